@@ -1,0 +1,1 @@
+//! rt-controller: see issue 5 (not built yet).

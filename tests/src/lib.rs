@@ -1,0 +1,1 @@
+//! Cross-process integration tests live in `tests/tests/` (issue 5).
