@@ -1,8 +1,34 @@
 //! The contract shared by `hil-sim`, `rt-controller` and `learner` (DESIGN.md §2–§3).
 //!
-//! One home for each fact: dimensions and the state layout ([`layout`]), … every other crate
-//! imports them from here.
+//! One home for each fact; every other crate imports these from here:
+//!
+//! - [`layout`]: dimensions dX = 12, dU = 3, [`MAX_HORIZON`], the state layout and
+//!   [`state_vector`], the single place a state vector is assembled.
+//! - [`gains`]: the gain table ([`GainTable`], ≈ 64 KB, `#[repr(C)]`, zero-copy), its checksum
+//!   and [`GainTable::validate`] against [`GainBounds`].
+//! - [`law`]: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε ([`controller_action`]),
+//!   used by both the real-time loop and the learner's rollouts.
+//! - [`msg`]: the other IPC payloads ([`ArmState`], [`ArmCommand`], [`StepSample`]).
+//! - [`services`]: iceoryx2 service names and per-run prefixes.
+//! - [`cost`]: the task cost C(τ) and normalised performance.
+//! - [`config`]: task and simulator configuration (TOML).
+//!
+//! Conventions: SI units (rad, rad/s, m, m/s, N·m, s; timestamps in monotonic ns); Cartesian
+//! quantities in the arm base frame; matrices row-major (numpy C order). Nothing the
+//! controller calls per tick ([`controller_action`], [`GainTable::validate`],
+//! [`GainTable::copy_from`], [`state_vector`], the payload types) allocates.
 
+pub mod config;
+pub mod cost;
+pub mod gains;
+pub mod law;
 pub mod layout;
+pub mod msg;
+pub mod services;
 
-pub use layout::{DU, DX, MAX_HORIZON};
+pub use cost::{normalised_performance, task_cost, task_cost_from_distances, CostError};
+pub use gains::{GainBounds, GainEntry, GainField, GainStep, GainTable, GainTableError};
+pub use law::{controller_action, LawError, NO_NOISE};
+pub use layout::{state_vector, DU, DX, MAX_HORIZON};
+pub use msg::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind, StepSample};
+pub use services::ServiceNames;

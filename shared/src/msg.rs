@@ -1,0 +1,339 @@
+//! IPC payloads (DESIGN.md §3): fixed-size `#[repr(C)]` `Copy` types that iceoryx2 moves
+//! through shared memory. The gain table is in [`crate::gains`].
+//!
+//! | service ([`crate::services`]) | publisher | payload |
+//! |---|---|---|
+//! | `arm/state` | arm (hil-sim or real driver) | [`ArmState`] |
+//! | `arm/command` | rt-controller | [`ArmCommand`] |
+//! | `learner/samples` | rt-controller | [`StepSample`] |
+//! | `controller/gains` | learner | [`crate::gains::GainTable`] |
+//!
+//! Conventions: timestamps are `CLOCK_MONOTONIC` nanoseconds of the host (`stamp_ns`);
+//! sequence numbers start at 1 and increase by one per message of that publisher (0 = "none");
+//! episodes are numbered by the controller from 0. Flags and enums travel as plain integers so
+//! that no bit pattern written by another process can be undefined behaviour here; decode them
+//! with the methods ([`ArmCommand::kind`], [`StepSample::is_noisy`]). Joint order and units are
+//! those of [`crate::layout`]; Cartesian quantities are in the arm base frame.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::layout::{self, DU, DX, N_JOINTS};
+
+/// One executed step, published by the controller on `learner/samples` for the learner's
+/// dynamics fit and discriminator (DESIGN.md §3).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
+#[type_name("ur5_shared::StepSample.v1")]
+pub struct StepSample {
+    /// Version of the gain table that computed `a`.
+    pub table_version: u64,
+    /// Episode number.
+    pub episode: u64,
+    /// Time step within the episode, 0 ≤ t < T.
+    pub t: u32,
+    /// 1 if `a` included exploration noise L_t ε, 0 for the noise-free evaluation run.
+    pub noise: u32,
+    /// State s_t the action was computed from (layout of [`crate::layout`]).
+    pub s: [f64; DX],
+    /// Action a_t as computed by [`crate::law::controller_action`], before the controller's
+    /// safety clamp (rad goal angles, or N·m in torque mode).
+    pub a: [f64; DU],
+    /// Action actually sent to the arm, after clamping to joint, velocity and effort limits.
+    pub a_sent: [f64; DU],
+    /// `seq` of the [`ArmState`] s_t came from.
+    pub state_seq: u64,
+    /// `stamp_ns` of that [`ArmState`] (monotonic ns).
+    pub state_stamp_ns: u64,
+    /// When the command carrying `a_sent` was published (monotonic ns).
+    pub command_stamp_ns: u64,
+}
+
+impl StepSample {
+    /// Whether `a` included exploration noise.
+    pub fn is_noisy(&self) -> bool {
+        self.noise != 0
+    }
+}
+
+/// Status bits of an [`ArmState`] (`status` field). Unknown bits are ignored.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, ZeroCopySend)]
+pub struct ArmStatus(pub u32);
+
+impl ArmStatus {
+    /// The arm is up and executing commands.
+    pub const READY: ArmStatus = ArmStatus(1 << 0);
+    /// The arm is holding its pose (a Hold command, a stale command, or a fault).
+    pub const HOLDING: ArmStatus = ArmStatus(1 << 1);
+    /// A reset to a start pose is in progress; states are not part of an episode.
+    pub const RESETTING: ArmStatus = ArmStatus(1 << 2);
+    /// The last command was clamped (joint, velocity or effort limit).
+    pub const SATURATED: ArmStatus = ArmStatus(1 << 3);
+
+    /// All bits of `other` are set.
+    pub fn contains(self, other: ArmStatus) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// Sets the bits of `other`.
+    pub fn insert(&mut self, other: ArmStatus) {
+        self.0 |= other.0;
+    }
+    /// Clears the bits of `other`.
+    pub fn remove(&mut self, other: ArmStatus) {
+        self.0 &= !other.0;
+    }
+}
+
+/// Fault bits of an [`ArmState`] (`faults` field); 0 = no fault. Unknown bits count as faults.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, ZeroCopySend)]
+pub struct ArmFaults(pub u32);
+
+impl ArmFaults {
+    /// No command arrived within the arm's timeout; the arm holds.
+    pub const STALE_COMMAND: ArmFaults = ArmFaults(1 << 0);
+    /// A command had a non-finite value; it was ignored and the arm holds.
+    pub const NON_FINITE_COMMAND: ArmFaults = ArmFaults(1 << 1);
+    /// A command had an unknown `kind`; it was ignored and the arm holds.
+    pub const UNKNOWN_COMMAND: ArmFaults = ArmFaults(1 << 2);
+    /// A joint is at or past its limit.
+    pub const JOINT_LIMIT: ArmFaults = ArmFaults(1 << 3);
+    /// The simulator's state became non-finite or diverged (hil-sim only).
+    pub const PHYSICS: ArmFaults = ArmFaults(1 << 4);
+    /// The real arm's driver reported an error or protective stop.
+    pub const DRIVER: ArmFaults = ArmFaults(1 << 5);
+
+    /// Any fault bit is set.
+    pub fn any(self) -> bool {
+        self.0 != 0
+    }
+    /// All bits of `other` are set.
+    pub fn contains(self, other: ArmFaults) -> bool {
+        self.0 & other.0 == other.0
+    }
+    /// Sets the bits of `other`.
+    pub fn insert(&mut self, other: ArmFaults) {
+        self.0 |= other.0;
+    }
+}
+
+/// The arm's measured state, published by the arm on `arm/state` once per control period (or
+/// per physics step in lockstep, as the arm chooses).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
+#[type_name("ur5_shared::ArmState.v1")]
+pub struct ArmState {
+    /// Message sequence number of this publisher (from 1).
+    pub seq: u64,
+    /// Time of the measurement (monotonic ns; sim time mapped onto it in lockstep).
+    pub stamp_ns: u64,
+    /// Episode of the last command applied (copied from [`ArmCommand::episode`]).
+    pub episode: u64,
+    /// `seq` of the last [`ArmCommand`] applied (0 = none yet).
+    pub last_command_seq: u64,
+    /// Joint angles q (rad), active joints in layout order.
+    pub q: [f64; N_JOINTS],
+    /// Joint velocities q̇ (rad/s).
+    pub qd: [f64; N_JOINTS],
+    /// End-effector point (m, arm base frame).
+    pub ee_pos: [f64; 3],
+    /// End-effector linear velocity (m/s, arm base frame).
+    pub ee_vel: [f64; 3],
+    /// Status bits.
+    pub status: ArmStatus,
+    /// Fault bits.
+    pub faults: ArmFaults,
+}
+
+impl ArmState {
+    /// The state vector s for `goal` (m, arm base frame); see [`layout::state_vector`].
+    pub fn state_vector(&self, goal: &[f64; 3]) -> [f64; DX] {
+        layout::state_vector(&self.q, &self.qd, &self.ee_pos, &self.ee_vel, goal)
+    }
+}
+
+/// What an [`ArmCommand`] asks for. Travels as `u32` in [`ArmCommand::kind`].
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CommandKind {
+    /// Hold the current pose; `values` ignored. 0 so that a zeroed command is safe.
+    Hold = 0,
+    /// `values` are goal joint angles (rad) for the arm's servo (the paper's set-up).
+    GoalAngles = 1,
+    /// `values` are joint torques (N·m) (research option, DESIGN.md §2).
+    Torques = 2,
+    /// Move (real arm) or teleport (sim) to `reset_pose` at rest; `values` ignored.
+    Reset = 3,
+}
+
+/// An [`ArmCommand::kind`] value that is not a [`CommandKind`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown arm command kind {0}; known: 0 hold, 1 goal angles, 2 torques, 3 reset")]
+pub struct UnknownCommandKind(pub u32);
+
+impl TryFrom<u32> for CommandKind {
+    type Error = UnknownCommandKind;
+    fn try_from(v: u32) -> Result<Self, Self::Error> {
+        match v {
+            0 => Ok(CommandKind::Hold),
+            1 => Ok(CommandKind::GoalAngles),
+            2 => Ok(CommandKind::Torques),
+            3 => Ok(CommandKind::Reset),
+            other => Err(UnknownCommandKind(other)),
+        }
+    }
+}
+
+/// A command to the arm on `arm/command`, one per control period.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
+#[type_name("ur5_shared::ArmCommand.v1")]
+pub struct ArmCommand {
+    /// Message sequence number of this publisher (from 1).
+    pub seq: u64,
+    /// When the command was sent (monotonic ns).
+    pub stamp_ns: u64,
+    /// Episode this command belongs to; the arm echoes it in [`ArmState::episode`].
+    pub episode: u64,
+    /// A [`CommandKind`] as u32; decode with [`ArmCommand::kind`].
+    pub kind: u32,
+    /// Keeps the layout free of implicit padding; write 0.
+    pub reserved: u32,
+    /// Goal joint angles (rad) or joint torques (N·m), active joints in layout order.
+    pub values: [f64; DU],
+    /// For [`CommandKind::Reset`]: start pose q (rad), reached at rest (q̇ = 0). Otherwise 0.
+    pub reset_pose: [f64; N_JOINTS],
+}
+
+impl ArmCommand {
+    fn new(seq: u64, stamp_ns: u64, episode: u64, kind: CommandKind) -> Self {
+        Self {
+            seq,
+            stamp_ns,
+            episode,
+            kind: kind as u32,
+            ..Self::default()
+        }
+    }
+
+    /// Hold the current pose.
+    pub fn hold(seq: u64, stamp_ns: u64, episode: u64) -> Self {
+        Self::new(seq, stamp_ns, episode, CommandKind::Hold)
+    }
+
+    /// Servo towards goal joint angles `q_goal` (rad).
+    pub fn goal_angles(seq: u64, stamp_ns: u64, episode: u64, q_goal: [f64; DU]) -> Self {
+        Self {
+            values: q_goal,
+            ..Self::new(seq, stamp_ns, episode, CommandKind::GoalAngles)
+        }
+    }
+
+    /// Apply joint torques `tau` (N·m).
+    pub fn torques(seq: u64, stamp_ns: u64, episode: u64, tau: [f64; DU]) -> Self {
+        Self {
+            values: tau,
+            ..Self::new(seq, stamp_ns, episode, CommandKind::Torques)
+        }
+    }
+
+    /// Reset to the start pose `q0` (rad) at rest.
+    pub fn reset(seq: u64, stamp_ns: u64, episode: u64, q0: [f64; N_JOINTS]) -> Self {
+        Self {
+            reset_pose: q0,
+            ..Self::new(seq, stamp_ns, episode, CommandKind::Reset)
+        }
+    }
+
+    /// The decoded kind; an unknown value is an error (the arm then holds).
+    pub fn kind(&self) -> Result<CommandKind, UnknownCommandKind> {
+        CommandKind::try_from(self.kind)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::{EE_MINUS_GOAL, EE_VEL, Q, QD};
+
+    #[test]
+    fn command_constructors_and_kind_round_trip() {
+        let c = ArmCommand::goal_angles(3, 100, 2, [0.1, -0.2, 0.3]);
+        assert_eq!(c.kind(), Ok(CommandKind::GoalAngles));
+        assert_eq!((c.seq, c.stamp_ns, c.episode), (3, 100, 2));
+        assert_eq!(c.values, [0.1, -0.2, 0.3]);
+        assert_eq!(
+            ArmCommand::torques(1, 0, 0, [1.0; 3]).kind(),
+            Ok(CommandKind::Torques)
+        );
+        let r = ArmCommand::reset(4, 0, 5, [0.0, -1.5, 2.0]);
+        assert_eq!(r.kind(), Ok(CommandKind::Reset));
+        assert_eq!(r.reset_pose, [0.0, -1.5, 2.0]);
+        assert_eq!(r.values, [0.0; 3]);
+        assert_eq!(ArmCommand::hold(1, 0, 0).kind(), Ok(CommandKind::Hold));
+        // A zeroed command decodes as Hold.
+        assert_eq!(ArmCommand::default().kind(), Ok(CommandKind::Hold));
+        for k in [
+            CommandKind::Hold,
+            CommandKind::GoalAngles,
+            CommandKind::Torques,
+            CommandKind::Reset,
+        ] {
+            assert_eq!(CommandKind::try_from(k as u32), Ok(k));
+        }
+        let bad = ArmCommand {
+            kind: 9,
+            ..ArmCommand::default()
+        };
+        let err = bad.kind().unwrap_err();
+        assert_eq!(err, UnknownCommandKind(9));
+        assert!(err.to_string().contains("unknown arm command kind 9"));
+    }
+
+    #[test]
+    fn arm_state_assembles_the_layout() {
+        let st = ArmState {
+            q: [1.0, 2.0, 3.0],
+            qd: [4.0, 5.0, 6.0],
+            ee_pos: [0.5, 0.25, 1.0],
+            ee_vel: [10.0, 11.0, 12.0],
+            ..ArmState::default()
+        };
+        let goal = [0.25, 0.25, 0.5];
+        let s = st.state_vector(&goal);
+        assert_eq!(s[Q], [1.0, 2.0, 3.0]);
+        assert_eq!(s[QD], [4.0, 5.0, 6.0]);
+        assert_eq!(s[EE_MINUS_GOAL], [0.25, 0.0, 0.5]);
+        assert_eq!(s[EE_VEL], [10.0, 11.0, 12.0]);
+    }
+
+    #[test]
+    fn flags() {
+        let mut s = ArmStatus::default();
+        s.insert(ArmStatus::READY);
+        s.insert(ArmStatus::HOLDING);
+        assert!(s.contains(ArmStatus::READY) && s.contains(ArmStatus::HOLDING));
+        s.remove(ArmStatus::HOLDING);
+        assert!(!s.contains(ArmStatus::HOLDING));
+        let mut f = ArmFaults::default();
+        assert!(!f.any());
+        f.insert(ArmFaults::STALE_COMMAND);
+        assert!(f.any() && f.contains(ArmFaults::STALE_COMMAND));
+        assert!(!f.contains(ArmFaults::PHYSICS));
+        let sample = StepSample {
+            noise: 1,
+            ..StepSample::default()
+        };
+        assert!(sample.is_noisy() && !StepSample::default().is_noisy());
+    }
+
+    #[test]
+    fn payloads_have_no_implicit_padding() {
+        assert_eq!(
+            core::mem::size_of::<StepSample>(),
+            8 * 2 + 4 * 2 + 8 * (DX + 2 * DU) + 8 * 3
+        );
+        assert_eq!(core::mem::size_of::<ArmState>(), 8 * 4 + 8 * 12 + 4 * 2);
+        assert_eq!(core::mem::size_of::<ArmCommand>(), 8 * 3 + 4 * 2 + 8 * 6);
+    }
+}
