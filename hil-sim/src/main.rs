@@ -1,1 +1,204 @@
-fn main() {}
+//! `hil-sim`: the simulated UR5.
+//!
+//! Subcommands:
+//! - `demo`: moves the arm through a few goal angles and prints the trajectory;
+//! - `inspect`: one JSON object describing the model at a given state (for debugging a URDF);
+//! - `bench`: physics throughput.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use serde::{Deserialize, Serialize};
+use ur5_shared::config::{from_toml_file, SimConfig, TaskConfig};
+
+use hil_sim::Ur5Sim;
+
+#[derive(Parser)]
+#[command(name = "hil-sim", version, about = "Simulated UR5 (rapier3d multibody from a URDF) for LQR+GAIfO.")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Move the arm through a few goal joint angles (rad) and print the trajectory, one line per
+    /// control period: t (s), q (rad), ee (m, base frame), ee − goal distance (m).
+    Demo {
+        /// TOML file with optional [task] and [sim] tables (see README).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Goal joint angles, semicolon-separated triples "q1,q2,q3;q1,q2,q3" (rad); each is held
+        /// for 2 s.
+        #[arg(long, default_value = "0.5,-1.2,1.5;-0.4,-1.0,1.0;0.0,-2.0,2.4")]
+        goals: String,
+        /// Print a one-line JSON summary at the end.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print one JSON object: ee_pos (m), ee_vel (m/s), qdd (rad/s², one physics substep under
+    /// raw torques τ, servo bypassed, gravity on), wrist_q (rad), ee_link, urdf.
+    Inspect {
+        /// Joint angles q1,q2,q3 (rad).
+        #[arg(long, value_parser = parse3, allow_hyphen_values = true)]
+        q: [f64; 3],
+        /// Joint velocities (rad/s).
+        #[arg(long, value_parser = parse3, allow_hyphen_values = true, default_value = "0,0,0")]
+        qd: [f64; 3],
+        /// Raw joint torques (N·m).
+        #[arg(long, value_parser = parse3, allow_hyphen_values = true, default_value = "0,0,0")]
+        tau: [f64; 3],
+        /// Physics substep (s) for qdd.
+        #[arg(long, default_value_t = 1e-4)]
+        substep: f64,
+        /// URDF file (default: the bundled UR5).
+        #[arg(long)]
+        urdf: Option<PathBuf>,
+    },
+    /// Physics throughput: steps per second for 10 s of simulated time at the physics rate, and
+    /// 100-step episodes per second.
+    Bench {
+        /// Episodes to time.
+        #[arg(long, default_value_t = 5)]
+        episodes: usize,
+        /// Print a one-line JSON summary at the end.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// A config file for hil-sim: both tables optional.
+#[derive(Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct FileConfig {
+    task: TaskConfig,
+    sim: SimConfig,
+}
+
+fn parse3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    let a: [f64; 3] = v.try_into().map_err(|v: Vec<f64>| format!("expected 3 comma-separated numbers, got {}", v.len()))?;
+    if a.iter().any(|x| !x.is_finite()) {
+        return Err("values must be finite".into());
+    }
+    Ok(a)
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().cmd {
+        Cmd::Demo { config, goals, json } => demo(config, &goals, json),
+        Cmd::Inspect { q, qd, tau, substep, urdf } => inspect(q, qd, tau, substep, urdf),
+        Cmd::Bench { episodes, json } => bench(episodes, json),
+    }
+}
+
+fn load(config: Option<PathBuf>) -> Result<FileConfig> {
+    let cfg: FileConfig = match config {
+        Some(p) => from_toml_file(&p)?,
+        None => FileConfig::default(),
+    };
+    cfg.task.validate()?;
+    cfg.sim.validate()?;
+    Ok(cfg)
+}
+
+fn demo(config: Option<PathBuf>, goals: &str, json: bool) -> Result<()> {
+    let cfg = load(config)?;
+    let goals: Vec<[f64; 3]> =
+        goals.split(';').map(parse3).collect::<Result<_, _>>().map_err(anyhow::Error::msg).context("--goals")?;
+    let mut sim = Ur5Sim::new(cfg.sim.clone(), cfg.task.dt)?;
+    let mut obs = sim.reset(cfg.task.start_q, cfg.task.goal)?;
+    let dist = |o: &hil_sim::Observation, g: [f64; 3]| {
+        ((o.ee_pos[0] - g[0]).powi(2) + (o.ee_pos[1] - g[1]).powi(2) + (o.ee_pos[2] - g[2]).powi(2)).sqrt()
+    };
+    println!("# t_s  q1 q2 q3 (rad)  goal1 goal2 goal3 (rad)  ee_x ee_y ee_z (m)  |ee-goal_point| (m)");
+    let steps_per_goal = (2.0 / cfg.task.dt).round() as usize;
+    let mut t = 0.0;
+    let mut worst_final = 0.0f64;
+    for g in &goals {
+        for _ in 0..steps_per_goal {
+            obs = sim.step(*g);
+            t += cfg.task.dt;
+            println!(
+                "{t:6.2}  {:+.4} {:+.4} {:+.4}  {:+.4} {:+.4} {:+.4}  {:+.4} {:+.4} {:+.4}  {:.4}",
+                obs.q[0], obs.q[1], obs.q[2], g[0], g[1], g[2], obs.ee_pos[0], obs.ee_pos[1], obs.ee_pos[2],
+                dist(&obs, cfg.task.goal)
+            );
+        }
+        let err = (0..3).map(|j| (obs.q[j] - g[j]).abs()).fold(0.0, f64::max);
+        eprintln!("goal {g:?} rad: final joint error {err:.2e} rad after {:.1} s", steps_per_goal as f64 * cfg.task.dt);
+        worst_final = worst_final.max(err);
+    }
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({"command": "demo", "goals": goals.len(), "sim_time_s": t,
+                "worst_final_joint_error_rad": worst_final, "max_abs_torque_nm": sim.max_abs_torque()})
+        );
+    }
+    Ok(())
+}
+
+fn inspect(q: [f64; 3], qd: [f64; 3], tau: [f64; 3], substep: f64, urdf: Option<PathBuf>) -> Result<()> {
+    let sim_cfg = SimConfig { urdf, physics_dt: substep, substeps: 1, ..SimConfig::default() };
+    let mut sim = Ur5Sim::new(sim_cfg, substep)?;
+    sim.set_joint_state(q, qd);
+    let obs = sim.true_observation();
+    let qdd = sim.joint_acceleration(q, qd, tau);
+    let m = sim.model();
+    println!(
+        "{}",
+        serde_json::json!({
+            "ee_pos": obs.ee_pos, "ee_vel": obs.ee_vel, "qdd": qdd, "wrist_q": m.wrist_q,
+            "wrist_joints": m.wrist_joints, "ee_link": m.ee_link, "ee_offset": m.ee_offset,
+            "urdf": m.source.display().to_string(),
+        })
+    );
+    Ok(())
+}
+
+fn bench(episodes: usize, json: bool) -> Result<()> {
+    let task = TaskConfig::default();
+    let mut sim = Ur5Sim::new(SimConfig::default(), task.dt)?;
+    let physics_dt = sim.config().physics_dt;
+    // 10 s of simulated time, servo tracking a moving goal.
+    sim.reset(task.start_q, task.goal)?;
+    let steps = (10.0 / task.dt).round() as usize;
+    let t0 = Instant::now();
+    for i in 0..steps {
+        let s = (i as f64 * task.dt).sin();
+        sim.step([0.5 * s, -1.5 + 0.3 * s, 1.8 - 0.3 * s]);
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let physics_steps = 10.0 / physics_dt;
+    let steps_per_s = physics_steps / wall;
+    let rt_factor = 10.0 / wall;
+
+    let t0 = Instant::now();
+    for e in 0..episodes {
+        sim.reset(task.start_q, task.goal)?;
+        for i in 0..task.horizon {
+            let s = ((i + e) as f64 * task.dt).sin();
+            sim.step([0.5 * s, -1.5 + 0.3 * s, 1.8 - 0.3 * s]);
+        }
+    }
+    let ep_per_s = episodes as f64 / t0.elapsed().as_secs_f64();
+    println!("| measure | value |");
+    println!("|---|---|");
+    println!("| physics steps/s (dt = {physics_dt} s, servo on) | {steps_per_s:.0} |");
+    println!("| real-time factor | {rt_factor:.1}x |");
+    println!("| {}-step episodes/s | {ep_per_s:.2} |", task.horizon);
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({"command": "bench", "physics_steps_per_s": steps_per_s, "real_time_factor": rt_factor,
+                "episodes_per_s": ep_per_s})
+        );
+    }
+    Ok(())
+}

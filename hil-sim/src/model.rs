@@ -1,0 +1,272 @@
+//! The arm model: the URDF parsed with `urdf-rs`, checked, and prepared for rapier3d.
+//!
+//! Preparation does three things the simulator relies on:
+//! - the three active joints ([`ur5_shared::layout::ACTIVE_JOINTS`]) must exist and be revolute
+//!   with limits; their limits are read from the URDF (rapier ignores effort and velocity limits,
+//!   so the simulator enforces them itself);
+//! - every other movable joint (the UR5's wrist) is locked at its configured angle by turning it
+//!   into a fixed joint whose origin absorbs the rotation, so the rapier multibody has exactly
+//!   three degrees of freedom;
+//! - link masses and inertias are scaled by the mass perturbation (the nominal copy is kept for
+//!   the arm's own gravity compensation).
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use ur5_shared::layout::{ACTIVE_JOINTS, N_JOINTS};
+use urdf_rs::{JointType, Robot};
+
+use crate::SimError;
+
+/// The UR5 URDF shipped with hil-sim (see the comment at its top for the sources of every number).
+pub const BUNDLED_URDF: &str = include_str!("../urdf/ur5.urdf");
+
+/// Where the bundled URDF lives in the source tree (reported by `hil-sim inspect`).
+pub fn bundled_urdf_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("urdf/ur5.urdf")
+}
+
+/// Limits of one active joint, as written in the URDF.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointLimits {
+    /// URDF joint name.
+    pub name: String,
+    /// Lower position limit (rad).
+    pub lower: f64,
+    /// Upper position limit (rad).
+    pub upper: f64,
+    /// Effort limit (N·m).
+    pub effort: f64,
+    /// Velocity limit (rad/s).
+    pub velocity: f64,
+}
+
+/// A checked arm description, ready to be built into a rapier multibody.
+#[derive(Clone, Debug)]
+pub struct ArmModel {
+    /// The robot as parsed from the URDF, unmodified (wrists still revolute, nominal masses).
+    pub urdf: Robot,
+    /// The robot handed to rapier3d-urdf: wrists fixed at [`Self::wrist_q`].
+    pub locked: Robot,
+    /// Where the URDF came from.
+    pub source: PathBuf,
+    /// Active joints in layout order (shoulder pan, shoulder lift, elbow).
+    pub active: [JointLimits; N_JOINTS],
+    /// Names of the locked (wrist) joints in chain order.
+    pub wrist_joints: Vec<String>,
+    /// Angles the wrist joints are locked at (rad).
+    pub wrist_q: [f64; 3],
+    /// Link whose origin plus [`Self::ee_offset`] is the end-effector point.
+    pub ee_link: String,
+    /// End-effector offset in `ee_link`'s frame (m).
+    pub ee_offset: [f64; 3],
+}
+
+impl ArmModel {
+    /// Loads a URDF file (or the bundled UR5 when `path` is `None`) and checks it.
+    pub fn load(
+        path: Option<&Path>,
+        wrist_q: [f64; 3],
+        ee_link: &str,
+        ee_offset: [f64; 3],
+    ) -> Result<Self, SimError> {
+        let (text, source) = match path {
+            Some(p) => (
+                std::fs::read_to_string(p).map_err(|e| SimError::UrdfRead {
+                    path: p.to_owned(),
+                    source: e,
+                })?,
+                p.to_owned(),
+            ),
+            None => (BUNDLED_URDF.to_owned(), bundled_urdf_path()),
+        };
+        Self::from_str(&text, source, wrist_q, ee_link, ee_offset)
+    }
+
+    /// Parses and checks URDF text; `source` is only used in messages.
+    pub fn from_str(
+        text: &str,
+        source: PathBuf,
+        wrist_q: [f64; 3],
+        ee_link: &str,
+        ee_offset: [f64; 3],
+    ) -> Result<Self, SimError> {
+        let urdf = urdf_rs::read_from_string(text).map_err(|e| SimError::UrdfParse {
+            path: source.clone(),
+            message: e.to_string(),
+        })?;
+        let joint_names = || urdf.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>();
+
+        let mut active = Vec::with_capacity(N_JOINTS);
+        for name in ACTIVE_JOINTS {
+            let j = urdf
+                .joints
+                .iter()
+                .find(|j| j.name == name)
+                .ok_or_else(|| SimError::UnknownJoint { name: name.into(), available: joint_names() })?;
+            if j.joint_type != JointType::Revolute {
+                return Err(SimError::BadJoint { name: name.into(), why: "must be revolute".into() });
+            }
+            let l = &j.limit;
+            if !(l.lower < l.upper && l.effort > 0.0 && l.velocity > 0.0) {
+                return Err(SimError::BadJoint {
+                    name: name.into(),
+                    why: format!(
+                        "needs lower < upper and positive effort and velocity limits, got lower {} upper {} effort {} velocity {}",
+                        l.lower, l.upper, l.effort, l.velocity
+                    ),
+                });
+            }
+            active.push(JointLimits {
+                name: name.into(),
+                lower: l.lower,
+                upper: l.upper,
+                effort: l.effort,
+                velocity: l.velocity,
+            });
+        }
+
+        if !urdf.links.iter().any(|l| l.name == ee_link) {
+            return Err(SimError::UnknownLink {
+                name: ee_link.into(),
+                available: urdf.links.iter().map(|l| l.name.clone()).collect(),
+            });
+        }
+        for link in &urdf.links {
+            let m = link.inertial.mass.value;
+            let i = &link.inertial.inertia;
+            if !(m.is_finite() && m > 0.0 && [i.ixx, i.iyy, i.izz].iter().all(|v| v.is_finite() && *v > 0.0)) {
+                return Err(SimError::BadLink {
+                    name: link.name.clone(),
+                    why: format!("mass {m} kg and inertia diagonal must be finite and > 0 (every link needs an <inertial>)"),
+                });
+            }
+        }
+
+        // Lock every movable joint that is not active, in chain order from the root.
+        let order = chain_order(&urdf)?;
+        let mut locked = urdf.clone();
+        let mut wrist_joints = Vec::new();
+        for ji in order {
+            let j = &urdf.joints[ji];
+            if ACTIVE_JOINTS.contains(&j.name.as_str()) || j.joint_type == JointType::Fixed {
+                continue;
+            }
+            if j.joint_type != JointType::Revolute && j.joint_type != JointType::Continuous {
+                return Err(SimError::BadJoint { name: j.name.clone(), why: "only revolute wrist joints can be locked".into() });
+            }
+            let k = wrist_joints.len();
+            if k >= wrist_q.len() {
+                return Err(SimError::BadJoint {
+                    name: j.name.clone(),
+                    why: format!("more than {} movable joints besides the active ones", wrist_q.len()),
+                });
+            }
+            wrist_joints.push(j.name.clone());
+            let lj = &mut locked.joints[ji];
+            lj.origin = lock_origin(&j.origin, j.axis.xyz.0, wrist_q[k]);
+            lj.joint_type = JointType::Fixed;
+        }
+        if wrist_joints.len() != wrist_q.len() {
+            return Err(SimError::BadJoint {
+                name: "<wrist>".into(),
+                why: format!("expected {} wrist joints to lock, found {:?}", wrist_q.len(), wrist_joints),
+            });
+        }
+
+        Ok(Self {
+            urdf,
+            locked,
+            source,
+            active: active.try_into().expect("three active joints"),
+            wrist_joints,
+            wrist_q,
+            ee_link: ee_link.into(),
+            ee_offset,
+        })
+    }
+
+    /// The locked robot with every link's mass and inertia multiplied by `scale` (the base is
+    /// fixed, so scaling it changes nothing).
+    pub fn locked_with_mass_scale(&self, scale: f64) -> Robot {
+        let mut r = self.locked.clone();
+        for link in &mut r.links {
+            link.inertial.mass.value *= scale;
+            let i = &mut link.inertial.inertia;
+            for v in [&mut i.ixx, &mut i.ixy, &mut i.ixz, &mut i.iyy, &mut i.iyz, &mut i.izz] {
+                *v *= scale;
+            }
+        }
+        r
+    }
+
+    /// Upper bound of the distance from the shoulder-lift joint to the end-effector point (m):
+    /// the sum of the lengths of the joint offsets after it, plus the end-effector offset.
+    pub fn reach(&self) -> f64 {
+        let mut reach = Vector3::from(self.ee_offset).norm();
+        let mut past_lift = false;
+        for ji in chain_order(&self.urdf).unwrap_or_default() {
+            let j = &self.urdf.joints[ji];
+            if past_lift {
+                reach += Vector3::from(j.origin.xyz.0).norm();
+            }
+            if j.name == ACTIVE_JOINTS[1] {
+                past_lift = true;
+            }
+        }
+        reach
+    }
+}
+
+/// Joint indices ordered from the root to the leaves (the URDF must be a tree).
+fn chain_order(robot: &Robot) -> Result<Vec<usize>, SimError> {
+    let is_child = |name: &str| robot.joints.iter().any(|j| j.child.link == name);
+    let roots: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).filter(|n| !is_child(n)).collect();
+    if roots.len() != 1 {
+        return Err(SimError::BadLink {
+            name: format!("{roots:?}"),
+            why: "the URDF must have exactly one root link".into(),
+        });
+    }
+    let mut order = Vec::new();
+    let mut stack = vec![roots[0]];
+    while let Some(link) = stack.pop() {
+        for (i, j) in robot.joints.iter().enumerate() {
+            if j.parent.link == link {
+                order.push(i);
+                stack.push(j.child.link.as_str());
+            }
+        }
+    }
+    if order.len() != robot.joints.len() {
+        return Err(SimError::BadJoint {
+            name: "<tree>".into(),
+            why: "some joints are not reachable from the root link (loop or dangling parent)".into(),
+        });
+    }
+    Ok(order)
+}
+
+/// The origin of a fixed joint equivalent to a revolute joint held at angle `q` about `axis`.
+fn lock_origin(origin: &urdf_rs::Pose, axis: [f64; 3], q: f64) -> urdf_rs::Pose {
+    let iso = urdf_pose_to_isometry(origin)
+        * UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(Vector3::from(axis)), q);
+    isometry_to_urdf_pose(&iso)
+}
+
+/// URDF pose (xyz, fixed-axis roll-pitch-yaw) to an isometry.
+pub fn urdf_pose_to_isometry(p: &urdf_rs::Pose) -> Isometry3<f64> {
+    let [r, pi, y] = p.rpy.0;
+    Isometry3::from_parts(
+        Translation3::from(Vector3::from(p.xyz.0)),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_euler_angles(r, pi, y)),
+    )
+}
+
+fn isometry_to_urdf_pose(iso: &Isometry3<f64>) -> urdf_rs::Pose {
+    let (r, p, y) = iso.rotation.euler_angles();
+    urdf_rs::Pose {
+        xyz: urdf_rs::Vec3(iso.translation.vector.into()),
+        rpy: urdf_rs::Vec3([r, p, y]),
+    }
+}

@@ -1,0 +1,458 @@
+//! The simulated UR5: a rapier3d reduced-coordinate multibody built from the URDF by
+//! rapier3d-urdf, with the arm's own joint servo running at the physics rate.
+//!
+//! Conventions: joint angles in rad, velocities in rad/s, torques in N·m, positions in m in the
+//! arm base frame (the URDF root link frame, z up, gravity −9.81 m/s² along z). The physics runs
+//! in rapier's f32; this API is f64.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rapier3d::glamx::Vec3;
+use rapier3d::prelude::*;
+use rapier3d_urdf::{UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
+use ur5_shared::config::{ActionMode, SimConfig};
+use ur5_shared::layout::N_JOINTS;
+
+use crate::model::ArmModel;
+use crate::servo::servo_torque;
+use crate::SimError;
+
+/// Standard gravity (m/s²), along −z of the base frame.
+pub const GRAVITY: f64 = 9.81;
+
+/// What the arm's sensors report (before or after sensor noise).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Observation {
+    /// Active joint angles (rad).
+    pub q: [f64; N_JOINTS],
+    /// Active joint velocities (rad/s).
+    pub qd: [f64; N_JOINTS],
+    /// End-effector point (m, base frame).
+    pub ee_pos: [f64; 3],
+    /// End-effector linear velocity (m/s, base frame), from the multibody's body Jacobian.
+    pub ee_vel: [f64; 3],
+}
+
+/// One active joint inside the rapier multibody.
+#[derive(Clone, Copy, Debug)]
+struct ActiveDof {
+    /// Multibody link id of the joint's child link.
+    link: usize,
+    /// Index of the joint's degree of freedom in the multibody's generalized vectors.
+    dof: usize,
+    parent_body: RigidBodyHandle,
+    child_body: RigidBodyHandle,
+}
+
+/// The simulated arm.
+pub struct Ur5Sim {
+    model: ArmModel,
+    cfg: SimConfig,
+    control_dt: f64,
+    physics_steps_per_control: usize,
+    world: PhysicsWorld,
+    mb: MultibodyIndex,
+    dofs: [ActiveDof; N_JOINTS],
+    /// (multibody link id, nominal mass kg) of every moving link, for gravity compensation.
+    nominal_masses: Vec<(usize, f64)>,
+    ee_link: usize,
+    ee_body: RigidBodyHandle,
+    rng: ChaCha8Rng,
+    /// Action waiting one control period when `latency_steps == 1`.
+    pending: Option<[f64; N_JOINTS]>,
+    /// Action the servo (or torque mode) currently executes.
+    current: [f64; N_JOINTS],
+    /// Torques applied in the last physics step (N·m, after clamping and actuator noise).
+    last_tau: [f64; N_JOINTS],
+    /// Largest |τ| per joint since the last reset (N·m).
+    max_abs_tau: [f64; N_JOINTS],
+    goal: [f64; 3],
+    time: f64,
+}
+
+impl Ur5Sim {
+    /// Builds the arm. `control_dt` (s) is how long each action is held (the paper: 0.1 s); it
+    /// must be a whole number of physics steps.
+    pub fn new(cfg: SimConfig, control_dt: f64) -> Result<Self, SimError> {
+        cfg.validate()?;
+        let model = ArmModel::load(cfg.urdf.as_deref(), cfg.wrist_q, &cfg.ee_link, cfg.ee_offset)?;
+        let ratio = control_dt / cfg.physics_dt;
+        if !(control_dt > 0.0 && (ratio - ratio.round()).abs() < 1e-9 && ratio.round() >= 1.0) {
+            return Err(SimError::Config(ur5_shared::config::ConfigError::Invalid {
+                key: "task.dt",
+                why: format!("control period {control_dt} s must be a whole multiple of physics_dt {} s", cfg.physics_dt),
+            }));
+        }
+        let physics_steps_per_control = ratio.round() as usize;
+
+        let mut world = PhysicsWorld::new();
+        world.gravity = Vec3::new(0.0, 0.0, -GRAVITY as f32);
+        world.integration_parameters.dt = cfg.physics_dt as f32;
+        world.integration_parameters.num_solver_iterations = cfg.substeps;
+
+        let options = UrdfLoaderOptions {
+            create_colliders_from_collision_shapes: false,
+            create_colliders_from_visual_shapes: false,
+            apply_imported_mass_props: true,
+            make_roots_fixed: true,
+            // UR5.md: squeezing empty links drops the root's fixed transform.
+            squeeze_empty_fixed_links: false,
+            rigid_body_blueprint: RigidBodyBuilder::dynamic().can_sleep(false),
+            ..Default::default()
+        };
+        let robot = model.locked_with_mass_scale(cfg.perturbation.mass_scale);
+        let nominal = &model.locked;
+        let urdf_robot = UrdfRobot::from_robot(&robot, options, std::path::Path::new("."));
+        let link_names: Vec<String> =
+            urdf_robot.links.iter().map(|l| robot.links[l.urdf_link_index].name.clone()).collect();
+        let joint_names: Vec<String> =
+            urdf_robot.joints.iter().map(|j| robot.joints[j.urdf_joint_index].name.clone()).collect();
+        let handles = urdf_robot.insert_using_multibody_joints(
+            &mut world.bodies,
+            &mut world.colliders,
+            &mut world.multibody_joints,
+            UrdfMultibodyOptions::DISABLE_SELF_CONTACTS,
+        );
+
+        let link_of = |body: RigidBodyHandle, world: &PhysicsWorld| {
+            *world.multibody_joints.rigid_body_link(body).expect("every URDF link is in the multibody")
+        };
+        let root = link_of(handles.links[0].body, &world);
+        let mb = root.multibody;
+        // The root's multibody joint follows its body type (fixed) only after a forward
+        // kinematics pass that reads the root body; do it before reading any dof index.
+        world.multibody_joints.get_multibody_mut(mb).expect("multibody").forward_kinematics(&world.bodies, true);
+
+        let mut dofs = Vec::with_capacity(N_JOINTS);
+        for limits in &model.active {
+            let ji = joint_names.iter().position(|n| *n == limits.name).expect("active joint was checked");
+            let jh = &handles.joints[ji];
+            let link = link_of(jh.link2, &world).id;
+            let dof = world.multibody_joints[mb].link(link).expect("link").assembly_id();
+            dofs.push(ActiveDof { link, dof, parent_body: jh.link1, child_body: jh.link2 });
+        }
+        let dofs: [ActiveDof; N_JOINTS] = dofs.try_into().expect("three active joints");
+
+        let mut nominal_masses = Vec::new();
+        for (li, name) in link_names.iter().enumerate() {
+            let link = link_of(handles.links[li].body, &world).id;
+            if link == 0 {
+                continue; // the fixed base does not load the joints
+            }
+            let mass = nominal.links.iter().find(|l| l.name == *name).expect("same links").inertial.mass.value;
+            nominal_masses.push((link, mass));
+        }
+        let ee_index = link_names.iter().position(|n| *n == model.ee_link).expect("ee link was checked");
+        let ee_body = handles.links[ee_index].body;
+        let ee_link = link_of(ee_body, &world).id;
+
+        {
+            let multibody = world.multibody_joints.get_multibody_mut(mb).expect("multibody");
+
+            if multibody.ndofs() != N_JOINTS {
+                return Err(SimError::BadJoint {
+                    name: "<multibody>".into(),
+                    why: format!("the multibody has {} degrees of freedom, expected {N_JOINTS}", multibody.ndofs()),
+                });
+            }
+            // UR5.md: rapier puts 0.1 N·m·s/rad on every multibody joint by default; the nominal arm
+            // has none. Damping and dry friction are perturbation knobs.
+            multibody.damping_mut().fill(0.0);
+            for (j, d) in dofs.iter().enumerate() {
+                multibody.damping_mut()[d.dof] = cfg.perturbation.joint_damping[j] as f32;
+                multibody.frictions_mut()[d.dof] = cfg.perturbation.joint_friction[j] as f32;
+            }
+        }
+
+        let rng = ChaCha8Rng::seed_from_u64(cfg.perturbation.seed);
+        let mut sim = Self {
+            model,
+            cfg,
+            control_dt,
+            physics_steps_per_control,
+            world,
+            mb,
+            dofs,
+            nominal_masses,
+            ee_link,
+            ee_body,
+            rng,
+            pending: None,
+            current: [0.0; N_JOINTS],
+            last_tau: [0.0; N_JOINTS],
+            max_abs_tau: [0.0; N_JOINTS],
+            goal: [0.0; 3],
+            time: 0.0,
+        };
+        sim.set_joint_state([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        Ok(sim)
+    }
+
+    /// The checked model (limits, wrist lock, end-effector definition).
+    pub fn model(&self) -> &ArmModel {
+        &self.model
+    }
+
+    /// The configuration the arm was built with.
+    pub fn config(&self) -> &SimConfig {
+        &self.cfg
+    }
+
+    /// Control period (s): how long each action is held.
+    pub fn control_dt(&self) -> f64 {
+        self.control_dt
+    }
+
+    /// Simulated time since the last reset (s).
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Goal point of the current episode (m, base frame).
+    pub fn goal(&self) -> [f64; 3] {
+        self.goal
+    }
+
+    /// Torques applied in the last physics step (N·m).
+    pub fn last_torque(&self) -> [f64; N_JOINTS] {
+        self.last_tau
+    }
+
+    /// Largest |τ| per joint applied since the last reset (N·m).
+    pub fn max_abs_torque(&self) -> [f64; N_JOINTS] {
+        self.max_abs_tau
+    }
+
+    /// Starts an episode: puts the arm at rest at `start_q` and sets the goal. Re-seeds
+    /// nothing: the perturbation RNG runs on across episodes, so a run replays as a whole.
+    pub fn reset(&mut self, start_q: [f64; N_JOINTS], goal: [f64; 3]) -> Result<Observation, SimError> {
+        for (j, l) in self.model.active.iter().enumerate() {
+            if !(start_q[j].is_finite() && start_q[j] >= l.lower && start_q[j] <= l.upper) {
+                return Err(SimError::OutOfLimits { joint: l.name.clone(), value: start_q[j], lower: l.lower, upper: l.upper });
+            }
+        }
+        self.check_goal(goal)?;
+        self.set_joint_state(start_q, [0.0; N_JOINTS]);
+        self.goal = goal;
+        self.pending = None;
+        self.current = match self.cfg.mode {
+            ActionMode::GoalAngles => start_q,
+            ActionMode::Torque => [0.0; N_JOINTS],
+        };
+        self.max_abs_tau = [0.0; N_JOINTS];
+        self.time = 0.0;
+        Ok(self.observe())
+    }
+
+    /// Rejects a goal that is not finite or farther from the shoulder than the arm reaches.
+    pub fn check_goal(&self, goal: [f64; 3]) -> Result<(), SimError> {
+        let lift = self.world.bodies[self.dofs[1].child_body].position().translation;
+        let d = ((goal[0] - lift.x as f64).powi(2) + (goal[1] - lift.y as f64).powi(2) + (goal[2] - lift.z as f64).powi(2)).sqrt();
+        let reach = self.model.reach();
+        if goal.iter().all(|g| g.is_finite()) && d <= reach {
+            Ok(())
+        } else {
+            Err(SimError::GoalOutOfReach { goal, distance: d, reach })
+        }
+    }
+
+    /// Executes one action for one control period and returns the measured observation.
+    ///
+    /// In goal-angle mode the action is goal joint angles (rad), clamped to the joint limits;
+    /// the servo tracks it at the physics rate. In torque mode it is joint torques (N·m),
+    /// clamped to the effort limits. Non-finite actions are replaced by a hold of the current
+    /// goal (or zero torque). With one-step latency the arm executes the previous action.
+    pub fn step(&mut self, action: [f64; N_JOINTS]) -> Observation {
+        let action = self.sanitize(action);
+        let applied = if self.cfg.perturbation.latency_steps == 1 {
+            let prev = self.pending.replace(action);
+            prev.unwrap_or(self.current)
+        } else {
+            action
+        };
+        self.current = applied;
+        for _ in 0..self.physics_steps_per_control {
+            self.physics_step();
+        }
+        self.observe()
+    }
+
+    fn sanitize(&self, mut a: [f64; N_JOINTS]) -> [f64; N_JOINTS] {
+        if a.iter().any(|v| !v.is_finite()) {
+            return self.current;
+        }
+        for (j, l) in self.model.active.iter().enumerate() {
+            a[j] = match self.cfg.mode {
+                ActionMode::GoalAngles => a[j].clamp(l.lower, l.upper),
+                ActionMode::Torque => a[j].clamp(-l.effort, l.effort),
+            };
+        }
+        a
+    }
+
+    /// One physics step with the current action.
+    fn physics_step(&mut self) {
+        let (q, qd) = self.joint_state();
+        let mut tau = match self.cfg.mode {
+            ActionMode::GoalAngles => {
+                let tau_g = self.gravity_torque();
+                let limits = [0, 1, 2].map(|j| (self.model.active[j].effort, self.model.active[j].velocity));
+                servo_torque(&self.cfg.servo, &limits, q, qd, self.current, tau_g)
+            }
+            ActionMode::Torque => self.current,
+        };
+        let noise = self.cfg.perturbation.actuator_noise_std;
+        for (j, t) in tau.iter_mut().enumerate() {
+            if noise > 0.0 {
+                let n: f64 = StandardNormal.sample(&mut self.rng);
+                *t += noise * n;
+            }
+            let e = self.model.active[j].effort;
+            *t = t.clamp(-e, e);
+        }
+        self.apply_torque_and_step(tau);
+    }
+
+    /// Applies raw joint torques (N·m, not clamped) for one physics step.
+    fn apply_torque_and_step(&mut self, tau: [f64; N_JOINTS]) {
+        for rb in self.world.bodies.iter_mut() {
+            rb.1.reset_torques(false);
+        }
+        for (j, d) in self.dofs.iter().enumerate() {
+            // A joint torque is an equal and opposite couple on child and parent (UR5.md).
+            let child = &self.world.bodies[d.child_body];
+            let axis = self.axis_world(j, child);
+            let couple = axis * tau[j] as f32;
+            self.world.bodies[d.child_body].add_torque(couple, false);
+            self.world.bodies[d.parent_body].add_torque(-couple, false);
+            self.last_tau[j] = tau[j];
+            self.max_abs_tau[j] = self.max_abs_tau[j].max(tau[j].abs());
+        }
+        self.world.step();
+        self.time += self.cfg.physics_dt;
+    }
+
+    /// World direction of active joint `j`'s axis.
+    fn axis_world(&self, j: usize, child: &RigidBody) -> Vec3 {
+        let link = self.world.multibody_joints[self.mb].link(self.dofs[j].link).expect("link");
+        child.position().rotation * link.joint().data.local_axis2()
+    }
+
+    /// The rapier multibody. Invariant: its link poses and body Jacobians are always those of
+    /// the current joint angles, because every change of state ends with a forward-kinematics
+    /// pass (rapier's step does one after integrating; [`Self::set_joint_state`] does one).
+    fn multibody(&self) -> &Multibody {
+        self.world.multibody_joints.get_multibody(self.mb).expect("multibody")
+    }
+
+    /// True joint angles and velocities (no sensor noise).
+    pub fn joint_state(&self) -> ([f64; N_JOINTS], [f64; N_JOINTS]) {
+        let mb = self.multibody();
+        let v = mb.generalized_velocity();
+        let mut q = [0.0; N_JOINTS];
+        let mut qd = [0.0; N_JOINTS];
+        for (j, d) in self.dofs.iter().enumerate() {
+            // Revolute joints from rapier3d-urdf rotate about the joint frame's x axis.
+            q[j] = mb.link(d.link).expect("link").joint().coords()[3] as f64;
+            qd[j] = v[d.dof] as f64;
+        }
+        (q, qd)
+    }
+
+    /// Puts the arm at joint angles `q` (rad) with velocities `qd` (rad/s) and updates every
+    /// link pose and Jacobian.
+    pub fn set_joint_state(&mut self, q: [f64; N_JOINTS], qd: [f64; N_JOINTS]) {
+        let (q0, _) = self.joint_state();
+        let mb = self.world.multibody_joints.get_multibody_mut(self.mb).expect("multibody");
+        let mut disp = vec![0.0f32; mb.ndofs()];
+        let mut vel = mb.generalized_velocity_mut();
+        for (j, d) in self.dofs.iter().enumerate() {
+            disp[d.dof] = (q[j] - q0[j]) as f32;
+            vel[d.dof] = qd[j] as f32;
+        }
+        // Coordinates are f32 in rapier: q is reproduced to within one f32 ulp.
+        mb.apply_displacements(&disp);
+        mb.forward_kinematics(&self.world.bodies, false);
+        mb.update_rigid_bodies(&mut self.world.bodies, true);
+        for (_, rb) in self.world.bodies.iter_mut() {
+            rb.set_linvel(Vec3::ZERO, false);
+            rb.set_angvel(Vec3::ZERO, false);
+        }
+    }
+
+    /// Gravity torque of the nominal model at the current pose (N·m): the torque that holds
+    /// the nominal arm still, τ_g = −Σ_i J_com,iᵀ m_i g over the moving links.
+    pub fn gravity_torque(&self) -> [f64; N_JOINTS] {
+        let mb = self.multibody();
+        let mut tau = [0.0; N_JOINTS];
+        for &(link, mass) in &self.nominal_masses {
+            let jac = mb.body_jacobian(link);
+            for (j, d) in self.dofs.iter().enumerate() {
+                // Row 2 is the z component of the COM's linear velocity.
+                tau[j] += mass * GRAVITY * jac[(2, d.dof)] as f64;
+            }
+        }
+        tau
+    }
+
+    /// The true observation (no sensor noise).
+    pub fn true_observation(&self) -> Observation {
+        let (q, qd) = self.joint_state();
+        let mb = self.multibody();
+        let pose = *mb.link(self.ee_link).expect("ee link").local_to_world();
+        let off = self.cfg.ee_offset;
+        let ee = pose.transform_point(Vec3::new(off[0] as f32, off[1] as f32, off[2] as f32));
+        let com = pose.transform_point(self.world.bodies[self.ee_body].local_center_of_mass());
+        let jac = mb.body_jacobian(self.ee_link);
+        let mut v = [0.0f64; 3];
+        let mut w = [0.0f64; 3];
+        for r in 0..3 {
+            for (j, d) in self.dofs.iter().enumerate() {
+                v[r] += jac[(r, d.dof)] as f64 * qd[j];
+                w[r] += jac[(r + 3, d.dof)] as f64 * qd[j];
+            }
+        }
+        // The Jacobian gives the COM velocity; shift it to the end-effector point: v + ω × r.
+        let r = [(ee.x - com.x) as f64, (ee.y - com.y) as f64, (ee.z - com.z) as f64];
+        let ee_vel = [
+            v[0] + w[1] * r[2] - w[2] * r[1],
+            v[1] + w[2] * r[0] - w[0] * r[2],
+            v[2] + w[0] * r[1] - w[1] * r[0],
+        ];
+        Observation { q, qd, ee_pos: [ee.x as f64, ee.y as f64, ee.z as f64], ee_vel }
+    }
+
+    /// What the arm's sensors report: the true observation plus the configured sensor noise.
+    pub fn observe(&mut self) -> Observation {
+        let mut o = self.true_observation();
+        let p = &self.cfg.perturbation;
+        let groups: [(&mut [f64; 3], f64); 4] =
+            [(&mut o.q, p.sensor_noise_q_std), (&mut o.qd, p.sensor_noise_qd_std), (&mut o.ee_pos, p.sensor_noise_ee_std), (&mut o.ee_vel, p.sensor_noise_ee_std)];
+        for (vals, std) in groups {
+            if std > 0.0 {
+                for v in vals.iter_mut() {
+                    let n: f64 = StandardNormal.sample(&mut self.rng);
+                    *v += std * n;
+                }
+            }
+        }
+        o
+    }
+
+    /// Joint accelerations (rad/s²) over one physics step from state (q, q̇) under raw joint
+    /// torques τ (servo bypassed, no clamping, gravity on): (q̇⁺ − q̇) / physics_dt. Leaves the
+    /// arm in the stepped state.
+    pub fn joint_acceleration(&mut self, q: [f64; N_JOINTS], qd: [f64; N_JOINTS], tau: [f64; N_JOINTS]) -> [f64; N_JOINTS] {
+        self.set_joint_state(q, qd);
+        let (_, v0) = self.joint_state();
+        self.apply_torque_and_step(tau);
+        let (_, v1) = self.joint_state();
+        [0, 1, 2].map(|j| (v1[j] - v0[j]) / self.cfg.physics_dt)
+    }
+
+    /// Advances one physics step under raw joint torques (N·m, servo bypassed, not clamped).
+    pub fn step_torque_raw(&mut self, tau: [f64; N_JOINTS]) {
+        self.apply_torque_and_step(tau);
+    }
+}

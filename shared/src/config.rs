@@ -1,0 +1,317 @@
+//! Configuration of the task and the simulated arm (serde; TOML files).
+//!
+//! Every default cites where its number comes from. Unknown keys are rejected so that a typo in
+//! a TOML file is an error rather than a silently ignored setting.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+use crate::layout::N_JOINTS;
+
+/// Errors reading a configuration file.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Io {
+        /// File that was asked for.
+        path: PathBuf,
+        /// Underlying I/O error.
+        source: std::io::Error,
+    },
+    /// The TOML did not parse or did not match the schema.
+    #[error("invalid config {origin}: {source}")]
+    Parse {
+        /// File name, or `<string>`.
+        origin: String,
+        /// What toml said (line, column, offending key).
+        source: toml::de::Error,
+    },
+    /// A value parsed but is out of its valid range.
+    #[error("invalid config value `{key}`: {why}")]
+    Invalid {
+        /// Dotted key of the offending value.
+        key: &'static str,
+        /// What is wrong and what is allowed.
+        why: String,
+    },
+}
+
+/// Reads a TOML file into any configuration type.
+pub fn from_toml_file<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    toml::from_str(&text).map_err(|source| ConfigError::Parse {
+        origin: path.display().to_string(),
+        source,
+    })
+}
+
+/// Parses a TOML string into any configuration type.
+pub fn from_toml_str<T: for<'de> Deserialize<'de>>(text: &str) -> Result<T, ConfigError> {
+    toml::from_str(text).map_err(|source| ConfigError::Parse {
+        origin: "<string>".into(),
+        source,
+    })
+}
+
+/// The reaching task (DESIGN.md §2, the paper's §5 set-up).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TaskConfig {
+    /// Control period (s). Paper §5: a new action every 0.1 s.
+    pub dt: f64,
+    /// Episode length T (steps). Paper §5: 100 steps (10 s).
+    pub horizon: usize,
+    /// Start pose q0 (rad): the retracted pose every episode starts from (paper §5: "the arm
+    /// starts in the same retracted pose"; the exact angles are ours: upper arm raised, elbow
+    /// folded).
+    pub start_q: [f64; N_JOINTS],
+    /// Goal point of the end effector (m, arm base frame). Ours: a point in front of the arm at
+    /// table height, reachable without passing a joint limit.
+    pub goal: [f64; 3],
+}
+
+impl Default for TaskConfig {
+    fn default() -> Self {
+        Self {
+            dt: 0.1,
+            horizon: 100,
+            start_q: [0.0, -2.0, 2.4],
+            goal: [-0.45, -0.25, 0.25],
+        }
+    }
+}
+
+impl TaskConfig {
+    /// Checks ranges; the message names the key and the allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(ConfigError::Invalid { key: "task.dt", why: format!("{} s must be finite and > 0", self.dt) });
+        }
+        if self.horizon == 0 || self.horizon > crate::layout::MAX_HORIZON {
+            return Err(ConfigError::Invalid {
+                key: "task.horizon",
+                why: format!("{} must be in 1..={}", self.horizon, crate::layout::MAX_HORIZON),
+            });
+        }
+        if self.start_q.iter().chain(self.goal.iter()).any(|v| !v.is_finite()) {
+            return Err(ConfigError::Invalid { key: "task.start_q/goal", why: "must be finite".into() });
+        }
+        Ok(())
+    }
+}
+
+/// What an action means to the simulated arm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionMode {
+    /// Goal joint angles (rad) tracked by the arm's own joint servo, as a UR5 executes `servoj`
+    /// (the paper's set-up, DESIGN.md §2).
+    #[default]
+    GoalAngles,
+    /// Joint torques (N·m), clamped to the effort limits; gravity is not compensated.
+    Torque,
+}
+
+/// Gains of the simulated arm's joint servo (runs at the physics rate).
+///
+/// Law per active joint j: v_des = clamp(ω_p (q_goal − q), ±v_max);
+/// τ = τ_g(q) + k_v,j (v_des − q̇), clamped to ±effort_j; τ_g is the gravity torque of the nominal
+/// model (the arm's controller knows its own nominal masses, as a real UR5's does).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServoConfig {
+    /// Position-loop bandwidth ω_p (1/s). Ours: 10/s gives a 0.1 s time constant, so a goal one
+    /// control period ahead is mostly reached by the time the next goal arrives.
+    pub position_gain: f64,
+    /// Velocity-loop gain k_v per joint (N·m·s/rad). Ours: about 50× the largest joint inertia
+    /// (≈ 3, 3, 0.6 kg·m² at full reach), a velocity loop ≈ 5× faster than the position loop
+    /// and still far inside the explicit-integration stability limit at 1 ms.
+    pub velocity_gain: [f64; N_JOINTS],
+    /// Joint velocity limit v_max (rad/s) used by the servo. UR5 data sheet: π rad/s (180°/s).
+    pub max_velocity: f64,
+}
+
+impl Default for ServoConfig {
+    fn default() -> Self {
+        Self { position_gain: 10.0, velocity_gain: [150.0, 150.0, 30.0], max_velocity: std::f64::consts::PI }
+    }
+}
+
+/// Perturbations that turn the nominal simulated arm into a stand-in "physical arm"
+/// (DESIGN.md §2, the paper's hardware experiment). All off by default; all noise is drawn from
+/// one RNG seeded with `seed`, so a run replays bit for bit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Perturbation {
+    /// Scale applied to every moving link's mass and inertia (1 = nominal).
+    pub mass_scale: f64,
+    /// Viscous joint damping per active joint (N·m·s/rad).
+    pub joint_damping: [f64; N_JOINTS],
+    /// Dry (Coulomb) joint friction per active joint: the largest torque friction can produce (N·m).
+    pub joint_friction: [f64; N_JOINTS],
+    /// Standard deviation of Gaussian noise added to every applied joint torque (N·m), drawn
+    /// once per physics step.
+    pub actuator_noise_std: f64,
+    /// Standard deviation of Gaussian noise on the measured joint angles (rad).
+    pub sensor_noise_q_std: f64,
+    /// Standard deviation of Gaussian noise on measured joint velocities (rad/s).
+    pub sensor_noise_qd_std: f64,
+    /// Standard deviation of Gaussian noise on the measured end-effector position (m) and
+    /// velocity (m/s).
+    pub sensor_noise_ee_std: f64,
+    /// Actions applied this many control periods late (0 or 1: one-step latency).
+    pub latency_steps: usize,
+    /// Seed of the perturbation RNG.
+    pub seed: u64,
+}
+
+impl Default for Perturbation {
+    fn default() -> Self {
+        Self {
+            mass_scale: 1.0,
+            joint_damping: [0.0; N_JOINTS],
+            joint_friction: [0.0; N_JOINTS],
+            actuator_noise_std: 0.0,
+            sensor_noise_q_std: 0.0,
+            sensor_noise_qd_std: 0.0,
+            sensor_noise_ee_std: 0.0,
+            latency_steps: 0,
+            seed: 0,
+        }
+    }
+}
+
+impl Perturbation {
+    /// A moderate perturbed arm for the "simulated vs physical" experiment: +10 % mass, some
+    /// damping and friction, small actuator and sensor noise, one-step latency. Our choice of
+    /// magnitudes (a few per cent of the nominal torques), not the paper's.
+    pub fn physical_stand_in(seed: u64) -> Self {
+        Self {
+            mass_scale: 1.1,
+            joint_damping: [2.0, 2.0, 1.0],
+            joint_friction: [1.0, 1.0, 0.5],
+            actuator_noise_std: 0.5,
+            sensor_noise_q_std: 1e-3,
+            sensor_noise_qd_std: 5e-3,
+            sensor_noise_ee_std: 1e-3,
+            latency_steps: 1,
+            seed,
+        }
+    }
+
+    /// True when every knob is at its nominal value.
+    pub fn is_nominal(&self) -> bool {
+        let z = Self { seed: self.seed, ..Self::default() };
+        *self == z
+    }
+}
+
+/// The simulated UR5 (hil-sim).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// URDF file; `None` uses the UR5 model bundled with hil-sim.
+    pub urdf: Option<PathBuf>,
+    /// Physics step (s), also the servo rate. Issue 2: 1 kHz.
+    pub physics_dt: f64,
+    /// Solver substeps per physics step (rapier's `num_solver_iterations`); accuracy is first
+    /// order in physics_dt / substeps (UR5.md: ≈ 2.5e-3 relative at 1 ms, 2.5e-4 at 0.1 ms).
+    pub substeps: usize,
+    /// Meaning of actions.
+    pub mode: ActionMode,
+    /// Angles the three wrist joints are locked at (rad). Ours: the usual UR5 home posture
+    /// of the wrist (wrist 1 at −π/2, wrist 2 at π/2).
+    pub wrist_q: [f64; 3],
+    /// URDF link whose origin (plus `ee_offset`) is the end-effector point.
+    pub ee_link: String,
+    /// Offset of the end-effector point from `ee_link`'s origin, in that link's frame (m).
+    pub ee_offset: [f64; 3],
+    /// Joint servo gains (goal-angle mode).
+    pub servo: ServoConfig,
+    /// Stand-in "physical arm" knobs (all off by default).
+    pub perturbation: Perturbation,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            urdf: None,
+            physics_dt: 1e-3,
+            substeps: 1,
+            mode: ActionMode::GoalAngles,
+            wrist_q: [-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2, 0.0],
+            ee_link: "wrist_3_link".into(),
+            ee_offset: [0.0; 3],
+            servo: ServoConfig::default(),
+            perturbation: Perturbation::default(),
+        }
+    }
+}
+
+impl SimConfig {
+    /// Checks ranges; the message names the key and the allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
+        if !(self.physics_dt.is_finite() && self.physics_dt > 0.0 && self.physics_dt <= 0.01) {
+            return bad("sim.physics_dt", format!("{} s must be in (0, 0.01]", self.physics_dt));
+        }
+        if self.substeps == 0 || self.substeps > 1000 {
+            return bad("sim.substeps", format!("{} must be in 1..=1000", self.substeps));
+        }
+        let p = &self.perturbation;
+        if !(p.mass_scale.is_finite() && p.mass_scale > 0.0) {
+            return bad("sim.perturbation.mass_scale", format!("{} must be finite and > 0", p.mass_scale));
+        }
+        let nonneg = p
+            .joint_damping
+            .iter()
+            .chain(p.joint_friction.iter())
+            .chain([p.actuator_noise_std, p.sensor_noise_q_std, p.sensor_noise_qd_std, p.sensor_noise_ee_std].iter())
+            .all(|v| v.is_finite() && *v >= 0.0);
+        if !nonneg {
+            return bad("sim.perturbation", "damping, friction and noise levels must be finite and >= 0".into());
+        }
+        if p.latency_steps > 1 {
+            return bad("sim.perturbation.latency_steps", format!("{} must be 0 or 1", p.latency_steps));
+        }
+        let s = &self.servo;
+        if !(s.position_gain > 0.0 && s.max_velocity > 0.0 && s.velocity_gain.iter().all(|g| *g > 0.0)) {
+            return bad("sim.servo", "gains and max_velocity must be > 0".into());
+        }
+        if self.wrist_q.iter().chain(self.ee_offset.iter()).any(|v| !v.is_finite()) {
+            return bad("sim.wrist_q/ee_offset", "must be finite".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate_and_round_trip_through_toml() {
+        let sim = SimConfig::default();
+        sim.validate().unwrap();
+        TaskConfig::default().validate().unwrap();
+        let text = toml::to_string(&sim).unwrap();
+        let back: SimConfig = from_toml_str(&text).unwrap();
+        assert_eq!(back, sim);
+        assert!(sim.perturbation.is_nominal());
+        assert!(!Perturbation::physical_stand_in(1).is_nominal());
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_rejected() {
+        let err = from_toml_str::<SimConfig>("physics_dtt = 0.001").unwrap_err();
+        assert!(err.to_string().contains("physics_dtt"), "{err}");
+        let sim: SimConfig = from_toml_str("physics_dt = -1.0").unwrap();
+        assert!(sim.validate().unwrap_err().to_string().contains("physics_dt"));
+        let sim: SimConfig = from_toml_str("[perturbation]\nlatency_steps = 3").unwrap();
+        assert!(sim.validate().is_err());
+    }
+}
