@@ -16,7 +16,11 @@ use ur5_shared::config::{from_toml_file, SimConfig, TaskConfig};
 use hil_sim::Ur5Sim;
 
 #[derive(Parser)]
-#[command(name = "hil-sim", version, about = "Simulated UR5 (rapier3d multibody from a URDF) for LQR+GAIfO.")]
+#[command(
+    name = "hil-sim",
+    version,
+    about = "Simulated UR5 (rapier3d multibody from a URDF) for LQR+GAIfO."
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -82,7 +86,9 @@ fn parse3(s: &str) -> Result<[f64; 3], String> {
         .split(',')
         .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
         .collect::<Result<_, _>>()?;
-    let a: [f64; 3] = v.try_into().map_err(|v: Vec<f64>| format!("expected 3 comma-separated numbers, got {}", v.len()))?;
+    let a: [f64; 3] = v
+        .try_into()
+        .map_err(|v: Vec<f64>| format!("expected 3 comma-separated numbers, got {}", v.len()))?;
     if a.iter().any(|x| !x.is_finite()) {
         return Err("values must be finite".into());
     }
@@ -91,8 +97,18 @@ fn parse3(s: &str) -> Result<[f64; 3], String> {
 
 fn main() -> Result<()> {
     match Cli::parse().cmd {
-        Cmd::Demo { config, goals, json } => demo(config, &goals, json),
-        Cmd::Inspect { q, qd, tau, substep, urdf } => inspect(q, qd, tau, substep, urdf),
+        Cmd::Demo {
+            config,
+            goals,
+            json,
+        } => demo(config, &goals, json),
+        Cmd::Inspect {
+            q,
+            qd,
+            tau,
+            substep,
+            urdf,
+        } => inspect(q, qd, tau, substep, urdf),
         Cmd::Bench { episodes, json } => bench(episodes, json),
     }
 }
@@ -109,14 +125,21 @@ fn load(config: Option<PathBuf>) -> Result<FileConfig> {
 
 fn demo(config: Option<PathBuf>, goals: &str, json: bool) -> Result<()> {
     let cfg = load(config)?;
-    let goals: Vec<[f64; 3]> =
-        goals.split(';').map(parse3).collect::<Result<_, _>>().map_err(anyhow::Error::msg).context("--goals")?;
+    let goals: Vec<[f64; 3]> = goals
+        .split(';')
+        .map(parse3)
+        .collect::<Result<_, _>>()
+        .map_err(anyhow::Error::msg)
+        .context("--goals")?;
     let mut sim = Ur5Sim::new(cfg.sim.clone(), cfg.task.dt)?;
     let mut obs = sim.reset(cfg.task.start_q, cfg.task.goal)?;
     let dist = |o: &hil_sim::Observation, g: [f64; 3]| {
-        ((o.ee_pos[0] - g[0]).powi(2) + (o.ee_pos[1] - g[1]).powi(2) + (o.ee_pos[2] - g[2]).powi(2)).sqrt()
+        ((o.ee_pos[0] - g[0]).powi(2) + (o.ee_pos[1] - g[1]).powi(2) + (o.ee_pos[2] - g[2]).powi(2))
+            .sqrt()
     };
-    println!("# t_s  q1 q2 q3 (rad)  goal1 goal2 goal3 (rad)  ee_x ee_y ee_z (m)  |ee-goal_point| (m)");
+    println!(
+        "# t_s  q1 q2 q3 (rad)  goal1 goal2 goal3 (rad)  ee_x ee_y ee_z (m)  |ee-goal_point| (m)"
+    );
     let steps_per_goal = (2.0 / cfg.task.dt).round() as usize;
     let mut t = 0.0;
     let mut worst_final = 0.0f64;
@@ -126,12 +149,23 @@ fn demo(config: Option<PathBuf>, goals: &str, json: bool) -> Result<()> {
             t += cfg.task.dt;
             println!(
                 "{t:6.2}  {:+.4} {:+.4} {:+.4}  {:+.4} {:+.4} {:+.4}  {:+.4} {:+.4} {:+.4}  {:.4}",
-                obs.q[0], obs.q[1], obs.q[2], g[0], g[1], g[2], obs.ee_pos[0], obs.ee_pos[1], obs.ee_pos[2],
+                obs.q[0],
+                obs.q[1],
+                obs.q[2],
+                g[0],
+                g[1],
+                g[2],
+                obs.ee_pos[0],
+                obs.ee_pos[1],
+                obs.ee_pos[2],
                 dist(&obs, cfg.task.goal)
             );
         }
         let err = (0..3).map(|j| (obs.q[j] - g[j]).abs()).fold(0.0, f64::max);
-        eprintln!("goal {g:?} rad: final joint error {err:.2e} rad after {:.1} s", steps_per_goal as f64 * cfg.task.dt);
+        eprintln!(
+            "goal {g:?} rad: final joint error {err:.2e} rad after {:.1} s",
+            steps_per_goal as f64 * cfg.task.dt
+        );
         worst_final = worst_final.max(err);
     }
     if json {
@@ -144,8 +178,19 @@ fn demo(config: Option<PathBuf>, goals: &str, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn inspect(q: [f64; 3], qd: [f64; 3], tau: [f64; 3], substep: f64, urdf: Option<PathBuf>) -> Result<()> {
-    let sim_cfg = SimConfig { urdf, physics_dt: substep, substeps: 1, ..SimConfig::default() };
+fn inspect(
+    q: [f64; 3],
+    qd: [f64; 3],
+    tau: [f64; 3],
+    substep: f64,
+    urdf: Option<PathBuf>,
+) -> Result<()> {
+    let sim_cfg = SimConfig {
+        urdf,
+        physics_dt: substep,
+        substeps: 1,
+        ..SimConfig::default()
+    };
     let mut sim = Ur5Sim::new(sim_cfg, substep)?;
     sim.set_joint_state(q, qd);
     let obs = sim.true_observation();

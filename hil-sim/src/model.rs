@@ -95,17 +95,26 @@ impl ArmModel {
             path: source.clone(),
             message: e.to_string(),
         })?;
-        let joint_names = || urdf.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>();
+        let joint_names = || {
+            urdf.joints
+                .iter()
+                .map(|j| j.name.clone())
+                .collect::<Vec<_>>()
+        };
 
         let mut active = Vec::with_capacity(N_JOINTS);
         for name in ACTIVE_JOINTS {
-            let j = urdf
-                .joints
-                .iter()
-                .find(|j| j.name == name)
-                .ok_or_else(|| SimError::UnknownJoint { name: name.into(), available: joint_names() })?;
+            let j = urdf.joints.iter().find(|j| j.name == name).ok_or_else(|| {
+                SimError::UnknownJoint {
+                    name: name.into(),
+                    available: joint_names(),
+                }
+            })?;
             if j.joint_type != JointType::Revolute {
-                return Err(SimError::BadJoint { name: name.into(), why: "must be revolute".into() });
+                return Err(SimError::BadJoint {
+                    name: name.into(),
+                    why: "must be revolute".into(),
+                });
             }
             let l = &j.limit;
             if !(l.lower < l.upper && l.effort > 0.0 && l.velocity > 0.0) {
@@ -135,7 +144,12 @@ impl ArmModel {
         for link in &urdf.links {
             let m = link.inertial.mass.value;
             let i = &link.inertial.inertia;
-            if !(m.is_finite() && m > 0.0 && [i.ixx, i.iyy, i.izz].iter().all(|v| v.is_finite() && *v > 0.0)) {
+            if !(m.is_finite()
+                && m > 0.0
+                && [i.ixx, i.iyy, i.izz]
+                    .iter()
+                    .all(|v| v.is_finite() && *v > 0.0))
+            {
                 return Err(SimError::BadLink {
                     name: link.name.clone(),
                     why: format!("mass {m} kg and inertia diagonal must be finite and > 0 (every link needs an <inertial>)"),
@@ -153,13 +167,19 @@ impl ArmModel {
                 continue;
             }
             if j.joint_type != JointType::Revolute && j.joint_type != JointType::Continuous {
-                return Err(SimError::BadJoint { name: j.name.clone(), why: "only revolute wrist joints can be locked".into() });
+                return Err(SimError::BadJoint {
+                    name: j.name.clone(),
+                    why: "only revolute wrist joints can be locked".into(),
+                });
             }
             let k = wrist_joints.len();
             if k >= wrist_q.len() {
                 return Err(SimError::BadJoint {
                     name: j.name.clone(),
-                    why: format!("more than {} movable joints besides the active ones", wrist_q.len()),
+                    why: format!(
+                        "more than {} movable joints besides the active ones",
+                        wrist_q.len()
+                    ),
                 });
             }
             wrist_joints.push(j.name.clone());
@@ -170,7 +190,11 @@ impl ArmModel {
         if wrist_joints.len() != wrist_q.len() {
             return Err(SimError::BadJoint {
                 name: "<wrist>".into(),
-                why: format!("expected {} wrist joints to lock, found {:?}", wrist_q.len(), wrist_joints),
+                why: format!(
+                    "expected {} wrist joints to lock, found {:?}",
+                    wrist_q.len(),
+                    wrist_joints
+                ),
             });
         }
 
@@ -193,7 +217,9 @@ impl ArmModel {
         for link in &mut r.links {
             link.inertial.mass.value *= scale;
             let i = &mut link.inertial.inertia;
-            for v in [&mut i.ixx, &mut i.ixy, &mut i.ixz, &mut i.iyy, &mut i.iyz, &mut i.izz] {
+            for v in [
+                &mut i.ixx, &mut i.ixy, &mut i.ixz, &mut i.iyy, &mut i.iyz, &mut i.izz,
+            ] {
                 *v *= scale;
             }
         }
@@ -221,7 +247,12 @@ impl ArmModel {
 /// Joint indices ordered from the root to the leaves (the URDF must be a tree).
 fn chain_order(robot: &Robot) -> Result<Vec<usize>, SimError> {
     let is_child = |name: &str| robot.joints.iter().any(|j| j.child.link == name);
-    let roots: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).filter(|n| !is_child(n)).collect();
+    let roots: Vec<&str> = robot
+        .links
+        .iter()
+        .map(|l| l.name.as_str())
+        .filter(|n| !is_child(n))
+        .collect();
     if roots.len() != 1 {
         return Err(SimError::BadLink {
             name: format!("{roots:?}"),
@@ -241,7 +272,8 @@ fn chain_order(robot: &Robot) -> Result<Vec<usize>, SimError> {
     if order.len() != robot.joints.len() {
         return Err(SimError::BadJoint {
             name: "<tree>".into(),
-            why: "some joints are not reachable from the root link (loop or dangling parent)".into(),
+            why: "some joints are not reachable from the root link (loop or dangling parent)"
+                .into(),
         });
     }
     Ok(order)

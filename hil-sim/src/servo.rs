@@ -38,10 +38,24 @@ mod tests {
         let cfg = ServoConfig::default();
         let limits = [(150.0, 3.14); 3];
         // At the goal, at rest: exactly the gravity torque.
-        let tau = servo_torque(&cfg, &limits, [0.1, 0.2, 0.3], [0.0; 3], [0.1, 0.2, 0.3], [10.0, -20.0, 5.0]);
+        let tau = servo_torque(
+            &cfg,
+            &limits,
+            [0.1, 0.2, 0.3],
+            [0.0; 3],
+            [0.1, 0.2, 0.3],
+            [10.0, -20.0, 5.0],
+        );
         assert_eq!(tau, [10.0, -20.0, 5.0]);
         // Far from the goal: clamped to the effort limit, with the sign of the error.
-        let tau = servo_torque(&cfg, &limits, [0.0; 3], [0.0; 3], [3.0, -3.0, 3.0], [0.0; 3]);
+        let tau = servo_torque(
+            &cfg,
+            &limits,
+            [0.0; 3],
+            [0.0; 3],
+            [3.0, -3.0, 3.0],
+            [0.0; 3],
+        );
         assert_eq!(tau, [150.0, -150.0, cfg.velocity_gain[2] * 3.14]);
         // Already at the velocity limit towards the goal: no further push beyond gravity.
         let tau = servo_torque(&cfg, &limits, [0.0; 3], [3.14; 3], [3.0; 3], [0.0; 3]);

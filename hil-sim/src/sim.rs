@@ -34,6 +34,13 @@ pub struct Observation {
     pub ee_vel: [f64; 3],
 }
 
+impl Observation {
+    /// The task state s ∈ R^12 (layout in `ur5_shared::layout`) for goal point `goal` (m).
+    pub fn state(&self, goal: &[f64; 3]) -> [f64; ur5_shared::DX] {
+        ur5_shared::state_vector(&self.q, &self.qd, &self.ee_pos, &self.ee_vel, goal)
+    }
+}
+
 /// One active joint inside the rapier multibody.
 #[derive(Clone, Copy, Debug)]
 struct ActiveDof {
@@ -76,12 +83,20 @@ impl Ur5Sim {
     /// must be a whole number of physics steps.
     pub fn new(cfg: SimConfig, control_dt: f64) -> Result<Self, SimError> {
         cfg.validate()?;
-        let model = ArmModel::load(cfg.urdf.as_deref(), cfg.wrist_q, &cfg.ee_link, cfg.ee_offset)?;
+        let model = ArmModel::load(
+            cfg.urdf.as_deref(),
+            cfg.wrist_q,
+            &cfg.ee_link,
+            cfg.ee_offset,
+        )?;
         let ratio = control_dt / cfg.physics_dt;
         if !(control_dt > 0.0 && (ratio - ratio.round()).abs() < 1e-9 && ratio.round() >= 1.0) {
             return Err(SimError::Config(ur5_shared::config::ConfigError::Invalid {
                 key: "task.dt",
-                why: format!("control period {control_dt} s must be a whole multiple of physics_dt {} s", cfg.physics_dt),
+                why: format!(
+                    "control period {control_dt} s must be a whole multiple of physics_dt {} s",
+                    cfg.physics_dt
+                ),
             }));
         }
         let physics_steps_per_control = ratio.round() as usize;
@@ -104,10 +119,16 @@ impl Ur5Sim {
         let robot = model.locked_with_mass_scale(cfg.perturbation.mass_scale);
         let nominal = &model.locked;
         let urdf_robot = UrdfRobot::from_robot(&robot, options, std::path::Path::new("."));
-        let link_names: Vec<String> =
-            urdf_robot.links.iter().map(|l| robot.links[l.urdf_link_index].name.clone()).collect();
-        let joint_names: Vec<String> =
-            urdf_robot.joints.iter().map(|j| robot.joints[j.urdf_joint_index].name.clone()).collect();
+        let link_names: Vec<String> = urdf_robot
+            .links
+            .iter()
+            .map(|l| robot.links[l.urdf_link_index].name.clone())
+            .collect();
+        let joint_names: Vec<String> = urdf_robot
+            .joints
+            .iter()
+            .map(|j| robot.joints[j.urdf_joint_index].name.clone())
+            .collect();
         let handles = urdf_robot.insert_using_multibody_joints(
             &mut world.bodies,
             &mut world.colliders,
@@ -116,21 +137,39 @@ impl Ur5Sim {
         );
 
         let link_of = |body: RigidBodyHandle, world: &PhysicsWorld| {
-            *world.multibody_joints.rigid_body_link(body).expect("every URDF link is in the multibody")
+            *world
+                .multibody_joints
+                .rigid_body_link(body)
+                .expect("every URDF link is in the multibody")
         };
         let root = link_of(handles.links[0].body, &world);
         let mb = root.multibody;
         // The root's multibody joint follows its body type (fixed) only after a forward
         // kinematics pass that reads the root body; do it before reading any dof index.
-        world.multibody_joints.get_multibody_mut(mb).expect("multibody").forward_kinematics(&world.bodies, true);
+        world
+            .multibody_joints
+            .get_multibody_mut(mb)
+            .expect("multibody")
+            .forward_kinematics(&world.bodies, true);
 
         let mut dofs = Vec::with_capacity(N_JOINTS);
         for limits in &model.active {
-            let ji = joint_names.iter().position(|n| *n == limits.name).expect("active joint was checked");
+            let ji = joint_names
+                .iter()
+                .position(|n| *n == limits.name)
+                .expect("active joint was checked");
             let jh = &handles.joints[ji];
             let link = link_of(jh.link2, &world).id;
-            let dof = world.multibody_joints[mb].link(link).expect("link").assembly_id();
-            dofs.push(ActiveDof { link, dof, parent_body: jh.link1, child_body: jh.link2 });
+            let dof = world.multibody_joints[mb]
+                .link(link)
+                .expect("link")
+                .assembly_id();
+            dofs.push(ActiveDof {
+                link,
+                dof,
+                parent_body: jh.link1,
+                child_body: jh.link2,
+            });
         }
         let dofs: [ActiveDof; N_JOINTS] = dofs.try_into().expect("three active joints");
 
@@ -140,20 +179,36 @@ impl Ur5Sim {
             if link == 0 {
                 continue; // the fixed base does not load the joints
             }
-            let mass = nominal.links.iter().find(|l| l.name == *name).expect("same links").inertial.mass.value;
+            let mass = nominal
+                .links
+                .iter()
+                .find(|l| l.name == *name)
+                .expect("same links")
+                .inertial
+                .mass
+                .value;
             nominal_masses.push((link, mass));
         }
-        let ee_index = link_names.iter().position(|n| *n == model.ee_link).expect("ee link was checked");
+        let ee_index = link_names
+            .iter()
+            .position(|n| *n == model.ee_link)
+            .expect("ee link was checked");
         let ee_body = handles.links[ee_index].body;
         let ee_link = link_of(ee_body, &world).id;
 
         {
-            let multibody = world.multibody_joints.get_multibody_mut(mb).expect("multibody");
+            let multibody = world
+                .multibody_joints
+                .get_multibody_mut(mb)
+                .expect("multibody");
 
             if multibody.ndofs() != N_JOINTS {
                 return Err(SimError::BadJoint {
                     name: "<multibody>".into(),
-                    why: format!("the multibody has {} degrees of freedom, expected {N_JOINTS}", multibody.ndofs()),
+                    why: format!(
+                        "the multibody has {} degrees of freedom, expected {N_JOINTS}",
+                        multibody.ndofs()
+                    ),
                 });
             }
             // UR5.md: rapier puts 0.1 N·m·s/rad on every multibody joint by default; the nominal arm
@@ -226,10 +281,19 @@ impl Ur5Sim {
 
     /// Starts an episode: puts the arm at rest at `start_q` and sets the goal. Re-seeds
     /// nothing: the perturbation RNG runs on across episodes, so a run replays as a whole.
-    pub fn reset(&mut self, start_q: [f64; N_JOINTS], goal: [f64; 3]) -> Result<Observation, SimError> {
+    pub fn reset(
+        &mut self,
+        start_q: [f64; N_JOINTS],
+        goal: [f64; 3],
+    ) -> Result<Observation, SimError> {
         for (j, l) in self.model.active.iter().enumerate() {
             if !(start_q[j].is_finite() && start_q[j] >= l.lower && start_q[j] <= l.upper) {
-                return Err(SimError::OutOfLimits { joint: l.name.clone(), value: start_q[j], lower: l.lower, upper: l.upper });
+                return Err(SimError::OutOfLimits {
+                    joint: l.name.clone(),
+                    value: start_q[j],
+                    lower: l.lower,
+                    upper: l.upper,
+                });
             }
         }
         self.check_goal(goal)?;
@@ -247,13 +311,22 @@ impl Ur5Sim {
 
     /// Rejects a goal that is not finite or farther from the shoulder than the arm reaches.
     pub fn check_goal(&self, goal: [f64; 3]) -> Result<(), SimError> {
-        let lift = self.world.bodies[self.dofs[1].child_body].position().translation;
-        let d = ((goal[0] - lift.x as f64).powi(2) + (goal[1] - lift.y as f64).powi(2) + (goal[2] - lift.z as f64).powi(2)).sqrt();
+        let lift = self.world.bodies[self.dofs[1].child_body]
+            .position()
+            .translation;
+        let d = ((goal[0] - lift.x as f64).powi(2)
+            + (goal[1] - lift.y as f64).powi(2)
+            + (goal[2] - lift.z as f64).powi(2))
+        .sqrt();
         let reach = self.model.reach();
         if goal.iter().all(|g| g.is_finite()) && d <= reach {
             Ok(())
         } else {
-            Err(SimError::GoalOutOfReach { goal, distance: d, reach })
+            Err(SimError::GoalOutOfReach {
+                goal,
+                distance: d,
+                reach,
+            })
         }
     }
 
@@ -297,7 +370,8 @@ impl Ur5Sim {
         let mut tau = match self.cfg.mode {
             ActionMode::GoalAngles => {
                 let tau_g = self.gravity_torque();
-                let limits = [0, 1, 2].map(|j| (self.model.active[j].effort, self.model.active[j].velocity));
+                let limits =
+                    [0, 1, 2].map(|j| (self.model.active[j].effort, self.model.active[j].velocity));
                 servo_torque(&self.cfg.servo, &limits, q, qd, self.current, tau_g)
             }
             ActionMode::Torque => self.current,
@@ -335,7 +409,9 @@ impl Ur5Sim {
 
     /// World direction of active joint `j`'s axis.
     fn axis_world(&self, j: usize, child: &RigidBody) -> Vec3 {
-        let link = self.world.multibody_joints[self.mb].link(self.dofs[j].link).expect("link");
+        let link = self.world.multibody_joints[self.mb]
+            .link(self.dofs[j].link)
+            .expect("link");
         child.position().rotation * link.joint().data.local_axis2()
     }
 
@@ -343,7 +419,10 @@ impl Ur5Sim {
     /// the current joint angles, because every change of state ends with a forward-kinematics
     /// pass (rapier's step does one after integrating; [`Self::set_joint_state`] does one).
     fn multibody(&self) -> &Multibody {
-        self.world.multibody_joints.get_multibody(self.mb).expect("multibody")
+        self.world
+            .multibody_joints
+            .get_multibody(self.mb)
+            .expect("multibody")
     }
 
     /// True joint angles and velocities (no sensor noise).
@@ -364,7 +443,11 @@ impl Ur5Sim {
     /// link pose and Jacobian.
     pub fn set_joint_state(&mut self, q: [f64; N_JOINTS], qd: [f64; N_JOINTS]) {
         let (q0, _) = self.joint_state();
-        let mb = self.world.multibody_joints.get_multibody_mut(self.mb).expect("multibody");
+        let mb = self
+            .world
+            .multibody_joints
+            .get_multibody_mut(self.mb)
+            .expect("multibody");
         let mut disp = vec![0.0f32; mb.ndofs()];
         let mut vel = mb.generalized_velocity_mut();
         for (j, d) in self.dofs.iter().enumerate() {
@@ -414,21 +497,34 @@ impl Ur5Sim {
             }
         }
         // The Jacobian gives the COM velocity; shift it to the end-effector point: v + ω × r.
-        let r = [(ee.x - com.x) as f64, (ee.y - com.y) as f64, (ee.z - com.z) as f64];
+        let r = [
+            (ee.x - com.x) as f64,
+            (ee.y - com.y) as f64,
+            (ee.z - com.z) as f64,
+        ];
         let ee_vel = [
             v[0] + w[1] * r[2] - w[2] * r[1],
             v[1] + w[2] * r[0] - w[0] * r[2],
             v[2] + w[0] * r[1] - w[1] * r[0],
         ];
-        Observation { q, qd, ee_pos: [ee.x as f64, ee.y as f64, ee.z as f64], ee_vel }
+        Observation {
+            q,
+            qd,
+            ee_pos: [ee.x as f64, ee.y as f64, ee.z as f64],
+            ee_vel,
+        }
     }
 
     /// What the arm's sensors report: the true observation plus the configured sensor noise.
     pub fn observe(&mut self) -> Observation {
         let mut o = self.true_observation();
         let p = &self.cfg.perturbation;
-        let groups: [(&mut [f64; 3], f64); 4] =
-            [(&mut o.q, p.sensor_noise_q_std), (&mut o.qd, p.sensor_noise_qd_std), (&mut o.ee_pos, p.sensor_noise_ee_std), (&mut o.ee_vel, p.sensor_noise_ee_std)];
+        let groups: [(&mut [f64; 3], f64); 4] = [
+            (&mut o.q, p.sensor_noise_q_std),
+            (&mut o.qd, p.sensor_noise_qd_std),
+            (&mut o.ee_pos, p.sensor_noise_ee_std),
+            (&mut o.ee_vel, p.sensor_noise_ee_std),
+        ];
         for (vals, std) in groups {
             if std > 0.0 {
                 for v in vals.iter_mut() {
@@ -443,7 +539,12 @@ impl Ur5Sim {
     /// Joint accelerations (rad/s²) over one physics step from state (q, q̇) under raw joint
     /// torques τ (servo bypassed, no clamping, gravity on): (q̇⁺ − q̇) / physics_dt. Leaves the
     /// arm in the stepped state.
-    pub fn joint_acceleration(&mut self, q: [f64; N_JOINTS], qd: [f64; N_JOINTS], tau: [f64; N_JOINTS]) -> [f64; N_JOINTS] {
+    pub fn joint_acceleration(
+        &mut self,
+        q: [f64; N_JOINTS],
+        qd: [f64; N_JOINTS],
+        tau: [f64; N_JOINTS],
+    ) -> [f64; N_JOINTS] {
         self.set_joint_state(q, qd);
         let (_, v0) = self.joint_state();
         self.apply_torque_and_step(tau);

@@ -89,16 +89,31 @@ impl TaskConfig {
     /// Checks ranges; the message names the key and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(ConfigError::Invalid { key: "task.dt", why: format!("{} s must be finite and > 0", self.dt) });
+            return Err(ConfigError::Invalid {
+                key: "task.dt",
+                why: format!("{} s must be finite and > 0", self.dt),
+            });
         }
         if self.horizon == 0 || self.horizon > crate::layout::MAX_HORIZON {
             return Err(ConfigError::Invalid {
                 key: "task.horizon",
-                why: format!("{} must be in 1..={}", self.horizon, crate::layout::MAX_HORIZON),
+                why: format!(
+                    "{} must be in 1..={}",
+                    self.horizon,
+                    crate::layout::MAX_HORIZON
+                ),
             });
         }
-        if self.start_q.iter().chain(self.goal.iter()).any(|v| !v.is_finite()) {
-            return Err(ConfigError::Invalid { key: "task.start_q/goal", why: "must be finite".into() });
+        if self
+            .start_q
+            .iter()
+            .chain(self.goal.iter())
+            .any(|v| !v.is_finite())
+        {
+            return Err(ConfigError::Invalid {
+                key: "task.start_q/goal",
+                why: "must be finite".into(),
+            });
         }
         Ok(())
     }
@@ -137,7 +152,11 @@ pub struct ServoConfig {
 
 impl Default for ServoConfig {
     fn default() -> Self {
-        Self { position_gain: 10.0, velocity_gain: [150.0, 150.0, 30.0], max_velocity: std::f64::consts::PI }
+        Self {
+            position_gain: 10.0,
+            velocity_gain: [150.0, 150.0, 30.0],
+            max_velocity: std::f64::consts::PI,
+        }
     }
 }
 
@@ -205,7 +224,10 @@ impl Perturbation {
 
     /// True when every knob is at its nominal value.
     pub fn is_nominal(&self) -> bool {
-        let z = Self { seed: self.seed, ..Self::default() };
+        let z = Self {
+            seed: self.seed,
+            ..Self::default()
+        };
         *self == z
     }
 }
@@ -243,7 +265,11 @@ impl Default for SimConfig {
             physics_dt: 1e-3,
             substeps: 1,
             mode: ActionMode::GoalAngles,
-            wrist_q: [-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2, 0.0],
+            wrist_q: [
+                -std::f64::consts::FRAC_PI_2,
+                std::f64::consts::FRAC_PI_2,
+                0.0,
+            ],
             ee_link: "wrist_3_link".into(),
             ee_offset: [0.0; 3],
             servo: ServoConfig::default(),
@@ -257,32 +283,63 @@ impl SimConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
         if !(self.physics_dt.is_finite() && self.physics_dt > 0.0 && self.physics_dt <= 0.01) {
-            return bad("sim.physics_dt", format!("{} s must be in (0, 0.01]", self.physics_dt));
+            return bad(
+                "sim.physics_dt",
+                format!("{} s must be in (0, 0.01]", self.physics_dt),
+            );
         }
         if self.substeps == 0 || self.substeps > 1000 {
-            return bad("sim.substeps", format!("{} must be in 1..=1000", self.substeps));
+            return bad(
+                "sim.substeps",
+                format!("{} must be in 1..=1000", self.substeps),
+            );
         }
         let p = &self.perturbation;
         if !(p.mass_scale.is_finite() && p.mass_scale > 0.0) {
-            return bad("sim.perturbation.mass_scale", format!("{} must be finite and > 0", p.mass_scale));
+            return bad(
+                "sim.perturbation.mass_scale",
+                format!("{} must be finite and > 0", p.mass_scale),
+            );
         }
         let nonneg = p
             .joint_damping
             .iter()
             .chain(p.joint_friction.iter())
-            .chain([p.actuator_noise_std, p.sensor_noise_q_std, p.sensor_noise_qd_std, p.sensor_noise_ee_std].iter())
+            .chain(
+                [
+                    p.actuator_noise_std,
+                    p.sensor_noise_q_std,
+                    p.sensor_noise_qd_std,
+                    p.sensor_noise_ee_std,
+                ]
+                .iter(),
+            )
             .all(|v| v.is_finite() && *v >= 0.0);
         if !nonneg {
-            return bad("sim.perturbation", "damping, friction and noise levels must be finite and >= 0".into());
+            return bad(
+                "sim.perturbation",
+                "damping, friction and noise levels must be finite and >= 0".into(),
+            );
         }
         if p.latency_steps > 1 {
-            return bad("sim.perturbation.latency_steps", format!("{} must be 0 or 1", p.latency_steps));
+            return bad(
+                "sim.perturbation.latency_steps",
+                format!("{} must be 0 or 1", p.latency_steps),
+            );
         }
         let s = &self.servo;
-        if !(s.position_gain > 0.0 && s.max_velocity > 0.0 && s.velocity_gain.iter().all(|g| *g > 0.0)) {
+        if !(s.position_gain > 0.0
+            && s.max_velocity > 0.0
+            && s.velocity_gain.iter().all(|g| *g > 0.0))
+        {
             return bad("sim.servo", "gains and max_velocity must be > 0".into());
         }
-        if self.wrist_q.iter().chain(self.ee_offset.iter()).any(|v| !v.is_finite()) {
+        if self
+            .wrist_q
+            .iter()
+            .chain(self.ee_offset.iter())
+            .any(|v| !v.is_finite())
+        {
             return bad("sim.wrist_q/ee_offset", "must be finite".into());
         }
         Ok(())
@@ -310,7 +367,11 @@ mod tests {
         let err = from_toml_str::<SimConfig>("physics_dtt = 0.001").unwrap_err();
         assert!(err.to_string().contains("physics_dtt"), "{err}");
         let sim: SimConfig = from_toml_str("physics_dt = -1.0").unwrap();
-        assert!(sim.validate().unwrap_err().to_string().contains("physics_dt"));
+        assert!(sim
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("physics_dt"));
         let sim: SimConfig = from_toml_str("[perturbation]\nlatency_steps = 3").unwrap();
         assert!(sim.validate().is_err());
     }
