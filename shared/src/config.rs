@@ -131,6 +131,50 @@ pub enum ActionMode {
     Torque,
 }
 
+/// Limits of the three active joints that every action is clamped to (see `crate::safety`).
+/// Defaults: UR5 (CB3) data sheet, as written in hil-sim's bundled URDF.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArmLimits {
+    /// Lower joint limits (rad): ±2π for pan and lift, ±π for the elbow.
+    pub lower: [f64; N_JOINTS],
+    /// Upper joint limits (rad).
+    pub upper: [f64; N_JOINTS],
+    /// Joint velocity limits (rad/s): π rad/s (180°/s).
+    pub velocity: [f64; N_JOINTS],
+    /// Joint effort limits (N·m): 150 N·m for the three large joints.
+    pub effort: [f64; N_JOINTS],
+}
+
+impl Default for ArmLimits {
+    fn default() -> Self {
+        use std::f64::consts::PI;
+        Self {
+            lower: [-2.0 * PI, -2.0 * PI, -PI],
+            upper: [2.0 * PI, 2.0 * PI, PI],
+            velocity: [PI; N_JOINTS],
+            effort: [150.0; N_JOINTS],
+        }
+    }
+}
+
+impl ArmLimits {
+    /// Checks ordering and signs.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for j in 0..N_JOINTS {
+            if !(self.lower[j] < self.upper[j] && self.velocity[j] > 0.0 && self.effort[j] > 0.0) {
+                return Err(ConfigError::Invalid {
+                    key: "limits",
+                    why: format!(
+                        "joint {j}: need lower < upper and positive velocity and effort limits"
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Gains of the simulated arm's joint servo (runs at the physics rate).
 ///
 /// Law per active joint j: v_des = clamp(ω_p (q_goal − q), ±v_max);

@@ -9,21 +9,26 @@
 //! - [`law`]: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε ([`controller_action`]),
 //!   used by both the real-time loop and the learner's rollouts.
 //! - [`msg`]: the other IPC payloads ([`ArmState`], [`ArmCommand`], [`StepSample`]).
-//! - [`services`]: iceoryx2 service names and per-run prefixes.
+//! - [`services`]: iceoryx2 service names, per-run prefixes and the quality of service of each
+//!   service ([`services::Qos`]).
+//! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`cost`]: the task cost C(τ) and normalised performance.
-//! - [`config`]: task and simulator configuration (TOML).
+//! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
+//! - [`config`]: task and simulator configuration (TOML), arm limits.
 //!
 //! Conventions: SI units (rad, rad/s, m, m/s, N·m, s; timestamps in monotonic ns); Cartesian
 //! quantities in the arm base frame; matrices row-major (numpy C order). Nothing the
 //! controller calls per tick ([`controller_action`], [`GainTable::validate`],
 //! [`GainTable::copy_from`], [`state_vector`], the payload types) allocates.
 
+pub mod clock;
 pub mod config;
 pub mod cost;
 pub mod gains;
 pub mod law;
 pub mod layout;
 pub mod msg;
+pub mod safety;
 pub mod services;
 
 pub use cost::{normalised_performance, task_cost, task_cost_from_distances, CostError};
