@@ -158,6 +158,7 @@ struct Workspace {
     pc: Mat<f64>,
     cpc: Mat<f64>,
     tmp_ux: Mat<f64>,
+    tmp_ux2: Mat<f64>,
     tmp_xu: Mat<f64>,
     tmp_u: Mat<f64>,
     prc: Mat<f64>,
@@ -203,6 +204,7 @@ impl Workspace {
             pc: z(du, du),
             cpc: z(du, du),
             tmp_ux: z(du, dx),
+            tmp_ux2: z(du, dx),
             tmp_xu: z(dx, du),
             tmp_u: z(du, 1),
             prc: z(du, du),
@@ -648,6 +650,8 @@ impl TrajOptLqr {
                     &mut ws.tmp_xx,
                     &mut ws.tmp_xx2,
                     &mut ws.prc,
+                    &mut ws.tmp_u,
+                    &mut ws.tmp_ux2,
                 )
             } else {
                 let (c_new, ld_new) = kl_terms(
@@ -1022,6 +1026,8 @@ fn kl_alt_step(
     tmp_xx: &mut Mat<f64>,
     tmp_xx2: &mut Mat<f64>,
     tmp_uu: &mut Mat<f64>,
+    kd: &mut Mat<f64>,
+    ipk: &mut Mat<f64>,
 ) -> f64 {
     let (dx, du) = (new.dx, new.du);
     let rp = prev.chol_pol_covar.mat(t);
@@ -1037,7 +1043,10 @@ fn kl_alt_step(
     }
     let kp = prev.k.slice(t);
     let kn = new.k.slice(t);
-    let kd: Vec<f64> = (0..du).map(|i| kp[i] - kn[i]).collect::<Vec<_>>();
+    for i in 0..du {
+        kd[(i, 0)] = kp[i] - kn[i];
+    }
+    let kd = kd.col(0);
     // tr(inv_prev sig_new)
     gemm(tmp_uu.as_mut(), Accum::Replace, inv_prev, sig_new, 1.0);
     let tr1: f64 = (0..du).map(|i| tmp_uu[(i, i)]).fold(0.0, |a, b| a + b);
@@ -1051,7 +1060,6 @@ fn kl_alt_step(
         q1 += s * kd[j];
     }
     // A = Kdᵀ inv_prev Kd (dX x dX)
-    let mut ipk = Mat::<f64>::zeros(du, dx);
     gemm(ipk.as_mut(), Accum::Replace, inv_prev, kdiff.as_ref(), 1.0);
     gemm(
         tmp_xx.as_mut(),
