@@ -17,6 +17,7 @@
 pub mod algorithm;
 pub mod bench;
 pub mod conformance;
+pub mod discriminator;
 pub mod dynamics;
 pub mod error;
 pub mod linalg;

@@ -85,6 +85,18 @@ pub struct TrajInfo {
 }
 
 impl TrajInfo {
+    /// Copies every array from `other` (same size) without allocating.
+    pub fn copy_from(&mut self, other: &TrajInfo) {
+        self.dynamics.fm.copy_from(&other.dynamics.fm);
+        self.dynamics.fv.copy_from(&other.dynamics.fv);
+        self.dynamics.dyn_covar.copy_from(&other.dynamics.dyn_covar);
+        self.x0mu.copy_from_slice(&other.x0mu);
+        self.x0sigma.copy_from(&other.x0sigma);
+        self.cc.copy_from_slice(&other.cc);
+        self.cv.copy_from(&other.cv);
+        self.cm.copy_from(&other.cm);
+    }
+
     /// All-zero trajectory info of the given size.
     pub fn zeros(t: usize, dx: usize, du: usize) -> Self {
         let d = dx + du;
