@@ -61,7 +61,7 @@ pub fn run(
     let (mut k, mut its, mut calls) = (0, 0, 0);
     let mut trace = Vec::new();
     let mut kl_target = 0.0;
-    for r in 0..reps {
+    for _ in 0..reps {
         let mut l = Learner::new(
             AlgorithmConfig::default(),
             PriorGmmConfig::default(),
@@ -71,7 +71,7 @@ pub fn run(
             dx,
             du,
             n,
-            ChaCha8Rng::seed_from_u64(seed ^ (r as u64 + 1)),
+            ChaCha8Rng::seed_from_u64(seed.wrapping_add(1)),
         );
         let t0 = Instant::now();
         let rep = l.prior.update(

@@ -142,6 +142,9 @@ impl Scratch {
 /// not positive definite (LAPACK `potrf` / scipy `cholesky` raise `LinAlgError` there).
 pub fn llt_lower(mut a: MatMut<'_, f64>, scratch: &mut Scratch) -> bool {
     let n = a.nrows();
+    if n <= SMALL_LLT {
+        return llt_small(a);
+    }
     let ok = cholesky_in_place(
         a.rb_mut(),
         Default::default(),
@@ -160,6 +163,37 @@ pub fn llt_lower(mut a: MatMut<'_, f64>, scratch: &mut Scratch) -> bool {
     }
     // faer reports only non-positive pivots; a NaN pivot must fail as in LAPACK.
     (0..n).all(|i| a[(i, i)].is_finite() && a[(i, i)] > 0.0)
+}
+
+/// Up to this size [`llt_lower`] uses the unblocked algorithm below (faer's blocked
+/// factorisation costs more in dispatch than in flops for the 2x2/3x3 Q_uu blocks).
+const SMALL_LLT: usize = 8;
+
+/// Unblocked Cholesky (LAPACK `dpotf2` order) on the lower triangle.
+fn llt_small(mut a: MatMut<'_, f64>) -> bool {
+    let n = a.nrows();
+    for j in 0..n {
+        let mut ajj = a[(j, j)];
+        for k in 0..j {
+            ajj -= a[(j, k)] * a[(j, k)];
+        }
+        if !(ajj > 0.0) || !ajj.is_finite() {
+            return false;
+        }
+        let ljj = ajj.sqrt();
+        a[(j, j)] = ljj;
+        for i in j + 1..n {
+            let mut aij = a[(i, j)];
+            for k in 0..j {
+                aij -= a[(i, k)] * a[(j, k)];
+            }
+            a[(i, j)] = aij / ljj;
+        }
+        for i in 0..j {
+            a[(i, j)] = 0.0;
+        }
+    }
+    true
 }
 
 /// Solves `L X = B` in place (`L` lower triangular; only its lower triangle is read).
@@ -285,6 +319,38 @@ mod tests {
         let mut ax = Mat::<f64>::zeros(3, 1);
         gemm(ax.as_mut(), Accum::Replace, a.as_ref(), x.as_ref(), 1.0);
         assert!((ax[(2, 0)] - 3.0).abs() < 1e-13 && (ax[(0, 0)] - 1.0).abs() < 1e-13);
+    }
+
+    #[test]
+    fn small_and_blocked_llt_agree() {
+        let n = 12;
+        let b = Mat::<f64>::from_fn(n, n, |i, j| {
+            ((i * 7 + j * 3) % 5) as f64 - 2.0 + if i == j { 9.0 } else { 0.0 }
+        });
+        let mut a = Mat::<f64>::zeros(n, n);
+        gemm(a.as_mut(), Accum::Replace, b.as_ref(), b.transpose(), 1.0);
+        for m in [2, 3, 8] {
+            let sub = a.as_ref().submatrix(0, 0, m, m).to_owned();
+            let mut s1 = sub.clone();
+            assert!(llt_small(s1.as_mut()));
+            let mut s2 = sub.clone();
+            let mut sc = Scratch::for_llt(m);
+            assert!(cholesky_in_place(
+                s2.as_mut(),
+                Default::default(),
+                Par::Seq,
+                sc.stack(),
+                Default::default()
+            )
+            .is_ok());
+            for j in 0..m {
+                for i in j..m {
+                    assert!((s1[(i, j)] - s2[(i, j)]).abs() < 1e-12 * s2[(0, 0)].abs());
+                }
+            }
+        }
+        let mut nan = faer::mat![[f64::NAN, 0.0], [0.0, 1.0]];
+        assert!(!llt_small(nan.as_mut()));
     }
 
     #[test]

@@ -24,6 +24,9 @@ use rand::Rng;
 use crate::error::LearnerError;
 use crate::linalg::{gemm, llt_lower, solve_lower, MatSeq, Scratch};
 
+/// Up to this many points the E-step uses its own small-N forward substitution.
+const SMALL_N: usize = 32;
+
 /// How to assign points to clusters when EM (re)initialises.
 pub enum ClusterInit<'a> {
     /// Cluster index of every point (length N, values in `0..K`), e.g. a recorded
@@ -91,6 +94,8 @@ struct Workspace {
     mu_t: Mat<f64>,
     /// `D x Ncap`: the points as columns.
     data_t: Mat<f64>,
+    /// `N x D` row-major scratch of the small-N E-step.
+    small: Vec<f64>,
 }
 
 impl Default for Workspace {
@@ -105,6 +110,7 @@ impl Default for Workspace {
             xx: Mat::zeros(0, 0),
             mu_t: Mat::zeros(0, 0),
             data_t: Mat::zeros(0, 0),
+            small: Vec::new(),
         }
     }
 }
@@ -156,6 +162,7 @@ pub struct Gmm {
     pub warmstart: bool,
     /// Log cluster weights of the last `inference` call (GPS `clusterwts`), `(K)`.
     pub last_logwts: Vec<f64>,
+    moment_buf: Vec<f64>,
     initialized: bool,
     chol: MatSeq,
     half_logdet: Vec<f64>,
@@ -177,6 +184,7 @@ impl Gmm {
             n: 0,
             warmstart: true,
             last_logwts: Vec::new(),
+            moment_buf: Vec::with_capacity(dim * dim + dim),
             initialized: false,
             chol: MatSeq::zeros(0, dim, dim),
             half_logdet: Vec::new(),
@@ -257,6 +265,10 @@ impl Gmm {
             .submatrix_mut(0, 0, d, n)
             .copy_from(data.transpose());
         let c0 = -0.5 * d as f64 * (2.0 * std::f64::consts::PI).ln();
+        if n <= SMALL_N {
+            self.estep_small(n, c0);
+            return Ok(());
+        }
         for i in 0..k {
             let mu = &self.mu[i * d..(i + 1) * d];
             let mut diff = self.ws.diff.as_mut().submatrix_mut(0, 0, d, n);
@@ -278,6 +290,55 @@ impl Gmm {
             }
         }
         Ok(())
+    }
+
+    /// E-step for a handful of points (the per-time-step prior queries): forward substitution
+    /// written out, four points at a time, subtracting in the same order as reference BLAS
+    /// `dtrsm`; a library triangular solve costs more in call overhead than in flops here.
+    fn estep_small(&mut self, n: usize, c0: f64) {
+        let (d, k) = (self.dim, self.k);
+        let y = &mut self.ws.small;
+        y.clear();
+        y.resize(d * n, 0.0);
+        for i in 0..k {
+            let mu = &self.mu[i * d..(i + 1) * d];
+            let l = self.chol.slice(i);
+            for p in 0..n {
+                let src = self.ws.data_t.col(p);
+                for a in 0..d {
+                    y[p * d + a] = src[a] - mu[a];
+                }
+            }
+            let mut p0 = 0;
+            while p0 < n {
+                let m = (n - p0).min(4);
+                for a in 0..d {
+                    let lrow = &l[a * d..a * d + a];
+                    let mut acc = [0.0f64; 4];
+                    for j in 0..m {
+                        acc[j] = y[(p0 + j) * d + a];
+                    }
+                    for (b, &lb) in lrow.iter().enumerate() {
+                        for j in 0..m {
+                            acc[j] -= lb * y[(p0 + j) * d + b];
+                        }
+                    }
+                    let laa = l[a * d + a];
+                    for j in 0..m {
+                        y[(p0 + j) * d + a] = acc[j] / laa;
+                    }
+                }
+                p0 += m;
+            }
+            for p in 0..n {
+                let col = &y[p * d..(p + 1) * d];
+                let mut ss = 0.0;
+                for a in 0..d {
+                    ss += col[a] * col[a];
+                }
+                self.ws.logobs[p * k + i] = c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
+            }
+        }
     }
 
     /// GPS `GMM.update`: EM on the rows of `data (N x D)` with `k` clusters.
@@ -512,7 +573,7 @@ impl Gmm {
     /// GPS `moments` of the mixture with the weights `exp(self.last_logwts)`:
     /// `μ = Σ w_i μ_i`, `Σ = Σ_i w_i (Σ_i + μ_i (μ_i − μ)ᵀ)` (GPS's form, equal to the usual
     /// one when the weights sum to one). `mu0` has length D, `phi` is `D x D`.
-    pub fn moments(&self, mu0: &mut [f64], mut phi: MatMut<'_, f64>) {
+    pub fn moments(&mut self, mu0: &mut [f64], mut phi: MatMut<'_, f64>) {
         let d = self.dim;
         mu0.iter_mut().for_each(|m| *m = 0.0);
         for i in 0..self.k {
@@ -521,17 +582,28 @@ impl Gmm {
                 mu0[a] += self.mu[i * d + a] * w;
             }
         }
-        phi.fill(0.0);
+        // Accumulate row-major in plain slices (vectorisable), then copy into `phi`.
+        let buf = &mut self.moment_buf;
+        buf.clear();
+        buf.resize(d * d + d, 0.0);
+        let (acc, dm) = buf.split_at_mut(d * d);
         for i in 0..self.k {
             let w = self.last_logwts[i].exp();
             let mi = &self.mu[i * d..(i + 1) * d];
+            for b in 0..d {
+                dm[b] = mi[b] - mu0[b];
+            }
             let si = self.sigma.slice(i);
             for a in 0..d {
+                let ma = mi[a];
+                let row = &mut acc[a * d..(a + 1) * d];
+                let srow = &si[a * d..(a + 1) * d];
                 for b in 0..d {
-                    phi[(a, b)] += (si[a * d + b] + mi[a] * (mi[b] - mu0[b])) * w;
+                    row[b] += (srow[b] + ma * dm[b]) * w;
                 }
             }
         }
+        phi.copy_from(MatRef::from_row_major_slice(acc, d, d));
     }
 
     /// GPS `GMM.inference`: normal-inverse-Wishart hyperparameters for the points
