@@ -1,1 +1,2 @@
 //! learner
+pub mod io;

@@ -1,0 +1,3 @@
+//! Files that leave the program (DESIGN.md §5): `.npz` containers, demonstrations, gain tables.
+
+pub mod npz;
