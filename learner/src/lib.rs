@@ -1,2 +1,3 @@
 //! learner
 pub mod io;
+pub mod cost;
