@@ -1,3 +1,4 @@
 //! learner
 pub mod io;
 pub mod cost;
+pub mod rollout;
