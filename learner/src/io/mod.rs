@@ -1,3 +1,4 @@
 //! Files that leave the program (DESIGN.md §5): `.npz` containers, demonstrations, gain tables.
 
+pub mod demos;
 pub mod npz;

@@ -217,10 +217,21 @@ impl NpzFile {
             "f4" => npy.into_vec::<f32>().map(|v| v.into_iter().map(f64::from).collect()),
             "i8" => npy.into_vec::<i64>().map(|v| v.into_iter().map(|x| x as f64).collect()),
             "i4" => npy.into_vec::<i32>().map(|v| v.into_iter().map(f64::from).collect()),
+            "u8" => npy.into_vec::<u64>().map(|v| v.into_iter().map(|x| x as f64).collect()),
             other => return Err(self.bad(name, format!("dtype {other} is not a little-endian float or integer"))),
         }
         .map_err(|e| self.bad(name, e.to_string()))?;
         Ok((shape, values))
+    }
+
+    /// A scalar (0-d) uint64, read exactly (seeds).
+    pub fn u64_scalar(&self, name: &str) -> Result<u64, NpzError> {
+        let npy = self.npy(name)?;
+        if !npy.shape().is_empty() {
+            return Err(self.bad(name, format!("shape {:?}, expected a scalar", npy.shape())));
+        }
+        let v = npy.into_vec::<u64>().map_err(|e| self.bad(name, e.to_string()))?;
+        Ok(v[0])
     }
 
     /// A float64 array that must have exactly `shape`.
