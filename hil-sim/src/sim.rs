@@ -136,6 +136,12 @@ impl Ur5Sim {
             UrdfMultibodyOptions::DISABLE_SELF_CONTACTS,
         );
 
+        // rapier applies the URDF mass properties only inside the first step(); until then
+        // every COM sits at its link origin and the body Jacobians (and so the servo's gravity
+        // feed-forward) are wrong. Apply them now.
+        for (_, rb) in world.bodies.iter_mut() {
+            rb.recompute_mass_properties_from_colliders(&world.colliders);
+        }
         let link_of = |body: RigidBodyHandle, world: &PhysicsWorld| {
             *world
                 .multibody_joints

@@ -1,1 +1,111 @@
-fn main() { eprintln!("learner: not implemented yet"); std::process::exit(2); }
+//! `learner`: the offline learner's command line.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "learner",
+    about = "Offline learner: GMM-prior dynamics fit and KL-bounded LQR (GPS port)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Check every learner piece against a GPS reference-vectors file (gps-vectors layout);
+    /// exits non-zero if any quantity fails its tolerance.
+    Conformance {
+        /// Path to a problem_*.json file.
+        vectors: std::path::PathBuf,
+        /// Print only a one-line JSON summary on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time one full learner update (GMM prior update, dynamics fit, η search) on a seeded
+    /// synthetic linear problem; prints median wall-clock times in milliseconds.
+    Bench {
+        /// Horizon T (steps of 0.1 s).
+        #[arg(long, default_value_t = 100)]
+        t: usize,
+        /// State dimension dX.
+        #[arg(long, default_value_t = 12)]
+        dx: usize,
+        /// Action dimension dU.
+        #[arg(long, default_value_t = 3)]
+        du: usize,
+        /// Samples per iteration N.
+        #[arg(long, default_value_t = 5)]
+        n: usize,
+        /// Repetitions (the median is reported).
+        #[arg(long, default_value_t = 21)]
+        reps: usize,
+        /// RNG seed of the synthetic problem.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Print only a one-line JSON summary on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.cmd {
+        Cmd::Conformance { vectors, json } => {
+            let f = vectors.to_string_lossy().to_string();
+            let rep = learner::conformance::run_file(&f)
+                .with_context(|| format!("conformance on {f}"))?;
+            if json {
+                println!("{}", rep.to_json());
+            } else {
+                print!("{}", rep.to_text());
+            }
+            if !rep.all_pass() {
+                std::process::exit(1);
+            }
+        }
+        Cmd::Bench {
+            t,
+            dx,
+            du,
+            n,
+            reps,
+            seed,
+            json,
+        } => {
+            let r = learner::bench::run(t, dx, du, n, reps.max(1), seed)?;
+            if json {
+                println!("{}", serde_json::to_string(&r)?);
+            } else {
+                println!(
+                    "learner bench: T={} dX={} dU={} N={}, {} reps, median wall-clock, one thread",
+                    r.t, r.dx, r.du, r.n, r.reps
+                );
+                println!("{:<22} {:>10}", "piece", "ms");
+                println!(
+                    "{:<22} {:>10.3}   (K={}, {} EM iterations)",
+                    "GMM prior update",
+                    r.gmm_prior_update_s * 1e3,
+                    r.gmm_k,
+                    r.gmm_em_iterations
+                );
+                println!(
+                    "{:<22} {:>10.3}",
+                    "dynamics fit + x0",
+                    r.dynamics_fit_s * 1e3
+                );
+                println!(
+                    "{:<22} {:>10.3}   ({} backward passes)",
+                    "eta search",
+                    r.eta_search_s * 1e3,
+                    r.dgd_backward_calls
+                );
+                println!("{:<22} {:>10.3}", "total", r.total_s * 1e3);
+            }
+        }
+    }
+    Ok(())
+}

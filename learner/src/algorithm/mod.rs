@@ -1,0 +1,36 @@
+//! Algorithm-level pieces of GPS `Algorithm` / `AlgorithmTrajOpt`
+//! (python/gps/algorithm/algorithm.py, algorithm_traj_opt.py): cost averaging, the
+//! initial-state fit, step-size adaptation, and one full learner update.
+
+pub mod eval_cost;
+pub mod init_state;
+pub mod step_adjust;
+pub mod update;
+
+/// GPS `ALG` hyperparameters used by the learner (algorithm/config.py).
+#[derive(Clone, Debug)]
+pub struct AlgorithmConfig {
+    /// Base KL step per time step ε/T (default 0.2).
+    pub kl_step: f64,
+    /// Lower bound of the step multiplier (default 0.01).
+    pub min_step_mult: f64,
+    /// Upper bound of the step multiplier (default 10.0).
+    pub max_step_mult: f64,
+    /// Floor on the per-coordinate variance of x_0 (default 1e-6).
+    pub initial_state_var: f64,
+    /// Initial dual variable η (GPS `IterationData.eta`, default 1.0).
+    pub eta_initial: f64,
+}
+
+impl Default for AlgorithmConfig {
+    fn default() -> Self {
+        // GPS algorithm/config.py ALG and algorithm_utils.py IterationData.
+        Self {
+            kl_step: 0.2,
+            min_step_mult: 0.01,
+            max_step_mult: 10.0,
+            initial_state_var: 1e-6,
+            eta_initial: 1.0,
+        }
+    }
+}

@@ -1,0 +1,128 @@
+//! `learner bench`: one full learner update on an arm-sized synthetic problem (GMM prior
+//! update, dynamics fit, η search), timed per piece.
+
+use std::time::Instant;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::algorithm::update::Learner;
+use crate::algorithm::AlgorithmConfig;
+use crate::dynamics::lr_prior::LrPriorConfig;
+use crate::dynamics::prior_gmm::PriorGmmConfig;
+use crate::policy::lin_gauss::LinGaussPolicy;
+use crate::synthetic::random_problem;
+use crate::traj_opt::lqr::TrajOptConfig;
+
+/// Median timings (seconds) of the pieces of one update.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BenchResult {
+    pub t: usize,
+    pub dx: usize,
+    pub du: usize,
+    pub n: usize,
+    pub reps: usize,
+    pub gmm_prior_update_s: f64,
+    pub dynamics_fit_s: f64,
+    pub eta_search_s: f64,
+    pub total_s: f64,
+    pub gmm_k: usize,
+    pub gmm_em_iterations: usize,
+    pub dgd_backward_calls: usize,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Runs `reps` full updates (each on a fresh learner, same seeded data) and returns medians.
+pub fn run(
+    t: usize,
+    dx: usize,
+    du: usize,
+    n: usize,
+    reps: usize,
+    seed: u64,
+) -> Result<BenchResult, crate::LearnerError> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (sys, pol, truth) = random_problem(&mut rng, t, dx, du);
+    let (x, u) = sys.rollout(&pol, n, &mut rng);
+    let (mut g, mut f, mut e, mut tot) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut out = LinGaussPolicy::zeros(t, dx, du);
+    let (mut k, mut its, mut calls) = (0, 0, 0);
+    for r in 0..reps {
+        let mut l = Learner::new(
+            AlgorithmConfig::default(),
+            PriorGmmConfig::default(),
+            LrPriorConfig::default(),
+            TrajOptConfig::default(),
+            t,
+            dx,
+            du,
+            n,
+            ChaCha8Rng::seed_from_u64(seed ^ (r as u64 + 1)),
+        );
+        let t0 = Instant::now();
+        let rep = l.prior.update(
+            &x,
+            &u,
+            n,
+            crate::dynamics::gmm::ClusterInit::Random(&mut l.rng),
+        )?;
+        let t1 = Instant::now();
+        crate::dynamics::lr_prior::fit(
+            &x,
+            &u,
+            n,
+            &mut l.prior,
+            &l.fit_cfg,
+            &mut FitWs::get(n, dx, du),
+            &mut l.info.dynamics,
+        )?;
+        let p0 = l.prior.initial_state();
+        let (mu, sig) =
+            crate::algorithm::init_state::fit_x0(&x, n, t, dx, l.alg.initial_state_var, Some(&p0));
+        l.info.x0mu = mu;
+        l.info.x0sigma = sig;
+        l.info.cc.clone_from(&truth.cc);
+        l.info.cv.copy_from(&truth.cv);
+        l.info.cm.copy_from(&truth.cm);
+        let t2 = Instant::now();
+        let res = l.update_trajectories(&pol, &mut out)?;
+        let t3 = Instant::now();
+        g.push((t1 - t0).as_secs_f64());
+        f.push((t2 - t1).as_secs_f64());
+        e.push((t3 - t2).as_secs_f64());
+        tot.push((t3 - t0).as_secs_f64());
+        k = rep.k;
+        its = rep.ll_trace.len();
+        calls = res.trace.len();
+    }
+    Ok(BenchResult {
+        t,
+        dx,
+        du,
+        n,
+        reps,
+        gmm_prior_update_s: median(&mut g),
+        dynamics_fit_s: median(&mut f),
+        eta_search_s: median(&mut e),
+        total_s: median(&mut tot),
+        gmm_k: k,
+        gmm_em_iterations: its,
+        dgd_backward_calls: calls,
+    })
+}
+
+struct FitWs;
+impl FitWs {
+    fn get(n: usize, dx: usize, du: usize) -> crate::dynamics::lr_prior::FitWorkspace {
+        crate::dynamics::lr_prior::FitWorkspace::new(n, dx, du)
+    }
+}

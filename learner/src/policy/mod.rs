@@ -1,0 +1,3 @@
+//! Linear-Gaussian controllers: the policy type and its initialisations.
+pub mod init;
+pub mod lin_gauss;
