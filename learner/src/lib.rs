@@ -20,6 +20,8 @@ pub mod conformance;
 pub mod cost;
 pub mod dynamics;
 pub mod error;
+pub mod expert;
+pub mod expert_cli;
 pub mod io;
 pub mod linalg;
 pub mod policy;
