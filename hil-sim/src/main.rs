@@ -3,7 +3,8 @@
 //! Subcommands:
 //! - `demo`: moves the arm through a few goal angles and prints the trajectory;
 //! - `inspect`: one JSON object describing the model at a given state (for debugging a URDF);
-//! - `bench`: physics throughput.
+//! - `bench`: physics throughput;
+//! - `serve`: the arm behind `arm/state` / `arm/command` over iceoryx2 (see `hil_sim::serve`).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -71,6 +72,30 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Serve the simulated arm over iceoryx2 (`{prefix}/arm/state` out, `{prefix}/arm/command`
+    /// in) until SIGINT/SIGTERM. Lockstep: each command advances task.dt s of arm time (a reset
+    /// teleports to the command's reset pose, rad) and is answered by one state. Real time: the
+    /// arm's own clock publishes a state every serve.state_period_s s of arm time
+    /// (wall: / time_compression) and holds the last command (zero-order hold); without a command
+    /// for serve.command_timeout_s (wall s) it holds and reports a stale command. States: q (rad),
+    /// q̇ (rad/s), ee (m, base frame), ee velocity (m/s), stamps CLOCK_MONOTONIC ns.
+    Serve {
+        /// TOML file with optional [task], [sim] and [serve] tables (every option).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// iceoryx2 service prefix (overrides serve.prefix); the controller must use the same.
+        #[arg(long)]
+        prefix: Option<String>,
+        /// lockstep or real-time (overrides serve.mode).
+        #[arg(long)]
+        mode: Option<String>,
+        /// Real time runs this many times faster than wall time (overrides serve.time_compression).
+        #[arg(long)]
+        time_compression: Option<f64>,
+        /// Print a one-line JSON summary at the end.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// A config file for hil-sim: both tables optional.
@@ -110,6 +135,7 @@ fn main() -> Result<()> {
             urdf,
         } => inspect(q, qd, tau, substep, urdf),
         Cmd::Bench { episodes, json } => bench(episodes, json),
+        Cmd::Serve { config, prefix, mode, time_compression, json } => serve(config, prefix, mode, time_compression, json),
     }
 }
 
@@ -244,6 +270,39 @@ fn bench(episodes: usize, json: bool) -> Result<()> {
             serde_json::json!({"command": "bench", "physics_steps_per_s": steps_per_s, "real_time_factor": rt_factor,
                 "episodes_per_s": ep_per_s})
         );
+    }
+    Ok(())
+}
+
+fn serve(config: Option<PathBuf>, prefix: Option<String>, mode: Option<String>, time_compression: Option<f64>, json: bool) -> Result<()> {
+    use hil_sim::serve::{ServeFile, ServeMode};
+    // iceoryx2 warns about running without its config file; IOX2_LOG_LEVEL=Warn shows it.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let mut cfg: ServeFile = match &config {
+        Some(p) => from_toml_file(p)?,
+        None => ServeFile::default(),
+    };
+    if let Some(p) = prefix {
+        cfg.serve.prefix = p;
+    }
+    if let Some(m) = mode {
+        cfg.serve.mode = match m.as_str() {
+            "lockstep" => ServeMode::Lockstep,
+            "real-time" | "real_time" => ServeMode::RealTime,
+            other => anyhow::bail!("--mode {other}: expected lockstep or real-time"),
+        };
+    }
+    if let Some(c) = time_compression {
+        cfg.serve.time_compression = c;
+    }
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let summary = hil_sim::serve::serve(&cfg.task, &cfg.sim, &cfg.serve, &never)?;
+    eprintln!(
+        "hil-sim serve: {} commands ({} resets, {} holds, {} rejected), {} states, {:.1} s simulated",
+        summary.commands, summary.resets, summary.holds, summary.rejected_commands, summary.states, summary.sim_time_s
+    );
+    if json {
+        println!("{}", serde_json::to_string(&summary)?);
     }
     Ok(())
 }

@@ -29,6 +29,9 @@ pub struct BenchResult {
     pub gmm_k: usize,
     pub gmm_em_iterations: usize,
     pub dgd_backward_calls: usize,
+    /// (η, KL) of each backward pass of the η search, and the KL target.
+    pub dgd_trace: Vec<(f64, f64)>,
+    pub kl_target: f64,
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -56,6 +59,8 @@ pub fn run(
     let (mut g, mut f, mut e, mut tot) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut out = LinGaussPolicy::zeros(t, dx, du);
     let (mut k, mut its, mut calls) = (0, 0, 0);
+    let mut trace = Vec::new();
+    let mut kl_target = 0.0;
     for r in 0..reps {
         let mut l = Learner::new(
             AlgorithmConfig::default(),
@@ -103,6 +108,8 @@ pub fn run(
         k = rep.k;
         its = rep.ll_trace.len();
         calls = res.trace.len();
+        trace = res.trace.iter().map(|s| (s.eta_out, s.kl)).collect();
+        kl_target = l.alg.kl_step * l.step_mult * t as f64;
     }
     Ok(BenchResult {
         t,
@@ -117,6 +124,8 @@ pub fn run(
         gmm_k: k,
         gmm_em_iterations: its,
         dgd_backward_calls: calls,
+        dgd_trace: trace,
+        kl_target,
     })
 }
 

@@ -108,6 +108,16 @@ fn main() -> anyhow::Result<()> {
                     r.dgd_backward_calls
                 );
                 println!("{:<22} {:>10.3}", "total", r.total_s * 1e3);
+                let tr: Vec<String> = r
+                    .dgd_trace
+                    .iter()
+                    .map(|(e, k)| format!("eta={e:.3e} kl={k:.3}"))
+                    .collect();
+                println!(
+                    "eta search (target KL {:.1}): {}",
+                    r.kl_target,
+                    tr.join(", ")
+                );
             }
         }
     }

@@ -150,7 +150,7 @@ pub fn random_problem(
         info.x0sigma[(i, i)] = sys.x0_std * sys.x0_std;
     }
     let tgt: Vec<f64> = (0..dx).map(|_| randn(rng)).collect();
-    let wx: Vec<f64> = (0..dx).map(|_| 0.5 + rng.random::<f64>()).collect();
+    let wx: Vec<f64> = (0..dx).map(|_| 2.0 + 4.0 * rng.random::<f64>()).collect();
     let wu = vec![0.01; du];
     quadratic_cost(&mut info, &tgt, &wx, &wu, 10.0);
     let mut pol = LinGaussPolicy::zeros(t, dx, du);

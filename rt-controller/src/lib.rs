@@ -1,1 +1,57 @@
-//! rt-controller: see issue 5 (not built yet).
+//! rt-controller: the real-time loop of DESIGN.md §3. It executes the time-varying
+//! linear-Gaussian controller a = K_t (s − ŝ_t) + k_t + â_t + L_t ε published by the learner
+//! ([`ur5_shared::controller_action`], the one implementation of the law) on the arm over
+//! iceoryx2, and publishes every step for the learner.
+//!
+//! - [`config`]: every option (TOML), with units;
+//! - [`controller`]: [`Controller::setup`] (allocates, may fail) and [`Controller::run`] (the
+//!   loop: no allocation, no locks, no blocking but the period wait), episodes, hot swap,
+//!   safety, statistics;
+//! - [`tables`]: the double-buffered gain table; [`safety`]: clamp and hold; [`noise`]: seeded
+//!   exploration noise; [`stats`]: allocation-free histograms; [`ports`]: the iceoryx2 ports;
+//!   [`rt`]: mlockall / SCHED_FIFO / pinning;
+//! - [`testkit`], [`bench`]: in-process peers and the benchmark.
+//!
+//! Conventions (those of `ur5_shared`): SI units — rad, rad/s, m, m/s, N·m, s; timestamps are
+//! `CLOCK_MONOTONIC` ns ([`ur5_shared::clock`]); Cartesian quantities in the arm base frame;
+//! the state layout of [`ur5_shared::layout`]. The control period is `task.dt` of arm time;
+//! in real time the wall period is `task.dt / time_compression`. Durations in statistics are
+//! wall-clock ns.
+
+pub mod bench;
+pub mod config;
+pub mod controller;
+pub mod noise;
+pub mod ports;
+pub mod rt;
+pub mod safety;
+pub mod stats;
+pub mod tables;
+pub mod testkit;
+
+pub use config::{ControllerConfig, Mode, Pacing};
+pub use controller::{Controller, ExitReason, Fault, Summary};
+pub use ports::SetupError;
+
+use core::sync::atomic::{AtomicBool, Ordering};
+
+/// Raised by SIGINT / SIGTERM once [`install_signal_handlers`] ran.
+pub static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::Relaxed);
+}
+
+/// Routes SIGINT and SIGTERM to [`STOP`] (the loop then holds the arm, prints its summary and
+/// returns). The iceoryx2 node is created with its own signal handling disabled.
+pub fn install_signal_handlers() {
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+        unsafe {
+            let mut action: libc::sigaction = core::mem::zeroed();
+            action.sa_sigaction = on_signal as *const () as usize;
+            libc::sigemptyset(&mut action.sa_mask);
+            libc::sigaction(sig, &action, core::ptr::null_mut());
+        }
+    }
+}

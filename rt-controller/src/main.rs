@@ -1,1 +1,199 @@
-fn main() { eprintln!("rt-controller: not implemented yet (issue 5)"); std::process::exit(2); }
+//! `rt-controller`: the real-time loop (DESIGN.md §3). `run` executes gain tables on the arm,
+//! `bench` measures the loop, `print-config` writes the default TOML.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use rt_controller::{
+    bench, install_signal_handlers, Controller, ControllerConfig, ExitReason, Mode, Pacing, STOP,
+};
+use ur5_shared::config::from_toml_file;
+
+const UNITS: &str = "Units: angles rad, joint velocities rad/s, torques N·m, positions m (arm base frame), times s \
+(the control period task.dt is arm time; in real time the wall period is task.dt / time_compression); statistics are \
+wall-clock and printed in µs (JSON: ns). Every option lives in the TOML file (`rt-controller print-config` shows all \
+of them with their defaults); the flags below override it.";
+
+#[derive(Parser)]
+#[command(name = "rt-controller", version, about = "Real-time controller: executes the learner's gain tables on the arm over iceoryx2.", long_about = None, after_help = UNITS)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum ModeArg {
+    /// Wait for the arm's answer to each command (the arm steps once per command).
+    Lockstep,
+    /// Real time at 1 / task.dt, optionally compressed.
+    RealTime,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum PacingArg {
+    /// Sleep to absolute deadlines (clock_nanosleep, TIMER_ABSTIME).
+    Deadline,
+    /// Each new arm state starts a tick.
+    Arm,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run episodes: reset the arm to task.start_q (rad), execute the newest gain table for
+    /// task.horizon ticks of task.dt s, publish every step on learner/samples, take a new table
+    /// only at the episode boundary. Exit codes: 0 done or stopped (SIGINT/SIGTERM), 2 setup
+    /// error, 3 arm lost (stale for safety.give_up_after_s), 4 no table (safety.no_table_timeout_s).
+    #[command(after_help = UNITS)]
+    Run {
+        /// TOML configuration file (all keys optional).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// iceoryx2 service prefix (the arm and the learner must use the same).
+        #[arg(long)]
+        prefix: Option<String>,
+        /// Pacing mode.
+        #[arg(long, value_enum)]
+        mode: Option<ModeArg>,
+        /// Real-time pacing.
+        #[arg(long, value_enum)]
+        pacing: Option<PacingArg>,
+        /// Real time runs this many times faster than arm time (>= 1).
+        #[arg(long)]
+        time_compression: Option<f64>,
+        /// Episodes to run (0 = until SIGINT/SIGTERM).
+        #[arg(long)]
+        episodes: Option<u64>,
+        /// Seed of the exploration noise.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Print a one-line JSON summary on stdout at the end.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Benchmark the loop in-process against a kinematic arm and a learner stand-in over real
+    /// iceoryx2 ports: compute per tick (law + clamp + publish), table swap and validation, IPC
+    /// round trip state → command. Prints a table (µs).
+    #[command(after_help = UNITS)]
+    Bench {
+        /// Episodes (each swaps in a new table at its boundary).
+        #[arg(long, default_value_t = 200)]
+        episodes: u64,
+        /// Ticks per episode.
+        #[arg(long, default_value_t = 100)]
+        horizon: usize,
+        /// Controller busy-poll budget per wait (ns) before it sleeps between polls.
+        #[arg(long, default_value_t = 1_000_000)]
+        spin_ns: u64,
+        /// Print a one-line JSON summary on stdout at the end.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print the default configuration as TOML (every option, with its default).
+    PrintConfig,
+}
+
+fn main() {
+    match real_main() {
+        Ok(code) => std::process::exit(code),
+        Err(e) => {
+            eprintln!("rt-controller: error: {e:#}");
+            std::process::exit(2);
+        }
+    }
+}
+
+fn real_main() -> Result<i32> {
+    // iceoryx2 warns about running without its config file; IOX2_LOG_LEVEL=Warn shows it.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    match Cli::parse().cmd {
+        Cmd::Run {
+            config,
+            prefix,
+            mode,
+            pacing,
+            time_compression,
+            episodes,
+            seed,
+            json,
+        } => {
+            let mut cfg: ControllerConfig = match &config {
+                Some(p) => {
+                    from_toml_file(p).with_context(|| format!("--config {}", p.display()))?
+                }
+                None => ControllerConfig::default(),
+            };
+            if let Some(p) = prefix {
+                cfg.prefix = p;
+            }
+            if let Some(m) = mode {
+                cfg.mode = match m {
+                    ModeArg::Lockstep => Mode::Lockstep,
+                    ModeArg::RealTime => Mode::RealTime,
+                };
+            }
+            if let Some(p) = pacing {
+                cfg.pacing = match p {
+                    PacingArg::Deadline => Pacing::Deadline,
+                    PacingArg::Arm => Pacing::Arm,
+                };
+            }
+            if let Some(c) = time_compression {
+                cfg.time_compression = c;
+            }
+            if let Some(e) = episodes {
+                cfg.episodes = e;
+            }
+            if let Some(s) = seed {
+                cfg.seed = s;
+            }
+            install_signal_handlers();
+            let mut controller = Controller::setup(cfg)?;
+            let reason = controller.run(&STOP);
+            if json {
+                println!("{}", serde_json::to_string(&controller.summary(reason))?);
+            }
+            Ok(match reason {
+                ExitReason::EpisodesDone | ExitReason::Stopped => 0,
+                ExitReason::ArmLost => 3,
+                ExitReason::NoTable => 4,
+            })
+        }
+        Cmd::Bench {
+            episodes,
+            horizon,
+            spin_ns,
+            json,
+        } => {
+            let r = bench::run(episodes, horizon, spin_ns)?;
+            let us = |v: u64| v as f64 / 1e3;
+            println!("rt-controller bench: {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc", r.episodes, horizon);
+            println!("| measure (µs) | n | p50 | p99 | p99.9 | max |");
+            println!("|---|---|---|---|---|---|");
+            for (name, p) in [
+                ("tick compute (law + clamp + command + sample)", r.compute),
+                ("table swap (copy 64 KB + flip)", r.swap),
+                ("table validation", r.validate),
+                ("table intake (receive + copy + validate + flip)", r.intake),
+                ("IPC round trip state → command", r.round_trip),
+            ] {
+                println!(
+                    "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                    p.count,
+                    us(p.p50_ns),
+                    us(p.p99_ns),
+                    us(p.p999_ns),
+                    us(p.max_ns)
+                );
+            }
+            if json {
+                println!("{}", serde_json::to_string(&r)?);
+            }
+            Ok(0)
+        }
+        Cmd::PrintConfig => {
+            print!("{}", toml::to_string(&ControllerConfig::default())?);
+            Ok(0)
+        }
+    }
+}

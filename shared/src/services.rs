@@ -6,7 +6,7 @@
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
-use iceoryx2::prelude::ServiceName;
+use iceoryx2::prelude::{ipc, Node, ServiceName, ZeroCopySend};
 
 /// Arm → controller: [`crate::msg::ArmState`].
 pub const ARM_STATE: &str = "arm/state";
@@ -97,6 +97,92 @@ impl ServiceNames {
     /// `controller/gains` as an iceoryx2 name.
     pub fn controller_gains(&self) -> Result<ServiceName, InvalidServiceName> {
         Self::service_name(&self.controller_gains)
+    }
+}
+
+/// Quality of service of one publish–subscribe service (DESIGN.md §3).
+///
+/// iceoryx2 fixes these settings when the first process creates a service, and refuses to open
+/// it for a process that asks for more (e.g. a larger subscriber buffer). Every process opens
+/// the services through [`Qos::open_or_create`] with the constants below, so whichever starts
+/// first creates the same service the others expect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Qos {
+    /// Samples a late subscriber receives on connecting (the newest ones).
+    pub history: usize,
+    /// Largest subscriber queue (samples).
+    pub subscriber_buffer: usize,
+    /// Largest number of publishers; more than one so that a restarted process can connect
+    /// while its dead predecessor is still registered.
+    pub max_publishers: usize,
+    /// Largest number of subscribers (tests and monitors add their own).
+    pub max_subscribers: usize,
+    /// A full subscriber queue drops its oldest sample instead of blocking the publisher; the
+    /// controller must never wait for a slow or dead peer.
+    pub safe_overflow: bool,
+}
+
+/// `arm/state`: the newest state only (a controller acts on the latest measurement); history 1
+/// so a controller that starts after the arm sees it at once.
+pub const ARM_STATE_QOS: Qos = Qos {
+    history: 1,
+    subscriber_buffer: 1,
+    max_publishers: 2,
+    max_subscribers: 4,
+    safe_overflow: true,
+};
+
+/// `arm/command`: no history (an old command must never reach a newly started arm); a short
+/// queue the arm drains in order so a reset followed by a goal is not lost.
+pub const ARM_COMMAND_QOS: Qos = Qos {
+    history: 0,
+    subscriber_buffer: 4,
+    max_publishers: 2,
+    max_subscribers: 4,
+    safe_overflow: true,
+};
+
+/// `learner/samples`: a queue of 8 full episodes so a learner that is busy with an update
+/// loses nothing; when even that overflows, the oldest samples go (the learner counts the
+/// incomplete episode and discards it) and the controller never waits.
+pub const LEARNER_SAMPLES_QOS: Qos = Qos {
+    history: 0,
+    subscriber_buffer: 8 * crate::layout::MAX_HORIZON,
+    max_publishers: 2,
+    max_subscribers: 4,
+    safe_overflow: true,
+};
+
+/// `controller/gains`: history 1, queue 1, safe overflow (DESIGN.md §3): only the newest table
+/// matters, and a controller that starts late still gets it.
+pub const CONTROLLER_GAINS_QOS: Qos = Qos {
+    history: 1,
+    subscriber_buffer: 1,
+    max_publishers: 4,
+    max_subscribers: 4,
+    safe_overflow: true,
+};
+
+impl Qos {
+    /// Opens the service `name` with payload `T`, or creates it with these settings. Setup
+    /// only: allocates, and may fail (e.g. a service of that name exists with another payload
+    /// type or smaller limits).
+    pub fn open_or_create<T: core::fmt::Debug + ZeroCopySend + 'static>(
+        &self,
+        node: &Node<ipc::Service>,
+        name: &ServiceName,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+        iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError,
+    > {
+        node.service_builder(name)
+            .publish_subscribe::<T>()
+            .history_size(self.history)
+            .subscriber_max_buffer_size(self.subscriber_buffer)
+            .max_publishers(self.max_publishers)
+            .max_subscribers(self.max_subscribers)
+            .enable_safe_overflow(self.safe_overflow)
+            .open_or_create()
     }
 }
 

@@ -1,1 +1,293 @@
-//! Cross-process integration tests live in `tests/tests/` (issue 5).
+//! Helpers for the cross-process integration tests in `tests/tests/`.
+//!
+//! # Running
+//!
+//! The tests spawn the real binaries `hil-sim` and `rt-controller` from the same target
+//! directory as the test executable (`target/release/`, found from
+//! `std::env::current_exe()`). `cargo test --release --workspace` builds every binary before it
+//! runs any test; when running this crate alone, build them first:
+//!
+//! ```text
+//! cargo build --release --workspace --bins && cargo test --release -p integration-tests
+//! ```
+//!
+//! Every test uses its own iceoryx2 service prefix ([`unique_prefix`]), so tests run in
+//! parallel and a crashed test leaves nothing that disturbs the next. No test asserts on a
+//! latency: the machines are shared and stall now and then.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+pub use ur5_shared::services::unique_prefix;
+use ur5_shared::services::{self, ServiceNames};
+use ur5_shared::{ArmCommand, GainTable, StepSample, DU};
+
+/// `target/release/<name>`, next to the directory of the test executable.
+pub fn bin(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("current_exe");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("test executable lives in target/<profile>/deps");
+    let path = dir.join(name);
+    assert!(
+        path.exists(),
+        "{} not found: build the binaries first (`cargo build --release --workspace --bins`), or run \
+         `cargo test --release --workspace`, which builds them before running tests",
+        path.display()
+    );
+    path
+}
+
+/// A scratch directory for this test's config files and logs.
+pub fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "ur5-it-{tag}-{}-{}",
+        std::process::id(),
+        unique_prefix("d").replace('/', "_")
+    ));
+    std::fs::create_dir_all(&dir).expect("create scratch dir");
+    dir
+}
+
+/// A spawned binary: stdout piped (the `--json` line), stderr to a log file. Killed on drop.
+pub struct Proc {
+    /// What it is, for messages.
+    pub name: String,
+    child: Option<Child>,
+    log: PathBuf,
+}
+
+impl Proc {
+    /// Spawns `bin(name)` with `args`; stderr goes to `dir/<label>.log`.
+    pub fn spawn(name: &str, label: &str, args: &[&str], dir: &Path) -> Self {
+        let log = dir.join(format!("{label}.log"));
+        let child = Command::new(bin(name))
+            .args(args)
+            .env("IOX2_LOG_LEVEL", "Error")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(File::create(&log).expect("log file"))
+            .spawn()
+            .unwrap_or_else(|e| panic!("spawn {name}: {e}"));
+        Self {
+            name: label.to_owned(),
+            child: Some(child),
+            log,
+        }
+    }
+
+    /// The process id.
+    pub fn pid(&self) -> i32 {
+        self.child.as_ref().expect("running").id() as i32
+    }
+
+    /// Sends a signal (e.g. `libc::SIGTERM`, `libc::SIGKILL`).
+    pub fn signal(&self, sig: i32) {
+        // SAFETY: plain kill(2) on our own child.
+        unsafe { libc::kill(self.pid(), sig) };
+    }
+
+    /// Its stderr so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Waits up to `timeout` for exit; returns (exit code, stdout). Panics with the log on
+    /// timeout.
+    pub fn wait(&mut self, timeout: Duration) -> (Option<i32>, String) {
+        let child = self.child.as_mut().expect("running");
+        let t0 = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().expect("try_wait") {
+                let mut out = String::new();
+                if let Some(mut s) = child.stdout.take() {
+                    let _ = s.read_to_string(&mut out);
+                }
+                self.child = None;
+                return (status.code(), out);
+            }
+            if t0.elapsed() > timeout {
+                let _ = child.kill();
+                panic!(
+                    "{} did not exit within {timeout:?}; its log:\n{}",
+                    self.name,
+                    self.log()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// True while running.
+    pub fn running(&mut self) -> bool {
+        match self.child.as_mut() {
+            Some(c) => c.try_wait().expect("try_wait").is_none(),
+            None => false,
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Some(c) = self.child.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// The last line of `stdout` parsed as JSON (the `--json` summary).
+pub fn json_summary(stdout: &str, log: &str) -> serde_json::Value {
+    let line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON line in stdout {stdout:?}; log:\n{log}"));
+    serde_json::from_str(line).unwrap_or_else(|e| panic!("bad JSON {line:?}: {e}"))
+}
+
+/// The test acting as the learner: publishes tables on `controller/gains`, receives samples on
+/// `learner/samples`, and watches `arm/command` (a monitor, as a second subscriber).
+pub struct TestLearner {
+    gains: Publisher<ipc::Service, GainTable, ()>,
+    samples: Subscriber<ipc::Service, StepSample, ()>,
+    commands: Subscriber<ipc::Service, ArmCommand, ()>,
+    /// Every sample received so far, in arrival order.
+    pub received: Vec<StepSample>,
+    /// Every command seen so far.
+    pub seen_commands: Vec<ArmCommand>,
+    _node: Node<ipc::Service>,
+}
+
+impl TestLearner {
+    /// Opens the services under `prefix` with the project's QoS.
+    pub fn new(prefix: &str) -> Self {
+        iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+        let names = ServiceNames::new(prefix);
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .unwrap();
+        let g = services::CONTROLLER_GAINS_QOS
+            .open_or_create::<GainTable>(&node, &names.controller_gains().unwrap())
+            .unwrap();
+        let s = services::LEARNER_SAMPLES_QOS
+            .open_or_create::<StepSample>(&node, &names.learner_samples().unwrap())
+            .unwrap();
+        let c = services::ARM_COMMAND_QOS
+            .open_or_create::<ArmCommand>(&node, &names.arm_command().unwrap())
+            .unwrap();
+        Self {
+            gains: g.publisher_builder().create().unwrap(),
+            samples: s.subscriber_builder().create().unwrap(),
+            commands: c
+                .subscriber_builder()
+                .buffer_size(services::ARM_COMMAND_QOS.subscriber_buffer)
+                .create()
+                .unwrap(),
+            received: Vec::new(),
+            seen_commands: Vec::new(),
+            _node: node,
+        }
+    }
+
+    /// Publishes `table` as it is (sealed or not).
+    pub fn publish(&self, table: &GainTable) {
+        let mut slot = self.gains.loan_uninit().unwrap();
+        table.copy_to_uninit(slot.payload_mut());
+        // SAFETY: copy_to_uninit initialised the payload.
+        unsafe { slot.assume_init() }.send().unwrap();
+    }
+
+    /// Takes what arrived; delivers the gains history to late subscribers.
+    pub fn poll(&mut self) {
+        let _ = self.gains.update_connections();
+        while let Some(s) = self.samples.receive().unwrap() {
+            self.received.push(*s);
+        }
+        while let Some(c) = self.commands.receive().unwrap() {
+            self.seen_commands.push(*c);
+        }
+    }
+
+    /// Only delivers the gains history to late subscribers (a learner that never reads).
+    pub fn poll_gains_only(&self) {
+        let _ = self.gains.update_connections();
+    }
+
+    /// Polls until `done(self)` or `timeout`; panics with `what` and the controller's log on
+    /// timeout or when the controller exits first.
+    pub fn poll_until(
+        &mut self,
+        ctl: &mut Proc,
+        timeout: Duration,
+        what: &str,
+        done: impl Fn(&Self) -> bool,
+    ) {
+        let t0 = Instant::now();
+        loop {
+            self.poll();
+            if done(self) {
+                return;
+            }
+            let exited = !ctl.running();
+            if exited || t0.elapsed() > timeout {
+                self.poll();
+                if done(self) {
+                    return;
+                }
+                panic!(
+                    "{} waiting for {what} ({} samples so far); controller log:\n{}",
+                    if exited {
+                        "the controller exited"
+                    } else {
+                        "timed out"
+                    },
+                    self.received.len(),
+                    ctl.log()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// Highest episode number received, if any.
+    pub fn last_episode(&self) -> Option<u64> {
+        self.received.iter().map(|s| s.episode).max()
+    }
+}
+
+/// A stable table around the goal angles `q_goal` (rad): a = q* + ½ (q − q*) + σ ε, i.e.
+/// K = ½ on the joint angles, ŝ = q* on them, â = q*, L = σ I. The arm converges to q*.
+pub fn reaching_table(
+    version: u64,
+    horizon: usize,
+    q_goal: [f64; DU],
+    sigma: f64,
+) -> Box<GainTable> {
+    let mut t = rt_controller::testkit::constant_goal_table(version, horizon, q_goal, sigma);
+    for s in 0..horizon {
+        let st = t.step_mut(s);
+        for i in 0..DU {
+            st.k_mat[i][i] = 0.5;
+            st.s_hat[i] = q_goal[i];
+        }
+    }
+    t.seal();
+    t
+}
+
+/// Writes `text` to `dir/name` and returns the path as a string.
+pub fn write_config(dir: &Path, name: &str, text: &str) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, text).expect("write config");
+    p.display().to_string()
+}

@@ -89,6 +89,8 @@ struct Workspace {
     collse: Vec<f64>,
     xx: Mat<f64>,
     mu_t: Mat<f64>,
+    /// `D x Ncap`: the points as columns.
+    data_t: Mat<f64>,
 }
 
 impl Default for Workspace {
@@ -102,6 +104,7 @@ impl Default for Workspace {
             collse: Vec::new(),
             xx: Mat::zeros(0, 0),
             mu_t: Mat::zeros(0, 0),
+            data_t: Mat::zeros(0, 0),
         }
     }
 }
@@ -245,13 +248,23 @@ impl Gmm {
         let (n, d) = (data.nrows(), data.ncols());
         let k = self.k;
         self.ws.ensure(n, d, k);
+        if self.ws.data_t.nrows() != d || self.ws.data_t.ncols() < n {
+            self.ws.data_t = Mat::zeros(d, n);
+        }
+        self.ws
+            .data_t
+            .as_mut()
+            .submatrix_mut(0, 0, d, n)
+            .copy_from(data.transpose());
         let c0 = -0.5 * d as f64 * (2.0 * std::f64::consts::PI).ln();
         for i in 0..k {
             let mu = &self.mu[i * d..(i + 1) * d];
             let mut diff = self.ws.diff.as_mut().submatrix_mut(0, 0, d, n);
             for p in 0..n {
+                let src = self.ws.data_t.col(p);
+                let mut dst = diff.rb_mut().col_mut(p);
                 for a in 0..d {
-                    diff[(a, p)] = data[(p, a)] - mu[a];
+                    dst[a] = src[a] - mu[a];
                 }
             }
             solve_lower(self.chol.mat(i), diff.rb_mut());
@@ -373,28 +386,40 @@ impl Gmm {
             }
         }
         for i in 0..k {
+            for p in 0..n {
+                ws.rowlse[p] = ws.w[p * k + i].sqrt();
+            }
             let mut wd = ws.wdata.as_mut().submatrix_mut(0, 0, n, d);
             for a in 0..d {
+                let col = data.col(a);
+                let mut out = wd.rb_mut().col_mut(a);
                 for p in 0..n {
-                    wd[(p, a)] = data[(p, a)] * ws.w[p * k + i].sqrt();
+                    out[p] = col[p] * ws.rowlse[p];
                 }
             }
             let wd = ws.wdata.as_ref().submatrix(0, 0, n, d);
-            gemm(ws.xx.as_mut(), Accum::Replace, wd.transpose(), wd, 1.0);
+            // Only the lower triangle of XX = wdᵀ wd is formed; Σ is symmetrised below anyway.
+            faer::linalg::matmul::triangular::matmul(
+                ws.xx.as_mut(),
+                faer::linalg::matmul::triangular::BlockStructure::TriangularLower,
+                Accum::Replace,
+                wd.transpose(),
+                faer::linalg::matmul::triangular::BlockStructure::Rectangular,
+                wd,
+                faer::linalg::matmul::triangular::BlockStructure::Rectangular,
+                1.0,
+                faer::Par::Seq,
+            );
             let mu = &self.mu[i * d..(i + 1) * d];
             let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
             for a in 0..d {
-                for b in 0..d {
-                    s[(a, b)] = ws.xx[(a, b)] - mu[a] * mu[b];
-                }
-            }
-            for a in 0..d {
                 for b in 0..a {
-                    let v = 0.5 * (s[(a, b)] + s[(b, a)]);
+                    // GPS: Σ = XX − μμᵀ, then 0.5 (Σ + Σᵀ); XX is symmetric by construction.
+                    let v = ws.xx[(a, b)] - mu[a] * mu[b];
                     s[(a, b)] = v;
                     s[(b, a)] = v;
                 }
-                s[(a, a)] = 0.5 * (s[(a, a)] + s[(a, a)]) + 1e-6;
+                s[(a, a)] = (ws.xx[(a, a)] - mu[a] * mu[a]) + 1e-6;
             }
         }
         self.chol_valid = false;
@@ -542,8 +567,11 @@ mod tests {
 
     #[test]
     fn em_separates_two_blobs_and_ll_increases() {
+        // Few points per cluster, as GPS sizes K (~40 points per cluster): GPS's initial
+        // covariance is divided by K, not by the cluster size, so with many points per cluster
+        // it starts far too wide and EM crawls.
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let n = 400;
+        let n = 40;
         let mut data = Mat::<f64>::zeros(n, 2);
         for p in 0..n {
             let c = if p % 2 == 0 { -5.0 } else { 5.0 };
@@ -552,10 +580,21 @@ mod tests {
                 data[(p, a)] = c + 0.5 * z;
             }
         }
+        // GPS starts from a hard assignment; give it a noisy one (every 5th point random).
+        let idx: Vec<usize> = (0..n)
+            .map(|p| {
+                if p % 5 == 0 {
+                    rand::Rng::random_range(&mut rng, 0..2)
+                } else {
+                    p % 2
+                }
+            })
+            .collect();
         let mut g = Gmm::new(2);
         let rep = g
-            .update(data.as_ref(), 2, 100, ClusterInit::Random(&mut rng))
+            .update(data.as_ref(), 2, 100, ClusterInit::Given(&idx))
             .unwrap();
+        assert!(rep.ll_trace.len() >= 2, "{rep:?}");
         for w in rep
             .ll_trace
             .windows(2)
@@ -570,5 +609,36 @@ mod tests {
             "{means:?}"
         );
         assert!((g.mass[0] - 0.5).abs() < 0.05);
+        assert!((g.mass.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn initialisation_follows_gps() {
+        // 4 points in 2-D, clusters {0, 2} and {1, 3}; zero EM iterations leaves the init.
+        let data = faer::mat![[0.0, 1.0], [4.0, 0.0], [2.0, 3.0], [6.0, 2.0f64]];
+        let mut g = Gmm::new(2);
+        let rep = g
+            .update(data.as_ref(), 2, 0, ClusterInit::Given(&[0, 1, 0, 1]))
+            .unwrap();
+        assert!(rep.reinitialized && rep.ll_trace.is_empty());
+        assert_eq!(&g.mu, &[1.0, 2.0, 5.0, 1.0]);
+        // Σ_0 = (1/K) Σ d dᵀ + 2e-6 I with d = ±(1, 1): (1/2)·2·[[1,1],[1,1]] + 2e-6 I
+        let s0 = g.sigma.slice(0);
+        assert_eq!(s0, &[1.0 + 2e-6, 1.0, 1.0, 1.0 + 2e-6]);
+        assert_eq!(g.n, 4);
+        assert!((g.logmass[0] - 0.5f64.ln()).abs() < 1e-15);
+        // A second update with the same K warm-starts and keeps N.
+        let more = faer::mat![
+            [0.0, 1.0],
+            [4.0, 0.0],
+            [2.0, 3.0],
+            [6.0, 2.0],
+            [1.0, 1.0f64]
+        ];
+        let rep = g
+            .update(more.as_ref(), 2, 1, ClusterInit::Given(&[]))
+            .unwrap();
+        assert!(!rep.reinitialized);
+        assert_eq!(g.n, 4);
     }
 }

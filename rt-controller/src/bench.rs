@@ -1,0 +1,140 @@
+//! `rt-controller bench`: the real loop ([`Controller::run`], lockstep) against an in-process
+//! kinematic arm and a learner stand-in that publishes a new table before every episode, over
+//! real iceoryx2 ports. Reports, from inside the loop: compute per tick (controller law + clamp
+//! + command + sample publish), table swap (copy + flip) and validation; from the arm: the IPC
+//! round trip state → command.
+
+use core::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use serde::Serialize;
+use ur5_shared::services::{self, unique_prefix, ServiceNames};
+use ur5_shared::{GainTable, StepSample};
+
+use crate::config::{ControllerConfig, Mode};
+use crate::controller::{Controller, ExitReason};
+use crate::stats::Percentiles;
+use crate::testkit::{constant_goal_table, run_kinematic_arm};
+
+/// Benchmark results (ns).
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    /// Always "bench".
+    pub command: &'static str,
+    /// Episodes run.
+    pub episodes: u64,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Per tick: law + clamp + command + sample publish.
+    pub compute: Percentiles,
+    /// Per accepted table: copy into the inactive half (+ index flip).
+    pub swap: Percentiles,
+    /// Per table: validation (dimensions, checksum, finiteness, Cholesky, bounds).
+    pub validate: Percentiles,
+    /// Per table: receive + copy + validate + flip.
+    pub intake: Percentiles,
+    /// State published → answering command received, at the arm.
+    pub round_trip: Percentiles,
+    /// Tables taken.
+    pub swaps: u64,
+    /// Why the loop ended.
+    pub exit_reason: ExitReason,
+    /// Controller spin before sleeping between polls (ns).
+    pub spin_ns: u64,
+}
+
+/// Runs `episodes` episodes of `horizon` ticks. `spin_ns`: the controller's busy-poll budget
+/// per wait (longer measures the IPC, shorter measures the sleep granularity too).
+pub fn run(episodes: u64, horizon: usize, spin_ns: u64) -> anyhow::Result<BenchReport> {
+    let prefix = unique_prefix("rt-bench");
+    let stop = Arc::new(AtomicBool::new(false));
+    let dt = 0.01;
+
+    let arm = {
+        let (prefix, stop) = (prefix.clone(), stop.clone());
+        std::thread::spawn(move || run_kinematic_arm(&prefix, dt, std::f64::consts::PI, &stop))
+    };
+    let learner = {
+        let (prefix, stop) = (prefix.clone(), stop.clone());
+        std::thread::spawn(move || learner_stand_in(&prefix, horizon, &stop))
+    };
+
+    let cfg = ControllerConfig {
+        prefix: prefix.clone(),
+        mode: Mode::Lockstep,
+        episodes,
+        episode_report: false,
+        wait_for_learner: true,
+        task: ur5_shared::config::TaskConfig {
+            dt,
+            horizon,
+            ..Default::default()
+        },
+        polling: crate::config::Polling {
+            spin_ns,
+            sleep_ns: 20_000,
+        },
+        ..ControllerConfig::default()
+    };
+    let mut controller = Controller::setup(cfg)?;
+    let never = AtomicBool::new(false);
+    let reason = controller.run(&never);
+    stop.store(true, Ordering::Relaxed);
+    let arm = arm
+        .join()
+        .map_err(|_| anyhow::anyhow!("arm thread panicked"))??;
+    learner
+        .join()
+        .map_err(|_| anyhow::anyhow!("learner thread panicked"))??;
+    let s = controller.stats();
+    Ok(BenchReport {
+        command: "bench",
+        episodes: s.episodes_completed,
+        ticks: s.ticks,
+        compute: s.compute.summary(),
+        swap: s.swap.summary(),
+        validate: s.validate.summary(),
+        intake: s.intake.summary(),
+        round_trip: arm.round_trip.summary(),
+        swaps: s.swaps,
+        exit_reason: reason,
+        spin_ns,
+    })
+}
+
+/// Publishes table version 1, then a new version whenever an episode starts (seen on
+/// `learner/samples`), so that every boundary swaps.
+fn learner_stand_in(prefix: &str, horizon: usize, stop: &AtomicBool) -> anyhow::Result<()> {
+    let names = ServiceNames::new(prefix);
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()?;
+    let gains = services::CONTROLLER_GAINS_QOS
+        .open_or_create::<GainTable>(&node, &names.controller_gains()?)?;
+    let samples = services::LEARNER_SAMPLES_QOS
+        .open_or_create::<StepSample>(&node, &names.learner_samples()?)?;
+    let publisher = gains.publisher_builder().create()?;
+    let subscriber = samples.subscriber_builder().create()?;
+    let mut version = 1;
+    let goal = |v: u64| [0.1 * (v % 5) as f64, -1.8, 2.2];
+    publisher.send_copy(*constant_goal_table(version, horizon, goal(version), 0.01))?;
+    let mut last_episode = 0;
+    while !stop.load(Ordering::Relaxed) {
+        let _ = publisher.update_connections();
+        while let Some(s) = subscriber.receive()? {
+            if s.episode > last_episode || (s.episode == 0 && s.t == 0 && version == 1) {
+                last_episode = s.episode;
+                version += 1;
+                let mut slot = publisher.loan_uninit()?;
+                constant_goal_table(version, horizon, goal(version), 0.01)
+                    .copy_to_uninit(slot.payload_mut());
+                // SAFETY: copy_to_uninit initialised the payload.
+                unsafe { slot.assume_init() }.send()?;
+            }
+        }
+        std::thread::sleep(core::time::Duration::from_micros(500));
+    }
+    Ok(())
+}

@@ -1,0 +1,313 @@
+//! Configuration of the controller (TOML; every option has a key, see `rt-controller
+//! print-config`). Unknown keys are rejected so that a typo is an error, not a silently ignored
+//! setting.
+//!
+//! Units: times in seconds (s) unless the key ends in `_ns`; angles in rad; velocities in
+//! rad/s; torques in N·m; positions in m (arm base frame).
+
+use serde::{Deserialize, Serialize};
+use ur5_shared::config::{ActionMode, ArmLimits, ConfigError, TaskConfig};
+use ur5_shared::layout::N_JOINTS;
+use ur5_shared::GainBounds;
+
+/// How the loop is paced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// As fast as the arm answers: after each command the controller waits for the state that
+    /// acknowledges it (`ArmState::last_command_seq`). The arm (`hil-sim serve --mode
+    /// lockstep`) steps one control period per command. Experiments run like this.
+    #[default]
+    Lockstep,
+    /// Real time at the control rate 1 / `task.dt` (10 Hz–1 kHz), optionally compressed.
+    RealTime,
+}
+
+/// In real-time mode, what decides when a tick starts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Pacing {
+    /// The controller sleeps to absolute deadlines (`clock_nanosleep`, `TIMER_ABSTIME`) every
+    /// `task.dt / time_compression` s and acts on the newest state.
+    #[default]
+    Deadline,
+    /// Each new state message from the arm starts a tick: the arm's clock paces the loop, as
+    /// with a real driver that publishes at the control rate.
+    Arm,
+}
+
+/// When the controller stops acting on the table and holds the arm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Safety {
+    /// The arm's state is stale when no fresh state arrived for this long (wall-clock s):
+    /// lockstep, no answer to a command; arm pacing, no new state; deadline pacing, the newest
+    /// state is older than this. Ours: 0.5 s, far above a sim step (≈ 1 ms per 0.1 s period)
+    /// and above most of the VM stalls we see, yet 5 periods at 10 Hz.
+    pub stale_state_timeout_s: f64,
+    /// Stop the run when the arm has been stale this long (s); 0 = hold forever.
+    pub give_up_after_s: f64,
+    /// Stop the run when no valid table has arrived this long after setup (s); 0 = wait forever.
+    pub no_table_timeout_s: f64,
+    /// Resend the reset when the arm has not acknowledged it after this long (s).
+    pub reset_timeout_s: f64,
+    /// Torque-mode hold: PD stiffness towards the last safe pose (N·m/rad). Ours: well inside
+    /// the effort limits for the errors a hold sees.
+    pub hold_kp: [f64; N_JOINTS],
+    /// Torque-mode hold: PD damping (N·m·s/rad).
+    pub hold_kd: [f64; N_JOINTS],
+}
+
+impl Default for Safety {
+    fn default() -> Self {
+        Self {
+            stale_state_timeout_s: 0.5,
+            give_up_after_s: 0.0,
+            no_table_timeout_s: 0.0,
+            reset_timeout_s: 1.0,
+            hold_kp: [200.0, 200.0, 50.0],
+            hold_kd: [20.0, 20.0, 5.0],
+        }
+    }
+}
+
+/// Optional real-time privileges, each with a logged fallback when not permitted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct RtSetup {
+    /// `mlockall(MCL_CURRENT | MCL_FUTURE)`: no page faults in the loop.
+    pub mlockall: bool,
+    /// `SCHED_FIFO` priority 1–99; 0 = keep the normal scheduler.
+    pub fifo_priority: i32,
+    /// Pin the loop thread to this CPU; none = no pinning.
+    pub cpu: Option<usize>,
+}
+
+/// Waiting for a message (lockstep, arm pacing, setup).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Polling {
+    /// Busy-poll this long before sleeping between polls (ns). Spinning trades CPU for wake-up
+    /// latency; on shared 2-core machines keep it short.
+    pub spin_ns: u64,
+    /// Sleep between polls after the spin (ns).
+    pub sleep_ns: u64,
+}
+
+impl Default for Polling {
+    fn default() -> Self {
+        Self {
+            spin_ns: 20_000,
+            sleep_ns: 20_000,
+        }
+    }
+}
+
+/// Everything `rt-controller run` reads.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ControllerConfig {
+    /// iceoryx2 service prefix (`{prefix}/arm/state`, …); "" for the plain names.
+    pub prefix: String,
+    /// Lockstep or real time.
+    pub mode: Mode,
+    /// Real-time pacing.
+    pub pacing: Pacing,
+    /// Real time runs this many times faster than the arm's clock (≥ 1): the wall period is
+    /// `task.dt / time_compression`. The arm must be started with the same factor.
+    pub time_compression: f64,
+    /// Episodes to run; 0 = until stopped (SIGINT/SIGTERM).
+    pub episodes: u64,
+    /// Seed of the exploration noise ([`crate::noise::episode_seed`]).
+    pub seed: u64,
+    /// Per table version: this many episodes with noise, then `eval_episodes` without, then
+    /// again (the paper's Algorithm 1, step 1: N = 5 noisy plus one noise-free).
+    pub noisy_episodes: u64,
+    /// Noise-free (evaluation) episodes per cycle.
+    pub eval_episodes: u64,
+    /// Meaning of actions (must match the arm's).
+    pub action_mode: ActionMode,
+    /// Control period (s), horizon T, start pose and goal. Tables whose horizon differs from
+    /// `task.horizon` are rejected.
+    pub task: TaskConfig,
+    /// Joint limits for the clamp ([`ur5_shared::safety::clamp_action`]); defaults: the UR5.
+    pub limits: ArmLimits,
+    /// Hold conditions.
+    pub safety: Safety,
+    /// Bounds a table must satisfy ([`GainBounds`]).
+    pub bounds: GainBounds,
+    /// Real-time privileges.
+    pub rt: RtSetup,
+    /// Message polling.
+    pub polling: Polling,
+    /// Setup waits this long for the arm (and the learner, if `wait_for_learner`) (s).
+    pub setup_timeout_s: f64,
+    /// Setup waits for the learner's ports too ("connect all peers before the first
+    /// episode"); off, the loop starts without a learner and holds until a table arrives.
+    pub wait_for_learner: bool,
+    /// Print a line per episode on stderr.
+    pub episode_report: bool,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        Self {
+            prefix: String::new(),
+            mode: Mode::Lockstep,
+            pacing: Pacing::Deadline,
+            time_compression: 1.0,
+            episodes: 0,
+            seed: 0,
+            noisy_episodes: 5,
+            eval_episodes: 1,
+            action_mode: ActionMode::GoalAngles,
+            task: TaskConfig::default(),
+            limits: ArmLimits::default(),
+            safety: Safety::default(),
+            bounds: GainBounds::default(),
+            rt: RtSetup::default(),
+            polling: Polling::default(),
+            setup_timeout_s: 10.0,
+            wait_for_learner: false,
+            episode_report: true,
+        }
+    }
+}
+
+/// Control rates the loop supports (Hz).
+pub const RATE_RANGE_HZ: (f64, f64) = (10.0, 1000.0);
+
+impl ControllerConfig {
+    /// Checks ranges; the message names the key and the allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
+        self.task.validate()?;
+        let rate = 1.0 / self.task.dt;
+        if !(rate >= RATE_RANGE_HZ.0 * (1.0 - 1e-9) && rate <= RATE_RANGE_HZ.1 * (1.0 + 1e-9)) {
+            return bad(
+                "task.dt",
+                format!("{} s is a control rate of {rate} Hz; the loop supports 10 Hz to 1 kHz (dt 0.001 to 0.1 s)", self.task.dt),
+            );
+        }
+        if !(self.time_compression.is_finite() && self.time_compression >= 1.0) {
+            return bad(
+                "time_compression",
+                format!("{} must be finite and >= 1", self.time_compression),
+            );
+        }
+        if self.noisy_episodes + self.eval_episodes == 0 {
+            return bad(
+                "noisy_episodes",
+                "noisy_episodes + eval_episodes must be >= 1".into(),
+            );
+        }
+        let l = &self.limits;
+        for j in 0..N_JOINTS {
+            let ok = l.lower[j].is_finite()
+                && l.upper[j].is_finite()
+                && l.lower[j] < l.upper[j]
+                && l.velocity[j] > 0.0
+                && l.effort[j] > 0.0
+                && l.velocity[j].is_finite()
+                && l.effort[j].is_finite();
+            if !ok {
+                return bad(
+                    "limits",
+                    format!("joint {j}: need finite lower < upper, velocity > 0, effort > 0"),
+                );
+            }
+            if !(l.lower[j] <= self.task.start_q[j] && self.task.start_q[j] <= l.upper[j]) {
+                return bad(
+                    "task.start_q",
+                    format!(
+                        "joint {j}: {} rad is outside the limits",
+                        self.task.start_q[j]
+                    ),
+                );
+            }
+        }
+        let s = &self.safety;
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        let nonneg = |v: f64| v.is_finite() && v >= 0.0;
+        if !pos(s.stale_state_timeout_s) || !pos(s.reset_timeout_s) {
+            return bad(
+                "safety",
+                "stale_state_timeout_s and reset_timeout_s must be > 0".into(),
+            );
+        }
+        if !nonneg(s.give_up_after_s) || !nonneg(s.no_table_timeout_s) {
+            return bad(
+                "safety",
+                "give_up_after_s and no_table_timeout_s must be >= 0 (0 = never)".into(),
+            );
+        }
+        if !s.hold_kp.iter().chain(&s.hold_kd).all(|v| nonneg(*v)) {
+            return bad("safety.hold_kp/hold_kd", "must be finite and >= 0".into());
+        }
+        if !pos(self.setup_timeout_s) {
+            return bad(
+                "setup_timeout_s",
+                format!("{} must be > 0", self.setup_timeout_s),
+            );
+        }
+        if !(0..=99).contains(&self.rt.fifo_priority) {
+            return bad(
+                "rt.fifo_priority",
+                format!("{} must be 0 (off) or 1..=99", self.rt.fifo_priority),
+            );
+        }
+        if self.polling.sleep_ns == 0 || self.polling.sleep_ns > 100_000_000 {
+            return bad(
+                "polling.sleep_ns",
+                format!("{} must be in 1..=100000000", self.polling.sleep_ns),
+            );
+        }
+        ur5_shared::services::ServiceNames::new(&self.prefix)
+            .arm_state()
+            .map_err(|e| ConfigError::Invalid {
+                key: "prefix",
+                why: e.to_string(),
+            })?;
+        Ok(())
+    }
+
+    /// Wall-clock period of one tick (ns): `task.dt / time_compression`.
+    pub fn wall_period_ns(&self) -> u64 {
+        (self.task.dt / self.time_compression * 1e9).round() as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate_and_round_trip() {
+        let c = ControllerConfig::default();
+        c.validate().unwrap();
+        let text = toml::to_string(&c).unwrap();
+        let back: ControllerConfig = toml::from_str(&text).unwrap();
+        assert_eq!(back, c);
+        assert_eq!(c.wall_period_ns(), 100_000_000);
+    }
+
+    #[test]
+    fn rejects_typos_and_out_of_range_values() {
+        assert!(toml::from_str::<ControllerConfig>("mode = \"lock_step\"").is_err());
+        assert!(toml::from_str::<ControllerConfig>("episodez = 3").is_err());
+        let mut c: ControllerConfig = toml::from_str("[task]\ndt = 0.0005").unwrap();
+        assert!(c.validate().unwrap_err().to_string().contains("task.dt"));
+        c.task.dt = 0.001;
+        c.validate().unwrap();
+        c.time_compression = 0.5;
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("time_compression"));
+        let c: ControllerConfig = toml::from_str("[safety]\nstale_state_timeout_s = 0").unwrap();
+        assert!(c.validate().is_err());
+        let c: ControllerConfig = toml::from_str("[task]\nstart_q = [0.0, 0.0, 4.0]").unwrap();
+        assert!(c.validate().unwrap_err().to_string().contains("start_q"));
+    }
+}

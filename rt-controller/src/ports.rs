@@ -1,0 +1,176 @@
+//! The controller's iceoryx2 node and ports, created in the setup phase (DESIGN.md §3):
+//! `arm/state` in, `arm/command` out, `learner/samples` out, `controller/gains` in, each with
+//! the quality of service of [`ur5_shared::services`].
+
+use core::time::Duration;
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+use ur5_shared::services::{self, Qos, ServiceNames};
+use ur5_shared::{ArmCommand, ArmState, GainTable, StepSample};
+
+/// Setup failures; each message says what to check.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// Invalid configuration.
+    #[error(transparent)]
+    Config(#[from] ur5_shared::config::ConfigError),
+    /// A service name iceoryx2 refused.
+    #[error(transparent)]
+    Name(#[from] ur5_shared::services::InvalidServiceName),
+    /// The iceoryx2 node could not be created.
+    #[error("cannot create the iceoryx2 node: {0}; is /dev/shm writable?")]
+    Node(String),
+    /// A service could not be opened or created.
+    #[error("cannot open or create service `{name}`: {why}; a service of that name may exist with another payload type or smaller limits (another build of the project, or a stale run: use a fresh --prefix)")]
+    Service {
+        /// Full service name.
+        name: String,
+        /// iceoryx2's error.
+        why: String,
+    },
+    /// A port could not be created.
+    #[error("cannot create a {kind} on `{name}`: {why}; too many processes may be connected (stale ports of killed processes count until cleaned up)")]
+    Port {
+        /// publisher / subscriber.
+        kind: &'static str,
+        /// Full service name.
+        name: String,
+        /// iceoryx2's error.
+        why: String,
+    },
+    /// A peer did not show up in time.
+    #[error("no {what} within {timeout_s} s on prefix `{prefix}`: start it with the same --prefix (e.g. `hil-sim serve --prefix {prefix}`), or raise setup_timeout_s")]
+    PeerTimeout {
+        /// What was waited for.
+        what: &'static str,
+        /// Timeout (s).
+        timeout_s: f64,
+        /// The service prefix.
+        prefix: String,
+    },
+}
+
+/// A creating process may race another: retry a few times before giving up.
+fn open_retrying<T: core::fmt::Debug + ZeroCopySend + 'static>(
+    node: &Node<ipc::Service>,
+    name: &str,
+    qos: &Qos,
+) -> Result<PubSubFactory<ipc::Service, T, ()>, SetupError> {
+    let sname = ServiceNames::service_name(name)?;
+    let mut last = String::new();
+    for attempt in 0..50 {
+        match qos.open_or_create::<T>(node, &sname) {
+            Ok(f) => return Ok(f),
+            Err(e) => last = format!("{e:?}"),
+        }
+        std::thread::sleep(Duration::from_millis(2 + attempt));
+    }
+    Err(SetupError::Service {
+        name: name.to_owned(),
+        why: last,
+    })
+}
+
+/// The node and the four ports. Fields drop in order: ports before services before the node.
+pub struct ControllerPorts {
+    pub(crate) state_sub: Subscriber<ipc::Service, ArmState, ()>,
+    pub(crate) cmd_pub: Publisher<ipc::Service, ArmCommand, ()>,
+    pub(crate) sample_pub: Publisher<ipc::Service, StepSample, ()>,
+    pub(crate) gains_sub: Subscriber<ipc::Service, GainTable, ()>,
+    pub(crate) state_svc: PubSubFactory<ipc::Service, ArmState, ()>,
+    pub(crate) cmd_svc: PubSubFactory<ipc::Service, ArmCommand, ()>,
+    pub(crate) samples_svc: PubSubFactory<ipc::Service, StepSample, ()>,
+    pub(crate) gains_svc: PubSubFactory<ipc::Service, GainTable, ()>,
+    /// Names in use.
+    pub names: ServiceNames,
+    _node: Node<ipc::Service>,
+}
+
+impl ControllerPorts {
+    /// Creates the node (signal handling left to the caller) and every port.
+    pub fn create(prefix: &str) -> Result<Self, SetupError> {
+        let names = ServiceNames::new(prefix);
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| SetupError::Node(format!("{e:?}")))?;
+        let state_svc =
+            open_retrying::<ArmState>(&node, &names.arm_state, &services::ARM_STATE_QOS)?;
+        let cmd_svc =
+            open_retrying::<ArmCommand>(&node, &names.arm_command, &services::ARM_COMMAND_QOS)?;
+        let samples_svc = open_retrying::<StepSample>(
+            &node,
+            &names.learner_samples,
+            &services::LEARNER_SAMPLES_QOS,
+        )?;
+        let gains_svc = open_retrying::<GainTable>(
+            &node,
+            &names.controller_gains,
+            &services::CONTROLLER_GAINS_QOS,
+        )?;
+        fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug) -> SetupError {
+            SetupError::Port {
+                kind,
+                name: name.to_owned(),
+                why: format!("{e:?}"),
+            }
+        }
+        let state_sub = state_svc
+            .subscriber_builder()
+            .create()
+            .map_err(|e| port_err("subscriber", &names.arm_state, &e))?;
+        let cmd_pub = cmd_svc
+            .publisher_builder()
+            .create()
+            .map_err(|e| port_err("publisher", &names.arm_command, &e))?;
+        let sample_pub = samples_svc
+            .publisher_builder()
+            .create()
+            .map_err(|e| port_err("publisher", &names.learner_samples, &e))?;
+        let gains_sub = gains_svc
+            .subscriber_builder()
+            .create()
+            .map_err(|e| port_err("subscriber", &names.controller_gains, &e))?;
+        Ok(Self {
+            state_sub,
+            cmd_pub,
+            sample_pub,
+            gains_sub,
+            state_svc,
+            cmd_svc,
+            samples_svc,
+            gains_svc,
+            names,
+            _node: node,
+        })
+    }
+
+    /// Number of arm-state publishers and arm-command subscribers connected.
+    pub fn arm_peers(&self) -> (usize, usize) {
+        (
+            self.state_svc.dynamic_config().number_of_publishers(),
+            self.cmd_svc.dynamic_config().number_of_subscribers(),
+        )
+    }
+
+    /// Number of sample subscribers and gain publishers connected (the learner's ports).
+    pub fn learner_peers(&self) -> (usize, usize) {
+        (
+            self.samples_svc.dynamic_config().number_of_subscribers(),
+            self.gains_svc.dynamic_config().number_of_publishers(),
+        )
+    }
+
+    /// Establishes the connections to every peer now, so that the loop's first send does not
+    /// (connection changes allocate inside iceoryx2).
+    pub fn connect(&self) {
+        let _ = self.cmd_pub.update_connections();
+        let _ = self.sample_pub.update_connections();
+        let _ = self.state_sub.update_connections();
+        let _ = self.gains_sub.update_connections();
+    }
+}

@@ -1,0 +1,83 @@
+//! The hold command (DESIGN.md §3). The action clamp itself is
+//! [`ur5_shared::safety::clamp_action`], shared with the learner's rollouts.
+//!
+//! The hold is "PD to the last safe pose": in goal-angle mode the arm's own servo is that PD
+//! (goal = last safe pose); in torque mode the controller computes it.
+
+use ur5_shared::config::{ActionMode, ArmLimits};
+use ur5_shared::layout::N_JOINTS;
+use ur5_shared::ArmCommand;
+
+use crate::config::Safety;
+
+/// The hold command: PD to the last safe pose `q_safe` (rad).
+///
+/// - Goal-angle mode: goal = `q_safe` clamped to the joint limits; the arm's servo holds it.
+/// - Torque mode with a fresh state (`q`, `qd`): τ = K_p (q_safe − q) − K_d q̇, clamped to the
+///   effort limits. Without a fresh state a torque is meaningless: [`ArmCommand::hold`], the
+///   arm's own hold.
+#[allow(clippy::too_many_arguments)]
+pub fn hold_command(
+    mode: ActionMode,
+    lim: &ArmLimits,
+    safety: &Safety,
+    q_safe: &[f64; N_JOINTS],
+    fresh: Option<(&[f64; N_JOINTS], &[f64; N_JOINTS])>,
+    seq: u64,
+    stamp_ns: u64,
+    episode: u64,
+) -> ArmCommand {
+    match (mode, fresh) {
+        (ActionMode::GoalAngles, _) => {
+            let goal = core::array::from_fn(|j| q_safe[j].clamp(lim.lower[j], lim.upper[j]));
+            ArmCommand::goal_angles(seq, stamp_ns, episode, goal)
+        }
+        (ActionMode::Torque, Some((q, qd))) => {
+            let tau = core::array::from_fn(|j| {
+                (safety.hold_kp[j] * (q_safe[j] - q[j]) - safety.hold_kd[j] * qd[j])
+                    .clamp(-lim.effort[j], lim.effort[j])
+            });
+            ArmCommand::torques(seq, stamp_ns, episode, tau)
+        }
+        (ActionMode::Torque, None) => ArmCommand::hold(seq, stamp_ns, episode),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ur5_shared::CommandKind;
+
+    #[test]
+    fn hold_is_a_pd_to_the_last_safe_pose() {
+        let l = ArmLimits::default();
+        let s = Safety::default();
+        let c = hold_command(
+            ActionMode::GoalAngles,
+            &l,
+            &s,
+            &[0.1, -1.0, 9.0],
+            None,
+            4,
+            5,
+            6,
+        );
+        assert_eq!(c.kind(), Ok(CommandKind::GoalAngles));
+        assert_eq!(c.values, [0.1, -1.0, std::f64::consts::PI]);
+        assert_eq!((c.seq, c.stamp_ns, c.episode), (4, 5, 6));
+        let c = hold_command(
+            ActionMode::Torque,
+            &l,
+            &s,
+            &[0.1, 0.0, 0.0],
+            Some((&[0.0; 3], &[0.0, 1.0, 0.0])),
+            1,
+            0,
+            0,
+        );
+        assert_eq!(c.kind(), Ok(CommandKind::Torques));
+        assert_eq!(c.values, [200.0 * 0.1, -20.0, 0.0]);
+        let c = hold_command(ActionMode::Torque, &l, &s, &[0.1, 0.0, 0.0], None, 1, 0, 0);
+        assert_eq!(c.kind(), Ok(CommandKind::Hold));
+    }
+}

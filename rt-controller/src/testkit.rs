@@ -1,0 +1,158 @@
+//! In-process stand-ins for the controller's peers, for the benchmark and the tests: a
+//! kinematic arm (no physics: goal angles are reached at the velocity limit) that answers every
+//! command with a state (lockstep), and a table builder. They use the same services and QoS as
+//! the real processes. Not for experiments: use `hil-sim serve` for an arm.
+
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use ur5_shared::clock::monotonic_ns;
+use ur5_shared::layout::N_JOINTS;
+use ur5_shared::services::{self, ServiceNames};
+use ur5_shared::{ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, DU};
+
+use crate::ports::SetupError;
+use crate::stats::Histogram;
+
+/// What the kinematic arm saw.
+pub struct ArmReport {
+    /// Commands applied.
+    pub commands: u64,
+    /// Reset commands among them.
+    pub resets: u64,
+    /// Hold commands among them.
+    pub holds: u64,
+    /// Time from publishing a state to receiving the command that answers it (ns): the IPC
+    /// round trip state → command, including the controller's compute and both sides' polling.
+    pub round_trip: Histogram,
+}
+
+fn setup_err(what: &'static str) -> impl Fn(&dyn core::fmt::Debug) -> SetupError {
+    move |e| SetupError::Port {
+        kind: what,
+        name: String::new(),
+        why: format!("{e:?}"),
+    }
+}
+
+/// Runs a lockstep kinematic arm on `prefix` until `stop` is raised. Joint angles move towards
+/// goal angles by at most `max_velocity` × `dt` per command; torques and holds keep the pose;
+/// a reset teleports. `ee_pos` is q scaled by 0.1 (only the layout matters here).
+pub fn run_kinematic_arm(
+    prefix: &str,
+    dt: f64,
+    max_velocity: f64,
+    stop: &AtomicBool,
+) -> Result<ArmReport, SetupError> {
+    let names = ServiceNames::new(prefix);
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| SetupError::Node(format!("{e:?}")))?;
+    let state_svc = services::ARM_STATE_QOS
+        .open_or_create::<ArmState>(&node, &names.arm_state()?)
+        .map_err(|e| setup_err("service")(&e))?;
+    let cmd_svc = services::ARM_COMMAND_QOS
+        .open_or_create::<ArmCommand>(&node, &names.arm_command()?)
+        .map_err(|e| setup_err("service")(&e))?;
+    let state_pub = state_svc
+        .publisher_builder()
+        .create()
+        .map_err(|e| setup_err("publisher")(&e))?;
+    let cmd_sub = cmd_svc
+        .subscriber_builder()
+        .create()
+        .map_err(|e| setup_err("subscriber")(&e))?;
+
+    let mut report = ArmReport {
+        commands: 0,
+        resets: 0,
+        holds: 0,
+        round_trip: Histogram::new(),
+    };
+    let mut state = ArmState {
+        status: ArmStatus::READY,
+        ..ArmState::default()
+    };
+    let publish = |state: &mut ArmState| {
+        state.seq += 1;
+        state.stamp_ns = monotonic_ns();
+        state.ee_pos = core::array::from_fn(|j| 0.1 * state.q[j]);
+        let _ = state_pub.send_copy(*state);
+        state.stamp_ns
+    };
+    let mut last_pub = publish(&mut state);
+    let step = max_velocity * dt;
+    let mut idle: u32 = 0;
+    while !stop.load(Ordering::Relaxed) {
+        let cmd = match cmd_sub.receive() {
+            Ok(Some(c)) => *c,
+            _ => {
+                idle += 1;
+                if idle % 64 == 0 {
+                    // Delivers the history (the last state) to a controller that joins late.
+                    let _ = state_pub.update_connections();
+                    std::thread::yield_now();
+                } else {
+                    core::hint::spin_loop();
+                }
+                if idle > 100_000 {
+                    std::thread::sleep(core::time::Duration::from_micros(200));
+                }
+                continue;
+            }
+        };
+        idle = 0;
+        report
+            .round_trip
+            .record(monotonic_ns().saturating_sub(last_pub));
+        report.commands += 1;
+        match cmd.kind() {
+            Ok(CommandKind::Reset) => {
+                report.resets += 1;
+                state.q = cmd.reset_pose;
+                state.qd = [0.0; N_JOINTS];
+            }
+            Ok(CommandKind::GoalAngles) => {
+                for j in 0..DU {
+                    let dq = (cmd.values[j] - state.q[j]).clamp(-step, step);
+                    state.q[j] += dq;
+                    state.qd[j] = dq / dt;
+                }
+            }
+            Ok(CommandKind::Hold) => {
+                report.holds += 1;
+                state.qd = [0.0; N_JOINTS];
+            }
+            Ok(CommandKind::Torques) | Err(_) => state.qd = [0.0; N_JOINTS],
+        }
+        state.episode = cmd.episode;
+        state.last_command_seq = cmd.seq;
+        last_pub = publish(&mut state);
+    }
+    Ok(report)
+}
+
+/// A table that commands the constant goal `q_goal` (rad) with exploration noise of standard
+/// deviation `sigma` (rad) on every joint: K = 0, k = 0, ŝ = 0, â = q_goal, L = σ I. Sealed.
+pub fn constant_goal_table(
+    version: u64,
+    horizon: usize,
+    q_goal: [f64; DU],
+    sigma: f64,
+) -> Box<GainTable> {
+    let mut t = GainTable::new_boxed();
+    t.set_version(version);
+    t.set_horizon(horizon)
+        .expect("horizon within 1..=MAX_HORIZON");
+    for s in 0..horizon {
+        let st = t.step_mut(s);
+        st.a_hat = q_goal;
+        for i in 0..DU {
+            st.chol[i][i] = sigma;
+        }
+    }
+    t.seal();
+    t
+}
