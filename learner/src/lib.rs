@@ -18,6 +18,7 @@ pub mod algorithm;
 pub mod bench;
 pub mod conformance;
 pub mod cost;
+pub mod discriminator;
 pub mod dynamics;
 pub mod error;
 pub mod expert;

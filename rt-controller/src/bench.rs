@@ -134,7 +134,10 @@ fn learner_stand_in(prefix: &str, horizon: usize, stop: &AtomicBool) -> anyhow::
                 unsafe { slot.assume_init() }.send()?;
             }
         }
-        std::thread::sleep(core::time::Duration::from_micros(500));
+        // Short sleeps: an episode of the kinematic arm lasts about a millisecond and most
+        // boundaries should find a new table, but a spinning third thread on a 2-core machine
+        // would distort the round trip being measured.
+        std::thread::sleep(core::time::Duration::from_micros(100));
     }
     Ok(())
 }

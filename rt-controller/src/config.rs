@@ -142,8 +142,10 @@ pub struct ControllerConfig {
     pub polling: Polling,
     /// Setup waits this long for the arm (and the learner, if `wait_for_learner`) (s).
     pub setup_timeout_s: f64,
-    /// Setup waits for the learner's ports too ("connect all peers before the first
-    /// episode"); off, the loop starts without a learner and holds until a table arrives.
+    /// Setup waits for the learner's ports too (DESIGN.md §3: every peer connected before the
+    /// first episode, because iceoryx2 allocates inside send/receive when connections change).
+    /// Off, the loop starts without a learner and holds until a table arrives; a learner that
+    /// connects later then costs one allocation burst in the loop (at its first sample send).
     pub wait_for_learner: bool,
     /// Print a line per episode on stderr.
     pub episode_report: bool,
@@ -168,7 +170,7 @@ impl Default for ControllerConfig {
             rt: RtSetup::default(),
             polling: Polling::default(),
             setup_timeout_s: 10.0,
-            wait_for_learner: false,
+            wait_for_learner: true,
             episode_report: true,
         }
     }

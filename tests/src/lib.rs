@@ -26,6 +26,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 pub use ur5_shared::services::unique_prefix;
+
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, GainTable, StepSample, DU};
 
@@ -283,6 +284,12 @@ pub fn reaching_table(
     }
     t.seal();
     t
+}
+
+/// Removes the iceoryx2 resources (shared memory, registrations) of processes that died, e.g.
+/// ones a test killed, so repeated runs do not accumulate them. Live processes are untouched.
+pub fn cleanup_dead_nodes() {
+    let _ = Node::<ipc::Service>::try_cleanup_dead_nodes(Config::global_config());
 }
 
 /// Writes `text` to `dir/name` and returns the path as a string.

@@ -5,7 +5,8 @@
 use std::time::Duration;
 
 use integration_tests::{
-    json_summary, reaching_table, scratch, unique_prefix, write_config, Proc, TestLearner,
+    cleanup_dead_nodes, json_summary, reaching_table, scratch, unique_prefix, write_config, Proc,
+    TestLearner,
 };
 use ur5_shared::{controller_action, CommandKind, StepSample, DX, NO_NOISE};
 
@@ -370,11 +371,18 @@ fn killing_the_sim_makes_the_controller_hold_and_report() {
         assert_eq!(c.kind(), Ok(CommandKind::GoalAngles), "{c:?}");
         assert_eq!(c.values[..], last.s[..3], "hold at the last safe pose");
     }
+    cleanup_dead_nodes();
 }
 
 #[test]
 fn an_absent_learner_leaves_the_arm_holding_without_a_table() {
-    let mut rig = start("it-d2", "", "", "no_table_timeout_s = 0.5", &[]);
+    let mut rig = start(
+        "it-d2",
+        "",
+        "wait_for_learner = false",
+        "no_table_timeout_s = 0.5",
+        &[],
+    );
     let (code, out) = rig.ctl.wait(LONG);
     let log = rig.ctl.log();
     assert_eq!(code, Some(4), "exit code 4 = no table; log:\n{log}");
@@ -439,6 +447,7 @@ fn killing_the_learner_never_stalls_the_loop() {
     assert_eq!(j["exit_reason"], "episodes_done");
     assert_eq!(j["episodes_completed"], 40);
     assert_eq!(j["table_version"], 1, "the current table stays");
+    cleanup_dead_nodes();
 }
 
 #[test]

@@ -75,7 +75,7 @@ impl Learner {
         n: usize,
     ) -> Result<EmReport, LearnerError> {
         if let Some(p) = self.prev_info.as_mut() {
-            p.clone_from(&self.info);
+            p.copy_from(&self.info);
         } else {
             self.prev_info = Some(self.info.clone());
         }

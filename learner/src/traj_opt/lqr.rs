@@ -86,6 +86,18 @@ pub struct TrajInfo {
 }
 
 impl TrajInfo {
+    /// Copies every array from `other` (same size) without allocating.
+    pub fn copy_from(&mut self, other: &TrajInfo) {
+        self.dynamics.fm.copy_from(&other.dynamics.fm);
+        self.dynamics.fv.copy_from(&other.dynamics.fv);
+        self.dynamics.dyn_covar.copy_from(&other.dynamics.dyn_covar);
+        self.x0mu.copy_from_slice(&other.x0mu);
+        self.x0sigma.copy_from(&other.x0sigma);
+        self.cc.copy_from_slice(&other.cc);
+        self.cv.copy_from(&other.cv);
+        self.cm.copy_from(&other.cm);
+    }
+
     /// All-zero trajectory info of the given size.
     pub fn zeros(t: usize, dx: usize, du: usize) -> Self {
         let d = dx + du;
@@ -159,6 +171,7 @@ struct Workspace {
     pc: Mat<f64>,
     cpc: Mat<f64>,
     tmp_ux: Mat<f64>,
+    tmp_ux2: Mat<f64>,
     tmp_xu: Mat<f64>,
     tmp_u: Mat<f64>,
     prc: Mat<f64>,
@@ -204,6 +217,7 @@ impl Workspace {
             pc: z(du, du),
             cpc: z(du, du),
             tmp_ux: z(du, dx),
+            tmp_ux2: z(du, dx),
             tmp_xu: z(dx, du),
             tmp_u: z(du, 1),
             prc: z(du, du),
@@ -649,6 +663,8 @@ impl TrajOptLqr {
                     &mut ws.tmp_xx,
                     &mut ws.tmp_xx2,
                     &mut ws.prc,
+                    &mut ws.tmp_u,
+                    &mut ws.tmp_ux2,
                 )
             } else {
                 let (c_new, ld_new) = kl_terms(
@@ -1023,6 +1039,8 @@ fn kl_alt_step(
     tmp_xx: &mut Mat<f64>,
     tmp_xx2: &mut Mat<f64>,
     tmp_uu: &mut Mat<f64>,
+    kd: &mut Mat<f64>,
+    ipk: &mut Mat<f64>,
 ) -> f64 {
     let (dx, du) = (new.dx, new.du);
     let rp = prev.chol_pol_covar.mat(t);
@@ -1038,7 +1056,10 @@ fn kl_alt_step(
     }
     let kp = prev.k.slice(t);
     let kn = new.k.slice(t);
-    let kd: Vec<f64> = (0..du).map(|i| kp[i] - kn[i]).collect::<Vec<_>>();
+    for i in 0..du {
+        kd[(i, 0)] = kp[i] - kn[i];
+    }
+    let kd = kd.col(0);
     // tr(inv_prev sig_new)
     gemm(tmp_uu.as_mut(), Accum::Replace, inv_prev, sig_new, 1.0);
     let tr1: f64 = (0..du).map(|i| tmp_uu[(i, i)]).fold(0.0, |a, b| a + b);
@@ -1052,7 +1073,6 @@ fn kl_alt_step(
         q1 += s * kd[j];
     }
     // A = Kdᵀ inv_prev Kd (dX x dX)
-    let mut ipk = Mat::<f64>::zeros(du, dx);
     gemm(ipk.as_mut(), Accum::Replace, inv_prev, kdiff.as_ref(), 1.0);
     gemm(
         tmp_xx.as_mut(),
