@@ -260,6 +260,18 @@ impl Ur5Sim {
         &self.cfg
     }
 
+    /// Limits of the active joints as written in the URDF, for the action clamp
+    /// (`ur5_shared::safety::clamp_action`).
+    pub fn limits(&self) -> ur5_shared::config::ArmLimits {
+        let a = &self.model.active;
+        ur5_shared::config::ArmLimits {
+            lower: [0, 1, 2].map(|j| a[j].lower),
+            upper: [0, 1, 2].map(|j| a[j].upper),
+            velocity: [0, 1, 2].map(|j| a[j].velocity),
+            effort: [0, 1, 2].map(|j| a[j].effort),
+        }
+    }
+
     /// Control period (s): how long each action is held.
     pub fn control_dt(&self) -> f64 {
         self.control_dt

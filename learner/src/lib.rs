@@ -17,11 +17,16 @@
 pub mod algorithm;
 pub mod bench;
 pub mod conformance;
+pub mod cost;
 pub mod discriminator;
 pub mod dynamics;
 pub mod error;
+pub mod expert;
+pub mod expert_cli;
+pub mod io;
 pub mod linalg;
 pub mod policy;
+pub mod rollout;
 pub mod synthetic;
 pub mod traj_opt;
 

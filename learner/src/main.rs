@@ -24,6 +24,9 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Train the expert on the true task cost (KL-bounded LQR with learned dynamics, in
+    /// process), save its gain table, record demonstrations. Progress: one line per iteration.
+    Expert(learner::expert_cli::ExpertArgs),
     /// Time one full learner update (GMM prior update, dynamics fit, η search) on a seeded
     /// synthetic linear problem; prints median wall-clock times in milliseconds.
     Bench {
@@ -54,6 +57,7 @@ enum Cmd {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.cmd {
+        Cmd::Expert(args) => learner::expert_cli::run(args)?,
         Cmd::Conformance { vectors, json } => {
             let f = vectors.to_string_lossy().to_string();
             let rep = learner::conformance::run_file(&f)

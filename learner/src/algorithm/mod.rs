@@ -8,7 +8,8 @@ pub mod step_adjust;
 pub mod update;
 
 /// GPS `ALG` hyperparameters used by the learner (algorithm/config.py).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct AlgorithmConfig {
     /// Base KL step per time step ε/T (default 0.2).
     pub kl_step: f64,

@@ -11,7 +11,8 @@ use crate::error::LearnerError;
 use crate::linalg::{gemm, LuSolver};
 
 /// GPS `DynamicsLRPrior` hyperparameters.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct LrPriorConfig {
     /// Added to **every** entry of the `(dX+dU) x (dX+dU)` block of the joint covariance
     /// before conditioning (GPS `sig_reg[it, it] = regularization`; default 1e-6 as in the GPS

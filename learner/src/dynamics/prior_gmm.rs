@@ -14,7 +14,8 @@ use crate::dynamics::gmm::{ClusterInit, EmReport, Gmm};
 use crate::error::LearnerError;
 
 /// GPS `DYN_PRIOR_GMM` hyperparameters.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct PriorGmmConfig {
     /// Points per cluster used to choose K (GPS default 20; the GPS examples and the
     /// reference vectors use 40).

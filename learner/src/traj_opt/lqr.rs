@@ -37,7 +37,8 @@ pub const ETA_ERROR_THRESHOLD: f64 = 1e16;
 
 /// `TRAJ_OPT_LQR` hyperparameters (GPS traj_opt/config.py) plus the algorithm's
 /// `max_ent_traj`.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct TrajOptConfig {
     /// First η increment on a non-PD Q_uu (default 1e-4).
     pub del0: f64,

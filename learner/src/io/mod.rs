@@ -1,0 +1,5 @@
+//! Files that leave the program (DESIGN.md §5): `.npz` containers, demonstrations, gain tables.
+
+pub mod demos;
+pub mod npz;
+pub mod table;

@@ -1,0 +1,121 @@
+//! Gain tables on disk (`.npz`, DESIGN.md §5), in the project's form
+//! a = K_t (s − ŝ_t) + k_t + â_t + L_t ε:
+//!
+//! | array | shape | meaning |
+//! |---|---|---|
+//! | `K` | (T, dU, dX) | feedback gains |
+//! | `k` | (T, dU) | feed-forward (action units) |
+//! | `s_hat` | (T, dX) | state the gains are centred on |
+//! | `a_hat` | (T, dU) | nominal action |
+//! | `L` | (T, dU, dU) | lower Cholesky factor of the action covariance |
+//! | `version`, `checksum` | () u64 | as in `ur5_shared::GainTable` |
+//! | `dt` | () f64 | control period (s) |
+//! | `state_names`, `action_names` | | layout |
+//! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
+//!
+//! Loading rebuilds the table, checks the stored checksum and runs `GainTable::validate`.
+
+use std::path::Path;
+
+use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
+use ur5_shared::{GainBounds, GainStep, GainTable};
+
+use super::npz::{NpzError, NpzFile, NpzWriter};
+
+/// Version of this file layout.
+pub const SCHEMA_VERSION: i64 = 1;
+
+/// Writes `table` (its used steps) with control period `dt` (s).
+pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzError> {
+    let steps = table.used_steps();
+    let t = steps.len() as u64;
+    let mut w = NpzWriter::create(path)?;
+    w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
+    let flat = |f: &dyn Fn(&GainStep) -> Vec<f64>| steps.iter().flat_map(f).collect::<Vec<f64>>();
+    w.f64("K", &[t, DU as u64, DX as u64], &flat(&|s| s.k_mat.iter().flatten().copied().collect()))?;
+    w.f64("k", &[t, DU as u64], &flat(&|s| s.k_vec.to_vec()))?;
+    w.f64("s_hat", &[t, DX as u64], &flat(&|s| s.s_hat.to_vec()))?;
+    w.f64("a_hat", &[t, DU as u64], &flat(&|s| s.a_hat.to_vec()))?;
+    w.f64("L", &[t, DU as u64, DU as u64], &flat(&|s| s.chol.iter().flatten().copied().collect()))?;
+    w.u64("version", &[], &[table.version])?;
+    w.u64("checksum", &[], &[table.checksum])?;
+    w.f64("dt", &[], &[dt])?;
+    w.strings("state_names", &STATE_NAMES)?;
+    w.strings("action_names", &ACTION_NAMES)?;
+    w.finish()?;
+    Ok(())
+}
+
+/// Reads a table and validates it against `bounds`; returns it with its control period (s).
+pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f64), NpzError> {
+    let f = NpzFile::open(path)?;
+    let bad = |name: &str, why: String| NpzError::Bad { path: path.to_owned(), name: name.into(), why };
+    let version = f.f64_shaped("schema_version", &[])?[0];
+    if version != SCHEMA_VERSION as f64 {
+        return Err(bad("schema_version", format!("{version}, this program reads {SCHEMA_VERSION}")));
+    }
+    let (shape, k_mat) = f.f64("K")?;
+    let [t, du, dx] = shape[..] else { return Err(bad("K", format!("shape {shape:?}, expected (T, {DU}, {DX})"))) };
+    if (du, dx) != (DU as u64, DX as u64) {
+        return Err(bad("K", format!("shape {shape:?}, expected (T, {DU}, {DX})")));
+    }
+    let k_vec = f.f64_shaped("k", &[t, DU as u64])?;
+    let s_hat = f.f64_shaped("s_hat", &[t, DX as u64])?;
+    let a_hat = f.f64_shaped("a_hat", &[t, DU as u64])?;
+    let chol = f.f64_shaped("L", &[t, DU as u64, DU as u64])?;
+    let dt = f.f64_shaped("dt", &[])?[0];
+    let mut table = GainTable::new_boxed();
+    table.set_horizon(t as usize).map_err(|e| bad("K", e.to_string()))?;
+    table.set_version(f.u64_scalar("version")?);
+    for ti in 0..t as usize {
+        let mut step = GainStep::default();
+        for i in 0..DU {
+            step.k_mat[i].copy_from_slice(&k_mat[(ti * DU + i) * DX..(ti * DU + i + 1) * DX]);
+            step.chol[i].copy_from_slice(&chol[(ti * DU + i) * DU..(ti * DU + i + 1) * DU]);
+        }
+        step.k_vec.copy_from_slice(&k_vec[ti * DU..(ti + 1) * DU]);
+        step.a_hat.copy_from_slice(&a_hat[ti * DU..(ti + 1) * DU]);
+        step.s_hat.copy_from_slice(&s_hat[ti * DX..(ti + 1) * DX]);
+        table.set_step(ti, &step);
+    }
+    table.checksum = f.u64_scalar("checksum")?;
+    table.validate(bounds).map_err(|e| bad("(table)", e.to_string()))?;
+    Ok((table, dt))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_rejects_a_tampered_file() {
+        let dir = std::env::temp_dir().join(format!("table-test-{}", std::process::id()));
+        let path = dir.join("t.npz");
+        let mut table = GainTable::new_boxed();
+        table.set_horizon(4).unwrap();
+        table.set_version(3);
+        for t in 0..4 {
+            let mut s = GainStep::default();
+            s.k_mat[1][5] = 0.5 + t as f64;
+            s.k_vec = [0.1, -0.2, 0.3];
+            s.s_hat[7] = -0.4;
+            s.a_hat = [1.0, -1.5, 2.0];
+            s.chol = [[0.2, 0.0, 0.0], [0.01, 0.3, 0.0], [0.0, -0.02, 0.1]];
+            table.set_step(t, &s);
+        }
+        table.seal();
+        save_table(&path, &table, 0.1).unwrap();
+        let (back, dt) = load_table(&path, &GainBounds::default()).unwrap();
+        assert_eq!(dt, 0.1);
+        assert_eq!(back.used_steps(), table.used_steps());
+        assert_eq!(back.checksum, table.checksum);
+
+        // A value changed without re-sealing: the checksum no longer matches.
+        let mut tampered = table.clone();
+        tampered.step_mut(2).k_vec[0] = 9.0;
+        save_table(&path, &tampered, 0.1).unwrap();
+        let e = load_table(&path, &GainBounds::default()).unwrap_err().to_string();
+        assert!(e.contains("checksum"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
