@@ -10,8 +10,16 @@
 //! - Derivatives in the raw input: `∇ₓD = diag(1/σ) ∇_u net`,
 //!   `∇²ₓD = diag(1/σ) ∇²_u net diag(1/σ)`.
 //! - Training ([`Discriminator::train`]): Gulrajani et al. (2017) Algorithm 1, critic part,
-//!   minimising `E_controller[D] − E_expert[D] + λ E_x̂[(‖∇ₓD(x̂)‖ − 1)²]` with
-//!   `x̂ = ε x_expert + (1 − ε) x_controller`, `ε ~ U[0, 1]`, by Adam ([`adam`]).
+//!   by Adam ([`adam`]), minimising
+//!   `E_expert[D] − E_controller[D] + λ E_x̂[(‖∇ₓD(x̂)‖ − 1)²]`,
+//!   `x̂ = ε x_expert + (1 − ε) x_controller`, `ε ~ U[0, 1]`. This sign makes D low on expert
+//!   transitions, so D is a cost, and makes the Wasserstein estimate
+//!   `E_controller[D] − E_expert[D]` non-negative. (DESIGN.md §1 step 3 writes the loss as
+//!   `E_controller[D] − E_expert[D] + …`; minimising that makes D *high* on expert data,
+//!   contradicting its own next sentence and the composite cost `C_t = D(…)` of step 4. Measured
+//!   on the two-Gaussian toy: that sign drives the estimate to −1.04 for a true W1 of 1.
+//!   Paper-wise: the expert plays the role of Gulrajani's generated samples, the controller
+//!   that of the real data; the W1 dual is symmetric, only the sign of D changes.)
 //!
 //! Model/data split as in crocoddyl: [`Discriminator`] holds parameters, normalisation, Adam
 //! and RNG state; [`Workspace`] holds all scratch memory, built once per net size with
@@ -234,7 +242,7 @@ pub struct Workspace {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrainStats {
     /// Mean over the `n_critic` steps of the minibatch loss
-    /// `mean D(x_c) − mean D(x_e) + λ mean (‖∇D(x̂)‖ − 1)²`, each at the weights before its step.
+    /// `mean D(x_e) − mean D(x_c) + λ mean (‖∇D(x̂)‖ − 1)²`, each at the weights before its step.
     pub critic_loss: f64,
     /// The penalty term of `critic_loss` (same averaging).
     pub gradient_penalty: f64,
@@ -449,6 +457,46 @@ impl Discriminator {
         p
     }
 
+    /// One sample of the critic loss, `ℓ = D(x_e) − D(x_c) + λ (‖∇ₓD(x̂)‖ − 1)²` with
+    /// `x̂ = ε x_e + (1 − ε) x_c`, and `grad_params += c ∂ℓ/∂θ`. Returns `(ℓ, penalty)`.
+    /// [`Self::train`]'s minibatch gradient is the sum of these with `c = 1/m`.
+    pub fn accumulate_critic_loss_gradient(
+        &self,
+        x_e: &[f64],
+        x_c: &[f64],
+        eps: f64,
+        c: f64,
+        ws: &mut Workspace,
+        grad_params: &mut [f64],
+    ) -> (f64, f64) {
+        self.check_ws(ws);
+        self.critic_sample(x_e, x_c, eps, c, &mut ws.mlp, &mut ws.x_hat, grad_params)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn critic_sample(
+        &self,
+        x_e: &[f64],
+        x_c: &[f64],
+        eps: f64,
+        c: f64,
+        mlp_ws: &mut MlpWorkspace,
+        x_hat: &mut [f64],
+        grad: &mut [f64],
+    ) -> (f64, f64) {
+        for ((h, &e), &xc) in x_hat.iter_mut().zip(x_e).zip(x_c) {
+            *h = eps * e + (1.0 - eps) * xc;
+        }
+        let de = self.forward_raw(x_e, mlp_ws);
+        self.net.backward(mlp_ws, false);
+        self.net.accumulate_param_grad(mlp_ws, c, grad);
+        let dc = self.forward_raw(x_c, mlp_ws);
+        self.net.backward(mlp_ws, false);
+        self.net.accumulate_param_grad(mlp_ws, -c, grad);
+        let p = self.penalty_into(x_hat, c, mlp_ws, grad);
+        (de - dc + p, p)
+    }
+
     /// Mean of `D` over the rows of `x` (`n × d`).
     pub fn mean_value(&self, x: MatRef<'_, f64>, ws: &mut Workspace) -> f64 {
         self.check_ws(ws);
@@ -476,10 +524,11 @@ impl Discriminator {
     }
 
     /// `n_critic` WGAN-GP critic steps (Gulrajani et al. 2017, Algorithm 1 lines 2–9, with
-    /// the roles: "real" = expert, "generated" = controller). Each step draws `m` expert rows,
-    /// `m` controller rows (uniformly, with replacement) and `m` values `ε ~ U[0,1)`, and takes
-    /// one Adam step on the gradient of
-    /// `(1/m) Σ [D(x_c) − D(x_e) + λ (‖∇ₓD(x̂)‖ − 1)²]`, `x̂ = ε x_e + (1 − ε) x_c`.
+    /// the roles: "real" = controller, "generated" = expert; see the module docs). Each step
+    /// draws `m` expert rows, `m` controller rows (uniformly, with replacement) and `m` values
+    /// `ε ~ U[0,1)`, and takes one Adam step on the gradient of
+    /// `(1/m) Σ [D(x_e) − D(x_c) + λ (‖∇ₓD(x̂)‖ − 1)²]`, `x̂ = ε x_e + (1 − ε) x_c`
+    /// (sign: module docs; D ends up low on expert transitions).
     /// `expert` and `controller` are `n × d` transitions `[s; s']`, one per row.
     ///
     /// Errors on wrong shapes, empty or non-finite data, or a non-finite gradient (then the
@@ -514,18 +563,16 @@ impl Discriminator {
                 let eps: f64 = self.rng.random();
                 copy_row(expert, i, &mut ws.x_e);
                 copy_row(controller, j, &mut ws.x_c);
-                for ((h, &e), &c) in ws.x_hat.iter_mut().zip(&ws.x_e).zip(&ws.x_c) {
-                    *h = eps * e + (1.0 - eps) * c;
-                }
-                let dc = self.forward_raw(&ws.x_c, &mut ws.mlp);
-                self.net.backward(&mut ws.mlp, false);
-                self.net.accumulate_param_grad(&ws.mlp, inv_m, &mut ws.grad);
-                let de = self.forward_raw(&ws.x_e, &mut ws.mlp);
-                self.net.backward(&mut ws.mlp, false);
-                self.net
-                    .accumulate_param_grad(&ws.mlp, -inv_m, &mut ws.grad);
-                let p = self.penalty_into(&ws.x_hat, inv_m, &mut ws.mlp, &mut ws.grad);
-                loss += dc - de + p;
+                let (l, p) = self.critic_sample(
+                    &ws.x_e,
+                    &ws.x_c,
+                    eps,
+                    inv_m,
+                    &mut ws.mlp,
+                    &mut ws.x_hat,
+                    &mut ws.grad,
+                );
+                loss += l;
                 gp += p;
             }
             if !ws.grad.iter().all(|g| g.is_finite()) {

@@ -273,6 +273,60 @@ fn discriminator_penalty_gradient_matches_finite_differences() {
 }
 
 #[test]
+fn discriminator_critic_loss_gradient_matches_finite_differences() {
+    // The whole per-sample WGAN-GP loss as `train` uses it: sign and composition included.
+    let mut worst: f64 = 0.0;
+    for c in cases().iter().filter(|c| c.normalise) {
+        let (mut disc, xs) = random_critic(c);
+        let mut ws = disc.workspace();
+        let triples = [(0, 1, 0.3), (1, 2, 0.9), (2, 0, 0.05)];
+        let mut grad = vec![0.0; disc.params().len()];
+        let mut total = 0.0;
+        for &(e, k, eps) in &triples {
+            let (l, p) =
+                disc.accumulate_critic_loss_gradient(&xs[e], &xs[k], eps, 0.5, &mut ws, &mut grad);
+            let x_hat: Vec<f64> = xs[e]
+                .iter()
+                .zip(&xs[k])
+                .map(|(a, b)| eps * a + (1.0 - eps) * b)
+                .collect();
+            let mut g = vec![0.0; c.d];
+            disc.value_gradient(&x_hat, &mut ws, &mut g);
+            let n = g.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let want_p = disc.config().lambda_gp * (n - 1.0) * (n - 1.0);
+            let want_l = disc.value(&xs[e], &mut ws) - disc.value(&xs[k], &mut ws) + want_p;
+            assert!((p - want_p).abs() <= 1e-12 * want_p.max(1.0));
+            assert!((l - want_l).abs() <= 1e-12 * want_l.abs().max(1.0));
+            total += l;
+        }
+        let loss = |d: &Discriminator| {
+            let mut ws = d.workspace();
+            let mut sink = vec![0.0; d.params().len()];
+            triples
+                .iter()
+                .map(|&(e, k, eps)| {
+                    0.5 * d
+                        .accumulate_critic_loss_gradient(
+                            &xs[e], &xs[k], eps, 0.0, &mut ws, &mut sink,
+                        )
+                        .0
+                })
+                .sum::<f64>()
+        };
+        assert_eq!(loss(&disc), 0.5 * total);
+        let fd = fd_params(&mut disc, loss);
+        let (rel, _) = rel_err(&grad, &fd);
+        assert!(
+            rel <= TOL,
+            "critic loss gradient rel err {rel:e}, sizes {:?}",
+            c.hidden
+        );
+        worst = worst.max(rel);
+    }
+    eprintln!("critic loss gradient: max rel err {worst:.2e}");
+}
+
+#[test]
 fn discriminator_workspace_reuse_leaves_no_stale_state() {
     let c = &cases()[1];
     let (disc, xs) = random_critic(c);
