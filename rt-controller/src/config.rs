@@ -149,6 +149,8 @@ pub struct ControllerConfig {
     pub wait_for_learner: bool,
     /// Print a line per episode on stderr.
     pub episode_report: bool,
+    /// How often a background thread looks for dead peer processes (s); 0 = never.
+    pub monitor_period_s: f64,
 }
 
 impl Default for ControllerConfig {
@@ -172,6 +174,7 @@ impl Default for ControllerConfig {
             setup_timeout_s: 10.0,
             wait_for_learner: true,
             episode_report: true,
+            monitor_period_s: 0.2,
         }
     }
 }
@@ -245,6 +248,12 @@ impl ControllerConfig {
         }
         if !s.hold_kp.iter().chain(&s.hold_kd).all(|v| nonneg(*v)) {
             return bad("safety.hold_kp/hold_kd", "must be finite and >= 0".into());
+        }
+        if !nonneg(self.monitor_period_s) {
+            return bad(
+                "monitor_period_s",
+                format!("{} must be >= 0 (0 = off)", self.monitor_period_s),
+            );
         }
         if !pos(self.setup_timeout_s) {
             return bad(

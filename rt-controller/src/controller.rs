@@ -42,6 +42,7 @@ use ur5_shared::safety::clamp_action;
 use ur5_shared::{controller_action, ArmCommand, ArmState, StepSample, DU, NO_NOISE};
 
 use crate::config::{ControllerConfig, Mode, Pacing};
+use crate::monitor::PeerMonitor;
 use crate::noise::Noise;
 use crate::ports::{ControllerPorts, SetupError};
 use crate::rt::{self, RtOutcome};
@@ -235,10 +236,21 @@ pub struct Summary {
     pub validate: Percentiles,
     /// Boundary intake (receive + copy + validate + flip), ns.
     pub intake: Percentiles,
+    /// Peer processes that died or left during the run ([`crate::monitor`]), if it ran.
+    pub lost_peers: Option<LostPeers>,
     /// Real-time privileges obtained.
     pub rt: RtOutcome,
     /// Wall time of the loop phase (s).
     pub wall_s: f64,
+}
+
+/// Peer processes that died or left ([`crate::monitor`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct LostPeers {
+    /// Arm processes.
+    pub arm: u64,
+    /// Learner processes.
+    pub learner: u64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -280,6 +292,7 @@ pub struct Controller {
     fault: Option<Fault>,
     no_table_since_ns: u64,
     wall_s: f64,
+    monitor: Option<PeerMonitor>,
 }
 
 /// Wait outcome of one period.
@@ -373,6 +386,12 @@ impl Controller {
             fault: None,
             no_table_since_ns: 0,
             wall_s: 0.0,
+            monitor: (cfg.monitor_period_s > 0.0).then(|| {
+                PeerMonitor::spawn(
+                    &cfg.prefix,
+                    core::time::Duration::from_secs_f64(cfg.monitor_period_s),
+                )
+            }),
             ports,
             cfg,
         })
@@ -456,6 +475,10 @@ impl Controller {
             swap: s.swap.summary(),
             validate: s.validate.summary(),
             intake: s.intake.summary(),
+            lost_peers: self.monitor.as_ref().map(|m| LostPeers {
+                arm: m.health.lost_arm.load(Ordering::Relaxed),
+                learner: m.health.lost_learner.load(Ordering::Relaxed),
+            }),
             rt: self.rt.clone(),
             wall_s: self.wall_s,
         }
@@ -900,7 +923,7 @@ impl Controller {
         if self.cfg.episode_report {
             let _ = writeln!(
                 std::io::stderr(),
-                "rt-controller: episode {} {} (table v{}, {}, {} ticks): compute {}; wake {}; missed periods {}, swaps {}, rejected {}, faults {}",
+                "rt-controller: episode {} {} (table v{}, {}, {} ticks): compute {}; wake {}; missed periods {}, swaps {}, rejected {}, faults {}, lost peers: arm {} learner {}",
                 self.episode,
                 if aborted { "ABORTED" } else { "done" },
                 self.tables.active_version().unwrap_or(0),
@@ -916,6 +939,8 @@ impl Controller {
                     + self.stats.faults.non_finite_state
                     + self.stats.faults.non_finite_action
                     + self.stats.faults.no_table,
+                self.monitor.as_ref().map_or(0, |m| m.health.lost_arm.load(Ordering::Relaxed)),
+                self.monitor.as_ref().map_or(0, |m| m.health.lost_learner.load(Ordering::Relaxed)),
             );
         }
         self.stats.compute_episode.clear();

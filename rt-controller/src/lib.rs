@@ -9,7 +9,7 @@
 //!   safety, statistics;
 //! - [`tables`]: the double-buffered gain table; [`safety`]: clamp and hold; [`noise`]: seeded
 //!   exploration noise; [`stats`]: allocation-free histograms; [`ports`]: the iceoryx2 ports;
-//!   [`rt`]: mlockall / SCHED_FIFO / pinning;
+//!   [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]: dead-peer detection off the loop;
 //! - [`testkit`], [`bench`]: in-process peers and the benchmark.
 //!
 //! Conventions (those of `ur5_shared`): SI units — rad, rad/s, m, m/s, N·m, s; timestamps are
@@ -21,6 +21,7 @@
 pub mod bench;
 pub mod config;
 pub mod controller;
+pub mod monitor;
 pub mod noise;
 pub mod ports;
 pub mod rt;

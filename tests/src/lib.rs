@@ -160,7 +160,7 @@ pub fn json_summary(stdout: &str, log: &str) -> serde_json::Value {
 pub struct TestLearner {
     gains: Publisher<ipc::Service, GainTable, ()>,
     samples: Subscriber<ipc::Service, StepSample, ()>,
-    commands: Subscriber<ipc::Service, ArmCommand, ()>,
+    commands: Option<Subscriber<ipc::Service, ArmCommand, ()>>,
     /// Every sample received so far, in arrival order.
     pub received: Vec<StepSample>,
     /// Every command seen so far.
@@ -169,8 +169,18 @@ pub struct TestLearner {
 }
 
 impl TestLearner {
-    /// Opens the services under `prefix` with the project's QoS.
+    /// Opens the services under `prefix` with the project's QoS, including the command monitor.
     pub fn new(prefix: &str) -> Self {
+        Self::open(prefix, true)
+    }
+
+    /// Only the learner's two ports (no `arm/command` monitor, which would make this process
+    /// look like an arm to the controller's peer monitor).
+    pub fn learner_only(prefix: &str) -> Self {
+        Self::open(prefix, false)
+    }
+
+    fn open(prefix: &str, monitor_commands: bool) -> Self {
         iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
         let names = ServiceNames::new(prefix);
         let node = NodeBuilder::new()
@@ -189,11 +199,12 @@ impl TestLearner {
         Self {
             gains: g.publisher_builder().create().unwrap(),
             samples: s.subscriber_builder().create().unwrap(),
-            commands: c
-                .subscriber_builder()
-                .buffer_size(services::ARM_COMMAND_QOS.subscriber_buffer)
-                .create()
-                .unwrap(),
+            commands: monitor_commands.then(|| {
+                c.subscriber_builder()
+                    .buffer_size(services::ARM_COMMAND_QOS.subscriber_buffer)
+                    .create()
+                    .unwrap()
+            }),
             received: Vec::new(),
             seen_commands: Vec::new(),
             _node: node,
@@ -214,8 +225,10 @@ impl TestLearner {
         while let Some(s) = self.samples.receive().unwrap() {
             self.received.push(*s);
         }
-        while let Some(c) = self.commands.receive().unwrap() {
-            self.seen_commands.push(*c);
+        if let Some(commands) = &self.commands {
+            while let Some(c) = commands.receive().unwrap() {
+                self.seen_commands.push(*c);
+            }
         }
     }
 

@@ -356,6 +356,11 @@ fn killing_the_sim_makes_the_controller_hold_and_report() {
     assert!(j["faults"]["stale_state"].as_u64().unwrap() >= 1, "{j}");
     assert_eq!(j["fault_at_exit"], "stale_state");
     assert!(
+        j["lost_peers"]["arm"].as_u64().unwrap() >= 1,
+        "the monitor saw the dead sim: {j}"
+    );
+    assert!(log.contains("peer died: arm"), "log:\n{log}");
+    assert!(
         log.contains("fault latched: stale arm state"),
         "log:\n{log}"
     );
@@ -397,12 +402,12 @@ fn an_absent_learner_leaves_the_arm_holding_without_a_table() {
 /// A learner in its own process (this test binary re-executed): publishes version 1, opens a
 /// samples subscriber it never reads, and idles until killed. Does nothing when run normally.
 #[test]
-#[ignore = "helper process for killing_the_learner_never_stalls_the_loop"]
+#[ignore = "helper process for killing_the_learner_never_stalls_the_loop_and_is_reported"]
 fn learner_helper_process() {
     let Ok(prefix) = std::env::var("IT_HELPER_PREFIX") else {
         return;
     };
-    let learner = TestLearner::new(&prefix);
+    let learner = TestLearner::learner_only(&prefix);
     learner.publish(&reaching_table(1, T, Q_GOAL, 0.02));
     eprintln!("helper learner up");
     loop {
@@ -413,9 +418,8 @@ fn learner_helper_process() {
 }
 
 #[test]
-fn killing_the_learner_never_stalls_the_loop() {
-    // 40 episodes × 30 = 1200 samples: more than the dead learner's queue (1024).
-    let mut rig = start("it-d3", "", "", "", &["--episodes", "40"]);
+fn killing_the_learner_never_stalls_the_loop_and_is_reported() {
+    let mut rig = start("it-d3", "", "", "", &[]);
     let log_path = rig.dir.join("helper.log");
     let mut helper = std::process::Command::new(std::env::current_exe().unwrap())
         .args([
@@ -429,24 +433,39 @@ fn killing_the_learner_never_stalls_the_loop() {
         .stderr(std::fs::File::create(&log_path).unwrap())
         .spawn()
         .unwrap();
-    let t0 = std::time::Instant::now();
-    while !rig.ctl.log().contains("episode 2 done") {
-        assert!(
-            t0.elapsed() < LONG,
-            "no episodes; controller log:\n{}",
-            rig.ctl.log()
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let wait_log = |rig: &mut Rig, needle: &str| {
+        let t0 = std::time::Instant::now();
+        while !rig.ctl.log().contains(needle) {
+            assert!(
+                rig.ctl.running(),
+                "controller exited; log:\n{}",
+                rig.ctl.log()
+            );
+            assert!(
+                t0.elapsed() < LONG,
+                "no {needle:?} in the controller log:\n{}",
+                rig.ctl.log()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+    wait_log(&mut rig, "episode 2 done");
     helper.kill().unwrap();
     helper.wait().unwrap();
+    wait_log(&mut rig, "peer died: learner");
+    // 40 episodes × 30 samples = 1200: more than the dead learner's queue (1024) holds.
+    wait_log(&mut rig, "episode 40 done");
+    rig.ctl.signal(libc::SIGTERM);
     let (code, out) = rig.ctl.wait(LONG);
     let log = rig.ctl.log();
     assert_eq!(code, Some(0), "log:\n{log}");
     let j = json_summary(&out, &log);
-    assert_eq!(j["exit_reason"], "episodes_done");
-    assert_eq!(j["episodes_completed"], 40);
+    assert_eq!(j["exit_reason"], "stopped");
+    assert!(j["episodes_completed"].as_u64().unwrap() >= 40, "{j}");
+    assert_eq!(j["episodes_aborted"], 0, "every episode finished");
     assert_eq!(j["table_version"], 1, "the current table stays");
+    assert!(j["lost_peers"]["learner"].as_u64().unwrap() >= 1, "{j}");
+    assert_eq!(j["lost_peers"]["arm"], 0, "{j}");
     cleanup_dead_nodes();
 }
 

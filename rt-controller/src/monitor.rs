@@ -1,0 +1,169 @@
+//! Detects lost peers without touching the loop: a background thread with its own iceoryx2
+//! node looks, every `monitor_period_s`, at which nodes own the ports of our four services and
+//! whether their processes are alive. A peer is lost when its process is dead (killed without
+//! cleaning up, e.g. SIGKILL or a crash: it stays registered in the services, so port counts
+//! alone do not show it) or when its ports are gone (it exited, or someone removed its stale
+//! resources).
+//!
+//! The loop only reads the atomic counters (no allocation, no lock). The monitor does not
+//! remove a dead peer's resources: that changes the loop's connections, and connection changes
+//! allocate inside iceoryx2; a restarted peer can call `Node::try_cleanup_dead_nodes` itself.
+
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use iceoryx2::identifiers::UniqueNodeId;
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+use ur5_shared::services::{self, ServiceNames};
+use ur5_shared::{ArmCommand, ArmState, GainTable, StepSample};
+
+/// Peer processes that went away. A node is classified by the ports it owns: any publisher of
+/// `arm/state` or subscriber of `arm/command` is an arm, any subscriber of `learner/samples` or
+/// publisher of `controller/gains` a learner (monitoring tools included).
+#[derive(Debug, Default)]
+pub struct PeerHealth {
+    /// Arm processes that died (or left) during the run.
+    pub lost_arm: AtomicU64,
+    /// Learner processes that died (or left) during the run.
+    pub lost_learner: AtomicU64,
+}
+
+/// A running monitor; stops and joins on drop.
+pub struct PeerMonitor {
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+    /// What it found.
+    pub health: Arc<PeerHealth>,
+}
+
+impl Drop for PeerMonitor {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+fn open<T: core::fmt::Debug + ZeroCopySend + 'static>(
+    node: &Node<ipc::Service>,
+    name: &str,
+    qos: &services::Qos,
+) -> Option<PubSubFactory<ipc::Service, T, ()>> {
+    let sname = ServiceNames::service_name(name).ok()?;
+    qos.open_or_create::<T>(node, &sname).ok()
+}
+
+impl PeerMonitor {
+    /// Starts the monitor for the services under `prefix`, looking every `period`.
+    pub fn spawn(prefix: &str, period: Duration) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let health = Arc::new(PeerHealth::default());
+        let names = ServiceNames::new(prefix);
+        let handle = {
+            let (stop, health) = (stop.clone(), health.clone());
+            std::thread::Builder::new()
+                .name("peer-monitor".into())
+                .spawn(move || watch(&names, period, &stop, &health))
+                .ok()
+        };
+        Self {
+            stop,
+            handle,
+            health,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Role {
+    Arm,
+    Learner,
+}
+
+fn watch(names: &ServiceNames, period: Duration, stop: &AtomicBool, health: &PeerHealth) {
+    let Ok(node) = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+    else {
+        eprintln!("rt-controller: peer monitor could not create its node; dead peers will not be reported");
+        return;
+    };
+    let (Some(state), Some(cmd), Some(samples), Some(gains)) = (
+        open::<ArmState>(&node, &names.arm_state, &services::ARM_STATE_QOS),
+        open::<ArmCommand>(&node, &names.arm_command, &services::ARM_COMMAND_QOS),
+        open::<StepSample>(
+            &node,
+            &names.learner_samples,
+            &services::LEARNER_SAMPLES_QOS,
+        ),
+        open::<GainTable>(
+            &node,
+            &names.controller_gains,
+            &services::CONTROLLER_GAINS_QOS,
+        ),
+    ) else {
+        eprintln!("rt-controller: peer monitor could not open the services; dead peers will not be reported");
+        return;
+    };
+    let mut current: Vec<(UniqueNodeId, Role)> = Vec::new();
+    let mut known: Vec<(UniqueNodeId, Role, bool)> = Vec::new();
+    let mut dead: Vec<UniqueNodeId> = Vec::new();
+    while !stop.load(Ordering::Relaxed) {
+        current.clear();
+        dead.clear();
+        state.dynamic_config().list_publishers(|p| {
+            current.push((p.node_id, Role::Arm));
+            CallbackProgression::Continue
+        });
+        cmd.dynamic_config().list_subscribers(|s| {
+            current.push((s.node_id, Role::Arm));
+            CallbackProgression::Continue
+        });
+        samples.dynamic_config().list_subscribers(|s| {
+            current.push((s.node_id, Role::Learner));
+            CallbackProgression::Continue
+        });
+        gains.dynamic_config().list_publishers(|p| {
+            current.push((p.node_id, Role::Learner));
+            CallbackProgression::Continue
+        });
+        let _ = Node::<ipc::Service>::list(node.config(), |n| {
+            if let NodeState::Dead(view) = n {
+                dead.push(*view.id());
+            }
+            CallbackProgression::Continue
+        });
+        for &(id, role) in &current {
+            if !known.iter().any(|(k, r, _)| *k == id && *r == role) {
+                known.push((id, role, false));
+            }
+        }
+        for (id, role, lost) in known.iter_mut() {
+            let present = current.iter().any(|(c, r)| c == id && r == role);
+            if !*lost && (dead.contains(id) || !present) {
+                *lost = true;
+                let (counter, name) = match role {
+                    Role::Arm => (&health.lost_arm, "arm"),
+                    Role::Learner => (&health.lost_learner, "learner"),
+                };
+                counter.fetch_add(1, Ordering::Relaxed);
+                eprintln!(
+                    "rt-controller: peer died: {name} (pid {}) on prefix `{}` {}",
+                    id.pid().value(),
+                    names.prefix,
+                    if present {
+                        "(its ports stay registered until its resources are cleaned up)"
+                    } else {
+                        "(ports gone)"
+                    }
+                );
+            }
+        }
+        std::thread::sleep(period);
+    }
+}
