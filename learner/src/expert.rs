@@ -16,6 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
+use ur5_shared::noise::Noise;
 use ur5_shared::{GainStep, GainTable};
 
 use crate::algorithm::eval_cost::{eval_cost, CostDerivs};
@@ -23,13 +24,18 @@ use crate::algorithm::update::Learner;
 use crate::algorithm::AlgorithmConfig;
 use crate::cost::task::{StepDerivs, TaskCostConfig};
 use crate::dynamics::lr_prior::LrPriorConfig;
+use crate::dynamics::prior_gmm::PriorGmmConfig;
 use crate::io::demos::Demos;
 use crate::io::table::save_table;
-use crate::dynamics::prior_gmm::PriorGmmConfig;
 use crate::policy::lin_gauss::LinGaussPolicy;
 use crate::rollout::{run_episode, Episode};
 use crate::traj_opt::lqr::TrajOptConfig;
 use hil_sim::Ur5Sim;
+
+/// Run-seed offsets of the independent random streams (ASCII tags).
+const SEED_RANDOM: u64 = 0x5241_4e44; // "RAND": random-policy baseline episodes
+const SEED_GMM: u64 = 0x474d_4d00; // "GMM": cluster initialisation
+const SEED_DEMOS: u64 = 0x4445_4d4f; // "DEMO": demonstration episodes
 
 /// Everything that defines an expert run (TOML: `learner expert --config FILE`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -150,7 +156,9 @@ pub fn init_hold(task: &TaskConfig, init_var: f64) -> LinGaussPolicy {
 /// k = GPS's k and L = Rᵀ (GPS keeps the upper factor R, the table the lower factor).
 pub fn to_gain_table(pol: &LinGaussPolicy, version: u64) -> Box<GainTable> {
     let mut table = GainTable::new_boxed();
-    table.set_horizon(pol.t).expect("horizon within MAX_HORIZON");
+    table
+        .set_horizon(pol.t)
+        .expect("horizon within MAX_HORIZON");
     table.set_version(version);
     for t in 0..pol.t {
         let mut step = GainStep::default();
@@ -190,11 +198,14 @@ pub fn task_cost_derivs(cost: &TaskCostConfig, episodes: &[Episode], out: &mut C
             out.lx[nt * DX..(nt + 1) * DX].copy_from_slice(&d.lx);
             out.lu[nt * DU..(nt + 1) * DU].copy_from_slice(&d.lu);
             for r in 0..DX {
-                out.lxx[nt * DX * DX + r * DX..nt * DX * DX + (r + 1) * DX].copy_from_slice(&d.lxx[r]);
+                out.lxx[nt * DX * DX + r * DX..nt * DX * DX + (r + 1) * DX]
+                    .copy_from_slice(&d.lxx[r]);
             }
             for r in 0..DU {
-                out.luu[nt * DU * DU + r * DU..nt * DU * DU + (r + 1) * DU].copy_from_slice(&d.luu[r]);
-                out.lux[nt * DU * DX + r * DX..nt * DU * DX + (r + 1) * DX].copy_from_slice(&d.lux[r]);
+                out.luu[nt * DU * DU + r * DU..nt * DU * DU + (r + 1) * DU]
+                    .copy_from_slice(&d.luu[r]);
+                out.lux[nt * DU * DX + r * DX..nt * DU * DX + (r + 1) * DX]
+                    .copy_from_slice(&d.lux[r]);
             }
         }
     }
@@ -207,18 +218,22 @@ pub fn stack(episodes: &[Episode]) -> (Vec<f64>, Vec<f64>) {
     (x, u)
 }
 
-/// Mean task cost of `count` episodes of `pol` with exploration noise.
+/// Mean task cost of `count` episodes of `pol` with exploration noise; episode k draws its
+/// noise from `Noise::new(seed, 0, k)`.
 pub fn mean_noisy_cost(
     sim: &mut Ur5Sim,
     task: &TaskConfig,
     pol: &LinGaussPolicy,
     count: usize,
-    rng: &mut ChaCha8Rng,
+    seed: u64,
 ) -> Result<f64, crate::LearnerError> {
     let table = to_gain_table(pol, 0);
     let mut total = 0.0;
-    for _ in 0..count {
-        total += run_episode(sim, task, &table, Some(rng)).map_err(sim_err)?.task_cost();
+    for k in 0..count {
+        let mut noise = Noise::new(seed, 0, k as u64);
+        total += run_episode(sim, task, &table, Some(&mut noise))
+            .map_err(sim_err)?
+            .task_cost();
     }
     Ok(total / count.max(1) as f64)
 }
@@ -228,17 +243,25 @@ fn sim_err(e: hil_sim::SimError) -> crate::LearnerError {
 }
 
 /// Trains the expert. `progress` receives each iteration's log as soon as it is done.
-pub fn train(cfg: &ExpertConfig, mut progress: impl FnMut(&IterationLog)) -> Result<ExpertRun, crate::LearnerError> {
+pub fn train(
+    cfg: &ExpertConfig,
+    mut progress: impl FnMut(&IterationLog),
+) -> Result<ExpertRun, crate::LearnerError> {
     let task = &cfg.task;
     let (t_len, n) = (task.horizon, cfg.samples);
     let mut sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
-    // Independent streams: random baseline, exploration noise, GMM initialisation.
-    let mut rng_random = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5241_4e44);
-    let mut rng_noise = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x4e4f_4953);
-    let rng_gmm = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x474d_4d00);
+    // Independent streams: random baseline, GMM initialisation; the exploration noise of the
+    // k-th episode of table version v is `Noise::new(cfg.seed, v, k)`, as in the RT loop.
+    let rng_gmm = ChaCha8Rng::seed_from_u64(cfg.seed ^ SEED_GMM);
 
     let mut pol = init_hold(task, cfg.init_var);
-    let cost_random = mean_noisy_cost(&mut sim, task, &pol, cfg.random_episodes, &mut rng_random)?;
+    let cost_random = mean_noisy_cost(
+        &mut sim,
+        task,
+        &pol,
+        cfg.random_episodes,
+        cfg.seed ^ SEED_RANDOM,
+    )?;
 
     let mut learner = Learner::new(
         cfg.algorithm.clone(),
@@ -261,10 +284,12 @@ pub fn train(cfg: &ExpertConfig, mut progress: impl FnMut(&IterationLog)) -> Res
     for iteration in 0..cfg.iterations {
         let t0 = Instant::now();
         // 1. Execute the controller N times with noise, once without.
-        let table = to_gain_table(&pol, iteration as u64);
+        let version = iteration as u64 + 1;
+        let table = to_gain_table(&pol, version);
         let mut episodes = Vec::with_capacity(n);
-        for _ in 0..n {
-            episodes.push(run_episode(&mut sim, task, &table, Some(&mut rng_noise)).map_err(sim_err)?);
+        for k in 0..n {
+            let mut noise = Noise::new(cfg.seed, version, k as u64);
+            episodes.push(run_episode(&mut sim, task, &table, Some(&mut noise)).map_err(sim_err)?);
         }
         let eval = run_episode(&mut sim, task, &table, None).map_err(sim_err)?;
         let (x, u) = stack(&episodes);
@@ -273,7 +298,18 @@ pub fn train(cfg: &ExpertConfig, mut progress: impl FnMut(&IterationLog)) -> Res
         learner.update_dynamics(&x, &u, n)?;
         // 3. Quadratic expansion of the task cost around the samples.
         task_cost_derivs(&cfg.cost, &episodes, &mut derivs);
-        eval_cost(&x, &u, &derivs, n, t_len, DX, DU, &mut learner.info.cc, &mut learner.info.cv, &mut learner.info.cm);
+        eval_cost(
+            &x,
+            &u,
+            &derivs,
+            n,
+            t_len,
+            DX,
+            DU,
+            &mut learner.info.cc,
+            &mut learner.info.cv,
+            &mut learner.info.cm,
+        );
         // 4. Step size from the previous step's predicted vs actual improvement.
         if let Some(prev) = prev_pol.as_ref() {
             learner.update_step_size(prev, &pol)?;
@@ -298,7 +334,10 @@ pub fn train(cfg: &ExpertConfig, mut progress: impl FnMut(&IterationLog)) -> Res
         progress(&entry);
         log.push(entry);
 
-        if best.as_ref().is_none_or(|(_, e)| eval_cost_value < e.task_cost()) {
+        if best
+            .as_ref()
+            .is_none_or(|(_, e)| eval_cost_value < e.task_cost())
+        {
             best = Some((pol.clone(), eval));
             since_best = 0;
         } else {
@@ -311,22 +350,35 @@ pub fn train(cfg: &ExpertConfig, mut progress: impl FnMut(&IterationLog)) -> Res
         }
     }
     let (policy, eval) = best.expect("at least one iteration");
-    Ok(ExpertRun { policy, eval, log, cost_random })
+    Ok(ExpertRun {
+        policy,
+        eval,
+        log,
+        cost_random,
+    })
 }
 
 /// Records `cfg.demos` demonstrations of `policy` (with its exploration noise when
 /// `cfg.demo_noise`), seeded from `cfg.seed`.
-pub fn record_demos(cfg: &ExpertConfig, policy: &LinGaussPolicy, cost_random: f64) -> Result<Demos, crate::LearnerError> {
+pub fn record_demos(
+    cfg: &ExpertConfig,
+    policy: &LinGaussPolicy,
+    cost_random: f64,
+) -> Result<Demos, crate::LearnerError> {
     let task = &cfg.task;
     let mut sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x4445_4d4f);
     let table = to_gain_table(policy, 0);
     let mut states = Vec::with_capacity(cfg.demos * task.horizon * DX);
     let mut actions = Vec::with_capacity(cfg.demos * task.horizon * DU);
     let mut total = 0.0;
-    for _ in 0..cfg.demos {
+    for k in 0..cfg.demos {
         let ep = if cfg.demo_noise {
-            run_episode(&mut sim, task, &table, Some(&mut rng))
+            run_episode(
+                &mut sim,
+                task,
+                &table,
+                Some(&mut Noise::new(cfg.seed ^ SEED_DEMOS, 0, k as u64)),
+            )
         } else {
             run_episode(&mut sim, task, &table, None)
         }
@@ -354,7 +406,16 @@ pub fn record_demos(cfg: &ExpertConfig, policy: &LinGaussPolicy, cost_random: f6
 /// corner (−x, −y).
 pub fn square_goals(centre: [f64; 3], half_side: f64) -> [[f64; 3]; 8] {
     let h = half_side;
-    let offsets = [(-h, -h), (0.0, -h), (h, -h), (h, 0.0), (h, h), (0.0, h), (-h, h), (-h, 0.0)];
+    let offsets = [
+        (-h, -h),
+        (0.0, -h),
+        (h, -h),
+        (h, 0.0),
+        (h, h),
+        (0.0, h),
+        (-h, h),
+        (-h, 0.0),
+    ];
     offsets.map(|(dx, dy)| [centre[0] + dx, centre[1] + dy, centre[2]])
 }
 
@@ -394,7 +455,11 @@ pub fn train_and_record(
     let run = train(cfg, progress)?;
     std::fs::create_dir_all(out)?;
     let table_path = out.join("expert_table.npz");
-    save_table(&table_path, &to_gain_table(&run.policy, run.log.len() as u64), cfg.task.dt)?;
+    save_table(
+        &table_path,
+        &to_gain_table(&run.policy, run.log.len() as u64),
+        cfg.task.dt,
+    )?;
     let log_path = out.join("expert_log.csv");
     let mut csv = std::fs::File::create(&log_path)?;
     writeln!(csv, "iteration,eval_cost,mean_sample_cost,final_distance_m,performance_proxy,kl,eta,step_mult,seconds")?;
@@ -402,7 +467,15 @@ pub fn train_and_record(
         writeln!(
             csv,
             "{},{},{},{},{},{},{},{},{}",
-            l.iteration, l.eval_cost, l.mean_sample_cost, l.final_distance, l.performance_proxy, l.kl, l.eta, l.step_mult, l.seconds
+            l.iteration,
+            l.eval_cost,
+            l.mean_sample_cost,
+            l.final_distance,
+            l.performance_proxy,
+            l.kl,
+            l.eta,
+            l.step_mult,
+            l.seconds
         )?;
     }
     let demos = record_demos(cfg, &run.policy, run.cost_random)?;

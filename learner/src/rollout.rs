@@ -3,10 +3,9 @@
 //! `ur5_shared::safety`, exactly what the real-time loop executes.
 
 use hil_sim::{SimError, Ur5Sim};
-use rand::Rng;
-use rand_distr::StandardNormal;
 use ur5_shared::config::TaskConfig;
 use ur5_shared::layout::{DU, DX};
+use ur5_shared::noise::Noise;
 use ur5_shared::safety::clamp_action;
 use ur5_shared::{controller_action, GainTable, NO_NOISE};
 
@@ -52,12 +51,14 @@ impl Episode {
 }
 
 /// Runs one episode of `task.horizon` steps from `task.start_q` towards `task.goal`, drawing
-/// ε ~ N(0, I) from `rng` when it is given (otherwise ε = 0).
+/// ε ~ N(0, I) from `noise` when it is given (otherwise ε = 0). Seed the noise with
+/// `Noise::new(run_seed, table.version, k)` for the k-th noisy episode of a table, as the
+/// real-time loop does, and the episode matches the one run over IPC.
 pub fn run_episode(
     sim: &mut Ur5Sim,
     task: &TaskConfig,
     table: &GainTable,
-    mut rng: Option<&mut dyn rand::RngCore>,
+    mut noise: Option<&mut Noise>,
 ) -> Result<Episode, SimError> {
     let horizon = task.horizon.min(table.horizon());
     let limits = sim.limits();
@@ -68,16 +69,14 @@ pub fn run_episode(
         u: Vec::with_capacity(horizon * DU),
         u_policy: Vec::with_capacity(horizon * DU),
         eps: Vec::with_capacity(horizon * DU),
-        noisy: rng.is_some(),
+        noisy: noise.is_some(),
     };
     for t in 0..horizon {
         let s = obs.state(&task.goal);
-        let mut eps = NO_NOISE;
-        if let Some(r) = rng.as_deref_mut() {
-            for e in eps.iter_mut() {
-                *e = r.sample(StandardNormal);
-            }
-        }
+        let eps = match noise.as_deref_mut() {
+            Some(n) => n.next(),
+            None => NO_NOISE,
+        };
         let mut a = [0.0; DU];
         controller_action(table, t, &s, &eps, &mut a).expect("t < horizon");
         ep.u_policy.extend_from_slice(&a);
@@ -93,8 +92,6 @@ pub fn run_episode(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_chacha::ChaCha8Rng;
     use ur5_shared::config::SimConfig;
     use ur5_shared::GainStep;
 
@@ -116,17 +113,23 @@ mod tests {
 
     #[test]
     fn noise_free_hold_stays_and_seeded_noise_replays() {
-        let task = TaskConfig { horizon: 20, ..TaskConfig::default() };
+        let task = TaskConfig {
+            horizon: 20,
+            ..TaskConfig::default()
+        };
         let mut sim = Ur5Sim::new(SimConfig::default(), task.dt).unwrap();
         let table = hold_table(&task, task.start_q, 0.2);
         let ep = run_episode(&mut sim, &task, &table, None).unwrap();
         assert_eq!(ep.horizon(), 20);
         let last = ep.state(19);
         for j in 0..DU {
-            assert!((last[j] - task.start_q[j]).abs() < 1e-3, "drifted: {last:?}");
+            assert!(
+                (last[j] - task.start_q[j]).abs() < 1e-3,
+                "drifted: {last:?}"
+            );
         }
-        let mut r1 = ChaCha8Rng::seed_from_u64(9);
-        let mut r2 = ChaCha8Rng::seed_from_u64(9);
+        let mut r1 = Noise::new(9, 1, 0);
+        let mut r2 = Noise::new(9, 1, 0);
         let a = run_episode(&mut sim, &task, &table, Some(&mut r1)).unwrap();
         let b = run_episode(&mut sim, &task, &table, Some(&mut r2)).unwrap();
         assert_eq!(a, b, "same seed, same episode");

@@ -13,6 +13,7 @@
 //!   service ([`services::Qos`]).
 //! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`cost`]: the task cost C(τ) and normalised performance.
+//! - [`noise`]: seeded exploration noise ε, per (run seed, table version, episode).
 //! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
 //! - [`config`]: task and simulator configuration (TOML), arm limits.
 //!
@@ -28,6 +29,7 @@ pub mod gains;
 pub mod law;
 pub mod layout;
 pub mod msg;
+pub mod noise;
 pub mod safety;
 pub mod services;
 
