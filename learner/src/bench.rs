@@ -26,12 +26,30 @@ pub struct BenchResult {
     pub dynamics_fit_s: f64,
     pub eta_search_s: f64,
     pub total_s: f64,
+    /// Median thread CPU time of the whole update, s.
+    pub total_cpu_s: f64,
+    pub gmm_prior_update_cpu_s: f64,
+    pub dynamics_fit_cpu_s: f64,
+    pub eta_search_cpu_s: f64,
     pub gmm_k: usize,
     pub gmm_em_iterations: usize,
     pub dgd_backward_calls: usize,
     /// (η, KL) of each backward pass of the η search, and the KL target.
     pub dgd_trace: Vec<(f64, f64)>,
     pub kl_target: f64,
+}
+
+/// CPU time of the calling thread, s (excludes time the thread waits for a core, which on a
+/// shared machine inflates wall-clock numbers).
+pub fn thread_cpu_s() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_THREAD_CPUTIME_ID is always supported
+    // on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -57,6 +75,7 @@ pub fn run(
     let (sys, pol, truth) = random_problem(&mut rng, t, dx, du);
     let (x, u) = sys.rollout(&pol, n, &mut rng);
     let (mut g, mut f, mut e, mut tot) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut gc, mut fc, mut ec, mut totc) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut out = LinGaussPolicy::zeros(t, dx, du);
     let (mut k, mut its, mut calls) = (0, 0, 0);
     let mut trace = Vec::new();
@@ -73,6 +92,7 @@ pub fn run(
             n,
             ChaCha8Rng::seed_from_u64(seed.wrapping_add(1)),
         );
+        let c0 = thread_cpu_s();
         let t0 = Instant::now();
         let rep = l.prior.update(
             &x,
@@ -81,6 +101,7 @@ pub fn run(
             crate::dynamics::gmm::ClusterInit::Random(&mut l.rng),
         )?;
         let t1 = Instant::now();
+        let c1 = thread_cpu_s();
         crate::dynamics::lr_prior::fit(
             &x,
             &u,
@@ -99,8 +120,14 @@ pub fn run(
         l.info.cv.copy_from(&truth.cv);
         l.info.cm.copy_from(&truth.cm);
         let t2 = Instant::now();
+        let c2 = thread_cpu_s();
         let res = l.update_trajectories(&pol, &mut out)?;
         let t3 = Instant::now();
+        let c3 = thread_cpu_s();
+        gc.push(c1 - c0);
+        fc.push(c2 - c1);
+        ec.push(c3 - c2);
+        totc.push(c3 - c0);
         g.push((t1 - t0).as_secs_f64());
         f.push((t2 - t1).as_secs_f64());
         e.push((t3 - t2).as_secs_f64());
@@ -121,6 +148,10 @@ pub fn run(
         dynamics_fit_s: median(&mut f),
         eta_search_s: median(&mut e),
         total_s: median(&mut tot),
+        total_cpu_s: median(&mut totc),
+        gmm_prior_update_cpu_s: median(&mut gc),
+        dynamics_fit_cpu_s: median(&mut fc),
+        eta_search_cpu_s: median(&mut ec),
         gmm_k: k,
         gmm_em_iterations: its,
         dgd_backward_calls: calls,

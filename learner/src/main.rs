@@ -85,29 +85,32 @@ fn main() -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string(&r)?);
             } else {
                 println!(
-                    "learner bench: T={} dX={} dU={} N={}, {} reps, median wall-clock, one thread",
+                    "learner bench: T={} dX={} dU={} N={}, {} reps, medians, one thread",
                     r.t, r.dx, r.du, r.n, r.reps
                 );
-                println!("{:<22} {:>10}", "piece", "ms");
-                println!(
-                    "{:<22} {:>10.3}   (K={}, {} EM iterations)",
+                println!("{:<22} {:>9} {:>9}", "piece", "wall ms", "cpu ms");
+                let row = |name: &str, w: f64, c: f64, extra: String| {
+                    println!("{:<22} {:>9.3} {:>9.3}   {}", name, w * 1e3, c * 1e3, extra);
+                };
+                row(
                     "GMM prior update",
-                    r.gmm_prior_update_s * 1e3,
-                    r.gmm_k,
-                    r.gmm_em_iterations
+                    r.gmm_prior_update_s,
+                    r.gmm_prior_update_cpu_s,
+                    format!("(K={}, {} EM iterations)", r.gmm_k, r.gmm_em_iterations),
                 );
-                println!(
-                    "{:<22} {:>10.3}",
+                row(
                     "dynamics fit + x0",
-                    r.dynamics_fit_s * 1e3
+                    r.dynamics_fit_s,
+                    r.dynamics_fit_cpu_s,
+                    String::new(),
                 );
-                println!(
-                    "{:<22} {:>10.3}   ({} backward passes)",
+                row(
                     "eta search",
-                    r.eta_search_s * 1e3,
-                    r.dgd_backward_calls
+                    r.eta_search_s,
+                    r.eta_search_cpu_s,
+                    format!("({} backward passes)", r.dgd_backward_calls),
                 );
-                println!("{:<22} {:>10.3}", "total", r.total_s * 1e3);
+                row("total", r.total_s, r.total_cpu_s, String::new());
                 let tr: Vec<String> = r
                     .dgd_trace
                     .iter()
