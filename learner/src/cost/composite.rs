@@ -1,0 +1,290 @@
+//! The composite cost of LQR+GAIfO (DESIGN.md §1 steps 4–5): the discriminator applied to the
+//! transition the learned dynamics predict,
+//!
+//!   C_t(s, a) = D(s, F_t [s; a] + f_t),
+//!
+//! expanded to second order with the chain rule. With y = [s; a] (dX + dU) and
+//! M_t = [[I, 0]; F_t] ((2 dX) × (dX + dU)): ∇C = M_tᵀ ∇D, ∇²C = M_tᵀ ∇²D M_t
+//! (f_t does not enter the derivatives; D is evaluated at the predicted transition).
+//!
+//! The last step T−1 has no fitted dynamics (GPS leaves F_{T−1} = 0). It gets a state-only
+//! cost C_{T−1}(s) = D(s, s): the transition of an arm at rest in s. The expert ends at rest at
+//! the goal, so D is low there; ∇C = [I I] ∇D, ∇²C = [I I] ∇²D [I I]ᵀ, and no action terms.
+//!
+//! The Hessians are indefinite in general (D is a tanh net). Nothing is added to them here: the
+//! KL-bounded LQR step raises η until Q_uu is positive definite (GPS's non-PD retry), which is
+//! the regularisation the algorithm already has.
+
+use faer::Mat;
+use ur5_shared::layout::{DU, DX};
+
+use crate::algorithm::eval_cost::CostDerivs;
+use crate::discriminator::{Discriminator, Workspace};
+use crate::dynamics::Dynamics;
+use crate::rollout::Episode;
+
+/// Scratch memory for the expansion; build once, reuse every iteration.
+pub struct CompositeWorkspace {
+    disc: Workspace,
+    x: Vec<f64>,
+    g: Vec<f64>,
+    h: Mat<f64>,
+}
+
+/// Input dimension of the discriminator: a transition [s; s'].
+pub const D_IN: usize = 2 * DX;
+const DY: usize = DX + DU;
+
+impl CompositeWorkspace {
+    /// Scratch for `disc`.
+    pub fn new(disc: &Discriminator) -> Self {
+        assert_eq!(disc.input_dim(), D_IN, "the discriminator must take [s; s'] (2 dX inputs)");
+        Self { disc: disc.workspace(), x: vec![0.0; D_IN], g: vec![0.0; D_IN], h: Mat::zeros(D_IN, D_IN) }
+    }
+}
+
+/// ℓ and its derivatives at one (t, s, a) in GPS layout (lx dX, lu dU, lxx dX×dX, luu dU×dU,
+/// lux dU×dX, row-major), written into the given slices.
+#[allow(clippy::too_many_arguments)]
+pub fn expand_step(
+    disc: &Discriminator,
+    dyn_: &Dynamics,
+    t: usize,
+    horizon: usize,
+    s: &[f64],
+    a: &[f64],
+    ws: &mut CompositeWorkspace,
+    lx: &mut [f64],
+    lu: &mut [f64],
+    lxx: &mut [f64],
+    luu: &mut [f64],
+    lux: &mut [f64],
+) -> f64 {
+    let last = t + 1 >= horizon;
+    ws.x[..DX].copy_from_slice(s);
+    if last {
+        ws.x[DX..].copy_from_slice(s);
+    } else {
+        // s' = F_t [s; a] + f_t.
+        let f = dyn_.fm.slice(t);
+        let fv = dyn_.fv.slice(t);
+        for i in 0..DX {
+            let mut v = fv[i];
+            for j in 0..DX {
+                v += f[i * DY + j] * s[j];
+            }
+            for j in 0..DU {
+                v += f[i * DY + DX + j] * a[j];
+            }
+            ws.x[DX + i] = v;
+        }
+    }
+    let value = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
+    let (g, h) = (&ws.g, &ws.h);
+    luu.fill(0.0);
+    lux.fill(0.0);
+    lu.fill(0.0);
+    if last {
+        // M = [I; I]: ∇ = g1 + g2, ∇² = H11 + H12 + H21 + H22.
+        for i in 0..DX {
+            lx[i] = g[i] + g[DX + i];
+            for j in 0..DX {
+                lxx[i * DX + j] = h[(i, j)] + h[(i, DX + j)] + h[(DX + i, j)] + h[(DX + i, DX + j)];
+            }
+        }
+        return value;
+    }
+    // M column c of y: e_c in the first block (if c < dX) plus F[:, c] in the second.
+    let f = dyn_.fm.slice(t);
+    let m_col = |c: usize, r: usize| -> f64 {
+        // Entry (r, c) of M, r in 0..2dX.
+        if r < DX {
+            if r == c {
+                1.0
+            } else {
+                0.0
+            }
+        } else {
+            f[(r - DX) * DY + c]
+        }
+    };
+    // ∇C = Mᵀ g.
+    let mut grad = [0.0; DY];
+    for (c, gc) in grad.iter_mut().enumerate() {
+        let mut v = if c < DX { g[c] } else { 0.0 };
+        for k in 0..DX {
+            v += f[k * DY + c] * g[DX + k];
+        }
+        *gc = v;
+    }
+    // HM = ∇²D M (2dX × DY), then Mᵀ (HM).
+    let mut hm = [[0.0; DY]; D_IN];
+    for (r, row) in hm.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            let mut acc = if c < DX { h[(r, c)] } else { 0.0 };
+            for k in 0..DX {
+                acc += h[(r, DX + k)] * f[k * DY + c];
+            }
+            *v = acc;
+        }
+    }
+    let mut hess = [[0.0; DY]; DY];
+    for (i, row) in hess.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            let mut acc = 0.0;
+            for (r, hm_r) in hm.iter().enumerate() {
+                let m = m_col(i, r);
+                if m != 0.0 {
+                    acc += m * hm_r[j];
+                }
+            }
+            *v = acc;
+        }
+    }
+    lx.copy_from_slice(&grad[..DX]);
+    lu.copy_from_slice(&grad[DX..]);
+    for i in 0..DX {
+        for j in 0..DX {
+            // Symmetrise against rounding: ∇²D is symmetric, so is Mᵀ∇²D M up to round-off.
+            lxx[i * DX + j] = 0.5 * (hess[i][j] + hess[j][i]);
+        }
+    }
+    for i in 0..DU {
+        for j in 0..DU {
+            luu[i * DU + j] = 0.5 * (hess[DX + i][DX + j] + hess[DX + j][DX + i]);
+        }
+        for j in 0..DX {
+            lux[i * DX + j] = 0.5 * (hess[DX + i][j] + hess[j][DX + i]);
+        }
+    }
+    value
+}
+
+/// Per-sample composite-cost derivatives for N episodes (GPS layout, around each sample's own
+/// executed (s, a)), ready for `eval_cost`.
+pub fn composite_cost_derivs(
+    disc: &Discriminator,
+    dyn_: &Dynamics,
+    episodes: &[Episode],
+    ws: &mut CompositeWorkspace,
+    out: &mut CostDerivs,
+) {
+    let n = episodes.len();
+    let t_len = episodes[0].horizon();
+    out.l.resize(n * t_len, 0.0);
+    out.lx.resize(n * t_len * DX, 0.0);
+    out.lu.resize(n * t_len * DU, 0.0);
+    out.lxx.resize(n * t_len * DX * DX, 0.0);
+    out.luu.resize(n * t_len * DU * DU, 0.0);
+    out.lux.resize(n * t_len * DU * DX, 0.0);
+    for (i, ep) in episodes.iter().enumerate() {
+        for t in 0..t_len {
+            let nt = i * t_len + t;
+            out.l[nt] = expand_step(
+                disc,
+                dyn_,
+                t,
+                t_len,
+                &ep.x[t * DX..(t + 1) * DX],
+                &ep.u[t * DU..(t + 1) * DU],
+                ws,
+                &mut out.lx[nt * DX..(nt + 1) * DX],
+                &mut out.lu[nt * DU..(nt + 1) * DU],
+                &mut out.lxx[nt * DX * DX..(nt + 1) * DX * DX],
+                &mut out.luu[nt * DU * DU..(nt + 1) * DU * DU],
+                &mut out.lux[nt * DU * DX..(nt + 1) * DU * DX],
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::discriminator::{DiscriminatorConfig, Normalizer};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The composed function C(y) = D(s, F y + f) evaluated directly.
+    fn composed(disc: &Discriminator, dyn_: &Dynamics, t: usize, horizon: usize, y: &[f64], ws: &mut Workspace) -> f64 {
+        let mut x = vec![0.0; D_IN];
+        x[..DX].copy_from_slice(&y[..DX]);
+        if t + 1 >= horizon {
+            x[DX..].copy_from_slice(&y[..DX]);
+        } else {
+            let f = dyn_.fm.slice(t);
+            for i in 0..DX {
+                x[DX + i] = dyn_.fv.slice(t)[i] + (0..DY).map(|j| f[i * DY + j] * y[j]).sum::<f64>();
+            }
+        }
+        disc.value(&x, ws)
+    }
+
+    #[test]
+    fn gradient_and_hessian_match_finite_differences_of_the_composed_function() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let cfg = DiscriminatorConfig { hidden: vec![16, 16], seed: 2, ..DiscriminatorConfig::default() };
+        let mut norm = Normalizer::identity(D_IN);
+        for (j, s) in norm.std.iter_mut().enumerate() {
+            *s = 0.5 + 0.1 * j as f64;
+        }
+        let disc = Discriminator::new(D_IN, cfg, norm).unwrap();
+        let horizon = 4;
+        let mut dyn_ = Dynamics::zeros(horizon, DX, DU);
+        for v in dyn_.fm.data.iter_mut() {
+            *v = rng.random_range(-0.5..0.5);
+        }
+        for v in dyn_.fv.data.iter_mut() {
+            *v = rng.random_range(-0.2..0.2);
+        }
+        let mut ws = CompositeWorkspace::new(&disc);
+        let mut dws = disc.workspace();
+        let h = 1e-5;
+        let (mut worst_g, mut worst_h) = (0.0f64, 0.0f64);
+        for t in [0, 2, 3] {
+            let y: Vec<f64> = (0..DY).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let (mut lx, mut lu) = (vec![0.0; DX], vec![0.0; DU]);
+            let (mut lxx, mut luu, mut lux) = (vec![0.0; DX * DX], vec![0.0; DU * DU], vec![0.0; DU * DX]);
+            let v = expand_step(&disc, &dyn_, t, horizon, &y[..DX], &y[DX..], &mut ws, &mut lx, &mut lu, &mut lxx, &mut luu, &mut lux);
+            assert!((v - composed(&disc, &dyn_, t, horizon, &y, &mut dws)).abs() < 1e-14);
+            let grad: Vec<f64> = lx.iter().chain(lu.iter()).copied().collect();
+            let hess = |i: usize, j: usize| match (i < DX, j < DX) {
+                (true, true) => lxx[i * DX + j],
+                (false, false) => luu[(i - DX) * DU + j - DX],
+                (false, true) => lux[(i - DX) * DX + j],
+                (true, false) => lux[(j - DX) * DX + i],
+            };
+            let scale_g = grad.iter().fold(1e-3f64, |m, g| m.max(g.abs()));
+            let mut scale_h = 1e-3f64;
+            for i in 0..DY {
+                for j in 0..DY {
+                    scale_h = scale_h.max(hess(i, j).abs());
+                }
+            }
+            for i in 0..DY {
+                let (mut yp, mut ym) = (y.clone(), y.clone());
+                yp[i] += h;
+                ym[i] -= h;
+                let fd = (composed(&disc, &dyn_, t, horizon, &yp, &mut dws) - composed(&disc, &dyn_, t, horizon, &ym, &mut dws)) / (2.0 * h);
+                worst_g = worst_g.max((fd - grad[i]).abs() / scale_g);
+                for j in 0..DY {
+                    let mut f = |di: f64, dj: f64| {
+                        let mut z = y.clone();
+                        z[i] += di;
+                        z[j] += dj;
+                        composed(&disc, &dyn_, t, horizon, &z, &mut dws)
+                    };
+                    let hh = 1e-4;
+                    let fd2 = (f(hh, hh) - f(hh, -hh) - f(-hh, hh) + f(-hh, -hh)) / (4.0 * hh * hh);
+                    worst_h = worst_h.max((fd2 - hess(i, j)).abs() / scale_h);
+                }
+            }
+            if t + 1 >= horizon {
+                assert!(lu.iter().chain(luu.iter()).chain(lux.iter()).all(|v| *v == 0.0), "last step is state-only");
+            }
+        }
+        eprintln!("composite cost: worst FD error gradient {worst_g:.2e}, Hessian {worst_h:.2e} (relative to the largest entry)");
+        assert!(worst_g < 1e-8, "gradient FD error {worst_g:.2e}");
+        assert!(worst_h < 1e-5, "Hessian FD error {worst_h:.2e}");
+    }
+}
