@@ -68,6 +68,17 @@ pub struct EmReport {
     pub stop_itr: usize,
 }
 
+/// `exp(x)`, skipping the call where the result underflows to +0 anyway (x below the
+/// smallest subnormal's log), so the value is identical to `x.exp()`.
+#[inline]
+fn exp_or_zero(x: f64) -> f64 {
+    if x < -746.0 {
+        0.0
+    } else {
+        x.exp()
+    }
+}
+
 /// GPS `logsum` over an iterator: `log Σ exp(v − max) + max`, with `max = −∞` replaced by 0.
 #[inline]
 pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
@@ -75,7 +86,7 @@ pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
     if m == f64::NEG_INFINITY {
         m = 0.0;
     }
-    let s: f64 = v.map(|x| (x - m).exp()).sum();
+    let s: f64 = v.map(|x| exp_or_zero(x - m)).sum();
     s.ln() + m
 }
 
@@ -418,7 +429,7 @@ impl Gmm {
                     w[p * k + i] = if reboot {
                         1.0 / n as f64
                     } else {
-                        (logobs[p * k + i] - collse[i]).exp()
+                        exp_or_zero(logobs[p * k + i] - collse[i])
                     };
                 }
             }
