@@ -19,7 +19,7 @@ use ur5_shared::layout::{DU, DX};
 use ur5_shared::noise::Noise;
 use ur5_shared::{GainStep, GainTable};
 
-use crate::algorithm::eval_cost::{eval_cost, CostDerivs};
+use crate::algorithm::eval_cost::CostDerivs;
 use crate::algorithm::update::Learner;
 use crate::algorithm::AlgorithmConfig;
 use crate::cost::task::{StepDerivs, TaskCostConfig};
@@ -27,6 +27,7 @@ use crate::dynamics::lr_prior::LrPriorConfig;
 use crate::dynamics::prior_gmm::PriorGmmConfig;
 use crate::io::demos::Demos;
 use crate::io::table::save_table;
+use crate::iteration::{execute, improve, sim_err, stack};
 use crate::policy::lin_gauss::LinGaussPolicy;
 use crate::rollout::{run_episode, Episode};
 use crate::traj_opt::lqr::TrajOptConfig;
@@ -211,13 +212,6 @@ pub fn task_cost_derivs(cost: &TaskCostConfig, episodes: &[Episode], out: &mut C
     }
 }
 
-/// Stacks episodes into GPS sample arrays `x (N,T,dX)`, `u (N,T,dU)`.
-pub fn stack(episodes: &[Episode]) -> (Vec<f64>, Vec<f64>) {
-    let x = episodes.iter().flat_map(|e| e.x.iter().copied()).collect();
-    let u = episodes.iter().flat_map(|e| e.u.iter().copied()).collect();
-    (x, u)
-}
-
 /// Mean task cost of `count` episodes of `pol` with exploration noise; episode k draws its
 /// noise from `Noise::new(seed, 0, k)`.
 pub fn mean_noisy_cost(
@@ -236,10 +230,6 @@ pub fn mean_noisy_cost(
             .task_cost();
     }
     Ok(total / count.max(1) as f64)
-}
-
-fn sim_err(e: hil_sim::SimError) -> crate::LearnerError {
-    crate::LearnerError::Shape(format!("simulator: {e}"))
 }
 
 /// Trains the expert. `progress` receives each iteration's log as soon as it is done.
@@ -285,39 +275,23 @@ pub fn train(
         let t0 = Instant::now();
         // 1. Execute the controller N times with noise, once without.
         let version = iteration as u64 + 1;
-        let table = to_gain_table(&pol, version);
-        let mut episodes = Vec::with_capacity(n);
-        for k in 0..n {
-            let mut noise = Noise::new(cfg.seed, version, k as u64);
-            episodes.push(run_episode(&mut sim, task, &table, Some(&mut noise)).map_err(sim_err)?);
-        }
-        let eval = run_episode(&mut sim, task, &table, None).map_err(sim_err)?;
+        let (episodes, eval) = execute(&mut sim, task, &pol, version, cfg.seed, n)?;
         let (x, u) = stack(&episodes);
-
         // 2. Dynamics and x0.
         learner.update_dynamics(&x, &u, n)?;
-        // 3. Quadratic expansion of the task cost around the samples.
+        // 3. Second-order expansion of the task cost around every sample.
         task_cost_derivs(&cfg.cost, &episodes, &mut derivs);
-        eval_cost(
+        // 4–5. Averaged quadratic model, step size, KL-bounded LQR step.
+        let step = improve(
+            &mut learner,
             &x,
             &u,
-            &derivs,
             n,
-            t_len,
-            DX,
-            DU,
-            &mut learner.info.cc,
-            &mut learner.info.cv,
-            &mut learner.info.cm,
-        );
-        // 4. Step size from the previous step's predicted vs actual improvement.
-        if let Some(prev) = prev_pol.as_ref() {
-            learner.update_step_size(prev, &pol)?;
-        }
-        let step_mult = learner.step_mult;
-        // 5. KL-bounded LQR step.
-        let res = learner.update_trajectories(&pol, &mut new_pol)?;
-        let kl = res.trace.last().map(|s| s.kl).unwrap_or(f64::NAN);
+            &derivs,
+            prev_pol.as_ref(),
+            &pol,
+            &mut new_pol,
+        )?;
 
         let eval_cost_value = eval.task_cost();
         let entry = IterationLog {
@@ -326,9 +300,9 @@ pub fn train(
             mean_sample_cost: episodes.iter().map(Episode::task_cost).sum::<f64>() / n as f64,
             final_distance: eval.final_distance(),
             performance_proxy: (cost_random - eval_cost_value) / cost_random,
-            kl,
-            eta: res.eta,
-            step_mult,
+            kl: step.kl,
+            eta: step.eta,
+            step_mult: step.step_mult,
             seconds: t0.elapsed().as_secs_f64(),
         };
         progress(&entry);

@@ -24,6 +24,7 @@ pub mod error;
 pub mod expert;
 pub mod expert_cli;
 pub mod io;
+pub mod iteration;
 pub mod linalg;
 pub mod policy;
 pub mod rollout;

@@ -38,8 +38,17 @@ const DY: usize = DX + DU;
 impl CompositeWorkspace {
     /// Scratch for `disc`.
     pub fn new(disc: &Discriminator) -> Self {
-        assert_eq!(disc.input_dim(), D_IN, "the discriminator must take [s; s'] (2 dX inputs)");
-        Self { disc: disc.workspace(), x: vec![0.0; D_IN], g: vec![0.0; D_IN], h: Mat::zeros(D_IN, D_IN) }
+        assert_eq!(
+            disc.input_dim(),
+            D_IN,
+            "the discriminator must take [s; s'] (2 dX inputs)"
+        );
+        Self {
+            disc: disc.workspace(),
+            x: vec![0.0; D_IN],
+            g: vec![0.0; D_IN],
+            h: Mat::zeros(D_IN, D_IN),
+        }
     }
 }
 
@@ -206,7 +215,14 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     /// The composed function C(y) = D(s, F y + f) evaluated directly.
-    fn composed(disc: &Discriminator, dyn_: &Dynamics, t: usize, horizon: usize, y: &[f64], ws: &mut Workspace) -> f64 {
+    fn composed(
+        disc: &Discriminator,
+        dyn_: &Dynamics,
+        t: usize,
+        horizon: usize,
+        y: &[f64],
+        ws: &mut Workspace,
+    ) -> f64 {
         let mut x = vec![0.0; D_IN];
         x[..DX].copy_from_slice(&y[..DX]);
         if t + 1 >= horizon {
@@ -214,7 +230,8 @@ mod tests {
         } else {
             let f = dyn_.fm.slice(t);
             for i in 0..DX {
-                x[DX + i] = dyn_.fv.slice(t)[i] + (0..DY).map(|j| f[i * DY + j] * y[j]).sum::<f64>();
+                x[DX + i] =
+                    dyn_.fv.slice(t)[i] + (0..DY).map(|j| f[i * DY + j] * y[j]).sum::<f64>();
             }
         }
         disc.value(&x, ws)
@@ -223,7 +240,11 @@ mod tests {
     #[test]
     fn gradient_and_hessian_match_finite_differences_of_the_composed_function() {
         let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let cfg = DiscriminatorConfig { hidden: vec![16, 16], seed: 2, ..DiscriminatorConfig::default() };
+        let cfg = DiscriminatorConfig {
+            hidden: vec![16, 16],
+            seed: 2,
+            ..DiscriminatorConfig::default()
+        };
         let mut norm = Normalizer::identity(D_IN);
         for (j, s) in norm.std.iter_mut().enumerate() {
             *s = 0.5 + 0.1 * j as f64;
@@ -244,8 +265,22 @@ mod tests {
         for t in [0, 2, 3] {
             let y: Vec<f64> = (0..DY).map(|_| rng.random_range(-1.0..1.0)).collect();
             let (mut lx, mut lu) = (vec![0.0; DX], vec![0.0; DU]);
-            let (mut lxx, mut luu, mut lux) = (vec![0.0; DX * DX], vec![0.0; DU * DU], vec![0.0; DU * DX]);
-            let v = expand_step(&disc, &dyn_, t, horizon, &y[..DX], &y[DX..], &mut ws, &mut lx, &mut lu, &mut lxx, &mut luu, &mut lux);
+            let (mut lxx, mut luu, mut lux) =
+                (vec![0.0; DX * DX], vec![0.0; DU * DU], vec![0.0; DU * DX]);
+            let v = expand_step(
+                &disc,
+                &dyn_,
+                t,
+                horizon,
+                &y[..DX],
+                &y[DX..],
+                &mut ws,
+                &mut lx,
+                &mut lu,
+                &mut lxx,
+                &mut luu,
+                &mut lux,
+            );
             assert!((v - composed(&disc, &dyn_, t, horizon, &y, &mut dws)).abs() < 1e-14);
             let grad: Vec<f64> = lx.iter().chain(lu.iter()).copied().collect();
             let hess = |i: usize, j: usize| match (i < DX, j < DX) {
@@ -265,7 +300,9 @@ mod tests {
                 let (mut yp, mut ym) = (y.clone(), y.clone());
                 yp[i] += h;
                 ym[i] -= h;
-                let fd = (composed(&disc, &dyn_, t, horizon, &yp, &mut dws) - composed(&disc, &dyn_, t, horizon, &ym, &mut dws)) / (2.0 * h);
+                let fd = (composed(&disc, &dyn_, t, horizon, &yp, &mut dws)
+                    - composed(&disc, &dyn_, t, horizon, &ym, &mut dws))
+                    / (2.0 * h);
                 worst_g = worst_g.max((fd - grad[i]).abs() / scale_g);
                 for j in 0..DY {
                     let mut f = |di: f64, dj: f64| {
@@ -280,7 +317,13 @@ mod tests {
                 }
             }
             if t + 1 >= horizon {
-                assert!(lu.iter().chain(luu.iter()).chain(lux.iter()).all(|v| *v == 0.0), "last step is state-only");
+                assert!(
+                    lu.iter()
+                        .chain(luu.iter())
+                        .chain(lux.iter())
+                        .all(|v| *v == 0.0),
+                    "last step is state-only"
+                );
             }
         }
         eprintln!("composite cost: worst FD error gradient {worst_g:.2e}, Hessian {worst_h:.2e} (relative to the largest entry)");
