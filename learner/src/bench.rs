@@ -94,28 +94,10 @@ pub fn run(
         );
         let c0 = thread_cpu_s();
         let t0 = Instant::now();
-        let rep = l.prior.update(
-            &x,
-            &u,
-            n,
-            crate::dynamics::gmm::ClusterInit::Random(&mut l.rng),
-        )?;
+        let rep = l.update_prior(&x, &u, n)?;
         let t1 = Instant::now();
         let c1 = thread_cpu_s();
-        crate::dynamics::lr_prior::fit(
-            &x,
-            &u,
-            n,
-            &mut l.prior,
-            &l.fit_cfg,
-            &mut FitWs::get(n, dx, du),
-            &mut l.info.dynamics,
-        )?;
-        let p0 = l.prior.initial_state();
-        let (mu, sig) =
-            crate::algorithm::init_state::fit_x0(&x, n, t, dx, l.alg.initial_state_var, Some(&p0));
-        l.info.x0mu = mu;
-        l.info.x0sigma = sig;
+        l.fit_dynamics(&x, &u, n)?;
         l.info.cc.clone_from(&truth.cc);
         l.info.cv.copy_from(&truth.cv);
         l.info.cm.copy_from(&truth.cm);
@@ -158,11 +140,4 @@ pub fn run(
         dgd_trace: trace,
         kl_target,
     })
-}
-
-struct FitWs;
-impl FitWs {
-    fn get(n: usize, dx: usize, du: usize) -> crate::dynamics::lr_prior::FitWorkspace {
-        crate::dynamics::lr_prior::FitWorkspace::new(n, dx, du)
-    }
 }

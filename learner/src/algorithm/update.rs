@@ -33,7 +33,6 @@ pub struct Learner {
     fit_ws: FitWorkspace,
     t: usize,
     dx: usize,
-    du: usize,
 }
 
 impl Learner {
@@ -62,12 +61,12 @@ impl Learner {
             fit_ws: FitWorkspace::new(n, dx, du),
             t,
             dx,
-            du,
         }
     }
 
     /// GPS `_update_dynamics`: prior update (GMM EM), dynamics fit, x0 fit, on the current
-    /// samples `x (N,T,dX)`, `u (N,T,dU)`.
+    /// samples `x (N,T,dX)`, `u (N,T,dU)`. Keeps the previous trajectory info for the step
+    /// adjustment.
     pub fn update_dynamics(
         &mut self,
         x: &[f64],
@@ -79,9 +78,25 @@ impl Learner {
         } else {
             self.prev_info = Some(self.info.clone());
         }
-        let rep = self
-            .prior
-            .update(x, u, n, ClusterInit::Random(&mut self.rng))?;
+        let rep = self.update_prior(x, u, n)?;
+        self.fit_dynamics(x, u, n)?;
+        Ok(rep)
+    }
+
+    /// GPS `DynamicsLRPrior.update_prior`: add the samples to the prior's dataset and refit
+    /// its GMM (random hard assignment from `self.rng` when EM (re)initialises).
+    pub fn update_prior(
+        &mut self,
+        x: &[f64],
+        u: &[f64],
+        n: usize,
+    ) -> Result<EmReport, LearnerError> {
+        self.prior
+            .update(x, u, n, ClusterInit::Random(&mut self.rng))
+    }
+
+    /// GPS `DynamicsLRPrior.fit` plus the x0 fit of `_update_dynamics`, into `self.info`.
+    pub fn fit_dynamics(&mut self, x: &[f64], u: &[f64], n: usize) -> Result<(), LearnerError> {
         fit(
             x,
             u,
@@ -95,8 +110,7 @@ impl Learner {
         let (mu, sig) = fit_x0(x, n, self.t, self.dx, self.alg.initial_state_var, Some(&p0));
         self.info.x0mu = mu;
         self.info.x0sigma = sig;
-        let _ = self.du;
-        Ok(rep)
+        Ok(())
     }
 
     /// GPS `_stepadjust`, given the controller run in the previous iteration and the one run
