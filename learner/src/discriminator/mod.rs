@@ -363,6 +363,7 @@ impl Discriminator {
     /// `D(x)`, and `∇ₓD(x) = diag(1/σ) ∇_u net` into `grad` (length `d`).
     pub fn value_gradient(&self, x: &[f64], ws: &mut Workspace, grad: &mut [f64]) -> f64 {
         self.check_ws(ws);
+        assert_eq!(grad.len(), self.input_dim(), "gradient length");
         let y = self.forward_raw(x, &mut ws.mlp);
         self.net.backward(&mut ws.mlp, true);
         for ((g, &gu), &s) in grad.iter_mut().zip(&ws.mlp.grad_u).zip(&self.norm.std) {
@@ -406,6 +407,11 @@ impl Discriminator {
         grad_params: &mut [f64],
     ) -> f64 {
         self.check_ws(ws);
+        assert_eq!(
+            grad_params.len(),
+            self.params().len(),
+            "parameter gradient length"
+        );
         let y = self.forward_raw(x, &mut ws.mlp);
         self.net.backward(&mut ws.mlp, false);
         self.net.accumulate_param_grad(&ws.mlp, c, grad_params);
@@ -424,6 +430,11 @@ impl Discriminator {
         grad_params: &mut [f64],
     ) -> f64 {
         self.check_ws(ws);
+        assert_eq!(
+            grad_params.len(),
+            self.params().len(),
+            "parameter gradient length"
+        );
         self.penalty_into(x_hat, c, &mut ws.mlp, grad_params)
     }
 
@@ -470,6 +481,12 @@ impl Discriminator {
         grad_params: &mut [f64],
     ) -> (f64, f64) {
         self.check_ws(ws);
+        assert_eq!(
+            grad_params.len(),
+            self.params().len(),
+            "parameter gradient length"
+        );
+        assert_eq!(x_c.len(), self.input_dim(), "input length");
         self.critic_sample(x_e, x_c, eps, c, &mut ws.mlp, &mut ws.x_hat, grad_params)
     }
 
