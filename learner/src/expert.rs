@@ -291,6 +291,7 @@ pub fn train(
             prev_pol.as_ref(),
             &pol,
             &mut new_pol,
+            true,
         )?;
 
         let eval_cost_value = eval.task_cost();

@@ -60,8 +60,8 @@ pub struct StepReport {
 
 /// Algorithm 1 lines 5–6: averages the per-sample cost expansion `derivs` into the quadratic
 /// model (GPS `_eval_cost`), adapts the KL step from the previous step's predicted vs actual
-/// improvement (from the second iteration on), and takes the KL-bounded LQR step from `pol`
-/// into `new_pol`. `learner.update_dynamics` must have run on the same samples.
+/// improvement (from the second iteration on, when `adapt_step`), and takes the KL-bounded LQR
+/// step from `pol` into `new_pol`. `learner.update_dynamics` must have run on the same samples.
 #[allow(clippy::too_many_arguments)]
 pub fn improve(
     learner: &mut Learner,
@@ -72,6 +72,7 @@ pub fn improve(
     prev_pol: Option<&LinGaussPolicy>,
     pol: &LinGaussPolicy,
     new_pol: &mut LinGaussPolicy,
+    adapt_step: bool,
 ) -> Result<StepReport, LearnerError> {
     let t_len = pol.t;
     eval_cost(
@@ -86,7 +87,7 @@ pub fn improve(
         &mut learner.info.cv,
         &mut learner.info.cm,
     );
-    if let Some(prev) = prev_pol {
+    if let (Some(prev), true) = (prev_pol, adapt_step) {
         learner.update_step_size(prev, pol)?;
     }
     let step_mult = learner.step_mult;

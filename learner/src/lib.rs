@@ -23,12 +23,14 @@ pub mod dynamics;
 pub mod error;
 pub mod expert;
 pub mod expert_cli;
+pub mod gaifo;
 pub mod io;
 pub mod iteration;
 pub mod linalg;
 pub mod policy;
 pub mod rollout;
 pub mod synthetic;
+pub mod train_cli;
 pub mod traj_opt;
 
 pub use error::LearnerError;

@@ -27,6 +27,9 @@ enum Cmd {
     /// Train the expert on the true task cost (KL-bounded LQR with learned dynamics, in
     /// process), save its gain table, record demonstrations. Progress: one line per iteration.
     Expert(learner::expert_cli::ExpertArgs),
+    /// Imitate state-only demonstrations: LQR+GAIfO (default) or the GAIfO (PPO) baseline.
+    /// Progress: one line per iteration.
+    Train(learner::train_cli::TrainArgs),
     /// Time one full learner update (GMM prior update, dynamics fit, η search) on a seeded
     /// synthetic linear problem; prints median wall-clock times in milliseconds.
     Bench {
@@ -58,6 +61,7 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.cmd {
         Cmd::Expert(args) => learner::expert_cli::run(args)?,
+        Cmd::Train(args) => learner::train_cli::run(args)?,
         Cmd::Conformance { vectors, json } => {
             let f = vectors.to_string_lossy().to_string();
             let rep = learner::conformance::run_file(&f)
