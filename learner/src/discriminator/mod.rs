@@ -1,6 +1,6 @@
-//! The discriminator of LQR+GAIfO (Torabi et al. 2019, Algorithm 1 line 3): a WGAN-GP critic
-//! `D(s, s')` on state transitions, trained so that it is low on expert transitions and can be
-//! used as a cost by the LQR step.
+//! The discriminator of LQR+GAIfO (Torabi et al. 2019; step 3 of Algorithm 1 as DESIGN.md §1
+//! lists it): a WGAN-GP critic `D(s, s')` on state transitions, trained so that it is low on
+//! expert transitions and can be used as a cost by the LQR step.
 //!
 //! - Input `x = [s; s'] ∈ R^{2 dX}` (24 for the UR5 task), one transition per row of a
 //!   row-major batch.
