@@ -24,7 +24,9 @@ use crate::algorithm::eval_cost::CostDerivs;
 use crate::algorithm::update::Learner;
 use crate::algorithm::AlgorithmConfig;
 use crate::cost::composite::{composite_cost_derivs, CompositeWorkspace, D_IN};
-use crate::discriminator::{Discriminator, DiscriminatorConfig, Normalizer, TrainStats};
+use crate::discriminator::{
+    AdamConfig, Discriminator, DiscriminatorConfig, Normalizer, TrainStats,
+};
 use crate::dynamics::lr_prior::LrPriorConfig;
 use crate::dynamics::prior_gmm::PriorGmmConfig;
 use crate::expert::{init_hold, to_gain_table};
@@ -63,7 +65,21 @@ pub struct GaifoConfig {
     /// its floor while the controller has not moved (measured: step multiplier at 0.01 within
     /// 10 iterations, no progress). With it off every step has KL ≤ kl_step · T.
     pub adapt_step: bool,
-    /// The critic and its training (WGAN-GP defaults of Gulrajani et al. 2017).
+    /// Project ∇²D on the positive semi-definite cone (negative eigenvalues set to 0) before
+    /// the chain rule ∇²C = M_tᵀ ∇²D M_t. On by default, and the one addition beyond GPS's
+    /// own regularisation: with the exact, indefinite ∇²D the LQR step had to raise η until
+    /// Q_uu was positive definite, η grew to 1e3–1e8 as the critic sharpened, the steps stopped
+    /// following the cost and the normalised performance stalled at 0.3–0.5 (measured, default
+    /// goal, seed 0, `learner train` with this off); with the projection η stays below 1 and the
+    /// same run reaches 0.94 by iteration 9. The projected Hessian is the Gauss–Newton-like
+    /// convex part of the critic's curvature: it keeps the exact gradient and never rewards
+    /// moving along a direction of negative curvature more than the gradient does.
+    pub psd_hessian: bool,
+    /// The critic and its training: WGAN-GP (Gulrajani et al. 2017: λ = 10, 5 critic steps per
+    /// call, batch 64, Adam β2 = 0.9) with our changes, measured on the default task: two
+    /// hidden layers of 32 (not 64), Adam lr 1e-3 and β1 = 0.5 (not 1e-4 and 0): at 1e-4 the
+    /// critic needs thousands of steps to separate 500 + 500 transitions, more than 20
+    /// iterations give it.
     pub discriminator: DiscriminatorConfig,
     /// Seed of every random draw of the run (noise, GMM, critic).
     pub seed: u64,
@@ -86,7 +102,17 @@ impl Default for GaifoConfig {
             init_var: 0.05,
             critic_updates: 20,
             adapt_step: false,
-            discriminator: DiscriminatorConfig::default(),
+            psd_hessian: true,
+            discriminator: DiscriminatorConfig {
+                hidden: vec![32, 32],
+                adam: AdamConfig {
+                    lr: 1e-3,
+                    beta1: 0.5,
+                    beta2: 0.9,
+                    eps: 1e-8,
+                },
+                ..DiscriminatorConfig::default()
+            },
             seed: 0,
             algorithm: AlgorithmConfig::default(),
             prior: PriorGmmConfig::default(),
@@ -185,14 +211,22 @@ pub struct LqrGaifo {
 impl LqrGaifo {
     /// Sets up a run imitating `demos` (the task — goal, start pose, T, dt — is theirs).
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, LearnerError> {
-        let task = TaskConfig { dt: demos.dt, horizon: demos.horizon, start_q: demos.start_q, goal: demos.goal };
-        task.validate().map_err(|e| LearnerError::Shape(format!("demonstrations: {e}")))?;
+        let task = TaskConfig {
+            dt: demos.dt,
+            horizon: demos.horizon,
+            start_q: demos.start_q,
+            goal: demos.goal,
+        };
+        task.validate()
+            .map_err(|e| LearnerError::Shape(format!("demonstrations: {e}")))?;
         let sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
         let expert = expert_transitions(&demos);
-        let norm = Normalizer::from_data(expert.as_ref()).map_err(|e| LearnerError::Shape(e.to_string()))?;
+        let norm = Normalizer::from_data(expert.as_ref())
+            .map_err(|e| LearnerError::Shape(e.to_string()))?;
         let mut dcfg = cfg.discriminator.clone();
         dcfg.seed = cfg.seed ^ dcfg.seed ^ 0x4352_4954; // "CRIT"
-        let disc = Discriminator::new(D_IN, dcfg, norm).map_err(|e| LearnerError::Shape(e.to_string()))?;
+        let disc =
+            Discriminator::new(D_IN, dcfg, norm).map_err(|e| LearnerError::Shape(e.to_string()))?;
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),
@@ -206,7 +240,7 @@ impl LqrGaifo {
         );
         let pol = init_hold(&task, cfg.init_var);
         Ok(Self {
-            cost_ws: CompositeWorkspace::new(&disc),
+            cost_ws: CompositeWorkspace::new(&disc).with_psd(cfg.psd_hessian),
             disc_ws: disc.workspace(),
             new_pol: LinGaussPolicy::zeros(task.horizon, DX, DU),
             derivs: CostDerivs::default(),
@@ -238,8 +272,33 @@ impl LqrGaifo {
         &self.task
     }
 
+    /// Rebuilds the critic with its input normalisation fitted on expert ∪ `controller`
+    /// transitions (done once, on the first iteration's samples). Fitted on the expert alone,
+    /// the scales are those of an arm resting at the goal (most expert transitions), the
+    /// controller's transitions sit many σ away, the tanh units saturate and the cost is flat
+    /// where the controller is (measured: no progress in 20 iterations).
+    fn refit_normalizer(&mut self, controller: &Mat<f64>) -> Result<(), LearnerError> {
+        let (ne, nc) = (self.expert.nrows(), controller.nrows());
+        let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
+            if r < ne {
+                self.expert[(r, c)]
+            } else {
+                controller[(r - ne, c)]
+            }
+        });
+        let norm =
+            Normalizer::from_data(both.as_ref()).map_err(|e| LearnerError::Shape(e.to_string()))?;
+        self.disc = Discriminator::new(D_IN, self.disc.config().clone(), norm)
+            .map_err(|e| LearnerError::Shape(e.to_string()))?;
+        self.cost_ws = CompositeWorkspace::new(&self.disc).with_psd(self.cfg.psd_hessian);
+        Ok(())
+    }
+
     /// Line 3 of Algorithm 1: `critic_updates` WGAN-GP calls on expert vs these transitions.
-    pub fn update_discriminator(&mut self, controller: &Mat<f64>) -> Result<TrainStats, LearnerError> {
+    pub fn update_discriminator(
+        &mut self,
+        controller: &Mat<f64>,
+    ) -> Result<TrainStats, LearnerError> {
         let mut stats = None;
         for _ in 0..self.cfg.critic_updates.max(1) {
             stats = Some(
@@ -257,17 +316,34 @@ impl LqrGaifo {
         let version = self.iteration as u64 + 1;
         // 1. Execute the controller.
         let t0 = Instant::now();
-        let (episodes, eval) = execute(&mut self.sim, &self.task, &self.pol, version, self.cfg.seed, n)?;
+        let (episodes, eval) = execute(
+            &mut self.sim,
+            &self.task,
+            &self.pol,
+            version,
+            self.cfg.seed,
+            n,
+        )?;
         let (x, u) = stack(&episodes);
         // 2. Fit the dynamics.
         let t1 = Instant::now();
         self.learner.update_dynamics(&x, &u, n)?;
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
-        let critic = self.update_discriminator(&episode_transitions(&episodes))?;
+        let controller = episode_transitions(&episodes);
+        if self.iteration == 0 {
+            self.refit_normalizer(&controller)?;
+        }
+        let critic = self.update_discriminator(&controller)?;
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) and its second-order expansion.
         let t3 = Instant::now();
-        composite_cost_derivs(&self.disc, &self.learner.info.dynamics, &episodes, &mut self.cost_ws, &mut self.derivs);
+        composite_cost_derivs(
+            &self.disc,
+            &self.learner.info.dynamics,
+            &episodes,
+            &mut self.cost_ws,
+            &mut self.derivs,
+        );
         // 6. KL-bounded LQR step.
         let t4 = Instant::now();
         let step = improve(
@@ -287,7 +363,12 @@ impl LqrGaifo {
         let log = GaifoLog {
             iteration: self.iteration,
             task_cost: c,
-            performance: ur5_shared::normalised_performance(c, self.demos.cost_random, self.demos.cost_expert).unwrap_or(f64::NAN),
+            performance: ur5_shared::normalised_performance(
+                c,
+                self.demos.cost_random,
+                self.demos.cost_expert,
+            )
+            .unwrap_or(f64::NAN),
             final_distance: eval.final_distance(),
             critic_loss: critic.critic_loss,
             wasserstein: critic.wasserstein,
@@ -315,7 +396,11 @@ impl LqrGaifo {
         std::fs::create_dir_all(dir)?;
         let i = self.iteration;
         let table = dir.join(format!("iter_{i:03}_table.npz"));
-        save_table(&table, &to_gain_table(&self.pol, i as u64 + 1), self.task.dt)?;
+        save_table(
+            &table,
+            &to_gain_table(&self.pol, i as u64 + 1),
+            self.task.dt,
+        )?;
         let critic = dir.join(format!("iter_{i:03}_critic.json"));
         self.disc.save(&critic)?;
         Ok((table, critic))
@@ -350,8 +435,21 @@ pub fn train(
             writeln!(
                 f,
                 "{},{},lqr-gaifo,{},{},{},{},{},{},{},{},{},{},{},{},{}",
-                log.iteration, cfg.seed, log.performance, log.task_cost, log.final_distance, log.critic_loss, log.wasserstein,
-                log.kl, log.eta, log.step_mult, log.t_execute, log.t_dynamics, log.t_critic, log.t_cost, log.t_lqr
+                log.iteration,
+                cfg.seed,
+                log.performance,
+                log.task_cost,
+                log.final_distance,
+                log.critic_loss,
+                log.wasserstein,
+                log.kl,
+                log.eta,
+                log.step_mult,
+                log.t_execute,
+                log.t_dynamics,
+                log.t_critic,
+                log.t_cost,
+                log.t_lqr
             )?;
             f.flush()?;
             run.checkpoint(dir)?;

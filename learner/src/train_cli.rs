@@ -63,7 +63,8 @@ fn print_line(l: &GaifoLog) {
 
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
-    let demos = Demos::load(&args.demos).with_context(|| format!("loading demonstrations {}", args.demos.display()))?;
+    let demos = Demos::load(&args.demos)
+        .with_context(|| format!("loading demonstrations {}", args.demos.display()))?;
     let mut cfg: GaifoConfig = match &args.config {
         Some(p) => ur5_shared::config::from_toml_file(p)?,
         None => GaifoConfig::default(),
@@ -75,10 +76,15 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         cfg.seed = s;
     }
     cfg.sim.validate()?;
-    anyhow::ensure!(cfg.samples >= 1 && cfg.iterations >= 1, "samples and iterations must be >= 1");
+    anyhow::ensure!(
+        cfg.samples >= 1 && cfg.iterations >= 1,
+        "samples and iterations must be >= 1"
+    );
     match args.algo {
         Algo::LqrGaifo => {}
-        Algo::GaifoPpo => anyhow::bail!("--algo gaifo-ppo (the PPO baseline) is not implemented yet"),
+        Algo::GaifoPpo => {
+            anyhow::bail!("--algo gaifo-ppo (the PPO baseline) is not implemented yet")
+        }
     }
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
@@ -90,7 +96,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     );
     eprintln!(
         "{:>4} {:>9} {:>7} {:>8} {:>9} {:>8} {:>8} {:>9} {:>6} {:>7} {:>7}",
-        "iter", "task_cost", "perf", "final_m", "critic", "W1_est", "kl", "eta", "mult", "lrn_ms", "sim_ms"
+        "iter",
+        "task_cost",
+        "perf",
+        "final_m",
+        "critic",
+        "W1_est",
+        "kl",
+        "eta",
+        "mult",
+        "lrn_ms",
+        "sim_ms"
     );
     let logs = train(&cfg, demos, Some(&args.out), print_line)?;
     let last = logs.last().expect("iterations >= 1");
@@ -102,7 +118,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     if args.json {
-        let best = logs.iter().map(|l| l.performance).fold(f64::NEG_INFINITY, f64::max);
+        let best = logs
+            .iter()
+            .map(|l| l.performance)
+            .fold(f64::NEG_INFINITY, f64::max);
         println!(
             "{}",
             serde_json::json!({"command": "train", "algo": "lqr-gaifo", "iterations": logs.len(), "seed": cfg.seed,

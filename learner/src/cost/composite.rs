@@ -25,6 +25,9 @@ use crate::rollout::Episode;
 
 /// Scratch memory for the expansion; build once, reuse every iteration.
 pub struct CompositeWorkspace {
+    /// Replace ∇²D by its projection on the positive semi-definite cone (negative eigenvalues
+    /// set to 0) before composing; see [`expand_step`].
+    pub psd: bool,
     disc: Workspace,
     x: Vec<f64>,
     g: Vec<f64>,
@@ -36,6 +39,12 @@ pub const D_IN: usize = 2 * DX;
 const DY: usize = DX + DU;
 
 impl CompositeWorkspace {
+    /// Sets [`Self::psd`].
+    pub fn with_psd(mut self, psd: bool) -> Self {
+        self.psd = psd;
+        self
+    }
+
     /// Scratch for `disc`.
     pub fn new(disc: &Discriminator) -> Self {
         assert_eq!(
@@ -44,6 +53,7 @@ impl CompositeWorkspace {
             "the discriminator must take [s; s'] (2 dX inputs)"
         );
         Self {
+            psd: false,
             disc: disc.workspace(),
             x: vec![0.0; D_IN],
             g: vec![0.0; D_IN],
@@ -89,6 +99,9 @@ pub fn expand_step(
         }
     }
     let value = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
+    if ws.psd {
+        project_psd(&mut ws.h);
+    }
     let (g, h) = (&ws.g, &ws.h);
     luu.fill(0.0);
     lux.fill(0.0);
@@ -167,6 +180,29 @@ pub fn expand_step(
         }
     }
     value
+}
+
+/// Projects a symmetric matrix on the PSD cone: U max(Λ, 0) Uᵀ.
+fn project_psd(h: &mut Mat<f64>) {
+    let Ok(evd) = h.self_adjoint_eigen(faer::Side::Lower) else {
+        return;
+    };
+    let (u, lam) = (evd.U(), evd.S().column_vector());
+    if (0..lam.nrows()).all(|i| lam[i] >= 0.0) {
+        return;
+    }
+    let n = h.nrows();
+    for i in 0..n {
+        for j in 0..n {
+            let mut acc = 0.0;
+            for k in 0..n {
+                if lam[k] > 0.0 {
+                    acc += u[(i, k)] * lam[k] * u[(j, k)];
+                }
+            }
+            h[(i, j)] = acc;
+        }
+    }
 }
 
 /// Per-sample composite-cost derivatives for N episodes (GPS layout, around each sample's own
@@ -329,5 +365,37 @@ mod tests {
         eprintln!("composite cost: worst FD error gradient {worst_g:.2e}, Hessian {worst_h:.2e} (relative to the largest entry)");
         assert!(worst_g < 1e-8, "gradient FD error {worst_g:.2e}");
         assert!(worst_h < 1e-5, "Hessian FD error {worst_h:.2e}");
+    }
+}
+
+#[cfg(test)]
+mod psd_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn projection_is_psd_and_leaves_psd_matrices_alone() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let n = 6;
+        let a = Mat::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+        let mut sym = Mat::from_fn(n, n, |i, j| a[(i, j)] + a[(j, i)]);
+        let before = sym.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+        assert!(before[0] < 0.0, "test matrix should be indefinite");
+        project_psd(&mut sym);
+        let after = sym.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+        assert!(after[0] > -1e-12, "projection left eigenvalue {}", after[0]);
+        // The positive eigenvalues are kept.
+        let kept: Vec<f64> = before.iter().copied().filter(|l| *l > 0.0).collect();
+        for (k, l) in kept.iter().rev().zip(after.iter().rev()) {
+            assert!((k - l).abs() < 1e-10);
+        }
+        // A PSD matrix is unchanged.
+        let psd = Mat::from_fn(n, n, |i, j| {
+            (0..n).map(|k| a[(i, k)] * a[(j, k)]).sum::<f64>()
+        });
+        let mut copy = psd.clone();
+        project_psd(&mut copy);
+        assert_eq!(copy, psd);
     }
 }
