@@ -12,7 +12,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use serde::{Deserialize, Serialize};
-use ur5_shared::config::{from_toml_file, SimConfig, TaskConfig};
+use ur5_shared::config::{from_toml_file, parse_triple as parse3, SimConfig, TaskConfig};
 
 use hil_sim::Ur5Sim;
 
@@ -104,20 +104,6 @@ enum Cmd {
 struct FileConfig {
     task: TaskConfig,
     sim: SimConfig,
-}
-
-fn parse3(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
-        .collect::<Result<_, _>>()?;
-    let a: [f64; 3] = v
-        .try_into()
-        .map_err(|v: Vec<f64>| format!("expected 3 comma-separated numbers, got {}", v.len()))?;
-    if a.iter().any(|x| !x.is_finite()) {
-        return Err("values must be finite".into());
-    }
-    Ok(a)
 }
 
 fn main() -> Result<()> {

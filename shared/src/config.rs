@@ -57,6 +57,21 @@ pub fn from_toml_str<T: for<'de> Deserialize<'de>>(text: &str) -> Result<T, Conf
     })
 }
 
+/// Parses "x,y,z" (three finite numbers, comma-separated) for command lines.
+pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    let a: [f64; 3] = v
+        .try_into()
+        .map_err(|v: Vec<f64>| format!("expected 3 comma-separated numbers, got {}", v.len()))?;
+    if a.iter().any(|x| !x.is_finite()) {
+        return Err("values must be finite".into());
+    }
+    Ok(a)
+}
+
 /// The reaching task (DESIGN.md §2, the paper's §5 set-up).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

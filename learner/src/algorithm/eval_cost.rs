@@ -15,6 +15,20 @@ pub struct CostDerivs {
     pub lux: Vec<f64>,
 }
 
+impl CostDerivs {
+    /// Sizes every array for `n` samples of horizon `t_len` (keeps the allocation when it
+    /// fits).
+    pub fn resize(&mut self, n: usize, t_len: usize, dx: usize, du: usize) {
+        let nt = n * t_len;
+        self.l.resize(nt, 0.0);
+        self.lx.resize(nt * dx, 0.0);
+        self.lu.resize(nt * du, 0.0);
+        self.lxx.resize(nt * dx * dx, 0.0);
+        self.luu.resize(nt * du * du, 0.0);
+        self.lux.resize(nt * du * dx, 0.0);
+    }
+}
+
 /// GPS `_eval_cost`: rewrites each sample's expansion around `ŷ = [x; u]` into absolute
 /// coordinates (`cv += Cmᵀ(−ŷ)`, `cc += (−ŷ)·cv + ½ (−ŷ)·Cmᵀ(−ŷ)`) and averages over samples.
 /// `x (N,T,dX)`, `u (N,T,dU)`. Writes `cc (T)`, `cv (T,D,1)`, `cm (T,D,D)`, D = dX+dU.

@@ -216,12 +216,7 @@ pub fn composite_cost_derivs(
 ) {
     let n = episodes.len();
     let t_len = episodes[0].horizon();
-    out.l.resize(n * t_len, 0.0);
-    out.lx.resize(n * t_len * DX, 0.0);
-    out.lu.resize(n * t_len * DU, 0.0);
-    out.lxx.resize(n * t_len * DX * DX, 0.0);
-    out.luu.resize(n * t_len * DU * DU, 0.0);
-    out.lux.resize(n * t_len * DU * DX, 0.0);
+    out.resize(n, t_len, DX, DU);
     for (i, ep) in episodes.iter().enumerate() {
         for t in 0..t_len {
             let nt = i * t_len + t;
