@@ -126,6 +126,48 @@ pub struct IterationLog {
     pub seconds: f64,
 }
 
+impl IterationLog {
+    /// Header of the per-iteration CSV (`expert_log.csv`, `serve_log.csv`).
+    pub const CSV_HEADER: &'static str =
+        "iteration,eval_cost,mean_sample_cost,final_distance_m,performance_proxy,kl,eta,step_mult,seconds";
+
+    /// Column names of [`IterationLog::progress_line`].
+    pub const PROGRESS_HEADER: &'static str =
+        "iter  eval_cost  mean_cost   final_m   proxy        kl       eta   mult    sec";
+
+    /// The progress line of this iteration (the columns of `learner expert`).
+    pub fn progress_line(&self) -> String {
+        format!(
+            "{:>4} {:>10.4} {:>10.4} {:>9.4} {:>7.3} {:>9.3} {:>9.2e} {:>6.2} {:>6.2}",
+            self.iteration,
+            self.eval_cost,
+            self.mean_sample_cost,
+            self.final_distance,
+            self.performance_proxy,
+            self.kl,
+            self.eta,
+            self.step_mult,
+            self.seconds
+        )
+    }
+
+    /// This iteration as a CSV row (no newline), columns as in [`IterationLog::CSV_HEADER`].
+    pub fn csv_row(&self) -> String {
+        format!(
+            "{},{},{},{},{},{},{},{},{}",
+            self.iteration,
+            self.eval_cost,
+            self.mean_sample_cost,
+            self.final_distance,
+            self.performance_proxy,
+            self.kl,
+            self.eta,
+            self.step_mult,
+            self.seconds
+        )
+    }
+}
+
 /// The outcome of training.
 pub struct ExpertRun {
     /// Best controller found (lowest noise-free task cost), GPS absolute form.
@@ -182,12 +224,7 @@ pub fn to_gain_table(pol: &LinGaussPolicy, version: u64) -> Box<GainTable> {
 pub fn task_cost_derivs(cost: &TaskCostConfig, episodes: &[Episode], out: &mut CostDerivs) {
     let n = episodes.len();
     let t_len = episodes[0].horizon();
-    out.l.resize(n * t_len, 0.0);
-    out.lx.resize(n * t_len * DX, 0.0);
-    out.lu.resize(n * t_len * DU, 0.0);
-    out.lxx.resize(n * t_len * DX * DX, 0.0);
-    out.luu.resize(n * t_len * DU * DU, 0.0);
-    out.lux.resize(n * t_len * DU * DX, 0.0);
+    out.resize(n, t_len, DX, DU);
     let mut d = StepDerivs::default();
     for (i, ep) in episodes.iter().enumerate() {
         for t in 0..t_len {
@@ -232,73 +269,156 @@ pub fn mean_noisy_cost(
     Ok(total / count.max(1) as f64)
 }
 
-/// Trains the expert. `progress` receives each iteration's log as soon as it is done.
-pub fn train(
-    cfg: &ExpertConfig,
-    mut progress: impl FnMut(&IterationLog),
-) -> Result<ExpertRun, crate::LearnerError> {
-    let task = &cfg.task;
-    let (t_len, n) = (task.horizon, cfg.samples);
-    let mut sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
-    // Independent streams: random baseline, GMM initialisation; the exploration noise of the
-    // k-th episode of table version v is `Noise::new(cfg.seed, v, k)`, as in the RT loop.
-    let rng_gmm = ChaCha8Rng::seed_from_u64(cfg.seed ^ SEED_GMM);
+/// The expert's learner as a state machine: one [`ExpertLearner::update`] is one iteration of
+/// Algorithm 1 on the true task cost, given the episodes line 1 executed (in process by
+/// [`train`], over IPC by `learner serve`). It owns the GPS learner state, the controller to
+/// execute next, the previous one (for the step adjustment) and the best one seen.
+pub struct ExpertLearner {
+    cfg: ExpertConfig,
+    learner: Learner,
+    /// The controller the next episodes must be executed with.
+    pol: LinGaussPolicy,
+    prev_pol: Option<LinGaussPolicy>,
+    new_pol: LinGaussPolicy,
+    derivs: CostDerivs,
+    cost_random: Option<f64>,
+    iteration: usize,
+    best: Option<(LinGaussPolicy, Episode)>,
+    since_best: usize,
+}
 
-    let mut pol = init_hold(task, cfg.init_var);
-    let cost_random = mean_noisy_cost(
-        &mut sim,
-        task,
-        &pol,
-        cfg.random_episodes,
-        cfg.seed ^ SEED_RANDOM,
-    )?;
+impl ExpertLearner {
+    /// A learner that starts from the initial controller ([`init_hold`]). `cost_random` is the
+    /// random policy's mean task cost for the progress proxy; `None` takes the mean cost of the
+    /// first iteration's noisy episodes (those of the initial controller).
+    pub fn new(cfg: ExpertConfig, cost_random: Option<f64>) -> Self {
+        let pol = init_hold(&cfg.task, cfg.init_var);
+        Self::resume(cfg, pol, 0, cost_random)
+    }
 
-    let mut learner = Learner::new(
-        cfg.algorithm.clone(),
-        cfg.prior.clone(),
-        cfg.fit.clone(),
-        cfg.traj_opt.clone(),
-        t_len,
-        DX,
-        DU,
-        n,
-        rng_gmm,
-    );
-    let mut prev_pol: Option<LinGaussPolicy> = None;
-    let mut new_pol = LinGaussPolicy::zeros(t_len, DX, DU);
-    let mut derivs = CostDerivs::default();
-    let mut best: Option<(LinGaussPolicy, Episode)> = None;
-    let mut since_best = 0;
-    let mut log = Vec::new();
+    /// A learner that continues from controller `pol` at `iteration` (its table version is
+    /// `iteration + 1`). The GPS learner state (dynamics prior, step size, previous controller)
+    /// starts afresh, as on a first iteration: it is not part of a checkpoint.
+    pub fn resume(
+        cfg: ExpertConfig,
+        pol: LinGaussPolicy,
+        iteration: usize,
+        cost_random: Option<f64>,
+    ) -> Self {
+        let (t_len, n) = (cfg.task.horizon, cfg.samples);
+        // Independent streams: random baseline, GMM initialisation; the exploration noise of
+        // the k-th episode of table version v is `Noise::new(cfg.seed, v, k)`, as in the RT loop.
+        let rng_gmm = ChaCha8Rng::seed_from_u64(cfg.seed ^ SEED_GMM);
+        let learner = Learner::new(
+            cfg.algorithm.clone(),
+            cfg.prior.clone(),
+            cfg.fit.clone(),
+            cfg.traj_opt.clone(),
+            t_len,
+            DX,
+            DU,
+            n,
+            rng_gmm,
+        );
+        Self {
+            learner,
+            pol,
+            prev_pol: None,
+            new_pol: LinGaussPolicy::zeros(t_len, DX, DU),
+            derivs: CostDerivs::default(),
+            cost_random,
+            iteration,
+            best: None,
+            since_best: 0,
+            cfg,
+        }
+    }
 
-    for iteration in 0..cfg.iterations {
+    /// The configuration.
+    pub fn config(&self) -> &ExpertConfig {
+        &self.cfg
+    }
+
+    /// The controller to execute next.
+    pub fn policy(&self) -> &LinGaussPolicy {
+        &self.pol
+    }
+
+    /// Its gain-table version: iteration + 1 (the initial controller is version 1).
+    pub fn version(&self) -> u64 {
+        self.iteration as u64 + 1
+    }
+
+    /// Iterations done (counting those before a resume).
+    pub fn iteration(&self) -> usize {
+        self.iteration
+    }
+
+    /// The random policy's cost used by the progress proxy, once known.
+    pub fn cost_random(&self) -> Option<f64> {
+        self.cost_random
+    }
+
+    /// `cfg.iterations` done, or `cfg.patience` iterations in a row without a better
+    /// noise-free episode.
+    pub fn done(&self) -> bool {
+        self.iteration >= self.cfg.iterations
+            || (self.best.is_some() && self.since_best >= self.cfg.patience)
+    }
+
+    /// Best controller executed so far (lowest noise-free task cost) and its evaluation episode.
+    pub fn best(&self) -> Option<(&LinGaussPolicy, &Episode)> {
+        self.best.as_ref().map(|(p, e)| (p, e))
+    }
+
+    /// Lines 2–6 of Algorithm 1 on the `noisy` episodes (`cfg.samples` of them) and the
+    /// noise-free `eval` episode of [`ExpertLearner::policy`]: fit the dynamics, expand the task
+    /// cost, take the KL-bounded LQR step. Returns the iteration's log (`seconds`: this update
+    /// only) and the new controller, which [`ExpertLearner::policy`] returns from now on.
+    pub fn update(
+        &mut self,
+        noisy: &[Episode],
+        eval: &Episode,
+    ) -> Result<(IterationLog, &LinGaussPolicy), crate::LearnerError> {
         let t0 = Instant::now();
-        // 1. Execute the controller N times with noise, once without.
-        let version = iteration as u64 + 1;
-        let (episodes, eval) = execute(&mut sim, task, &pol, version, cfg.seed, n)?;
-        let (x, u) = stack(&episodes);
+        let (t_len, n) = (self.cfg.task.horizon, self.cfg.samples);
+        if noisy.len() != n || noisy.iter().chain([eval]).any(|e| e.horizon() != t_len) {
+            return Err(crate::LearnerError::Shape(format!(
+                "an expert iteration needs {n} noisy episodes and one noise-free episode of \
+                 T = {t_len} steps; got {} noisy, horizons {:?}",
+                noisy.len(),
+                noisy
+                    .iter()
+                    .chain([eval])
+                    .map(Episode::horizon)
+                    .collect::<Vec<_>>()
+            )));
+        }
+        let (x, u) = stack(noisy);
         // 2. Dynamics and x0.
-        learner.update_dynamics(&x, &u, n)?;
+        self.learner.update_dynamics(&x, &u, n)?;
         // 3. Second-order expansion of the task cost around every sample.
-        task_cost_derivs(&cfg.cost, &episodes, &mut derivs);
+        task_cost_derivs(&self.cfg.cost, noisy, &mut self.derivs);
         // 4–5. Averaged quadratic model, step size, KL-bounded LQR step.
         let step = improve(
-            &mut learner,
+            &mut self.learner,
             &x,
             &u,
             n,
-            &derivs,
-            prev_pol.as_ref(),
-            &pol,
-            &mut new_pol,
+            &self.derivs,
+            self.prev_pol.as_ref(),
+            &self.pol,
+            &mut self.new_pol,
             true,
         )?;
 
         let eval_cost_value = eval.task_cost();
+        let mean_sample_cost = noisy.iter().map(Episode::task_cost).sum::<f64>() / n as f64;
+        let cost_random = *self.cost_random.get_or_insert(mean_sample_cost);
         let entry = IterationLog {
-            iteration,
+            iteration: self.iteration,
             eval_cost: eval_cost_value,
-            mean_sample_cost: episodes.iter().map(Episode::task_cost).sum::<f64>() / n as f64,
+            mean_sample_cost,
             final_distance: eval.final_distance(),
             performance_proxy: (cost_random - eval_cost_value) / cost_random,
             kl: step.kl,
@@ -306,25 +426,61 @@ pub fn train(
             step_mult: step.step_mult,
             seconds: t0.elapsed().as_secs_f64(),
         };
-        progress(&entry);
-        log.push(entry);
-
-        if best
+        if self
+            .best
             .as_ref()
             .is_none_or(|(_, e)| eval_cost_value < e.task_cost())
         {
-            best = Some((pol.clone(), eval));
-            since_best = 0;
+            self.best = Some((self.pol.clone(), eval.clone()));
+            self.since_best = 0;
         } else {
-            since_best += 1;
+            self.since_best += 1;
         }
-        prev_pol = Some(pol.clone());
-        pol.copy_from(&new_pol);
-        if since_best >= cfg.patience {
-            break;
+        match self.prev_pol.as_mut() {
+            Some(p) => p.copy_from(&self.pol),
+            None => self.prev_pol = Some(self.pol.clone()),
         }
+        self.pol.copy_from(&self.new_pol);
+        self.iteration += 1;
+        Ok((entry, &self.pol))
     }
-    let (policy, eval) = best.expect("at least one iteration");
+}
+
+/// Trains the expert in process (lockstep, no IPC): line 1 of Algorithm 1 is
+/// [`execute`] on an in-process arm, the rest [`ExpertLearner::update`]. `progress` receives
+/// each iteration's log (`seconds`: episodes and update) as soon as it is done.
+pub fn train(
+    cfg: &ExpertConfig,
+    mut progress: impl FnMut(&IterationLog),
+) -> Result<ExpertRun, crate::LearnerError> {
+    let task = &cfg.task;
+    let mut sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
+    let cost_random = mean_noisy_cost(
+        &mut sim,
+        task,
+        &init_hold(task, cfg.init_var),
+        cfg.random_episodes,
+        cfg.seed ^ SEED_RANDOM,
+    )?;
+    let mut el = ExpertLearner::new(cfg.clone(), Some(cost_random));
+    let mut log = Vec::new();
+    while !el.done() {
+        let t0 = Instant::now();
+        // 1. Execute the controller N times with noise, once without.
+        let (episodes, eval) = execute(
+            &mut sim,
+            task,
+            el.policy(),
+            el.version(),
+            cfg.seed,
+            cfg.samples,
+        )?;
+        let (mut entry, _) = el.update(&episodes, &eval)?;
+        entry.seconds = t0.elapsed().as_secs_f64();
+        progress(&entry);
+        log.push(entry);
+    }
+    let (policy, eval) = el.best.expect("at least one iteration");
     Ok(ExpertRun {
         policy,
         eval,
@@ -437,21 +593,9 @@ pub fn train_and_record(
     )?;
     let log_path = out.join("expert_log.csv");
     let mut csv = std::fs::File::create(&log_path)?;
-    writeln!(csv, "iteration,eval_cost,mean_sample_cost,final_distance_m,performance_proxy,kl,eta,step_mult,seconds")?;
+    writeln!(csv, "{}", IterationLog::CSV_HEADER)?;
     for l in &run.log {
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{},{}",
-            l.iteration,
-            l.eval_cost,
-            l.mean_sample_cost,
-            l.final_distance,
-            l.performance_proxy,
-            l.kl,
-            l.eta,
-            l.step_mult,
-            l.seconds
-        )?;
+        writeln!(csv, "{}", l.csv_row())?;
     }
     let demos = record_demos(cfg, &run.policy, run.cost_random)?;
     let demos_path = out.join("demos.npz");

@@ -27,6 +27,10 @@ enum Cmd {
     /// Train the expert on the true task cost (KL-bounded LQR with learned dynamics, in
     /// process), save its gain table, record demonstrations. Progress: one line per iteration.
     Expert(learner::expert_cli::ExpertArgs),
+    /// The learner end of the three processes (hil-sim serve <-> rt-controller <-> learner):
+    /// publishes gain tables on controller/gains, learns from the episodes on learner/samples
+    /// (the expert's iteration on the true task cost). Progress: one line per iteration.
+    Serve(learner::serve::ServeArgs),
     /// Imitate state-only demonstrations: LQR+GAIfO (default) or the GAIfO (PPO) baseline.
     /// Progress: one line per iteration.
     Train(learner::train_cli::TrainArgs),
@@ -62,6 +66,7 @@ fn main() -> anyhow::Result<()> {
     match cli.cmd {
         Cmd::Expert(args) => learner::expert_cli::run(args)?,
         Cmd::Train(args) => learner::train_cli::run(args)?,
+        Cmd::Serve(args) => learner::serve::run_cli(args)?,
         Cmd::Conformance { vectors, json } => {
             let f = vectors.to_string_lossy().to_string();
             let rep = learner::conformance::run_file(&f)

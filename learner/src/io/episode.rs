@@ -1,0 +1,138 @@
+//! One executed episode on disk, as `learner serve` records every episode it receives
+//! (copper-rs: every run recorded and replayable). The layout of [`super::demos`] with D = 1,
+//! plus where the episode came from:
+//!
+//! | array | shape | meaning |
+//! |---|---|---|
+//! | `states` | (1, T, dX) f64 | s_t (layout: `state_names`) |
+//! | `actions` | (1, T, dU) f64 | actions executed by the arm (after the controller's clamp); the dynamics are fitted on these |
+//! | `actions_policy` | (1, T, dU) f64 | actions the controller law asked for (before the clamp) |
+//! | `table_version` | () u64 | gain-table version that computed the actions |
+//! | `episode` | () u64 | the controller's episode number |
+//! | `noisy` | () u64 | 1 with exploration noise, 0 for the noise-free evaluation episode |
+//! | `task_cost` | () f64 | C(τ) (`ur5_shared::cost`) |
+//! | `goal`, `start_q` | (3,) f64 | goal point (m), start pose (rad) |
+//! | `dt` | () f64 | control period (s) |
+//! | `seed` | () u64 | run seed (the exploration noise of episode k of version v is `ur5_shared::noise::Noise::new(seed, v, k)`) |
+//! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
+//! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
+
+use std::path::Path;
+
+use ur5_shared::config::TaskConfig;
+use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
+
+use super::npz::{NpzError, NpzFile, NpzWriter};
+use crate::rollout::Episode;
+
+/// Version of this file layout.
+pub const SCHEMA_VERSION: i64 = 1;
+
+/// Where an episode came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EpisodeOrigin {
+    /// Gain-table version that computed the actions.
+    pub table_version: u64,
+    /// The controller's episode number.
+    pub episode: u64,
+    /// Run seed.
+    pub seed: u64,
+}
+
+/// Writes `ep` (atomically) with its origin and the task it ran.
+pub fn save_episode(
+    path: &Path,
+    ep: &Episode,
+    origin: &EpisodeOrigin,
+    task: &TaskConfig,
+) -> Result<(), NpzError> {
+    let t = ep.horizon() as u64;
+    let mut w = NpzWriter::create(path)?;
+    w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
+    w.f64("states", &[1, t, DX as u64], &ep.x)?;
+    w.f64("actions", &[1, t, DU as u64], &ep.u)?;
+    w.f64("actions_policy", &[1, t, DU as u64], &ep.u_policy)?;
+    w.u64("table_version", &[], &[origin.table_version])?;
+    w.u64("episode", &[], &[origin.episode])?;
+    w.u64("noisy", &[], &[ep.noisy as u64])?;
+    w.f64("task_cost", &[], &[ep.task_cost()])?;
+    w.f64("goal", &[3], &task.goal)?;
+    w.f64("start_q", &[3], &task.start_q)?;
+    w.f64("dt", &[], &[task.dt])?;
+    w.u64("seed", &[], &[origin.seed])?;
+    w.strings("state_names", &STATE_NAMES)?;
+    w.strings("action_names", &ACTION_NAMES)?;
+    w.finish()?;
+    Ok(())
+}
+
+/// Reads an episode written by [`save_episode`] (`eps` is not recorded: left empty).
+pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
+    let f = NpzFile::open(path)?;
+    let bad = |name: &str, why: String| NpzError::Bad {
+        path: path.to_owned(),
+        name: name.into(),
+        why,
+    };
+    let version = f.f64_shaped("schema_version", &[])?[0];
+    if version != SCHEMA_VERSION as f64 {
+        return Err(bad(
+            "schema_version",
+            format!("{version}, this program reads {SCHEMA_VERSION}"),
+        ));
+    }
+    let (shape, x) = f.f64("states")?;
+    let [1, t, dx] = shape[..] else {
+        return Err(bad(
+            "states",
+            format!("shape {shape:?}, expected (1, T, {DX})"),
+        ));
+    };
+    if dx != DX as u64 || t == 0 {
+        return Err(bad(
+            "states",
+            format!("shape {shape:?}, expected (1, T, {DX})"),
+        ));
+    }
+    let ep = Episode {
+        x,
+        u: f.f64_shaped("actions", &[1, t, DU as u64])?,
+        u_policy: f.f64_shaped("actions_policy", &[1, t, DU as u64])?,
+        eps: Vec::new(),
+        noisy: f.u64_scalar("noisy")? != 0,
+    };
+    let origin = EpisodeOrigin {
+        table_version: f.u64_scalar("table_version")?,
+        episode: f.u64_scalar("episode")?,
+        seed: f.u64_scalar("seed")?,
+    };
+    Ok((ep, origin))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip() {
+        let dir = std::env::temp_dir().join(format!("episode-test-{}", std::process::id()));
+        let path = dir.join("e.npz");
+        let t = 4;
+        let ep = Episode {
+            x: (0..t * DX).map(|i| i as f64 * 0.1).collect(),
+            u: (0..t * DU).map(|i| -(i as f64)).collect(),
+            u_policy: (0..t * DU).map(|i| i as f64 + 0.5).collect(),
+            eps: Vec::new(),
+            noisy: true,
+        };
+        let origin = EpisodeOrigin {
+            table_version: 3,
+            episode: 17,
+            seed: 9,
+        };
+        save_episode(&path, &ep, &origin, &TaskConfig::default()).unwrap();
+        let (back, o) = load_episode(&path).unwrap();
+        assert_eq!((back, o), (ep, origin));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

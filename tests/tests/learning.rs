@@ -1,0 +1,520 @@
+//! Learning over IPC: `hil-sim serve`, `rt-controller run` and `learner serve`, all three from
+//! the built binaries, lockstep, on a fresh prefix per test. The outcome must equal the
+//! in-process loop (`learner::expert`) with the same seed bit for bit; a killed learner must
+//! leave the controller on its table, and a restarted one (`--resume`) must continue.
+//! Assertions are on behaviour only, never on latency.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use hil_sim::Ur5Sim;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use integration_tests::{
+    cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc,
+};
+use learner::expert::{to_gain_table, train, ExpertConfig, ExpertLearner, IterationLog};
+use learner::io::episode::load_episode;
+use learner::io::table::load_table;
+use learner::iteration::execute;
+use learner::rollout::Episode;
+use learner::serve::{episode_from_samples, load_config};
+use ur5_shared::services::{self, ServiceNames};
+use ur5_shared::{GainBounds, GainTable, StepSample};
+
+/// Episode length (steps of the default 0.1 s), noisy episodes per version, run seed.
+const T: usize = 30;
+const N: usize = 5;
+const SEED: u64 = 7;
+const LONG: Duration = Duration::from_secs(60);
+
+/// The learner's config file (an `ExpertConfig` plus `[serve]`) for `iterations` iterations.
+fn learner_toml(iterations: usize) -> String {
+    format!(
+        "samples = {N}\nseed = {SEED}\niterations = {iterations}\nrandom_episodes = 1\n\
+         [task]\nhorizon = {T}\n[serve]\nwait_report_s = 1.0\nidle_sleep_us = 200\n"
+    )
+}
+
+/// Writes the three config files; returns (learner, sim, controller) paths.
+fn configs(dir: &Path, iterations: usize) -> (String, String, String) {
+    (
+        write_config(dir, "learner.toml", &learner_toml(iterations)),
+        write_config(dir, "sim.toml", &format!("[task]\nhorizon = {T}\n")),
+        write_config(
+            dir,
+            "controller.toml",
+            &format!(
+                "seed = {SEED}\nnoisy_episodes = {N}\neval_episodes = 1\n[task]\nhorizon = {T}\n"
+            ),
+        ),
+    )
+}
+
+fn spawn_learner(
+    cfg: &str,
+    prefix: &str,
+    out: &Path,
+    extra: &[&str],
+    dir: &Path,
+    label: &str,
+) -> Proc {
+    let out = out.display().to_string();
+    let mut args = vec![
+        "serve", "--config", cfg, "--prefix", prefix, "--out", &out, "--json",
+    ];
+    args.extend_from_slice(extra);
+    Proc::spawn("learner", label, &args, dir)
+}
+
+fn spawn_sim_and_controller(
+    sim_cfg: &str,
+    ctl_cfg: &str,
+    prefix: &str,
+    dir: &Path,
+) -> (Proc, Proc) {
+    let sim = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &["serve", "--config", sim_cfg, "--prefix", prefix],
+        dir,
+    );
+    let ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
+        dir,
+    );
+    (sim, ctl)
+}
+
+/// A passive second subscriber on `learner/samples`: sees exactly what the learner sees.
+struct SampleMonitor {
+    sub: Subscriber<ipc::Service, StepSample, ()>,
+    received: Vec<StepSample>,
+    _node: Node<ipc::Service>,
+}
+
+impl SampleMonitor {
+    fn new(prefix: &str) -> Self {
+        set_log_level_from_env_or(LogLevel::Error);
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .unwrap();
+        let svc = services::LEARNER_SAMPLES_QOS
+            .open_or_create::<StepSample>(
+                &node,
+                &ServiceNames::new(prefix).learner_samples().unwrap(),
+            )
+            .unwrap();
+        let sub = svc
+            .subscriber_builder()
+            .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
+            .create()
+            .unwrap();
+        Self {
+            sub,
+            received: Vec::new(),
+            _node: node,
+        }
+    }
+
+    fn poll(&mut self) {
+        while let Some(s) = self.sub.receive().unwrap() {
+            self.received.push(*s);
+        }
+    }
+
+    /// Complete episodes of `version` in arrival order.
+    fn episodes(&self, version: u64) -> Vec<Episode> {
+        let mut out = Vec::new();
+        let mut cur: Vec<StepSample> = Vec::new();
+        for s in self.received.iter().filter(|s| s.table_version == version) {
+            if s.t == 0 {
+                cur.clear();
+            }
+            cur.push(*s);
+            if cur.len() == T {
+                out.push(episode_from_samples(&cur));
+                cur.clear();
+            }
+        }
+        out
+    }
+}
+
+/// Every episode complete (t = 0 … T−1 in order, nothing lost), one table version per episode,
+/// versions never decreasing and each new version first used at t = 0; the last episode may be
+/// cut by SIGTERM.
+fn check_stream(samples: &[StepSample]) {
+    assert!(!samples.is_empty());
+    assert_eq!((samples[0].episode, samples[0].t), (0, 0));
+    for w in samples.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        let next = (b.episode == a.episode && b.t == a.t + 1)
+            || (b.episode == a.episode + 1 && b.t == 0 && a.t as usize == T - 1);
+        assert!(
+            next,
+            "lost or out of order: {:?} then {:?}",
+            (a.episode, a.t),
+            (b.episode, b.t)
+        );
+        if b.episode == a.episode {
+            assert_eq!(
+                (b.table_version, b.noise),
+                (a.table_version, a.noise),
+                "version or noise flag changed inside episode {}",
+                a.episode
+            );
+        } else {
+            assert!(b.table_version >= a.table_version, "version went back");
+        }
+    }
+}
+
+/// The in-process loop: `execute` on an in-process arm, then `ExpertLearner::update`. Returns
+/// the table of each version 1 … iterations + 1 and, per iteration, its episodes and log.
+#[allow(clippy::type_complexity)]
+fn in_process(
+    cfg: &ExpertConfig,
+) -> (
+    Vec<Box<GainTable>>,
+    Vec<(Vec<Episode>, Episode, IterationLog)>,
+) {
+    let mut sim = Ur5Sim::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+    let mut el = ExpertLearner::new(cfg.clone(), None);
+    let (mut tables, mut iterations) = (Vec::new(), Vec::new());
+    while !el.done() {
+        tables.push(to_gain_table(el.policy(), el.version()));
+        let (noisy, eval) = execute(
+            &mut sim,
+            &cfg.task,
+            el.policy(),
+            el.version(),
+            cfg.seed,
+            cfg.samples,
+        )
+        .unwrap();
+        let (log, _) = el.update(&noisy, &eval).unwrap();
+        iterations.push((noisy, eval, log));
+    }
+    tables.push(to_gain_table(el.policy(), el.version()));
+    (tables, iterations)
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+fn same_episode(a: &Episode, b: &Episode) -> bool {
+    a.noisy == b.noisy
+        && bits(&a.x) == bits(&b.x)
+        && bits(&a.u) == bits(&b.u)
+        && bits(&a.u_policy) == bits(&b.u_policy)
+}
+
+/// Waits until `done()`, polling `monitor`; panics with the logs when a process exits or on
+/// timeout.
+fn wait_for(
+    what: &str,
+    procs: &mut [&mut Proc],
+    monitor: &mut Option<&mut SampleMonitor>,
+    mut done: impl FnMut() -> bool,
+) {
+    let t0 = Instant::now();
+    loop {
+        if let Some(m) = monitor.as_mut() {
+            m.poll();
+        }
+        if done() {
+            return;
+        }
+        for p in procs.iter_mut() {
+            assert!(
+                p.running(),
+                "{} exited while waiting for {what}; its log:\n{}",
+                p.name,
+                p.log()
+            );
+        }
+        if t0.elapsed() > LONG {
+            let logs: Vec<String> = procs
+                .iter()
+                .map(|p| format!("--- {}:\n{}", p.name, p.log()))
+                .collect();
+            panic!("timed out waiting for {what}:\n{}", logs.join("\n"));
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// `(episode, table version, done)` of each episode line in the controller's log.
+fn controller_episodes(log: &str) -> Vec<(u64, u64, bool)> {
+    log.lines()
+        .filter_map(|l| {
+            let rest = l.strip_prefix("rt-controller: episode ")?;
+            let (ep, rest) = rest.split_once(' ')?;
+            let done = rest.starts_with("done");
+            let v = rest.split_once("(table v")?.1.split_once(',')?.0;
+            Some((ep.parse().ok()?, v.parse().ok()?, done))
+        })
+        .collect()
+}
+
+#[test]
+fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
+    const ITERATIONS: usize = 3;
+    let prefix = unique_prefix("learn-a");
+    let dir = scratch("learn-a");
+    let out = dir.join("out");
+    let (learner_cfg, sim_cfg, ctl_cfg) = configs(&dir, ITERATIONS);
+    let (cfg, _) = load_config(Path::new(&learner_cfg)).unwrap();
+    // The reference runs in another thread while this one watches the processes.
+    let reference = {
+        let cfg = cfg.clone();
+        std::thread::spawn(move || {
+            let (tables, iterations) = in_process(&cfg);
+            let trained = train(&cfg, |_| {}).unwrap();
+            (tables, iterations, trained.log)
+        })
+    };
+
+    let mut monitor = SampleMonitor::new(&prefix);
+    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &[], &dir, "learner");
+    let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
+    {
+        let mut procs = [&mut sim, &mut ctl];
+        let mut m = Some(&mut monitor);
+        let t0 = Instant::now();
+        while learner.running() {
+            m.as_mut().unwrap().poll();
+            for p in procs.iter_mut() {
+                assert!(
+                    p.running(),
+                    "{} exited; log:\n{}\nlearner log:\n{}",
+                    p.name,
+                    p.log(),
+                    learner.log()
+                );
+            }
+            assert!(
+                t0.elapsed() < LONG,
+                "learner did not finish; its log:\n{}",
+                learner.log()
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+    let (code, stdout) = learner.wait(LONG);
+    let llog = learner.log();
+    assert_eq!(code, Some(0), "learner log:\n{llog}");
+    let lj = json_summary(&stdout, &llog);
+    ctl.signal(libc::SIGTERM);
+    let (code, cout) = ctl.wait(LONG);
+    let clog = ctl.log();
+    assert_eq!(code, Some(0), "controller log:\n{clog}");
+    let cj = json_summary(&cout, &clog);
+    monitor.poll();
+
+    // The learner: ITERATIONS updates, the last table taken, nothing discarded.
+    assert_eq!(lj["exit_reason"], "done", "{lj}");
+    assert_eq!(lj["iterations"], ITERATIONS as u64, "{lj}");
+    assert_eq!(lj["table_version"], ITERATIONS as u64 + 1, "{lj}");
+    assert_eq!(lj["counts"]["partial"], 0, "{lj}");
+    assert_eq!(lj["counts"]["mixed"], 0, "{lj}");
+    assert_eq!(lj["counts"]["used"], (ITERATIONS * (N + 1)) as u64, "{lj}");
+    assert!(
+        llog.contains(IterationLog::PROGRESS_HEADER),
+        "progress lines: {llog}"
+    );
+    // The controller: every version taken once, at a boundary; no episode aborted.
+    assert_eq!(cj["swaps"], ITERATIONS as u64 + 1, "{cj}");
+    assert_eq!(cj["table_version"], ITERATIONS as u64 + 1, "{cj}");
+    assert_eq!(cj["rejected_total"], 0, "{cj}");
+    assert_eq!(cj["episodes_aborted"], 0, "{cj}");
+
+    // The sample stream: nothing lost, versions change only between episodes.
+    let samples = &monitor.received;
+    check_stream(samples);
+    assert_eq!(
+        samples.len() as u64,
+        cj["ticks"].as_u64().unwrap(),
+        "every sample arrived"
+    );
+    // The learner recorded every complete episode it received, as it arrived.
+    let mut files: Vec<PathBuf> = std::fs::read_dir(out.join("episodes"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert_eq!(
+        files.len() as u64,
+        lj["counts"]["episodes"].as_u64().unwrap()
+    );
+
+    let (tables, iterations, trained) = reference.join().unwrap();
+    assert_eq!(iterations.len(), ITERATIONS);
+    for (i, (noisy, eval, log)) in iterations.iter().enumerate() {
+        let v = i as u64 + 1;
+        // The first N + 1 episodes of version v over IPC are the in-process ones, bit for bit:
+        // k = 0 … N−1 with noise, k = N without.
+        let ipc = monitor.episodes(v);
+        assert!(ipc.len() > N, "version {v}: {} episodes", ipc.len());
+        for (k, e) in noisy.iter().chain([eval]).enumerate() {
+            assert!(
+                same_episode(e, &ipc[k]),
+                "version {v}, episode k = {k} differs from the in-process one"
+            );
+        }
+        // What the learner recorded is what it received.
+        let first = files
+            .iter()
+            .find(|f| {
+                f.file_name()
+                    .unwrap()
+                    .to_str()
+                    .unwrap()
+                    .ends_with(&format!("_v{v:04}.npz"))
+            })
+            .unwrap();
+        let (rec, origin) = load_episode(first).unwrap();
+        assert_eq!(origin.table_version, v);
+        assert!(
+            same_episode(&rec, &noisy[0]),
+            "recorded episode {}",
+            first.display()
+        );
+        // The learning outcome: the noise-free task cost per iteration …
+        let ipc_cost = lj["eval_costs"][i].as_f64().unwrap();
+        assert_eq!(
+            ipc_cost.to_bits(),
+            log.eval_cost.to_bits(),
+            "iteration {i}: {ipc_cost} vs {}",
+            log.eval_cost
+        );
+        // … equals `expert::train`'s too (the same code in process, after its random baseline).
+        assert_eq!(
+            trained[i].eval_cost.to_bits(),
+            log.eval_cost.to_bits(),
+            "train, iteration {i}"
+        );
+    }
+    // … and every table the learner published.
+    for (i, table) in tables.iter().enumerate() {
+        let v = i as u64 + 1;
+        let (got, _) = load_table(
+            &out.join("tables").join(format!("v{v:04}.npz")),
+            &GainBounds::default(),
+        )
+        .unwrap();
+        assert_eq!(got.version, v);
+        assert_eq!(got.checksum, table.checksum, "table version {v}");
+        assert!(got.used_steps() == table.used_steps(), "table version {v}");
+    }
+    assert!(
+        tables[ITERATIONS].used_steps() != tables[0].used_steps(),
+        "the controller changed"
+    );
+    assert!(sim.running());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continues() {
+    let prefix = unique_prefix("learn-b");
+    let dir = scratch("learn-b");
+    let out = dir.join("out");
+    let (learner_cfg, sim_cfg, ctl_cfg) = configs(&dir, 50);
+    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &[], &dir, "learner1");
+    let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
+
+    // Two updates, and the controller runs version 3.
+    wait_for(
+        "version 3 in use",
+        &mut [&mut learner, &mut sim, &mut ctl],
+        &mut None,
+        || {
+            controller_episodes(&ctl_log(&dir))
+                .iter()
+                .any(|&(_, v, _)| v == 3)
+        },
+    );
+    learner.signal(libc::SIGKILL);
+    let _ = learner.wait(LONG);
+    let killed_at = controller_episodes(&ctl_log(&dir)).len();
+    // The controller finishes its episodes and keeps its table.
+    wait_for(
+        "5 episodes after the kill",
+        &mut [&mut sim, &mut ctl],
+        &mut None,
+        || controller_episodes(&ctl_log(&dir)).len() >= killed_at + 5,
+    );
+    let after = controller_episodes(&ctl_log(&dir));
+    let kept = after[killed_at].1;
+    assert!(kept >= 3);
+    for &(e, v, done) in &after[killed_at..] {
+        assert!(done, "episode {e} aborted after the learner died");
+        assert_eq!(v, kept, "episode {e} ran table v{v}: nobody published it");
+    }
+
+    // Restart from the checkpoint: the same version is published again (the controller
+    // ignores it), then learning goes on.
+    let mut resumed = spawn_learner(
+        &learner_cfg,
+        &prefix,
+        &out,
+        &["--resume", &out.display().to_string()],
+        &dir,
+        "learner2",
+    );
+    wait_for(
+        "two more versions",
+        &mut [&mut resumed, &mut sim, &mut ctl],
+        &mut None,
+        || {
+            controller_episodes(&ctl_log(&dir))
+                .iter()
+                .any(|&(_, v, _)| v >= kept + 2)
+        },
+    );
+    resumed.signal(libc::SIGTERM);
+    let (code, stdout) = resumed.wait(LONG);
+    let rlog = resumed.log();
+    assert_eq!(code, Some(0), "resumed learner log:\n{rlog}");
+    let rj = json_summary(&stdout, &rlog);
+    assert_eq!(rj["exit_reason"], "stopped", "{rj}");
+    assert!(rj["start_version"].as_u64().unwrap() >= kept, "{rj}");
+    assert!(rj["iterations"].as_u64().unwrap() >= 1, "{rj}");
+    assert!(rlog.contains("(resumed)"), "{rlog}");
+
+    ctl.signal(libc::SIGTERM);
+    let (code, cout) = ctl.wait(LONG);
+    let clog = ctl.log();
+    assert_eq!(code, Some(0), "controller log:\n{clog}");
+    let cj = json_summary(&cout, &clog);
+    assert_eq!(cj["episodes_aborted"], 0, "{cj}");
+    assert_eq!(
+        cj["rejected_total"], 0,
+        "the resumed learner's first table is the current one: {cj}"
+    );
+    assert!(cj["table_version"].as_u64().unwrap() >= kept + 2, "{cj}");
+    assert!(cj["lost_peers"]["learner"].as_u64().unwrap() >= 1, "{cj}");
+    // Versions advanced one at a time, each taken once.
+    let versions: Vec<u64> = controller_episodes(&clog).iter().map(|e| e.1).collect();
+    for w in versions.windows(2) {
+        assert!(
+            w[1] == w[0] || w[1] == w[0] + 1,
+            "versions {} then {}",
+            w[0],
+            w[1]
+        );
+    }
+    assert!(sim.running());
+    cleanup_dead_nodes();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn ctl_log(dir: &Path) -> String {
+    std::fs::read_to_string(dir.join("controller.log")).unwrap_or_default()
+}
