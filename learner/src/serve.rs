@@ -739,7 +739,7 @@ pub const HELP_UNITS: &str = "Units: angles rad (actions are goal joint angles),
 times s (task.dt is the control period; progress `sec` is wall-clock from the version's first sample to the \
 end of its update), task cost C(τ) = d_T + Σ (i/T) d_i in m; init_var rad². Every option lives in the TOML file \
 (an ExpertConfig as for `learner expert --config`, plus a [serve] table with prefix, out, resume, \
-record_episodes, wait_report_s, idle_sleep_us); the flags below override it. The controller must run with \
+record_episodes, wait_report_s, idle_sleep_us); the flags above override it. The controller must run with \
 the same seed, task, noisy_episodes = samples and eval_episodes = 1. Files in --out: episodes/*.npz, \
 tables/v*.npz, latest_table.npz, checkpoint.npz, serve_log.csv, best_table.npz.";
 
