@@ -192,6 +192,86 @@ pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
     })
 }
 
+/// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
+/// that runs with different seeds get different critics. Shared with the PPO baseline.
+pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
+    let mut dcfg = dcfg.clone();
+    dcfg.seed = seed ^ dcfg.seed ^ 0x4352_4954; // "CRIT"
+    dcfg
+}
+
+/// A fresh critic (`dcfg`, weights drawn again from its seed) whose input normalisation is
+/// fitted on expert ∪ `controller` transitions; LQR+GAIfO and the PPO baseline call it once,
+/// on the first iteration's samples (why: [`LqrGaifo`]'s `refit_normalizer`).
+pub fn refit_critic(
+    expert: &Mat<f64>,
+    controller: &Mat<f64>,
+    dcfg: &DiscriminatorConfig,
+) -> Result<Discriminator, LearnerError> {
+    let (ne, nc) = (expert.nrows(), controller.nrows());
+    let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
+        if r < ne {
+            expert[(r, c)]
+        } else {
+            controller[(r - ne, c)]
+        }
+    });
+    let norm =
+        Normalizer::from_data(both.as_ref()).map_err(|e| LearnerError::Shape(e.to_string()))?;
+    Discriminator::new(D_IN, dcfg.clone(), norm).map_err(|e| LearnerError::Shape(e.to_string()))
+}
+
+/// Line 3 of Algorithm 1: `updates` (at least one) WGAN-GP calls on expert vs `controller`
+/// transitions; returns the last call's statistics. Shared with the PPO baseline.
+pub fn train_critic(
+    disc: &mut Discriminator,
+    ws: &mut crate::discriminator::Workspace,
+    expert: &Mat<f64>,
+    controller: &Mat<f64>,
+    updates: usize,
+) -> Result<TrainStats, LearnerError> {
+    let mut stats = None;
+    for _ in 0..updates.max(1) {
+        stats = Some(
+            disc.train(expert.as_ref(), controller.as_ref(), ws)
+                .map_err(|e| LearnerError::Shape(format!("discriminator: {e}")))?,
+        );
+    }
+    Ok(stats.expect("at least one update"))
+}
+
+/// Header of the per-iteration CSV (`gaifo_log.csv`), the same for both algorithms.
+pub const CSV_HEADER: &str = "iteration,seed,algorithm,normalised_performance,task_cost,final_distance_m,critic_loss,wasserstein,kl,eta,step_mult,t_execute_s,t_dynamics_s,t_critic_s,t_cost_s,t_lqr_s";
+
+/// One CSV row (columns of [`CSV_HEADER`]) of run `seed` of `algorithm`.
+pub fn write_csv_row(
+    f: &mut impl std::io::Write,
+    log: &GaifoLog,
+    seed: u64,
+    algorithm: &str,
+) -> std::io::Result<()> {
+    writeln!(
+        f,
+        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        log.iteration,
+        seed,
+        algorithm,
+        log.performance,
+        log.task_cost,
+        log.final_distance,
+        log.critic_loss,
+        log.wasserstein,
+        log.kl,
+        log.eta,
+        log.step_mult,
+        log.t_execute,
+        log.t_dynamics,
+        log.t_critic,
+        log.t_cost,
+        log.t_lqr
+    )
+}
+
 /// The state of an LQR+GAIfO run; [`LqrGaifo::iterate`] runs one iteration of Algorithm 1.
 pub struct LqrGaifo {
     cfg: GaifoConfig,
@@ -225,10 +305,8 @@ impl LqrGaifo {
         let expert = expert_transitions(&demos);
         let norm = Normalizer::from_data(expert.as_ref())
             .map_err(|e| LearnerError::Shape(e.to_string()))?;
-        let mut dcfg = cfg.discriminator.clone();
-        dcfg.seed = cfg.seed ^ dcfg.seed ^ 0x4352_4954; // "CRIT"
-        let disc =
-            Discriminator::new(D_IN, dcfg, norm).map_err(|e| LearnerError::Shape(e.to_string()))?;
+        let disc = Discriminator::new(D_IN, critic_config(&cfg.discriminator, cfg.seed), norm)
+            .map_err(|e| LearnerError::Shape(e.to_string()))?;
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),
@@ -280,18 +358,7 @@ impl LqrGaifo {
     /// controller's transitions sit many σ away, the tanh units saturate and the cost is flat
     /// where the controller is (measured: no progress in 20 iterations).
     fn refit_normalizer(&mut self, controller: &Mat<f64>) -> Result<(), LearnerError> {
-        let (ne, nc) = (self.expert.nrows(), controller.nrows());
-        let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
-            if r < ne {
-                self.expert[(r, c)]
-            } else {
-                controller[(r - ne, c)]
-            }
-        });
-        let norm =
-            Normalizer::from_data(both.as_ref()).map_err(|e| LearnerError::Shape(e.to_string()))?;
-        self.disc = Discriminator::new(D_IN, self.disc.config().clone(), norm)
-            .map_err(|e| LearnerError::Shape(e.to_string()))?;
+        self.disc = refit_critic(&self.expert, controller, self.disc.config())?;
         self.cost_ws = CompositeWorkspace::new(&self.disc).with_psd(self.cfg.psd_hessian);
         Ok(())
     }
@@ -301,15 +368,13 @@ impl LqrGaifo {
         &mut self,
         controller: &Mat<f64>,
     ) -> Result<TrainStats, LearnerError> {
-        let mut stats = None;
-        for _ in 0..self.cfg.critic_updates.max(1) {
-            stats = Some(
-                self.disc
-                    .train(self.expert.as_ref(), controller.as_ref(), &mut self.disc_ws)
-                    .map_err(|e| LearnerError::Shape(format!("discriminator: {e}")))?,
-            );
-        }
-        Ok(stats.expect("at least one update"))
+        train_critic(
+            &mut self.disc,
+            &mut self.disc_ws,
+            &self.expert,
+            controller,
+            self.cfg.critic_updates,
+        )
     }
 
     /// One iteration of Algorithm 1; returns its log and the noise-free episode.
@@ -423,7 +488,7 @@ pub fn train(
         Some(dir) => {
             std::fs::create_dir_all(dir)?;
             let mut f = std::fs::File::create(dir.join("gaifo_log.csv"))?;
-            writeln!(f, "iteration,seed,algorithm,normalised_performance,task_cost,final_distance_m,critic_loss,wasserstein,kl,eta,step_mult,t_execute_s,t_dynamics_s,t_critic_s,t_cost_s,t_lqr_s")?;
+            writeln!(f, "{CSV_HEADER}")?;
             run.checkpoint(dir)?;
             Some(f)
         }
@@ -434,25 +499,7 @@ pub fn train(
         let (log, _) = run.iterate()?;
         progress(&log);
         if let (Some(f), Some(dir)) = (csv.as_mut(), out) {
-            writeln!(
-                f,
-                "{},{},lqr-gaifo,{},{},{},{},{},{},{},{},{},{},{},{},{}",
-                log.iteration,
-                cfg.seed,
-                log.performance,
-                log.task_cost,
-                log.final_distance,
-                log.critic_loss,
-                log.wasserstein,
-                log.kl,
-                log.eta,
-                log.step_mult,
-                log.t_execute,
-                log.t_dynamics,
-                log.t_critic,
-                log.t_cost,
-                log.t_lqr
-            )?;
+            write_csv_row(f, &log, cfg.seed, "lqr-gaifo")?;
             f.flush()?;
             run.checkpoint(dir)?;
         }

@@ -82,9 +82,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     );
     match args.algo {
         Algo::LqrGaifo => {}
-        Algo::GaifoPpo => {
-            anyhow::bail!("--algo gaifo-ppo (the PPO baseline) is not implemented yet")
-        }
+        Algo::GaifoPpo => return crate::ppo::gaifo_ppo::run_cli(&args, demos, &cfg),
     }
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
