@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
+use ur5_shared::config::parse_triple;
+
 use crate::expert::{square_goals, train_and_record, ExpertConfig, IterationLog};
 
 /// Arguments of `learner expert`.
@@ -15,7 +17,7 @@ pub struct ExpertArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Goal point x,y,z (m, arm base frame); overrides the config.
-    #[arg(long, value_parser = parse3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
     pub goal: Option<[f64; 3]>,
     /// Train and record experts for the 8 points of the generalisation square around the goal
     /// (corners and mid-edges, half side `square_half_side`), one folder each.
@@ -35,28 +37,12 @@ pub struct ExpertArgs {
     pub json: bool,
 }
 
-fn parse3(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> =
-        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}"))).collect::<Result<_, _>>()?;
-    let a: [f64; 3] = v.try_into().map_err(|v: Vec<f64>| format!("expected x,y,z, got {} numbers", v.len()))?;
-    if a.iter().any(|x| !x.is_finite()) {
-        return Err("values must be finite".into());
-    }
-    Ok(a)
-}
-
 fn print_header() {
-    eprintln!(
-        "{:>4} {:>10} {:>10} {:>9} {:>7} {:>9} {:>9} {:>6} {:>6}",
-        "iter", "eval_cost", "mean_cost", "final_m", "proxy", "kl", "eta", "mult", "sec"
-    );
+    eprintln!("{}", IterationLog::PROGRESS_HEADER);
 }
 
 fn print_line(l: &IterationLog) {
-    eprintln!(
-        "{:>4} {:>10.4} {:>10.4} {:>9.4} {:>7.3} {:>9.3} {:>9.2e} {:>6.2} {:>6.2}",
-        l.iteration, l.eval_cost, l.mean_sample_cost, l.final_distance, l.performance_proxy, l.kl, l.eta, l.step_mult, l.seconds
-    );
+    eprintln!("{}", l.progress_line());
 }
 
 /// Runs `learner expert`.
@@ -76,8 +62,14 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     }
     cfg.task.validate()?;
     cfg.sim.validate()?;
-    anyhow::ensure!(cfg.samples >= 1 && cfg.iterations >= 1 && cfg.demos >= 1, "samples, iterations and demos must be >= 1");
-    anyhow::ensure!(cfg.init_var > 0.0 && cfg.init_var.is_finite(), "init_var must be finite and > 0 (rad²)");
+    anyhow::ensure!(
+        cfg.samples >= 1 && cfg.iterations >= 1 && cfg.demos >= 1,
+        "samples, iterations and demos must be >= 1"
+    );
+    anyhow::ensure!(
+        cfg.init_var > 0.0 && cfg.init_var.is_finite(),
+        "init_var must be finite and > 0 (rad²)"
+    );
 
     let jobs: Vec<(ExpertConfig, PathBuf)> = if args.square {
         square_goals(cfg.task.goal, cfg.square_half_side)
@@ -95,9 +87,15 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
     };
     let mut summaries = Vec::new();
     for (c, out) in &jobs {
-        eprintln!("expert for goal {:?} m (seed {}) -> {}", c.task.goal, c.seed, out.display());
+        eprintln!(
+            "expert for goal {:?} m (seed {}) -> {}",
+            c.task.goal,
+            c.seed,
+            out.display()
+        );
         print_header();
-        let s = train_and_record(c, out, print_line).with_context(|| format!("expert for goal {:?}", c.task.goal))?;
+        let s = train_and_record(c, out, print_line)
+            .with_context(|| format!("expert for goal {:?}", c.task.goal))?;
         eprintln!(
             "done: best eval cost {:.4} ({:.1} % of the random policy's {:.4}), final distance {:.4} m; \
              {} demos (mean cost {:.4}) in {}",
@@ -112,7 +110,10 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
         summaries.push(s);
     }
     if args.json {
-        println!("{}", serde_json::json!({"command": "expert", "runs": summaries}));
+        println!(
+            "{}",
+            serde_json::json!({"command": "expert", "runs": summaries})
+        );
     }
     Ok(())
 }

@@ -9,16 +9,32 @@ use ur5_shared::GainBounds;
 /// < 25 % of the random policy's within 15 iterations (75 noisy episodes).
 #[test]
 fn expert_reaches_the_goal_within_15_iterations() {
-    let cfg = ExpertConfig { iterations: 15, ..ExpertConfig::default() };
+    let cfg = ExpertConfig {
+        iterations: 15,
+        ..ExpertConfig::default()
+    };
     let mut lines = Vec::new();
-    let run = train(&cfg, |l| lines.push((l.iteration, l.eval_cost, l.final_distance))).unwrap();
+    let run = train(&cfg, |l| {
+        lines.push((l.iteration, l.eval_cost, l.final_distance))
+    })
+    .unwrap();
     for (i, c, d) in &lines {
         eprintln!("iteration {i}: eval cost {c:.4}, final distance {d:.4} m");
     }
     let ratio = run.eval.task_cost() / run.cost_random;
-    eprintln!("best: cost {:.4} = {:.2} % of random {:.4}, final distance {:.5} m", run.eval.task_cost(), 100.0 * ratio, run.cost_random, run.eval.final_distance());
+    eprintln!(
+        "best: cost {:.4} = {:.2} % of random {:.4}, final distance {:.5} m",
+        run.eval.task_cost(),
+        100.0 * ratio,
+        run.cost_random,
+        run.eval.final_distance()
+    );
     assert!(run.log.len() <= 15);
-    assert!(run.eval.final_distance() < 0.02, "final distance {} m", run.eval.final_distance());
+    assert!(
+        run.eval.final_distance() < 0.02,
+        "final distance {} m",
+        run.eval.final_distance()
+    );
     assert!(ratio < 0.25, "cost ratio {ratio}");
     // Learning, not luck: the first controller (hold the start pose) is far from the goal.
     assert!(run.log[0].final_distance > 0.1);
@@ -28,7 +44,12 @@ fn expert_reaches_the_goal_within_15_iterations() {
 #[test]
 fn same_seed_same_demonstrations_bit_for_bit() {
     let dir = std::env::temp_dir().join(format!("expert-test-{}", std::process::id()));
-    let mut cfg = ExpertConfig { iterations: 3, demos: 2, random_episodes: 2, ..ExpertConfig::default() };
+    let mut cfg = ExpertConfig {
+        iterations: 3,
+        demos: 2,
+        random_episodes: 2,
+        ..ExpertConfig::default()
+    };
     cfg.task.horizon = 30;
     let a = train_and_record(&cfg, &dir.join("a"), |_| {}).unwrap();
     let b = train_and_record(&cfg, &dir.join("b"), |_| {}).unwrap();
@@ -43,9 +64,15 @@ fn same_seed_same_demonstrations_bit_for_bit() {
     let (table, dt) = load_table(&a.table, &GainBounds::default()).unwrap();
     assert_eq!((table.horizon(), dt), (30, cfg.task.dt));
 
-    let other = ExpertConfig { seed: cfg.seed + 1, ..cfg.clone() };
+    let other = ExpertConfig {
+        seed: cfg.seed + 1,
+        ..cfg.clone()
+    };
     let run = train(&other, |_| {}).unwrap();
     let dc = record_demos(&other, &run.policy, run.cost_random).unwrap();
-    assert_ne!(dc.states, da.states, "another seed must give other demonstrations");
+    assert_ne!(
+        dc.states, da.states,
+        "another seed must give other demonstrations"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

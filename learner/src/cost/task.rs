@@ -32,7 +32,13 @@ pub struct TaskCostConfig {
 
 impl Default for TaskCostConfig {
     fn default() -> Self {
-        Self { l1: 1.0, l2: 1.0, alpha: 1e-4, final_weight: 1.0, action_weight: 1e-2 }
+        Self {
+            l1: 1.0,
+            l2: 1.0,
+            alpha: 1e-4,
+            final_weight: 1.0,
+            action_weight: 1e-2,
+        }
     }
 }
 
@@ -56,7 +62,14 @@ pub struct StepDerivs {
 
 impl Default for StepDerivs {
     fn default() -> Self {
-        Self { l: 0.0, lx: [0.0; DX], lu: [0.0; DU], lxx: [[0.0; DX]; DX], luu: [[0.0; DU]; DU], lux: [[0.0; DX]; DU] }
+        Self {
+            l: 0.0,
+            lx: [0.0; DX],
+            lu: [0.0; DU],
+            lxx: [[0.0; DX]; DX],
+            luu: [[0.0; DU]; DU],
+            lux: [[0.0; DX]; DU],
+        }
     }
 }
 
@@ -72,10 +85,21 @@ impl TaskCostConfig {
     }
 
     /// ℓ_t(s, a) and its derivatives, written into `out` (no allocation).
-    pub fn eval(&self, t: usize, horizon: usize, s: &[f64; DX], a: &[f64; DU], out: &mut StepDerivs) {
+    pub fn eval(
+        &self,
+        t: usize,
+        horizon: usize,
+        s: &[f64; DX],
+        a: &[f64; DU],
+        out: &mut StepDerivs,
+    ) {
         *out = StepDerivs::default();
         let w = self.weight(t, horizon);
-        let e = [s[EE_MINUS_GOAL.start], s[EE_MINUS_GOAL.start + 1], s[EE_MINUS_GOAL.start + 2]];
+        let e = [
+            s[EE_MINUS_GOAL.start],
+            s[EE_MINUS_GOAL.start + 1],
+            s[EE_MINUS_GOAL.start + 2],
+        ];
         let d2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
         let r = (d2 + self.alpha).sqrt();
         out.l = w * (self.l1 * r + 0.5 * self.l2 * d2);
@@ -87,7 +111,8 @@ impl TaskCostConfig {
                 out.lx[EE_MINUS_GOAL.start + i] = g * e[i];
                 for j in 0..3 {
                     let diag = if i == j { g } else { 0.0 };
-                    out.lxx[EE_MINUS_GOAL.start + i][EE_MINUS_GOAL.start + j] = diag - h * e[i] * e[j];
+                    out.lxx[EE_MINUS_GOAL.start + i][EE_MINUS_GOAL.start + j] =
+                        diag - h * e[i] * e[j];
                 }
             }
         }
@@ -132,7 +157,12 @@ mod tests {
             let scale = if k % 2 == 0 { 0.3 } else { 0.01 };
             let mut y = [0.0; DX + DU];
             for (i, v) in y.iter_mut().enumerate() {
-                *v = rng.random_range(-1.0..1.0) * if EE_MINUS_GOAL.contains(&i) { scale } else { 1.0 };
+                *v = rng.random_range(-1.0..1.0)
+                    * if EE_MINUS_GOAL.contains(&i) {
+                        scale
+                    } else {
+                        1.0
+                    };
             }
             let t = rng.random_range(0..100);
             let s: [f64; DX] = y[..DX].try_into().unwrap();
@@ -157,8 +187,20 @@ mod tests {
                 // Hessian row i from central differences of the analytic gradient.
                 let mut dp = StepDerivs::default();
                 let mut dm = StepDerivs::default();
-                c.eval(t, 100, &yp[..DX].try_into().unwrap(), &yp[DX..].try_into().unwrap(), &mut dp);
-                c.eval(t, 100, &ym[..DX].try_into().unwrap(), &ym[DX..].try_into().unwrap(), &mut dm);
+                c.eval(
+                    t,
+                    100,
+                    &yp[..DX].try_into().unwrap(),
+                    &yp[DX..].try_into().unwrap(),
+                    &mut dp,
+                );
+                c.eval(
+                    t,
+                    100,
+                    &ym[..DX].try_into().unwrap(),
+                    &ym[DX..].try_into().unwrap(),
+                    &mut dm,
+                );
                 let gp: Vec<f64> = dp.lx.iter().chain(dp.lu.iter()).copied().collect();
                 let gm: Vec<f64> = dm.lx.iter().chain(dm.lu.iter()).copied().collect();
                 for j in 0..DX + DU {
@@ -174,7 +216,13 @@ mod tests {
     /// With the smoothing and extras off, the summed per-step cost is the task cost C(τ).
     #[test]
     fn reduces_to_the_task_cost() {
-        let c = TaskCostConfig { l1: 1.0, l2: 0.0, alpha: 0.0, final_weight: 1.0, action_weight: 0.0 };
+        let c = TaskCostConfig {
+            l1: 1.0,
+            l2: 0.0,
+            alpha: 0.0,
+            final_weight: 1.0,
+            action_weight: 0.0,
+        };
         let horizon = 7;
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut states = Vec::new();

@@ -79,24 +79,43 @@ impl Demos {
     /// Reads and checks demonstrations.
     pub fn load(path: &Path) -> Result<Self, NpzError> {
         let f = NpzFile::open(path)?;
-        let bad = |name: &str, why: String| NpzError::Bad { path: path.to_owned(), name: name.into(), why };
+        let bad = |name: &str, why: String| NpzError::Bad {
+            path: path.to_owned(),
+            name: name.into(),
+            why,
+        };
         let version = f.f64_shaped("schema_version", &[])?[0];
         if version != SCHEMA_VERSION as f64 {
-            return Err(bad("schema_version", format!("{version}, this program reads {SCHEMA_VERSION}")));
+            return Err(bad(
+                "schema_version",
+                format!("{version}, this program reads {SCHEMA_VERSION}"),
+            ));
         }
         let names = f.strings("state_names")?;
         if names != STATE_NAMES {
-            return Err(bad("state_names", format!("{names:?} is not this project's state layout {STATE_NAMES:?}")));
+            return Err(bad(
+                "state_names",
+                format!("{names:?} is not this project's state layout {STATE_NAMES:?}"),
+            ));
         }
         let (shape, states) = f.f64("states")?;
         let [d, t, dx] = shape[..] else {
-            return Err(bad("states", format!("shape {shape:?}, expected (D, T, {DX})")));
+            return Err(bad(
+                "states",
+                format!("shape {shape:?}, expected (D, T, {DX})"),
+            ));
         };
         if dx != DX as u64 {
-            return Err(bad("states", format!("state dimension {dx}, expected dX = {DX}")));
+            return Err(bad(
+                "states",
+                format!("state dimension {dx}, expected dX = {DX}"),
+            ));
         }
         if d == 0 || t < 2 {
-            return Err(bad("states", format!("{d} demonstrations of {t} steps: need at least 1 of at least 2 steps")));
+            return Err(bad(
+                "states",
+                format!("{d} demonstrations of {t} steps: need at least 1 of at least 2 steps"),
+            ));
         }
         let actions = f.f64_shaped("actions_diagnostic", &[d, t, DU as u64])?;
         let scalar = |name: &str| -> Result<f64, NpzError> { Ok(f.f64_shaped(name, &[])?[0]) };
@@ -115,15 +134,26 @@ impl Demos {
             states,
             actions,
         };
-        for (name, values) in [("states", &demos.states), ("actions_diagnostic", &demos.actions)] {
+        for (name, values) in [
+            ("states", &demos.states),
+            ("actions_diagnostic", &demos.actions),
+        ] {
             if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(bad(name, format!("non-finite value {} at flat index {i}", values[i])));
+                return Err(bad(
+                    name,
+                    format!("non-finite value {} at flat index {i}", values[i]),
+                ));
             }
         }
         if !(demos.dt > 0.0 && demos.dt.is_finite()) {
             return Err(bad("dt", format!("{} s must be finite and > 0", demos.dt)));
         }
-        if demos.goal.iter().chain(demos.start_q.iter()).any(|v| !v.is_finite()) {
+        if demos
+            .goal
+            .iter()
+            .chain(demos.start_q.iter())
+            .any(|v| !v.is_finite())
+        {
             return Err(bad("goal", "goal and start_q must be finite".into()));
         }
         Ok(demos)
@@ -163,7 +193,10 @@ mod tests {
         nan.states[17] = f64::NAN;
         nan.save(&path).unwrap();
         let e = Demos::load(&path).unwrap_err().to_string();
-        assert!(e.contains("states") && e.contains("non-finite") && e.contains("17"), "{e}");
+        assert!(
+            e.contains("states") && e.contains("non-finite") && e.contains("17"),
+            "{e}"
+        );
 
         // Wrong state dimension: write a (2, 5, 11) array by hand.
         let mut w = NpzWriter::create(&path).unwrap();
@@ -186,10 +219,14 @@ mod tests {
         w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
         w.strings("state_names", &STATE_NAMES).unwrap();
         w.f64("states", &[2, 5, 12], &vec![0.0; 120]).unwrap();
-        w.f64("actions_diagnostic", &[2, 4, 3], &vec![0.0; 24]).unwrap();
+        w.f64("actions_diagnostic", &[2, 4, 3], &vec![0.0; 24])
+            .unwrap();
         w.finish().unwrap();
         let e = Demos::load(&path).unwrap_err().to_string();
-        assert!(e.contains("actions_diagnostic") && e.contains("expected [2, 5, 3]"), "{e}");
+        assert!(
+            e.contains("actions_diagnostic") && e.contains("expected [2, 5, 3]"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -67,23 +67,38 @@ impl NpzWriter {
         let mut partial = path.as_os_str().to_owned();
         partial.push(".partial");
         let partial = PathBuf::from(partial);
-        let io = |source| NpzError::Io { path: partial.clone(), source };
+        let io = |source| NpzError::Io {
+            path: partial.clone(),
+            source,
+        };
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(io)?;
         }
         let file = File::create(&partial).map_err(io)?;
-        Ok(Self { zip: ZipWriter::new(BufWriter::new(file)), partial, path: path.to_owned() })
+        Ok(Self {
+            zip: ZipWriter::new(BufWriter::new(file)),
+            partial,
+            path: path.to_owned(),
+        })
     }
 
     fn start(&mut self, name: &str) -> Result<(), NpzError> {
-        let opts = SimpleFileOptions::default().compression_method(CompressionMethod::Stored).large_file(true);
+        let opts = SimpleFileOptions::default()
+            .compression_method(CompressionMethod::Stored)
+            .large_file(true);
         self.zip
             .start_file(format!("{name}.npy"), opts)
-            .map_err(|e| NpzError::Zip { path: self.partial.clone(), message: e.to_string() })
+            .map_err(|e| NpzError::Zip {
+                path: self.partial.clone(),
+                message: e.to_string(),
+            })
     }
 
     fn io(&self) -> impl Fn(std::io::Error) -> NpzError + '_ {
-        move |source| NpzError::Io { path: self.partial.clone(), source }
+        move |source| NpzError::Io {
+            path: self.partial.clone(),
+            source,
+        }
     }
 
     /// Adds a float64 array of `shape` (C order); `data.len()` must equal the product of `shape`.
@@ -101,13 +116,28 @@ impl NpzWriter {
         self.numeric(name, shape, data)
     }
 
-    fn numeric<T: npyz::AutoSerialize + Copy>(&mut self, name: &str, shape: &[u64], data: &[T]) -> Result<(), NpzError> {
+    fn numeric<T: npyz::AutoSerialize + Copy>(
+        &mut self,
+        name: &str,
+        shape: &[u64],
+        data: &[T],
+    ) -> Result<(), NpzError> {
         let n: u64 = shape.iter().product();
-        assert_eq!(n as usize, data.len(), "array `{name}`: shape {shape:?} does not match {} values", data.len());
+        assert_eq!(
+            n as usize,
+            data.len(),
+            "array `{name}`: shape {shape:?} does not match {} values",
+            data.len()
+        );
         self.start(name)?;
         let mut buf = Vec::with_capacity(128 + std::mem::size_of_val(data));
         {
-            let mut w = npyz::WriteOptions::new().default_dtype().shape(shape).writer(&mut buf).begin_nd().map_err(self.io())?;
+            let mut w = npyz::WriteOptions::new()
+                .default_dtype()
+                .shape(shape)
+                .writer(&mut buf)
+                .begin_nd()
+                .map_err(self.io())?;
             w.extend(data.iter().copied()).map_err(self.io())?;
             w.finish().map_err(self.io())?;
         }
@@ -116,8 +146,17 @@ impl NpzWriter {
 
     /// Adds a 1-D array of unicode strings (numpy dtype `<U{max len}`).
     pub fn strings(&mut self, name: &str, values: &[&str]) -> Result<(), NpzError> {
-        let width = values.iter().map(|s| s.chars().count()).max().unwrap_or(1).max(1);
-        let dtype = npyz::DType::Plain(format!("<U{width}").parse::<npyz::TypeStr>().expect("valid type string"));
+        let width = values
+            .iter()
+            .map(|s| s.chars().count())
+            .max()
+            .unwrap_or(1)
+            .max(1);
+        let dtype = npyz::DType::Plain(
+            format!("<U{width}")
+                .parse::<npyz::TypeStr>()
+                .expect("valid type string"),
+        );
         self.start(name)?;
         let mut buf = Vec::new();
         {
@@ -143,10 +182,22 @@ impl NpzWriter {
     /// Finishes the archive, flushes it to disk and moves it to its final name.
     pub fn finish(self) -> Result<PathBuf, NpzError> {
         let partial = self.partial.clone();
-        let writer = self.zip.finish().map_err(|e| NpzError::Zip { path: partial.clone(), message: e.to_string() })?;
-        let file = writer.into_inner().map_err(|e| NpzError::Io { path: partial.clone(), source: e.into_error() })?;
-        file.sync_all().map_err(|source| NpzError::Io { path: partial.clone(), source })?;
-        std::fs::rename(&partial, &self.path).map_err(|source| NpzError::Io { path: self.path.clone(), source })?;
+        let writer = self.zip.finish().map_err(|e| NpzError::Zip {
+            path: partial.clone(),
+            message: e.to_string(),
+        })?;
+        let file = writer.into_inner().map_err(|e| NpzError::Io {
+            path: partial.clone(),
+            source: e.into_error(),
+        })?;
+        file.sync_all().map_err(|source| NpzError::Io {
+            path: partial.clone(),
+            source,
+        })?;
+        std::fs::rename(&partial, &self.path).map_err(|source| NpzError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
         Ok(self.path)
     }
 }
@@ -166,19 +217,38 @@ pub struct NpzFile {
 impl NpzFile {
     /// Reads every array of `path`.
     pub fn open(path: &Path) -> Result<Self, NpzError> {
-        let file = File::open(path).map_err(|source| NpzError::Io { path: path.to_owned(), source })?;
-        let zerr = |e: zip::result::ZipError| NpzError::Zip { path: path.to_owned(), message: e.to_string() };
+        let file = File::open(path).map_err(|source| NpzError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let zerr = |e: zip::result::ZipError| NpzError::Zip {
+            path: path.to_owned(),
+            message: e.to_string(),
+        };
         let mut zip = ZipArchive::new(file).map_err(zerr)?;
         let mut arrays = BTreeMap::new();
         for i in 0..zip.len() {
             let mut entry = zip.by_index(i).map_err(zerr)?;
-            let entry_name = entry.name().map_err(|e| NpzError::Zip { path: path.to_owned(), message: e.to_string() })?;
-            let Some(name) = entry_name.strip_suffix(".npy").map(str::to_owned) else { continue };
+            let entry_name = entry.name().map_err(|e| NpzError::Zip {
+                path: path.to_owned(),
+                message: e.to_string(),
+            })?;
+            let Some(name) = entry_name.strip_suffix(".npy").map(str::to_owned) else {
+                continue;
+            };
             let mut bytes = Vec::with_capacity(entry.size() as usize);
-            entry.read_to_end(&mut bytes).map_err(|source| NpzError::Io { path: path.to_owned(), source })?;
+            entry
+                .read_to_end(&mut bytes)
+                .map_err(|source| NpzError::Io {
+                    path: path.to_owned(),
+                    source,
+                })?;
             arrays.insert(name, RawArray { bytes });
         }
-        Ok(Self { path: path.to_owned(), arrays })
+        Ok(Self {
+            path: path.to_owned(),
+            arrays,
+        })
     }
 
     /// Path the file was read from.
@@ -197,11 +267,16 @@ impl NpzFile {
             name: name.into(),
             present: self.names(),
         })?;
-        npyz::NpyFile::new(&raw.bytes[..]).map_err(|e| self.bad(name, format!("not a valid .npy array: {e}")))
+        npyz::NpyFile::new(&raw.bytes[..])
+            .map_err(|e| self.bad(name, format!("not a valid .npy array: {e}")))
     }
 
     fn bad(&self, name: &str, why: String) -> NpzError {
-        NpzError::Bad { path: self.path.clone(), name: name.into(), why }
+        NpzError::Bad {
+            path: self.path.clone(),
+            name: name.into(),
+            why,
+        }
     }
 
     /// A float64 array: (shape, values in C order). Float32 and integer arrays are converted.
@@ -209,16 +284,32 @@ impl NpzFile {
         let npy = self.npy(name)?;
         let shape = npy.shape().to_vec();
         if npy.order() != npyz::Order::C {
-            return Err(self.bad(name, "Fortran-ordered arrays are not supported; save with C order".into()));
+            return Err(self.bad(
+                name,
+                "Fortran-ordered arrays are not supported; save with C order".into(),
+            ));
         }
         let dtype = npy.dtype().descr();
         let values = match dtype.trim_matches('\'').trim_start_matches(['<', '|', '=']) {
             "f8" => npy.into_vec::<f64>(),
-            "f4" => npy.into_vec::<f32>().map(|v| v.into_iter().map(f64::from).collect()),
-            "i8" => npy.into_vec::<i64>().map(|v| v.into_iter().map(|x| x as f64).collect()),
-            "i4" => npy.into_vec::<i32>().map(|v| v.into_iter().map(f64::from).collect()),
-            "u8" => npy.into_vec::<u64>().map(|v| v.into_iter().map(|x| x as f64).collect()),
-            other => return Err(self.bad(name, format!("dtype {other} is not a little-endian float or integer"))),
+            "f4" => npy
+                .into_vec::<f32>()
+                .map(|v| v.into_iter().map(f64::from).collect()),
+            "i8" => npy
+                .into_vec::<i64>()
+                .map(|v| v.into_iter().map(|x| x as f64).collect()),
+            "i4" => npy
+                .into_vec::<i32>()
+                .map(|v| v.into_iter().map(f64::from).collect()),
+            "u8" => npy
+                .into_vec::<u64>()
+                .map(|v| v.into_iter().map(|x| x as f64).collect()),
+            other => {
+                return Err(self.bad(
+                    name,
+                    format!("dtype {other} is not a little-endian float or integer"),
+                ))
+            }
         }
         .map_err(|e| self.bad(name, e.to_string()))?;
         Ok((shape, values))
@@ -230,7 +321,9 @@ impl NpzFile {
         if !npy.shape().is_empty() {
             return Err(self.bad(name, format!("shape {:?}, expected a scalar", npy.shape())));
         }
-        let v = npy.into_vec::<u64>().map_err(|e| self.bad(name, e.to_string()))?;
+        let v = npy
+            .into_vec::<u64>()
+            .map_err(|e| self.bad(name, e.to_string()))?;
         Ok(v[0])
     }
 
@@ -246,7 +339,8 @@ impl NpzFile {
     /// A unicode string array (numpy `<U`), as Rust strings.
     pub fn strings(&self, name: &str) -> Result<Vec<String>, NpzError> {
         let npy = self.npy(name)?;
-        npy.into_vec::<String>().map_err(|e| self.bad(name, e.to_string()))
+        npy.into_vec::<String>()
+            .map_err(|e| self.bad(name, e.to_string()))
     }
 
     /// The single string of a one-element string array.
@@ -287,7 +381,10 @@ mod tests {
         let e = f.f64_shaped("x", &[2, 3, 5]).unwrap_err().to_string();
         assert!(e.contains("shape [2, 3, 4], expected [2, 3, 5]"), "{e}");
         std::fs::write(dir.join("junk.npz"), b"not a zip").unwrap();
-        assert!(matches!(NpzFile::open(&dir.join("junk.npz")), Err(NpzError::Zip { .. })));
+        assert!(matches!(
+            NpzFile::open(&dir.join("junk.npz")),
+            Err(NpzError::Zip { .. })
+        ));
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -32,11 +32,19 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
     let mut w = NpzWriter::create(path)?;
     w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
     let flat = |f: &dyn Fn(&GainStep) -> Vec<f64>| steps.iter().flat_map(f).collect::<Vec<f64>>();
-    w.f64("K", &[t, DU as u64, DX as u64], &flat(&|s| s.k_mat.iter().flatten().copied().collect()))?;
+    w.f64(
+        "K",
+        &[t, DU as u64, DX as u64],
+        &flat(&|s| s.k_mat.iter().flatten().copied().collect()),
+    )?;
     w.f64("k", &[t, DU as u64], &flat(&|s| s.k_vec.to_vec()))?;
     w.f64("s_hat", &[t, DX as u64], &flat(&|s| s.s_hat.to_vec()))?;
     w.f64("a_hat", &[t, DU as u64], &flat(&|s| s.a_hat.to_vec()))?;
-    w.f64("L", &[t, DU as u64, DU as u64], &flat(&|s| s.chol.iter().flatten().copied().collect()))?;
+    w.f64(
+        "L",
+        &[t, DU as u64, DU as u64],
+        &flat(&|s| s.chol.iter().flatten().copied().collect()),
+    )?;
     w.u64("version", &[], &[table.version])?;
     w.u64("checksum", &[], &[table.checksum])?;
     w.f64("dt", &[], &[dt])?;
@@ -49,15 +57,30 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
 /// Reads a table and validates it against `bounds`; returns it with its control period (s).
 pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f64), NpzError> {
     let f = NpzFile::open(path)?;
-    let bad = |name: &str, why: String| NpzError::Bad { path: path.to_owned(), name: name.into(), why };
+    let bad = |name: &str, why: String| NpzError::Bad {
+        path: path.to_owned(),
+        name: name.into(),
+        why,
+    };
     let version = f.f64_shaped("schema_version", &[])?[0];
     if version != SCHEMA_VERSION as f64 {
-        return Err(bad("schema_version", format!("{version}, this program reads {SCHEMA_VERSION}")));
+        return Err(bad(
+            "schema_version",
+            format!("{version}, this program reads {SCHEMA_VERSION}"),
+        ));
     }
     let (shape, k_mat) = f.f64("K")?;
-    let [t, du, dx] = shape[..] else { return Err(bad("K", format!("shape {shape:?}, expected (T, {DU}, {DX})"))) };
+    let [t, du, dx] = shape[..] else {
+        return Err(bad(
+            "K",
+            format!("shape {shape:?}, expected (T, {DU}, {DX})"),
+        ));
+    };
     if (du, dx) != (DU as u64, DX as u64) {
-        return Err(bad("K", format!("shape {shape:?}, expected (T, {DU}, {DX})")));
+        return Err(bad(
+            "K",
+            format!("shape {shape:?}, expected (T, {DU}, {DX})"),
+        ));
     }
     let k_vec = f.f64_shaped("k", &[t, DU as u64])?;
     let s_hat = f.f64_shaped("s_hat", &[t, DX as u64])?;
@@ -65,7 +88,9 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
     let chol = f.f64_shaped("L", &[t, DU as u64, DU as u64])?;
     let dt = f.f64_shaped("dt", &[])?[0];
     let mut table = GainTable::new_boxed();
-    table.set_horizon(t as usize).map_err(|e| bad("K", e.to_string()))?;
+    table
+        .set_horizon(t as usize)
+        .map_err(|e| bad("K", e.to_string()))?;
     table.set_version(f.u64_scalar("version")?);
     for ti in 0..t as usize {
         let mut step = GainStep::default();
@@ -79,7 +104,9 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
         table.set_step(ti, &step);
     }
     table.checksum = f.u64_scalar("checksum")?;
-    table.validate(bounds).map_err(|e| bad("(table)", e.to_string()))?;
+    table
+        .validate(bounds)
+        .map_err(|e| bad("(table)", e.to_string()))?;
     Ok((table, dt))
 }
 
@@ -114,7 +141,9 @@ mod tests {
         let mut tampered = table.clone();
         tampered.step_mut(2).k_vec[0] = 9.0;
         save_table(&path, &tampered, 0.1).unwrap();
-        let e = load_table(&path, &GainBounds::default()).unwrap_err().to_string();
+        let e = load_table(&path, &GainBounds::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("checksum"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
