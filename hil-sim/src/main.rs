@@ -121,7 +121,13 @@ fn main() -> Result<()> {
             urdf,
         } => inspect(q, qd, tau, substep, urdf),
         Cmd::Bench { episodes, json } => bench(episodes, json),
-        Cmd::Serve { config, prefix, mode, time_compression, json } => serve(config, prefix, mode, time_compression, json),
+        Cmd::Serve {
+            config,
+            prefix,
+            mode,
+            time_compression,
+            json,
+        } => serve(config, prefix, mode, time_compression, json),
     }
 }
 
@@ -260,7 +266,13 @@ fn bench(episodes: usize, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn serve(config: Option<PathBuf>, prefix: Option<String>, mode: Option<String>, time_compression: Option<f64>, json: bool) -> Result<()> {
+fn serve(
+    config: Option<PathBuf>,
+    prefix: Option<String>,
+    mode: Option<String>,
+    time_compression: Option<f64>,
+    json: bool,
+) -> Result<()> {
     use hil_sim::serve::{ServeFile, ServeMode};
     // iceoryx2 warns about running without its config file; IOX2_LOG_LEVEL=Warn shows it.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
