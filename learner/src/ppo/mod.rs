@@ -72,6 +72,13 @@ pub struct PpoConfig {
     pub normalize_advantage: bool,
     /// Clip the global gradient norm to this. SB3: 0.5.
     pub max_grad_norm: f64,
+    /// Scale rewards by a running standard deviation of the discounted return and clip them to
+    /// ±10 (`VecNormalize(norm_reward=True)`: OpenAI baselines ppo2 on MuJoCo, rl-zoo's PPO
+    /// settings for continuous control). On by default: the critic's reward −D has no fixed
+    /// scale (measured without it on the default task: value loss 4e3 by iteration 15, the
+    /// value gradient took the whole 0.5 gradient-norm budget and the policy stopped moving,
+    /// approx. KL 1e-3, clip fraction 0).
+    pub normalize_reward: bool,
 }
 
 impl Default for PpoConfig {
@@ -96,6 +103,7 @@ impl Default for PpoConfig {
             ent_coef: 0.0,
             normalize_advantage: true,
             max_grad_norm: 0.5,
+            normalize_reward: true,
         }
     }
 }
@@ -147,6 +155,51 @@ pub struct UpdateStats {
     pub mean_reward: f64,
 }
 
+/// Running mean and variance (Chan et al. parallel update, as baselines' `RunningMeanStd`,
+/// initial count 1e-4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunningMeanStd {
+    pub mean: f64,
+    pub var: f64,
+    pub count: f64,
+}
+
+impl Default for RunningMeanStd {
+    fn default() -> Self {
+        Self {
+            mean: 0.0,
+            var: 1.0,
+            count: 1e-4,
+        }
+    }
+}
+
+impl RunningMeanStd {
+    /// Adds one sample.
+    pub fn update(&mut self, x: f64) {
+        let tot = self.count + 1.0;
+        let delta = x - self.mean;
+        let m2 = self.var * self.count + delta * delta * self.count / tot;
+        self.mean += delta / tot;
+        self.var = m2 / tot;
+        self.count = tot;
+    }
+}
+
+/// Normalises `rewards` in place as `VecNormalize` does, one environment stepping through the
+/// episodes in order: `ret ← γ ret + r` (0 at each episode start), update the statistics with
+/// `ret`, `r ← clip(r / sqrt(var + 1e-8), ±10)`.
+pub fn normalize_rewards(rms: &mut RunningMeanStd, gamma: f64, rewards: &mut [Vec<f64>]) {
+    for ep in rewards.iter_mut() {
+        let mut ret = 0.0;
+        for r in ep.iter_mut() {
+            ret = gamma * ret + *r;
+            rms.update(ret);
+            *r = (*r / (rms.var + 1e-8).sqrt()).clamp(-10.0, 10.0);
+        }
+    }
+}
+
 /// PPO's state: the nets, Adam, the minibatch RNG and all scratch memory.
 pub struct Ppo {
     cfg: PpoConfig,
@@ -162,6 +215,8 @@ pub struct Ppo {
     perm: Vec<usize>,
     values: Vec<f64>,
     adv: Vec<f64>,
+    ret_rms: RunningMeanStd,
+    scaled: Vec<Vec<f64>>,
 }
 
 impl Ppo {
@@ -188,6 +243,8 @@ impl Ppo {
             perm: Vec::new(),
             values: Vec::new(),
             adv: Vec::new(),
+            ret_rms: RunningMeanStd::default(),
+            scaled: Vec::new(),
             cfg,
             mode,
             ac,
@@ -266,8 +323,18 @@ impl Ppo {
     /// One PPO update on `episodes` with per-transition `rewards` ([`Self::collect`]):
     /// `epochs` passes over the data in shuffled minibatches, each one Adam step on the
     /// clipped loss ([`loss`]) with the gradient norm clipped.
+    /// With `normalize_reward` the rewards are scaled first ([`normalize_rewards`]).
     pub fn update(&mut self, episodes: &[Episode], rewards: &[Vec<f64>]) -> UpdateStats {
-        self.collect(episodes, rewards);
+        if self.cfg.normalize_reward {
+            let mut scaled = std::mem::take(&mut self.scaled);
+            scaled.clear();
+            scaled.extend(rewards.iter().cloned());
+            normalize_rewards(&mut self.ret_rms, self.cfg.gamma, &mut scaled);
+            self.collect(episodes, &scaled);
+            self.scaled = scaled;
+        } else {
+            self.collect(episodes, rewards);
+        }
         let n = self.data.len();
         let n_rewards: usize = rewards.iter().map(|r| r.len()).sum();
         let mut st = UpdateStats {
