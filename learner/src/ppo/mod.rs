@@ -48,8 +48,13 @@ pub struct PpoConfig {
     /// (`log_std_init = 0`), i.e. most goals at the clamp's ±0.31 rad window; ours is
     /// LQR+GAIfO's initial controller σ = √0.05 ≈ 0.224 rad, so both start exploring alike.
     pub init_std: f64,
-    /// Scale of the mean heads' initial output layer (SB3/baselines: orthogonal init with gain
-    /// 0.01 on the action layer); makes the initial policy ≈ "hold".
+    /// Scale of the mean heads' initial output layer. SB3/baselines: orthogonal init with gain
+    /// 0.01 on the action layer. Ours: 0, so the initial mean offset is exactly 0 and the
+    /// initial policy holds the start pose like LQR+GAIfO's initial controller. With 0.01 the
+    /// small constant offset is integrated by the offset action (`a = q + μ`) and the arm
+    /// drifts: measured, iteration-0 task cost 20.9 on the default task, worse than the random
+    /// policy's 12.9. (The output layer still gets a gradient at 0; the hidden layers do from
+    /// the first step on.)
     pub init_out_scale: f64,
     /// Clip range ε. Schulman et al. 2017 / SB3: 0.2.
     pub clip_range: f64,
@@ -87,7 +92,7 @@ impl Default for PpoConfig {
             pi_hidden: vec![64, 64],
             v_hidden: vec![64, 64],
             init_std: 0.05f64.sqrt(),
-            init_out_scale: 0.01,
+            init_out_scale: 0.0,
             clip_range: 0.2,
             gamma: 0.99,
             gae_lambda: 0.95,
