@@ -84,13 +84,7 @@ impl Demos {
             name: name.into(),
             why,
         };
-        let version = f.f64_shaped("schema_version", &[])?[0];
-        if version != SCHEMA_VERSION as f64 {
-            return Err(bad(
-                "schema_version",
-                format!("{version}, this program reads {SCHEMA_VERSION}"),
-            ));
-        }
+        f.check_schema(SCHEMA_VERSION)?;
         let names = f.strings("state_names")?;
         if names != STATE_NAMES {
             return Err(bad(

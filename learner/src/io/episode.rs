@@ -74,13 +74,7 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
         name: name.into(),
         why,
     };
-    let version = f.f64_shaped("schema_version", &[])?[0];
-    if version != SCHEMA_VERSION as f64 {
-        return Err(bad(
-            "schema_version",
-            format!("{version}, this program reads {SCHEMA_VERSION}"),
-        ));
-    }
+    f.check_schema(SCHEMA_VERSION)?;
     let (shape, x) = f.f64("states")?;
     let [1, t, dx] = shape[..] else {
         return Err(bad(

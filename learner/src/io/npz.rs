@@ -327,6 +327,18 @@ impl NpzFile {
         Ok(v[0])
     }
 
+    /// Checks the scalar `schema_version` array against the version this program reads.
+    pub fn check_schema(&self, expected: i64) -> Result<(), NpzError> {
+        let version = self.f64_shaped("schema_version", &[])?[0];
+        if version != expected as f64 {
+            return Err(self.bad(
+                "schema_version",
+                format!("{version}, this program reads {expected}"),
+            ));
+        }
+        Ok(())
+    }
+
     /// A float64 array that must have exactly `shape`.
     pub fn f64_shaped(&self, name: &str, shape: &[u64]) -> Result<Vec<f64>, NpzError> {
         let (s, v) = self.f64(name)?;

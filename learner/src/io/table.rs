@@ -62,13 +62,7 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
         name: name.into(),
         why,
     };
-    let version = f.f64_shaped("schema_version", &[])?[0];
-    if version != SCHEMA_VERSION as f64 {
-        return Err(bad(
-            "schema_version",
-            format!("{version}, this program reads {SCHEMA_VERSION}"),
-        ));
-    }
+    f.check_schema(SCHEMA_VERSION)?;
     let (shape, k_mat) = f.f64("K")?;
     let [t, du, dx] = shape[..] else {
         return Err(bad(
