@@ -474,16 +474,36 @@ impl LqrGaifo {
     }
 }
 
-/// Runs `cfg.iterations` iterations on `demos`, calling `progress` after each, writing
-/// `gaifo_log.csv` and per-iteration checkpoints into `out` when it is given.
-pub fn train(
-    cfg: &GaifoConfig,
-    demos: Demos,
+/// An imitation run the shared training loop drives: LQR+GAIfO here, the PPO baseline in
+/// `crate::ppo`.
+pub trait Imitation {
+    /// One iteration: its log and the noise-free episode.
+    fn iterate(&mut self) -> Result<(GaifoLog, Episode), LearnerError>;
+    /// Saves what a resumed run needs into `dir`.
+    fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)>;
+}
+
+impl Imitation for LqrGaifo {
+    fn iterate(&mut self) -> Result<(GaifoLog, Episode), LearnerError> {
+        LqrGaifo::iterate(self)
+    }
+    fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
+        LqrGaifo::checkpoint(self, dir)
+    }
+}
+
+/// Runs `iterations` iterations of `run`, calling `progress` after each, writing
+/// `gaifo_log.csv` (column `algorithm` = `algo`) and per-iteration checkpoints into `out` when
+/// it is given.
+pub fn run_iterations<R: Imitation>(
+    run: &mut R,
+    iterations: usize,
+    seed: u64,
+    algo: &str,
     out: Option<&Path>,
-    mut progress: impl FnMut(&GaifoLog),
+    mut progress: impl FnMut(&GaifoLog, &R),
 ) -> anyhow::Result<Vec<GaifoLog>> {
     use std::io::Write;
-    let mut run = LqrGaifo::new(cfg.clone(), demos)?;
     let mut csv = match out {
         Some(dir) => {
             std::fs::create_dir_all(dir)?;
@@ -494,16 +514,34 @@ pub fn train(
         }
         None => None,
     };
-    let mut logs = Vec::with_capacity(cfg.iterations);
-    for _ in 0..cfg.iterations {
+    let mut logs = Vec::with_capacity(iterations);
+    for _ in 0..iterations {
         let (log, _) = run.iterate()?;
-        progress(&log);
+        progress(&log, run);
         if let (Some(f), Some(dir)) = (csv.as_mut(), out) {
-            write_csv_row(f, &log, cfg.seed, "lqr-gaifo")?;
+            write_csv_row(f, &log, seed, algo)?;
             f.flush()?;
             run.checkpoint(dir)?;
         }
         logs.push(log);
     }
     Ok(logs)
+}
+
+/// Runs `cfg.iterations` iterations of LQR+GAIfO on `demos` ([`run_iterations`]).
+pub fn train(
+    cfg: &GaifoConfig,
+    demos: Demos,
+    out: Option<&Path>,
+    mut progress: impl FnMut(&GaifoLog),
+) -> anyhow::Result<Vec<GaifoLog>> {
+    let mut run = LqrGaifo::new(cfg.clone(), demos)?;
+    run_iterations(
+        &mut run,
+        cfg.iterations,
+        cfg.seed,
+        "lqr-gaifo",
+        out,
+        |l, _| progress(l),
+    )
 }

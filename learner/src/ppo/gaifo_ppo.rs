@@ -28,8 +28,8 @@ use super::{Ppo, PpoConfig, UpdateStats};
 use crate::cost::composite::D_IN;
 use crate::discriminator::{Discriminator, DiscriminatorConfig, Normalizer};
 use crate::gaifo::{
-    critic_config, episode_transitions, expert_transitions, refit_critic, train_critic,
-    write_csv_row, GaifoConfig, GaifoLog, CSV_HEADER,
+    critic_config, episode_transitions, expert_transitions, refit_critic, run_iterations,
+    train_critic, GaifoConfig, GaifoLog, Imitation,
 };
 use crate::io::demos::Demos;
 use crate::iteration::sim_err;
@@ -255,30 +255,24 @@ pub fn train(
     out: Option<&Path>,
     mut progress: impl FnMut(&GaifoLog, &UpdateStats),
 ) -> anyhow::Result<Vec<GaifoLog>> {
-    use std::io::Write;
     let mut run = GaifoPpo::new(cfg.clone(), demos)?;
-    let mut csv = match out {
-        Some(dir) => {
-            std::fs::create_dir_all(dir)?;
-            let mut f = std::fs::File::create(dir.join("gaifo_log.csv"))?;
-            writeln!(f, "{CSV_HEADER}")?;
-            run.checkpoint(dir)?;
-            Some(f)
-        }
-        None => None,
-    };
-    let mut logs = Vec::with_capacity(cfg.iterations);
-    for _ in 0..cfg.iterations {
-        let (log, _) = run.iterate()?;
-        progress(&log, &run.last_update);
-        if let (Some(f), Some(dir)) = (csv.as_mut(), out) {
-            write_csv_row(f, &log, cfg.seed, "gaifo-ppo")?;
-            f.flush()?;
-            run.checkpoint(dir)?;
-        }
-        logs.push(log);
+    run_iterations(
+        &mut run,
+        cfg.iterations,
+        cfg.seed,
+        "gaifo-ppo",
+        out,
+        |l, r| progress(l, &r.last_update),
+    )
+}
+
+impl Imitation for GaifoPpo {
+    fn iterate(&mut self) -> Result<(GaifoLog, Episode), LearnerError> {
+        GaifoPpo::iterate(self)
     }
-    Ok(logs)
+    fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
+        GaifoPpo::checkpoint(self, dir)
+    }
 }
 
 fn print_line(l: &GaifoLog, u: &UpdateStats) {
