@@ -61,6 +61,31 @@ fn print_line(l: &GaifoLog) {
     );
 }
 
+/// The end of a `learner train` run: the summary line on stderr and, with `--json`, the
+/// one-line JSON summary on stdout (both algorithms).
+pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, json: bool) {
+    let Some(last) = logs.last() else { return };
+    eprintln!(
+        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m); log and checkpoints in {}",
+        last.performance,
+        last.task_cost,
+        last.final_distance,
+        out.display()
+    );
+    if json {
+        let best = logs
+            .iter()
+            .map(|l| l.performance)
+            .fold(f64::NEG_INFINITY, f64::max);
+        println!(
+            "{}",
+            serde_json::json!({"command": "train", "algo": algo, "iterations": logs.len(), "seed": seed,
+                "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
+                "final_distance_m": last.final_distance, "out": out})
+        );
+    }
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let demos = Demos::load(&args.demos)
@@ -107,25 +132,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         "sim_ms"
     );
     let logs = train(&cfg, demos, Some(&args.out), print_line)?;
-    let last = logs.last().expect("iterations >= 1");
-    eprintln!(
-        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m); log and checkpoints in {}",
-        last.performance,
-        last.task_cost,
-        last.final_distance,
-        args.out.display()
-    );
-    if args.json {
-        let best = logs
-            .iter()
-            .map(|l| l.performance)
-            .fold(f64::NEG_INFINITY, f64::max);
-        println!(
-            "{}",
-            serde_json::json!({"command": "train", "algo": "lqr-gaifo", "iterations": logs.len(), "seed": cfg.seed,
-                "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
-                "final_distance_m": last.final_distance, "out": args.out})
-        );
-    }
+    crate::train_cli::report(&logs, "lqr-gaifo", cfg.seed, &args.out, args.json);
     Ok(())
 }

@@ -325,25 +325,6 @@ pub fn run_cli(
         "sim_ms"
     );
     let logs = train(&pcfg, demos, Some(&args.out), print_line)?;
-    let last = logs.last().expect("iterations >= 1");
-    eprintln!(
-        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m); log and checkpoints in {}",
-        last.performance,
-        last.task_cost,
-        last.final_distance,
-        args.out.display()
-    );
-    if args.json {
-        let best = logs
-            .iter()
-            .map(|l| l.performance)
-            .fold(f64::NEG_INFINITY, f64::max);
-        println!(
-            "{}",
-            serde_json::json!({"command": "train", "algo": "gaifo-ppo", "iterations": logs.len(), "seed": pcfg.seed,
-                "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
-                "final_distance_m": last.final_distance, "out": args.out})
-        );
-    }
+    crate::train_cli::report(&logs, "gaifo-ppo", pcfg.seed, &args.out, args.json);
     Ok(())
 }
