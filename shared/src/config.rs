@@ -3,6 +3,7 @@
 //! Every default cites where its number comes from. Unknown keys are rejected so that a typo in
 //! a TOML file is an error rather than a silently ignored setting.
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -37,24 +38,58 @@ pub enum ConfigError {
     },
 }
 
-/// Reads a TOML file into any configuration type.
-pub fn from_toml_file<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ConfigError> {
+/// Reads a TOML file into any configuration type, layered over `T::default()` (see
+/// [`from_toml_str`]).
+pub fn from_toml_file<T: Serialize + DeserializeOwned + Default>(
+    path: &Path,
+) -> Result<T, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
         path: path.to_owned(),
         source,
     })?;
-    toml::from_str(&text).map_err(|source| ConfigError::Parse {
-        origin: path.display().to_string(),
-        source,
-    })
+    layered(&text, &path.display().to_string())
 }
 
-/// Parses a TOML string into any configuration type.
-pub fn from_toml_str<T: for<'de> Deserialize<'de>>(text: &str) -> Result<T, ConfigError> {
-    toml::from_str(text).map_err(|source| ConfigError::Parse {
-        origin: "<string>".into(),
+/// Parses a TOML string into any configuration type, layered over `T::default()`: a key the
+/// text leaves out keeps its default at every depth, so `[discriminator]\nn_critic = 30` changes
+/// that one value and keeps the rest of the parent's `discriminator` defaults (a plain
+/// `toml::from_str` would rebuild the whole table from the field type's own defaults). Tables
+/// merge key by key; any other value (numbers, strings, arrays) replaces the default.
+/// Unknown keys are still errors.
+pub fn from_toml_str<T: Serialize + DeserializeOwned + Default>(
+    text: &str,
+) -> Result<T, ConfigError> {
+    layered(text, "<string>")
+}
+
+fn layered<T: Serialize + DeserializeOwned + Default>(
+    text: &str,
+    origin: &str,
+) -> Result<T, ConfigError> {
+    let parse = |source| ConfigError::Parse {
+        origin: origin.to_string(),
         source,
-    })
+    };
+    let file: toml::Table = toml::from_str(text).map_err(parse)?;
+    let mut merged = match toml::Value::try_from(T::default()) {
+        Ok(toml::Value::Table(t)) => t,
+        // A configuration that does not serialise to a table: the file alone.
+        _ => return toml::from_str(text).map_err(parse),
+    };
+    merge_table(&mut merged, file);
+    T::deserialize(toml::Value::Table(merged)).map_err(parse)
+}
+
+/// `base` with `over` laid on top: tables recursively, everything else replaced.
+fn merge_table(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_table(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
 }
 
 /// Parses "x,y,z" (three finite numbers, comma-separated) for command lines.
@@ -419,6 +454,44 @@ mod tests {
         assert_eq!(back, sim);
         assert!(sim.perturbation.is_nominal());
         assert!(!Perturbation::physical_stand_in(1).is_nominal());
+    }
+
+    #[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Inner {
+        a: f64,
+        b: Vec<usize>,
+    }
+    #[derive(Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Outer {
+        inner: Inner,
+        n: u32,
+    }
+    impl Default for Outer {
+        fn default() -> Self {
+            Self {
+                inner: Inner {
+                    a: 1.0,
+                    b: vec![32, 32],
+                },
+                n: 5,
+            }
+        }
+    }
+
+    #[test]
+    fn a_partial_table_keeps_the_parents_defaults() {
+        let o: Outer = from_toml_str("[inner]\na = 2.0").unwrap();
+        assert_eq!(o.inner.b, vec![32, 32], "not Inner::default()'s empty list");
+        assert_eq!((o.inner.a, o.n), (2.0, 5));
+        let o: Outer = from_toml_str("n = 7\n[inner]\nb = [4]").unwrap();
+        assert_eq!(o.inner, Inner { a: 1.0, b: vec![4] });
+        assert_eq!(o.n, 7);
+        let err = from_toml_str::<Outer>("[inner]\nc = 1").unwrap_err();
+        assert!(err.to_string().contains('c'), "{err}");
+        assert!(from_toml_str::<Outer>("n = \"x\"").is_err());
+        assert!(from_toml_str::<Outer>("n = ").is_err());
     }
 
     #[test]
