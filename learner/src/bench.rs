@@ -141,3 +141,53 @@ pub fn run(
         kl_target,
     })
 }
+
+/// `learner bench-gaifo`: LQR+GAIfO iterations (5 + 1 episodes, dynamics, critic steps,
+/// Hessians, LQR) on real demonstrations; per-iteration learner time on one core.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GaifoBenchResult {
+    pub iterations: usize,
+    pub seed: u64,
+    /// Learner thread-CPU time per iteration (everything but executing the episodes), s:
+    /// median, 90th percentile and largest over the iterations.
+    pub cpu_learner_median_s: f64,
+    pub cpu_learner_p90_s: f64,
+    pub cpu_learner_max_s: f64,
+    /// Median wall time per phase, s.
+    pub dynamics_s: f64,
+    pub critic_s: f64,
+    pub cost_s: f64,
+    pub lqr_s: f64,
+    pub execute_s: f64,
+    /// Normalised performance of the last noise-free episode (that the run still learns).
+    pub final_performance: f64,
+}
+
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Runs `cfg.iterations` LQR+GAIfO iterations on `demos` and summarises their timings.
+pub fn gaifo(
+    cfg: &crate::gaifo::GaifoConfig,
+    demos: crate::io::demos::Demos,
+) -> anyhow::Result<GaifoBenchResult> {
+    let logs = crate::gaifo::train(cfg, demos, None, |_| {})?;
+    anyhow::ensure!(!logs.is_empty(), "no iterations");
+    let col = |f: fn(&crate::gaifo::GaifoLog) -> f64| -> Vec<f64> { logs.iter().map(f).collect() };
+    let mut cpu = col(|l| l.cpu_learner);
+    Ok(GaifoBenchResult {
+        iterations: logs.len(),
+        seed: cfg.seed,
+        cpu_learner_median_s: median(&mut cpu.clone()),
+        cpu_learner_p90_s: quantile(&mut cpu.clone(), 0.9),
+        cpu_learner_max_s: quantile(&mut cpu, 1.0),
+        dynamics_s: median(&mut col(|l| l.t_dynamics)),
+        critic_s: median(&mut col(|l| l.t_critic)),
+        cost_s: median(&mut col(|l| l.t_cost)),
+        lqr_s: median(&mut col(|l| l.t_lqr)),
+        execute_s: median(&mut col(|l| l.t_execute)),
+        final_performance: logs.last().map(|l| l.performance).unwrap_or(f64::NAN),
+    })
+}

@@ -59,6 +59,26 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Time LQR+GAIfO iterations on real demonstrations (issue goal: < 50 ms of learner time
+    /// per iteration on one core); prints per-phase medians and the learner CPU time.
+    BenchGaifo {
+        /// Demonstrations (.npz from `learner expert`); without it the default expert is
+        /// trained first (about 10 s) and its demonstrations are used.
+        #[arg(long)]
+        demos: Option<std::path::PathBuf>,
+        /// TOML `GaifoConfig` (as for `learner train --config`).
+        #[arg(long)]
+        config: Option<std::path::PathBuf>,
+        /// Iterations.
+        #[arg(long, default_value_t = 20)]
+        iterations: usize,
+        /// Seed of the run.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Print only a one-line JSON summary on stdout.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 fn main() -> anyhow::Result<()> {
@@ -80,6 +100,13 @@ fn main() -> anyhow::Result<()> {
                 std::process::exit(1);
             }
         }
+        Cmd::BenchGaifo {
+            demos,
+            config,
+            iterations,
+            seed,
+            json,
+        } => bench_gaifo(demos, config, iterations, seed, json)?,
         Cmd::Bench {
             t,
             dx,
@@ -132,6 +159,60 @@ fn main() -> anyhow::Result<()> {
                 );
             }
         }
+    }
+    Ok(())
+}
+
+fn bench_gaifo(
+    demos: Option<std::path::PathBuf>,
+    config: Option<std::path::PathBuf>,
+    iterations: usize,
+    seed: u64,
+    json: bool,
+) -> anyhow::Result<()> {
+    use learner::gaifo::GaifoConfig;
+    let mut cfg: GaifoConfig = match &config {
+        Some(p) => ur5_shared::config::from_toml_file(p)?,
+        None => GaifoConfig::default(),
+    };
+    cfg.iterations = iterations.max(1);
+    cfg.seed = seed;
+    let demos = match &demos {
+        Some(p) => learner::io::demos::Demos::load(p)
+            .with_context(|| format!("loading demonstrations {}", p.display()))?,
+        None => {
+            eprintln!("no --demos: training the default expert first");
+            let ecfg = learner::expert::ExpertConfig::default();
+            let run = learner::expert::train(&ecfg, |_| {})?;
+            learner::expert::record_demos(&ecfg, &run.policy, run.cost_random)?
+        }
+    };
+    let r = learner::bench::gaifo(&cfg, demos)?;
+    if json {
+        println!("{}", serde_json::to_string(&r)?);
+        return Ok(());
+    }
+    println!(
+        "LQR+GAIfO bench: {} iterations, seed {}, N = {} + 1 episodes, final normalised performance {:.3}",
+        r.iterations, r.seed, cfg.samples, r.final_performance
+    );
+    println!("{:<34} {:>9}", "learner CPU per iteration", "ms");
+    println!("{:<34} {:>9.1}", "  median", 1e3 * r.cpu_learner_median_s);
+    println!(
+        "{:<34} {:>9.1}",
+        "  90th percentile",
+        1e3 * r.cpu_learner_p90_s
+    );
+    println!("{:<34} {:>9.1}", "  largest", 1e3 * r.cpu_learner_max_s);
+    println!("{:<34} {:>9}", "phase (median wall)", "ms");
+    for (name, v) in [
+        ("  dynamics (GMM prior + fit)", r.dynamics_s),
+        ("  critic (WGAN-GP steps)", r.critic_s),
+        ("  composite cost + Hessians", r.cost_s),
+        ("  KL-bounded LQR", r.lqr_s),
+        ("  episodes (simulator, not learner)", r.execute_s),
+    ] {
+        println!("{:<34} {:>9.1}", name, 1e3 * v);
     }
     Ok(())
 }

@@ -185,6 +185,7 @@ impl GaifoPpo {
         )?;
         // 3. Update the critic on (s, s') of the policy vs the expert.
         let t1 = Instant::now();
+        let c1 = crate::bench::thread_cpu_s();
         let controller = episode_transitions(&episodes);
         if self.iteration == 0 {
             self.disc = refit_critic(&self.expert, &controller, self.disc.config())?;
@@ -204,6 +205,7 @@ impl GaifoPpo {
         let t3 = Instant::now();
         let st = self.ppo.update(&episodes, &rewards);
         let t4 = Instant::now();
+        let cpu_learner = crate::bench::thread_cpu_s() - c1;
 
         let c = eval.task_cost();
         let log = GaifoLog {
@@ -226,6 +228,7 @@ impl GaifoPpo {
             t_critic: (t2 - t1).as_secs_f64(),
             t_cost: (t3 - t2).as_secs_f64(),
             t_lqr: (t4 - t3).as_secs_f64(),
+            cpu_learner,
         };
         self.last_update = st;
         self.iteration += 1;
