@@ -27,6 +27,7 @@ pub mod gaifo;
 pub mod io;
 pub mod iteration;
 pub mod linalg;
+pub mod plot;
 pub mod policy;
 pub mod ppo;
 pub mod rollout;
