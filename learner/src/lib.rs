@@ -21,6 +21,8 @@ pub mod cost;
 pub mod discriminator;
 pub mod dynamics;
 pub mod error;
+pub mod experiment;
+pub mod experiment_ipc;
 pub mod expert;
 pub mod expert_cli;
 pub mod gaifo;

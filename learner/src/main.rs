@@ -59,6 +59,9 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// The paper's experiments (comparison, generalisation, sim-vs-physical, stability): CSV,
+    /// PNG plot and summary table in the output folder; seeds run in parallel.
+    Experiment(learner::experiment::ExperimentArgs),
     /// Time LQR+GAIfO iterations on real demonstrations (issue goal: < 50 ms of learner time
     /// per iteration on one core); prints per-phase medians and the learner CPU time.
     BenchGaifo {
@@ -86,6 +89,7 @@ fn main() -> anyhow::Result<()> {
     match cli.cmd {
         Cmd::Expert(args) => learner::expert_cli::run(args)?,
         Cmd::Train(args) => learner::train_cli::run(args)?,
+        Cmd::Experiment(args) => learner::experiment::run_cli(args)?,
         Cmd::Serve(args) => learner::serve::run_cli(args)?,
         Cmd::Conformance { vectors, json } => {
             let f = vectors.to_string_lossy().to_string();

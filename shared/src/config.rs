@@ -47,7 +47,20 @@ pub fn from_toml_file<T: Serialize + DeserializeOwned + Default>(
         path: path.to_owned(),
         source,
     })?;
-    layered(&text, &path.display().to_string())
+    layered(&text, &path.display().to_string(), T::default())
+}
+
+/// Reads a TOML file into a configuration, layered over `base` instead of `T::default()`
+/// (for commands whose defaults depend on a choice, e.g. one experiment of several).
+pub fn from_toml_file_over<T: Serialize + DeserializeOwned>(
+    path: &Path,
+    base: T,
+) -> Result<T, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    layered(&text, &path.display().to_string(), base)
 }
 
 /// Parses a TOML string into any configuration type, layered over `T::default()`: a key the
@@ -59,19 +72,20 @@ pub fn from_toml_file<T: Serialize + DeserializeOwned + Default>(
 pub fn from_toml_str<T: Serialize + DeserializeOwned + Default>(
     text: &str,
 ) -> Result<T, ConfigError> {
-    layered(text, "<string>")
+    layered(text, "<string>", T::default())
 }
 
-fn layered<T: Serialize + DeserializeOwned + Default>(
+fn layered<T: Serialize + DeserializeOwned>(
     text: &str,
     origin: &str,
+    base: T,
 ) -> Result<T, ConfigError> {
     let parse = |source| ConfigError::Parse {
         origin: origin.to_string(),
         source,
     };
     let file: toml::Table = toml::from_str(text).map_err(parse)?;
-    let mut merged = match toml::Value::try_from(T::default()) {
+    let mut merged = match toml::Value::try_from(base) {
         Ok(toml::Value::Table(t)) => t,
         // A configuration that does not serialise to a table: the file alone.
         _ => return toml::from_str(text).map_err(parse),

@@ -1,0 +1,843 @@
+//! `learner experiment <name>`: the paper's experiments, one command each (issue 7).
+//!
+//! | name | what | default |
+//! |---|---|---|
+//! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison") | 10 seeds × 100 iterations each |
+//! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
+//! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade? | 5 seeds × 200 iterations |
+//!
+//! The simulated-vs-"physical" experiment runs over IPC: see [`crate::experiment_ipc`].
+//!
+//! Every run is a set of independent jobs (variant × seed), run on a rayon pool of
+//! `threads` workers (0 = all cores). A job's result depends only on its own seed and
+//! settings, never on the thread count or on the other jobs: the CSV (bar the wall-time
+//! columns) is the same with 1 thread or 8.
+//!
+//! Outputs in `--out` (default `runs/experiments/<name>`):
+//! - `<name>.csv`: one row per (variant, seed, iteration): `experiment,variant,` followed by
+//!   the columns of [`crate::gaifo::CSV_HEADER`] (iteration, seed, algorithm, normalised
+//!   performance, task cost, final distance, critic loss, Wasserstein estimate, KL, η, step
+//!   multiplier, wall time per phase, learner CPU time);
+//! - `<name>.png`: normalised performance of the noise-free episode per iteration, mean ±
+//!   standard error over seeds, one curve per variant;
+//! - `summary.txt` / `summary.json`: the table printed at the end;
+//! - the demonstrations used (`demos.npz`, or `experts/` for the generalisation experiment).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::expert::{record_demos, square_goals, ExpertConfig};
+use crate::gaifo::{GaifoConfig, GaifoLog, LqrGaifo, CSV_HEADER};
+use crate::io::demos::Demos;
+use crate::plot::{mean_stderr, plot_curves, Series};
+use crate::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
+
+/// Which experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExperimentName {
+    /// LQR+GAIfO vs GAIfO (PPO), normalised performance per iteration.
+    Comparison,
+    /// Demonstrations from subsets of the 8 square points; reach the unseen centre.
+    Generalisation,
+    /// The same LQR+GAIfO run on the nominal and on the perturbed arm, over IPC in real time.
+    SimVsPhysical,
+    /// LQR+GAIfO for 200 iterations: late-iteration stability.
+    Stability,
+}
+
+impl ExperimentName {
+    /// File-name form (`comparison`, `sim-vs-physical`, …).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Comparison => "comparison",
+            Self::Generalisation => "generalisation",
+            Self::SimVsPhysical => "sim-vs-physical",
+            Self::Stability => "stability",
+        }
+    }
+}
+
+/// Settings of an experiment (TOML: `learner experiment <name> --config FILE`, layered over
+/// that experiment's defaults, [`ExperimentConfig::defaults`]; unknown keys are errors).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// Seeds per variant: `first_seed, first_seed + 1, …`.
+    pub seeds: usize,
+    /// First seed.
+    pub first_seed: u64,
+    /// Iterations per run (overrides `lqr_gaifo.iterations` and `gaifo_ppo.iterations`).
+    pub iterations: usize,
+    /// Worker threads; 0 = one per core.
+    pub threads: usize,
+    /// Algorithms of the comparison (`lqr-gaifo`, `gaifo-ppo`).
+    pub algorithms: Vec<String>,
+    /// The expert that records the demonstrations (its `task.goal` is the target; its
+    /// `demos` is the number of demonstrations; the generalisation experiment trains one per
+    /// square point and one at the centre for the normalisation).
+    pub expert: ExpertConfig,
+    /// LQR+GAIfO (its `seed` and `iterations` are set per run).
+    pub lqr_gaifo: GaifoConfig,
+    /// GAIfO (PPO) (its `seed` and `iterations` are set per run).
+    pub gaifo_ppo: GaifoPpoConfig,
+    /// Generalisation: numbers of demonstrated square points, each a curve.
+    pub subset_sizes: Vec<usize>,
+    /// Generalisation: demonstrations per square point.
+    pub demos_per_point: usize,
+    /// Sim vs physical: the "physical" arm's perturbation (`hil-sim` knobs).
+    pub physical: ur5_shared::config::Perturbation,
+    /// Sim vs physical: simulated seconds per wall-clock second of the real-time loop.
+    pub time_compression: f64,
+}
+
+impl Default for ExperimentConfig {
+    fn default() -> Self {
+        Self::defaults(ExperimentName::Comparison)
+    }
+}
+
+impl ExperimentConfig {
+    /// The defaults of experiment `name` (issue 7: 10 seeds × 100 iterations for the
+    /// comparison; 15 iterations for the generalisation; 25 for sim vs physical).
+    pub fn defaults(name: ExperimentName) -> Self {
+        let base = Self {
+            seeds: 10,
+            first_seed: 0,
+            iterations: 100,
+            threads: 0,
+            algorithms: vec!["lqr-gaifo".into(), "gaifo-ppo".into()],
+            expert: ExpertConfig::default(),
+            lqr_gaifo: GaifoConfig::default(),
+            gaifo_ppo: GaifoPpoConfig::default(),
+            subset_sizes: (1..=8).collect(),
+            demos_per_point: 5,
+            physical: ur5_shared::config::Perturbation::physical_stand_in(1),
+            time_compression: 10.0,
+        };
+        match name {
+            ExperimentName::Comparison => base,
+            ExperimentName::Generalisation => Self {
+                seeds: 5,
+                iterations: 15,
+                ..base
+            },
+            ExperimentName::SimVsPhysical => Self {
+                seeds: 3,
+                iterations: 25,
+                ..base
+            },
+            ExperimentName::Stability => Self {
+                seeds: 5,
+                iterations: 200,
+                ..base
+            },
+        }
+    }
+
+    /// Checks the settings an experiment needs.
+    pub fn validate(&self, name: ExperimentName) -> anyhow::Result<()> {
+        anyhow::ensure!(self.seeds >= 1, "seeds must be >= 1");
+        anyhow::ensure!(self.iterations >= 1, "iterations must be >= 1");
+        for a in &self.algorithms {
+            anyhow::ensure!(
+                a == "lqr-gaifo" || a == "gaifo-ppo",
+                "unknown algorithm `{a}` (lqr-gaifo or gaifo-ppo)"
+            );
+        }
+        if name == ExperimentName::Comparison {
+            anyhow::ensure!(!self.algorithms.is_empty(), "algorithms is empty");
+        }
+        if name == ExperimentName::Generalisation {
+            anyhow::ensure!(
+                !self.subset_sizes.is_empty()
+                    && self.subset_sizes.iter().all(|k| (1..=8).contains(k)),
+                "subset_sizes must be numbers of square points in 1..=8, got {:?}",
+                self.subset_sizes
+            );
+            anyhow::ensure!(self.demos_per_point >= 1, "demos_per_point must be >= 1");
+        }
+        anyhow::ensure!(
+            self.time_compression > 0.0 && self.time_compression.is_finite(),
+            "time_compression must be > 0"
+        );
+        self.expert.task.validate()?;
+        self.expert.sim.validate()?;
+        Ok(())
+    }
+
+    fn seed_list(&self) -> Vec<u64> {
+        (0..self.seeds as u64)
+            .map(|i| self.first_seed + i)
+            .collect()
+    }
+}
+
+/// One finished run: a variant (curve) and seed.
+#[derive(Clone, Debug)]
+pub struct Run {
+    /// Curve label (algorithm, subset size, arm, …).
+    pub variant: String,
+    /// `lqr-gaifo` or `gaifo-ppo`.
+    pub algorithm: String,
+    /// Seed.
+    pub seed: u64,
+    /// One log per iteration.
+    pub logs: Vec<GaifoLog>,
+    /// Wall time of the whole run, s.
+    pub wall_s: f64,
+}
+
+/// What one job runs.
+#[derive(Clone)]
+pub enum Spec {
+    /// LQR+GAIfO with these settings.
+    LqrGaifo(GaifoConfig),
+    /// GAIfO (PPO) with these settings.
+    GaifoPpo(GaifoPpoConfig),
+}
+
+/// One independent unit of work: a variant at one seed on one demonstration set.
+#[derive(Clone)]
+pub struct Job {
+    /// Curve label.
+    pub variant: String,
+    /// Algorithm and settings (seed and iterations included).
+    pub spec: Spec,
+    /// The demonstrations (state-only use) and the task.
+    pub demos: Arc<Demos>,
+}
+
+impl Job {
+    fn seed(&self) -> u64 {
+        match &self.spec {
+            Spec::LqrGaifo(c) => c.seed,
+            Spec::GaifoPpo(c) => c.seed,
+        }
+    }
+
+    fn algorithm(&self) -> &'static str {
+        match &self.spec {
+            Spec::LqrGaifo(_) => "lqr-gaifo",
+            Spec::GaifoPpo(_) => "gaifo-ppo",
+        }
+    }
+
+    /// Runs the job in this thread.
+    pub fn run(&self) -> anyhow::Result<Run> {
+        let t0 = Instant::now();
+        let demos = (*self.demos).clone();
+        let logs = match &self.spec {
+            Spec::LqrGaifo(c) => {
+                let mut r = LqrGaifo::new(c.clone(), demos)?;
+                (0..c.iterations)
+                    .map(|_| r.iterate().map(|(l, _)| l))
+                    .collect::<Result<Vec<_>, _>>()?
+            }
+            Spec::GaifoPpo(c) => {
+                let mut r = GaifoPpo::new(c.clone(), demos)?;
+                (0..c.iterations)
+                    .map(|_| r.iterate().map(|(l, _)| l))
+                    .collect::<Result<Vec<_>, _>>()?
+            }
+        };
+        Ok(Run {
+            variant: self.variant.clone(),
+            algorithm: self.algorithm().into(),
+            seed: self.seed(),
+            logs,
+            wall_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// A rayon pool of `threads` workers (0 = one per core).
+pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("building the worker pool")
+}
+
+/// Runs every job on `pool`, printing one line per finished job; results in job order.
+pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Run>> {
+    let done = AtomicUsize::new(0);
+    let t0 = Instant::now();
+    let total = jobs.len();
+    pool.install(|| {
+        jobs.par_iter()
+            .map(|job| {
+                let run = job.run().with_context(|| {
+                    format!("{} seed {} ({})", job.variant, job.seed(), job.algorithm())
+                })?;
+                let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+                let last = run.logs.last().map(|l| l.performance).unwrap_or(f64::NAN);
+                eprintln!(
+                    "[{k:>3}/{total}] {:<18} seed {:>3}: {} iterations, final normalised performance {:>6.3} ({:.0} s; {:.0} s elapsed)",
+                    run.variant,
+                    run.seed,
+                    run.logs.len(),
+                    last,
+                    run.wall_s,
+                    t0.elapsed().as_secs_f64()
+                );
+                Ok(run)
+            })
+            .collect()
+    })
+}
+
+/// Trains `cfg` (an expert) and records `cfg.demos` demonstrations, with one progress line.
+pub fn expert_demos(cfg: &ExpertConfig) -> anyhow::Result<Demos> {
+    let t0 = Instant::now();
+    let run = crate::expert::train(cfg, |_| {})?;
+    let demos = record_demos(cfg, &run.policy, run.cost_random)?;
+    eprintln!(
+        "expert for goal {:?}: {} demonstrations, mean cost {:.4} (random {:.4}), {:.0} s",
+        cfg.task.goal,
+        demos.count,
+        demos.cost_expert,
+        demos.cost_random,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(demos)
+}
+
+/// The demonstration set of the generalisation experiment for the square points `points`:
+/// their state trajectories, with the task (goal, start, T, dt) and the normalisation costs of
+/// `centre` (the target nobody demonstrated).
+pub fn combine_demos(centre: &Demos, points: &[&Demos]) -> anyhow::Result<Demos> {
+    anyhow::ensure!(!points.is_empty(), "no demonstrations to combine");
+    let mut out = Demos {
+        states: Vec::new(),
+        actions: Vec::new(),
+        count: 0,
+        ..centre.clone()
+    };
+    for d in points {
+        anyhow::ensure!(
+            d.horizon == centre.horizon && d.dt == centre.dt && d.start_q == centre.start_q,
+            "demonstrations of goal {:?} have another T, dt or start pose than the centre's",
+            d.goal
+        );
+        out.states.extend_from_slice(&d.states);
+        out.actions.extend_from_slice(&d.actions);
+        out.count += d.count;
+    }
+    Ok(out)
+}
+
+/// Square points demonstrated by a set of `k` (1…8): spread evenly around the square (the
+/// points are in order around it, corners and mid-edges alternating), starting at the first
+/// corner, so that every set of two or more surrounds the centre as evenly as `k` allows:
+/// indices `round(i · 8 / k)`, i = 0…k−1.
+pub fn subset(k: usize) -> Vec<usize> {
+    (0..k)
+        .map(|i| ((i * 8) as f64 / k as f64).round() as usize % 8)
+        .collect()
+}
+
+/// Per-variant summary of an experiment.
+#[derive(Clone, Debug, Serialize)]
+pub struct SummaryRow {
+    /// Curve label.
+    pub variant: String,
+    /// Seeds run.
+    pub seeds: usize,
+    /// Iterations per run.
+    pub iterations: usize,
+    /// (iteration, mean, standard error) of the normalised performance at the report points.
+    pub performance: Vec<(usize, f64, f64)>,
+    /// Mean (± SE over seeds) normalised performance over the last 10 iterations.
+    pub last10_mean: f64,
+    pub last10_se: f64,
+    /// First iteration at which the mean over seeds reaches 0.8 (None: never).
+    pub first_iteration_mean_ge_0_8: Option<usize>,
+    /// Median learner CPU time per iteration, ms.
+    pub learner_cpu_ms_median: f64,
+    /// Median simulator time per iteration (episodes), ms.
+    pub execute_ms_median: f64,
+}
+
+/// Iterations reported in the summary (0-based), those below `iterations`, and the last.
+fn report_points(iterations: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = [0, 4, 9, 14, 19, 24, 49, 59, 79, 99, 149, 199]
+        .into_iter()
+        .filter(|&i| i < iterations)
+        .collect();
+    if v.last() != Some(&(iterations - 1)) {
+        v.push(iterations - 1);
+    }
+    v
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Variants in order of first appearance, each with its runs.
+fn by_variant(runs: &[Run]) -> Vec<(String, Vec<&Run>)> {
+    let mut out: Vec<(String, Vec<&Run>)> = Vec::new();
+    for r in runs {
+        match out.iter_mut().find(|(v, _)| *v == r.variant) {
+            Some((_, rs)) => rs.push(r),
+            None => out.push((r.variant.clone(), vec![r])),
+        }
+    }
+    out
+}
+
+/// The summary table of `runs`.
+pub fn summarise(runs: &[Run]) -> Vec<SummaryRow> {
+    by_variant(runs)
+        .into_iter()
+        .map(|(variant, rs)| {
+            let perf: Vec<Vec<f64>> = rs
+                .iter()
+                .map(|r| r.logs.iter().map(|l| l.performance).collect())
+                .collect();
+            let (mean, se, _) = mean_stderr(&perf);
+            let iterations = mean.len();
+            let last10: Vec<Vec<f64>> = perf
+                .iter()
+                .map(|p| {
+                    let tail = &p[p.len().saturating_sub(10)..];
+                    vec![tail.iter().sum::<f64>() / tail.len().max(1) as f64]
+                })
+                .collect();
+            let (l10, l10se, _) = mean_stderr(&last10);
+            SummaryRow {
+                seeds: rs.len(),
+                iterations,
+                performance: report_points(iterations.max(1))
+                    .into_iter()
+                    .filter(|&i| i < iterations)
+                    .map(|i| (i, mean[i], se[i]))
+                    .collect(),
+                last10_mean: l10.first().copied().unwrap_or(f64::NAN),
+                last10_se: l10se.first().copied().unwrap_or(f64::NAN),
+                first_iteration_mean_ge_0_8: mean.iter().position(|&m| m >= 0.8),
+                learner_cpu_ms_median: 1e3
+                    * median(
+                        rs.iter()
+                            .flat_map(|r| r.logs.iter().map(|l| l.cpu_learner))
+                            .collect(),
+                    ),
+                execute_ms_median: 1e3
+                    * median(
+                        rs.iter()
+                            .flat_map(|r| r.logs.iter().map(|l| l.t_execute))
+                            .collect(),
+                    ),
+                variant,
+            }
+        })
+        .collect()
+}
+
+/// The summary as a text table.
+pub fn summary_text(rows: &[SummaryRow]) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let points: Vec<usize> = rows
+        .first()
+        .map(|r| r.performance.iter().map(|p| p.0).collect())
+        .unwrap_or_default();
+    let _ = write!(s, "{:<20} {:>5}", "variant", "seeds");
+    for p in &points {
+        let _ = write!(s, " {:>13}", format!("it {}", p + 1));
+    }
+    let _ = writeln!(
+        s,
+        " {:>13} {:>8} {:>9} {:>8}",
+        "last 10", ">=0.8 at", "lrn ms", "sim ms"
+    );
+    for r in rows {
+        let _ = write!(s, "{:<20} {:>5}", r.variant, r.seeds);
+        for p in &points {
+            match r.performance.iter().find(|q| q.0 == *p) {
+                Some((_, m, e)) => {
+                    let _ = write!(s, " {:>13}", format!("{m:.3}±{e:.3}"));
+                }
+                None => {
+                    let _ = write!(s, " {:>13}", "-");
+                }
+            }
+        }
+        let _ = writeln!(
+            s,
+            " {:>13} {:>8} {:>9.1} {:>8.0}",
+            format!("{:.3}±{:.3}", r.last10_mean, r.last10_se),
+            r.first_iteration_mean_ge_0_8
+                .map(|i| (i + 1).to_string())
+                .unwrap_or_else(|| "never".into()),
+            r.learner_cpu_ms_median,
+            r.execute_ms_median
+        );
+    }
+    s.push_str("(normalised performance of the noise-free episode, mean ± standard error over seeds; iterations counted from 1; lrn ms = median learner CPU time per iteration)\n");
+    s
+}
+
+/// Header of the experiment CSV.
+pub fn csv_header() -> String {
+    format!("experiment,variant,{CSV_HEADER}")
+}
+
+/// Writes `<name>.csv`, `<name>.png`, `summary.txt` and `summary.json` into `out`; returns
+/// the summary.
+pub fn write_outputs(
+    name: &str,
+    title: &str,
+    runs: &[Run],
+    out: &Path,
+) -> anyhow::Result<Vec<SummaryRow>> {
+    use std::io::Write;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let csv_path = out.join(format!("{name}.csv"));
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(&csv_path)
+            .with_context(|| format!("creating {}", csv_path.display()))?,
+    );
+    writeln!(f, "{}", csv_header())?;
+    for r in runs {
+        for l in &r.logs {
+            write!(f, "{name},{},", r.variant)?;
+            crate::gaifo::write_csv_row(&mut f, l, r.seed, &r.algorithm)?;
+        }
+    }
+    f.flush()?;
+    let series: Vec<Series> = by_variant(runs)
+        .into_iter()
+        .map(|(variant, rs)| {
+            let perf: Vec<Vec<f64>> = rs
+                .iter()
+                .map(|r| r.logs.iter().map(|l| l.performance).collect())
+                .collect();
+            let (mean, stderr, _) = mean_stderr(&perf);
+            Series {
+                label: format!("{variant} ({} seeds)", rs.len()),
+                x: (1..=mean.len()).map(|i| i as f64).collect(),
+                mean,
+                stderr,
+            }
+        })
+        .collect();
+    plot_curves(
+        &out.join(format!("{name}.png")),
+        title,
+        "iteration",
+        "normalised performance (1 = expert, 0 = random)",
+        &series,
+        (1000, 620),
+    )?;
+    let rows = summarise(runs);
+    std::fs::write(out.join("summary.txt"), summary_text(&rows))?;
+    std::fs::write(out.join("summary.json"), serde_json::to_vec_pretty(&rows)?)?;
+    Ok(rows)
+}
+
+/// Jobs of the comparison: every algorithm × seed on `demos`.
+pub fn comparison_jobs(cfg: &ExperimentConfig, demos: Arc<Demos>) -> Vec<Job> {
+    let mut jobs = Vec::new();
+    for a in &cfg.algorithms {
+        for seed in cfg.seed_list() {
+            let spec = if a == "gaifo-ppo" {
+                let mut c = cfg.gaifo_ppo.clone();
+                c.seed = seed;
+                c.iterations = cfg.iterations;
+                Spec::GaifoPpo(c)
+            } else {
+                let mut c = cfg.lqr_gaifo.clone();
+                c.seed = seed;
+                c.iterations = cfg.iterations;
+                Spec::LqrGaifo(c)
+            };
+            jobs.push(Job {
+                variant: a.clone(),
+                spec,
+                demos: demos.clone(),
+            });
+        }
+    }
+    jobs
+}
+
+/// LQR+GAIfO jobs for one variant over every seed.
+pub fn lqr_jobs(cfg: &ExperimentConfig, variant: &str, demos: Arc<Demos>) -> Vec<Job> {
+    cfg.seed_list()
+        .into_iter()
+        .map(|seed| {
+            let mut c = cfg.lqr_gaifo.clone();
+            c.seed = seed;
+            c.iterations = cfg.iterations;
+            Job {
+                variant: variant.into(),
+                spec: Spec::LqrGaifo(c),
+                demos: demos.clone(),
+            }
+        })
+        .collect()
+}
+
+/// Loads `path` or trains the expert of `cfg.expert` and saves its demonstrations as
+/// `out/demos.npz`.
+fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow::Result<Demos> {
+    if let Some(p) = path {
+        let d =
+            Demos::load(p).with_context(|| format!("loading demonstrations {}", p.display()))?;
+        eprintln!(
+            "demonstrations: {} ({} of goal {:?})",
+            p.display(),
+            d.count,
+            d.goal
+        );
+        return Ok(d);
+    }
+    let d = expert_demos(&cfg.expert)?;
+    std::fs::create_dir_all(out)?;
+    d.save(&out.join("demos.npz"))?;
+    Ok(d)
+}
+
+/// The generalisation experiment's demonstration sets: trains the centre expert and the 8
+/// square experts (in parallel), saves them under `out/experts/`, returns one set per subset
+/// size.
+pub fn generalisation_demos(
+    cfg: &ExperimentConfig,
+    pool: &rayon::ThreadPool,
+    out: &Path,
+) -> anyhow::Result<Vec<(usize, Demos)>> {
+    let centre_goal = cfg.expert.task.goal;
+    let mut goals = vec![centre_goal];
+    goals.extend(square_goals(centre_goal, cfg.expert.square_half_side));
+    let experts: Vec<Demos> = pool.install(|| {
+        goals
+            .par_iter()
+            .enumerate()
+            .map(|(i, g)| {
+                let mut e = cfg.expert.clone();
+                e.task.goal = *g;
+                if i > 0 {
+                    e.demos = cfg.demos_per_point;
+                }
+                expert_demos(&e)
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+    })?;
+    let dir = out.join("experts");
+    std::fs::create_dir_all(&dir)?;
+    experts[0].save(&dir.join("centre.npz"))?;
+    for (i, d) in experts[1..].iter().enumerate() {
+        d.save(&dir.join(format!("point_{i}.npz")))?;
+    }
+    cfg.subset_sizes
+        .iter()
+        .map(|&k| {
+            let pts: Vec<&Demos> = subset(k).into_iter().map(|i| &experts[1 + i]).collect();
+            Ok((k, combine_demos(&experts[0], &pts)?))
+        })
+        .collect()
+}
+
+/// Runs an in-process experiment (`comparison`, `generalisation`, `stability`) and writes its
+/// outputs; `demos` replaces training the expert (comparison and stability).
+pub fn run(
+    name: ExperimentName,
+    cfg: &ExperimentConfig,
+    out: &Path,
+    demos: Option<&Path>,
+) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+    cfg.validate(name)?;
+    let pool = pool(cfg.threads)?;
+    eprintln!(
+        "experiment {}: {} seed(s) from {}, {} iterations, {} worker thread(s) -> {}",
+        name.as_str(),
+        cfg.seeds,
+        cfg.first_seed,
+        cfg.iterations,
+        pool.current_num_threads(),
+        out.display()
+    );
+    let t0 = Instant::now();
+    let (jobs, title) = match name {
+        ExperimentName::Comparison => {
+            let d = Arc::new(demos_for(cfg, demos, out)?);
+            (
+                comparison_jobs(cfg, d),
+                "LQR+GAIfO vs GAIfO (PPO): 5 noisy episodes per iteration".to_string(),
+            )
+        }
+        ExperimentName::Stability => {
+            let d = Arc::new(demos_for(cfg, demos, out)?);
+            (
+                lqr_jobs(cfg, "lqr-gaifo", d),
+                format!("LQR+GAIfO over {} iterations", cfg.iterations),
+            )
+        }
+        ExperimentName::Generalisation => {
+            anyhow::ensure!(
+                demos.is_none(),
+                "--demos does not apply to the generalisation experiment (it trains 9 experts)"
+            );
+            let sets = generalisation_demos(cfg, &pool, out)?;
+            let mut jobs = Vec::new();
+            for (k, d) in sets {
+                let label = format!("{k} point{}", if k == 1 { "" } else { "s" });
+                jobs.extend(lqr_jobs(cfg, &label, Arc::new(d)));
+            }
+            (
+                jobs,
+                "Generalisation: demonstrations from k square points, target the centre"
+                    .to_string(),
+            )
+        }
+        ExperimentName::SimVsPhysical => {
+            anyhow::bail!("sim-vs-physical runs over IPC: crate::experiment_ipc::run")
+        }
+    };
+    let runs = run_jobs(&pool, &jobs)?;
+    let rows = write_outputs(name.as_str(), &title, &runs, out)?;
+    eprint!("{}", summary_text(&rows));
+    eprintln!(
+        "experiment {} done in {:.0} s; {} and {} in {}",
+        name.as_str(),
+        t0.elapsed().as_secs_f64(),
+        format_args!("{}.csv", name.as_str()),
+        format_args!("{}.png", name.as_str()),
+        out.display()
+    );
+    Ok((runs, rows))
+}
+
+/// Arguments of `learner experiment`.
+#[derive(clap::Args, Debug)]
+pub struct ExperimentArgs {
+    /// Which experiment.
+    #[arg(value_enum)]
+    pub name: ExperimentName,
+    /// TOML `ExperimentConfig` (keys `seeds`, `first_seed`, `iterations`, `threads`,
+    /// `algorithms`, `subset_sizes`, `demos_per_point`, `time_compression`; tables `expert`,
+    /// `lqr_gaifo`, `gaifo_ppo`, `physical`), layered over the experiment's defaults.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Output folder [default: runs/experiments/<name>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Seeds per variant; overrides the config.
+    #[arg(long)]
+    pub seeds: Option<usize>,
+    /// Iterations per run; overrides the config.
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Worker threads (0 = one per core); overrides the config.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Demonstrations to use instead of training the expert (comparison, stability,
+    /// sim-vs-physical's simulated arm).
+    #[arg(long)]
+    pub demos: Option<PathBuf>,
+    /// Print a one-line JSON summary at the end (stdout).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The experiment's settings from its defaults, the config file and the command line.
+pub fn config_from_args(args: &ExperimentArgs) -> anyhow::Result<ExperimentConfig> {
+    let base = ExperimentConfig::defaults(args.name);
+    let mut cfg = match &args.config {
+        Some(p) => ur5_shared::config::from_toml_file_over(p, base)?,
+        None => base,
+    };
+    if let Some(s) = args.seeds {
+        cfg.seeds = s;
+    }
+    if let Some(i) = args.iterations {
+        cfg.iterations = i;
+    }
+    if let Some(t) = args.threads {
+        cfg.threads = t;
+    }
+    Ok(cfg)
+}
+
+/// Runs `learner experiment`.
+pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
+    let cfg = config_from_args(&args)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs/experiments").join(args.name.as_str()));
+    let rows = match args.name {
+        ExperimentName::SimVsPhysical => {
+            crate::experiment_ipc::run(&cfg, &out, args.demos.as_deref())?.1
+        }
+        name => run(name, &cfg, &out, args.demos.as_deref())?.1,
+    };
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({"command": "experiment", "name": args.name.as_str(), "out": out, "summary": rows})
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subsets_spread_around_the_square() {
+        assert_eq!(subset(1), vec![0]);
+        assert_eq!(subset(2), vec![0, 4]);
+        assert_eq!(subset(4), vec![0, 2, 4, 6]);
+        assert_eq!(subset(8), (0..8).collect::<Vec<_>>());
+        for k in 1..=8 {
+            let s = subset(k);
+            let mut u = s.clone();
+            u.sort();
+            u.dedup();
+            assert_eq!(u.len(), k, "k = {k}: {s:?} has repeats");
+        }
+    }
+
+    #[test]
+    fn report_points_end_with_the_last_iteration() {
+        assert_eq!(report_points(3), vec![0, 2]);
+        assert_eq!(report_points(15), vec![0, 4, 9, 14]);
+        assert_eq!(report_points(100).last(), Some(&99));
+    }
+
+    #[test]
+    fn partial_config_keeps_the_experiments_defaults() {
+        let base = ExperimentConfig::defaults(ExperimentName::Generalisation);
+        let dir = std::env::temp_dir().join(format!("exp-cfg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("c.toml");
+        std::fs::write(&p, "seeds = 2\n[lqr_gaifo.discriminator]\nn_critic = 7\n").unwrap();
+        let c: ExperimentConfig =
+            ur5_shared::config::from_toml_file_over(&p, base.clone()).unwrap();
+        assert_eq!(c.seeds, 2);
+        assert_eq!(c.iterations, 15, "generalisation default kept");
+        assert_eq!(c.lqr_gaifo.discriminator.n_critic, 7);
+        assert_eq!(
+            c.lqr_gaifo.discriminator.batch_size,
+            base.lqr_gaifo.discriminator.batch_size
+        );
+        std::fs::write(&p, "seedz = 2\n").unwrap();
+        let e = ur5_shared::config::from_toml_file_over(&p, base).unwrap_err();
+        assert!(e.to_string().contains("seedz"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

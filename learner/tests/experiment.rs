@@ -1,0 +1,128 @@
+//! `learner experiment` on tiny configurations: the outputs are produced and well formed,
+//! LQR+GAIfO learns, and the results do not depend on the number of worker threads.
+
+use std::path::{Path, PathBuf};
+
+use learner::experiment::{csv_header, run, ExperimentConfig, ExperimentName};
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("learner-exp-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// CSV rows without the wall-clock columns (t_*_s, cpu_learner_s), which differ run to run.
+fn rows_without_times(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header.join(","), csv_header());
+    let keep: Vec<usize> = header
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| !(h.starts_with("t_") || h.starts_with("cpu_")))
+        .map(|(i, _)| i)
+        .collect();
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            assert_eq!(f.len(), header.len(), "row {l}");
+            keep.iter().map(|&i| f[i]).collect::<Vec<_>>().join(",")
+        })
+        .collect()
+}
+
+fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(
+        bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "{} is not a PNG",
+        path.display()
+    );
+    assert!(bytes.len() > 10_000, "{} looks empty", path.display());
+}
+
+#[test]
+fn comparison_outputs_learning_and_thread_independence() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Comparison);
+    cfg.seeds = 2;
+    cfg.iterations = 4;
+    cfg.threads = 2;
+    let out2 = tmp("cmp2");
+    let (runs, rows) = run(ExperimentName::Comparison, &cfg, &out2, None).unwrap();
+    assert_eq!(runs.len(), 4, "2 algorithms x 2 seeds");
+    let csv = out2.join("comparison.csv");
+    let rows2 = rows_without_times(&csv);
+    assert_eq!(rows2.len(), 2 * 2 * 4);
+    assert_png(&out2.join("comparison.png"));
+    assert!(out2.join("summary.txt").exists() && out2.join("demos.npz").exists());
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out2.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 2);
+    assert_eq!(rows.len(), 2);
+    let lqr = rows.iter().find(|r| r.variant == "lqr-gaifo").unwrap();
+    let (first, last) = (lqr.performance[0].1, lqr.performance.last().unwrap().1);
+    eprintln!("LQR+GAIfO mean normalised performance {first:.3} -> {last:.3}");
+    assert!(
+        last > first + 0.1,
+        "LQR+GAIfO should learn: {first:.3} -> {last:.3}"
+    );
+    for r in &runs {
+        assert!(r
+            .logs
+            .iter()
+            .all(|l| l.task_cost.is_finite() && l.performance.is_finite()));
+    }
+
+    // The same runs on one thread: identical rows (bar wall times), in the same order.
+    cfg.threads = 1;
+    let out1 = tmp("cmp1");
+    run(
+        ExperimentName::Comparison,
+        &cfg,
+        &out1,
+        Some(&out2.join("demos.npz")),
+    )
+    .unwrap();
+    assert_eq!(rows_without_times(&out1.join("comparison.csv")), rows2);
+    let _ = std::fs::remove_dir_all(&out1);
+    let _ = std::fs::remove_dir_all(&out2);
+}
+
+#[test]
+fn generalisation_trains_the_square_experts_and_targets_the_centre() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Generalisation);
+    cfg.seeds = 1;
+    cfg.iterations = 3;
+    cfg.threads = 2;
+    cfg.subset_sizes = vec![2];
+    cfg.demos_per_point = 1;
+    cfg.expert.iterations = 6;
+    let out = tmp("gen");
+    let (runs, rows) = run(ExperimentName::Generalisation, &cfg, &out, None).unwrap();
+    assert_eq!(runs.len(), 1);
+    assert_eq!(rows[0].variant, "2 points");
+    for f in ["centre.npz", "point_0.npz", "point_7.npz"] {
+        assert!(out.join("experts").join(f).exists(), "{f}");
+    }
+    let centre = learner::io::demos::Demos::load(&out.join("experts/centre.npz")).unwrap();
+    assert_eq!(centre.goal, cfg.expert.task.goal);
+    assert_eq!(rows_without_times(&out.join("generalisation.csv")).len(), 3);
+    assert_png(&out.join("generalisation.png"));
+    let p: Vec<f64> = runs[0].logs.iter().map(|l| l.performance).collect();
+    eprintln!("generalisation (2 points): {p:?}");
+    assert!(p[2] > p[0], "moves towards the centre: {p:?}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_settings_are_refused_with_a_reason() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Generalisation);
+    cfg.subset_sizes = vec![9];
+    let e = run(ExperimentName::Generalisation, &cfg, &tmp("bad"), None).unwrap_err();
+    assert!(e.to_string().contains("subset_sizes"), "{e}");
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Comparison);
+    cfg.algorithms = vec!["dagger".into()];
+    let e = run(ExperimentName::Comparison, &cfg, &tmp("bad2"), None).unwrap_err();
+    assert!(e.to_string().contains("dagger"), "{e}");
+}
