@@ -1,15 +1,399 @@
-//! `learner experiment sim-vs-physical`: LQR+GAIfO over IPC (hil-sim serve, rt-controller in
-//! real time with time compression, learner serve) on the nominal and on the perturbed arm.
+//! `learner experiment sim-vs-physical` (paper: "comparison" of simulation and the physical
+//! arm): the same LQR+GAIfO run on the nominal simulated arm and on the perturbed one (mass,
+//! damping, friction, actuator and sensor noise, one-step latency: `ExperimentConfig::physical`,
+//! default `Perturbation::physical_stand_in`), each over IPC with all three processes in real
+//! time, compressed `time_compression` times:
+//!
+//! ```text
+//! hil-sim serve (real time, arm clock)  <->  rt-controller run (real time)  <->  learner serve --algo lqr-gaifo
+//! ```
+//!
+//! Each arm gets its own expert, trained in process on that arm, and its own demonstrations,
+//! so that each curve is normalised by its own arm's expert and random policy. Runs (arm ×
+//! seed) execute `threads` at a time (0 = one per core), each on its own iceoryx2 prefix; the
+//! binaries `hil-sim` and `rt-controller` are taken from the directory of the running
+//! `learner` executable. Real time is not lockstep: episodes depend on scheduling, so these
+//! runs are not bit-for-bit repeatable (the in-process experiments are).
 
-use std::path::Path;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
-use crate::experiment::{ExperimentConfig, Run, SummaryRow};
+use anyhow::Context;
+use rayon::prelude::*;
+use ur5_shared::config::Perturbation;
 
-/// Runs the experiment (not wired yet: needs `learner serve --algo lqr-gaifo`).
+use crate::experiment::{
+    expert_demos, pool, summary_text, write_outputs, ExperimentConfig, ExperimentName, Run,
+    SummaryRow,
+};
+use crate::gaifo::GaifoLog;
+
+/// `v` as a TOML value.
+fn value<T: serde::Serialize>(v: &T) -> anyhow::Result<toml::Value> {
+    Ok(toml::Value::try_from(v)?)
+}
+
+/// A spawned process, killed (and reaped) on drop.
+struct Guard {
+    name: String,
+    child: Child,
+}
+
+impl Guard {
+    fn spawn(bin: &Path, args: &[String], log: &Path) -> anyhow::Result<Self> {
+        let child = Command::new(bin)
+            .args(args)
+            .env("IOX2_LOG_LEVEL", "Error")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(File::create(log).with_context(|| format!("creating {}", log.display()))?)
+            .spawn()
+            .with_context(|| format!("starting {}", bin.display()))?;
+        Ok(Self {
+            name: bin.display().to_string(),
+            child,
+        })
+    }
+}
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        // SIGTERM first (the binaries stop cleanly and remove their iceoryx2 ports), then kill.
+        // SAFETY: plain kill(2) on our own child's pid.
+        unsafe {
+            libc::kill(self.child.id() as i32, libc::SIGTERM);
+        }
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(3) {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        eprintln!("{} did not stop on SIGTERM; killed", self.name);
+    }
+}
+
+/// `name` next to the running executable (`target/release/<name>`).
+fn sibling(name: &str) -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let p = exe
+        .parent()
+        .map(|d| d.join(name))
+        .context("no directory for the running executable")?;
+    anyhow::ensure!(
+        p.exists(),
+        "{} not found: build every binary first (`cargo build --release --workspace --bins`)",
+        p.display()
+    );
+    Ok(p)
+}
+
+/// Parses a `gaifo_log.csv` (columns of `gaifo::CSV_HEADER`, by name) back into logs.
+pub fn read_gaifo_csv(path: &Path) -> anyhow::Result<Vec<GaifoLog>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().context("empty CSV")?.split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .with_context(|| format!("{}: no column {name}", path.display()))
+    };
+    let idx = [
+        col("iteration")?,
+        col("normalised_performance")?,
+        col("task_cost")?,
+        col("final_distance_m")?,
+        col("critic_loss")?,
+        col("wasserstein")?,
+        col("kl")?,
+        col("eta")?,
+        col("step_mult")?,
+        col("t_execute_s")?,
+        col("t_dynamics_s")?,
+        col("t_critic_s")?,
+        col("t_cost_s")?,
+        col("t_lqr_s")?,
+    ];
+    let cpu = header.iter().position(|h| *h == "cpu_learner_s");
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let num = |i: usize| -> anyhow::Result<f64> {
+                f.get(i)
+                    .context("short row")?
+                    .parse::<f64>()
+                    .with_context(|| format!("{}: bad number in `{l}`", path.display()))
+            };
+            Ok(GaifoLog {
+                iteration: num(idx[0])? as usize,
+                performance: num(idx[1])?,
+                task_cost: num(idx[2])?,
+                final_distance: num(idx[3])?,
+                critic_loss: num(idx[4])?,
+                wasserstein: num(idx[5])?,
+                kl: num(idx[6])?,
+                eta: num(idx[7])?,
+                step_mult: num(idx[8])?,
+                t_execute: num(idx[9])?,
+                t_dynamics: num(idx[10])?,
+                t_critic: num(idx[11])?,
+                t_cost: num(idx[12])?,
+                t_lqr: num(idx[13])?,
+                cpu_learner: match cpu {
+                    Some(i) => num(i)?,
+                    None => f64::NAN,
+                },
+            })
+        })
+        .collect()
+}
+
+/// Everything one IPC run needs.
+struct IpcRun<'a> {
+    cfg: &'a ExperimentConfig,
+    arm: &'a str,
+    perturbation: &'a Perturbation,
+    demos: &'a Path,
+    seed: u64,
+    dir: PathBuf,
+}
+
+impl IpcRun<'_> {
+    fn run(&self) -> anyhow::Result<Run> {
+        let t0 = Instant::now();
+        let cfg = self.cfg;
+        let dir = &self.dir;
+        std::fs::create_dir_all(dir)?;
+        let prefix =
+            ur5_shared::services::unique_prefix(&format!("exp-{}-{}", self.arm, self.seed));
+        let task = &cfg.expert.task;
+        let mut sim = cfg.expert.sim.clone();
+        sim.perturbation = self.perturbation.clone();
+        let c = cfg.time_compression;
+        let n = cfg.lqr_gaifo.samples;
+        let table = |pairs: Vec<(&str, toml::Value)>| -> toml::Value {
+            toml::Value::Table(pairs.into_iter().map(|(k, v)| (k.to_string(), v)).collect())
+        };
+        let write = |name: &str, v: toml::Value| -> anyhow::Result<String> {
+            let p = dir.join(name);
+            std::fs::write(&p, toml::to_string(&v)?)?;
+            Ok(p.display().to_string())
+        };
+        let real_time = toml::Value::String("real_time".into());
+        let sim_cfg = write(
+            "sim.toml",
+            table(vec![
+                ("task", value(task)?),
+                ("sim", value(&sim)?),
+                (
+                    "serve",
+                    table(vec![
+                        ("mode", real_time.clone()),
+                        ("time_compression", toml::Value::Float(c)),
+                    ]),
+                ),
+            ]),
+        )?;
+        let ctl_cfg = write(
+            "controller.toml",
+            table(vec![
+                ("mode", real_time),
+                ("pacing", toml::Value::String("deadline".into())),
+                ("time_compression", toml::Value::Float(c)),
+                ("seed", toml::Value::Integer(self.seed as i64)),
+                ("noisy_episodes", toml::Value::Integer(n as i64)),
+                ("eval_episodes", toml::Value::Integer(1)),
+                ("action_mode", value(&sim.mode)?),
+                ("task", value(task)?),
+            ]),
+        )?;
+        let mut lcfg = cfg.lqr_gaifo.clone();
+        lcfg.seed = self.seed;
+        lcfg.iterations = cfg.iterations;
+        lcfg.sim = sim.clone();
+        let learner_cfg = write("learner.toml", value(&lcfg)?)?;
+        let out = dir.join("learner");
+        let s = |v: &str| v.to_string();
+        let _sim = Guard::spawn(
+            &sibling("hil-sim")?,
+            &[
+                s("serve"),
+                s("--config"),
+                sim_cfg,
+                s("--prefix"),
+                prefix.clone(),
+            ],
+            &dir.join("sim.log"),
+        )?;
+        let _ctl = Guard::spawn(
+            &sibling("rt-controller")?,
+            &[
+                s("run"),
+                s("--config"),
+                ctl_cfg,
+                s("--prefix"),
+                prefix.clone(),
+            ],
+            &dir.join("controller.log"),
+        )?;
+        let mut learner = Guard::spawn(
+            &std::env::current_exe()?,
+            &[
+                s("serve"),
+                s("--algo"),
+                s("lqr-gaifo"),
+                s("--demos"),
+                self.demos.display().to_string(),
+                s("--config"),
+                learner_cfg,
+                s("--prefix"),
+                prefix,
+                s("--out"),
+                out.display().to_string(),
+            ],
+            &dir.join("learner.log"),
+        )?;
+        // Arm time of one iteration (N + 1 episodes, one more for the table switch), in wall
+        // time, and generous slack for learning and a loaded machine.
+        let per_iter = (n + 2) as f64 * task.horizon as f64 * task.dt / c;
+        let limit = Duration::from_secs_f64(120.0 + 3.0 * per_iter * cfg.iterations as f64);
+        let status = loop {
+            if let Some(st) = learner.child.try_wait()? {
+                break st;
+            }
+            anyhow::ensure!(
+                t0.elapsed() < limit,
+                "{} seed {}: learner still running after {:.0} s (log: {})",
+                self.arm,
+                self.seed,
+                limit.as_secs_f64(),
+                dir.join("learner.log").display()
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        };
+        anyhow::ensure!(
+            status.success(),
+            "{} seed {}: learner serve failed ({status}); log: {}",
+            self.arm,
+            self.seed,
+            dir.join("learner.log").display()
+        );
+        let logs = read_gaifo_csv(&out.join("gaifo_log.csv"))?;
+        anyhow::ensure!(
+            logs.len() >= cfg.iterations,
+            "{} seed {}: {} of {} iterations logged",
+            self.arm,
+            self.seed,
+            logs.len(),
+            cfg.iterations
+        );
+        Ok(Run {
+            variant: self.arm.to_string(),
+            algorithm: "lqr-gaifo".into(),
+            seed: self.seed,
+            logs,
+            wall_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// Runs the experiment and writes its outputs (`sim-vs-physical.csv`, `.png`, summary) into
+/// `out`; `demos` replaces training the nominal arm's expert.
 pub fn run(
-    _cfg: &ExperimentConfig,
-    _out: &Path,
-    _demos: Option<&Path>,
+    cfg: &ExperimentConfig,
+    out: &Path,
+    demos: Option<&Path>,
 ) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
-    anyhow::bail!("sim-vs-physical is not implemented yet (needs `learner serve --algo lqr-gaifo`)")
+    let name = ExperimentName::SimVsPhysical;
+    cfg.validate(name)?;
+    let pool = pool(cfg.threads)?;
+    std::fs::create_dir_all(out)?;
+    eprintln!(
+        "experiment sim-vs-physical: {} seed(s) from {}, {} iterations, real time x{} over IPC, {} run(s) at a time -> {}",
+        cfg.seeds,
+        cfg.first_seed,
+        cfg.iterations,
+        cfg.time_compression,
+        pool.current_num_threads(),
+        out.display()
+    );
+    let t0 = Instant::now();
+    let arms = [
+        ("simulated", Perturbation::default()),
+        ("physical", cfg.physical.clone()),
+    ];
+    // One expert per arm, trained in process on that arm.
+    let demo_paths: Vec<PathBuf> = pool.install(|| {
+        arms.par_iter()
+            .map(|(arm, p)| -> anyhow::Result<PathBuf> {
+                let path = out.join(format!("demos_{arm}.npz"));
+                if let (Some(d), true) = (demos, p.is_nominal()) {
+                    std::fs::copy(d, &path).with_context(|| format!("copying {}", d.display()))?;
+                    return Ok(path);
+                }
+                let mut e = cfg.expert.clone();
+                e.sim.perturbation = p.clone();
+                expert_demos(&e)?.save(&path)?;
+                Ok(path)
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+    })?;
+    let mut jobs = Vec::new();
+    for ((arm, p), d) in arms.iter().zip(&demo_paths) {
+        for i in 0..cfg.seeds as u64 {
+            let seed = cfg.first_seed + i;
+            jobs.push(IpcRun {
+                cfg,
+                arm,
+                perturbation: p,
+                demos: d,
+                seed,
+                dir: out.join(format!("{arm}_seed{seed}")),
+            });
+        }
+    }
+    let done = AtomicUsize::new(0);
+    let total = jobs.len();
+    let runs: Vec<Run> = pool.install(|| {
+        jobs.par_iter()
+            .map(|j| {
+                let r = j.run()?;
+                let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+                eprintln!(
+                    "[{k:>3}/{total}] {:<10} seed {:>3}: {} iterations over IPC, final normalised performance {:>6.3} ({:.0} s)",
+                    r.variant,
+                    r.seed,
+                    r.logs.len(),
+                    r.logs.last().map(|l| l.performance).unwrap_or(f64::NAN),
+                    r.wall_s
+                );
+                Ok(r)
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+    })?;
+    let rows = write_outputs(
+        name.as_str(),
+        &format!(
+            "LQR+GAIfO over IPC in real time (x{}): nominal vs perturbed arm",
+            cfg.time_compression
+        ),
+        &runs,
+        out,
+    )?;
+    eprint!("{}", summary_text(&rows));
+    eprintln!(
+        "experiment sim-vs-physical done in {:.0} s; outputs in {}",
+        t0.elapsed().as_secs_f64(),
+        out.display()
+    );
+    Ok((runs, rows))
 }
