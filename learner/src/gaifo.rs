@@ -1,5 +1,5 @@
-//! LQR+GAIfO (Torabi et al. 2019, Algorithm 1), in process (lockstep). One function per line
-//! of the algorithm, called in the paper's order by [`LqrGaifo::iterate`]:
+//! LQR+GAIfO (Torabi et al. 2019, Algorithm 1). One function per line of the algorithm, called
+//! in the paper's order:
 //!
 //! 1. [`execute`]: run the controller N times with noise and once without;
 //! 2. `update_dynamics`: refit p(s'|s,a) = N(F_t [s;a] + f_t, Σ_t) (GMM prior + regression);
@@ -7,6 +7,11 @@
 //! 4. [`composite_cost_derivs`]: C_t(s,a) = D(s, F_t [s;a] + f_t) and
 //! 5. its second-order expansion around the samples;
 //! 6. [`improve`]: the KL-bounded LQR step.
+//!
+//! Line 1 and the rest are separate: [`LqrGaifo::learn`] is lines 2–6 (and the switch to the new
+//! controller) on episodes executed elsewhere; [`LqrGaifo::iterate`] is [`execute`] on an
+//! in-process arm followed by `learn` (`learner train`), and `learner serve --algo lqr-gaifo`
+//! calls `learn` on the episodes the real-time loop streams. Same episodes, same result.
 //!
 //! Only state transitions of the expert are used (`Demos::states`); its actions are never read.
 
@@ -162,6 +167,28 @@ impl GaifoLog {
     pub fn learner_seconds(&self) -> f64 {
         self.t_dynamics + self.t_critic + self.t_cost + self.t_lqr
     }
+
+    /// Column names of [`GaifoLog::progress_line`].
+    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
+
+    /// The progress line of this iteration (`learner train`, `learner serve --algo lqr-gaifo`;
+    /// `sim_ms` is [`GaifoLog::t_execute`]).
+    pub fn progress_line(&self) -> String {
+        format!(
+            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
+            self.iteration,
+            self.task_cost,
+            self.performance,
+            self.final_distance,
+            self.critic_loss,
+            self.wasserstein,
+            self.kl,
+            self.eta,
+            self.step_mult,
+            1e3 * self.learner_seconds(),
+            1e3 * self.t_execute
+        )
+    }
 }
 
 /// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row.
@@ -278,7 +305,8 @@ pub struct LqrGaifo {
     task: TaskConfig,
     demos: Demos,
     expert: Mat<f64>,
-    sim: Ur5Sim,
+    /// The in-process arm of [`LqrGaifo::iterate`], built on first use (`learn` needs none).
+    sim: Option<Ur5Sim>,
     learner: Learner,
     disc: Discriminator,
     cost_ws: CompositeWorkspace,
@@ -301,7 +329,6 @@ impl LqrGaifo {
         };
         task.validate()
             .map_err(|e| LearnerError::Shape(format!("demonstrations: {e}")))?;
-        let sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
         let expert = expert_transitions(&demos);
         let norm = Normalizer::from_data(expert.as_ref())
             .map_err(|e| LearnerError::Shape(e.to_string()))?;
@@ -330,7 +357,7 @@ impl LqrGaifo {
             task,
             demos,
             expert,
-            sim,
+            sim: None,
             learner,
             disc,
             pol,
@@ -350,6 +377,31 @@ impl LqrGaifo {
     /// The task being imitated.
     pub fn task(&self) -> &TaskConfig {
         &self.task
+    }
+
+    /// The settings of the run.
+    pub fn config(&self) -> &GaifoConfig {
+        &self.cfg
+    }
+
+    /// The demonstrations being imitated.
+    pub fn demos(&self) -> &Demos {
+        &self.demos
+    }
+
+    /// Iterations done (counting those before a resume).
+    pub fn iteration(&self) -> usize {
+        self.iteration
+    }
+
+    /// Gain-table version of [`LqrGaifo::policy`]: iteration + 1 (the initial controller is 1).
+    pub fn version(&self) -> u64 {
+        self.iteration as u64 + 1
+    }
+
+    /// `cfg.iterations` done.
+    pub fn done(&self) -> bool {
+        self.iteration >= self.cfg.iterations
     }
 
     /// Rebuilds the critic with its input normalisation fitted on expert ∪ `controller`
@@ -377,27 +429,60 @@ impl LqrGaifo {
         )
     }
 
-    /// One iteration of Algorithm 1; returns its log and the noise-free episode.
+    /// One iteration of Algorithm 1 in process: line 1 ([`execute`] on the in-process arm),
+    /// then [`LqrGaifo::learn`]. Returns its log and the noise-free episode.
     pub fn iterate(&mut self) -> Result<(GaifoLog, Episode), LearnerError> {
-        let n = self.cfg.samples;
-        let version = self.iteration as u64 + 1;
+        let sim = match self.sim.as_mut() {
+            Some(sim) => sim,
+            None => self
+                .sim
+                .insert(Ur5Sim::new(self.cfg.sim.clone(), self.task.dt).map_err(sim_err)?),
+        };
         // 1. Execute the controller.
         let t0 = Instant::now();
         let (episodes, eval) = execute(
-            &mut self.sim,
+            sim,
             &self.task,
             &self.pol,
-            version,
+            self.iteration as u64 + 1,
             self.cfg.seed,
-            n,
+            self.cfg.samples,
         )?;
-        let (x, u) = stack(&episodes);
+        let t_execute = t0.elapsed().as_secs_f64();
+        let log = self.learn(&episodes, &eval, t_execute)?;
+        Ok((log, eval))
+    }
+
+    /// Lines 2–6 of Algorithm 1 on the `episodes` (`cfg.samples` noisy ones) and the noise-free
+    /// `eval` episode executed with [`LqrGaifo::policy`] (as table version
+    /// [`LqrGaifo::version`]); then that controller is replaced by the new one. `t_execute`
+    /// (s) is logged as the time line 1 took.
+    pub fn learn(
+        &mut self,
+        episodes: &[Episode],
+        eval: &Episode,
+        t_execute: f64,
+    ) -> Result<GaifoLog, LearnerError> {
+        let (n, t_len) = (self.cfg.samples, self.task.horizon);
+        if episodes.len() != n || episodes.iter().chain([eval]).any(|e| e.horizon() != t_len) {
+            return Err(LearnerError::Shape(format!(
+                "an LQR+GAIfO iteration needs {n} noisy episodes and one noise-free episode of \
+                 T = {t_len} steps; got {} noisy, horizons {:?}",
+                episodes.len(),
+                episodes
+                    .iter()
+                    .chain([eval])
+                    .map(Episode::horizon)
+                    .collect::<Vec<_>>()
+            )));
+        }
+        let (x, u) = stack(episodes);
         // 2. Fit the dynamics.
         let t1 = Instant::now();
         self.learner.update_dynamics(&x, &u, n)?;
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
-        let controller = episode_transitions(&episodes);
+        let controller = episode_transitions(episodes);
         if self.iteration == 0 {
             self.refit_normalizer(&controller)?;
         }
@@ -407,7 +492,7 @@ impl LqrGaifo {
         composite_cost_derivs(
             &self.disc,
             &self.learner.info.dynamics,
-            &episodes,
+            episodes,
             &mut self.cost_ws,
             &mut self.derivs,
         );
@@ -442,7 +527,7 @@ impl LqrGaifo {
             kl: step.kl,
             eta: step.eta,
             step_mult: step.step_mult,
-            t_execute: (t1 - t0).as_secs_f64(),
+            t_execute,
             t_dynamics: (t2 - t1).as_secs_f64(),
             t_critic: (t3 - t2).as_secs_f64(),
             t_cost: (t4 - t3).as_secs_f64(),
@@ -454,7 +539,7 @@ impl LqrGaifo {
         }
         self.pol.copy_from(&self.new_pol);
         self.iteration += 1;
-        Ok((log, eval))
+        Ok(log)
     }
 
     /// Saves the controller that the next iteration executes (`iter_NNN_table.npz`) and the

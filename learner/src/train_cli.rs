@@ -44,23 +44,6 @@ pub struct TrainArgs {
     pub json: bool,
 }
 
-fn print_line(l: &GaifoLog) {
-    eprintln!(
-        "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
-        l.iteration,
-        l.task_cost,
-        l.performance,
-        l.final_distance,
-        l.critic_loss,
-        l.wasserstein,
-        l.kl,
-        l.eta,
-        l.step_mult,
-        1e3 * l.learner_seconds(),
-        1e3 * l.t_execute
-    );
-}
-
 /// The end of a `learner train` run: the summary line on stderr and, with `--json`, the
 /// one-line JSON summary on stdout (both algorithms).
 pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, json: bool) {
@@ -117,21 +100,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         cfg.seed,
         args.out.display()
     );
-    eprintln!(
-        "{:>4} {:>9} {:>7} {:>8} {:>9} {:>8} {:>8} {:>9} {:>6} {:>7} {:>7}",
-        "iter",
-        "task_cost",
-        "perf",
-        "final_m",
-        "critic",
-        "W1_est",
-        "kl",
-        "eta",
-        "mult",
-        "lrn_ms",
-        "sim_ms"
-    );
-    let logs = train(&cfg, demos, Some(&args.out), print_line)?;
+    eprintln!("{}", GaifoLog::PROGRESS_HEADER);
+    let logs = train(&cfg, demos, Some(&args.out), |l| {
+        eprintln!("{}", l.progress_line())
+    })?;
     crate::train_cli::report(&logs, "lqr-gaifo", cfg.seed, &args.out, args.json);
     Ok(())
 }
