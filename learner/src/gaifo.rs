@@ -13,6 +13,17 @@
 //! in-process arm followed by `learn` (`learner train`), and `learner serve --algo lqr-gaifo`
 //! calls `learn` on the episodes the real-time loop streams. Same episodes, same result.
 //!
+//! # Checkpoints and resuming
+//! [`LqrGaifo::checkpoint`] writes, before every iteration, the controller it executes
+//! (`iter_NNN_table.npz`, NNN = iterations done) and the critic (`iter_NNN_critic.json`:
+//! weights, input normalisation, Adam moments and step count, minibatch RNG position).
+//! [`LqrGaifo::resume`] continues from the latest complete pair: the critic exactly, the
+//! controller as its gain table (K, k, L; Σ = L Lᵀ is recomputed). The GPS learner state — the
+//! GMM dynamics prior (and the transitions it was fitted on), the previous controller and the
+//! step size — is not checkpointed and starts afresh, so a resumed run's first iteration executes
+//! the same episodes and makes the same critic update as the uninterrupted run would, but its
+//! dynamics fit, and hence its LQR step, differ from there on.
+//!
 //! Only state transitions of the expert are used (`Demos::states`); its actions are never read.
 
 use std::path::{Path, PathBuf};
@@ -34,9 +45,9 @@ use crate::discriminator::{
 };
 use crate::dynamics::lr_prior::LrPriorConfig;
 use crate::dynamics::prior_gmm::PriorGmmConfig;
-use crate::expert::{init_hold, to_gain_table};
+use crate::expert::{init_hold, policy_from_gain_table, to_gain_table};
 use crate::io::demos::Demos;
-use crate::io::table::save_table;
+use crate::io::table::{load_table, save_table};
 use crate::iteration::{execute, improve, sim_err, stack};
 use crate::policy::lin_gauss::LinGaussPolicy;
 use crate::rollout::Episode;
@@ -557,6 +568,92 @@ impl LqrGaifo {
         self.disc.save(&critic)?;
         Ok((table, critic))
     }
+
+    /// Continues a run from the latest checkpoint in `dir` ([`latest_checkpoint`]): the
+    /// controller of `iter_NNN_table.npz` (executed next, as table version NNN + 1), the critic
+    /// of `iter_NNN_critic.json`, NNN iterations done. `cfg` and `demos` must be the run's own:
+    /// the critic's settings and seed are checked against `cfg`, the table's horizon and control
+    /// period against the demonstrations. What is not checkpointed starts afresh (module docs).
+    pub fn resume(cfg: GaifoConfig, demos: Demos, dir: &Path) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        let (iteration, table_path, critic_path) = latest_checkpoint(dir)?;
+        let mut run = Self::new(cfg, demos)?;
+        let (table, dt) = load_table(&table_path, &ur5_shared::GainBounds::default())
+            .with_context(|| format!("resuming from {}", table_path.display()))?;
+        anyhow::ensure!(
+            table.horizon() == run.task.horizon && dt.to_bits() == run.task.dt.to_bits(),
+            "{}: a controller of T = {} steps at dt = {dt} s, the demonstrations have T = {} at \
+             dt = {} s: resume with the run's own demonstrations",
+            table_path.display(),
+            table.horizon(),
+            run.task.horizon,
+            run.task.dt
+        );
+        anyhow::ensure!(
+            table.version == iteration as u64 + 1,
+            "{}: table version {}, expected {} for iteration {iteration}",
+            table_path.display(),
+            table.version,
+            iteration + 1
+        );
+        run.pol = policy_from_gain_table(&table)
+            .with_context(|| format!("resuming from {}", table_path.display()))?;
+        let disc = Discriminator::load(&critic_path, D_IN)
+            .with_context(|| format!("resuming from {}", critic_path.display()))?;
+        let expected = critic_config(&run.cfg.discriminator, run.cfg.seed);
+        anyhow::ensure!(
+            *disc.config() == expected,
+            "{}: the critic was trained with other [discriminator] settings or another seed than \
+             this run's (seed {}): resume with the run's own --config and --seed",
+            critic_path.display(),
+            run.cfg.seed
+        );
+        run.cost_ws = CompositeWorkspace::new(&disc).with_psd(run.cfg.psd_hessian);
+        run.disc_ws = disc.workspace();
+        run.disc = disc;
+        run.iteration = iteration;
+        Ok(run)
+    }
+}
+
+/// The latest complete checkpoint in `dir`: (NNN, `iter_NNN_table.npz`, `iter_NNN_critic.json`)
+/// with the largest NNN for which both files exist. A clear error when there is none.
+pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot resume from {}: {e} (expected the --out folder of an earlier \
+             `learner train` or `learner serve --algo lqr-gaifo` run)",
+            dir.display()
+        )
+    })?;
+    let mut best: Option<usize> = None;
+    for entry in entries {
+        let name = entry?.file_name();
+        let Some(n) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("iter_"))
+            .and_then(|n| n.strip_suffix("_table.npz"))
+            .filter(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|n| n.parse::<usize>().ok())
+        else {
+            continue;
+        };
+        if dir.join(format!("iter_{n:03}_critic.json")).is_file() && best.is_none_or(|b| n > b) {
+            best = Some(n);
+        }
+    }
+    let n = best.ok_or_else(|| {
+        anyhow::anyhow!(
+            "cannot resume from {}: no checkpoint in it (no pair iter_NNN_table.npz + \
+             iter_NNN_critic.json, written by `learner train` and `learner serve --algo lqr-gaifo`)",
+            dir.display()
+        )
+    })?;
+    Ok((
+        n,
+        dir.join(format!("iter_{n:03}_table.npz")),
+        dir.join(format!("iter_{n:03}_critic.json")),
+    ))
 }
 
 /// An imitation run the shared training loop drives: LQR+GAIfO here, the PPO baseline in
@@ -586,24 +683,35 @@ pub fn run_iterations<R: Imitation>(
     seed: u64,
     algo: &str,
     out: Option<&Path>,
-    mut progress: impl FnMut(&GaifoLog, &R),
+    progress: impl FnMut(&GaifoLog, &R),
 ) -> anyhow::Result<Vec<GaifoLog>> {
-    use std::io::Write;
-    let mut csv = match out {
+    let csv = match out {
         Some(dir) => {
             std::fs::create_dir_all(dir)?;
-            let mut f = std::fs::File::create(dir.join("gaifo_log.csv"))?;
-            writeln!(f, "{CSV_HEADER}")?;
+            let f = open_log(&dir.join("gaifo_log.csv"), None)?;
             run.checkpoint(dir)?;
-            Some(f)
+            Some((f, dir))
         }
         None => None,
     };
+    drive(run, iterations, seed, algo, csv, progress)
+}
+
+/// The iterations of [`run_iterations`] and [`train_resumed`]: iterate, report, log, checkpoint.
+fn drive<R: Imitation>(
+    run: &mut R,
+    iterations: usize,
+    seed: u64,
+    algo: &str,
+    mut csv: Option<(std::fs::File, &Path)>,
+    mut progress: impl FnMut(&GaifoLog, &R),
+) -> anyhow::Result<Vec<GaifoLog>> {
+    use std::io::Write;
     let mut logs = Vec::with_capacity(iterations);
     for _ in 0..iterations {
         let (log, _) = run.iterate()?;
         progress(&log, run);
-        if let (Some(f), Some(dir)) = (csv.as_mut(), out) {
+        if let Some((f, dir)) = csv.as_mut() {
             write_csv_row(f, &log, seed, algo)?;
             f.flush()?;
             run.checkpoint(dir)?;
@@ -611,6 +719,59 @@ pub fn run_iterations<R: Imitation>(
         logs.push(log);
     }
     Ok(logs)
+}
+
+/// Opens the per-iteration CSV `path` ([`CSV_HEADER`]) for appending rows. `resume_at: None`
+/// starts a new file. `Some(i)`, a run resumed at iteration i, keeps the rows of iterations
+/// before i and appends after them (creating the file if it is missing); rows of iteration i
+/// and later — written after the checkpoint it resumes from, by a run that was stopped before
+/// its next checkpoint — are dropped, as the resumed run writes them again.
+pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs::File> {
+    use anyhow::Context;
+    use std::io::Write;
+    let Some(start) = resume_at.filter(|_| path.exists()) else {
+        let mut f =
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        writeln!(f, "{CSV_HEADER}")?;
+        return Ok(f);
+    };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    anyhow::ensure!(
+        lines.next() == Some(CSV_HEADER),
+        "{}: not a per-iteration log of this build (its first line is not the header {CSV_HEADER:?})",
+        path.display()
+    );
+    let mut kept = String::new();
+    let mut dropped = 0;
+    for (k, line) in lines.enumerate() {
+        let it: usize = line
+            .split(',')
+            .next()
+            .and_then(|c| c.parse().ok())
+            .with_context(|| format!("{} line {}: no iteration number", path.display(), k + 2))?;
+        if it < start {
+            kept.push_str(line);
+            kept.push('\n');
+        } else {
+            dropped += 1;
+        }
+    }
+    if dropped > 0 {
+        eprintln!(
+            "{}: dropping {dropped} row(s) of iteration {start} and later, written after the \
+             checkpoint this run resumes from",
+            path.display()
+        );
+        let mut f = std::fs::File::create(path)?;
+        write!(f, "{CSV_HEADER}\n{kept}")?;
+        return Ok(f);
+    }
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))
 }
 
 /// Runs `cfg.iterations` iterations of LQR+GAIfO on `demos` ([`run_iterations`]).
@@ -627,6 +788,35 @@ pub fn train(
         cfg.seed,
         "lqr-gaifo",
         out,
+        |l, _| progress(l),
+    )
+}
+
+/// Continues the LQR+GAIfO run whose checkpoints are in `dir` ([`LqrGaifo::resume`]) up to
+/// `cfg.iterations` iterations in all, appending to `dir/gaifo_log.csv` ([`open_log`]) and
+/// writing the next checkpoints into `dir`. Iterations are numbered on from the checkpoint.
+pub fn train_resumed(
+    cfg: &GaifoConfig,
+    demos: Demos,
+    dir: &Path,
+    mut progress: impl FnMut(&GaifoLog),
+) -> anyhow::Result<Vec<GaifoLog>> {
+    let mut run = LqrGaifo::resume(cfg.clone(), demos, dir)?;
+    let start = run.iteration();
+    anyhow::ensure!(
+        start < cfg.iterations,
+        "{} already holds {start} iterations, as many as iterations = {} asks for: nothing to \
+         resume (raise --iterations)",
+        dir.display(),
+        cfg.iterations
+    );
+    let csv = open_log(&dir.join("gaifo_log.csv"), Some(start))?;
+    drive(
+        &mut run,
+        cfg.iterations - start,
+        cfg.seed,
+        "lqr-gaifo",
+        Some((csv, dir)),
         |l, _| progress(l),
     )
 }

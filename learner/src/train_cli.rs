@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use crate::gaifo::{train, GaifoConfig, GaifoLog};
+use crate::gaifo::{train, train_resumed, GaifoConfig, GaifoLog};
 use crate::io::demos::Demos;
 
 /// Which imitation algorithm.
@@ -36,9 +36,18 @@ pub struct TrainArgs {
     /// Seed; overrides the config.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Output folder: per-iteration CSV, gain tables and critic checkpoints.
-    #[arg(long, default_value = "runs/train")]
-    pub out: PathBuf,
+    /// Output folder: per-iteration CSV, gain tables and critic checkpoints [default:
+    /// runs/train; with --resume, DIR].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Continue the LQR+GAIfO run in DIR (its --out) from its latest checkpoint
+    /// (iter_NNN_table.npz + iter_NNN_critic.json) up to --iterations in all, with the run's
+    /// own demonstrations, config and seed: iterations are numbered on from NNN and rows are
+    /// appended to DIR/gaifo_log.csv. The critic resumes exactly (weights, normalisation, Adam
+    /// moments, RNG); the GMM dynamics prior, the previous controller and the step size are not
+    /// checkpointed and start afresh, so the result differs from an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
     /// Print a one-line JSON summary at the end (stdout).
     #[arg(long)]
     pub json: bool,
@@ -69,6 +78,16 @@ pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, j
     }
 }
 
+impl TrainArgs {
+    /// The output folder: `--out`, else the `--resume` folder, else `runs/train`.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out
+            .clone()
+            .or_else(|| self.resume.clone())
+            .unwrap_or_else(|| PathBuf::from("runs/train"))
+    }
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let demos = Demos::load(&args.demos)
@@ -88,22 +107,42 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         cfg.samples >= 1 && cfg.iterations >= 1,
         "samples and iterations must be >= 1"
     );
+    let out = args.out_dir();
+    if let Some(dir) = &args.resume {
+        anyhow::ensure!(
+            args.algo == Algo::LqrGaifo,
+            "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+        );
+        anyhow::ensure!(
+            out == *dir,
+            "--out {} and --resume {} differ: a resumed run continues in its own folder",
+            out.display(),
+            dir.display()
+        );
+    }
     match args.algo {
         Algo::LqrGaifo => {}
         Algo::GaifoPpo => return crate::ppo::gaifo_ppo::run_cli(&args, demos, &cfg),
     }
     eprintln!(
-        "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
+        "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,
         demos.horizon,
         demos.goal,
         cfg.seed,
-        args.out.display()
+        out.display(),
+        if args.resume.is_some() {
+            " (resumed)"
+        } else {
+            ""
+        }
     );
     eprintln!("{}", GaifoLog::PROGRESS_HEADER);
-    let logs = train(&cfg, demos, Some(&args.out), |l| {
-        eprintln!("{}", l.progress_line())
-    })?;
-    crate::train_cli::report(&logs, "lqr-gaifo", cfg.seed, &args.out, args.json);
+    let print = |l: &GaifoLog| eprintln!("{}", l.progress_line());
+    let logs = match &args.resume {
+        Some(dir) => train_resumed(&cfg, demos, dir, print)?,
+        None => train(&cfg, demos, Some(&out), print)?,
+    };
+    crate::train_cli::report(&logs, "lqr-gaifo", cfg.seed, &out, args.json);
     Ok(())
 }
