@@ -220,6 +220,49 @@ pub fn to_gain_table(pol: &LinGaussPolicy, version: u64) -> Box<GainTable> {
     table
 }
 
+/// The controller of a gain table written by [`to_gain_table`] (ŝ = 0, â = 0): K and k as
+/// stored, GPS's upper factor R = Lᵀ, Σ = L Lᵀ and Σ⁻¹ = L⁻ᵀ L⁻¹ (recomputed, so Σ and Σ⁻¹
+/// may differ from the original controller's in the last bits; K, k and L, and hence the
+/// table, round-trip exactly).
+pub fn policy_from_gain_table(table: &GainTable) -> Result<LinGaussPolicy, crate::LearnerError> {
+    let t_len = table.horizon();
+    let mut pol = LinGaussPolicy::zeros(t_len, DX, DU);
+    for t in 0..t_len {
+        let step = table.step(t);
+        if step.s_hat.iter().chain(&step.a_hat).any(|v| *v != 0.0) {
+            return Err(crate::LearnerError::Shape(format!(
+                "gain table step {t} has a non-zero ŝ or â: not a table written by the learner"
+            )));
+        }
+        let l = &step.chol;
+        // L⁻¹ by forward substitution (L is lower triangular with a positive diagonal).
+        let mut li = [[0.0; DU]; DU];
+        for c in 0..DU {
+            for r in c..DU {
+                let mut v = if r == c { 1.0 } else { 0.0 };
+                for k in c..r {
+                    v -= l[r][k] * li[k][c];
+                }
+                li[r][c] = v / l[r][r];
+            }
+        }
+        let gain = pol.gain.slice_mut(t);
+        for i in 0..DU {
+            gain[i * DX..(i + 1) * DX].copy_from_slice(&step.k_mat[i]);
+        }
+        pol.k.slice_mut(t).copy_from_slice(&step.k_vec);
+        for i in 0..DU {
+            for j in 0..DU {
+                pol.chol_pol_covar.slice_mut(t)[j * DU + i] = if j <= i { l[i][j] } else { 0.0 };
+                pol.pol_covar.slice_mut(t)[i * DU + j] = (0..DU).map(|k| l[i][k] * l[j][k]).sum();
+                pol.inv_pol_covar.slice_mut(t)[i * DU + j] =
+                    (0..DU).map(|k| li[k][i] * li[k][j]).sum();
+            }
+        }
+    }
+    Ok(pol)
+}
+
 /// Fills GPS per-sample cost derivatives for N episodes (around each sample's own (x, u)).
 pub fn task_cost_derivs(cost: &TaskCostConfig, episodes: &[Episode], out: &mut CostDerivs) {
     let n = episodes.len();

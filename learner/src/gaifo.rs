@@ -1,5 +1,5 @@
-//! LQR+GAIfO (Torabi et al. 2019, Algorithm 1), in process (lockstep). One function per line
-//! of the algorithm, called in the paper's order by [`LqrGaifo::iterate`]:
+//! LQR+GAIfO (Torabi et al. 2019, Algorithm 1). One function per line of the algorithm, called
+//! in the paper's order:
 //!
 //! 1. [`execute`]: run the controller N times with noise and once without;
 //! 2. `update_dynamics`: refit p(s'|s,a) = N(F_t [s;a] + f_t, Σ_t) (GMM prior + regression);
@@ -7,6 +7,22 @@
 //! 4. [`composite_cost_derivs`]: C_t(s,a) = D(s, F_t [s;a] + f_t) and
 //! 5. its second-order expansion around the samples;
 //! 6. [`improve`]: the KL-bounded LQR step.
+//!
+//! Line 1 and the rest are separate: [`LqrGaifo::learn`] is lines 2–6 (and the switch to the new
+//! controller) on episodes executed elsewhere; [`LqrGaifo::iterate`] is [`execute`] on an
+//! in-process arm followed by `learn` (`learner train`), and `learner serve --algo lqr-gaifo`
+//! calls `learn` on the episodes the real-time loop streams. Same episodes, same result.
+//!
+//! # Checkpoints and resuming
+//! [`LqrGaifo::checkpoint`] writes, before every iteration, the controller it executes
+//! (`iter_NNN_table.npz`, NNN = iterations done) and the critic (`iter_NNN_critic.json`:
+//! weights, input normalisation, Adam moments and step count, minibatch RNG position).
+//! [`LqrGaifo::resume`] continues from the latest complete pair: the critic exactly, the
+//! controller as its gain table (K, k, L; Σ = L Lᵀ is recomputed). The GPS learner state — the
+//! GMM dynamics prior (and the transitions it was fitted on), the previous controller and the
+//! step size — is not checkpointed and starts afresh, so a resumed run's first iteration executes
+//! the same episodes and makes the same critic update as the uninterrupted run would, but its
+//! dynamics fit, and hence its LQR step, differ from there on.
 //!
 //! Only state transitions of the expert are used (`Demos::states`); its actions are never read.
 
@@ -30,9 +46,9 @@ use crate::discriminator::{
 };
 use crate::dynamics::lr_prior::LrPriorConfig;
 use crate::dynamics::prior_gmm::PriorGmmConfig;
-use crate::expert::{init_hold, to_gain_table};
+use crate::expert::{init_hold, policy_from_gain_table, to_gain_table};
 use crate::io::demos::Demos;
-use crate::io::table::save_table;
+use crate::io::table::{load_table, save_table};
 use crate::iteration::{execute, improve, sim_err, stack};
 use crate::policy::lin_gauss::LinGaussPolicy;
 use crate::rollout::Episode;
@@ -182,6 +198,28 @@ impl GaifoLog {
     pub fn learner_seconds(&self) -> f64 {
         self.t_dynamics + self.t_critic + self.t_cost + self.t_lqr
     }
+
+    /// Column names of [`GaifoLog::progress_line`].
+    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
+
+    /// The progress line of this iteration (`learner train`, `learner serve --algo lqr-gaifo`;
+    /// `sim_ms` is [`GaifoLog::t_execute`]).
+    pub fn progress_line(&self) -> String {
+        format!(
+            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
+            self.iteration,
+            self.task_cost,
+            self.performance,
+            self.final_distance,
+            self.critic_loss,
+            self.wasserstein,
+            self.kl,
+            self.eta,
+            self.step_mult,
+            1e3 * self.learner_seconds(),
+            1e3 * self.t_execute
+        )
+    }
 }
 
 /// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row.
@@ -299,7 +337,8 @@ pub struct LqrGaifo {
     task: TaskConfig,
     demos: Demos,
     expert: Mat<f64>,
-    sim: Ur5Sim,
+    /// The in-process arm of [`LqrGaifo::iterate`], built on first use (`learn` needs none).
+    sim: Option<Ur5Sim>,
     learner: Learner,
     disc: Discriminator,
     cost_ws: CompositeWorkspace,
@@ -322,7 +361,6 @@ impl LqrGaifo {
         };
         task.validate()
             .map_err(|e| LearnerError::Shape(format!("demonstrations: {e}")))?;
-        let sim = Ur5Sim::new(cfg.sim.clone(), task.dt).map_err(sim_err)?;
         let expert = expert_transitions(&demos);
         let norm = Normalizer::from_data(expert.as_ref())
             .map_err(|e| LearnerError::Shape(e.to_string()))?;
@@ -351,7 +389,7 @@ impl LqrGaifo {
             task,
             demos,
             expert,
-            sim,
+            sim: None,
             learner,
             disc,
             pol,
@@ -371,6 +409,31 @@ impl LqrGaifo {
     /// The task being imitated.
     pub fn task(&self) -> &TaskConfig {
         &self.task
+    }
+
+    /// The settings of the run.
+    pub fn config(&self) -> &GaifoConfig {
+        &self.cfg
+    }
+
+    /// The demonstrations being imitated.
+    pub fn demos(&self) -> &Demos {
+        &self.demos
+    }
+
+    /// Iterations done (counting those before a resume).
+    pub fn iteration(&self) -> usize {
+        self.iteration
+    }
+
+    /// Gain-table version of [`LqrGaifo::policy`]: iteration + 1 (the initial controller is 1).
+    pub fn version(&self) -> u64 {
+        self.iteration as u64 + 1
+    }
+
+    /// `cfg.iterations` done.
+    pub fn done(&self) -> bool {
+        self.iteration >= self.cfg.iterations
     }
 
     /// Rebuilds the critic with its input normalisation fitted on expert ∪ `controller`
@@ -398,28 +461,61 @@ impl LqrGaifo {
         )
     }
 
-    /// One iteration of Algorithm 1; returns its log and the noise-free episode.
+    /// One iteration of Algorithm 1 in process: line 1 ([`execute`] on the in-process arm),
+    /// then [`LqrGaifo::learn`]. Returns its log and the noise-free episode.
     pub fn iterate(&mut self) -> Result<(GaifoLog, Episode), LearnerError> {
-        let n = self.cfg.samples;
-        let version = self.iteration as u64 + 1;
+        let sim = match self.sim.as_mut() {
+            Some(sim) => sim,
+            None => self
+                .sim
+                .insert(Ur5Sim::new(self.cfg.sim.clone(), self.task.dt).map_err(sim_err)?),
+        };
         // 1. Execute the controller.
         let t0 = Instant::now();
         let (episodes, eval) = execute(
-            &mut self.sim,
+            sim,
             &self.task,
             &self.pol,
-            version,
+            self.iteration as u64 + 1,
             self.cfg.seed,
-            n,
+            self.cfg.samples,
         )?;
-        let (x, u) = stack(&episodes);
+        let t_execute = t0.elapsed().as_secs_f64();
+        let log = self.learn(&episodes, &eval, t_execute)?;
+        Ok((log, eval))
+    }
+
+    /// Lines 2–6 of Algorithm 1 on the `episodes` (`cfg.samples` noisy ones) and the noise-free
+    /// `eval` episode executed with [`LqrGaifo::policy`] (as table version
+    /// [`LqrGaifo::version`]); then that controller is replaced by the new one. `t_execute`
+    /// (s) is logged as the time line 1 took.
+    pub fn learn(
+        &mut self,
+        episodes: &[Episode],
+        eval: &Episode,
+        t_execute: f64,
+    ) -> Result<GaifoLog, LearnerError> {
+        let (n, t_len) = (self.cfg.samples, self.task.horizon);
+        if episodes.len() != n || episodes.iter().chain([eval]).any(|e| e.horizon() != t_len) {
+            return Err(LearnerError::Shape(format!(
+                "an LQR+GAIfO iteration needs {n} noisy episodes and one noise-free episode of \
+                 T = {t_len} steps; got {} noisy, horizons {:?}",
+                episodes.len(),
+                episodes
+                    .iter()
+                    .chain([eval])
+                    .map(Episode::horizon)
+                    .collect::<Vec<_>>()
+            )));
+        }
+        let (x, u) = stack(episodes);
         // 2. Fit the dynamics.
         let t1 = Instant::now();
         let c1 = thread_cpu_s();
         self.learner.update_dynamics(&x, &u, n)?;
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
-        let controller = episode_transitions(&episodes);
+        let controller = episode_transitions(episodes);
         if self.iteration == 0 {
             self.refit_normalizer(&controller)?;
         }
@@ -429,7 +525,7 @@ impl LqrGaifo {
         composite_cost_derivs(
             &self.disc,
             &self.learner.info.dynamics,
-            &episodes,
+            episodes,
             &mut self.cost_ws,
             &mut self.derivs,
         );
@@ -465,7 +561,7 @@ impl LqrGaifo {
             kl: step.kl,
             eta: step.eta,
             step_mult: step.step_mult,
-            t_execute: (t1 - t0).as_secs_f64(),
+            t_execute,
             t_dynamics: (t2 - t1).as_secs_f64(),
             t_critic: (t3 - t2).as_secs_f64(),
             t_cost: (t4 - t3).as_secs_f64(),
@@ -478,7 +574,7 @@ impl LqrGaifo {
         }
         self.pol.copy_from(&self.new_pol);
         self.iteration += 1;
-        Ok((log, eval))
+        Ok(log)
     }
 
     /// Saves the controller that the next iteration executes (`iter_NNN_table.npz`) and the
@@ -496,6 +592,92 @@ impl LqrGaifo {
         self.disc.save(&critic)?;
         Ok((table, critic))
     }
+
+    /// Continues a run from the latest checkpoint in `dir` ([`latest_checkpoint`]): the
+    /// controller of `iter_NNN_table.npz` (executed next, as table version NNN + 1), the critic
+    /// of `iter_NNN_critic.json`, NNN iterations done. `cfg` and `demos` must be the run's own:
+    /// the critic's settings and seed are checked against `cfg`, the table's horizon and control
+    /// period against the demonstrations. What is not checkpointed starts afresh (module docs).
+    pub fn resume(cfg: GaifoConfig, demos: Demos, dir: &Path) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        let (iteration, table_path, critic_path) = latest_checkpoint(dir)?;
+        let mut run = Self::new(cfg, demos)?;
+        let (table, dt) = load_table(&table_path, &ur5_shared::GainBounds::default())
+            .with_context(|| format!("resuming from {}", table_path.display()))?;
+        anyhow::ensure!(
+            table.horizon() == run.task.horizon && dt.to_bits() == run.task.dt.to_bits(),
+            "{}: a controller of T = {} steps at dt = {dt} s, the demonstrations have T = {} at \
+             dt = {} s: resume with the run's own demonstrations",
+            table_path.display(),
+            table.horizon(),
+            run.task.horizon,
+            run.task.dt
+        );
+        anyhow::ensure!(
+            table.version == iteration as u64 + 1,
+            "{}: table version {}, expected {} for iteration {iteration}",
+            table_path.display(),
+            table.version,
+            iteration + 1
+        );
+        run.pol = policy_from_gain_table(&table)
+            .with_context(|| format!("resuming from {}", table_path.display()))?;
+        let disc = Discriminator::load(&critic_path, D_IN)
+            .with_context(|| format!("resuming from {}", critic_path.display()))?;
+        let expected = critic_config(&run.cfg.discriminator, run.cfg.seed);
+        anyhow::ensure!(
+            *disc.config() == expected,
+            "{}: the critic was trained with other [discriminator] settings or another seed than \
+             this run's (seed {}): resume with the run's own --config and --seed",
+            critic_path.display(),
+            run.cfg.seed
+        );
+        run.cost_ws = CompositeWorkspace::new(&disc).with_psd(run.cfg.psd_hessian);
+        run.disc_ws = disc.workspace();
+        run.disc = disc;
+        run.iteration = iteration;
+        Ok(run)
+    }
+}
+
+/// The latest complete checkpoint in `dir`: (NNN, `iter_NNN_table.npz`, `iter_NNN_critic.json`)
+/// with the largest NNN for which both files exist. A clear error when there is none.
+pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot resume from {}: {e} (expected the --out folder of an earlier \
+             `learner train` or `learner serve --algo lqr-gaifo` run)",
+            dir.display()
+        )
+    })?;
+    let mut best: Option<usize> = None;
+    for entry in entries {
+        let name = entry?.file_name();
+        let Some(n) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("iter_"))
+            .and_then(|n| n.strip_suffix("_table.npz"))
+            .filter(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|n| n.parse::<usize>().ok())
+        else {
+            continue;
+        };
+        if dir.join(format!("iter_{n:03}_critic.json")).is_file() && best.is_none_or(|b| n > b) {
+            best = Some(n);
+        }
+    }
+    let n = best.ok_or_else(|| {
+        anyhow::anyhow!(
+            "cannot resume from {}: no checkpoint in it (no pair iter_NNN_table.npz + \
+             iter_NNN_critic.json, written by `learner train` and `learner serve --algo lqr-gaifo`)",
+            dir.display()
+        )
+    })?;
+    Ok((
+        n,
+        dir.join(format!("iter_{n:03}_table.npz")),
+        dir.join(format!("iter_{n:03}_critic.json")),
+    ))
 }
 
 /// An imitation run the shared training loop drives: LQR+GAIfO here, the PPO baseline in
@@ -525,24 +707,35 @@ pub fn run_iterations<R: Imitation>(
     seed: u64,
     algo: &str,
     out: Option<&Path>,
-    mut progress: impl FnMut(&GaifoLog, &R),
+    progress: impl FnMut(&GaifoLog, &R),
 ) -> anyhow::Result<Vec<GaifoLog>> {
-    use std::io::Write;
-    let mut csv = match out {
+    let csv = match out {
         Some(dir) => {
             std::fs::create_dir_all(dir)?;
-            let mut f = std::fs::File::create(dir.join("gaifo_log.csv"))?;
-            writeln!(f, "{CSV_HEADER}")?;
+            let f = open_log(&dir.join("gaifo_log.csv"), None)?;
             run.checkpoint(dir)?;
-            Some(f)
+            Some((f, dir))
         }
         None => None,
     };
+    drive(run, iterations, seed, algo, csv, progress)
+}
+
+/// The iterations of [`run_iterations`] and [`train_resumed`]: iterate, report, log, checkpoint.
+fn drive<R: Imitation>(
+    run: &mut R,
+    iterations: usize,
+    seed: u64,
+    algo: &str,
+    mut csv: Option<(std::fs::File, &Path)>,
+    mut progress: impl FnMut(&GaifoLog, &R),
+) -> anyhow::Result<Vec<GaifoLog>> {
+    use std::io::Write;
     let mut logs = Vec::with_capacity(iterations);
     for _ in 0..iterations {
         let (log, _) = run.iterate()?;
         progress(&log, run);
-        if let (Some(f), Some(dir)) = (csv.as_mut(), out) {
+        if let Some((f, dir)) = csv.as_mut() {
             write_csv_row(f, &log, seed, algo)?;
             f.flush()?;
             run.checkpoint(dir)?;
@@ -550,6 +743,59 @@ pub fn run_iterations<R: Imitation>(
         logs.push(log);
     }
     Ok(logs)
+}
+
+/// Opens the per-iteration CSV `path` ([`CSV_HEADER`]) for appending rows. `resume_at: None`
+/// starts a new file. `Some(i)`, a run resumed at iteration i, keeps the rows of iterations
+/// before i and appends after them (creating the file if it is missing); rows of iteration i
+/// and later — written after the checkpoint it resumes from, by a run that was stopped before
+/// its next checkpoint — are dropped, as the resumed run writes them again.
+pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs::File> {
+    use anyhow::Context;
+    use std::io::Write;
+    let Some(start) = resume_at.filter(|_| path.exists()) else {
+        let mut f =
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        writeln!(f, "{CSV_HEADER}")?;
+        return Ok(f);
+    };
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines();
+    anyhow::ensure!(
+        lines.next() == Some(CSV_HEADER),
+        "{}: not a per-iteration log of this build (its first line is not the header {CSV_HEADER:?})",
+        path.display()
+    );
+    let mut kept = String::new();
+    let mut dropped = 0;
+    for (k, line) in lines.enumerate() {
+        let it: usize = line
+            .split(',')
+            .next()
+            .and_then(|c| c.parse().ok())
+            .with_context(|| format!("{} line {}: no iteration number", path.display(), k + 2))?;
+        if it < start {
+            kept.push_str(line);
+            kept.push('\n');
+        } else {
+            dropped += 1;
+        }
+    }
+    if dropped > 0 {
+        eprintln!(
+            "{}: dropping {dropped} row(s) of iteration {start} and later, written after the \
+             checkpoint this run resumes from",
+            path.display()
+        );
+        let mut f = std::fs::File::create(path)?;
+        write!(f, "{CSV_HEADER}\n{kept}")?;
+        return Ok(f);
+    }
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))
 }
 
 /// Runs `cfg.iterations` iterations of LQR+GAIfO on `demos` ([`run_iterations`]).
@@ -566,6 +812,35 @@ pub fn train(
         cfg.seed,
         "lqr-gaifo",
         out,
+        |l, _| progress(l),
+    )
+}
+
+/// Continues the LQR+GAIfO run whose checkpoints are in `dir` ([`LqrGaifo::resume`]) up to
+/// `cfg.iterations` iterations in all, appending to `dir/gaifo_log.csv` ([`open_log`]) and
+/// writing the next checkpoints into `dir`. Iterations are numbered on from the checkpoint.
+pub fn train_resumed(
+    cfg: &GaifoConfig,
+    demos: Demos,
+    dir: &Path,
+    mut progress: impl FnMut(&GaifoLog),
+) -> anyhow::Result<Vec<GaifoLog>> {
+    let mut run = LqrGaifo::resume(cfg.clone(), demos, dir)?;
+    let start = run.iteration();
+    anyhow::ensure!(
+        start < cfg.iterations,
+        "{} already holds {start} iterations, as many as iterations = {} asks for: nothing to \
+         resume (raise --iterations)",
+        dir.display(),
+        cfg.iterations
+    );
+    let csv = open_log(&dir.join("gaifo_log.csv"), Some(start))?;
+    drive(
+        &mut run,
+        cfg.iterations - start,
+        cfg.seed,
+        "lqr-gaifo",
+        Some((csv, dir)),
         |l, _| progress(l),
     )
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 
-use crate::gaifo::{train, GaifoConfig, GaifoLog};
+use crate::gaifo::{train, train_resumed, GaifoConfig, GaifoLog};
 use crate::io::demos::Demos;
 
 /// Which imitation algorithm.
@@ -36,29 +36,21 @@ pub struct TrainArgs {
     /// Seed; overrides the config.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Output folder: per-iteration CSV, gain tables and critic checkpoints.
-    #[arg(long, default_value = "runs/train")]
-    pub out: PathBuf,
+    /// Output folder: per-iteration CSV, gain tables and critic checkpoints [default:
+    /// runs/train; with --resume, DIR].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Continue the LQR+GAIfO run in DIR (its --out) from its latest checkpoint
+    /// (iter_NNN_table.npz + iter_NNN_critic.json) up to --iterations in all, with the run's
+    /// own demonstrations, config and seed: iterations are numbered on from NNN and rows are
+    /// appended to DIR/gaifo_log.csv. The critic resumes exactly (weights, normalisation, Adam
+    /// moments, RNG); the GMM dynamics prior, the previous controller and the step size are not
+    /// checkpointed and start afresh, so the result differs from an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
     /// Print a one-line JSON summary at the end (stdout).
     #[arg(long)]
     pub json: bool,
-}
-
-fn print_line(l: &GaifoLog) {
-    eprintln!(
-        "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
-        l.iteration,
-        l.task_cost,
-        l.performance,
-        l.final_distance,
-        l.critic_loss,
-        l.wasserstein,
-        l.kl,
-        l.eta,
-        l.step_mult,
-        1e3 * l.learner_seconds(),
-        1e3 * l.t_execute
-    );
 }
 
 /// The end of a `learner train` run: the summary line on stderr and, with `--json`, the
@@ -86,6 +78,16 @@ pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, j
     }
 }
 
+impl TrainArgs {
+    /// The output folder: `--out`, else the `--resume` folder, else `runs/train`.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out
+            .clone()
+            .or_else(|| self.resume.clone())
+            .unwrap_or_else(|| PathBuf::from("runs/train"))
+    }
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let demos = Demos::load(&args.demos)
@@ -105,33 +107,42 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         cfg.samples >= 1 && cfg.iterations >= 1,
         "samples and iterations must be >= 1"
     );
+    let out = args.out_dir();
+    if let Some(dir) = &args.resume {
+        anyhow::ensure!(
+            args.algo == Algo::LqrGaifo,
+            "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+        );
+        anyhow::ensure!(
+            out == *dir,
+            "--out {} and --resume {} differ: a resumed run continues in its own folder",
+            out.display(),
+            dir.display()
+        );
+    }
     match args.algo {
         Algo::LqrGaifo => {}
         Algo::GaifoPpo => return crate::ppo::gaifo_ppo::run_cli(&args, demos, &cfg),
     }
     eprintln!(
-        "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
+        "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,
         demos.horizon,
         demos.goal,
         cfg.seed,
-        args.out.display()
+        out.display(),
+        if args.resume.is_some() {
+            " (resumed)"
+        } else {
+            ""
+        }
     );
-    eprintln!(
-        "{:>4} {:>9} {:>7} {:>8} {:>9} {:>8} {:>8} {:>9} {:>6} {:>7} {:>7}",
-        "iter",
-        "task_cost",
-        "perf",
-        "final_m",
-        "critic",
-        "W1_est",
-        "kl",
-        "eta",
-        "mult",
-        "lrn_ms",
-        "sim_ms"
-    );
-    let logs = train(&cfg, demos, Some(&args.out), print_line)?;
-    crate::train_cli::report(&logs, "lqr-gaifo", cfg.seed, &args.out, args.json);
+    eprintln!("{}", GaifoLog::PROGRESS_HEADER);
+    let print = |l: &GaifoLog| eprintln!("{}", l.progress_line());
+    let logs = match &args.resume {
+        Some(dir) => train_resumed(&cfg, demos, dir, print)?,
+        None => train(&cfg, demos, Some(&out), print)?,
+    };
+    crate::train_cli::report(&logs, "lqr-gaifo", cfg.seed, &out, args.json);
     Ok(())
 }

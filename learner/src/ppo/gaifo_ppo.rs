@@ -304,13 +304,14 @@ pub fn run_cli(
     cfg: &GaifoConfig,
 ) -> anyhow::Result<()> {
     let pcfg = GaifoPpoConfig::from_gaifo(cfg);
+    let out = args.out_dir();
     eprintln!(
         "GAIfO (PPO) on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
         demos.count,
         demos.horizon,
         demos.goal,
         pcfg.seed,
-        args.out.display()
+        out.display()
     );
     eprintln!(
         "{:>4} {:>9} {:>7} {:>8} {:>9} {:>8} {:>9} {:>6} {:>7} {:>9} {:>7} {:>7}",
@@ -327,7 +328,7 @@ pub fn run_cli(
         "lrn_ms",
         "sim_ms"
     );
-    let logs = train(&pcfg, demos, Some(&args.out), print_line)?;
-    crate::train_cli::report(&logs, "gaifo-ppo", pcfg.seed, &args.out, args.json);
+    let logs = train(&pcfg, demos, Some(&out), print_line)?;
+    crate::train_cli::report(&logs, "gaifo-ppo", pcfg.seed, &out, args.json);
     Ok(())
 }
