@@ -4,7 +4,7 @@
 //! |---|---|---|
 //! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison") | 10 seeds × 100 iterations each |
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
-//! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade? | 5 seeds × 200 iterations |
+//! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`crate::experiment_ipc`].
 //!
@@ -91,6 +91,10 @@ pub struct ExperimentConfig {
     pub subset_sizes: Vec<usize>,
     /// Generalisation: demonstrations per square point.
     pub demos_per_point: usize,
+    /// Stability: one curve per number of critic (Adam) steps per iteration
+    /// (`lqr_gaifo.discriminator.n_critic`), to probe the paper's guess that a critic which
+    /// outpaces the controller causes the late degradation.
+    pub critic_steps: Vec<usize>,
     /// Sim vs physical: the "physical" arm's perturbation (`hil-sim` knobs).
     pub physical: ur5_shared::config::Perturbation,
     /// Sim vs physical: simulated seconds per wall-clock second of the real-time loop.
@@ -118,6 +122,7 @@ impl ExperimentConfig {
             gaifo_ppo: GaifoPpoConfig::default(),
             subset_sizes: (1..=8).collect(),
             demos_per_point: 5,
+            critic_steps: vec![100, 1000],
             physical: ur5_shared::config::Perturbation::physical_stand_in(1),
             time_compression: 10.0,
         };
@@ -153,6 +158,13 @@ impl ExperimentConfig {
         }
         if name == ExperimentName::Comparison {
             anyhow::ensure!(!self.algorithms.is_empty(), "algorithms is empty");
+        }
+        if name == ExperimentName::Stability {
+            anyhow::ensure!(
+                !self.critic_steps.is_empty() && self.critic_steps.iter().all(|&n| n >= 1),
+                "critic_steps must list numbers >= 1, got {:?}",
+                self.critic_steps
+            );
         }
         if name == ExperimentName::Generalisation {
             anyhow::ensure!(
@@ -680,8 +692,14 @@ pub fn run(
         }
         ExperimentName::Stability => {
             let d = Arc::new(demos_for(cfg, demos, out)?);
+            let mut jobs = Vec::new();
+            for &steps in &cfg.critic_steps {
+                let mut c = cfg.clone();
+                c.lqr_gaifo.discriminator.n_critic = steps;
+                jobs.extend(lqr_jobs(&c, &format!("critic {steps} steps/it"), d.clone()));
+            }
             (
-                lqr_jobs(cfg, "lqr-gaifo", d),
+                jobs,
                 format!("LQR+GAIfO over {} iterations", cfg.iterations),
             )
         }
@@ -727,7 +745,7 @@ pub struct ExperimentArgs {
     #[arg(value_enum)]
     pub name: ExperimentName,
     /// TOML `ExperimentConfig` (keys `seeds`, `first_seed`, `iterations`, `threads`,
-    /// `algorithms`, `subset_sizes`, `demos_per_point`, `time_compression`; tables `expert`,
+    /// `algorithms`, `subset_sizes`, `demos_per_point`, `critic_steps`, `time_compression`; tables `expert`,
     /// `lqr_gaifo`, `gaifo_ppo`, `physical`), layered over the experiment's defaults.
     #[arg(long)]
     pub config: Option<PathBuf>,
