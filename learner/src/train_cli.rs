@@ -7,6 +7,7 @@ use clap::{Args, ValueEnum};
 
 use crate::gaifo::{train, train_resumed, GaifoConfig, GaifoLog};
 use crate::io::demos::Demos;
+use crate::ppo::gaifo_ppo::GaifoPpoConfig;
 
 /// Which imitation algorithm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -26,8 +27,11 @@ pub struct TrainArgs {
     /// Algorithm.
     #[arg(long, value_enum, default_value = "lqr-gaifo")]
     pub algo: Algo,
-    /// TOML file with a `GaifoConfig` (tables `sim`, `discriminator`, `algorithm`, `prior`,
-    /// `fit`, `traj_opt`; unknown keys are errors).
+    /// TOML settings, layered over the defaults (unknown keys are errors): for lqr-gaifo a
+    /// `GaifoConfig` (keys `samples`, `iterations`, `init_var`, `critic_updates`, `adapt_step`,
+    /// `psd_hessian`, `seed`; tables `sim`, `discriminator`, `algorithm`, `prior`, `fit`,
+    /// `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys `samples`, `iterations`,
+    /// `critic_updates`, `seed`; tables `sim`, `discriminator`, `ppo`).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Iterations; overrides the config.
@@ -92,6 +96,28 @@ impl TrainArgs {
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let demos = Demos::load(&args.demos)
         .with_context(|| format!("loading demonstrations {}", args.demos.display()))?;
+    if args.algo == Algo::GaifoPpo {
+        anyhow::ensure!(
+            args.resume.is_none(),
+            "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+        );
+        let mut pcfg: GaifoPpoConfig = match &args.config {
+            Some(p) => ur5_shared::config::from_toml_file(p)?,
+            None => GaifoPpoConfig::default(),
+        };
+        if let Some(i) = args.iterations {
+            pcfg.iterations = i;
+        }
+        if let Some(s) = args.seed {
+            pcfg.seed = s;
+        }
+        pcfg.sim.validate()?;
+        anyhow::ensure!(
+            pcfg.samples >= 1 && pcfg.iterations >= 1,
+            "samples and iterations must be >= 1"
+        );
+        return crate::ppo::gaifo_ppo::run_cli(&args, demos, &pcfg);
+    }
     let mut cfg: GaifoConfig = match &args.config {
         Some(p) => ur5_shared::config::from_toml_file(p)?,
         None => GaifoConfig::default(),
@@ -119,10 +145,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             out.display(),
             dir.display()
         );
-    }
-    match args.algo {
-        Algo::LqrGaifo => {}
-        Algo::GaifoPpo => return crate::ppo::gaifo_ppo::run_cli(&args, demos, &cfg),
     }
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",

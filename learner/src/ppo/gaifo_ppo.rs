@@ -296,14 +296,14 @@ fn print_line(l: &GaifoLog, u: &UpdateStats) {
     );
 }
 
-/// `learner train --algo gaifo-ppo`: the settings LQR+GAIfO would use (`cfg`, after the
-/// command line's overrides) via [`GaifoPpoConfig::from_gaifo`], PPO at its defaults.
+/// `learner train --algo gaifo-ppo` with `pcfg` (its `--config` layered over
+/// [`GaifoPpoConfig::default`], i.e. LQR+GAIfO's shared settings, then the command line).
 pub fn run_cli(
     args: &crate::train_cli::TrainArgs,
     demos: Demos,
-    cfg: &GaifoConfig,
+    pcfg: &GaifoPpoConfig,
 ) -> anyhow::Result<()> {
-    let pcfg = GaifoPpoConfig::from_gaifo(cfg);
+    let pcfg = pcfg.clone();
     let out = args.out_dir();
     eprintln!(
         "GAIfO (PPO) on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
