@@ -79,19 +79,24 @@ impl Drop for Guard {
     }
 }
 
-/// `name` next to the running executable (`target/release/<name>`).
+/// The binary `name` of this build: next to the running executable (`target/release/learner`)
+/// or one folder up (a test executable in `target/release/deps/`).
 fn sibling(name: &str) -> anyhow::Result<PathBuf> {
     let exe = std::env::current_exe()?;
-    let p = exe
+    let dir = exe
         .parent()
-        .map(|d| d.join(name))
         .context("no directory for the running executable")?;
-    anyhow::ensure!(
-        p.exists(),
-        "{} not found: build every binary first (`cargo build --release --workspace --bins`)",
-        p.display()
-    );
-    Ok(p)
+    let candidates = [Some(dir.join(name)), dir.parent().map(|d| d.join(name))];
+    candidates
+        .into_iter()
+        .flatten()
+        .find(|p| p.is_file())
+        .with_context(|| {
+            format!(
+                "{name} not found next to {}: build every binary first (`cargo build --release --workspace --bins`)",
+                exe.display()
+            )
+        })
 }
 
 /// Parses a `gaifo_log.csv` (columns of `gaifo::CSV_HEADER`, by name) back into logs.
@@ -246,7 +251,7 @@ impl IpcRun<'_> {
             &dir.join("controller.log"),
         )?;
         let mut learner = Guard::spawn(
-            &std::env::current_exe()?,
+            &sibling("learner")?,
             &[
                 s("serve"),
                 s("--algo"),
