@@ -29,10 +29,11 @@ enum Cmd {
     Expert(learner::expert_cli::ExpertArgs),
     /// The learner end of the three processes (hil-sim serve <-> rt-controller <-> learner):
     /// publishes gain tables on controller/gains, learns from the episodes on learner/samples
-    /// (the expert's iteration on the true task cost). Progress: one line per iteration.
+    /// (the expert's iteration on the true task cost, or LQR+GAIfO with --algo lqr-gaifo
+    /// --demos FILE). Progress: one line per iteration.
     Serve(learner::serve::ServeArgs),
-    /// Imitate state-only demonstrations: LQR+GAIfO (default) or the GAIfO (PPO) baseline.
-    /// Progress: one line per iteration.
+    /// Imitate state-only demonstrations: LQR+GAIfO (default) or the GAIfO (PPO) baseline;
+    /// --resume DIR continues an LQR+GAIfO run. Progress: one line per iteration.
     Train(learner::train_cli::TrainArgs),
     /// Time one full learner update (GMM prior update, dynamics fit, η search) on a seeded
     /// synthetic linear problem; prints median wall-clock times in milliseconds.

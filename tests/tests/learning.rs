@@ -1,8 +1,9 @@
 //! Learning over IPC: `hil-sim serve`, `rt-controller run` and `learner serve`, all three from
 //! the built binaries, lockstep, on a fresh prefix per test. The outcome must equal the
-//! in-process loop (`learner::expert`) with the same seed bit for bit; a killed learner must
-//! leave the controller on its table, and a restarted one (`--resume`) must continue.
-//! Assertions are on behaviour only, never on latency.
+//! in-process loop with the same seed bit for bit, for the expert (`learner::expert`) and for
+//! LQR+GAIfO (`learner::gaifo::LqrGaifo`); a killed learner must leave the controller on its
+//! table, and a restarted one (`--resume`) must continue. Assertions are on behaviour only,
+//! never on latency.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -13,12 +14,16 @@ use iceoryx2::prelude::*;
 use integration_tests::{
     cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc,
 };
-use learner::expert::{to_gain_table, train, ExpertConfig, ExpertLearner, IterationLog};
+use learner::expert::{
+    record_demos, to_gain_table, train, ExpertConfig, ExpertLearner, IterationLog,
+};
+use learner::gaifo::{write_csv_row, GaifoLog, LqrGaifo, CSV_HEADER};
 use learner::io::episode::load_episode;
 use learner::io::table::load_table;
 use learner::iteration::execute;
 use learner::rollout::Episode;
-use learner::serve::{episode_from_samples, load_config};
+use learner::serve::{episode_from_samples, load_config, load_gaifo_config};
+use ur5_shared::config::TaskConfig;
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{GainBounds, GainTable, StepSample};
 
@@ -262,6 +267,46 @@ fn controller_episodes(log: &str) -> Vec<(u64, u64, bool)> {
         .collect()
 }
 
+/// Waits until the learner exits (learning done), polling `monitor`; then stops the
+/// controller. Returns the learner's JSON summary and log and the controller's summary.
+fn run_until_learned(
+    learner: &mut Proc,
+    sim: &mut Proc,
+    ctl: &mut Proc,
+    monitor: &mut SampleMonitor,
+) -> (serde_json::Value, String, serde_json::Value) {
+    let t0 = Instant::now();
+    while learner.running() {
+        monitor.poll();
+        for p in [&mut *sim, &mut *ctl] {
+            assert!(
+                p.running(),
+                "{} exited; log:\n{}\nlearner log:\n{}",
+                p.name,
+                p.log(),
+                learner.log()
+            );
+        }
+        assert!(
+            t0.elapsed() < LONG,
+            "learner did not finish; its log:\n{}",
+            learner.log()
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let (code, stdout) = learner.wait(LONG);
+    let llog = learner.log();
+    assert_eq!(code, Some(0), "learner log:\n{llog}");
+    let lj = json_summary(&stdout, &llog);
+    ctl.signal(libc::SIGTERM);
+    let (code, cout) = ctl.wait(LONG);
+    let clog = ctl.log();
+    assert_eq!(code, Some(0), "controller log:\n{clog}");
+    let cj = json_summary(&cout, &clog);
+    monitor.poll();
+    (lj, llog, cj)
+}
+
 #[test]
 fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
     const ITERATIONS: usize = 3;
@@ -283,39 +328,7 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
     let mut monitor = SampleMonitor::new(&prefix);
     let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &[], &dir, "learner");
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
-    {
-        let mut procs = [&mut sim, &mut ctl];
-        let mut m = Some(&mut monitor);
-        let t0 = Instant::now();
-        while learner.running() {
-            m.as_mut().unwrap().poll();
-            for p in procs.iter_mut() {
-                assert!(
-                    p.running(),
-                    "{} exited; log:\n{}\nlearner log:\n{}",
-                    p.name,
-                    p.log(),
-                    learner.log()
-                );
-            }
-            assert!(
-                t0.elapsed() < LONG,
-                "learner did not finish; its log:\n{}",
-                learner.log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
-    let (code, stdout) = learner.wait(LONG);
-    let llog = learner.log();
-    assert_eq!(code, Some(0), "learner log:\n{llog}");
-    let lj = json_summary(&stdout, &llog);
-    ctl.signal(libc::SIGTERM);
-    let (code, cout) = ctl.wait(LONG);
-    let clog = ctl.log();
-    assert_eq!(code, Some(0), "controller log:\n{clog}");
-    let cj = json_summary(&cout, &clog);
-    monitor.poll();
+    let (lj, llog, cj) = run_until_learned(&mut learner, &mut sim, &mut ctl, &mut monitor);
 
     // The learner: ITERATIONS updates, the last table taken, nothing discarded.
     assert_eq!(lj["exit_reason"], "done", "{lj}");
@@ -416,6 +429,143 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
         tables[ITERATIONS].used_steps() != tables[0].used_steps(),
         "the controller changed"
     );
+    assert!(sim.running());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The columns of a `gaifo_log.csv` row up to `step_mult` (the rest are timings).
+fn learned_columns(row: &str) -> Vec<String> {
+    row.trim_end()
+        .split(',')
+        .take(11)
+        .map(str::to_owned)
+        .collect()
+}
+
+/// `learner serve --algo lqr-gaifo`: ITERATIONS iterations of LQR+GAIfO over IPC, on
+/// demonstrations of a short expert of the same task, equal `LqrGaifo::iterate` in process with
+/// the same seed bit for bit: every noise-free episode, every table published, the logged
+/// task cost, critic loss, Wasserstein estimate, KL, η of each iteration, and the critic
+/// checkpoints byte for byte.
+#[test]
+fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
+    const ITERATIONS: usize = 3;
+    let prefix = unique_prefix("learn-g");
+    let dir = scratch("learn-g");
+    let (out, ref_out) = (dir.join("out"), dir.join("reference"));
+    // Demonstrations of the task the arm and the controller run (T steps, default goal/start).
+    let ecfg = ExpertConfig {
+        task: TaskConfig {
+            horizon: T,
+            ..TaskConfig::default()
+        },
+        samples: N,
+        iterations: 4,
+        random_episodes: 1,
+        demos: 3,
+        seed: SEED,
+        ..ExpertConfig::default()
+    };
+    let expert = train(&ecfg, |_| {}).unwrap();
+    let demos = record_demos(&ecfg, &expert.policy, expert.cost_random).unwrap();
+    let demos_path = dir.join("demos.npz");
+    demos.save(&demos_path).unwrap();
+    let learner_cfg = write_config(
+        &dir,
+        "gaifo.toml",
+        &format!(
+            "samples = {N}\nseed = {SEED}\niterations = {ITERATIONS}\n\
+             [serve]\nalgo = \"lqr-gaifo\"\nwait_report_s = 1.0\nidle_sleep_us = 200\n"
+        ),
+    );
+    let (_, sim_cfg, ctl_cfg) = configs(&dir, ITERATIONS);
+    let (cfg, _) = load_gaifo_config(Path::new(&learner_cfg)).unwrap();
+    let reference = {
+        let (cfg, demos, ref_out) = (cfg.clone(), demos.clone(), ref_out.clone());
+        std::thread::spawn(move || {
+            let mut run = LqrGaifo::new(cfg, demos).unwrap();
+            let (mut tables, mut iterations) = (Vec::new(), Vec::new());
+            for _ in 0..ITERATIONS {
+                tables.push(to_gain_table(run.policy(), run.version()));
+                run.checkpoint(&ref_out).unwrap();
+                iterations.push(run.iterate().unwrap());
+            }
+            tables.push(to_gain_table(run.policy(), run.version()));
+            run.checkpoint(&ref_out).unwrap();
+            (tables, iterations)
+        })
+    };
+
+    let mut monitor = SampleMonitor::new(&prefix);
+    let demos_arg = demos_path.display().to_string();
+    let mut learner = spawn_learner(
+        &learner_cfg,
+        &prefix,
+        &out,
+        &["--demos", &demos_arg],
+        &dir,
+        "learner",
+    );
+    let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
+    let (lj, llog, cj) = run_until_learned(&mut learner, &mut sim, &mut ctl, &mut monitor);
+
+    assert_eq!(lj["algorithm"], "lqr-gaifo", "{lj}");
+    assert_eq!(lj["exit_reason"], "done", "{lj}");
+    assert_eq!(lj["iterations"], ITERATIONS as u64, "{lj}");
+    assert_eq!(lj["table_version"], ITERATIONS as u64 + 1, "{lj}");
+    assert_eq!(lj["counts"]["partial"], 0, "{lj}");
+    assert_eq!(lj["counts"]["mixed"], 0, "{lj}");
+    assert_eq!(lj["counts"]["used"], (ITERATIONS * (N + 1)) as u64, "{lj}");
+    assert!(llog.contains(GaifoLog::PROGRESS_HEADER), "{llog}");
+    assert_eq!(cj["swaps"], ITERATIONS as u64 + 1, "{cj}");
+    assert_eq!(cj["rejected_total"], 0, "{cj}");
+    assert_eq!(cj["episodes_aborted"], 0, "{cj}");
+    check_stream(&monitor.received);
+
+    let (tables, iterations) = reference.join().unwrap();
+    let csv = std::fs::read_to_string(out.join("gaifo_log.csv")).unwrap();
+    let mut rows = csv.lines();
+    assert_eq!(rows.next(), Some(CSV_HEADER));
+    let rows: Vec<&str> = rows.collect();
+    assert_eq!(rows.len(), ITERATIONS, "{csv}");
+    for (i, (log, eval)) in iterations.iter().enumerate() {
+        let v = i as u64 + 1;
+        // The noise-free episode of version v over IPC is the in-process one.
+        let ipc = monitor.episodes(v);
+        assert!(ipc.len() > N, "version {v}: {} episodes", ipc.len());
+        assert!(
+            same_episode(eval, &ipc[N]),
+            "version {v}: noise-free episode"
+        );
+        // The learned numbers, as the CSV writes them (f64 Display round-trips exactly).
+        let mut want = Vec::new();
+        write_csv_row(&mut want, log, SEED, "lqr-gaifo").unwrap();
+        assert_eq!(
+            learned_columns(rows[i]),
+            learned_columns(std::str::from_utf8(&want).unwrap()),
+            "iteration {i}: IPC row vs in-process row"
+        );
+        assert!(log.kl > 0.0, "iteration {i} took a step");
+    }
+    for (i, table) in tables.iter().enumerate() {
+        let v = i as u64 + 1;
+        let (got, _) = load_table(
+            &out.join("tables").join(format!("v{v:04}.npz")),
+            &GainBounds::default(),
+        )
+        .unwrap();
+        assert_eq!(got.version, v);
+        assert_eq!(got.checksum, table.checksum, "table version {v}");
+        assert!(got.used_steps() == table.used_steps(), "table version {v}");
+        // The critic checkpoints: same bytes (weights, normalisation, Adam, RNG position).
+        let name = format!("iter_{i:03}_critic.json");
+        assert_eq!(
+            std::fs::read(out.join(&name)).unwrap(),
+            std::fs::read(ref_out.join(&name)).unwrap(),
+            "{name}"
+        );
+    }
+    assert!(tables[ITERATIONS].used_steps() != tables[0].used_steps());
     assert!(sim.running());
     std::fs::remove_dir_all(&dir).ok();
 }
