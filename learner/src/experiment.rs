@@ -33,7 +33,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::expert::{record_demos, square_goals, ExpertConfig};
-use crate::gaifo::{GaifoConfig, GaifoLog, LqrGaifo, CSV_HEADER};
+use crate::gaifo::{run_iterations, GaifoConfig, GaifoLog, LqrGaifo, CSV_HEADER};
 use crate::io::demos::Demos;
 use crate::plot::{mean_stderr, plot_curves, Series};
 use crate::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
@@ -245,24 +245,29 @@ impl Job {
     pub fn run(&self) -> anyhow::Result<Run> {
         let t0 = Instant::now();
         let demos = (*self.demos).clone();
+        let (seed, algo) = (self.seed(), self.algorithm());
         let logs = match &self.spec {
-            Spec::LqrGaifo(c) => {
-                let mut r = LqrGaifo::new(c.clone(), demos)?;
-                (0..c.iterations)
-                    .map(|_| r.iterate().map(|(l, _)| l))
-                    .collect::<Result<Vec<_>, _>>()?
-            }
-            Spec::GaifoPpo(c) => {
-                let mut r = GaifoPpo::new(c.clone(), demos)?;
-                (0..c.iterations)
-                    .map(|_| r.iterate().map(|(l, _)| l))
-                    .collect::<Result<Vec<_>, _>>()?
-            }
+            Spec::LqrGaifo(c) => run_iterations(
+                &mut LqrGaifo::new(c.clone(), demos)?,
+                c.iterations,
+                seed,
+                algo,
+                None,
+                |_, _| {},
+            )?,
+            Spec::GaifoPpo(c) => run_iterations(
+                &mut GaifoPpo::new(c.clone(), demos)?,
+                c.iterations,
+                seed,
+                algo,
+                None,
+                |_, _| {},
+            )?,
         };
         Ok(Run {
             variant: self.variant.clone(),
-            algorithm: self.algorithm().into(),
-            seed: self.seed(),
+            algorithm: algo.into(),
+            seed,
             logs,
             wall_s: t0.elapsed().as_secs_f64(),
         })

@@ -194,6 +194,36 @@ pub struct GaifoLog {
 }
 
 impl GaifoLog {
+    /// The log of iteration `iteration` with the evaluation of its noise-free episode `eval`
+    /// (task cost, normalised performance against `demos`, final distance) and the critic's
+    /// statistics filled in; the step (`kl`, `eta`, `step_mult`) NaN and the times 0, for the
+    /// algorithm to set. Shared by LQR+GAIfO and the PPO baseline.
+    pub fn evaluated(iteration: usize, eval: &Episode, demos: &Demos, critic: &TrainStats) -> Self {
+        let c = eval.task_cost();
+        Self {
+            iteration,
+            task_cost: c,
+            performance: ur5_shared::normalised_performance(
+                c,
+                demos.cost_random,
+                demos.cost_expert,
+            )
+            .unwrap_or(f64::NAN),
+            final_distance: eval.final_distance(),
+            critic_loss: critic.critic_loss,
+            wasserstein: critic.wasserstein,
+            kl: f64::NAN,
+            eta: f64::NAN,
+            step_mult: f64::NAN,
+            t_execute: 0.0,
+            t_dynamics: 0.0,
+            t_critic: 0.0,
+            t_cost: 0.0,
+            t_lqr: 0.0,
+            cpu_learner: 0.0,
+        }
+    }
+
     /// Learner time (everything but executing episodes), s.
     pub fn learner_seconds(&self) -> f64 {
         self.t_dynamics + self.t_critic + self.t_cost + self.t_lqr
@@ -545,19 +575,7 @@ impl LqrGaifo {
         let t5 = Instant::now();
         let cpu_learner = thread_cpu_s() - c1;
 
-        let c = eval.task_cost();
         let log = GaifoLog {
-            iteration: self.iteration,
-            task_cost: c,
-            performance: ur5_shared::normalised_performance(
-                c,
-                self.demos.cost_random,
-                self.demos.cost_expert,
-            )
-            .unwrap_or(f64::NAN),
-            final_distance: eval.final_distance(),
-            critic_loss: critic.critic_loss,
-            wasserstein: critic.wasserstein,
             kl: step.kl,
             eta: step.eta,
             step_mult: step.step_mult,
@@ -567,6 +585,7 @@ impl LqrGaifo {
             t_cost: (t4 - t3).as_secs_f64(),
             t_lqr: (t5 - t4).as_secs_f64(),
             cpu_learner,
+            ..GaifoLog::evaluated(self.iteration, eval, &self.demos, &critic)
         };
         match self.prev_pol.as_mut() {
             Some(p) => p.copy_from(&self.pol),

@@ -207,28 +207,14 @@ impl GaifoPpo {
         let t4 = Instant::now();
         let cpu_learner = crate::bench::thread_cpu_s() - c1;
 
-        let c = eval.task_cost();
         let log = GaifoLog {
-            iteration: self.iteration,
-            task_cost: c,
-            performance: ur5_shared::normalised_performance(
-                c,
-                self.demos.cost_random,
-                self.demos.cost_expert,
-            )
-            .unwrap_or(f64::NAN),
-            final_distance: eval.final_distance(),
-            critic_loss: critic.critic_loss,
-            wasserstein: critic.wasserstein,
             kl: st.approx_kl,
-            eta: f64::NAN,
-            step_mult: f64::NAN,
             t_execute: (t1 - t0).as_secs_f64(),
-            t_dynamics: 0.0,
             t_critic: (t2 - t1).as_secs_f64(),
             t_cost: (t3 - t2).as_secs_f64(),
             t_lqr: (t4 - t3).as_secs_f64(),
             cpu_learner,
+            ..GaifoLog::evaluated(self.iteration, &eval, &self.demos, &critic)
         };
         self.last_update = st;
         self.iteration += 1;
