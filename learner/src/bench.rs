@@ -3,16 +3,20 @@
 
 use std::time::Instant;
 
+use imitation::cpu::thread_cpu_s;
+
+use crate::stats::{median, quantile};
+
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::algorithm::update::Learner;
-use crate::algorithm::AlgorithmConfig;
-use crate::dynamics::lr_prior::LrPriorConfig;
-use crate::dynamics::prior_gmm::PriorGmmConfig;
-use crate::policy::lin_gauss::LinGaussPolicy;
-use crate::synthetic::random_problem;
-use crate::traj_opt::lqr::TrajOptConfig;
+use gps::algorithm::update::Learner;
+use gps::algorithm::AlgorithmConfig;
+use gps::dynamics::lr_prior::LrPriorConfig;
+use gps::dynamics::prior_gmm::PriorGmmConfig;
+use gps::policy::lin_gauss::LinGaussPolicy;
+use gps::synthetic::random_problem;
+use gps::traj_opt::lqr::TrajOptConfig;
 
 /// Median timings (seconds) of the pieces of one update.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -37,29 +41,6 @@ pub struct BenchResult {
     /// (η, KL) of each backward pass of the η search, and the KL target.
     pub dgd_trace: Vec<(f64, f64)>,
     pub kl_target: f64,
-}
-
-/// CPU time of the calling thread, s (excludes time the thread waits for a core, which on a
-/// shared machine inflates wall-clock numbers).
-pub fn thread_cpu_s() -> f64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec; CLOCK_THREAD_CPUTIME_ID is always supported
-    // on Linux.
-    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Runs `reps` full updates (each on a fresh learner, same seeded data) and returns medians.
@@ -163,19 +144,15 @@ pub struct GaifoBenchResult {
     pub final_performance: f64,
 }
 
-fn quantile(v: &mut [f64], q: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
-}
-
 /// Runs `cfg.iterations` LQR+GAIfO iterations on `demos` and summarises their timings.
 pub fn gaifo(
-    cfg: &crate::gaifo::GaifoConfig,
-    demos: crate::io::demos::Demos,
+    cfg: &imitation::gaifo::GaifoConfig,
+    demos: imitation::demos::Demos,
 ) -> anyhow::Result<GaifoBenchResult> {
-    let logs = crate::gaifo::train(cfg, demos, None, |_| {})?;
+    let logs = crate::run::train(cfg, demos, None, |_| {})?;
     anyhow::ensure!(!logs.is_empty(), "no iterations");
-    let col = |f: fn(&crate::gaifo::GaifoLog) -> f64| -> Vec<f64> { logs.iter().map(f).collect() };
+    let col =
+        |f: fn(&imitation::gaifo::GaifoLog) -> f64| -> Vec<f64> { logs.iter().map(f).collect() };
     let mut cpu = col(|l| l.cpu_learner);
     Ok(GaifoBenchResult {
         iterations: logs.len(),

@@ -6,19 +6,7 @@ pub enum LearnerError {
     /// Arrays whose sizes do not fit together.
     #[error("shape mismatch: {0}")]
     Shape(String),
-    /// A matrix that must be positive definite is not.
-    #[error("{what} is not positive definite at index {t}; check the conditioning of the data")]
-    NotPositiveDefinite { what: &'static str, t: usize },
-    /// GPS `TrajOptLQRPython.backward`: raising η never made Q_uu positive definite.
-    #[error(
-        "failed to find a PD Q_uu even for eta = {eta:e} (>= 1e16); check that the dynamics and \
-         cost are reasonably well conditioned"
-    )]
-    EtaOverflow { eta: f64 },
-    /// GPS raises this when the PD retry fails on dynamics containing NaN.
-    #[error("NaNs encountered in the dynamics (Fm or fv); the dynamics fit failed upstream")]
-    NanDynamics,
-    /// Too few samples for a regression.
-    #[error("cannot fit dynamics on {0} sample(s); need at least 2 trajectories")]
-    TooFewSamples(usize),
+    /// A GPS piece (dynamics fit, LQR step, step adjustment) failed.
+    #[error(transparent)]
+    Gps(#[from] gps::GpsError),
 }

@@ -105,7 +105,7 @@ fn generalisation_trains_the_square_experts_and_targets_the_centre() {
     for f in ["centre.npz", "point_0.npz", "point_7.npz"] {
         assert!(out.join("experts").join(f).exists(), "{f}");
     }
-    let centre = learner::io::demos::Demos::load(&out.join("experts/centre.npz")).unwrap();
+    let centre = learner::io::demos::load(&out.join("experts/centre.npz")).unwrap();
     assert_eq!(centre.goal, cfg.expert.task.goal);
     assert_eq!(rows_without_times(&out.join("generalisation.csv")).len(), 3);
     assert_png(&out.join("generalisation.png"));

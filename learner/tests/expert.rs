@@ -1,8 +1,8 @@
 //! The expert of issue 4 on the simulated arm: acceptance and reproducibility.
 
-use learner::expert::{record_demos, train, train_and_record, ExpertConfig};
-use learner::io::demos::Demos;
+use imitation::expert::ExpertConfig;
 use learner::io::table::load_table;
+use learner::run::{demos as record_demos, expert as train, train_and_record};
 use ur5_shared::GainBounds;
 
 /// From the standard retracted pose to the default goal: final distance < 2 cm and task cost
@@ -56,7 +56,7 @@ fn same_seed_same_demonstrations_bit_for_bit() {
     let bytes = |p: &std::path::Path| std::fs::read(p).unwrap();
     assert_eq!(bytes(&a.demos), bytes(&b.demos), "demos.npz differ");
     assert_eq!(bytes(&a.table), bytes(&b.table), "expert_table.npz differ");
-    let da = Demos::load(&a.demos).unwrap();
+    let da = learner::io::demos::load(&a.demos).unwrap();
     assert_eq!(da.count, 2);
     assert_eq!(da.horizon, 30);
     assert_eq!(da.seed, cfg.seed);
@@ -69,7 +69,7 @@ fn same_seed_same_demonstrations_bit_for_bit() {
         ..cfg.clone()
     };
     let run = train(&other, |_| {}).unwrap();
-    let dc = record_demos(&other, &run.policy, run.cost_random).unwrap();
+    let dc = record_demos(&other, &run).unwrap();
     assert_ne!(
         dc.states, da.states,
         "another seed must give other demonstrations"

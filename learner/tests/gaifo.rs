@@ -1,8 +1,10 @@
 //! LQR+GAIfO end to end on the simulated arm: expert → demonstrations → imitation from the
 //! states alone.
 
-use learner::expert::{record_demos, train as train_expert, ExpertConfig};
-use learner::gaifo::{train, GaifoConfig};
+use imitation::expert::ExpertConfig;
+use imitation::gaifo::GaifoConfig;
+use learner::run::train;
+use learner::run::{demos as record_demos, expert as train_expert};
 
 /// The expert of issue 4, then 12 iterations of LQR+GAIfO on its 5 state-only demonstrations:
 /// the imitator's noise-free episode must reach normalised performance ≥ 0.8 (the issue's
@@ -14,7 +16,7 @@ fn lqr_gaifo_imitates_the_expert_from_states_only() {
         ..ExpertConfig::default()
     };
     let expert = train_expert(&ecfg, |_| {}).unwrap();
-    let demos = record_demos(&ecfg, &expert.policy, expert.cost_random).unwrap();
+    let demos = record_demos(&ecfg, &expert).unwrap();
     assert!(demos.cost_expert < 0.25 * demos.cost_random);
     let cfg = GaifoConfig {
         iterations: 12,
@@ -43,7 +45,7 @@ fn lqr_gaifo_imitates_the_expert_from_states_only() {
 
 /// Demonstrations of a short task (T = 30) from a 4-iteration expert: enough to imitate for a
 /// few iterations, in a second.
-fn short_demos() -> learner::io::demos::Demos {
+fn short_demos() -> imitation::demos::Demos {
     let ecfg = ExpertConfig {
         task: ur5_shared::config::TaskConfig {
             horizon: 30,
@@ -55,15 +57,17 @@ fn short_demos() -> learner::io::demos::Demos {
         ..ExpertConfig::default()
     };
     let expert = train_expert(&ecfg, |_| {}).unwrap();
-    record_demos(&ecfg, &expert.policy, expert.cost_random).unwrap()
+    record_demos(&ecfg, &expert).unwrap()
 }
 
 /// `iterate` is `execute` + `learn`: learning on episodes executed outside (as `learner serve`
 /// does with the controller's) gives the same logs and controllers bit for bit.
 #[test]
 fn learning_on_executed_episodes_equals_iterate() {
-    use learner::gaifo::LqrGaifo;
-    use learner::iteration::execute;
+    use imitation::gaifo::LqrGaifo;
+    use imitation::learn::{iterate, LinGaussLearn};
+    use imitation::rollout::execute;
+    use learner::arm::SimArm;
     let demos = short_demos();
     let cfg = GaifoConfig {
         seed: 5,
@@ -71,20 +75,23 @@ fn learning_on_executed_episodes_equals_iterate() {
     };
     let mut a = LqrGaifo::new(cfg.clone(), demos.clone()).unwrap();
     let mut b = LqrGaifo::new(cfg.clone(), demos).unwrap();
-    let mut sim = hil_sim::Ur5Sim::new(cfg.sim.clone(), b.task().dt).unwrap();
+    let mut arm_a = SimArm::new(cfg.sim.clone(), a.task().dt).unwrap();
+    let mut sim = SimArm::new(cfg.sim.clone(), b.task().dt).unwrap();
     for i in 0..3 {
-        let (la, ea) = a.iterate().unwrap();
+        let (la, ea) = iterate(&mut a, &mut arm_a).unwrap();
         let task = b.task().clone();
-        let (noisy, eval) = execute(&mut sim, &task, b.policy(), b.version(), 5, 5).unwrap();
+        let (noisy, eval) = execute(&mut sim, &task, &mut *b.table(), b.version(), 5, 5).unwrap();
         assert_eq!(ea, eval);
         let lb = b.learn(&noisy, &eval, 0.0).unwrap();
-        let key = |l: &learner::gaifo::GaifoLog| {
+        let key = |l: &imitation::gaifo::GaifoLog| {
             [l.task_cost, l.critic_loss, l.wasserstein, l.kl, l.eta].map(f64::to_bits)
         };
         assert_eq!((la.iteration, key(&la)), (i, key(&lb)));
         assert_eq!(a.policy(), b.policy());
     }
-    let e = b.learn(&[], &a.iterate().unwrap().1, 0.0).unwrap_err();
+    let e = b
+        .learn(&[], &iterate(&mut a, &mut arm_a).unwrap().1, 0.0)
+        .unwrap_err();
     assert!(e.to_string().contains("needs 5 noisy episodes"), "{e}");
 }
 
@@ -92,11 +99,13 @@ mod resume {
     use std::path::{Path, PathBuf};
 
     use super::short_demos;
-    use learner::cost::composite::D_IN;
-    use learner::discriminator::Discriminator;
-    use learner::expert::{policy_from_gain_table, to_gain_table};
-    use learner::gaifo::{train, train_resumed, GaifoConfig, LqrGaifo, CSV_HEADER};
+    use imitation::controller::{policy_from_gain_table, to_gain_table};
+    use imitation::cost::composite::D_IN;
+    use imitation::discriminator::Discriminator;
+    use imitation::gaifo::GaifoConfig;
+    use learner::io::log::CSV_HEADER;
     use learner::io::table::load_table;
+    use learner::run::{resume, train, train_resumed};
     use ur5_shared::config::TaskConfig;
     use ur5_shared::GainBounds;
 
@@ -157,7 +166,7 @@ mod resume {
 
         // What the resumed run starts from: the checkpointed table and critic, which are the
         // uninterrupted run's after 2 iterations.
-        let resumed = LqrGaifo::resume(cfg(4), demos.clone(), &split).unwrap();
+        let resumed = resume(cfg(4), demos.clone(), &split).unwrap();
         assert_eq!((resumed.iteration(), resumed.version()), (2, 3));
         let (table, dt) =
             load_table(&split.join("iter_002_table.npz"), &GainBounds::default()).unwrap();
@@ -246,7 +255,7 @@ mod resume {
             horizon: 4,
             ..TaskConfig::default()
         };
-        let mut pol = learner::expert::init_hold(&task, 0.05);
+        let mut pol = imitation::controller::init_hold(&task, 0.05);
         for t in 0..4 {
             pol.gain.slice_mut(t)[5] = -0.3 * t as f64;
             // Σ = R Rᵀ... here a full lower factor L (GPS keeps R = Lᵀ).

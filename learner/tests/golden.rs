@@ -49,8 +49,10 @@ fn comparison_2_seeds_10_iterations_matches_the_committed_csv() {
     }
     let want = std::fs::read_to_string(&path)
         .unwrap_or_else(|e| panic!("{}: {e} (regenerate: see module docs)", path.display()));
-    let (got, want): (Vec<String>, Vec<String>) =
-        (without_times(&got), want.lines().map(String::from).collect());
+    let (got, want): (Vec<String>, Vec<String>) = (
+        without_times(&got),
+        want.lines().map(String::from).collect(),
+    );
     assert_eq!(got.len(), want.len(), "number of CSV lines");
     for (k, (g, w)) in got.iter().zip(&want).enumerate() {
         assert_eq!(g, w, "CSV line {} differs from the committed copy", k + 1);

@@ -2,12 +2,13 @@
 //! hand-computed example, PPO on the true task cost improving the simulated arm, and bitwise
 //! determinism of the imitation loop.
 
-use hil_sim::Ur5Sim;
-use learner::io::demos::Demos;
-use learner::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
-use learner::ppo::rollout::execute_mlp;
-use learner::ppo::{gae, ppo_loss_gradient, ActorCritic, Ppo, PpoConfig, Rollouts};
-use learner::rollout::Episode;
+use imitation::demos::Demos;
+use imitation::learn::iterate;
+use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
+use imitation::ppo::rollout::execute_mlp;
+use imitation::ppo::{gae, ppo_loss_gradient, ActorCritic, Ppo, PpoConfig, Rollouts};
+use imitation::rollout::Episode;
+use learner::arm::SimArm;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
@@ -61,7 +62,7 @@ fn ppo_loss_gradient_matches_finite_differences() {
     assert!(parts.clip_fraction > 0.3 && parts.clip_fraction < 0.7);
     // Every ratio ≥ 0.03 away from the kinks at 0.8 and 1.2 (the finite differences move
     // log ρ by ~1e-5).
-    let loss = |ac: &ActorCritic, ws: &mut learner::ppo::ActorCriticWorkspace| {
+    let loss = |ac: &ActorCritic, ws: &mut imitation::ppo::ActorCriticWorkspace| {
         let (mut a, mut g) = (Vec::new(), vec![0.0; n]);
         ppo_loss_gradient(ac, ws, &cfg, &data, &idx, &mut a, &mut g).loss
     };
@@ -143,7 +144,7 @@ fn ppo_on_task_cost(
     iterations: usize,
     seed: u64,
 ) -> (Vec<f64>, Vec<f64>) {
-    let mut sim = Ur5Sim::new(SimConfig::default(), task.dt).unwrap();
+    let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
     let mut ppo = Ppo::new(cfg, ActionMode::GoalAngles, seed).unwrap();
     let mut costs = Vec::new();
     for it in 0..=iterations {
@@ -207,7 +208,7 @@ fn ppo_on_the_true_task_cost_reduces_it() {
 
 #[test]
 fn reward_normalisation_matches_two_pass_statistics() {
-    use learner::ppo::{normalize_rewards, RunningMeanStd};
+    use imitation::ppo::{normalize_rewards, RunningMeanStd};
     let mut rms = RunningMeanStd::default();
     let mut r = vec![vec![1.0, -2.0, 0.5], vec![3.0, 0.0]];
     normalize_rewards(&mut rms, 0.5, &mut r);
@@ -248,7 +249,7 @@ fn same_seed_same_run_bit_for_bit() {
 
 /// Demonstrations stand-in: two episodes of a fresh noisy policy (the loop only needs states).
 fn fake_demos(task: &TaskConfig) -> Demos {
-    let mut sim = Ur5Sim::new(SimConfig::default(), task.dt).unwrap();
+    let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
     let mut ppo = Ppo::new(PpoConfig::default(), ActionMode::GoalAngles, 99).unwrap();
     let (pol, ws) = ppo.policy_and_workspace();
     let (eps, _) = execute_mlp(&mut sim, task, pol, ws, 1, 5, 2).unwrap();
@@ -279,9 +280,10 @@ fn gaifo_ppo_is_deterministic_and_logs_like_lqr_gaifo() {
     };
     let run = |cfg: &GaifoPpoConfig| {
         let mut r = GaifoPpo::new(cfg.clone(), demos.clone()).unwrap();
+        let mut arm = learner::run::arm_for(&r).unwrap();
         let mut out = Vec::new();
         for _ in 0..cfg.iterations {
-            let (log, eval) = r.iterate().unwrap();
+            let (log, eval) = iterate(&mut r, &mut arm).unwrap();
             out.push((
                 log.task_cost,
                 log.critic_loss,
@@ -308,13 +310,13 @@ fn gaifo_ppo_is_deterministic_and_logs_like_lqr_gaifo() {
     assert_eq!(a.2, b.2);
     // The CSV: LQR+GAIfO's header, algorithm gaifo-ppo.
     let dir = std::env::temp_dir().join(format!("ppo_test_csv_{}", std::process::id()));
-    let logs = learner::ppo::gaifo_ppo::train(&cfg, demos, Some(&dir), |_, _| {}).unwrap();
+    let logs = learner::run::train_ppo(&cfg, demos, Some(&dir), |_, _| {}).unwrap();
     assert_eq!(logs.len(), 2);
     let csv = std::fs::read_to_string(dir.join("gaifo_log.csv")).unwrap();
     let mut lines = csv.lines();
-    assert_eq!(lines.next().unwrap(), learner::gaifo::CSV_HEADER);
+    assert_eq!(lines.next().unwrap(), learner::io::log::CSV_HEADER);
     let row: Vec<&str> = lines.next().unwrap().split(',').collect();
-    assert_eq!(row.len(), learner::gaifo::CSV_HEADER.split(',').count());
+    assert_eq!(row.len(), learner::io::log::CSV_HEADER.split(',').count());
     assert_eq!(row[2], "gaifo-ppo");
     assert!(dir.join("iter_002_policy.json").exists());
     std::fs::remove_dir_all(&dir).unwrap();

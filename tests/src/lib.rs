@@ -15,10 +15,7 @@
 //! parallel and a crashed test leaves nothing that disturbs the next. No test asserts on a
 //! latency: the machines are shared and stall now and then.
 
-use std::fs::File;
-use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::publisher::Publisher;
@@ -26,6 +23,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 pub use ur5_shared::services::unique_prefix;
+
+use learner::process::Spawned;
 
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, GainTable, StepSample, DU};
@@ -58,90 +57,51 @@ pub fn scratch(tag: &str) -> PathBuf {
     dir
 }
 
-/// A spawned binary: stdout piped (the `--json` line), stderr to a log file. Killed on drop.
-pub struct Proc {
-    /// What it is, for messages.
-    pub name: String,
-    child: Option<Child>,
-    log: PathBuf,
-}
+/// A spawned binary ([`learner::process::Spawned`]: stdout piped for the `--json` line, stderr
+/// to a log file), killed at once on drop; the methods panic with its log where a test would.
+pub struct Proc(Spawned);
 
 impl Proc {
     /// Spawns `bin(name)` with `args`; stderr goes to `dir/<label>.log`.
     pub fn spawn(name: &str, label: &str, args: &[&str], dir: &Path) -> Self {
         let log = dir.join(format!("{label}.log"));
-        let child = Command::new(bin(name))
-            .args(args)
-            .env("IOX2_LOG_LEVEL", "Error")
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(File::create(&log).expect("log file"))
-            .spawn()
+        let p = Spawned::spawn(&bin(name), args, &log, Duration::ZERO)
             .unwrap_or_else(|e| panic!("spawn {name}: {e}"));
-        Self {
-            name: label.to_owned(),
-            child: Some(child),
-            log,
-        }
+        Self(p.named(label))
+    }
+
+    /// What it is, for messages.
+    pub fn name(&self) -> &str {
+        &self.0.name
     }
 
     /// The process id.
     pub fn pid(&self) -> i32 {
-        self.child.as_ref().expect("running").id() as i32
+        self.0.pid()
     }
 
     /// Sends a signal (e.g. `libc::SIGTERM`, `libc::SIGKILL`).
     pub fn signal(&self, sig: i32) {
-        // SAFETY: plain kill(2) on our own child.
-        unsafe { libc::kill(self.pid(), sig) };
+        self.0.signal(sig)
     }
 
     /// Its stderr so far.
     pub fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
+        self.0.log()
     }
 
     /// Waits up to `timeout` for exit; returns (exit code, stdout). Panics with the log on
     /// timeout.
     pub fn wait(&mut self, timeout: Duration) -> (Option<i32>, String) {
-        let child = self.child.as_mut().expect("running");
-        let t0 = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait().expect("try_wait") {
-                let mut out = String::new();
-                if let Some(mut s) = child.stdout.take() {
-                    let _ = s.read_to_string(&mut out);
-                }
-                self.child = None;
-                return (status.code(), out);
-            }
-            if t0.elapsed() > timeout {
-                let _ = child.kill();
-                panic!(
-                    "{} did not exit within {timeout:?}; its log:\n{}",
-                    self.name,
-                    self.log()
-                );
-            }
-            std::thread::sleep(Duration::from_millis(10));
+        match self.0.wait(timeout) {
+            Ok(r) => r,
+            Err(e) => panic!("{e}; its log:\n{}", self.log()),
         }
     }
 
     /// True while running.
     pub fn running(&mut self) -> bool {
-        match self.child.as_mut() {
-            Some(c) => c.try_wait().expect("try_wait").is_none(),
-            None => false,
-        }
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if let Some(c) = self.child.as_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
+        self.0.running()
     }
 }
 

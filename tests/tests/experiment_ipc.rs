@@ -1,8 +1,8 @@
 //! `learner experiment sim-vs-physical` on a tiny configuration: both arms, all three
 //! processes per run in real time (time-compressed), outputs produced and well formed.
 
+use learner::experiment::ipc::run;
 use learner::experiment::{csv_header, ExperimentConfig, ExperimentName};
-use learner::experiment_ipc::run;
 
 #[test]
 fn sim_vs_physical_runs_both_arms_over_ipc() {

@@ -1,27 +1,28 @@
 //! Learning over IPC: `hil-sim serve`, `rt-controller run` and `learner serve`, all three from
 //! the built binaries, lockstep, on a fresh prefix per test. The outcome must equal the
-//! in-process loop with the same seed bit for bit, for the expert (`learner::expert`) and for
-//! LQR+GAIfO (`learner::gaifo::LqrGaifo`); a killed learner must leave the controller on its
+//! in-process loop with the same seed bit for bit, for the expert (`imitation::expert`) and for
+//! LQR+GAIfO (`imitation::gaifo::LqrGaifo`); a killed learner must leave the controller on its
 //! table, and a restarted one (`--resume`) must continue. Assertions are on behaviour only,
 //! never on latency.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use hil_sim::Ur5Sim;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use imitation::controller::to_gain_table;
+use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
+use imitation::gaifo::{GaifoLog, LqrGaifo};
+use imitation::learn::iterate;
+use imitation::rollout::{execute, Episode};
 use integration_tests::{
     cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc,
 };
-use learner::expert::{
-    record_demos, to_gain_table, train, ExpertConfig, ExpertLearner, IterationLog,
-};
-use learner::gaifo::{write_csv_row, GaifoLog, LqrGaifo, CSV_HEADER};
+use learner::arm::SimArm;
 use learner::io::episode::load_episode;
+use learner::io::log::{write_csv_row, CSV_HEADER};
 use learner::io::table::load_table;
-use learner::iteration::execute;
-use learner::rollout::Episode;
+use learner::run::{arm_for, demos as record_demos, expert as train, Checkpoint};
 use learner::serve::{episode_from_samples, load_config, load_gaifo_config};
 use ur5_shared::config::TaskConfig;
 use ur5_shared::services::{self, ServiceNames};
@@ -187,7 +188,7 @@ fn in_process(
     Vec<Box<GainTable>>,
     Vec<(Vec<Episode>, Episode, IterationLog)>,
 ) {
-    let mut sim = Ur5Sim::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+    let mut sim = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
     let mut el = ExpertLearner::new(cfg.clone(), None);
     let (mut tables, mut iterations) = (Vec::new(), Vec::new());
     while !el.done() {
@@ -195,7 +196,7 @@ fn in_process(
         let (noisy, eval) = execute(
             &mut sim,
             &cfg.task,
-            el.policy(),
+            &mut *to_gain_table(el.policy(), el.version()),
             el.version(),
             cfg.seed,
             cfg.samples,
@@ -239,14 +240,14 @@ fn wait_for(
             assert!(
                 p.running(),
                 "{} exited while waiting for {what}; its log:\n{}",
-                p.name,
+                p.name(),
                 p.log()
             );
         }
         if t0.elapsed() > LONG {
             let logs: Vec<String> = procs
                 .iter()
-                .map(|p| format!("--- {}:\n{}", p.name, p.log()))
+                .map(|p| format!("--- {}:\n{}", p.name(), p.log()))
                 .collect();
             panic!("timed out waiting for {what}:\n{}", logs.join("\n"));
         }
@@ -282,7 +283,7 @@ fn run_until_learned(
             assert!(
                 p.running(),
                 "{} exited; log:\n{}\nlearner log:\n{}",
-                p.name,
+                p.name(),
                 p.log(),
                 learner.log()
             );
@@ -467,9 +468,9 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
         ..ExpertConfig::default()
     };
     let expert = train(&ecfg, |_| {}).unwrap();
-    let demos = record_demos(&ecfg, &expert.policy, expert.cost_random).unwrap();
+    let demos = record_demos(&ecfg, &expert).unwrap();
     let demos_path = dir.join("demos.npz");
-    demos.save(&demos_path).unwrap();
+    learner::io::demos::save(&demos, &demos_path).unwrap();
     let learner_cfg = write_config(
         &dir,
         "gaifo.toml",
@@ -484,11 +485,12 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
         let (cfg, demos, ref_out) = (cfg.clone(), demos.clone(), ref_out.clone());
         std::thread::spawn(move || {
             let mut run = LqrGaifo::new(cfg, demos).unwrap();
+            let mut arm = arm_for(&run).unwrap();
             let (mut tables, mut iterations) = (Vec::new(), Vec::new());
             for _ in 0..ITERATIONS {
                 tables.push(to_gain_table(run.policy(), run.version()));
                 run.checkpoint(&ref_out).unwrap();
-                iterations.push(run.iterate().unwrap());
+                iterations.push(iterate(&mut run, &mut arm).unwrap());
             }
             tables.push(to_gain_table(run.policy(), run.version()));
             run.checkpoint(&ref_out).unwrap();

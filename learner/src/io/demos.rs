@@ -20,138 +20,108 @@ use std::path::Path;
 
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
+use imitation::demos::Demos;
+
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
 /// Version of this file layout.
 pub const SCHEMA_VERSION: i64 = 1;
 
-/// A set of demonstrations.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Demos {
-    /// States, (D, T, dX) row-major.
-    pub states: Vec<f64>,
-    /// Actions (diagnostics only), (D, T, dU) row-major.
-    pub actions: Vec<f64>,
-    /// Number of demonstrations D.
-    pub count: usize,
-    /// Horizon T.
-    pub horizon: usize,
-    /// Goal point (m).
-    pub goal: [f64; 3],
-    /// Start pose (rad).
-    pub start_q: [f64; 3],
-    /// Control period (s).
-    pub dt: f64,
-    /// Seed of the recording run.
-    pub seed: u64,
-    /// Mean task cost of the random policy (for normalised performance).
-    pub cost_random: f64,
-    /// Mean task cost of these demonstrations.
-    pub cost_expert: f64,
+/// Writes `demos` to `path` (atomically).
+pub fn save(demos: &Demos, path: &Path) -> Result<(), NpzError> {
+    let d = demos;
+    let (n, t) = (d.count as u64, d.horizon as u64);
+    let mut w = NpzWriter::create(path)?;
+    w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
+    w.f64("states", &[n, t, DX as u64], &d.states)?;
+    w.f64("actions_diagnostic", &[n, t, DU as u64], &d.actions)?;
+    w.f64("goal", &[3], &d.goal)?;
+    w.f64("start_q", &[3], &d.start_q)?;
+    w.f64("dt", &[], &[d.dt])?;
+    w.u64("seed", &[], &[d.seed])?;
+    w.f64("cost_random", &[], &[d.cost_random])?;
+    w.f64("cost_expert", &[], &[d.cost_expert])?;
+    w.strings("state_names", &STATE_NAMES)?;
+    w.strings("action_names", &ACTION_NAMES)?;
+    w.finish()?;
+    Ok(())
 }
 
-impl Demos {
-    /// State t of demonstration d.
-    pub fn state(&self, d: usize, t: usize) -> [f64; DX] {
-        let i = (d * self.horizon + t) * DX;
-        self.states[i..i + DX].try_into().expect("dX")
+/// Reads and checks demonstrations.
+pub fn load(path: &Path) -> Result<Demos, NpzError> {
+    let f = NpzFile::open(path)?;
+    let bad = |name: &str, why: String| NpzError::Bad {
+        path: path.to_owned(),
+        name: name.into(),
+        why,
+    };
+    f.check_schema(SCHEMA_VERSION)?;
+    let names = f.strings("state_names")?;
+    if names != STATE_NAMES {
+        return Err(bad(
+            "state_names",
+            format!("{names:?} is not this project's state layout {STATE_NAMES:?}"),
+        ));
     }
-
-    /// Writes the demonstrations to `path` (atomically).
-    pub fn save(&self, path: &Path) -> Result<(), NpzError> {
-        let (d, t) = (self.count as u64, self.horizon as u64);
-        let mut w = NpzWriter::create(path)?;
-        w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
-        w.f64("states", &[d, t, DX as u64], &self.states)?;
-        w.f64("actions_diagnostic", &[d, t, DU as u64], &self.actions)?;
-        w.f64("goal", &[3], &self.goal)?;
-        w.f64("start_q", &[3], &self.start_q)?;
-        w.f64("dt", &[], &[self.dt])?;
-        w.u64("seed", &[], &[self.seed])?;
-        w.f64("cost_random", &[], &[self.cost_random])?;
-        w.f64("cost_expert", &[], &[self.cost_expert])?;
-        w.strings("state_names", &STATE_NAMES)?;
-        w.strings("action_names", &ACTION_NAMES)?;
-        w.finish()?;
-        Ok(())
+    let (shape, states) = f.f64("states")?;
+    let [d, t, dx] = shape[..] else {
+        return Err(bad(
+            "states",
+            format!("shape {shape:?}, expected (D, T, {DX})"),
+        ));
+    };
+    if dx != DX as u64 {
+        return Err(bad(
+            "states",
+            format!("state dimension {dx}, expected dX = {DX}"),
+        ));
     }
-
-    /// Reads and checks demonstrations.
-    pub fn load(path: &Path) -> Result<Self, NpzError> {
-        let f = NpzFile::open(path)?;
-        let bad = |name: &str, why: String| NpzError::Bad {
-            path: path.to_owned(),
-            name: name.into(),
-            why,
-        };
-        f.check_schema(SCHEMA_VERSION)?;
-        let names = f.strings("state_names")?;
-        if names != STATE_NAMES {
-            return Err(bad(
-                "state_names",
-                format!("{names:?} is not this project's state layout {STATE_NAMES:?}"),
-            ));
-        }
-        let (shape, states) = f.f64("states")?;
-        let [d, t, dx] = shape[..] else {
-            return Err(bad(
-                "states",
-                format!("shape {shape:?}, expected (D, T, {DX})"),
-            ));
-        };
-        if dx != DX as u64 {
-            return Err(bad(
-                "states",
-                format!("state dimension {dx}, expected dX = {DX}"),
-            ));
-        }
-        if d == 0 || t < 2 {
-            return Err(bad(
-                "states",
-                format!("{d} demonstrations of {t} steps: need at least 1 of at least 2 steps"),
-            ));
-        }
-        let actions = f.f64_shaped("actions_diagnostic", &[d, t, DU as u64])?;
-        let scalar = |name: &str| -> Result<f64, NpzError> { Ok(f.f64_shaped(name, &[])?[0]) };
-        let vec3 = |name: &str| -> Result<[f64; 3], NpzError> {
-            Ok(f.f64_shaped(name, &[3])?.try_into().expect("3"))
-        };
-        let demos = Demos {
-            count: d as usize,
-            horizon: t as usize,
-            goal: vec3("goal")?,
-            start_q: vec3("start_q")?,
-            dt: scalar("dt")?,
-            seed: f.u64_scalar("seed")?,
-            cost_random: scalar("cost_random")?,
-            cost_expert: scalar("cost_expert")?,
-            states,
-            actions,
-        };
-        for (name, values) in [
-            ("states", &demos.states),
-            ("actions_diagnostic", &demos.actions),
-        ] {
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(bad(
-                    name,
-                    format!("non-finite value {} at flat index {i}", values[i]),
-                ));
-            }
-        }
-        if !(demos.dt > 0.0 && demos.dt.is_finite()) {
-            return Err(bad("dt", format!("{} s must be finite and > 0", demos.dt)));
-        }
-        if demos
-            .goal
-            .iter()
-            .chain(demos.start_q.iter())
-            .any(|v| !v.is_finite())
-        {
-            return Err(bad("goal", "goal and start_q must be finite".into()));
-        }
-        Ok(demos)
+    if d == 0 || t < 2 {
+        return Err(bad(
+            "states",
+            format!("{d} demonstrations of {t} steps: need at least 1 of at least 2 steps"),
+        ));
     }
+    let actions = f.f64_shaped("actions_diagnostic", &[d, t, DU as u64])?;
+    let scalar = |name: &str| -> Result<f64, NpzError> { Ok(f.f64_shaped(name, &[])?[0]) };
+    let vec3 = |name: &str| -> Result<[f64; 3], NpzError> {
+        Ok(f.f64_shaped(name, &[3])?.try_into().expect("3"))
+    };
+    let demos = Demos {
+        count: d as usize,
+        horizon: t as usize,
+        goal: vec3("goal")?,
+        start_q: vec3("start_q")?,
+        dt: scalar("dt")?,
+        seed: f.u64_scalar("seed")?,
+        cost_random: scalar("cost_random")?,
+        cost_expert: scalar("cost_expert")?,
+        states,
+        actions,
+    };
+    for (name, values) in [
+        ("states", &demos.states),
+        ("actions_diagnostic", &demos.actions),
+    ] {
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(bad(
+                name,
+                format!("non-finite value {} at flat index {i}", values[i]),
+            ));
+        }
+    }
+    if !(demos.dt > 0.0 && demos.dt.is_finite()) {
+        return Err(bad("dt", format!("{} s must be finite and > 0", demos.dt)));
+    }
+    if demos
+        .goal
+        .iter()
+        .chain(demos.start_q.iter())
+        .any(|v| !v.is_finite())
+    {
+        return Err(bad("goal", "goal and start_q must be finite".into()));
+    }
+    Ok(demos)
 }
 
 #[cfg(test)]
@@ -179,14 +149,14 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("demos-test-{}", std::process::id()));
         let path = dir.join("demos.npz");
         let demos = sample();
-        demos.save(&path).unwrap();
-        assert_eq!(Demos::load(&path).unwrap(), demos);
+        save(&demos, &path).unwrap();
+        assert_eq!(load(&path).unwrap(), demos);
 
         // Non-finite state.
         let mut nan = sample();
         nan.states[17] = f64::NAN;
-        nan.save(&path).unwrap();
-        let e = Demos::load(&path).unwrap_err().to_string();
+        save(&nan, &path).unwrap();
+        let e = load(&path).unwrap_err().to_string();
         assert!(
             e.contains("states") && e.contains("non-finite") && e.contains("17"),
             "{e}"
@@ -198,14 +168,14 @@ mod tests {
         w.strings("state_names", &STATE_NAMES).unwrap();
         w.f64("states", &[2, 5, 11], &vec![0.0; 110]).unwrap();
         w.finish().unwrap();
-        let e = Demos::load(&path).unwrap_err().to_string();
+        let e = load(&path).unwrap_err().to_string();
         assert!(e.contains("state dimension 11, expected dX = 12"), "{e}");
 
         // Missing array.
         let mut w = NpzWriter::create(&path).unwrap();
         w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
         w.finish().unwrap();
-        let e = Demos::load(&path).unwrap_err().to_string();
+        let e = load(&path).unwrap_err().to_string();
         assert!(e.contains("no array `state_names`"), "{e}");
 
         // Action array of the wrong size.
@@ -216,7 +186,7 @@ mod tests {
         w.f64("actions_diagnostic", &[2, 4, 3], &vec![0.0; 24])
             .unwrap();
         w.finish().unwrap();
-        let e = Demos::load(&path).unwrap_err().to_string();
+        let e = load(&path).unwrap_err().to_string();
         assert!(
             e.contains("actions_diagnostic") && e.contains("expected [2, 5, 3]"),
             "{e}"

@@ -23,7 +23,7 @@ use ur5_shared::config::TaskConfig;
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
-use crate::rollout::Episode;
+use imitation::rollout::Episode;
 
 /// Version of this file layout.
 pub const SCHEMA_VERSION: i64 = 1;

@@ -1,6 +1,8 @@
-//! Files that leave the program (DESIGN.md §5): `.npz` containers, demonstrations, gain tables.
+//! Files that leave the program (docs/design.md §4): `.npz` containers, demonstrations, gain tables.
 
+pub mod checkpoint;
 pub mod demos;
 pub mod episode;
+pub mod log;
 pub mod npz;
 pub mod table;

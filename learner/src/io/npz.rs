@@ -1,5 +1,5 @@
 //! `.npz` files (numpy's `np.savez` layout: a zip of `.npy` arrays) for everything that leaves
-//! the program: demonstrations, recorded episodes, gain tables (DESIGN.md §5).
+//! the program: demonstrations, recorded episodes, gain tables (docs/design.md §4.1).
 //!
 //! Writing goes to `<path>.partial` and is renamed into place by [`NpzWriter::finish`], so a
 //! crash never leaves a truncated file under the final name. Arrays are little-endian, C order.

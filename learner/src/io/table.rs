@@ -1,4 +1,4 @@
-//! Gain tables on disk (`.npz`, DESIGN.md §5), in the project's form
+//! Gain tables on disk (`.npz`, docs/design.md §4.4), in the project's form
 //! a = K_t (s − ŝ_t) + k_t + â_t + L_t ε:
 //!
 //! | array | shape | meaning |

@@ -1,0 +1,727 @@
+//! Gaussian mixture model fitted by EM (GPS python/gps/utility/gmm.py, class `GMM` with its
+//! defaults `init_sequential=False, eigreg=False, warmstart=True`).
+//!
+//! Behaviour kept from GPS on purpose:
+//! - (Re)initialisation only when there is no model yet or `K` changed; otherwise EM starts
+//!   from the previous clusters (warm start) and `N` (used for the prior's `n0`) keeps the
+//!   point count of the last (re)initialisation.
+//! - Initial covariances are `(1/K) Σ_{n∈cluster} d dᵀ + 2e-6 I` (divided by K, not by the
+//!   cluster size).
+//! - Stopping: before each M-step, stop when `ll < prevll` ("ll decreased") or
+//!   `|ll − prevll| < 1e-5 · prevll` ("converged"; never true for negative ll), else after
+//!   `max_iterations`.
+//! - Clusters whose mass falls below `1e-4 / K` get uniform weights `1/N` in the M-step.
+//! - Covariance regularisation `0.5 (Σ + Σᵀ) + 1e-6 I`.
+//!
+//! Responsibilities are computed in log space with GPS's `logsum` (max-shifted log-sum-exp).
+//! Data points are rows of an `N x D` matrix; the model owns a workspace that grows to the
+//! largest `N` seen and is reused afterwards.
+
+use faer::prelude::{Reborrow, ReborrowMut};
+use faer::{Accum, Mat, MatMut, MatRef};
+use rand::Rng;
+
+use crate::error::GpsError;
+use crate::linalg::{gemm, llt_lower, solve_lower, MatSeq, Scratch};
+
+/// Up to this many points the E-step uses its own small-N forward substitution.
+const SMALL_N: usize = 32;
+
+/// How to assign points to clusters when EM (re)initialises.
+pub enum ClusterInit<'a> {
+    /// Cluster index of every point (length N, values in `0..K`), e.g. a recorded
+    /// `init_cluster_idx`.
+    Given(&'a [usize]),
+    /// Uniform random indices, as GPS's `np.random.randint(0, K, N)` (different stream).
+    Random(&'a mut dyn rand::RngCore),
+}
+
+/// Why EM stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EmStop {
+    LlDecreased,
+    Converged,
+    MaxIterations,
+}
+
+impl EmStop {
+    /// GPS vector spelling (`ll_decreased`, `converged`, `max_iterations`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EmStop::LlDecreased => "ll_decreased",
+            EmStop::Converged => "converged",
+            EmStop::MaxIterations => "max_iterations",
+        }
+    }
+}
+
+/// What one `update` did.
+#[derive(Clone, Debug)]
+pub struct EmReport {
+    pub k: usize,
+    pub n_points: usize,
+    pub reinitialized: bool,
+    /// Log-likelihood at the top of each EM iteration.
+    pub ll_trace: Vec<f64>,
+    pub stop: EmStop,
+    /// Iteration index at which EM stopped (`max_iterations` when it ran out).
+    pub stop_itr: usize,
+}
+
+/// `exp(x)`, skipping the call where the result underflows to +0 anyway (x below the
+/// smallest subnormal's log), so the value is identical to `x.exp()`.
+#[inline]
+fn exp_or_zero(x: f64) -> f64 {
+    if x < -746.0 {
+        0.0
+    } else {
+        x.exp()
+    }
+}
+
+/// GPS `logsum` over an iterator: `log Σ exp(v − max) + max`, with `max = −∞` replaced by 0.
+#[inline]
+pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
+    let mut m = v.clone().fold(f64::NEG_INFINITY, f64::max);
+    if m == f64::NEG_INFINITY {
+        m = 0.0;
+    }
+    let s: f64 = v.map(|x| exp_or_zero(x - m)).sum();
+    s.ln() + m
+}
+
+struct Workspace {
+    /// `D x Ncap`: centred, then whitened points of one cluster.
+    diff: Mat<f64>,
+    /// `N x K` row-major log observation probabilities, then log responsibilities.
+    logobs: Vec<f64>,
+    /// `N x K` row-major weights for refitting.
+    w: Vec<f64>,
+    /// `N x D` weighted data of one cluster.
+    wdata: Mat<f64>,
+    rowlse: Vec<f64>,
+    collse: Vec<f64>,
+    xx: Mat<f64>,
+    mu_t: Mat<f64>,
+    /// `D x Ncap`: the points as columns.
+    data_t: Mat<f64>,
+    /// `N x D` row-major scratch of the small-N E-step.
+    small: Vec<f64>,
+}
+
+impl Default for Workspace {
+    fn default() -> Self {
+        Self {
+            diff: Mat::zeros(0, 0),
+            logobs: Vec::new(),
+            w: Vec::new(),
+            wdata: Mat::zeros(0, 0),
+            rowlse: Vec::new(),
+            collse: Vec::new(),
+            xx: Mat::zeros(0, 0),
+            mu_t: Mat::zeros(0, 0),
+            data_t: Mat::zeros(0, 0),
+            small: Vec::new(),
+        }
+    }
+}
+
+impl Workspace {
+    fn ensure(&mut self, n: usize, d: usize, k: usize) {
+        if self.diff.nrows() != d || self.diff.ncols() < n {
+            self.diff = Mat::zeros(d, n);
+        }
+        if self.wdata.nrows() < n || self.wdata.ncols() != d {
+            self.wdata = Mat::zeros(n, d);
+        }
+        if self.logobs.len() < n * k {
+            self.logobs.resize(n * k, 0.0);
+            self.w.resize(n * k, 0.0);
+        }
+        if self.rowlse.len() < n {
+            self.rowlse.resize(n, 0.0);
+        }
+        if self.collse.len() < k {
+            self.collse.resize(k, 0.0);
+        }
+        if self.xx.nrows() != d {
+            self.xx = Mat::zeros(d, d);
+        }
+        if self.mu_t.nrows() != k || self.mu_t.ncols() != d {
+            self.mu_t = Mat::zeros(k, d);
+        }
+    }
+}
+
+/// GPS `GMM`: `K` clusters in `D` dimensions.
+pub struct Gmm {
+    /// Dimension of a point.
+    pub dim: usize,
+    /// Number of clusters (0 before the first update).
+    pub k: usize,
+    /// Cluster means, `(K, D)` row-major.
+    pub mu: Vec<f64>,
+    /// Cluster covariances, `(K, D, D)`.
+    pub sigma: MatSeq,
+    /// Log cluster masses, `(K)`.
+    pub logmass: Vec<f64>,
+    /// Cluster masses, `(K)`.
+    pub mass: Vec<f64>,
+    /// GPS `GMM.N`: number of points at the last (re)initialisation (sets `m`, `n0`).
+    pub n: usize,
+    /// GPS `warmstart` (default true).
+    pub warmstart: bool,
+    /// Log cluster weights of the last `inference` call (GPS `clusterwts`), `(K)`.
+    pub last_logwts: Vec<f64>,
+    moment_buf: Vec<f64>,
+    initialized: bool,
+    chol: MatSeq,
+    half_logdet: Vec<f64>,
+    chol_valid: bool,
+    scratch: Scratch,
+    ws: Workspace,
+}
+
+impl Gmm {
+    /// Empty model for `dim`-dimensional points.
+    pub fn new(dim: usize) -> Self {
+        Self {
+            dim,
+            k: 0,
+            mu: Vec::new(),
+            sigma: MatSeq::zeros(0, dim, dim),
+            logmass: Vec::new(),
+            mass: Vec::new(),
+            n: 0,
+            warmstart: true,
+            last_logwts: Vec::new(),
+            moment_buf: Vec::with_capacity(dim * dim + dim),
+            initialized: false,
+            chol: MatSeq::zeros(0, dim, dim),
+            half_logdet: Vec::new(),
+            chol_valid: false,
+            scratch: Scratch::for_llt(dim),
+            ws: Workspace::default(),
+        }
+    }
+
+    /// Whether a model exists (after the first update or `set_params`).
+    pub fn is_initialized(&self) -> bool {
+        self.initialized
+    }
+
+    /// Sets the model from given parameters (e.g. a recorded GMM): `mu (K,D)`,
+    /// `sigma (K,D,D)`, `logmass (K)`, `n` = GPS `GMM.N`. Masses are `exp(logmass)`.
+    pub fn set_params(&mut self, k: usize, mu: &[f64], sigma: &[f64], logmass: &[f64], n: usize) {
+        let d = self.dim;
+        assert_eq!(mu.len(), k * d);
+        assert_eq!(sigma.len(), k * d * d);
+        assert_eq!(logmass.len(), k);
+        self.resize_k(k);
+        self.mu.copy_from_slice(mu);
+        self.sigma.data.copy_from_slice(sigma);
+        self.logmass.copy_from_slice(logmass);
+        for i in 0..k {
+            self.mass[i] = logmass[i].exp();
+        }
+        self.n = n;
+        self.initialized = true;
+        self.chol_valid = false;
+    }
+
+    fn resize_k(&mut self, k: usize) {
+        let d = self.dim;
+        self.k = k;
+        self.mu.resize(k * d, 0.0);
+        self.sigma = MatSeq::zeros(k, d, d);
+        self.chol = MatSeq::zeros(k, d, d);
+        self.logmass.resize(k, 0.0);
+        self.mass.resize(k, 0.0);
+        self.half_logdet.resize(k, 0.0);
+        self.last_logwts.resize(k, 0.0);
+    }
+
+    fn factor(&mut self) -> Result<(), GpsError> {
+        if self.chol_valid {
+            return Ok(());
+        }
+        for i in 0..self.k {
+            self.chol.slice_mut(i).copy_from_slice(self.sigma.slice(i));
+            if !llt_lower(self.chol.mat_mut(i), &mut self.scratch) {
+                return Err(GpsError::NotPositiveDefinite {
+                    what: "GMM cluster covariance",
+                    t: i,
+                });
+            }
+            let l = self.chol.mat(i);
+            self.half_logdet[i] = (0..self.dim).map(|j| l[(j, j)].ln()).sum();
+        }
+        self.chol_valid = true;
+        Ok(())
+    }
+
+    /// GPS `estep`: `logobs[n, i] = log N(x_n; μ_i, Σ_i) + logmass_i` into the workspace
+    /// (`N x K` row-major).
+    fn estep(&mut self, data: MatRef<'_, f64>) -> Result<(), GpsError> {
+        self.factor()?;
+        let (n, d) = (data.nrows(), data.ncols());
+        let k = self.k;
+        self.ws.ensure(n, d, k);
+        if self.ws.data_t.nrows() != d || self.ws.data_t.ncols() < n {
+            self.ws.data_t = Mat::zeros(d, n);
+        }
+        self.ws
+            .data_t
+            .as_mut()
+            .submatrix_mut(0, 0, d, n)
+            .copy_from(data.transpose());
+        let c0 = -0.5 * d as f64 * (2.0 * std::f64::consts::PI).ln();
+        if n <= SMALL_N {
+            self.estep_small(n, c0);
+            return Ok(());
+        }
+        for i in 0..k {
+            let mu = &self.mu[i * d..(i + 1) * d];
+            let mut diff = self.ws.diff.as_mut().submatrix_mut(0, 0, d, n);
+            for p in 0..n {
+                let src = self.ws.data_t.col(p);
+                let mut dst = diff.rb_mut().col_mut(p);
+                for a in 0..d {
+                    dst[a] = src[a] - mu[a];
+                }
+            }
+            solve_lower(self.chol.mat(i), diff.rb_mut());
+            for p in 0..n {
+                let col = diff.rb().col(p);
+                let mut ss = 0.0;
+                for a in 0..d {
+                    ss += col[a] * col[a];
+                }
+                self.ws.logobs[p * k + i] = c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
+            }
+        }
+        Ok(())
+    }
+
+    /// E-step for a handful of points (the per-time-step prior queries): forward substitution
+    /// written out, four points at a time, subtracting in the same order as reference BLAS
+    /// `dtrsm`; a library triangular solve costs more in call overhead than in flops here.
+    fn estep_small(&mut self, n: usize, c0: f64) {
+        let (d, k) = (self.dim, self.k);
+        let y = &mut self.ws.small;
+        y.clear();
+        y.resize(d * n, 0.0);
+        for i in 0..k {
+            let mu = &self.mu[i * d..(i + 1) * d];
+            let l = self.chol.slice(i);
+            for p in 0..n {
+                let src = self.ws.data_t.col(p);
+                for a in 0..d {
+                    y[p * d + a] = src[a] - mu[a];
+                }
+            }
+            let mut p0 = 0;
+            while p0 < n {
+                let m = (n - p0).min(4);
+                for a in 0..d {
+                    let lrow = &l[a * d..a * d + a];
+                    let mut acc = [0.0f64; 4];
+                    for j in 0..m {
+                        acc[j] = y[(p0 + j) * d + a];
+                    }
+                    for (b, &lb) in lrow.iter().enumerate() {
+                        for j in 0..m {
+                            acc[j] -= lb * y[(p0 + j) * d + b];
+                        }
+                    }
+                    let laa = l[a * d + a];
+                    for j in 0..m {
+                        y[(p0 + j) * d + a] = acc[j] / laa;
+                    }
+                }
+                p0 += m;
+            }
+            for p in 0..n {
+                let col = &y[p * d..(p + 1) * d];
+                let mut ss = 0.0;
+                for a in 0..d {
+                    ss += col[a] * col[a];
+                }
+                self.ws.logobs[p * k + i] = c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
+            }
+        }
+    }
+
+    /// GPS `GMM.update`: EM on the rows of `data (N x D)` with `k` clusters.
+    pub fn update(
+        &mut self,
+        data: MatRef<'_, f64>,
+        k: usize,
+        max_iterations: usize,
+        init: ClusterInit<'_>,
+    ) -> Result<EmReport, GpsError> {
+        let (n, d) = (data.nrows(), data.ncols());
+        if d != self.dim {
+            return Err(GpsError::Shape(format!(
+                "GMM of dimension {} given points of dimension {d}",
+                self.dim
+            )));
+        }
+        let reinit = !self.warmstart || !self.initialized || k != self.k;
+        if reinit {
+            self.initialize(data, k, init)?;
+        }
+        self.ws.ensure(n, d, k);
+        let mut report = EmReport {
+            k,
+            n_points: n,
+            reinitialized: reinit,
+            ll_trace: Vec::new(),
+            stop: EmStop::MaxIterations,
+            stop_itr: max_iterations,
+        };
+        let mut prevll = f64::NEG_INFINITY;
+        for itr in 0..max_iterations {
+            self.estep(data)?;
+            let Workspace {
+                logobs,
+                w,
+                rowlse,
+                collse,
+                ..
+            } = &mut self.ws;
+            let mut ll = 0.0;
+            for p in 0..n {
+                rowlse[p] = logsum(logobs[p * k..(p + 1) * k].iter().copied());
+                ll += rowlse[p];
+            }
+            report.ll_trace.push(ll);
+            if ll < prevll {
+                report.stop = EmStop::LlDecreased;
+                report.stop_itr = itr;
+                return Ok(report);
+            }
+            if (ll - prevll).abs() < 1e-5 * prevll {
+                report.stop = EmStop::Converged;
+                report.stop_itr = itr;
+                return Ok(report);
+            }
+            prevll = ll;
+
+            // logw = logobs − logsum over clusters (responsibilities, in place).
+            for p in 0..n {
+                for i in 0..k {
+                    logobs[p * k + i] -= rowlse[p];
+                }
+            }
+            for i in 0..k {
+                collse[i] = logsum((0..n).map(|p| logobs[p * k + i]));
+            }
+            let lm = logsum(collse[..k].iter().copied());
+            for i in 0..k {
+                self.logmass[i] = collse[i] - lm;
+                self.mass[i] = self.logmass[i].exp();
+            }
+            let small = 1.0 / k as f64 * 1e-4;
+            for i in 0..k {
+                let reboot = self.mass[i] < small;
+                for p in 0..n {
+                    w[p * k + i] = if reboot {
+                        1.0 / n as f64
+                    } else {
+                        exp_or_zero(logobs[p * k + i] - collse[i])
+                    };
+                }
+            }
+            self.mstep(data);
+        }
+        Ok(report)
+    }
+
+    /// M-step for means and covariances from the weights in the workspace.
+    fn mstep(&mut self, data: MatRef<'_, f64>) {
+        let (n, d) = (data.nrows(), data.ncols());
+        let k = self.k;
+        let ws = &mut self.ws;
+        let wmat = MatRef::from_row_major_slice(&ws.w[..n * k], n, k);
+        // μ_i = Σ_n w_ni x_n  (K x D = wᵀ X)
+        gemm(
+            ws.mu_t.as_mut(),
+            Accum::Replace,
+            wmat.transpose(),
+            data,
+            1.0,
+        );
+        for i in 0..k {
+            for a in 0..d {
+                self.mu[i * d + a] = ws.mu_t[(i, a)];
+            }
+        }
+        for i in 0..k {
+            for p in 0..n {
+                ws.rowlse[p] = ws.w[p * k + i].sqrt();
+            }
+            let mut wd = ws.wdata.as_mut().submatrix_mut(0, 0, n, d);
+            for a in 0..d {
+                let col = data.col(a);
+                let mut out = wd.rb_mut().col_mut(a);
+                for p in 0..n {
+                    out[p] = col[p] * ws.rowlse[p];
+                }
+            }
+            let wd = ws.wdata.as_ref().submatrix(0, 0, n, d);
+            // Only the lower triangle of XX = wdᵀ wd is formed; Σ is symmetrised below anyway.
+            faer::linalg::matmul::triangular::matmul(
+                ws.xx.as_mut(),
+                faer::linalg::matmul::triangular::BlockStructure::TriangularLower,
+                Accum::Replace,
+                wd.transpose(),
+                faer::linalg::matmul::triangular::BlockStructure::Rectangular,
+                wd,
+                faer::linalg::matmul::triangular::BlockStructure::Rectangular,
+                1.0,
+                faer::Par::Seq,
+            );
+            let mu = &self.mu[i * d..(i + 1) * d];
+            let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
+            for a in 0..d {
+                for b in 0..a {
+                    // GPS: Σ = XX − μμᵀ, then 0.5 (Σ + Σᵀ); XX is symmetric by construction.
+                    let v = ws.xx[(a, b)] - mu[a] * mu[b];
+                    s[(a, b)] = v;
+                    s[(b, a)] = v;
+                }
+                s[(a, a)] = (ws.xx[(a, a)] - mu[a] * mu[a]) + 1e-6;
+            }
+        }
+        self.chol_valid = false;
+    }
+
+    fn initialize(
+        &mut self,
+        data: MatRef<'_, f64>,
+        k: usize,
+        init: ClusterInit<'_>,
+    ) -> Result<(), GpsError> {
+        let (n, d) = (data.nrows(), data.ncols());
+        self.resize_k(k);
+        for i in 0..k {
+            self.logmass[i] = (1.0 / k as f64).ln();
+            self.mass[i] = 1.0 / k as f64;
+        }
+        self.n = n;
+        let random;
+        let cidx: &[usize] = match init {
+            ClusterInit::Given(idx) => {
+                if idx.len() != n || idx.iter().any(|&c| c >= k) {
+                    return Err(GpsError::Shape(format!(
+                        "cluster assignment has {} entries (need {n}) or an index >= K={k}",
+                        idx.len()
+                    )));
+                }
+                idx
+            }
+            ClusterInit::Random(rng) => {
+                random = (0..n).map(|_| rng.random_range(0..k)).collect::<Vec<_>>();
+                &random
+            }
+        };
+        let mut mu = vec![0.0; d];
+        for i in 0..k {
+            let members: Vec<usize> = (0..n).filter(|&p| cidx[p] == i).collect();
+            mu.iter_mut().for_each(|m| *m = 0.0);
+            for &p in &members {
+                for a in 0..d {
+                    mu[a] += data[(p, a)];
+                }
+            }
+            let cnt = members.len() as f64;
+            mu.iter_mut().for_each(|m| *m /= cnt);
+            let mut s = self.sigma.mat_mut(i);
+            s.fill(0.0);
+            for &p in &members {
+                for a in 0..d {
+                    let da = data[(p, a)] - mu[a];
+                    for b in 0..d {
+                        s[(a, b)] += da * (data[(p, b)] - mu[b]);
+                    }
+                }
+            }
+            let inv_k = 1.0 / k as f64;
+            for a in 0..d {
+                for b in 0..d {
+                    s[(a, b)] *= inv_k;
+                }
+                s[(a, a)] += 2e-6;
+            }
+            self.mu[i * d..(i + 1) * d].copy_from_slice(&mu);
+        }
+        self.initialized = true;
+        self.chol_valid = false;
+        Ok(())
+    }
+
+    /// GPS `clusterwts`: average posterior log cluster weights of the points `pts (N x D)`,
+    /// written to `self.last_logwts`.
+    pub fn clusterwts(&mut self, pts: MatRef<'_, f64>) -> Result<(), GpsError> {
+        self.estep(pts)?;
+        let n = pts.nrows();
+        let k = self.k;
+        let Workspace { logobs, rowlse, .. } = &mut self.ws;
+        for p in 0..n {
+            rowlse[p] = logsum(logobs[p * k..(p + 1) * k].iter().copied());
+            for i in 0..k {
+                logobs[p * k + i] -= rowlse[p];
+            }
+        }
+        let ln_n = (n as f64).ln();
+        for i in 0..k {
+            self.last_logwts[i] = logsum((0..n).map(|p| logobs[p * k + i])) - ln_n;
+        }
+        Ok(())
+    }
+
+    /// GPS `moments` of the mixture with the weights `exp(self.last_logwts)`:
+    /// `μ = Σ w_i μ_i`, `Σ = Σ_i w_i (Σ_i + μ_i (μ_i − μ)ᵀ)` (GPS's form, equal to the usual
+    /// one when the weights sum to one). `mu0` has length D, `phi` is `D x D`.
+    pub fn moments(&mut self, mu0: &mut [f64], mut phi: MatMut<'_, f64>) {
+        let d = self.dim;
+        mu0.iter_mut().for_each(|m| *m = 0.0);
+        for i in 0..self.k {
+            let w = self.last_logwts[i].exp();
+            for a in 0..d {
+                mu0[a] += self.mu[i * d + a] * w;
+            }
+        }
+        // Accumulate row-major in plain slices (vectorisable), then copy into `phi`.
+        let buf = &mut self.moment_buf;
+        buf.clear();
+        buf.resize(d * d + d, 0.0);
+        let (acc, dm) = buf.split_at_mut(d * d);
+        for i in 0..self.k {
+            let w = self.last_logwts[i].exp();
+            let mi = &self.mu[i * d..(i + 1) * d];
+            for b in 0..d {
+                dm[b] = mi[b] - mu0[b];
+            }
+            let si = self.sigma.slice(i);
+            for a in 0..d {
+                let ma = mi[a];
+                let row = &mut acc[a * d..(a + 1) * d];
+                let srow = &si[a * d..(a + 1) * d];
+                for b in 0..d {
+                    row[b] += (srow[b] + ma * dm[b]) * w;
+                }
+            }
+        }
+        phi.copy_from(MatRef::from_row_major_slice(acc, d, d));
+    }
+
+    /// GPS `GMM.inference`: normal-inverse-Wishart hyperparameters for the points
+    /// `pts (N x D)`: writes `μ0 (D)` and `Φ (D x D)` and returns `(m, n0)` =
+    /// `(1, (N_gmm − 2 − D) / N_gmm)` (before the prior's strength scaling).
+    pub fn inference(
+        &mut self,
+        pts: MatRef<'_, f64>,
+        mu0: &mut [f64],
+        phi: MatMut<'_, f64>,
+    ) -> Result<(f64, f64), GpsError> {
+        self.clusterwts(pts)?;
+        self.moments(mu0, phi);
+        let m = self.n as f64;
+        let n0 = m - 2.0 - self.dim as f64;
+        Ok((m / self.n as f64, n0 / self.n as f64))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    #[test]
+    fn logsum_handles_all_neg_inf() {
+        let v = [f64::NEG_INFINITY, f64::NEG_INFINITY];
+        assert_eq!(logsum(v.iter().copied()), f64::NEG_INFINITY);
+        let v = [1000.0, 1000.0];
+        assert!((logsum(v.iter().copied()) - (1000.0 + 2f64.ln())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn em_separates_two_blobs_and_ll_increases() {
+        // Few points per cluster, as GPS sizes K (~40 points per cluster): GPS's initial
+        // covariance is divided by K, not by the cluster size, so with many points per cluster
+        // it starts far too wide and EM crawls.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let n = 40;
+        let mut data = Mat::<f64>::zeros(n, 2);
+        for p in 0..n {
+            let c = if p % 2 == 0 { -5.0 } else { 5.0 };
+            for a in 0..2 {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                data[(p, a)] = c + 0.5 * z;
+            }
+        }
+        // GPS starts from a hard assignment; give it a noisy one (every 5th point random).
+        let idx: Vec<usize> = (0..n)
+            .map(|p| {
+                if p % 5 == 0 {
+                    rand::Rng::random_range(&mut rng, 0..2)
+                } else {
+                    p % 2
+                }
+            })
+            .collect();
+        let mut g = Gmm::new(2);
+        let rep = g
+            .update(data.as_ref(), 2, 100, ClusterInit::Given(&idx))
+            .unwrap();
+        assert!(rep.ll_trace.len() >= 2, "{rep:?}");
+        for w in rep
+            .ll_trace
+            .windows(2)
+            .take(rep.ll_trace.len().saturating_sub(2))
+        {
+            assert!(w[1] >= w[0] - 1e-9);
+        }
+        let mut means: Vec<f64> = (0..2).map(|i| g.mu[i * 2]).collect();
+        means.sort_by(f64::total_cmp);
+        assert!(
+            (means[0] + 5.0).abs() < 0.2 && (means[1] - 5.0).abs() < 0.2,
+            "{means:?}"
+        );
+        assert!((g.mass[0] - 0.5).abs() < 0.05);
+        assert!((g.mass.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn initialisation_follows_gps() {
+        // 4 points in 2-D, clusters {0, 2} and {1, 3}; zero EM iterations leaves the init.
+        let data = faer::mat![[0.0, 1.0], [4.0, 0.0], [2.0, 3.0], [6.0, 2.0f64]];
+        let mut g = Gmm::new(2);
+        let rep = g
+            .update(data.as_ref(), 2, 0, ClusterInit::Given(&[0, 1, 0, 1]))
+            .unwrap();
+        assert!(rep.reinitialized && rep.ll_trace.is_empty());
+        assert_eq!(&g.mu, &[1.0, 2.0, 5.0, 1.0]);
+        // Σ_0 = (1/K) Σ d dᵀ + 2e-6 I with d = ±(1, 1): (1/2)·2·[[1,1],[1,1]] + 2e-6 I
+        let s0 = g.sigma.slice(0);
+        assert_eq!(s0, &[1.0 + 2e-6, 1.0, 1.0, 1.0 + 2e-6]);
+        assert_eq!(g.n, 4);
+        assert!((g.logmass[0] - 0.5f64.ln()).abs() < 1e-15);
+        // A second update with the same K warm-starts and keeps N.
+        let more = faer::mat![
+            [0.0, 1.0],
+            [4.0, 0.0],
+            [2.0, 3.0],
+            [6.0, 2.0],
+            [1.0, 1.0f64]
+        ];
+        let rep = g
+            .update(more.as_ref(), 2, 1, ClusterInit::Given(&[]))
+            .unwrap();
+        assert!(!rep.reinitialized);
+        assert_eq!(g.n, 4);
+    }
+}

@@ -1,0 +1,93 @@
+//! The linear-Gaussian controller (GPS absolute form u = K x + k, `gps::policy::lin_gauss`)
+//! as the gain table the real-time loop executes (a = K_t (s − ŝ_t) + k_t + â_t + L_t ε with
+//! ŝ = 0, â = 0; docs/design.md §1), and the initial controller both LQR learners start from.
+
+use gps::policy::lin_gauss::LinGaussPolicy;
+use ur5_shared::config::TaskConfig;
+use ur5_shared::layout::{DU, DX};
+use ur5_shared::{GainStep, GainTable};
+
+use crate::ImitationError;
+
+/// The initial controller: goal angles = start pose, Σ = init_var · I.
+pub fn init_hold(task: &TaskConfig, init_var: f64) -> LinGaussPolicy {
+    let mut pol = LinGaussPolicy::zeros(task.horizon, DX, DU);
+    let sd = init_var.sqrt();
+    for t in 0..task.horizon {
+        pol.k.slice_mut(t).copy_from_slice(&task.start_q);
+        for j in 0..DU {
+            pol.pol_covar.slice_mut(t)[j * DU + j] = init_var;
+            pol.chol_pol_covar.slice_mut(t)[j * DU + j] = sd;
+            pol.inv_pol_covar.slice_mut(t)[j * DU + j] = 1.0 / init_var;
+        }
+    }
+    pol
+}
+
+/// The controller as a gain table for `ur5_shared::controller_action`: ŝ = 0, â = 0, so
+/// k = GPS's k and L = Rᵀ (GPS keeps the upper factor R, the table the lower factor).
+pub fn to_gain_table(pol: &LinGaussPolicy, version: u64) -> Box<GainTable> {
+    let mut table = GainTable::new_boxed();
+    table
+        .set_horizon(pol.t)
+        .expect("horizon within MAX_HORIZON");
+    table.set_version(version);
+    for t in 0..pol.t {
+        let mut step = GainStep::default();
+        let kg = pol.gain.slice(t);
+        let r = pol.chol_pol_covar.slice(t);
+        for i in 0..DU {
+            step.k_mat[i].copy_from_slice(&kg[i * DX..(i + 1) * DX]);
+            step.k_vec[i] = pol.k.slice(t)[i];
+            for j in 0..=i {
+                step.chol[i][j] = r[j * DU + i];
+            }
+        }
+        table.set_step(t, &step);
+    }
+    table.seal();
+    table
+}
+
+/// The controller of a gain table written by [`to_gain_table`] (ŝ = 0, â = 0): K and k as
+/// stored, GPS's upper factor R = Lᵀ, Σ = L Lᵀ and Σ⁻¹ = L⁻ᵀ L⁻¹ (recomputed, so Σ and Σ⁻¹
+/// may differ from the original controller's in the last bits; K, k and L, and hence the
+/// table, round-trip exactly).
+pub fn policy_from_gain_table(table: &GainTable) -> Result<LinGaussPolicy, ImitationError> {
+    let t_len = table.horizon();
+    let mut pol = LinGaussPolicy::zeros(t_len, DX, DU);
+    for t in 0..t_len {
+        let step = table.step(t);
+        if step.s_hat.iter().chain(&step.a_hat).any(|v| *v != 0.0) {
+            return Err(ImitationError::Table(format!(
+                "gain table step {t} has a non-zero ŝ or â: not a table written by the learner"
+            )));
+        }
+        let l = &step.chol;
+        // L⁻¹ by forward substitution (L is lower triangular with a positive diagonal).
+        let mut li = [[0.0; DU]; DU];
+        for c in 0..DU {
+            for r in c..DU {
+                let mut v = if r == c { 1.0 } else { 0.0 };
+                for k in c..r {
+                    v -= l[r][k] * li[k][c];
+                }
+                li[r][c] = v / l[r][r];
+            }
+        }
+        let gain = pol.gain.slice_mut(t);
+        for i in 0..DU {
+            gain[i * DX..(i + 1) * DX].copy_from_slice(&step.k_mat[i]);
+        }
+        pol.k.slice_mut(t).copy_from_slice(&step.k_vec);
+        for i in 0..DU {
+            for j in 0..DU {
+                pol.chol_pol_covar.slice_mut(t)[j * DU + i] = if j <= i { l[i][j] } else { 0.0 };
+                pol.pol_covar.slice_mut(t)[i * DU + j] = (0..DU).map(|k| l[i][k] * l[j][k]).sum();
+                pol.inv_pol_covar.slice_mut(t)[i * DU + j] =
+                    (0..DU).map(|k| li[k][i] * li[k][j]).sum();
+            }
+        }
+    }
+    Ok(pol)
+}

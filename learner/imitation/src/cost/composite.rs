@@ -1,0 +1,590 @@
+//! The composite cost of LQR+GAIfO (docs/design.md §1.3 steps 4–5): the discriminator applied to the
+//! transition the learned dynamics predict,
+//!
+//!   C_t(s, a) = D(s, F_t [s; a] + f_t),
+//!
+//! expanded to second order with the chain rule. With y = [s; a] (dX + dU) and
+//! M_t = [[I, 0]; F_t] ((2 dX) × (dX + dU)): ∇C = M_tᵀ ∇D, ∇²C = M_tᵀ ∇²D M_t
+//! (f_t does not enter the derivatives; D is evaluated at the predicted transition).
+//!
+//! The last step T−1 has no fitted dynamics (GPS leaves F_{T−1} = 0). It gets a state-only
+//! cost C_{T−1}(s) = D(s, s): the transition of an arm at rest in s. The expert ends at rest at
+//! the goal, so D is low there; ∇C = [I I] ∇D, ∇²C = [I I] ∇²D [I I]ᵀ, and no action terms.
+//!
+//! The Hessians are indefinite in general (D is a tanh net). The KL-bounded LQR step raises η
+//! until Q_uu is positive definite (GPS's non-PD retry); beyond that, [`CompositeWorkspace::psd`]
+//! (on in LQR+GAIfO, docs/design.md §5 D3, D4)
+//! projects the per-step mean of ∇²D on the PSD cone before the chain rule.
+
+use faer::Mat;
+use ur5_shared::layout::{DU, DX};
+
+use super::Cost;
+use crate::discriminator::{Discriminator, Workspace};
+use crate::rollout::Episode;
+use gps::algorithm::eval_cost::CostDerivs;
+use gps::dynamics::Dynamics;
+
+/// Scratch memory for the expansion; build once, reuse every iteration.
+pub struct CompositeWorkspace {
+    /// Replace ∇²D by its projection on the positive semi-definite cone (negative eigenvalues
+    /// set to 0) before composing; see [`expand_step`].
+    pub psd: bool,
+    disc: Workspace,
+    x: Vec<f64>,
+    g: Vec<f64>,
+    h: Mat<f64>,
+    /// Mean ∇²D over the samples of one time step (psd mode).
+    h_mean: Mat<f64>,
+}
+
+/// Input dimension of the discriminator: a transition [s; s'].
+pub const D_IN: usize = 2 * DX;
+const DY: usize = DX + DU;
+
+impl CompositeWorkspace {
+    /// Sets [`Self::psd`].
+    pub fn with_psd(mut self, psd: bool) -> Self {
+        self.psd = psd;
+        self
+    }
+
+    /// Scratch for `disc`.
+    pub fn new(disc: &Discriminator) -> Self {
+        assert_eq!(
+            disc.input_dim(),
+            D_IN,
+            "the discriminator must take [s; s'] (2 dX inputs)"
+        );
+        Self {
+            psd: false,
+            disc: disc.workspace(),
+            x: vec![0.0; D_IN],
+            g: vec![0.0; D_IN],
+            h: Mat::zeros(D_IN, D_IN),
+            h_mean: Mat::zeros(D_IN, D_IN),
+        }
+    }
+}
+
+/// The transition the dynamics predict, written into `x` (`2 dX`): `[s; F_t [s; a] + f_t]`,
+/// or `[s; s]` at the last step (`t + 1 >= horizon`).
+fn predicted_transition(
+    dyn_: &Dynamics,
+    t: usize,
+    horizon: usize,
+    s: &[f64],
+    a: &[f64],
+    x: &mut [f64],
+) {
+    x[..DX].copy_from_slice(s);
+    if t + 1 >= horizon {
+        x[DX..].copy_from_slice(s);
+        return;
+    }
+    let f = dyn_.fm.slice(t);
+    let fv = dyn_.fv.slice(t);
+    for i in 0..DX {
+        let mut v = fv[i];
+        for j in 0..DX {
+            v += f[i * DY + j] * s[j];
+        }
+        for j in 0..DU {
+            v += f[i * DY + DX + j] * a[j];
+        }
+        x[DX + i] = v;
+    }
+}
+
+/// `∇C = M_tᵀ g` into `lx` (dX) and `lu` (dU; zero at the last step, where `M = [I; I]`).
+fn compose_gradient(
+    dyn_: &Dynamics,
+    t: usize,
+    horizon: usize,
+    g: &[f64],
+    lx: &mut [f64],
+    lu: &mut [f64],
+) {
+    if t + 1 >= horizon {
+        for i in 0..DX {
+            lx[i] = g[i] + g[DX + i];
+        }
+        lu.fill(0.0);
+        return;
+    }
+    let f = dyn_.fm.slice(t);
+    for c in 0..DY {
+        let mut v = if c < DX { g[c] } else { 0.0 };
+        for k in 0..DX {
+            v += f[k * DY + c] * g[DX + k];
+        }
+        if c < DX {
+            lx[c] = v;
+        } else {
+            lu[c - DX] = v;
+        }
+    }
+}
+
+/// `∇²C = M_tᵀ h M_t` (`h` = ∇²D, `2dX × 2dX`, symmetric) into `lxx` (dX×dX), `luu` (dU×dU),
+/// `lux` (dU×dX), row-major, symmetrised against round-off; at the last step
+/// `∇²C = [I I] h [I I]ᵀ` and no action terms.
+fn compose_hessian(
+    dyn_: &Dynamics,
+    t: usize,
+    horizon: usize,
+    h: &Mat<f64>,
+    lxx: &mut [f64],
+    luu: &mut [f64],
+    lux: &mut [f64],
+) {
+    luu.fill(0.0);
+    lux.fill(0.0);
+    if t + 1 >= horizon {
+        for i in 0..DX {
+            for j in 0..DX {
+                lxx[i * DX + j] = h[(i, j)] + h[(i, DX + j)] + h[(DX + i, j)] + h[(DX + i, DX + j)];
+            }
+        }
+        return;
+    }
+    let f = dyn_.fm.slice(t);
+    // HM = h M (2dX × DY), M = [[I, 0]; F_t].
+    let mut hm = [[0.0; DY]; D_IN];
+    for (r, row) in hm.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            let mut acc = if c < DX { h[(r, c)] } else { 0.0 };
+            for k in 0..DX {
+                acc += h[(r, DX + k)] * f[k * DY + c];
+            }
+            *v = acc;
+        }
+    }
+    // Mᵀ (HM): row i of Mᵀ is e_i (i < dX) in the first block plus F_t[:, i] in the second.
+    let mut hess = [[0.0; DY]; DY];
+    for (i, row) in hess.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            let mut acc = if i < DX { hm[i][j] } else { 0.0 };
+            for k in 0..DX {
+                acc += f[k * DY + i] * hm[DX + k][j];
+            }
+            *v = acc;
+        }
+    }
+    for i in 0..DX {
+        for j in 0..DX {
+            lxx[i * DX + j] = 0.5 * (hess[i][j] + hess[j][i]);
+        }
+    }
+    for i in 0..DU {
+        for j in 0..DU {
+            luu[i * DU + j] = 0.5 * (hess[DX + i][DX + j] + hess[DX + j][DX + i]);
+        }
+        for j in 0..DX {
+            lux[i * DX + j] = 0.5 * (hess[DX + i][j] + hess[j][DX + i]);
+        }
+    }
+}
+
+/// ℓ and its derivatives at one (t, s, a) in GPS layout (lx dX, lu dU, lxx dX×dX, luu dU×dU,
+/// lux dU×dX, row-major), written into the given slices. With `ws.psd` the ∇²D of this one
+/// point is projected ([`project_psd`]).
+#[allow(clippy::too_many_arguments)]
+pub fn expand_step(
+    disc: &Discriminator,
+    dyn_: &Dynamics,
+    t: usize,
+    horizon: usize,
+    s: &[f64],
+    a: &[f64],
+    ws: &mut CompositeWorkspace,
+    lx: &mut [f64],
+    lu: &mut [f64],
+    lxx: &mut [f64],
+    luu: &mut [f64],
+    lux: &mut [f64],
+) -> f64 {
+    predicted_transition(dyn_, t, horizon, s, a, &mut ws.x);
+    let value = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
+    if ws.psd {
+        project_psd(&mut ws.h);
+    }
+    compose_gradient(dyn_, t, horizon, &ws.g, lx, lu);
+    compose_hessian(dyn_, t, horizon, &ws.h, lxx, luu, lux);
+    value
+}
+
+/// Projects a symmetric matrix on the PSD cone: U max(Λ, 0) Uᵀ.
+pub fn project_psd(h: &mut Mat<f64>) {
+    let Ok(evd) = h.self_adjoint_eigen(faer::Side::Lower) else {
+        return;
+    };
+    let (u, lam) = (evd.U(), evd.S().column_vector());
+    if (0..lam.nrows()).all(|i| lam[i] >= 0.0) {
+        return;
+    }
+    let n = h.nrows();
+    for i in 0..n {
+        for j in 0..n {
+            let mut acc = 0.0;
+            for k in 0..n {
+                if lam[k] > 0.0 {
+                    acc += u[(i, k)] * lam[k] * u[(j, k)];
+                }
+            }
+            h[(i, j)] = acc;
+        }
+    }
+}
+
+/// The composite cost of critic `disc` as a [`Cost`], with its scratch memory.
+pub struct CompositeCost<'a> {
+    /// The critic D(s, s').
+    pub disc: &'a Discriminator,
+    /// Scratch (and the PSD switch).
+    pub ws: &'a mut CompositeWorkspace,
+}
+
+impl Cost for CompositeCost<'_> {
+    fn expand(&mut self, episodes: &[Episode], dynamics: &Dynamics, out: &mut CostDerivs) {
+        composite_cost_derivs(self.disc, dynamics, episodes, self.ws, out);
+    }
+}
+
+/// Per-sample composite-cost derivatives for N episodes (GPS layout), ready for `eval_cost`:
+/// value and gradient around each sample's own executed (s, a).
+///
+/// Hessians: without `ws.psd`, each sample's exact `M_tᵀ ∇²D M_t`. With `ws.psd`, the
+/// samples' ∇²D at step t are averaged first, the average is projected on the PSD cone once
+/// and every sample gets the same `M_tᵀ proj(mean ∇²D) M_t`: the nearest convex curvature
+/// (Frobenius norm) to the averaged expansion that GPS's `eval_cost` forms anyway, at one
+/// eigendecomposition per time step instead of one per sample (docs/design.md §5 D4).
+pub fn composite_cost_derivs(
+    disc: &Discriminator,
+    dyn_: &Dynamics,
+    episodes: &[Episode],
+    ws: &mut CompositeWorkspace,
+    out: &mut CostDerivs,
+) {
+    let n = episodes.len();
+    let t_len = episodes[0].horizon();
+    out.resize(n, t_len, DX, DU);
+    for t in 0..t_len {
+        if ws.psd {
+            ws.h_mean.fill(0.0);
+        }
+        for (i, ep) in episodes.iter().enumerate() {
+            let nt = i * t_len + t;
+            let (s, a) = (&ep.x[t * DX..(t + 1) * DX], &ep.u[t * DU..(t + 1) * DU]);
+            predicted_transition(dyn_, t, t_len, s, a, &mut ws.x);
+            out.l[nt] = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
+            compose_gradient(
+                dyn_,
+                t,
+                t_len,
+                &ws.g,
+                &mut out.lx[nt * DX..(nt + 1) * DX],
+                &mut out.lu[nt * DU..(nt + 1) * DU],
+            );
+            if ws.psd {
+                ws.h_mean += &ws.h;
+            } else {
+                compose_hessian(
+                    dyn_,
+                    t,
+                    t_len,
+                    &ws.h,
+                    &mut out.lxx[nt * DX * DX..(nt + 1) * DX * DX],
+                    &mut out.luu[nt * DU * DU..(nt + 1) * DU * DU],
+                    &mut out.lux[nt * DU * DX..(nt + 1) * DU * DX],
+                );
+            }
+        }
+        if ws.psd {
+            ws.h_mean *= faer::Scale(1.0 / n as f64);
+            project_psd(&mut ws.h_mean);
+            compose_hessian(
+                dyn_,
+                t,
+                t_len,
+                &ws.h_mean,
+                &mut out.lxx[t * DX * DX..(t + 1) * DX * DX],
+                &mut out.luu[t * DU * DU..(t + 1) * DU * DU],
+                &mut out.lux[t * DU * DX..(t + 1) * DU * DX],
+            );
+            for i in 1..n {
+                let nt = i * t_len + t;
+                out.lxx
+                    .copy_within(t * DX * DX..(t + 1) * DX * DX, nt * DX * DX);
+                out.luu
+                    .copy_within(t * DU * DU..(t + 1) * DU * DU, nt * DU * DU);
+                out.lux
+                    .copy_within(t * DU * DX..(t + 1) * DU * DX, nt * DU * DX);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::discriminator::{DiscriminatorConfig, Normalizer};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The composed function C(y) = D(s, F y + f) evaluated directly.
+    fn composed(
+        disc: &Discriminator,
+        dyn_: &Dynamics,
+        t: usize,
+        horizon: usize,
+        y: &[f64],
+        ws: &mut Workspace,
+    ) -> f64 {
+        let mut x = vec![0.0; D_IN];
+        x[..DX].copy_from_slice(&y[..DX]);
+        if t + 1 >= horizon {
+            x[DX..].copy_from_slice(&y[..DX]);
+        } else {
+            let f = dyn_.fm.slice(t);
+            for i in 0..DX {
+                x[DX + i] =
+                    dyn_.fv.slice(t)[i] + (0..DY).map(|j| f[i * DY + j] * y[j]).sum::<f64>();
+            }
+        }
+        disc.value(&x, ws)
+    }
+
+    #[test]
+    fn gradient_and_hessian_match_finite_differences_of_the_composed_function() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let cfg = DiscriminatorConfig {
+            hidden: vec![16, 16],
+            seed: 2,
+            ..DiscriminatorConfig::default()
+        };
+        let mut norm = Normalizer::identity(D_IN);
+        for (j, s) in norm.std.iter_mut().enumerate() {
+            *s = 0.5 + 0.1 * j as f64;
+        }
+        let disc = Discriminator::new(D_IN, cfg, norm).unwrap();
+        let horizon = 4;
+        let mut dyn_ = Dynamics::zeros(horizon, DX, DU);
+        for v in dyn_.fm.data.iter_mut() {
+            *v = rng.random_range(-0.5..0.5);
+        }
+        for v in dyn_.fv.data.iter_mut() {
+            *v = rng.random_range(-0.2..0.2);
+        }
+        let mut ws = CompositeWorkspace::new(&disc);
+        let mut dws = disc.workspace();
+        let h = 1e-5;
+        let (mut worst_g, mut worst_h) = (0.0f64, 0.0f64);
+        for t in [0, 2, 3] {
+            let y: Vec<f64> = (0..DY).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let (mut lx, mut lu) = (vec![0.0; DX], vec![0.0; DU]);
+            let (mut lxx, mut luu, mut lux) =
+                (vec![0.0; DX * DX], vec![0.0; DU * DU], vec![0.0; DU * DX]);
+            let v = expand_step(
+                &disc,
+                &dyn_,
+                t,
+                horizon,
+                &y[..DX],
+                &y[DX..],
+                &mut ws,
+                &mut lx,
+                &mut lu,
+                &mut lxx,
+                &mut luu,
+                &mut lux,
+            );
+            assert!((v - composed(&disc, &dyn_, t, horizon, &y, &mut dws)).abs() < 1e-14);
+            let grad: Vec<f64> = lx.iter().chain(lu.iter()).copied().collect();
+            let hess = |i: usize, j: usize| match (i < DX, j < DX) {
+                (true, true) => lxx[i * DX + j],
+                (false, false) => luu[(i - DX) * DU + j - DX],
+                (false, true) => lux[(i - DX) * DX + j],
+                (true, false) => lux[(j - DX) * DX + i],
+            };
+            let scale_g = grad.iter().fold(1e-3f64, |m, g| m.max(g.abs()));
+            let mut scale_h = 1e-3f64;
+            for i in 0..DY {
+                for j in 0..DY {
+                    scale_h = scale_h.max(hess(i, j).abs());
+                }
+            }
+            for i in 0..DY {
+                let (mut yp, mut ym) = (y.clone(), y.clone());
+                yp[i] += h;
+                ym[i] -= h;
+                let fd = (composed(&disc, &dyn_, t, horizon, &yp, &mut dws)
+                    - composed(&disc, &dyn_, t, horizon, &ym, &mut dws))
+                    / (2.0 * h);
+                worst_g = worst_g.max((fd - grad[i]).abs() / scale_g);
+                for j in 0..DY {
+                    let mut f = |di: f64, dj: f64| {
+                        let mut z = y.clone();
+                        z[i] += di;
+                        z[j] += dj;
+                        composed(&disc, &dyn_, t, horizon, &z, &mut dws)
+                    };
+                    let hh = 1e-4;
+                    let fd2 = (f(hh, hh) - f(hh, -hh) - f(-hh, hh) + f(-hh, -hh)) / (4.0 * hh * hh);
+                    worst_h = worst_h.max((fd2 - hess(i, j)).abs() / scale_h);
+                }
+            }
+            if t + 1 >= horizon {
+                assert!(
+                    lu.iter()
+                        .chain(luu.iter())
+                        .chain(lux.iter())
+                        .all(|v| *v == 0.0),
+                    "last step is state-only"
+                );
+            }
+        }
+        eprintln!("composite cost: worst FD error gradient {worst_g:.2e}, Hessian {worst_h:.2e} (relative to the largest entry)");
+        assert!(worst_g < 1e-8, "gradient FD error {worst_g:.2e}");
+        assert!(worst_h < 1e-5, "Hessian FD error {worst_h:.2e}");
+    }
+}
+
+#[cfg(test)]
+mod psd_tests {
+    use super::*;
+    use crate::discriminator::{DiscriminatorConfig, Normalizer};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn projection_is_psd_and_leaves_psd_matrices_alone() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let n = 6;
+        let a = Mat::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+        let mut sym = Mat::from_fn(n, n, |i, j| a[(i, j)] + a[(j, i)]);
+        let before = sym.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+        assert!(before[0] < 0.0, "test matrix should be indefinite");
+        project_psd(&mut sym);
+        let after = sym.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+        assert!(after[0] > -1e-12, "projection left eigenvalue {}", after[0]);
+        // The positive eigenvalues are kept.
+        let kept: Vec<f64> = before.iter().copied().filter(|l| *l > 0.0).collect();
+        for (k, l) in kept.iter().rev().zip(after.iter().rev()) {
+            assert!((k - l).abs() < 1e-10);
+        }
+        // A PSD matrix is unchanged.
+        let psd = Mat::from_fn(n, n, |i, j| {
+            (0..n).map(|k| a[(i, k)] * a[(j, k)]).sum::<f64>()
+        });
+        let mut copy = psd.clone();
+        project_psd(&mut copy);
+        assert_eq!(copy, psd);
+    }
+
+    /// Without projection the batch expansion is each sample's own [`expand_step`]; with it,
+    /// every sample at step t carries `M_tᵀ proj(mean_i ∇²D_i) M_t`, which is PSD.
+    #[test]
+    fn batch_expansion_matches_per_sample_and_projects_the_mean() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let cfg = DiscriminatorConfig {
+            hidden: vec![16, 16],
+            seed: 3,
+            ..DiscriminatorConfig::default()
+        };
+        let disc = Discriminator::new(D_IN, cfg, Normalizer::identity(D_IN)).unwrap();
+        let (horizon, n) = (3, 4);
+        let mut dyn_ = Dynamics::zeros(horizon, DX, DU);
+        for v in dyn_.fm.data.iter_mut() {
+            *v = rng.random_range(-0.5..0.5);
+        }
+        let episodes: Vec<Episode> = (0..n)
+            .map(|_| {
+                let mut draw = |len: usize| -> Vec<f64> {
+                    (0..len).map(|_| rng.random_range(-1.0..1.0)).collect()
+                };
+                Episode {
+                    x: draw(horizon * DX),
+                    u: draw(horizon * DU),
+                    u_policy: vec![0.0; horizon * DU],
+                    eps: vec![0.0; horizon * DU],
+                    noisy: true,
+                }
+            })
+            .collect();
+        let mut ws = CompositeWorkspace::new(&disc);
+        let mut exact = CostDerivs::default();
+        composite_cost_derivs(&disc, &dyn_, &episodes, &mut ws, &mut exact);
+        let (mut lx, mut lu) = (vec![0.0; DX], vec![0.0; DU]);
+        let (mut lxx, mut luu, mut lux) =
+            (vec![0.0; DX * DX], vec![0.0; DU * DU], vec![0.0; DU * DX]);
+        for (i, ep) in episodes.iter().enumerate() {
+            for t in 0..horizon {
+                let nt = i * horizon + t;
+                let l = expand_step(
+                    &disc,
+                    &dyn_,
+                    t,
+                    horizon,
+                    &ep.x[t * DX..(t + 1) * DX],
+                    &ep.u[t * DU..(t + 1) * DU],
+                    &mut ws,
+                    &mut lx,
+                    &mut lu,
+                    &mut lxx,
+                    &mut luu,
+                    &mut lux,
+                );
+                assert_eq!(l, exact.l[nt]);
+                assert_eq!(lx, exact.lx[nt * DX..(nt + 1) * DX]);
+                assert_eq!(lu, exact.lu[nt * DU..(nt + 1) * DU]);
+                assert_eq!(lxx, exact.lxx[nt * DX * DX..(nt + 1) * DX * DX]);
+                assert_eq!(luu, exact.luu[nt * DU * DU..(nt + 1) * DU * DU]);
+                assert_eq!(lux, exact.lux[nt * DU * DX..(nt + 1) * DU * DX]);
+            }
+        }
+        let mut ws = CompositeWorkspace::new(&disc).with_psd(true);
+        let mut proj = CostDerivs::default();
+        composite_cost_derivs(&disc, &dyn_, &episodes, &mut ws, &mut proj);
+        assert_eq!(proj.l, exact.l);
+        assert_eq!(proj.lx, exact.lx);
+        assert_eq!(proj.lu, exact.lu);
+        let mut some_changed = false;
+        for t in 0..horizon {
+            // The full (dX + dU) Hessian of sample 0 at t, and of the exact mean.
+            let full = |d: &CostDerivs, nt: usize| {
+                Mat::from_fn(DY, DY, |i, j| match (i < DX, j < DX) {
+                    (true, true) => d.lxx[nt * DX * DX + i * DX + j],
+                    (false, false) => d.luu[nt * DU * DU + (i - DX) * DU + j - DX],
+                    (false, true) => d.lux[nt * DU * DX + (i - DX) * DX + j],
+                    (true, false) => d.lux[nt * DU * DX + (j - DX) * DX + i],
+                })
+            };
+            let p0 = full(&proj, t);
+            for i in 1..n {
+                assert_eq!(
+                    full(&proj, i * horizon + t),
+                    p0,
+                    "same Hessian for every sample"
+                );
+            }
+            let lam = p0.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+            assert!(
+                lam[0] > -1e-10 * lam[DY - 1].abs().max(1.0),
+                "not PSD: {}",
+                lam[0]
+            );
+            let mut mean = Mat::<f64>::zeros(DY, DY);
+            for i in 0..n {
+                mean += full(&exact, i * horizon + t);
+            }
+            mean *= faer::Scale(1.0 / n as f64);
+            let e = mean.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
+            some_changed |= e[0] < -1e-8;
+        }
+        assert!(
+            some_changed,
+            "test data should have an indefinite mean Hessian"
+        );
+    }
+}

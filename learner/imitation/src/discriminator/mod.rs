@@ -1,0 +1,627 @@
+//! The discriminator of LQR+GAIfO (Torabi et al. 2019; docs/design.md §1.3 step 3): a WGAN-GP critic `D(s, s')` on state transitions, trained so that it is low on
+//! expert transitions and can be used as a cost by the LQR step.
+//!
+//! - Input `x = [s; s'] ∈ R^{2 dX}` (24 for the UR5 task), one transition per row of a
+//!   row-major batch.
+//! - `D(x) = net((x − μ) ⊘ σ)` with `μ, σ` per input from data ([`Normalizer`]; LQR+GAIfO and
+//!   GAIfO (PPO) fit them on expert ∪ first controller transitions, docs/design.md §5 D2) and
+//!   `net` a tanh MLP with a scalar linear output ([`mlp`]). tanh, not ReLU: the LQR step
+//!   needs the exact curvature `∇²ₓD`, and a ReLU net has none.
+//! - Derivatives in the raw input: `∇ₓD = diag(1/σ) ∇_u net`,
+//!   `∇²ₓD = diag(1/σ) ∇²_u net diag(1/σ)`.
+//! - Training ([`Discriminator::train`]): Gulrajani et al. (2017) Algorithm 1, critic part,
+//!   by Adam ([`adam`]), minimising
+//!   `E_expert[D] − E_controller[D] + λ E_x̂[(‖∇ₓD(x̂)‖ − 1)²]`,
+//!   `x̂ = ε x_expert + (1 − ε) x_controller`, `ε ~ U[0, 1]`. This sign makes D low on expert
+//!   transitions, so D is a cost, and makes the Wasserstein estimate
+//!   `E_controller[D] − E_expert[D]` non-negative. (The paper prints the opposite sign;
+//!   why this one is right, with the measurement: docs/design.md §5 D1.)
+//!
+//! Model/data split as in crocoddyl: [`Discriminator`] holds parameters, normalisation, Adam
+//! and RNG state; [`Workspace`] holds all scratch memory, built once per net size with
+//! [`Discriminator::workspace`] and passed to every call.
+
+pub mod adam;
+pub mod mlp;
+mod persist;
+#[cfg(test)]
+mod tests;
+
+use std::path::PathBuf;
+
+use faer::{MatMut, MatRef};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+pub use adam::{Adam, AdamConfig};
+pub use mlp::{Mlp, MlpWorkspace};
+
+/// What went wrong in the discriminator, and what to do about it.
+#[derive(Debug, thiserror::Error)]
+pub enum DiscriminatorError {
+    /// A configuration that cannot work.
+    #[error("invalid discriminator config: {0}")]
+    Config(String),
+    /// Arrays whose sizes do not fit the net.
+    #[error("shape mismatch: {0}")]
+    Shape(String),
+    /// NaN or ±inf in data, gradients or parameters.
+    #[error("non-finite {0}; check the transitions fed to the discriminator")]
+    NonFinite(String),
+    /// The critic file could not be read or written.
+    #[error("critic file {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The critic file is not JSON of the expected schema.
+    #[error("critic file {path} is not a valid critic file (truncated or hand-edited?): {source}")]
+    Json {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    /// The critic file parsed but its contents are inconsistent.
+    #[error("critic file {path}: {msg}")]
+    BadFile { path: PathBuf, msg: String },
+}
+
+/// Configuration of the critic and its training; defaults follow Gulrajani et al. (2017),
+/// Algorithm 1, except where noted.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiscriminatorConfig {
+    /// Hidden layer widths (at least one layer).
+    pub hidden: Vec<usize>,
+    /// Gradient-penalty weight λ.
+    pub lambda_gp: f64,
+    /// Critic (Adam) steps per [`Discriminator::train`] call, `n_critic`.
+    pub n_critic: usize,
+    /// Minibatch size `m`: expert and controller samples per step, each.
+    pub batch_size: usize,
+    pub adam: AdamConfig,
+    /// Seeds the weight initialisation and then the minibatch sampling.
+    pub seed: u64,
+}
+
+impl Default for DiscriminatorConfig {
+    /// - `hidden = [64, 64]`: not from a paper. Two tanh layers are the fewest that give a
+    ///   curvature which is not a sum of ridge functions of the input; 64 units keep the exact
+    ///   24×24 Hessian cheap (`O(h² n_0 + h n_0²)` per point, needed at every one of T = 100
+    ///   steps per LQR iteration) and ~5.8k parameters do not drown 500 transitions per
+    ///   iteration.
+    /// - `lambda_gp = 10`, `n_critic = 5`, `batch_size = 64`, Adam(1e−4, 0, 0.9): Gulrajani et
+    ///   al. (2017), Algorithm 1 ("default values").
+    fn default() -> Self {
+        Self {
+            hidden: vec![64, 64],
+            lambda_gp: 10.0,
+            n_critic: 5,
+            batch_size: 64,
+            adam: AdamConfig::default(),
+            seed: 0,
+        }
+    }
+}
+
+impl DiscriminatorConfig {
+    /// Checks that the config can build and train a net.
+    pub fn validate(&self) -> Result<(), DiscriminatorError> {
+        let bad = |m: String| Err(DiscriminatorError::Config(m));
+        if self.hidden.is_empty() || self.hidden.contains(&0) {
+            return bad(format!(
+                "hidden must list at least one non-zero width (a linear critic has no \
+                 curvature for the LQR step); got {:?}",
+                self.hidden
+            ));
+        }
+        if !(self.lambda_gp.is_finite() && self.lambda_gp >= 0.0) {
+            return bad(format!(
+                "lambda_gp must be finite and >= 0; got {}",
+                self.lambda_gp
+            ));
+        }
+        if self.n_critic == 0 || self.batch_size == 0 {
+            return bad(format!(
+                "n_critic and batch_size must be >= 1; got {} and {}",
+                self.n_critic, self.batch_size
+            ));
+        }
+        self.adam.validate().map_err(DiscriminatorError::Config)
+    }
+
+    /// Layer sizes `[d_in, hidden..., 1]`.
+    pub fn sizes(&self, d_in: usize) -> Vec<usize> {
+        let mut s = Vec::with_capacity(self.hidden.len() + 2);
+        s.push(d_in);
+        s.extend_from_slice(&self.hidden);
+        s.push(1);
+        s
+    }
+}
+
+/// Per-input affine normalisation `u = (x − μ) ⊘ σ`, fitted to the expert transitions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Normalizer {
+    pub mean: Vec<f64>,
+    pub std: Vec<f64>,
+}
+
+impl Normalizer {
+    /// An input whose expert standard deviation is below this (state units) is constant for
+    /// the expert; it is only centred (σ = 1), otherwise any controller deviation along it
+    /// would be blown up by 1/σ and saturate the tanh units.
+    pub const MIN_STD: f64 = 1e-6;
+
+    /// `μ = 0`, `σ = 1`.
+    pub fn identity(d: usize) -> Self {
+        Self {
+            mean: vec![0.0; d],
+            std: vec![1.0; d],
+        }
+    }
+
+    /// Column means and population standard deviations of `x` (`n × d`, one sample per row),
+    /// σ replaced by 1 where it is below [`Self::MIN_STD`].
+    pub fn from_data(x: MatRef<'_, f64>) -> Result<Self, DiscriminatorError> {
+        let (n, d) = (x.nrows(), x.ncols());
+        if n == 0 {
+            return Err(DiscriminatorError::Shape(
+                "cannot fit the input normalisation to zero samples".into(),
+            ));
+        }
+        check_finite(x, "expert data")?;
+        let mut mean = vec![0.0; d];
+        let mut var = vec![0.0; d];
+        for i in 0..n {
+            for (j, m) in mean.iter_mut().enumerate() {
+                *m += x[(i, j)];
+            }
+        }
+        for m in &mut mean {
+            *m /= n as f64;
+        }
+        for i in 0..n {
+            for (j, v) in var.iter_mut().enumerate() {
+                let e = x[(i, j)] - mean[j];
+                *v += e * e;
+            }
+        }
+        let std = var
+            .iter()
+            .map(|v| {
+                let s = (v / n as f64).sqrt();
+                if s >= Self::MIN_STD {
+                    s
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Ok(Self { mean, std })
+    }
+
+    fn validate(&self, d: usize) -> Result<(), String> {
+        if self.mean.len() != d || self.std.len() != d {
+            return Err(format!(
+                "normalisation has {} means and {} stds for {d} inputs",
+                self.mean.len(),
+                self.std.len()
+            ));
+        }
+        if !self.mean.iter().all(|m| m.is_finite()) {
+            return Err("normalisation mean is not finite".into());
+        }
+        if !self.std.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err("normalisation std must be finite and > 0".into());
+        }
+        Ok(())
+    }
+}
+
+/// Scratch memory for one net size ([`Discriminator::workspace`]).
+#[derive(Clone, Debug)]
+pub struct Workspace {
+    mlp: MlpWorkspace,
+    /// Gradient accumulator over `θ`.
+    grad: Vec<f64>,
+    /// Raw input rows: expert, controller, interpolate.
+    x_e: Vec<f64>,
+    x_c: Vec<f64>,
+    x_hat: Vec<f64>,
+    /// `∇²_u net`, row-major `d × d`.
+    hess_u: Vec<f64>,
+}
+
+/// What one [`Discriminator::train`] call did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrainStats {
+    /// Mean over the `n_critic` steps of the minibatch loss
+    /// `mean D(x_e) − mean D(x_c) + λ mean (‖∇D(x̂)‖ − 1)²`, each at the weights before its step.
+    pub critic_loss: f64,
+    /// The penalty term of `critic_loss` (same averaging).
+    pub gradient_penalty: f64,
+    /// `E_controller[D] − E_expert[D]` over all the given transitions after the last step:
+    /// the critic's estimate of the Wasserstein-1 distance (≥ 0 when it separates them).
+    pub wasserstein: f64,
+}
+
+/// The WGAN-GP critic `D(x)`, its normalisation, Adam state and minibatch RNG.
+#[derive(Clone, Debug)]
+pub struct Discriminator {
+    config: DiscriminatorConfig,
+    net: Mlp,
+    norm: Normalizer,
+    adam: Adam,
+    rng: ChaCha8Rng,
+}
+
+impl Discriminator {
+    /// A fresh critic for `d_in` inputs: Glorot-uniform weights from `ChaCha8(config.seed)`,
+    /// which then goes on to draw the minibatches.
+    pub fn new(
+        d_in: usize,
+        config: DiscriminatorConfig,
+        norm: Normalizer,
+    ) -> Result<Self, DiscriminatorError> {
+        config.validate()?;
+        if d_in == 0 {
+            return Err(DiscriminatorError::Config("input dimension is 0".into()));
+        }
+        norm.validate(d_in).map_err(DiscriminatorError::Shape)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let net = Mlp::glorot(&config.sizes(d_in), &mut rng);
+        let adam = Adam::new(config.adam, net.params().len());
+        Ok(Self {
+            config,
+            net,
+            norm,
+            adam,
+            rng,
+        })
+    }
+
+    /// Scratch memory for this net's size; reuse it for every call.
+    pub fn workspace(&self) -> Workspace {
+        let d = self.input_dim();
+        Workspace {
+            mlp: MlpWorkspace::new(self.net.sizes()),
+            grad: vec![0.0; self.net.params().len()],
+            x_e: vec![0.0; d],
+            x_c: vec![0.0; d],
+            x_hat: vec![0.0; d],
+            hess_u: vec![0.0; d * d],
+        }
+    }
+
+    /// Input dimension `2 dX`.
+    pub fn input_dim(&self) -> usize {
+        self.net.input_dim()
+    }
+
+    pub fn config(&self) -> &DiscriminatorConfig {
+        &self.config
+    }
+
+    pub fn normalizer(&self) -> &Normalizer {
+        &self.norm
+    }
+
+    pub fn net(&self) -> &Mlp {
+        &self.net
+    }
+
+    pub fn adam(&self) -> &Adam {
+        &self.adam
+    }
+
+    /// The flat parameter vector `θ` (layout: [`mlp`]).
+    pub fn params(&self) -> &[f64] {
+        self.net.params()
+    }
+
+    /// Mutable `θ` (for tests and external optimisers).
+    pub fn params_mut(&mut self) -> &mut [f64] {
+        self.net.params_mut()
+    }
+
+    fn check_ws(&self, ws: &Workspace) {
+        assert!(
+            ws.mlp.sizes() == self.net.sizes(),
+            "workspace built for {:?}, net is {:?}",
+            ws.mlp.sizes(),
+            self.net.sizes()
+        );
+    }
+
+    /// Normalises `x` into the net's input buffer and runs the forward pass.
+    fn forward_raw(&self, x: &[f64], mlp_ws: &mut MlpWorkspace) -> f64 {
+        assert_eq!(x.len(), self.input_dim(), "input length");
+        for (((u, &xi), &m), &s) in mlp_ws
+            .u
+            .iter_mut()
+            .zip(x)
+            .zip(&self.norm.mean)
+            .zip(&self.norm.std)
+        {
+            *u = (xi - m) / s;
+        }
+        self.net.forward(mlp_ws)
+    }
+
+    /// `D(x)` for one transition `x = [s; s']`.
+    pub fn value(&self, x: &[f64], ws: &mut Workspace) -> f64 {
+        self.check_ws(ws);
+        self.forward_raw(x, &mut ws.mlp)
+    }
+
+    /// `D(x)`, and `∇ₓD(x) = diag(1/σ) ∇_u net` into `grad` (length `d`).
+    pub fn value_gradient(&self, x: &[f64], ws: &mut Workspace, grad: &mut [f64]) -> f64 {
+        self.check_ws(ws);
+        assert_eq!(grad.len(), self.input_dim(), "gradient length");
+        let y = self.forward_raw(x, &mut ws.mlp);
+        self.net.backward(&mut ws.mlp, true);
+        for ((g, &gu), &s) in grad.iter_mut().zip(&ws.mlp.grad_u).zip(&self.norm.std) {
+            *g = gu / s;
+        }
+        y
+    }
+
+    /// `D(x)`, `∇ₓD(x)` into `grad` (`d`) and the exact
+    /// `∇²ₓD(x) = diag(1/σ) ∇²_u net diag(1/σ)` into `hess` (`d × d`, symmetric): what the
+    /// second-order expansion of the composite cost needs (docs/design.md §1.3 step 5).
+    pub fn value_gradient_hessian(
+        &self,
+        x: &[f64],
+        ws: &mut Workspace,
+        grad: &mut [f64],
+        mut hess: MatMut<'_, f64>,
+    ) -> f64 {
+        let d = self.input_dim();
+        assert!(
+            hess.nrows() == d && hess.ncols() == d,
+            "Hessian must be d x d"
+        );
+        let y = self.value_gradient(x, ws, grad);
+        self.net.input_hessian(&mut ws.mlp, &mut ws.hess_u);
+        let s = &self.norm.std;
+        for p in 0..d {
+            for q in 0..d {
+                hess[(p, q)] = ws.hess_u[p * d + q] / (s[p] * s[q]);
+            }
+        }
+        y
+    }
+
+    /// `grad_params += c ∂D(x)/∂θ`; returns `D(x)`.
+    pub fn accumulate_param_gradient(
+        &self,
+        x: &[f64],
+        c: f64,
+        ws: &mut Workspace,
+        grad_params: &mut [f64],
+    ) -> f64 {
+        self.check_ws(ws);
+        assert_eq!(
+            grad_params.len(),
+            self.params().len(),
+            "parameter gradient length"
+        );
+        let y = self.forward_raw(x, &mut ws.mlp);
+        self.net.backward(&mut ws.mlp, false);
+        self.net.accumulate_param_grad(&ws.mlp, c, grad_params);
+        y
+    }
+
+    /// The gradient penalty at one interpolate, `P = λ (‖∇ₓD(x̂)‖ − 1)²`, and
+    /// `grad_params += c ∂P/∂θ`. With `v = ∇ₓD`, `∂P/∂θ = (∂v/∂θ)ᵀ r`,
+    /// `r = 2λ (‖v‖ − 1) v / ‖v‖`, i.e. the θ-gradient of `ρᵀ ∇_u net` with
+    /// `ρ = r ⊘ σ` held fixed ([`mlp`] docs). At `v = 0` the subgradient 0 is used.
+    pub fn accumulate_penalty_gradient(
+        &self,
+        x_hat: &[f64],
+        c: f64,
+        ws: &mut Workspace,
+        grad_params: &mut [f64],
+    ) -> f64 {
+        self.check_ws(ws);
+        assert_eq!(
+            grad_params.len(),
+            self.params().len(),
+            "parameter gradient length"
+        );
+        self.penalty_into(x_hat, c, &mut ws.mlp, grad_params)
+    }
+
+    fn penalty_into(
+        &self,
+        x_hat: &[f64],
+        c: f64,
+        mlp_ws: &mut MlpWorkspace,
+        grad_params: &mut [f64],
+    ) -> f64 {
+        let lambda = self.config.lambda_gp;
+        self.forward_raw(x_hat, mlp_ws);
+        self.net.backward(mlp_ws, true);
+        let s = &self.norm.std;
+        let norm2: f64 = mlp_ws
+            .grad_u
+            .iter()
+            .zip(s)
+            .map(|(g, s)| (g / s) * (g / s))
+            .sum();
+        let nv = norm2.sqrt();
+        let p = lambda * (nv - 1.0) * (nv - 1.0);
+        if nv > 0.0 && c != 0.0 && lambda != 0.0 {
+            let coef = c * 2.0 * lambda * (nv - 1.0) / nv;
+            for ((rho, &g), &si) in mlp_ws.rho.iter_mut().zip(&mlp_ws.grad_u).zip(s) {
+                *rho = coef * g / (si * si);
+            }
+            self.net
+                .accumulate_directional_grad_param_grad(mlp_ws, grad_params);
+        }
+        p
+    }
+
+    /// One sample of the critic loss, `ℓ = D(x_e) − D(x_c) + λ (‖∇ₓD(x̂)‖ − 1)²` with
+    /// `x̂ = ε x_e + (1 − ε) x_c`, and `grad_params += c ∂ℓ/∂θ`. Returns `(ℓ, penalty)`.
+    /// [`Self::train`]'s minibatch gradient is the sum of these with `c = 1/m`.
+    pub fn accumulate_critic_loss_gradient(
+        &self,
+        x_e: &[f64],
+        x_c: &[f64],
+        eps: f64,
+        c: f64,
+        ws: &mut Workspace,
+        grad_params: &mut [f64],
+    ) -> (f64, f64) {
+        self.check_ws(ws);
+        assert_eq!(
+            grad_params.len(),
+            self.params().len(),
+            "parameter gradient length"
+        );
+        assert_eq!(x_c.len(), self.input_dim(), "input length");
+        self.critic_sample(x_e, x_c, eps, c, &mut ws.mlp, &mut ws.x_hat, grad_params)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn critic_sample(
+        &self,
+        x_e: &[f64],
+        x_c: &[f64],
+        eps: f64,
+        c: f64,
+        mlp_ws: &mut MlpWorkspace,
+        x_hat: &mut [f64],
+        grad: &mut [f64],
+    ) -> (f64, f64) {
+        for ((h, &e), &xc) in x_hat.iter_mut().zip(x_e).zip(x_c) {
+            *h = eps * e + (1.0 - eps) * xc;
+        }
+        let de = self.forward_raw(x_e, mlp_ws);
+        self.net.backward(mlp_ws, false);
+        self.net.accumulate_param_grad(mlp_ws, c, grad);
+        let dc = self.forward_raw(x_c, mlp_ws);
+        self.net.backward(mlp_ws, false);
+        self.net.accumulate_param_grad(mlp_ws, -c, grad);
+        let p = self.penalty_into(x_hat, c, mlp_ws, grad);
+        (de - dc + p, p)
+    }
+
+    /// Mean of `D` over the rows of `x` (`n × d`).
+    pub fn mean_value(&self, x: MatRef<'_, f64>, ws: &mut Workspace) -> f64 {
+        self.check_ws(ws);
+        assert_eq!(
+            x.ncols(),
+            self.input_dim(),
+            "columns must be the input dimension"
+        );
+        let mut sum = 0.0;
+        for i in 0..x.nrows() {
+            copy_row(x, i, &mut ws.x_e);
+            sum += self.forward_raw(&ws.x_e, &mut ws.mlp);
+        }
+        sum / x.nrows() as f64
+    }
+
+    /// The critic's Wasserstein-1 estimate `E_controller[D] − E_expert[D]` (sample means).
+    pub fn wasserstein_estimate(
+        &self,
+        expert: MatRef<'_, f64>,
+        controller: MatRef<'_, f64>,
+        ws: &mut Workspace,
+    ) -> f64 {
+        self.mean_value(controller, ws) - self.mean_value(expert, ws)
+    }
+
+    /// `n_critic` WGAN-GP critic steps (Gulrajani et al. 2017, Algorithm 1 lines 2–9, with
+    /// the roles: "real" = controller, "generated" = expert; see the module docs). Each step
+    /// draws `m` expert rows, `m` controller rows (uniformly, with replacement) and `m` values
+    /// `ε ~ U[0,1)`, and takes one Adam step on the gradient of
+    /// `(1/m) Σ [D(x_e) − D(x_c) + λ (‖∇ₓD(x̂)‖ − 1)²]`, `x̂ = ε x_e + (1 − ε) x_c`
+    /// (sign: module docs; D ends up low on expert transitions).
+    /// `expert` and `controller` are `n × d` transitions `[s; s']`, one per row.
+    ///
+    /// Errors on wrong shapes, empty or non-finite data, or a non-finite gradient (then the
+    /// weights are left as they were before that step).
+    pub fn train(
+        &mut self,
+        expert: MatRef<'_, f64>,
+        controller: MatRef<'_, f64>,
+        ws: &mut Workspace,
+    ) -> Result<TrainStats, DiscriminatorError> {
+        self.check_ws(ws);
+        let d = self.input_dim();
+        for (name, x) in [("expert", expert), ("controller", controller)] {
+            if x.ncols() != d || x.nrows() == 0 {
+                return Err(DiscriminatorError::Shape(format!(
+                    "{name} transitions are {}x{}, need n >= 1 rows of {d} = [s; s']",
+                    x.nrows(),
+                    x.ncols()
+                )));
+            }
+            check_finite(x, name)?;
+        }
+        let m = self.config.batch_size;
+        let inv_m = 1.0 / m as f64;
+        let (mut loss_sum, mut gp_sum) = (0.0, 0.0);
+        for _ in 0..self.config.n_critic {
+            ws.grad.fill(0.0);
+            let (mut loss, mut gp) = (0.0, 0.0);
+            for _ in 0..m {
+                let i = self.rng.random_range(0..expert.nrows());
+                let j = self.rng.random_range(0..controller.nrows());
+                let eps: f64 = self.rng.random();
+                copy_row(expert, i, &mut ws.x_e);
+                copy_row(controller, j, &mut ws.x_c);
+                let (l, p) = self.critic_sample(
+                    &ws.x_e,
+                    &ws.x_c,
+                    eps,
+                    inv_m,
+                    &mut ws.mlp,
+                    &mut ws.x_hat,
+                    &mut ws.grad,
+                );
+                loss += l;
+                gp += p;
+            }
+            if !ws.grad.iter().all(|g| g.is_finite()) {
+                return Err(DiscriminatorError::NonFinite(
+                    "critic gradient (weights left unchanged by this step)".into(),
+                ));
+            }
+            self.adam.step(self.net.params_mut(), &ws.grad);
+            loss_sum += loss * inv_m;
+            gp_sum += gp * inv_m;
+        }
+        let n = self.config.n_critic as f64;
+        Ok(TrainStats {
+            critic_loss: loss_sum / n,
+            gradient_penalty: gp_sum / n,
+            wasserstein: self.wasserstein_estimate(expert, controller, ws),
+        })
+    }
+}
+
+fn copy_row(x: MatRef<'_, f64>, i: usize, out: &mut [f64]) {
+    for (j, o) in out.iter_mut().enumerate() {
+        *o = x[(i, j)];
+    }
+}
+
+fn check_finite(x: MatRef<'_, f64>, what: &str) -> Result<(), DiscriminatorError> {
+    for i in 0..x.nrows() {
+        for j in 0..x.ncols() {
+            if !x[(i, j)].is_finite() {
+                return Err(DiscriminatorError::NonFinite(format!(
+                    "{what} at row {i}, column {j} ({})",
+                    x[(i, j)]
+                )));
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,543 @@
+//! LQR+GAIfO (Torabi et al. 2019, Algorithm 1; docs/design.md §1). One function per step of
+//! the algorithm, called in the paper's order by [`LqrGaifo::learn`]:
+//!
+//! 1. execute the controller N times with noise and once without ([`crate::learn::Learn::execute`]
+//!    in process, or the real-time loop over IPC);
+//! 2. `update_dynamics`: refit p(s'|s,a) = N(F_t [s;a] + f_t, Σ_t) (GMM prior + regression);
+//! 3. [`LqrGaifo::update_discriminator`]: WGAN-GP steps on expert vs controller transitions;
+//! 4. [`composite_cost_derivs`]: C_t(s,a) = D(s, F_t [s;a] + f_t) and
+//! 5. its second-order expansion around the samples;
+//! 6. [`improve`]: the KL-bounded LQR step.
+//!
+//! [`LqrGaifo::learn`] is steps 2–6 (and the switch to the new controller) on episodes executed
+//! elsewhere: `learner train` executes them in process, `learner serve --algo lqr-gaifo` gets
+//! them from the real-time loop. Same episodes, same result.
+//!
+//! # Checkpoints and resuming
+//! A checkpoint (written by the `learner` application before every iteration) holds the
+//! controller executed next as its gain table and the critic (weights, input normalisation,
+//! Adam moments and step count, minibatch RNG position). [`LqrGaifo::from_checkpoint`]
+//! continues from one: the critic exactly, the controller as its gain table (K, k, L;
+//! Σ = L Lᵀ is recomputed). The GPS learner state — the GMM dynamics prior (and the
+//! transitions it was fitted on), the previous controller and the step size — is not
+//! checkpointed and starts afresh, so a resumed run's first iteration executes the same
+//! episodes and makes the same critic update as the uninterrupted run would, but its dynamics
+//! fit, and hence its LQR step, differ from there on.
+//!
+//! Only state transitions of the expert are used (`Demos::states`); its actions are never read.
+
+use std::time::Instant;
+
+use faer::Mat;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::layout::{DU, DX};
+
+use crate::controller::init_hold;
+use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
+use crate::cpu::thread_cpu_s;
+use crate::demos::Demos;
+use crate::discriminator::{
+    AdamConfig, Discriminator, DiscriminatorConfig, Normalizer, TrainStats,
+};
+use crate::iteration::LqrIteration;
+use crate::learn::{Learn, LinGaussLearn};
+use crate::rollout::{Arm, Episode, SampleList};
+use crate::ImitationError;
+use gps::algorithm::update::Learner;
+use gps::algorithm::AlgorithmConfig;
+use gps::dynamics::lr_prior::LrPriorConfig;
+use gps::dynamics::prior_gmm::PriorGmmConfig;
+use gps::policy::lin_gauss::LinGaussPolicy;
+use gps::traj_opt::lqr::TrajOptConfig;
+
+/// Settings of an LQR+GAIfO run (TOML: `learner train --config FILE`). The task (goal, start
+/// pose, T, dt) comes from the demonstrations file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GaifoConfig {
+    /// The simulated arm of in-process runs (docs/design.md §2).
+    pub sim: SimConfig,
+    /// Noisy episodes per iteration N; paper §5: 5 (docs/design.md §1.3 step 1).
+    pub samples: usize,
+    /// Iterations to run (docs/design.md §1.3).
+    pub iterations: usize,
+    /// Initial controller: hold the start pose with this exploration variance, rad²
+    /// (docs/design.md §5 D11).
+    pub init_var: f64,
+    /// `Discriminator::train` calls per iteration, each `discriminator.n_critic` Adam steps
+    /// (docs/design.md §5 D6).
+    pub critic_updates: usize,
+    /// GPS step-size adaptation; off: the critic's cost changes every iteration
+    /// (docs/design.md §5 D5).
+    pub adapt_step: bool,
+    /// Project the samples' mean ∇²D per step on the PSD cone before the chain rule
+    /// (docs/design.md §5 D3, D4).
+    pub psd_hessian: bool,
+    /// The critic: 2 × 32 tanh, Adam 1e-3 / β1 0.5, 100 steps of batch 16 per call
+    /// (docs/design.md §5 D6–D8).
+    pub discriminator: DiscriminatorConfig,
+    /// Seed of every random draw of the run: noise, GMM, critic (docs/design.md §3.7).
+    pub seed: u64,
+    /// GPS algorithm settings; KL step 0.2 per time step (docs/design.md §1.3 step 6).
+    pub algorithm: AlgorithmConfig,
+    /// GPS dynamics prior on the last 10 trajectories with ≤ 5 EM iterations, for the
+    /// learner-time budget (docs/design.md §5 D9).
+    pub prior: PriorGmmConfig,
+    /// GPS dynamics fit (docs/design.md §1.3 step 2).
+    pub fit: LrPriorConfig,
+    /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
+    pub traj_opt: TrajOptConfig,
+}
+
+impl Default for GaifoConfig {
+    fn default() -> Self {
+        Self {
+            sim: SimConfig::default(),
+            samples: 5,
+            iterations: 20,
+            init_var: 0.05,
+            critic_updates: 1,
+            adapt_step: false,
+            psd_hessian: true,
+            discriminator: DiscriminatorConfig {
+                hidden: vec![32, 32],
+                n_critic: 100,
+                adam: AdamConfig {
+                    lr: 1e-3,
+                    beta1: 0.5,
+                    beta2: 0.9,
+                    eps: 1e-8,
+                },
+                batch_size: 16,
+                ..DiscriminatorConfig::default()
+            },
+            seed: 0,
+            algorithm: AlgorithmConfig::default(),
+            prior: PriorGmmConfig {
+                max_samples: 11,
+                max_iterations: 5,
+                ..PriorGmmConfig::default()
+            },
+            fit: LrPriorConfig::default(),
+            traj_opt: TrajOptConfig::default(),
+        }
+    }
+}
+
+/// Per-iteration log (progress line and CSV row).
+#[derive(Clone, Debug, Serialize)]
+pub struct GaifoLog {
+    /// Iteration (0-based).
+    pub iteration: usize,
+    /// True task cost C(τ) of the noise-free episode.
+    pub task_cost: f64,
+    /// Its normalised performance (C_random − C) / (C_random − C_expert).
+    pub performance: f64,
+    /// Final end-effector distance of the noise-free episode (m).
+    pub final_distance: f64,
+    /// Mean critic loss of this iteration's critic steps.
+    pub critic_loss: f64,
+    /// Critic's Wasserstein-1 estimate E_controller[D] − E_expert[D] after the update.
+    pub wasserstein: f64,
+    /// KL of the LQR step.
+    pub kl: f64,
+    /// η after the search.
+    pub eta: f64,
+    /// Step multiplier.
+    pub step_mult: f64,
+    /// Seconds per phase: executing episodes (simulator).
+    pub t_execute: f64,
+    /// Dynamics fit (GMM prior + regression).
+    pub t_dynamics: f64,
+    /// Discriminator update.
+    pub t_critic: f64,
+    /// Composite cost and its expansion (Hessians).
+    pub t_cost: f64,
+    /// KL-bounded LQR (cost averaging, step size, η search).
+    pub t_lqr: f64,
+    /// Thread CPU seconds of the learner phases (dynamics, critic, cost, LQR): the learner
+    /// time of one iteration on one core, unaffected by waiting for a core on a busy machine.
+    pub cpu_learner: f64,
+}
+
+impl GaifoLog {
+    /// The log of iteration `iteration` with the evaluation of its noise-free episode `eval`
+    /// (task cost, normalised performance against `demos`, final distance) and the critic's
+    /// statistics filled in; the step (`kl`, `eta`, `step_mult`) NaN and the times 0, for the
+    /// algorithm to set. Shared by LQR+GAIfO and the PPO baseline.
+    pub fn evaluated(iteration: usize, eval: &Episode, demos: &Demos, critic: &TrainStats) -> Self {
+        let c = eval.task_cost();
+        Self {
+            iteration,
+            task_cost: c,
+            performance: ur5_shared::normalised_performance(
+                c,
+                demos.cost_random,
+                demos.cost_expert,
+            )
+            .unwrap_or(f64::NAN),
+            final_distance: eval.final_distance(),
+            critic_loss: critic.critic_loss,
+            wasserstein: critic.wasserstein,
+            kl: f64::NAN,
+            eta: f64::NAN,
+            step_mult: f64::NAN,
+            t_execute: 0.0,
+            t_dynamics: 0.0,
+            t_critic: 0.0,
+            t_cost: 0.0,
+            t_lqr: 0.0,
+            cpu_learner: 0.0,
+        }
+    }
+
+    /// Learner time (everything but executing episodes), s.
+    pub fn learner_seconds(&self) -> f64 {
+        self.t_dynamics + self.t_critic + self.t_cost + self.t_lqr
+    }
+
+    /// Column names of [`GaifoLog::progress_line`].
+    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
+
+    /// The progress line of this iteration (`learner train`, `learner serve --algo lqr-gaifo`;
+    /// `sim_ms` is [`GaifoLog::t_execute`]).
+    pub fn progress_line(&self) -> String {
+        format!(
+            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
+            self.iteration,
+            self.task_cost,
+            self.performance,
+            self.final_distance,
+            self.critic_loss,
+            self.wasserstein,
+            self.kl,
+            self.eta,
+            self.step_mult,
+            1e3 * self.learner_seconds(),
+            1e3 * self.t_execute
+        )
+    }
+}
+
+/// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row.
+pub fn expert_transitions(demos: &Demos) -> Mat<f64> {
+    let rows = demos.count * (demos.horizon - 1);
+    Mat::from_fn(rows, D_IN, |r, c| {
+        let (d, t) = (r / (demos.horizon - 1), r % (demos.horizon - 1));
+        if c < DX {
+            demos.state(d, t)[c]
+        } else {
+            demos.state(d, t + 1)[c - DX]
+        }
+    })
+}
+
+/// Controller transitions of the given episodes, one per row.
+pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
+    let t_len = episodes[0].horizon();
+    let rows = episodes.len() * (t_len - 1);
+    Mat::from_fn(rows, D_IN, |r, c| {
+        let (i, t) = (r / (t_len - 1), r % (t_len - 1));
+        let ep = &episodes[i];
+        if c < DX {
+            ep.x[t * DX + c]
+        } else {
+            ep.x[(t + 1) * DX + c - DX]
+        }
+    })
+}
+
+/// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
+/// that runs with different seeds get different critics. Shared with the PPO baseline.
+pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
+    let mut dcfg = dcfg.clone();
+    dcfg.seed = seed ^ dcfg.seed ^ 0x4352_4954; // "CRIT"
+    dcfg
+}
+
+/// A fresh critic (`dcfg`, weights drawn again from its seed) whose input normalisation is
+/// fitted on expert ∪ `controller` transitions; LQR+GAIfO and the PPO baseline call it once,
+/// on the first iteration's samples (docs/design.md §5 D2).
+pub fn refit_critic(
+    expert: &Mat<f64>,
+    controller: &Mat<f64>,
+    dcfg: &DiscriminatorConfig,
+) -> Result<Discriminator, ImitationError> {
+    let (ne, nc) = (expert.nrows(), controller.nrows());
+    let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
+        if r < ne {
+            expert[(r, c)]
+        } else {
+            controller[(r - ne, c)]
+        }
+    });
+    let norm = Normalizer::from_data(both.as_ref())?;
+    Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
+}
+
+/// Line 3 of Algorithm 1: `updates` (at least one) WGAN-GP calls on expert vs `controller`
+/// transitions; returns the last call's statistics. Shared with the PPO baseline.
+pub fn train_critic(
+    disc: &mut Discriminator,
+    ws: &mut crate::discriminator::Workspace,
+    expert: &Mat<f64>,
+    controller: &Mat<f64>,
+    updates: usize,
+) -> Result<TrainStats, ImitationError> {
+    let mut stats = None;
+    for _ in 0..updates.max(1) {
+        stats = Some(disc.train(expert.as_ref(), controller.as_ref(), ws)?);
+    }
+    Ok(stats.expect("at least one update"))
+}
+
+/// The state of an LQR+GAIfO run; [`LqrGaifo::iterate`] runs one iteration of Algorithm 1.
+pub struct LqrGaifo {
+    cfg: GaifoConfig,
+    task: TaskConfig,
+    demos: Demos,
+    expert: Mat<f64>,
+    lqr: LqrIteration,
+    disc: Discriminator,
+    cost_ws: CompositeWorkspace,
+    disc_ws: crate::discriminator::Workspace,
+}
+
+impl LqrGaifo {
+    /// Sets up a run imitating `demos` (the task — goal, start pose, T, dt — is theirs).
+    pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
+        let task = demos.task()?;
+        let expert = expert_transitions(&demos);
+        let norm = Normalizer::from_data(expert.as_ref())?;
+        let disc = Discriminator::new(D_IN, critic_config(&cfg.discriminator, cfg.seed), norm)?;
+        let learner = Learner::new(
+            cfg.algorithm.clone(),
+            cfg.prior.clone(),
+            cfg.fit.clone(),
+            cfg.traj_opt.clone(),
+            task.horizon,
+            DX,
+            DU,
+            cfg.samples,
+            ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x474d_4d00),
+        );
+        let pol = init_hold(&task, cfg.init_var);
+        Ok(Self {
+            cost_ws: CompositeWorkspace::new(&disc).with_psd(cfg.psd_hessian),
+            disc_ws: disc.workspace(),
+            lqr: LqrIteration::new(learner, pol, 0),
+            cfg,
+            task,
+            demos,
+            expert,
+            disc,
+        })
+    }
+
+    /// The controller that the next iteration executes.
+    pub fn policy(&self) -> &LinGaussPolicy {
+        self.lqr.policy()
+    }
+
+    /// The critic.
+    pub fn discriminator(&self) -> &Discriminator {
+        &self.disc
+    }
+
+    /// The task being imitated.
+    pub fn task(&self) -> &TaskConfig {
+        &self.task
+    }
+
+    /// The settings of the run.
+    pub fn config(&self) -> &GaifoConfig {
+        &self.cfg
+    }
+
+    /// The demonstrations being imitated.
+    pub fn demos(&self) -> &Demos {
+        &self.demos
+    }
+
+    /// Iterations done (counting those before a resume).
+    pub fn iteration(&self) -> usize {
+        self.lqr.iteration()
+    }
+
+    /// Gain-table version of [`LqrGaifo::policy`]: iteration + 1 (the initial controller is 1).
+    pub fn version(&self) -> u64 {
+        self.iteration() as u64 + 1
+    }
+
+    /// `cfg.iterations` done.
+    pub fn done(&self) -> bool {
+        self.iteration() >= self.cfg.iterations
+    }
+
+    /// Rebuilds the critic with its input normalisation fitted on expert ∪ `controller`
+    /// transitions, once, on the first iteration's samples (docs/design.md §5 D2).
+    fn refit_normalizer(&mut self, controller: &Mat<f64>) -> Result<(), ImitationError> {
+        self.disc = refit_critic(&self.expert, controller, self.disc.config())?;
+        self.cost_ws = CompositeWorkspace::new(&self.disc).with_psd(self.cfg.psd_hessian);
+        Ok(())
+    }
+
+    /// Line 3 of Algorithm 1: `critic_updates` WGAN-GP calls on expert vs these transitions.
+    pub fn update_discriminator(
+        &mut self,
+        controller: &Mat<f64>,
+    ) -> Result<TrainStats, ImitationError> {
+        train_critic(
+            &mut self.disc,
+            &mut self.disc_ws,
+            &self.expert,
+            controller,
+            self.cfg.critic_updates,
+        )
+    }
+
+    /// Lines 2–6 of Algorithm 1 on the `episodes` (`cfg.samples` noisy ones) and the noise-free
+    /// `eval` episode executed with [`LqrGaifo::policy`] (as table version
+    /// [`LqrGaifo::version`]); then that controller is replaced by the new one. `t_execute`
+    /// (s) is logged as the time line 1 took.
+    pub fn learn(
+        &mut self,
+        episodes: &[Episode],
+        eval: &Episode,
+        t_execute: f64,
+    ) -> Result<GaifoLog, ImitationError> {
+        let (n, t_len) = (self.cfg.samples, self.task.horizon);
+        if episodes.len() != n || episodes.iter().chain([eval]).any(|e| e.horizon() != t_len) {
+            return Err(ImitationError::Episodes(format!(
+                "an LQR+GAIfO iteration needs {n} noisy episodes and one noise-free episode of \
+                 T = {t_len} steps; got {} noisy, horizons {:?}",
+                episodes.len(),
+                episodes
+                    .iter()
+                    .chain([eval])
+                    .map(Episode::horizon)
+                    .collect::<Vec<_>>()
+            )));
+        }
+        let iteration = self.lqr.iteration();
+        let samples = SampleList::new(episodes);
+        // 2. Fit the dynamics.
+        let t1 = Instant::now();
+        let c1 = thread_cpu_s();
+        self.lqr.fit_dynamics(&samples)?;
+        // 3. Update the discriminator on (s, s') of the controller vs the expert.
+        let t2 = Instant::now();
+        let controller = episode_transitions(episodes);
+        if iteration == 0 {
+            self.refit_normalizer(&controller)?;
+        }
+        let critic = self.update_discriminator(&controller)?;
+        // 4–5. Composite cost D(s, F_t[s;a] + f_t) and its second-order expansion.
+        let t3 = Instant::now();
+        let mut cost = CompositeCost {
+            disc: &self.disc,
+            ws: &mut self.cost_ws,
+        };
+        self.lqr.expand(&mut cost, episodes);
+        // 6. KL-bounded LQR step.
+        let t4 = Instant::now();
+        let step = self.lqr.improve(&samples, self.cfg.adapt_step)?;
+        let t5 = Instant::now();
+        let cpu_learner = thread_cpu_s() - c1;
+
+        let log = GaifoLog {
+            kl: step.kl,
+            eta: step.eta,
+            step_mult: step.step_mult,
+            t_execute,
+            t_dynamics: (t2 - t1).as_secs_f64(),
+            t_critic: (t3 - t2).as_secs_f64(),
+            t_cost: (t4 - t3).as_secs_f64(),
+            t_lqr: (t5 - t4).as_secs_f64(),
+            cpu_learner,
+            ..GaifoLog::evaluated(iteration, eval, &self.demos, &critic)
+        };
+        Ok(log)
+    }
+
+    /// A run that continues from controller `pol` and critic `disc` after `iteration`
+    /// iterations (a checkpoint: `learner train --resume`). The critic must have been trained
+    /// with this run's settings and seed; what a checkpoint does not hold (the GMM dynamics
+    /// prior, the previous controller, the step size) starts afresh (module docs).
+    pub fn from_checkpoint(
+        cfg: GaifoConfig,
+        demos: Demos,
+        pol: LinGaussPolicy,
+        disc: Discriminator,
+        iteration: usize,
+    ) -> Result<Self, ImitationError> {
+        let mut run = Self::new(cfg, demos)?;
+        let expected = critic_config(&run.cfg.discriminator, run.cfg.seed);
+        if *disc.config() != expected {
+            return Err(ImitationError::Checkpoint(format!(
+                "the critic was trained with other [discriminator] settings or another seed than \
+                 this run's (seed {}): resume with the run's own --config and --seed",
+                run.cfg.seed
+            )));
+        }
+        if pol.t != run.task.horizon {
+            return Err(ImitationError::Checkpoint(format!(
+                "a controller of T = {} steps, the demonstrations have T = {}: resume with the \
+                 run's own demonstrations",
+                pol.t, run.task.horizon
+            )));
+        }
+        run.lqr.restart_at(pol, iteration);
+        run.cost_ws = CompositeWorkspace::new(&disc).with_psd(run.cfg.psd_hessian);
+        run.disc_ws = disc.workspace();
+        run.disc = disc;
+        Ok(run)
+    }
+}
+
+impl Learn for LqrGaifo {
+    type Log = GaifoLog;
+    const ALGO: &'static str = "lqr-gaifo";
+
+    fn task(&self) -> &TaskConfig {
+        &self.task
+    }
+    fn sim_config(&self) -> &SimConfig {
+        &self.cfg.sim
+    }
+    fn samples(&self) -> usize {
+        self.cfg.samples
+    }
+    fn seed(&self) -> u64 {
+        self.cfg.seed
+    }
+    fn iteration(&self) -> usize {
+        LqrGaifo::iteration(self)
+    }
+    fn done(&self) -> bool {
+        LqrGaifo::done(self)
+    }
+    fn execute(&mut self, arm: &mut dyn Arm) -> Result<(Vec<Episode>, Episode), ImitationError> {
+        crate::learn::execute_table(self, arm)
+    }
+    fn learn(
+        &mut self,
+        noisy: &[Episode],
+        eval: &Episode,
+        t_execute: f64,
+    ) -> Result<GaifoLog, ImitationError> {
+        LqrGaifo::learn(self, noisy, eval, t_execute)
+    }
+    fn eval_cost(log: &GaifoLog) -> f64 {
+        log.task_cost
+    }
+}
+
+impl LinGaussLearn for LqrGaifo {
+    fn policy(&self) -> &LinGaussPolicy {
+        self.lqr.policy()
+    }
+}

@@ -1,0 +1,124 @@
+//! The one LQR iteration both LQR learners run (docs/design.md §1.3), GPS's
+//! `AlgorithmTrajOpt.iteration` with a plug-in [`Cost`]: [`LqrIteration::fit_dynamics`] is
+//! step 2, [`LqrIteration::expand`] steps 4–5 with any cost, [`LqrIteration::improve`] step 6
+//! (and the switch to the new controller). The expert ([`crate::expert::ExpertLearner`]) calls
+//! them with the task cost; LQR+GAIfO ([`crate::gaifo::LqrGaifo`]) with the critic's composite
+//! cost, after its critic step (step 3). Step 1 is [`crate::learn::Learn::execute`].
+
+use gps::algorithm::eval_cost::{eval_cost, CostDerivs};
+use gps::algorithm::update::Learner;
+use gps::policy::lin_gauss::LinGaussPolicy;
+use ur5_shared::layout::{DU, DX};
+
+use crate::cost::Cost;
+use crate::rollout::{Episode, SampleList};
+use crate::ImitationError;
+
+/// What the LQR step did.
+#[derive(Clone, Copy, Debug)]
+pub struct StepReport {
+    /// KL(new ‖ old) of the step (total over T).
+    pub kl: f64,
+    /// Dual variable η after the search.
+    pub eta: f64,
+    /// Step multiplier used.
+    pub step_mult: f64,
+}
+
+/// The state one LQR iteration updates: the GPS learner (dynamics prior and fit, x0, step
+/// size, η), the controller executed next, the previous one (for the step adjustment), the
+/// cost expansion and the iteration count.
+pub struct LqrIteration {
+    learner: Learner,
+    pol: LinGaussPolicy,
+    prev_pol: Option<LinGaussPolicy>,
+    new_pol: LinGaussPolicy,
+    derivs: CostDerivs,
+    iteration: usize,
+}
+
+impl LqrIteration {
+    /// Starts from controller `pol` after `iteration` iterations. The GPS learner state starts
+    /// afresh (no previous controller: the first step is not step-adjusted).
+    pub fn new(learner: Learner, pol: LinGaussPolicy, iteration: usize) -> Self {
+        Self {
+            new_pol: LinGaussPolicy::zeros(pol.t, pol.dx, pol.du),
+            learner,
+            pol,
+            prev_pol: None,
+            derivs: CostDerivs::default(),
+            iteration,
+        }
+    }
+
+    /// The controller executed next.
+    pub fn policy(&self) -> &LinGaussPolicy {
+        &self.pol
+    }
+
+    /// Iterations done.
+    pub fn iteration(&self) -> usize {
+        self.iteration
+    }
+
+    /// Continues from controller `pol` after `iteration` iterations (a checkpoint).
+    pub fn restart_at(&mut self, pol: LinGaussPolicy, iteration: usize) {
+        self.pol = pol;
+        self.iteration = iteration;
+    }
+
+    /// Step 2: refits the dynamics p(s'|s,a) (GMM prior + Bayesian linear regression) and x0
+    /// on `samples` (GPS `_update_dynamics`).
+    pub fn fit_dynamics(&mut self, samples: &SampleList) -> Result<(), ImitationError> {
+        self.learner
+            .update_dynamics(&samples.x, &samples.u, samples.n)?;
+        Ok(())
+    }
+
+    /// Steps 4–5: the per-sample second-order expansion of `cost` around `episodes` (the
+    /// episodes of `samples`), with the dynamics fitted by [`LqrIteration::fit_dynamics`].
+    pub fn expand(&mut self, cost: &mut dyn Cost, episodes: &[Episode]) {
+        cost.expand(episodes, &self.learner.info.dynamics, &mut self.derivs);
+    }
+
+    /// Step 6: averages the expansion into the quadratic model (GPS `_eval_cost`), adapts the
+    /// KL step from the previous step's predicted vs actual improvement (from the second
+    /// iteration on, when `adapt_step`), takes the KL-bounded LQR step, and makes the new
+    /// controller the one executed next.
+    pub fn improve(
+        &mut self,
+        samples: &SampleList,
+        adapt_step: bool,
+    ) -> Result<StepReport, ImitationError> {
+        let learner = &mut self.learner;
+        eval_cost(
+            &samples.x,
+            &samples.u,
+            &self.derivs,
+            samples.n,
+            self.pol.t,
+            DX,
+            DU,
+            &mut learner.info.cc,
+            &mut learner.info.cv,
+            &mut learner.info.cm,
+        );
+        if let (Some(prev), true) = (self.prev_pol.as_ref(), adapt_step) {
+            learner.update_step_size(prev, &self.pol)?;
+        }
+        let step_mult = learner.step_mult;
+        let res = learner.update_trajectories(&self.pol, &mut self.new_pol)?;
+        let kl = res.trace.last().map(|s| s.kl).unwrap_or(f64::NAN);
+        match self.prev_pol.as_mut() {
+            Some(p) => p.copy_from(&self.pol),
+            None => self.prev_pol = Some(self.pol.clone()),
+        }
+        self.pol.copy_from(&self.new_pol);
+        self.iteration += 1;
+        Ok(StepReport {
+            kl,
+            eta: res.eta,
+            step_mult,
+        })
+    }
+}

@@ -1,0 +1,34 @@
+//! Imitation from observation on top of the GPS pieces (crate `gps`): LQR+GAIfO (Torabi,
+//! Geiger, Warnell, Stone 2019), the expert it imitates, and the GAIfO (PPO) baseline.
+//! Algorithm 1 and its step numbering are in docs/design.md §1; every module cites them.
+//!
+//! - [`rollout`]: step 1, the one episode loop over an [`rollout::Arm`] and a
+//!   [`rollout::Policy`]; [`rollout::Episode`] and GPS's [`rollout::SampleList`];
+//! - [`discriminator`]: the WGAN-GP critic D(s, s') (MLP, Adam, persistence), step 3;
+//! - [`cost`]: the true task cost ([`cost::task`], the expert's) and the composite cost
+//!   C_t(s, a) = D(s, F_t [s; a] + f_t) with its expansion ([`cost::composite`]), steps 4–5;
+//! - [`iteration`]: step 6 shared by both LQR learners (cost averaging, step size, KL-bounded
+//!   LQR);
+//! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
+//! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`];
+//! - [`ppo`]: the GAIfO (PPO) baseline;
+//! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
+//!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table.
+//!
+//! Depends on `gps` and `shared` (the contract) only; the simulator, files and IPC are the
+//! `learner` application's.
+
+pub mod controller;
+pub mod cost;
+pub mod cpu;
+pub mod demos;
+pub mod discriminator;
+pub mod error;
+pub mod expert;
+pub mod gaifo;
+pub mod iteration;
+pub mod learn;
+pub mod ppo;
+pub mod rollout;
+
+pub use error::ImitationError;

@@ -1,0 +1,75 @@
+//! The Gaussian MLP policy's episodes: the one episode loop [`crate::rollout::run_episode`]
+//! with the policy as a [`Policy`] ([`MlpActor`]), so the same [`Episode`] record, noise
+//! seeding and action clamp as the gain tables.
+//!
+//! Action: in goal-angle mode (the paper's set-up) the policy gives an *offset* from the
+//! current joint angles, `a = q + μ(s) + σ ⊙ ε` (rad), so that the initial policy (μ ≈ 0)
+//! holds the arm, as the LQR's initial controller does, and the clamp's per-step window
+//! `q ± v_max·dt` is centred on the policy's zero. In torque mode the output is the torque
+//! itself (N·m). `Episode::u_policy` holds `a` before the clamp; PPO's log-probabilities use the
+//! unclamped offset `Δ = a − q` (as SB3 stores the unclipped action), [`offset`].
+
+use ur5_shared::config::{ActionMode, TaskConfig};
+use ur5_shared::layout::{DU, DX};
+
+use super::policy::{GaussianMlpPolicy, PolicyWorkspace};
+use crate::rollout::{execute, Arm, Episode, Policy};
+use crate::ImitationError;
+
+/// What the policy's offset is added to: the joint angles `s[0..DU]` in goal-angle mode, 0 in
+/// torque mode.
+pub fn action_base(mode: ActionMode, s: &[f64; DX]) -> [f64; DU] {
+    match mode {
+        ActionMode::GoalAngles => std::array::from_fn(|j| s[ur5_shared::layout::Q.start + j]),
+        ActionMode::Torque => [0.0; DU],
+    }
+}
+
+/// The unclamped offset Δ_t = u_policy_t − base(s_t) of step `t` of `ep`.
+pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> [f64; DU] {
+    let base = action_base(mode, &ep.state(t));
+    std::array::from_fn(|j| ep.u_policy[t * DU + j] - base[j])
+}
+
+/// The Gaussian MLP policy as a [`Policy`] for [`crate::rollout::run_episode`]:
+/// `a = base(s) + (μ(s) + σ ⊙ ε)`.
+pub struct MlpActor<'a> {
+    pol: &'a GaussianMlpPolicy,
+    ws: &'a mut PolicyWorkspace,
+    std: [f64; DU],
+}
+
+impl<'a> MlpActor<'a> {
+    /// `pol` acting with scratch memory `ws`.
+    pub fn new(pol: &'a GaussianMlpPolicy, ws: &'a mut PolicyWorkspace) -> Self {
+        let std = std::array::from_fn(|j| pol.log_std()[j].exp());
+        Self { pol, ws, std }
+    }
+}
+
+impl Policy for MlpActor<'_> {
+    fn horizon(&self) -> usize {
+        usize::MAX
+    }
+
+    fn act(&mut self, _t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
+        let mu = self.pol.mean(s, self.ws);
+        let base = action_base(mode, s);
+        std::array::from_fn(|j| base[j] + (mu[j] + self.std[j] * eps[j]))
+    }
+}
+
+/// Step 1 of Algorithm 1 for the MLP policy ([`crate::rollout::execute`]): `n` noisy
+/// episodes (episode k draws `Noise::new(seed, version, k)`) and one noise-free evaluation
+/// episode (the policy mean).
+pub fn execute_mlp(
+    arm: &mut dyn Arm,
+    task: &TaskConfig,
+    pol: &GaussianMlpPolicy,
+    ws: &mut PolicyWorkspace,
+    version: u64,
+    seed: u64,
+    n: usize,
+) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    execute(arm, task, &mut MlpActor::new(pol, ws), version, seed, n)
+}

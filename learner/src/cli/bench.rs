@@ -1,0 +1,174 @@
+//! `learner bench`, `learner bench-gaifo` and `learner conformance`: timings and the GPS
+//! reference check.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use imitation::gaifo::GaifoConfig;
+
+use super::CommonArgs;
+
+/// Arguments of `learner conformance`.
+#[derive(clap::Args, Debug)]
+pub struct ConformanceArgs {
+    /// Path to a problem_*.json file.
+    pub vectors: PathBuf,
+    /// Print only a one-line JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `learner conformance`: exits with status 1 if any quantity fails.
+pub fn conformance(args: ConformanceArgs) -> anyhow::Result<()> {
+    let f = args.vectors.to_string_lossy().to_string();
+    let rep = gps::conformance::run_file(&f).with_context(|| format!("conformance on {f}"))?;
+    if args.json {
+        println!("{}", rep.to_json());
+    } else {
+        print!("{}", rep.to_text());
+    }
+    if !rep.all_pass() {
+        std::process::exit(1);
+    }
+    Ok(())
+}
+
+/// Arguments of `learner bench`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Horizon T (steps of 0.1 s).
+    #[arg(long, default_value_t = 100)]
+    pub t: usize,
+    /// State dimension dX.
+    #[arg(long, default_value_t = 12)]
+    pub dx: usize,
+    /// Action dimension dU.
+    #[arg(long, default_value_t = 3)]
+    pub du: usize,
+    /// Samples per iteration N.
+    #[arg(long, default_value_t = 5)]
+    pub n: usize,
+    /// Repetitions (the median is reported).
+    #[arg(long, default_value_t = 21)]
+    pub reps: usize,
+    /// RNG seed of the synthetic problem.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print only a one-line JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `learner bench`.
+pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    let r = crate::bench::run(
+        args.t,
+        args.dx,
+        args.du,
+        args.n,
+        args.reps.max(1),
+        args.seed,
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string(&r)?);
+    } else {
+        println!(
+            "learner bench: T={} dX={} dU={} N={}, {} reps, medians, one thread",
+            r.t, r.dx, r.du, r.n, r.reps
+        );
+        println!("{:<22} {:>9} {:>9}", "piece", "wall ms", "cpu ms");
+        let row = |name: &str, w: f64, c: f64, extra: String| {
+            println!("{:<22} {:>9.3} {:>9.3}   {}", name, w * 1e3, c * 1e3, extra);
+        };
+        row(
+            "GMM prior update",
+            r.gmm_prior_update_s,
+            r.gmm_prior_update_cpu_s,
+            format!("(K={}, {} EM iterations)", r.gmm_k, r.gmm_em_iterations),
+        );
+        row(
+            "dynamics fit + x0",
+            r.dynamics_fit_s,
+            r.dynamics_fit_cpu_s,
+            String::new(),
+        );
+        row(
+            "eta search",
+            r.eta_search_s,
+            r.eta_search_cpu_s,
+            format!("({} backward passes)", r.dgd_backward_calls),
+        );
+        row("total", r.total_s, r.total_cpu_s, String::new());
+        let tr: Vec<String> = r
+            .dgd_trace
+            .iter()
+            .map(|(e, k)| format!("eta={e:.3e} kl={k:.3}"))
+            .collect();
+        println!(
+            "eta search (target KL {:.1}): {}",
+            r.kl_target,
+            tr.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// Arguments of `learner bench-gaifo`.
+#[derive(clap::Args, Debug)]
+pub struct BenchGaifoArgs {
+    /// Demonstrations (.npz from `learner expert`); without it the default expert is trained
+    /// first (about 10 s) and its demonstrations are used.
+    #[arg(long)]
+    pub demos: Option<PathBuf>,
+    /// Iterations.
+    #[arg(long, default_value_t = 20)]
+    pub iterations: usize,
+    /// --config (a `GaifoConfig`), --seed (default 0), --json; --out is not used.
+    #[command(flatten)]
+    pub common: CommonArgs,
+}
+
+/// Runs `learner bench-gaifo`.
+pub fn run_gaifo(args: BenchGaifoArgs) -> anyhow::Result<()> {
+    let mut cfg: GaifoConfig = args.common.settings()?;
+    cfg.iterations = args.iterations.max(1);
+    cfg.seed = args.common.seed.unwrap_or(0);
+    let demos = match &args.demos {
+        Some(p) => crate::io::demos::load(p)
+            .with_context(|| format!("loading demonstrations {}", p.display()))?,
+        None => {
+            eprintln!("no --demos: training the default expert first");
+            let ecfg = imitation::expert::ExpertConfig::default();
+            let run = crate::run::expert(&ecfg, |_| {})?;
+            crate::run::demos(&ecfg, &run)?
+        }
+    };
+    let r = crate::bench::gaifo(&cfg, demos)?;
+    if args.common.json {
+        println!("{}", serde_json::to_string(&r)?);
+        return Ok(());
+    }
+    println!(
+        "LQR+GAIfO bench: {} iterations, seed {}, N = {} + 1 episodes, final normalised performance {:.3}",
+        r.iterations, r.seed, cfg.samples, r.final_performance
+    );
+    println!("{:<34} {:>9}", "learner CPU per iteration", "ms");
+    println!("{:<34} {:>9.1}", "  median", 1e3 * r.cpu_learner_median_s);
+    println!(
+        "{:<34} {:>9.1}",
+        "  90th percentile",
+        1e3 * r.cpu_learner_p90_s
+    );
+    println!("{:<34} {:>9.1}", "  largest", 1e3 * r.cpu_learner_max_s);
+    println!("{:<34} {:>9}", "phase (median wall)", "ms");
+    for (name, v) in [
+        ("  dynamics (GMM prior + fit)", r.dynamics_s),
+        ("  critic (WGAN-GP steps)", r.critic_s),
+        ("  composite cost + Hessians", r.cost_s),
+        ("  KL-bounded LQR", r.lqr_s),
+        ("  episodes (simulator, not learner)", r.execute_s),
+    ] {
+        println!("{:<34} {:>9.1}", name, 1e3 * v);
+    }
+    Ok(())
+}

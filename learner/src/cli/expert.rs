@@ -1,0 +1,115 @@
+//! `learner expert`: command-line front of [`imitation::expert`].
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+
+use ur5_shared::config::parse_triple;
+
+use imitation::expert::{square_goals, ExpertConfig, IterationLog};
+
+use super::CommonArgs;
+use crate::run::train_and_record;
+
+/// Arguments of `learner expert`.
+#[derive(Args, Debug)]
+pub struct ExpertArgs {
+    /// Goal point x,y,z (m, arm base frame); overrides the config.
+    #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
+    pub goal: Option<[f64; 3]>,
+    /// Train and record experts for the 8 points of the generalisation square around the goal
+    /// (corners and mid-edges, half side `square_half_side`), one folder each.
+    #[arg(long)]
+    pub square: bool,
+    /// Largest number of iterations; overrides the config.
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// --config: an `ExpertConfig` (tables `task`, `sim`, `cost`, `algorithm`, `prior`, `fit`,
+    /// `traj_opt`); --out default `runs/expert`.
+    #[command(flatten)]
+    pub common: CommonArgs,
+}
+
+fn print_header() {
+    eprintln!("{}", IterationLog::PROGRESS_HEADER);
+}
+
+fn print_line(l: &IterationLog) {
+    eprintln!("{}", l.progress_line());
+}
+
+/// Runs `learner expert`.
+pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
+    let mut cfg: ExpertConfig = args.common.settings()?;
+    let out_dir = args
+        .common
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs/expert"));
+    if let Some(g) = args.goal {
+        cfg.task.goal = g;
+    }
+    if let Some(s) = args.common.seed {
+        cfg.seed = s;
+    }
+    if let Some(i) = args.iterations {
+        cfg.iterations = i;
+    }
+    cfg.task.validate()?;
+    cfg.sim.validate()?;
+    anyhow::ensure!(
+        cfg.samples >= 1 && cfg.iterations >= 1 && cfg.demos >= 1,
+        "samples, iterations and demos must be >= 1"
+    );
+    anyhow::ensure!(
+        cfg.init_var > 0.0 && cfg.init_var.is_finite(),
+        "init_var must be finite and > 0 (rad²)"
+    );
+
+    let jobs: Vec<(ExpertConfig, PathBuf)> = if args.square {
+        square_goals(cfg.task.goal, cfg.square_half_side)
+            .iter()
+            .enumerate()
+            .map(|(i, g)| {
+                let mut c = cfg.clone();
+                c.task.goal = *g;
+                c.seed = cfg.seed.wrapping_add(i as u64 + 1);
+                (c, out_dir.join(format!("square_{i}")))
+            })
+            .collect()
+    } else {
+        vec![(cfg.clone(), out_dir.clone())]
+    };
+    let mut summaries = Vec::new();
+    for (c, out) in &jobs {
+        eprintln!(
+            "expert for goal {:?} m (seed {}) -> {}",
+            c.task.goal,
+            c.seed,
+            out.display()
+        );
+        print_header();
+        let s = train_and_record(c, out, print_line)
+            .with_context(|| format!("expert for goal {:?}", c.task.goal))?;
+        eprintln!(
+            "done: best eval cost {:.4} ({:.1} % of the random policy's {:.4}), final distance {:.4} m; \
+             {} demos (mean cost {:.4}) in {}",
+            s.eval_cost,
+            100.0 * s.cost_ratio,
+            s.cost_random,
+            s.final_distance,
+            c.demos,
+            s.cost_demos,
+            s.demos.display()
+        );
+        summaries.push(s);
+    }
+    if args.common.json {
+        println!(
+            "{}",
+            serde_json::json!({"command": "expert", "runs": summaries})
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,98 @@
+//! The `learner` command line: one module per subcommand, all sharing [`CommonArgs`].
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+pub mod bench;
+pub mod experiment;
+pub mod expert;
+pub mod serve;
+pub mod train;
+
+/// The options every run-producing subcommand shares.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct CommonArgs {
+    /// TOML settings, layered over the subcommand's defaults (unknown keys are errors; the
+    /// settings type is named in the subcommand's help).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Seed of the run (of the first run for `experiment`); overrides the config.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Output folder (each subcommand's default in its help).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print a one-line JSON summary at the end (stdout).
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl CommonArgs {
+    /// The settings of `--config` layered over `C::default()`, or the defaults.
+    pub fn settings<C>(&self) -> anyhow::Result<C>
+    where
+        C: serde::Serialize + serde::de::DeserializeOwned + Default,
+    {
+        Ok(match &self.config {
+            Some(p) => ur5_shared::config::from_toml_file(p)?,
+            None => C::default(),
+        })
+    }
+}
+
+#[derive(Parser)]
+#[command(
+    name = "learner",
+    about = "LQR+GAIfO learner: the expert, imitation from state-only demonstrations, the GAIfO \
+             (PPO) baseline, the learner end over IPC, the paper's experiments"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+/// The subcommands.
+#[derive(Subcommand)]
+pub enum Cmd {
+    /// Check every GPS piece against a reference-vectors file (gps-vectors layout); exits
+    /// non-zero if any quantity fails its tolerance.
+    Conformance(bench::ConformanceArgs),
+    /// Train the expert on the true task cost (KL-bounded LQR with learned dynamics, in
+    /// process), save its gain table, record demonstrations. --config: an `ExpertConfig`.
+    /// Progress: one line per iteration.
+    Expert(expert::ExpertArgs),
+    /// The learner end of the three processes (hil-sim serve <-> rt-controller <-> learner):
+    /// publishes gain tables on controller/gains, learns from the episodes on learner/samples
+    /// (the expert's iteration on the true task cost, or LQR+GAIfO with --algo lqr-gaifo
+    /// --demos FILE). --config: an `ExpertConfig` or `GaifoConfig` plus a [serve] table.
+    /// Progress: one line per iteration.
+    Serve(serve::ServeArgs),
+    /// Imitate state-only demonstrations: LQR+GAIfO (default; --config: a `GaifoConfig`) or
+    /// the GAIfO (PPO) baseline (--config: a `GaifoPpoConfig`); --resume DIR continues an
+    /// LQR+GAIfO run. Progress: one line per iteration.
+    Train(train::TrainArgs),
+    /// Time one full learner update (GMM prior update, dynamics fit, η search) on a seeded
+    /// synthetic linear problem; prints median wall-clock and CPU times in milliseconds.
+    Bench(bench::BenchArgs),
+    /// The paper's experiments (comparison, generalisation, sim-vs-physical, stability): CSV,
+    /// PNG plot and summary table in the output folder; seeds run in parallel. --config: an
+    /// `ExperimentConfig`.
+    Experiment(experiment::ExperimentArgs),
+    /// Time LQR+GAIfO iterations on real demonstrations; prints per-phase medians and the
+    /// learner CPU time. --config: a `GaifoConfig`.
+    BenchGaifo(bench::BenchGaifoArgs),
+}
+
+/// Parses the command line and runs the subcommand.
+pub fn main() -> anyhow::Result<()> {
+    match Cli::parse().cmd {
+        Cmd::Expert(args) => expert::run(args),
+        Cmd::Train(args) => train::run(args),
+        Cmd::Experiment(args) => experiment::run_cli(args),
+        Cmd::Serve(args) => serve::run_cli(args),
+        Cmd::Conformance(args) => bench::conformance(args),
+        Cmd::BenchGaifo(args) => bench::run_gaifo(args),
+        Cmd::Bench(args) => bench::run(args),
+    }
+}

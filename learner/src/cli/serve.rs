@@ -1,0 +1,140 @@
+//! `learner serve`: its arguments and the command.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use serde::Serialize;
+
+use imitation::expert::ExpertConfig;
+use imitation::gaifo::GaifoConfig;
+
+use super::CommonArgs;
+use crate::serve::{
+    read_config, serve, serve_gaifo, settings, ServeAlgo, ServeOptions, ServeSummary,
+};
+
+/// Units and files, shown after `learner serve --help`.
+pub const HELP_UNITS: &str = "Units: angles rad (actions are goal joint angles), positions m (arm base frame), \
+times s (task.dt is the control period; progress `sec` (expert) and `sim_ms` (lqr-gaifo) are wall-clock from the \
+version's first sample to its update), task cost C(τ) = d_T + Σ (i/T) d_i in m; init_var rad². Every option lives \
+in the TOML file (an ExpertConfig as for `learner expert --config`, or with --algo lqr-gaifo a GaifoConfig as for \
+`learner train --config`, plus a [serve] table with algo, demos, prefix, out, resume, record_episodes, \
+wait_report_s, idle_sleep_us, task_tolerance); the flags above override it. The controller must run with the \
+same seed, task (lqr-gaifo: the demonstrations' goal, start_q, horizon, dt), noisy_episodes = samples and \
+eval_episodes = 1; the learner checks the task on the sample stream and stops with an error naming the \
+setting. Files in --out: episodes/*.npz, tables/v*.npz, latest_table.npz, best_table.npz; expert: \
+checkpoint.npz, serve_log.csv; lqr-gaifo: iter_NNN_table.npz + iter_NNN_critic.json, gaifo_log.csv (the \
+columns of `learner train`). --resume restores the controller (and LQR+GAIfO's critic exactly); the GMM \
+dynamics prior, the step size and the previous controller are not checkpointed and start afresh.";
+
+/// Arguments of `learner serve`.
+#[derive(clap::Args, Debug)]
+#[command(after_help = HELP_UNITS)]
+pub struct ServeArgs {
+    /// Learner: `expert` (true task cost; default) or `lqr-gaifo` (imitation from --demos);
+    /// overrides the config's [serve] algo.
+    #[arg(long, value_enum)]
+    pub algo: Option<ServeAlgo>,
+    /// Demonstrations (.npz from `learner expert`) for --algo lqr-gaifo; their task (goal,
+    /// start pose, T, dt) is the one rt-controller and hil-sim must run.
+    #[arg(long)]
+    pub demos: Option<PathBuf>,
+    /// iceoryx2 service prefix (rt-controller and hil-sim must use the same).
+    #[arg(long)]
+    pub prefix: Option<String>,
+    /// Continue from the checkpoint in DIR of an earlier (e.g. killed) run (expert:
+    /// checkpoint.npz; lqr-gaifo: the latest iter_NNN_table.npz + iter_NNN_critic.json):
+    /// re-publishes its table version and continues learning from that controller.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
+    /// Largest number of iterations (counted from the first, across resumes); overrides the config.
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// --config: an `ExpertConfig` (as for `learner expert`) or, for lqr-gaifo, a
+    /// `GaifoConfig` (as for `learner train`), plus an optional `[serve]` table; --seed must be
+    /// the controller's `seed`; --out: episodes, tables, checkpoints, per-iteration CSV.
+    #[command(flatten)]
+    pub common: CommonArgs,
+}
+
+/// The end-of-run line (stderr) and, with `--json`, the summary (stdout).
+fn finish<Log: Serialize>(summary: &ServeSummary<Log>, json: bool) -> anyhow::Result<()> {
+    eprintln!(
+        "learner serve: {:?} after {} iterations; table version {}; best noise-free cost {}; \
+         {} samples, {} complete episodes ({} used), discarded {} partial and {} mixed",
+        summary.exit_reason,
+        summary.iterations,
+        summary.table_version,
+        summary
+            .best_eval_cost
+            .map_or("-".to_string(), |c| format!("{c:.4}")),
+        summary.counts.samples,
+        summary.counts.episodes,
+        summary.counts.used,
+        summary.counts.partial,
+        summary.counts.mixed
+    );
+    if json {
+        println!("{}", serde_json::to_string(summary)?);
+    }
+    Ok(())
+}
+
+/// Runs `learner serve`.
+pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let (rest, mut opts) = match &args.common.config {
+        Some(p) => read_config(p)?,
+        None => (toml::Table::new(), ServeOptions::default()),
+    };
+    let path = args.common.config.clone().unwrap_or_default();
+    if let Some(a) = args.algo {
+        opts.algo = a;
+    }
+    if args.demos.is_some() {
+        opts.demos = args.demos;
+    }
+    if let Some(p) = args.prefix {
+        opts.prefix = p;
+    }
+    if let Some(o) = args.common.out {
+        opts.out = o;
+    }
+    if args.resume.is_some() {
+        opts.resume = args.resume;
+    }
+    match opts.algo {
+        ServeAlgo::Expert => {
+            anyhow::ensure!(
+                opts.demos.is_none(),
+                "--demos is for --algo lqr-gaifo; the expert learns on the true task cost"
+            );
+            let mut cfg: ExpertConfig = settings(rest, &path, "expert")?;
+            if let Some(s) = args.common.seed {
+                cfg.seed = s;
+            }
+            if let Some(i) = args.iterations {
+                cfg.iterations = i;
+            }
+            finish(&serve(cfg, opts, |_| {})?, args.common.json)
+        }
+        ServeAlgo::LqrGaifo => {
+            let Some(demos_path) = opts.demos.clone() else {
+                anyhow::bail!(
+                    "--algo lqr-gaifo needs --demos FILE (or [serve] demos): the demonstrations \
+                     to imitate, from `learner expert`"
+                );
+            };
+            let demos = crate::io::demos::load(&demos_path)
+                .with_context(|| format!("loading demonstrations {}", demos_path.display()))?;
+            let mut cfg: GaifoConfig = settings(rest, &path, "LQR+GAIfO")?;
+            if let Some(s) = args.common.seed {
+                cfg.seed = s;
+            }
+            if let Some(i) = args.iterations {
+                cfg.iterations = i;
+            }
+            finish(&serve_gaifo(cfg, demos, opts, |_| {})?, args.common.json)
+        }
+    }
+}

@@ -1,0 +1,211 @@
+//! `learner train`: imitation from state-only demonstrations.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+
+use imitation::demos::Demos;
+use imitation::gaifo::{GaifoConfig, GaifoLog};
+use imitation::ppo::UpdateStats;
+
+use super::CommonArgs;
+use crate::run::{train, train_resumed};
+use imitation::ppo::gaifo_ppo::GaifoPpoConfig;
+
+/// Which imitation algorithm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Algo {
+    /// LQR+GAIfO (Torabi et al. 2019, Algorithm 1).
+    LqrGaifo,
+    /// GAIfO with a PPO policy (the baseline).
+    GaifoPpo,
+}
+
+/// Arguments of `learner train`.
+#[derive(Args, Debug)]
+pub struct TrainArgs {
+    /// Demonstrations (.npz from `learner expert`): state trajectories only are used.
+    #[arg(long)]
+    pub demos: PathBuf,
+    /// Algorithm.
+    #[arg(long, value_enum, default_value = "lqr-gaifo")]
+    pub algo: Algo,
+    /// Iterations; overrides the config.
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Continue the LQR+GAIfO run in DIR (its --out) from its latest checkpoint
+    /// (iter_NNN_table.npz + iter_NNN_critic.json) up to --iterations in all, with the run's
+    /// own demonstrations, config and seed: iterations are numbered on from NNN and rows are
+    /// appended to DIR/gaifo_log.csv. The critic resumes exactly (weights, normalisation, Adam
+    /// moments, RNG); the GMM dynamics prior, the previous controller and the step size are not
+    /// checkpointed and start afresh, so the result differs from an uninterrupted run.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
+    /// --config: for lqr-gaifo a `GaifoConfig` (keys `samples`, `iterations`, `init_var`,
+    /// `critic_updates`, `adapt_step`, `psd_hessian`, `seed`; tables `sim`, `discriminator`,
+    /// `algorithm`, `prior`, `fit`, `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys
+    /// `samples`, `iterations`, `critic_updates`, `seed`; tables `sim`, `discriminator`, `ppo`).
+    /// --out: per-iteration CSV, gain tables and critic checkpoints [default: runs/train; with
+    /// --resume, DIR].
+    #[command(flatten)]
+    pub common: CommonArgs,
+}
+
+/// The end of a `learner train` run: the summary line on stderr and, with `--json`, the
+/// one-line JSON summary on stdout (both algorithms).
+pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, json: bool) {
+    let Some(last) = logs.last() else { return };
+    eprintln!(
+        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m); log and checkpoints in {}",
+        last.performance,
+        last.task_cost,
+        last.final_distance,
+        out.display()
+    );
+    if json {
+        let best = logs
+            .iter()
+            .map(|l| l.performance)
+            .fold(f64::NEG_INFINITY, f64::max);
+        println!(
+            "{}",
+            serde_json::json!({"command": "train", "algo": algo, "iterations": logs.len(), "seed": seed,
+                "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
+                "final_distance_m": last.final_distance, "out": out})
+        );
+    }
+}
+
+impl TrainArgs {
+    /// The output folder: `--out`, else the `--resume` folder, else `runs/train`.
+    pub fn out_dir(&self) -> PathBuf {
+        self.common
+            .out
+            .clone()
+            .or_else(|| self.resume.clone())
+            .unwrap_or_else(|| PathBuf::from("runs/train"))
+    }
+}
+
+/// Runs `learner train`.
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let demos = crate::io::demos::load(&args.demos)
+        .with_context(|| format!("loading demonstrations {}", args.demos.display()))?;
+    if args.algo == Algo::GaifoPpo {
+        anyhow::ensure!(
+            args.resume.is_none(),
+            "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+        );
+        let mut pcfg: GaifoPpoConfig = args.common.settings()?;
+        if let Some(i) = args.iterations {
+            pcfg.iterations = i;
+        }
+        if let Some(s) = args.common.seed {
+            pcfg.seed = s;
+        }
+        pcfg.sim.validate()?;
+        anyhow::ensure!(
+            pcfg.samples >= 1 && pcfg.iterations >= 1,
+            "samples and iterations must be >= 1"
+        );
+        return run_ppo(&args, demos, &pcfg);
+    }
+    let mut cfg: GaifoConfig = args.common.settings()?;
+    if let Some(i) = args.iterations {
+        cfg.iterations = i;
+    }
+    if let Some(s) = args.common.seed {
+        cfg.seed = s;
+    }
+    cfg.sim.validate()?;
+    anyhow::ensure!(
+        cfg.samples >= 1 && cfg.iterations >= 1,
+        "samples and iterations must be >= 1"
+    );
+    let out = args.out_dir();
+    if let Some(dir) = &args.resume {
+        anyhow::ensure!(
+            args.algo == Algo::LqrGaifo,
+            "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+        );
+        anyhow::ensure!(
+            out == *dir,
+            "--out {} and --resume {} differ: a resumed run continues in its own folder",
+            out.display(),
+            dir.display()
+        );
+    }
+    eprintln!(
+        "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
+        demos.count,
+        demos.horizon,
+        demos.goal,
+        cfg.seed,
+        out.display(),
+        if args.resume.is_some() {
+            " (resumed)"
+        } else {
+            ""
+        }
+    );
+    eprintln!("{}", GaifoLog::PROGRESS_HEADER);
+    let print = |l: &GaifoLog| eprintln!("{}", l.progress_line());
+    let logs = match &args.resume {
+        Some(dir) => train_resumed(&cfg, demos, dir, print)?,
+        None => train(&cfg, demos, Some(&out), print)?,
+    };
+    report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json);
+    Ok(())
+}
+
+fn print_line(l: &GaifoLog, u: &UpdateStats) {
+    eprintln!(
+        "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>9.2e} {:>6.3} {:>7.3} {:>9.3e} {:>7.1} {:>7.1}",
+        l.iteration,
+        l.task_cost,
+        l.performance,
+        l.final_distance,
+        l.critic_loss,
+        l.wasserstein,
+        l.kl,
+        u.clip_fraction,
+        u.mean_std,
+        u.value_loss,
+        1e3 * (l.t_critic + l.t_cost + l.t_lqr),
+        1e3 * l.t_execute
+    );
+}
+
+/// `learner train --algo gaifo-ppo` with `pcfg` (its `--config` layered over
+/// [`GaifoPpoConfig::default`], i.e. LQR+GAIfO's shared settings, then the command line).
+fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Result<()> {
+    let pcfg = pcfg.clone();
+    let out = args.out_dir();
+    eprintln!(
+        "GAIfO (PPO) on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}",
+        demos.count,
+        demos.horizon,
+        demos.goal,
+        pcfg.seed,
+        out.display()
+    );
+    eprintln!(
+        "{:>4} {:>9} {:>7} {:>8} {:>9} {:>8} {:>9} {:>6} {:>7} {:>9} {:>7} {:>7}",
+        "iter",
+        "task_cost",
+        "perf",
+        "final_m",
+        "critic",
+        "W1_est",
+        "approx_kl",
+        "clip",
+        "std",
+        "v_loss",
+        "lrn_ms",
+        "sim_ms"
+    );
+    let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), print_line)?;
+    report(&logs, "gaifo-ppo", pcfg.seed, &out, args.common.json);
+    Ok(())
+}

@@ -1,0 +1,590 @@
+//! `learner experiment <name>`: the paper's experiments, one command each (issue 7).
+//!
+//! | name | what | default |
+//! |---|---|---|
+//! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison") | 10 seeds × 100 iterations each |
+//! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
+//! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
+//!
+//! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
+//!
+//! Every run is a set of independent jobs (variant × seed), run on a rayon pool of
+//! `threads` workers (0 = all cores). A job's result depends only on its own seed and
+//! settings, never on the thread count or on the other jobs: the CSV (bar the wall-time
+//! columns) is the same with 1 thread or 8.
+//!
+//! Outputs in `--out` (default `runs/experiments/<name>`):
+//! - `<name>.csv`: one row per (variant, seed, iteration): `experiment,variant,` followed by
+//!   the columns of [`crate::io::log::CSV_HEADER`] (iteration, seed, algorithm, normalised
+//!   performance, task cost, final distance, critic loss, Wasserstein estimate, KL, η, step
+//!   multiplier, wall time per phase, learner CPU time);
+//! - `<name>.png`: normalised performance of the noise-free episode per iteration, mean ±
+//!   standard error over seeds, one curve per variant;
+//! - `summary.txt` / `summary.json`: the table printed at the end;
+//! - the demonstrations used (`demos.npz`, or `experts/` for the generalisation experiment).
+
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use imitation::demos::Demos;
+use imitation::expert::{square_goals, ExpertConfig};
+use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
+use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
+
+use crate::run::{arm_for, run_iterations};
+
+pub mod ipc;
+pub mod summary;
+
+pub use summary::{csv_header, summarise, summary_text, write_outputs, SummaryRow};
+
+/// Which experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExperimentName {
+    /// LQR+GAIfO vs GAIfO (PPO), normalised performance per iteration.
+    Comparison,
+    /// Demonstrations from subsets of the 8 square points; reach the unseen centre.
+    Generalisation,
+    /// The same LQR+GAIfO run on the nominal and on the perturbed arm, over IPC in real time.
+    SimVsPhysical,
+    /// LQR+GAIfO for 200 iterations: late-iteration stability.
+    Stability,
+}
+
+impl ExperimentName {
+    /// File-name form (`comparison`, `sim-vs-physical`, …).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Comparison => "comparison",
+            Self::Generalisation => "generalisation",
+            Self::SimVsPhysical => "sim-vs-physical",
+            Self::Stability => "stability",
+        }
+    }
+}
+
+/// Settings of an experiment (TOML: `learner experiment <name> --config FILE`, layered over
+/// that experiment's defaults, [`ExperimentConfig::defaults`]; unknown keys are errors).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// Seeds per variant: `first_seed, first_seed + 1, …`.
+    pub seeds: usize,
+    /// First seed.
+    pub first_seed: u64,
+    /// Iterations per run (overrides `lqr_gaifo.iterations` and `gaifo_ppo.iterations`).
+    pub iterations: usize,
+    /// Worker threads; 0 = one per core.
+    pub threads: usize,
+    /// Algorithms of the comparison (`lqr-gaifo`, `gaifo-ppo`).
+    pub algorithms: Vec<String>,
+    /// The expert that records the demonstrations (its `task.goal` is the target; its
+    /// `demos` is the number of demonstrations; the generalisation experiment trains one per
+    /// square point and one at the centre for the normalisation).
+    pub expert: ExpertConfig,
+    /// LQR+GAIfO (its `seed` and `iterations` are set per run).
+    pub lqr_gaifo: GaifoConfig,
+    /// GAIfO (PPO) (its `seed` and `iterations` are set per run).
+    pub gaifo_ppo: GaifoPpoConfig,
+    /// Generalisation: numbers of demonstrated square points, each a curve.
+    pub subset_sizes: Vec<usize>,
+    /// Generalisation: demonstrations per square point.
+    pub demos_per_point: usize,
+    /// Stability: one curve per number of critic (Adam) steps per iteration
+    /// (`lqr_gaifo.discriminator.n_critic`), to probe the paper's guess that a critic which
+    /// outpaces the controller causes the late degradation.
+    pub critic_steps: Vec<usize>,
+    /// Sim vs physical: the "physical" arm's perturbation (`hil-sim` knobs).
+    pub physical: ur5_shared::config::Perturbation,
+    /// Sim vs physical: simulated seconds per wall-clock second of the real-time loop.
+    pub time_compression: f64,
+}
+
+impl Default for ExperimentConfig {
+    fn default() -> Self {
+        Self::defaults(ExperimentName::Comparison)
+    }
+}
+
+impl ExperimentConfig {
+    /// The defaults of experiment `name` (issue 7: 10 seeds × 100 iterations for the
+    /// comparison; 15 iterations for the generalisation; 25 for sim vs physical).
+    pub fn defaults(name: ExperimentName) -> Self {
+        let base = Self {
+            seeds: 10,
+            first_seed: 0,
+            iterations: 100,
+            threads: 0,
+            algorithms: vec!["lqr-gaifo".into(), "gaifo-ppo".into()],
+            expert: ExpertConfig::default(),
+            lqr_gaifo: GaifoConfig::default(),
+            gaifo_ppo: GaifoPpoConfig::default(),
+            subset_sizes: (1..=8).collect(),
+            demos_per_point: 5,
+            critic_steps: vec![100, 1000],
+            physical: ur5_shared::config::Perturbation::physical_stand_in(1),
+            time_compression: 10.0,
+        };
+        match name {
+            ExperimentName::Comparison => base,
+            ExperimentName::Generalisation => Self {
+                seeds: 5,
+                iterations: 15,
+                ..base
+            },
+            ExperimentName::SimVsPhysical => Self {
+                seeds: 3,
+                iterations: 25,
+                ..base
+            },
+            ExperimentName::Stability => Self {
+                seeds: 5,
+                iterations: 200,
+                ..base
+            },
+        }
+    }
+
+    /// Checks the settings an experiment needs.
+    pub fn validate(&self, name: ExperimentName) -> anyhow::Result<()> {
+        anyhow::ensure!(self.seeds >= 1, "seeds must be >= 1");
+        anyhow::ensure!(self.iterations >= 1, "iterations must be >= 1");
+        for a in &self.algorithms {
+            anyhow::ensure!(
+                a == "lqr-gaifo" || a == "gaifo-ppo",
+                "unknown algorithm `{a}` (lqr-gaifo or gaifo-ppo)"
+            );
+        }
+        if name == ExperimentName::Comparison {
+            anyhow::ensure!(!self.algorithms.is_empty(), "algorithms is empty");
+        }
+        if name == ExperimentName::Stability {
+            anyhow::ensure!(
+                !self.critic_steps.is_empty() && self.critic_steps.iter().all(|&n| n >= 1),
+                "critic_steps must list numbers >= 1, got {:?}",
+                self.critic_steps
+            );
+        }
+        if name == ExperimentName::Generalisation {
+            anyhow::ensure!(
+                !self.subset_sizes.is_empty()
+                    && self.subset_sizes.iter().all(|k| (1..=8).contains(k)),
+                "subset_sizes must be numbers of square points in 1..=8, got {:?}",
+                self.subset_sizes
+            );
+            anyhow::ensure!(self.demos_per_point >= 1, "demos_per_point must be >= 1");
+        }
+        anyhow::ensure!(
+            self.time_compression > 0.0 && self.time_compression.is_finite(),
+            "time_compression must be > 0"
+        );
+        self.expert.task.validate()?;
+        self.expert.sim.validate()?;
+        Ok(())
+    }
+
+    fn seed_list(&self) -> Vec<u64> {
+        (0..self.seeds as u64)
+            .map(|i| self.first_seed + i)
+            .collect()
+    }
+}
+
+/// One finished run: a variant (curve) and seed.
+#[derive(Clone, Debug)]
+pub struct Run {
+    /// Curve label (algorithm, subset size, arm, …).
+    pub variant: String,
+    /// `lqr-gaifo` or `gaifo-ppo`.
+    pub algorithm: String,
+    /// Seed.
+    pub seed: u64,
+    /// One log per iteration.
+    pub logs: Vec<GaifoLog>,
+    /// Wall time of the whole run, s.
+    pub wall_s: f64,
+}
+
+/// What one job runs.
+#[derive(Clone)]
+pub enum Spec {
+    /// LQR+GAIfO with these settings.
+    LqrGaifo(GaifoConfig),
+    /// GAIfO (PPO) with these settings.
+    GaifoPpo(GaifoPpoConfig),
+}
+
+/// One independent unit of work: a variant at one seed on one demonstration set.
+#[derive(Clone)]
+pub struct Job {
+    /// Curve label.
+    pub variant: String,
+    /// Algorithm and settings (seed and iterations included).
+    pub spec: Spec,
+    /// The demonstrations (state-only use) and the task.
+    pub demos: Arc<Demos>,
+}
+
+impl Job {
+    fn seed(&self) -> u64 {
+        match &self.spec {
+            Spec::LqrGaifo(c) => c.seed,
+            Spec::GaifoPpo(c) => c.seed,
+        }
+    }
+
+    fn algorithm(&self) -> &'static str {
+        match &self.spec {
+            Spec::LqrGaifo(_) => "lqr-gaifo",
+            Spec::GaifoPpo(_) => "gaifo-ppo",
+        }
+    }
+
+    /// Runs the job in this thread.
+    pub fn run(&self) -> anyhow::Result<Run> {
+        let t0 = Instant::now();
+        let demos = (*self.demos).clone();
+        let (seed, algo) = (self.seed(), self.algorithm());
+        let logs = match &self.spec {
+            Spec::LqrGaifo(c) => {
+                let mut run = LqrGaifo::new(c.clone(), demos)?;
+                let mut arm = arm_for(&run)?;
+                run_iterations(&mut run, &mut arm, c.iterations, None, |_, _| {})?
+            }
+            Spec::GaifoPpo(c) => {
+                let mut run = GaifoPpo::new(c.clone(), demos)?;
+                let mut arm = arm_for(&run)?;
+                run_iterations(&mut run, &mut arm, c.iterations, None, |_, _| {})?
+            }
+        };
+        Ok(Run {
+            variant: self.variant.clone(),
+            algorithm: algo.into(),
+            seed,
+            logs,
+            wall_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// A rayon pool of `threads` workers (0 = one per core).
+pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("building the worker pool")
+}
+
+/// Runs every job on `pool`, printing one line per finished job; results in job order.
+pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Run>> {
+    let done = AtomicUsize::new(0);
+    let t0 = Instant::now();
+    let total = jobs.len();
+    pool.install(|| {
+        jobs.par_iter()
+            .map(|job| {
+                let run = job.run().with_context(|| {
+                    format!("{} seed {} ({})", job.variant, job.seed(), job.algorithm())
+                })?;
+                let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+                let last = run.logs.last().map(|l| l.performance).unwrap_or(f64::NAN);
+                eprintln!(
+                    "[{k:>3}/{total}] {:<18} seed {:>3}: {} iterations, final normalised performance {:>6.3} ({:.0} s; {:.0} s elapsed)",
+                    run.variant,
+                    run.seed,
+                    run.logs.len(),
+                    last,
+                    run.wall_s,
+                    t0.elapsed().as_secs_f64()
+                );
+                Ok(run)
+            })
+            .collect()
+    })
+}
+
+/// Trains `cfg` (an expert) and records `cfg.demos` demonstrations, with one progress line.
+pub fn expert_demos(cfg: &ExpertConfig) -> anyhow::Result<Demos> {
+    let t0 = Instant::now();
+    let run = crate::run::expert(cfg, |_| {})?;
+    let demos = crate::run::demos(cfg, &run)?;
+    eprintln!(
+        "expert for goal {:?}: {} demonstrations, mean cost {:.4} (random {:.4}), {:.0} s",
+        cfg.task.goal,
+        demos.count,
+        demos.cost_expert,
+        demos.cost_random,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(demos)
+}
+
+/// The demonstration set of the generalisation experiment for the square points `points`:
+/// their state trajectories, with the task (goal, start, T, dt) and the normalisation costs of
+/// `centre` (the target nobody demonstrated).
+pub fn combine_demos(centre: &Demos, points: &[&Demos]) -> anyhow::Result<Demos> {
+    anyhow::ensure!(!points.is_empty(), "no demonstrations to combine");
+    let mut out = Demos {
+        states: Vec::new(),
+        actions: Vec::new(),
+        count: 0,
+        ..centre.clone()
+    };
+    for d in points {
+        anyhow::ensure!(
+            d.horizon == centre.horizon && d.dt == centre.dt && d.start_q == centre.start_q,
+            "demonstrations of goal {:?} have another T, dt or start pose than the centre's",
+            d.goal
+        );
+        out.states.extend_from_slice(&d.states);
+        out.actions.extend_from_slice(&d.actions);
+        out.count += d.count;
+    }
+    Ok(out)
+}
+
+/// Square points demonstrated by a set of `k` (1…8): spread evenly around the square (the
+/// points are in order around it, corners and mid-edges alternating), starting at the first
+/// corner, so that every set of two or more surrounds the centre as evenly as `k` allows:
+/// indices `round(i · 8 / k)`, i = 0…k−1.
+pub fn subset(k: usize) -> Vec<usize> {
+    (0..k)
+        .map(|i| ((i * 8) as f64 / k as f64).round() as usize % 8)
+        .collect()
+}
+
+/// Jobs of the comparison: every algorithm × seed on `demos`.
+pub fn comparison_jobs(cfg: &ExperimentConfig, demos: Arc<Demos>) -> Vec<Job> {
+    let mut jobs = Vec::new();
+    for a in &cfg.algorithms {
+        for seed in cfg.seed_list() {
+            let spec = if a == "gaifo-ppo" {
+                let mut c = cfg.gaifo_ppo.clone();
+                c.seed = seed;
+                c.iterations = cfg.iterations;
+                Spec::GaifoPpo(c)
+            } else {
+                let mut c = cfg.lqr_gaifo.clone();
+                c.seed = seed;
+                c.iterations = cfg.iterations;
+                Spec::LqrGaifo(c)
+            };
+            jobs.push(Job {
+                variant: a.clone(),
+                spec,
+                demos: demos.clone(),
+            });
+        }
+    }
+    jobs
+}
+
+/// LQR+GAIfO jobs for one variant over every seed.
+pub fn lqr_jobs(cfg: &ExperimentConfig, variant: &str, demos: Arc<Demos>) -> Vec<Job> {
+    cfg.seed_list()
+        .into_iter()
+        .map(|seed| {
+            let mut c = cfg.lqr_gaifo.clone();
+            c.seed = seed;
+            c.iterations = cfg.iterations;
+            Job {
+                variant: variant.into(),
+                spec: Spec::LqrGaifo(c),
+                demos: demos.clone(),
+            }
+        })
+        .collect()
+}
+
+/// Loads `path` or trains the expert of `cfg.expert` and saves its demonstrations as
+/// `out/demos.npz`.
+fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow::Result<Demos> {
+    if let Some(p) = path {
+        let d = crate::io::demos::load(p)
+            .with_context(|| format!("loading demonstrations {}", p.display()))?;
+        eprintln!(
+            "demonstrations: {} ({} of goal {:?})",
+            p.display(),
+            d.count,
+            d.goal
+        );
+        return Ok(d);
+    }
+    let d = expert_demos(&cfg.expert)?;
+    std::fs::create_dir_all(out)?;
+    crate::io::demos::save(&d, &out.join("demos.npz"))?;
+    Ok(d)
+}
+
+/// The generalisation experiment's demonstration sets: trains the centre expert and the 8
+/// square experts (in parallel), saves them under `out/experts/`, returns one set per subset
+/// size.
+pub fn generalisation_demos(
+    cfg: &ExperimentConfig,
+    pool: &rayon::ThreadPool,
+    out: &Path,
+) -> anyhow::Result<Vec<(usize, Demos)>> {
+    let centre_goal = cfg.expert.task.goal;
+    let mut goals = vec![centre_goal];
+    goals.extend(square_goals(centre_goal, cfg.expert.square_half_side));
+    let experts: Vec<Demos> = pool.install(|| {
+        goals
+            .par_iter()
+            .enumerate()
+            .map(|(i, g)| {
+                let mut e = cfg.expert.clone();
+                e.task.goal = *g;
+                if i > 0 {
+                    e.demos = cfg.demos_per_point;
+                }
+                expert_demos(&e)
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+    })?;
+    let dir = out.join("experts");
+    std::fs::create_dir_all(&dir)?;
+    crate::io::demos::save(&experts[0], &dir.join("centre.npz"))?;
+    for (i, d) in experts[1..].iter().enumerate() {
+        crate::io::demos::save(d, &dir.join(format!("point_{i}.npz")))?;
+    }
+    cfg.subset_sizes
+        .iter()
+        .map(|&k| {
+            let pts: Vec<&Demos> = subset(k).into_iter().map(|i| &experts[1 + i]).collect();
+            Ok((k, combine_demos(&experts[0], &pts)?))
+        })
+        .collect()
+}
+
+/// Runs an in-process experiment (`comparison`, `generalisation`, `stability`) and writes its
+/// outputs; `demos` replaces training the expert (comparison and stability).
+pub fn run(
+    name: ExperimentName,
+    cfg: &ExperimentConfig,
+    out: &Path,
+    demos: Option<&Path>,
+) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+    cfg.validate(name)?;
+    let pool = pool(cfg.threads)?;
+    eprintln!(
+        "experiment {}: {} seed(s) from {}, {} iterations, {} worker thread(s) -> {}",
+        name.as_str(),
+        cfg.seeds,
+        cfg.first_seed,
+        cfg.iterations,
+        pool.current_num_threads(),
+        out.display()
+    );
+    let t0 = Instant::now();
+    let (jobs, title) = match name {
+        ExperimentName::Comparison => {
+            let d = Arc::new(demos_for(cfg, demos, out)?);
+            (
+                comparison_jobs(cfg, d),
+                "LQR+GAIfO vs GAIfO (PPO): 5 noisy episodes per iteration".to_string(),
+            )
+        }
+        ExperimentName::Stability => {
+            let d = Arc::new(demos_for(cfg, demos, out)?);
+            let mut jobs = Vec::new();
+            for &steps in &cfg.critic_steps {
+                let mut c = cfg.clone();
+                c.lqr_gaifo.discriminator.n_critic = steps;
+                jobs.extend(lqr_jobs(&c, &format!("critic {steps} steps/it"), d.clone()));
+            }
+            (
+                jobs,
+                format!("LQR+GAIfO over {} iterations", cfg.iterations),
+            )
+        }
+        ExperimentName::Generalisation => {
+            anyhow::ensure!(
+                demos.is_none(),
+                "--demos does not apply to the generalisation experiment (it trains 9 experts)"
+            );
+            let sets = generalisation_demos(cfg, &pool, out)?;
+            let mut jobs = Vec::new();
+            for (k, d) in sets {
+                let label = format!("{k} point{}", if k == 1 { "" } else { "s" });
+                jobs.extend(lqr_jobs(cfg, &label, Arc::new(d)));
+            }
+            (
+                jobs,
+                "Generalisation: demonstrations from k square points, target the centre"
+                    .to_string(),
+            )
+        }
+        ExperimentName::SimVsPhysical => {
+            anyhow::bail!("sim-vs-physical runs over IPC: learner::experiment::ipc::run")
+        }
+    };
+    let runs = run_jobs(&pool, &jobs)?;
+    let rows = write_outputs(name.as_str(), &title, &runs, out)?;
+    eprint!("{}", summary_text(&rows));
+    eprintln!(
+        "experiment {} done in {:.0} s; {} and {} in {}",
+        name.as_str(),
+        t0.elapsed().as_secs_f64(),
+        format_args!("{}.csv", name.as_str()),
+        format_args!("{}.png", name.as_str()),
+        out.display()
+    );
+    Ok((runs, rows))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::summary::report_points;
+    use super::*;
+
+    #[test]
+    fn subsets_spread_around_the_square() {
+        assert_eq!(subset(1), vec![0]);
+        assert_eq!(subset(2), vec![0, 4]);
+        assert_eq!(subset(4), vec![0, 2, 4, 6]);
+        assert_eq!(subset(8), (0..8).collect::<Vec<_>>());
+        for k in 1..=8 {
+            let s = subset(k);
+            let mut u = s.clone();
+            u.sort();
+            u.dedup();
+            assert_eq!(u.len(), k, "k = {k}: {s:?} has repeats");
+        }
+    }
+
+    #[test]
+    fn report_points_end_with_the_last_iteration() {
+        assert_eq!(report_points(3), vec![0, 2]);
+        assert_eq!(report_points(15), vec![0, 4, 9, 14]);
+        assert_eq!(report_points(100).last(), Some(&99));
+    }
+
+    #[test]
+    fn partial_config_keeps_the_experiments_defaults() {
+        let base = ExperimentConfig::defaults(ExperimentName::Generalisation);
+        let dir = std::env::temp_dir().join(format!("exp-cfg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("c.toml");
+        std::fs::write(&p, "seeds = 2\n[lqr_gaifo.discriminator]\nn_critic = 7\n").unwrap();
+        let c: ExperimentConfig =
+            ur5_shared::config::from_toml_file_over(&p, base.clone()).unwrap();
+        assert_eq!(c.seeds, 2);
+        assert_eq!(c.iterations, 15, "generalisation default kept");
+        assert_eq!(c.lqr_gaifo.discriminator.n_critic, 7);
+        assert_eq!(
+            c.lqr_gaifo.discriminator.batch_size,
+            base.lqr_gaifo.discriminator.batch_size
+        );
+        std::fs::write(&p, "seedz = 2\n").unwrap();
+        let e = ur5_shared::config::from_toml_file_over(&p, base).unwrap_err();
+        assert!(e.to_string().contains("seedz"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

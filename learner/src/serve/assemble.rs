@@ -1,0 +1,163 @@
+//! Episodes from the sample stream: the controller streams one `StepSample` per step; the
+//! [`Assembler`] groups them into complete episodes and [`Batch`] keeps those of the table version
+//! an update waits for (module docs of `serve`: "Which episodes count").
+
+use imitation::rollout::Episode;
+use serde::Serialize;
+use ur5_shared::layout::{DU, DX};
+use ur5_shared::StepSample;
+
+/// Counts of what arrived.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Counts {
+    /// Samples received.
+    pub samples: u64,
+    /// Complete episodes received (any version).
+    pub episodes: u64,
+    /// Episodes used by an update.
+    pub used: u64,
+    /// Discarded: incomplete (aborted by the controller, or samples lost).
+    pub partial: u64,
+    /// Discarded: the table version or the noise flag changed inside the episode.
+    pub mixed: u64,
+    /// Complete episodes of an older table version (run while the learner was updating).
+    pub old_version: u64,
+    /// Complete episodes of a newer table version than this learner's (another learner).
+    pub newer_version: u64,
+    /// Complete episodes of the current version beyond the N + 1 an update needs.
+    pub surplus: u64,
+}
+
+/// Builds an [`Episode`] from the samples of one complete episode (t = 0 … T−1):
+/// `x` = s, `u` = a_sent (executed), `u_policy` = a; ε is not sent and stays empty.
+pub fn episode_from_samples(samples: &[StepSample]) -> Episode {
+    let mut ep = Episode {
+        x: Vec::with_capacity(samples.len() * DX),
+        u: Vec::with_capacity(samples.len() * DU),
+        u_policy: Vec::with_capacity(samples.len() * DU),
+        eps: Vec::new(),
+        noisy: samples.first().is_some_and(StepSample::is_noisy),
+    };
+    for s in samples {
+        ep.x.extend_from_slice(&s.s);
+        ep.u.extend_from_slice(&s.a_sent);
+        ep.u_policy.extend_from_slice(&s.a);
+    }
+    ep
+}
+
+/// What the [`Assembler`] made of an episode once it ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Assembled {
+    /// All T steps in order, one version, one noise flag.
+    Complete {
+        /// Controller episode number.
+        episode: u64,
+        /// Table version.
+        version: u64,
+        /// The episode.
+        ep: Episode,
+    },
+    /// Ended (or was cut) before t = T−1, or missed samples.
+    Partial {
+        /// Controller episode number.
+        episode: u64,
+        /// Samples it had.
+        have: usize,
+    },
+    /// The version or noise flag changed inside the episode.
+    Mixed {
+        /// Controller episode number.
+        episode: u64,
+    },
+}
+
+/// Groups the sample stream into episodes.
+pub struct Assembler {
+    horizon: usize,
+    cur: Vec<StepSample>,
+    gap: bool,
+    mixed: bool,
+}
+
+impl Assembler {
+    /// For episodes of `horizon` steps.
+    pub fn new(horizon: usize) -> Self {
+        Self {
+            horizon,
+            cur: Vec::with_capacity(horizon),
+            gap: false,
+            mixed: false,
+        }
+    }
+
+    fn close(&mut self) -> Option<Assembled> {
+        let first = *self.cur.first()?;
+        let out = if self.mixed {
+            Assembled::Mixed {
+                episode: first.episode,
+            }
+        } else if self.gap || self.cur.len() != self.horizon {
+            Assembled::Partial {
+                episode: first.episode,
+                have: self.cur.len(),
+            }
+        } else {
+            Assembled::Complete {
+                episode: first.episode,
+                version: first.table_version,
+                ep: episode_from_samples(&self.cur),
+            }
+        };
+        self.cur.clear();
+        self.gap = false;
+        self.mixed = false;
+        Some(out)
+    }
+
+    /// Takes one sample; returns the episodes it ended (at most two: an unfinished one cut
+    /// off by this sample, and this sample's own if it is the last step).
+    pub fn push(&mut self, s: &StepSample) -> Vec<Assembled> {
+        let mut out = Vec::new();
+        if let Some(last) = self.cur.last() {
+            if s.episode != last.episode {
+                out.extend(self.close());
+            } else {
+                self.gap |= s.t != last.t + 1;
+                self.mixed |= s.table_version != last.table_version || s.noise != last.noise;
+            }
+        }
+        if self.cur.is_empty() {
+            self.gap = s.t != 0;
+        }
+        self.cur.push(*s);
+        if s.t as usize + 1 >= self.horizon {
+            out.extend(self.close());
+        }
+        out
+    }
+}
+
+/// The episodes of one table version an update waits for.
+pub(super) struct Batch {
+    pub(super) noisy: Vec<Episode>,
+    pub(super) eval: Option<Episode>,
+}
+
+impl Batch {
+    pub(super) fn full(&self, n: usize) -> bool {
+        self.noisy.len() >= n && self.eval.is_some()
+    }
+
+    /// Takes `ep` if the batch still needs one of its kind.
+    pub(super) fn offer(&mut self, ep: Episode, n: usize) -> bool {
+        if ep.noisy && self.noisy.len() < n {
+            self.noisy.push(ep);
+        } else if !ep.noisy && self.eval.is_none() {
+            self.eval = Some(ep);
+        } else {
+            return false;
+        }
+        true
+    }
+}

@@ -1,0 +1,144 @@
+//! What the serve loop needs of a learner besides [`imitation::learn::LinGaussLearn`]: its
+//! files (checkpoint, CSV) and progress line, and the table in force.
+
+use std::io::Write;
+use std::path::Path;
+
+use anyhow::Context;
+use imitation::expert::{ExpertLearner, IterationLog};
+use imitation::gaifo::{GaifoLog, LqrGaifo};
+use imitation::learn::{Learn, LinGaussLearn};
+use imitation::rollout::Episode;
+use serde::Serialize;
+use ur5_shared::GainTable;
+
+use super::ServeOptions;
+use crate::io::checkpoint::save_checkpoint;
+use crate::io::episode::{save_episode, EpisodeOrigin};
+use crate::io::log::{open_log, write_csv_row};
+use crate::io::table::save_table;
+use crate::run::Checkpoint;
+
+/// A learner `learner serve` runs: [`LinGaussLearn`] (steps 2–6 on the streamed episodes, the
+/// controller to publish) plus its files and progress line. Implemented for the expert
+/// ([`ExpertLearner`]) and LQR+GAIfO ([`LqrGaifo`]).
+pub trait ServeLearner: LinGaussLearn<Log: Serialize> {
+    /// Where the task comes from (for messages).
+    const TASK_SOURCE: &'static str;
+    /// Header of [`ServeLearner::progress_line`].
+    const PROGRESS_HEADER: &'static str;
+    /// Writes what `--resume` needs into `out`.
+    fn checkpoint(&self, out: &Path) -> anyhow::Result<()>;
+    /// Opens the per-iteration CSV in `out` for appending (`resumed`: a resumed run).
+    fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File>;
+    /// One CSV row, newline included.
+    fn csv_row(&self, log: &Self::Log) -> anyhow::Result<String>;
+    /// The progress line of an iteration.
+    fn progress_line(log: &Self::Log) -> String;
+}
+
+impl ServeLearner for ExpertLearner {
+    const TASK_SOURCE: &'static str = "this learner's config ([task])";
+    const PROGRESS_HEADER: &'static str = IterationLog::PROGRESS_HEADER;
+    fn checkpoint(&self, out: &Path) -> anyhow::Result<()> {
+        save_checkpoint(
+            &out.join("checkpoint.npz"),
+            self.policy(),
+            self.iteration(),
+            self.cost_random(),
+            self.config().seed,
+        )
+    }
+    fn open_csv(&self, out: &Path, _resumed: bool) -> anyhow::Result<std::fs::File> {
+        let path = out.join("serve_log.csv");
+        let new_csv = !path.exists();
+        let mut csv = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .with_context(|| format!("opening {}", path.display()))?;
+        if new_csv {
+            writeln!(csv, "{}", IterationLog::CSV_HEADER)?;
+        }
+        Ok(csv)
+    }
+    fn csv_row(&self, log: &IterationLog) -> anyhow::Result<String> {
+        Ok(format!("{}\n", log.csv_row()))
+    }
+    fn progress_line(log: &IterationLog) -> String {
+        log.progress_line()
+    }
+}
+
+impl ServeLearner for LqrGaifo {
+    const TASK_SOURCE: &'static str = "the demonstrations";
+    const PROGRESS_HEADER: &'static str = GaifoLog::PROGRESS_HEADER;
+    fn checkpoint(&self, out: &Path) -> anyhow::Result<()> {
+        Checkpoint::checkpoint(self, out).map(|_| ())
+    }
+    fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File> {
+        open_log(
+            &out.join("gaifo_log.csv"),
+            resumed.then_some(self.iteration()),
+        )
+    }
+    fn csv_row(&self, log: &GaifoLog) -> anyhow::Result<String> {
+        let mut row = Vec::new();
+        write_csv_row(&mut row, log, self.seed(), Self::ALGO)?;
+        Ok(String::from_utf8(row)?)
+    }
+    fn progress_line(log: &GaifoLog) -> String {
+        log.progress_line()
+    }
+}
+
+/// The learner's side of the run: files and the table in force.
+pub(super) struct Run<L> {
+    pub(super) learner: L,
+    pub(super) opts: ServeOptions,
+    pub(super) csv: std::fs::File,
+    pub(super) arrivals: u64,
+}
+
+impl<L: ServeLearner> Run<L> {
+    /// Saves the checkpoint and the table of the controller to execute next; returns the table.
+    pub(super) fn save_current(&self) -> anyhow::Result<Box<GainTable>> {
+        let out = &self.opts.out;
+        let version = self.learner.version();
+        let table = self.learner.table();
+        self.learner.checkpoint(out)?;
+        let dt = self.learner.task().dt;
+        save_table(
+            &out.join("tables").join(format!("v{version:04}.npz")),
+            &table,
+            dt,
+        )?;
+        save_table(&out.join("latest_table.npz"), &table, dt)?;
+        Ok(table)
+    }
+
+    pub(super) fn record(
+        &mut self,
+        ep: &Episode,
+        episode: u64,
+        version: u64,
+    ) -> anyhow::Result<()> {
+        self.arrivals += 1;
+        if !self.opts.record_episodes {
+            return Ok(());
+        }
+        let name = format!("{:06}_e{episode:06}_v{version:04}.npz", self.arrivals);
+        let origin = EpisodeOrigin {
+            table_version: version,
+            episode,
+            seed: self.learner.seed(),
+        };
+        save_episode(
+            &self.opts.out.join("episodes").join(name),
+            ep,
+            &origin,
+            self.learner.task(),
+        )?;
+        Ok(())
+    }
+}

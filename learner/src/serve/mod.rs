@@ -1,0 +1,676 @@
+//! `learner serve`: the learner end of the three processes (docs/design.md §3.6)
+//!
+//! ```text
+//! hil-sim serve  <-->  rt-controller  -- learner/samples -->  learner serve
+//!                                     <-- controller/gains --
+//! ```
+//!
+//! Algorithm 1 with line 1 ("execute the controller") done by the real-time loop: the learner
+//! publishes a gain table, assembles the episodes the controller runs with it from the
+//! [`StepSample`] stream, and when `samples` noisy episodes and one noise-free episode of that
+//! table version are in, runs lines 2–6 and publishes the next version. One loop serves both
+//! learners ([`ServeLearner`]):
+//! - `--algo expert` (default): [`ExpertLearner::update`] on the true task cost (the same code
+//!   as the in-process [`imitation::expert::train`]); the task is the config's `[task]`;
+//! - `--algo lqr-gaifo --demos FILE`: [`LqrGaifo::learn`] (the same code as the in-process
+//!   [`LqrGaifo::iterate`], `learner train`); the task (goal, start pose, T, dt) is the
+//!   demonstrations'.
+//!
+//! # Same episodes as in process
+//! The controller draws the noise of the k-th episode of a table version from
+//! `Noise::new(seed, version, k)`, episodes k = 0 … N−1 of a version with noise and k = N
+//! without (`noisy_episodes = N`, `eval_episodes = 1`), exactly the order of
+//! [`imitation::iteration::execute`]. With the same seed, task and arm (lockstep), the episodes over
+//! IPC equal the in-process ones bit for bit, and so does everything learned from them. The
+//! dynamics are fitted on the executed actions (`StepSample::a_sent`, after the clamp).
+//!
+//! # The task must be the controller's and the arm's
+//! The learner checks what the sample stream shows and stops with an error naming the setting:
+//! a step t ≥ T, or three episodes in a row that end after the same number of steps < T (the
+//! controller's horizon differs); on the first complete episode (of any table version), a
+//! first state whose joint angles (start pose) or end effector minus goal differ from the
+//! task's by more than `serve.task_tolerance`; on the first complete noisy episode of its own
+//! table version, motion per step that is not what the task's dt gives (ratio of
+//! Σ Δq·q̄̇ / Σ q̄̇² — q̄̇ the mean joint velocity of the two ends of a step — to the same on an
+//! in-process replay of that table with the episode-0 noise, outside [1/2, 2]; measured on
+//! the initial controller, T = 30: 0.89–1.0 for the same dt on the nominal and on the perturbed
+//! "physical" arm, 0.38 at half and 2.8–3.9 at twice the dt). The dt check is a heuristic: in
+//! lockstep the samples carry no simulated time. In real time it also catches an arm that
+//! cannot keep up with its clock (less simulated time per control period than dt).
+//!
+//! # Which episodes count
+//! Only complete episodes (t = 0 … T−1 in order, one table version, one noise flag) of the
+//! version the learner waits for; the first N noisy and the first noise-free one, in arrival
+//! order. Partial (aborted, or samples lost), mixed-version episodes are discarded and counted;
+//! complete episodes of other versions (the controller keeps running the old table while the
+//! learner updates) and surplus ones are recorded but not used.
+//!
+//! # Files (`--out`)
+//! - `episodes/NNNNNN_eEPISODE_vVERSION.npz`: every complete episode as it arrives
+//!   ([`crate::io::episode`]);
+//! - `tables/vVERSION.npz`: every table published ([`crate::io::table`]); `latest_table.npz`;
+//! - the checkpoint of the controller to execute next, written before its table is published:
+//!   expert: `checkpoint.npz` (all GPS policy arrays, its iteration, the random-policy cost);
+//!   lqr-gaifo: `iter_NNN_table.npz` + `iter_NNN_critic.json`, as `learner train` writes them
+//!   ([`LqrGaifo::checkpoint`]);
+//! - the per-iteration CSV: expert: `serve_log.csv` ([`IterationLog::CSV_HEADER`], appended
+//!   across runs); lqr-gaifo: `gaifo_log.csv` ([`imitation::gaifo::CSV_HEADER`], as `learner train`;
+//!   `t_execute_s` is the time from the version's first sample to its last needed episode;
+//!   appended across resumes); `best_table.npz` at exit.
+//!
+//! # Peers that die
+//! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
+//! A restarted learner: `--resume DIR` continues from DIR's checkpoint (expert:
+//! `checkpoint.npz`; lqr-gaifo: the latest `iter_NNN_*` pair, [`LqrGaifo::resume`]: also a
+//! `learner train` folder) and publishes that table version again (the controller already runs
+//! it and ignores the duplicate), then waits for N + 1 fresh episodes of it. The GPS learner
+//! state (GMM dynamics prior, step size, previous controller) is not checkpointed and starts
+//! afresh; LQR+GAIfO's critic resumes exactly. Without `--resume` a new learner starts at
+//! version 1, which a controller running a newer version rejects: the learner then reports the
+//! newer version it sees in the samples and keeps waiting.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use imitation::controller::to_gain_table;
+use imitation::demos::Demos;
+use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
+use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
+use serde::{Deserialize, Serialize};
+
+use crate::io::table::save_table;
+use gps::policy::lin_gauss::LinGaussPolicy;
+use iceoryx2::port::update_connections::UpdateConnections;
+
+mod assemble;
+mod learner;
+mod ports;
+mod task_check;
+
+pub use assemble::{episode_from_samples, Assembled, Assembler, Counts};
+pub use learner::ServeLearner;
+pub use task_check::motion_per_step;
+
+use assemble::Batch;
+use learner::Run;
+use ports::Ports;
+use task_check::{validate, TaskCheck};
+
+/// Which learner `learner serve` runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ServeAlgo {
+    /// The expert's iteration on the true task cost (the config is an `ExpertConfig`).
+    #[default]
+    Expert,
+    /// LQR+GAIfO from state-only demonstrations (the config is a `GaifoConfig`; needs `demos`).
+    LqrGaifo,
+}
+
+/// Options of `learner serve` (the `[serve]` table of the config file; the rest of the file is
+/// an [`ExpertConfig`], as for `learner expert`, or with `algo = "lqr-gaifo"` a
+/// [`GaifoConfig`], as for `learner train`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServeOptions {
+    /// Which learner.
+    pub algo: ServeAlgo,
+    /// Demonstrations (`.npz` from `learner expert`) for `algo = "lqr-gaifo"`; their task
+    /// (goal, start pose, T, dt) is the one the controller and the arm must run.
+    pub demos: Option<PathBuf>,
+    /// iceoryx2 service prefix; the controller and the arm must use the same.
+    pub prefix: String,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Continue from the checkpoint in this folder of an earlier run (see the module docs).
+    pub resume: Option<PathBuf>,
+    /// Record every complete episode to `out/episodes/`.
+    pub record_episodes: bool,
+    /// While no sample arrives, say so every this many seconds (wall clock).
+    pub wait_report_s: f64,
+    /// Sleep between polls when idle (µs).
+    pub idle_sleep_us: u64,
+    /// Largest difference (rad, m) allowed between the first state of the controller's
+    /// episodes and the task's: joint angles (start pose) and end effector minus goal. Ours:
+    /// 0.01, ten times the perturbed arm's sensor noise (1e-3).
+    pub task_tolerance: f64,
+}
+
+impl Default for ServeOptions {
+    fn default() -> Self {
+        Self {
+            algo: ServeAlgo::Expert,
+            demos: None,
+            prefix: String::new(),
+            out: PathBuf::from("runs/serve"),
+            resume: None,
+            record_episodes: true,
+            wait_report_s: 5.0,
+            idle_sleep_us: 500,
+            task_tolerance: 0.01,
+        }
+    }
+}
+
+/// Reads a config file: its `[serve]` table (optional) and the rest, unparsed.
+pub(crate) fn read_config(path: &Path) -> anyhow::Result<(toml::Table, ServeOptions)> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut value: toml::Table =
+        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let serve = match value.remove("serve") {
+        Some(v) => v
+            .try_into()
+            .with_context(|| format!("[serve] in {}", path.display()))?,
+        None => ServeOptions::default(),
+    };
+    Ok((value, serve))
+}
+
+/// The settings of a config file without its `[serve]` table, read as `learner expert` and
+/// `learner train` read theirs (`ur5_shared::config::from_toml_str`).
+pub(crate) fn settings<C: Serialize + serde::de::DeserializeOwned + Default>(
+    rest: toml::Table,
+    path: &Path,
+    what: &str,
+) -> anyhow::Result<C> {
+    let text = toml::to_string(&rest)?;
+    ur5_shared::config::from_toml_str(&text)
+        .with_context(|| format!("{what} settings in {}", path.display()))
+}
+
+/// Reads a config file: an [`ExpertConfig`] at the top level plus an optional `[serve]` table.
+pub fn load_config(path: &Path) -> anyhow::Result<(ExpertConfig, ServeOptions)> {
+    let (rest, serve) = read_config(path)?;
+    Ok((settings(rest, path, "expert")?, serve))
+}
+
+/// Reads a config file: a [`GaifoConfig`] at the top level plus an optional `[serve]` table.
+pub fn load_gaifo_config(path: &Path) -> anyhow::Result<(GaifoConfig, ServeOptions)> {
+    let (rest, serve) = read_config(path)?;
+    Ok((settings(rest, path, "LQR+GAIfO")?, serve))
+}
+
+/// Why [`serve`] returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ServeExit {
+    /// `iterations` reached (or `patience` ran out) and the controller took the last table.
+    Done,
+    /// SIGINT / SIGTERM.
+    Stopped,
+}
+
+/// What a serve run did (`--json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct ServeSummary<Log = IterationLog> {
+    /// Always "serve".
+    pub command: &'static str,
+    /// `expert` or `lqr-gaifo`.
+    pub algorithm: &'static str,
+    /// Why it ended.
+    pub exit_reason: ServeExit,
+    /// Version this run started from (1, or the resumed checkpoint's).
+    pub start_version: u64,
+    /// Latest table version published.
+    pub table_version: u64,
+    /// Iterations (updates) run by this process.
+    pub iterations: usize,
+    /// Task cost of the noise-free episode of each iteration of this run.
+    pub eval_costs: Vec<f64>,
+    /// Lowest of them.
+    pub best_eval_cost: Option<f64>,
+    /// Per-iteration logs of this run.
+    pub log: Vec<Log>,
+    /// What arrived.
+    pub counts: Counts,
+    /// Output folder.
+    pub out: PathBuf,
+}
+
+/// Runs the expert's learner end until the learning is done or SIGINT/SIGTERM. `progress`
+/// receives each iteration's log (`seconds`: from the first sample of the version to the end
+/// of its update).
+pub fn serve(
+    cfg: ExpertConfig,
+    opts: ServeOptions,
+    progress: impl FnMut(&IterationLog),
+) -> anyhow::Result<ServeSummary> {
+    validate(&cfg.task, cfg.samples, cfg.init_var, &opts)?;
+    let el = match &opts.resume {
+        Some(dir) => {
+            let path = dir.join("checkpoint.npz");
+            let (pol, iteration, cost_random) = crate::io::checkpoint::load_checkpoint(&path)
+                .with_context(|| format!("resuming from {}", path.display()))?;
+            anyhow::ensure!(
+                pol.t == cfg.task.horizon,
+                "{} holds a controller of T = {}, the task has T = {}",
+                path.display(),
+                pol.t,
+                cfg.task.horizon
+            );
+            ExpertLearner::resume(cfg, pol, iteration, cost_random)
+        }
+        None => ExpertLearner::new(cfg, None),
+    };
+    serve_loop(el, opts, progress)
+}
+
+/// Runs the LQR+GAIfO learner end on `demos` (their task) until `cfg.iterations` are done or
+/// SIGINT/SIGTERM. `progress` receives each iteration's log (`t_execute`: from the first sample
+/// of the version to its last needed episode).
+pub fn serve_gaifo(
+    cfg: GaifoConfig,
+    demos: Demos,
+    opts: ServeOptions,
+    progress: impl FnMut(&GaifoLog),
+) -> anyhow::Result<ServeSummary<GaifoLog>> {
+    let task = demos.task()?;
+    validate(&task, cfg.samples, cfg.init_var, &opts)
+        .context("the demonstrations' task or the settings")?;
+    let run = match &opts.resume {
+        Some(dir) => crate::run::resume(cfg, demos, dir)?,
+        None => LqrGaifo::new(cfg, demos)?,
+    };
+    serve_loop(run, opts, progress)
+}
+
+/// The one serve loop (module docs) around `learner`.
+fn serve_loop<L: ServeLearner>(
+    learner: L,
+    opts: ServeOptions,
+    mut progress: impl FnMut(&L::Log),
+) -> anyhow::Result<ServeSummary<L::Log>> {
+    let out = opts.out.clone();
+    for d in [out.clone(), out.join("tables"), out.join("episodes")] {
+        std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    let csv = learner.open_csv(&out, opts.resume.is_some())?;
+    let mut run = Run {
+        learner,
+        opts,
+        csv,
+        arrivals: 0,
+    };
+
+    // Setup: every port before anything runs.
+    let ports = Ports::create(&run.opts.prefix)?;
+    let start_version = run.learner.version();
+    let table = run.save_current()?;
+    ports.publish(&table)?;
+    let (n, t_len) = (run.learner.samples(), run.learner.task().horizon);
+    eprintln!(
+        "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version",
+        L::ALGO,
+        run.opts.prefix,
+        if run.opts.resume.is_some() { " (resumed)" } else { "" },
+    );
+    eprintln!("{}", L::PROGRESS_HEADER);
+
+    let mut asm = Assembler::new(t_len);
+    let mut batch = Batch {
+        noisy: Vec::with_capacity(n),
+        eval: None,
+    };
+    let mut check = TaskCheck::default();
+    let mut counts = Counts::default();
+    let mut log = Vec::new();
+    let mut best: Option<(LinGaussPolicy, f64)> = None;
+    let mut finishing = run.learner.done();
+    let report = Duration::from_secs_f64(run.opts.wait_report_s);
+    let idle = Duration::from_micros(run.opts.idle_sleep_us.max(1));
+    let mut last_sample = Instant::now();
+    let mut last_report = Instant::now();
+    let mut version_started: Option<Instant> = None;
+    let mut newer_reported = 0u64;
+
+    let exit = 'outer: loop {
+        let mut got = false;
+        while let Some(sample) = ports
+            .samples
+            .receive()
+            .map_err(|e| anyhow::anyhow!("receiving samples: {e:?}"))?
+        {
+            let s = *sample;
+            drop(sample);
+            got = true;
+            counts.samples += 1;
+            check.sample(&s, &run.learner)?;
+            if s.table_version == run.learner.version() && version_started.is_none() {
+                version_started = Some(Instant::now());
+            }
+            for a in asm.push(&s) {
+                let (episode, version, ep) = match a {
+                    Assembled::Complete {
+                        episode,
+                        version,
+                        ep,
+                    } => (episode, version, ep),
+                    Assembled::Partial { episode, have } => {
+                        counts.partial += 1;
+                        eprintln!(
+                            "learner serve: discarded episode {episode}: {have} of {t_len} steps"
+                        );
+                        check.partial(have, &run.learner)?;
+                        continue;
+                    }
+                    Assembled::Mixed { episode } => {
+                        counts.mixed += 1;
+                        eprintln!("learner serve: discarded episode {episode}: table version or noise flag changed inside it");
+                        continue;
+                    }
+                };
+                counts.episodes += 1;
+                run.record(&ep, episode, version)?;
+                check.episode(&ep, version, &run.learner, run.opts.task_tolerance)?;
+                let current = run.learner.version();
+                if version < current {
+                    counts.old_version += 1;
+                } else if version > current {
+                    counts.newer_version += 1;
+                    if version != newer_reported {
+                        newer_reported = version;
+                        eprintln!(
+                            "learner serve: the controller runs table version {version}, newer than this learner's {current}: \
+                             another learner published it; restart this one with --resume <its out dir> to continue from there"
+                        );
+                    }
+                } else if finishing {
+                    // The controller took the last table: nothing more to learn.
+                    break 'outer ServeExit::Done;
+                } else if batch.offer(ep, n) {
+                    counts.used += 1;
+                } else {
+                    counts.surplus += 1;
+                }
+            }
+            if batch.full(n) {
+                let eval = batch.eval.take().expect("full batch");
+                let cost = eval.task_cost();
+                if best.as_ref().is_none_or(|(_, c)| cost < *c) {
+                    best = Some((run.learner.policy().clone(), cost));
+                }
+                let waited = version_started
+                    .take()
+                    .map_or(0.0, |t0| t0.elapsed().as_secs_f64());
+                let entry = run.learner.learn(&batch.noisy, &eval, waited)?;
+                batch.noisy.clear();
+                let table = run.save_current()?;
+                ports.publish(&table)?;
+                let row = run.learner.csv_row(&entry)?;
+                run.csv.write_all(row.as_bytes())?;
+                eprintln!("{}", L::progress_line(&entry));
+                progress(&entry);
+                log.push(entry);
+                finishing = run.learner.done();
+                if finishing {
+                    eprintln!(
+                        "learner serve: learning done ({} iterations); published the last table, version {}; \
+                         exiting once the controller runs it",
+                        run.learner.iteration(),
+                        run.learner.version()
+                    );
+                }
+            }
+        }
+        if got {
+            last_sample = Instant::now();
+            continue;
+        }
+        // Idle: deliver the table (history) to a controller that connected late.
+        let _ = ports.gains.update_connections();
+        if last_sample.elapsed() >= report && last_report.elapsed() >= report {
+            last_report = Instant::now();
+            eprintln!(
+                "learner serve: waiting for episodes of table version {} on prefix `{}`: no sample for {:.0} s \
+                 (is rt-controller running with --prefix {}?)",
+                run.learner.version(),
+                run.opts.prefix,
+                last_sample.elapsed().as_secs_f64(),
+                run.opts.prefix
+            );
+        }
+        if ports.node.wait(idle).is_err() {
+            break ServeExit::Stopped;
+        }
+    };
+
+    if let Some((pol, _)) = &best {
+        save_table(
+            &out.join("best_table.npz"),
+            &to_gain_table(pol, run.learner.version()),
+            run.learner.task().dt,
+        )?;
+    }
+    Ok(ServeSummary {
+        command: "serve",
+        algorithm: L::ALGO,
+        exit_reason: exit,
+        start_version,
+        table_version: run.learner.version(),
+        iterations: log.len(),
+        eval_costs: log.iter().map(L::eval_cost).collect(),
+        best_eval_cost: best.map(|(_, c)| c),
+        log,
+        counts,
+        out,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::arm::SimArm;
+    use crate::io::checkpoint::{load_checkpoint, save_checkpoint};
+    use imitation::rollout::{run_episode, Episode};
+    use ur5_shared::config::{SimConfig, TaskConfig};
+    use ur5_shared::layout::{DU, DX};
+    use ur5_shared::noise::Noise;
+    use ur5_shared::StepSample;
+
+    fn sample(episode: u64, t: u32, version: u64, noise: u32) -> StepSample {
+        StepSample {
+            table_version: version,
+            episode,
+            t,
+            noise,
+            s: [t as f64; DX],
+            a: [1.0; DU],
+            a_sent: [0.5; DU],
+            ..StepSample::default()
+        }
+    }
+
+    #[test]
+    fn assembler_keeps_complete_episodes_and_discards_the_rest() {
+        let mut a = Assembler::new(3);
+        let mut got = Vec::new();
+        // Starts mid-episode (a learner that joins late): partial.
+        for s in [sample(0, 1, 1, 1), sample(0, 2, 1, 1)] {
+            got.extend(a.push(&s));
+        }
+        // Complete.
+        for t in 0..3 {
+            got.extend(a.push(&sample(1, t, 1, 1)));
+        }
+        // Aborted after t = 1, then a complete noise-free one.
+        for s in [sample(2, 0, 1, 1), sample(2, 1, 1, 1)] {
+            got.extend(a.push(&s));
+        }
+        for t in 0..3 {
+            got.extend(a.push(&sample(3, t, 2, 0)));
+        }
+        // Version changes inside; a sample lost inside.
+        for s in [sample(4, 0, 2, 1), sample(4, 1, 3, 1), sample(4, 2, 3, 1)] {
+            got.extend(a.push(&s));
+        }
+        for s in [sample(5, 0, 3, 1), sample(5, 2, 3, 1)] {
+            got.extend(a.push(&s));
+        }
+        let kinds: Vec<String> = got
+            .iter()
+            .map(|g| match g {
+                Assembled::Complete {
+                    episode, version, ..
+                } => format!("C{episode}v{version}"),
+                Assembled::Partial { episode, have } => format!("P{episode}:{have}"),
+                Assembled::Mixed { episode } => format!("M{episode}"),
+            })
+            .collect();
+        assert_eq!(kinds, ["P0:2", "C1v1", "P2:2", "C3v2", "M4", "P5:2"]);
+        let Assembled::Complete { ep, .. } = &got[3] else {
+            panic!()
+        };
+        assert!(!ep.noisy);
+        assert_eq!(ep.horizon(), 3);
+        assert_eq!(ep.state(2), [2.0; DX]);
+        assert_eq!(ep.u, vec![0.5; 3 * DU]);
+        assert_eq!(ep.u_policy, vec![1.0; 3 * DU]);
+    }
+
+    #[test]
+    fn checkpoint_round_trip_and_config_file() {
+        let dir = std::env::temp_dir().join(format!("serve-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let task = ur5_shared::config::TaskConfig {
+            horizon: 5,
+            ..Default::default()
+        };
+        let mut pol = imitation::controller::init_hold(&task, 0.05);
+        pol.gain.data[7] = 0.25;
+        let path = dir.join("checkpoint.npz");
+        save_checkpoint(&path, &pol, 4, Some(2.5), 3).unwrap();
+        let (back, it, cr) = load_checkpoint(&path).unwrap();
+        assert_eq!((back, it, cr), (pol, 4, Some(2.5)));
+
+        let cfg = dir.join("serve.toml");
+        std::fs::write(
+            &cfg,
+            "samples = 3\nseed = 9\n[task]\nhorizon = 30\n[serve]\nprefix = \"x\"\nwait_report_s = 1.5\n",
+        )
+        .unwrap();
+        let (c, o) = load_config(&cfg).unwrap();
+        assert_eq!((c.samples, c.seed, c.task.horizon), (3, 9, 30));
+        assert_eq!((o.prefix.as_str(), o.wait_report_s), ("x", 1.5));
+        std::fs::write(&cfg, "[serve]\nprefixx = \"x\"\n").unwrap();
+        assert!(load_config(&cfg).is_err(), "unknown keys are errors");
+
+        // LQR+GAIfO: a GaifoConfig plus [serve], which may name the algorithm and the demos.
+        std::fs::write(
+            &cfg,
+            "samples = 4\nseed = 5\niterations = 3\ncritic_updates = 2\n[sim]\nsubsteps = 2\n\
+             [serve]\nalgo = \"lqr-gaifo\"\ndemos = \"d.npz\"\ntask_tolerance = 0.02\n",
+        )
+        .unwrap();
+        let (g, o) = load_gaifo_config(&cfg).unwrap();
+        assert_eq!((g.samples, g.seed, g.iterations), (4, 5, 3));
+        assert_eq!((g.critic_updates, g.sim.substeps), (2, 2));
+        assert_eq!(o.algo, ServeAlgo::LqrGaifo);
+        assert_eq!(o.demos.as_deref(), Some(Path::new("d.npz")));
+        assert_eq!(o.task_tolerance, 0.02);
+        assert!(
+            load_config(&cfg).is_err(),
+            "a GaifoConfig is not an ExpertConfig"
+        );
+        std::fs::write(&cfg, "[task]\nhorizon = 30\n").unwrap();
+        assert!(
+            load_gaifo_config(&cfg).is_err(),
+            "the task of LQR+GAIfO is the demonstrations'"
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// The task checks: an episode of the learner's own task passes; a different goal, start
+    /// pose, control period or horizon is an error that names the setting.
+    #[test]
+    fn task_check_names_what_differs() {
+        let cfg = ExpertConfig {
+            task: TaskConfig {
+                horizon: 30,
+                ..TaskConfig::default()
+            },
+            ..ExpertConfig::default()
+        };
+        let el = ExpertLearner::new(cfg.clone(), None);
+        let table = to_gain_table(el.policy(), 1);
+        let table = &*table;
+        let episode = |task: &TaskConfig, k: u64| {
+            let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
+            let mut table = table.clone();
+            run_episode(&mut sim, task, &mut table, Some(&mut Noise::new(0, 1, k))).unwrap()
+        };
+        let check = |ep: &Episode| TaskCheck::default().episode(ep, 1, &el, 0.01);
+        // The same task (another episode of the version than the replayed k = 0 included).
+        check(&episode(&cfg.task, 0)).unwrap();
+        check(&episode(&cfg.task, 3)).unwrap();
+        let mut physical = SimConfig::default();
+        physical.perturbation = ur5_shared::config::Perturbation::physical_stand_in(1);
+        let mut sim = SimArm::new(physical, cfg.task.dt).unwrap();
+        let ep = run_episode(
+            &mut sim,
+            &cfg.task,
+            &mut table.clone(),
+            Some(&mut Noise::new(0, 1, 2)),
+        )
+        .unwrap();
+        check(&ep).unwrap();
+        let err = |task: TaskConfig| format!("{:#}", check(&episode(&task, 0)).unwrap_err());
+        let e = err(TaskConfig {
+            goal: [-0.45, -0.2, 0.25],
+            ..cfg.task.clone()
+        });
+        assert!(e.contains("start_q and goal"), "{e}");
+        // The start is checked on any version's episode (a controller running another
+        // learner's table), the dt only on this learner's own (it replays its table).
+        let other_goal = episode(
+            &TaskConfig {
+                goal: [-0.45, -0.2, 0.25],
+                ..cfg.task.clone()
+            },
+            0,
+        );
+        assert!(TaskCheck::default()
+            .episode(&other_goal, 5, &el, 0.01)
+            .is_err());
+        let half_dt = episode(
+            &TaskConfig {
+                dt: 0.05,
+                ..cfg.task.clone()
+            },
+            0,
+        );
+        TaskCheck::default()
+            .episode(&half_dt, 5, &el, 0.01)
+            .unwrap();
+        let e = err(TaskConfig {
+            start_q: [0.05, -2.0, 2.4],
+            ..cfg.task.clone()
+        });
+        assert!(e.contains("start_q and goal"), "{e}");
+        for dt in [0.05, 0.2] {
+            let e = err(TaskConfig {
+                dt,
+                ..cfg.task.clone()
+            });
+            assert!(e.contains("[task] dt"), "dt {dt}: {e}");
+        }
+        // Horizon: a step beyond T, or episodes that keep ending early.
+        let mut c = TaskCheck::default();
+        let s = sample(4, 30, 1, 1);
+        assert!(format!("{:#}", c.sample(&s, &el).unwrap_err()).contains("horizon = 30"));
+        c.sample(&sample(4, 29, 1, 1), &el).unwrap();
+        c.partial(20, &el).unwrap();
+        c.partial(20, &el).unwrap();
+        let e = format!("{:#}", c.partial(20, &el).unwrap_err());
+        assert!(
+            e.contains("end after 20 steps") && e.contains("horizon = 30"),
+            "{e}"
+        );
+        let mut c = TaskCheck::default();
+        for have in [20, 20, 7, 20, 20] {
+            c.partial(have, &el).unwrap();
+        }
+    }
+}

@@ -1,0 +1,177 @@
+//! The checks that the controller and the arm run the learner's task (module docs of `serve`:
+//! "The task must be the controller's and the arm's").
+
+use imitation::controller::to_gain_table;
+use imitation::rollout::{run_episode, Arm, Episode};
+use ur5_shared::config::TaskConfig;
+use ur5_shared::layout::{DU, DX, MAX_HORIZON};
+use ur5_shared::noise::Noise;
+use ur5_shared::services::ServiceNames;
+use ur5_shared::StepSample;
+
+use super::learner::ServeLearner;
+use super::ServeOptions;
+use crate::arm::SimArm;
+
+/// Checks what `serve` needs of the configuration.
+pub(super) fn validate(
+    task: &TaskConfig,
+    samples: usize,
+    init_var: f64,
+    opts: &ServeOptions,
+) -> anyhow::Result<()> {
+    task.validate()?;
+    anyhow::ensure!(
+        task.horizon <= MAX_HORIZON,
+        "task.horizon = {} exceeds the gain table's MAX_HORIZON = {MAX_HORIZON}",
+        task.horizon
+    );
+    anyhow::ensure!(
+        samples >= 2,
+        "samples = {samples} noisy episodes per iteration: the dynamics fit needs at least 2"
+    );
+    anyhow::ensure!(
+        init_var > 0.0 && init_var.is_finite(),
+        "init_var must be finite and > 0 (rad²)"
+    );
+    anyhow::ensure!(
+        opts.wait_report_s.is_finite() && opts.wait_report_s > 0.0,
+        "serve.wait_report_s = {} must be > 0 (s)",
+        opts.wait_report_s
+    );
+    anyhow::ensure!(
+        opts.task_tolerance.is_finite() && opts.task_tolerance > 0.0,
+        "serve.task_tolerance = {} must be > 0",
+        opts.task_tolerance
+    );
+    ServiceNames::new(&opts.prefix).learner_samples()?;
+    Ok(())
+}
+
+/// Σ Δq·q̄̇ / Σ q̄̇² over the steps of `ep` (q̄̇ the mean joint velocity of a step's two ends):
+/// about the control period for slow motion, larger for a fast servo; `None` without motion.
+pub fn motion_per_step(ep: &Episode) -> Option<f64> {
+    let (mut num, mut den) = (0.0, 0.0);
+    for t in 0..ep.horizon().saturating_sub(1) {
+        let (a, b) = (ep.state(t), ep.state(t + 1));
+        for j in 0..DU {
+            let v = 0.5 * (a[DU + j] + b[DU + j]);
+            num += (b[j] - a[j]) * v;
+            den += v * v;
+        }
+    }
+    (den > 1e-12 && num.is_finite()).then(|| num / den)
+}
+
+/// The checks of the module docs ("The task must be the controller's and the arm's").
+#[derive(Default)]
+pub(super) struct TaskCheck {
+    /// The first state of the first complete episode (any version) was the task's.
+    start_checked: bool,
+    /// The first complete noisy episode of the learner's version moved as the task's dt does.
+    dt_checked: bool,
+    /// Length of the last partial episodes and how many in a row had it.
+    short: (usize, u32),
+}
+
+impl TaskCheck {
+    pub(super) fn sample<L: ServeLearner>(
+        &self,
+        s: &StepSample,
+        learner: &L,
+    ) -> anyhow::Result<()> {
+        let t_len = learner.task().horizon;
+        anyhow::ensure!(
+            (s.t as usize) < t_len,
+            "the controller runs episodes longer than the task's T = {t_len} steps (episode {} \
+             has step t = {}): run rt-controller and hil-sim with [task] horizon = {t_len}, as in {}",
+            s.episode,
+            s.t,
+            L::TASK_SOURCE
+        );
+        Ok(())
+    }
+
+    pub(super) fn partial<L: ServeLearner>(
+        &mut self,
+        have: usize,
+        learner: &L,
+    ) -> anyhow::Result<()> {
+        self.short = if self.short.0 == have {
+            (have, self.short.1 + 1)
+        } else {
+            (have, 1)
+        };
+        anyhow::ensure!(
+            self.short.1 < 3,
+            "the controller's episodes end after {have} steps (3 in a row), the task has T = {} \
+             steps: run rt-controller and hil-sim with [task] horizon = {}, as in {}",
+            learner.task().horizon,
+            learner.task().horizon,
+            L::TASK_SOURCE
+        );
+        Ok(())
+    }
+
+    /// On every complete episode (table `version`).
+    pub(super) fn episode<L: ServeLearner>(
+        &mut self,
+        ep: &Episode,
+        version: u64,
+        learner: &L,
+        tolerance: f64,
+    ) -> anyhow::Result<()> {
+        self.short = (0, 0);
+        let check_dt = !self.dt_checked && ep.noisy && version == learner.version();
+        if self.start_checked && !check_dt {
+            return Ok(());
+        }
+        let task = learner.task();
+        let mut sim = SimArm::new(learner.sim_config().clone(), task.dt)
+            .map_err(|e| anyhow::anyhow!("the learner's model of the arm: {e}"))?;
+        if !self.start_checked {
+            // Joint angles and end effector minus goal (velocities: sensor noise only).
+            let want = sim
+                .reset(task.start_q, task.goal)
+                .map_err(|e| anyhow::anyhow!("the learner's model of the arm: {e}"))?;
+            let parts = |s: &[f64; DX]| [s[0], s[1], s[2], s[6], s[7], s[8]];
+            let (got, want) = (parts(&ep.state(0)), parts(&want));
+            let diff = (0..6).map(|i| (got[i] - want[i]).abs()).fold(0.0, f64::max);
+            anyhow::ensure!(
+                diff <= tolerance,
+                "the controller's episodes start at joint angles {:.4?} rad with end effector \
+                 minus goal {:.4?} m; the task's start is {:.4?} rad, {:.4?} m (start_q {:?}, \
+                 goal {:?}): they differ by {diff:.3e} > serve.task_tolerance = {tolerance}; run \
+                 rt-controller and hil-sim with the [task] start_q and goal of {}",
+                &got[..3],
+                &got[3..],
+                &want[..3],
+                &want[3..],
+                task.start_q,
+                task.goal,
+                L::TASK_SOURCE
+            );
+            self.start_checked = true;
+        }
+        if check_dt {
+            let mut table = to_gain_table(learner.policy(), version);
+            let mut noise = Noise::new(learner.seed(), version, 0);
+            let replay = run_episode(&mut sim, task, &mut *table, Some(&mut noise))
+                .map_err(|e| anyhow::anyhow!("replaying the first episode in process: {e}"))?;
+            if let (Some(a), Some(b)) = (motion_per_step(ep), motion_per_step(&replay)) {
+                let ratio = a / b;
+                anyhow::ensure!(
+                    (0.5..=2.0).contains(&ratio),
+                    "the arm moves {ratio:.2}x as far per step as the task's control period \
+                     dt = {} s gives on the learner's model of the arm (allowed 1/2 to 2): the \
+                     arm or the controller runs another dt (or, in real time, the arm cannot \
+                     keep up with its clock); run both with the [task] dt of {}",
+                    task.dt,
+                    L::TASK_SOURCE
+                );
+            }
+            self.dt_checked = true;
+        }
+        Ok(())
+    }
+}
