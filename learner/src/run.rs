@@ -19,7 +19,7 @@ use imitation::ppo::UpdateStats;
 use serde::Serialize;
 
 use crate::arm::SimArm;
-use crate::io::log::{open_log, write_csv_row};
+use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::{load_table, save_table};
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
@@ -306,9 +306,9 @@ pub fn train_and_record(
     )?;
     let log_path = out.join("expert_log.csv");
     let mut csv = std::fs::File::create(&log_path)?;
-    writeln!(csv, "{}", IterationLog::CSV_HEADER)?;
+    writeln!(csv, "{EXPERT_CSV_HEADER}")?;
     for l in &run.log {
-        writeln!(csv, "{}", l.csv_row())?;
+        write_record(&mut csv, l)?;
     }
     let demos = demos(cfg, &run)?;
     let demos_path = out.join("demos.npz");

@@ -1,7 +1,8 @@
 //! The comparison experiment at a tiny size (2 seeds × 10 iterations, both algorithms, demos
 //! from the default expert) against a copy of its CSV committed before the learner was split
 //! into crates (`tests/data/golden/comparison_2x10.csv`). Wall-clock columns (`t_*_s`,
-//! `cpu_learner_s`) are left out; every other field must match to the last printed digit.
+//! `cpu_learner_s`) are left out; every other field must match: numbers bit for bit, text
+//! exactly.
 //!
 //! A change that alters results on purpose regenerates the copy in the same commit and says why
 //! in the commit message: `GOLDEN_REGENERATE=1 cargo test --release -p learner --test golden`.
@@ -54,7 +55,18 @@ fn comparison_2_seeds_10_iterations_matches_the_committed_csv() {
         want.lines().map(String::from).collect(),
     );
     assert_eq!(got.len(), want.len(), "number of CSV lines");
+    // Numbers are compared by value, bit for bit (NaN with NaN), so that only a change of the
+    // printed format (e.g. `1` vs `1.0`) is not a difference; every other field as text.
+    let same = |g: &str, w: &str| match (g.parse::<f64>(), w.parse::<f64>()) {
+        (Ok(a), Ok(b)) => a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+        _ => g == w,
+    };
     for (k, (g, w)) in got.iter().zip(&want).enumerate() {
-        assert_eq!(g, w, "CSV line {} differs from the committed copy", k + 1);
+        let (gf, wf): (Vec<&str>, Vec<&str>) = (g.split(',').collect(), w.split(',').collect());
+        assert!(
+            gf.len() == wf.len() && gf.iter().zip(&wf).all(|(a, b)| same(a, b)),
+            "CSV line {} differs from the committed copy:\n got  {g}\n want {w}",
+            k + 1
+        );
     }
 }

@@ -96,7 +96,8 @@ impl Default for ExpertConfig {
     }
 }
 
-/// What one iteration measured (also the progress line).
+/// What one iteration measured (also the progress line; its serde form is the CSV row of
+/// `expert_log.csv`, `learner::io::log`).
 #[derive(Clone, Debug, Serialize)]
 pub struct IterationLog {
     /// Iteration number (0-based).
@@ -106,6 +107,7 @@ pub struct IterationLog {
     /// Mean task cost of the N noisy episodes.
     pub mean_sample_cost: f64,
     /// Final end-effector distance of the evaluation episode (m).
+    #[serde(rename = "final_distance_m")]
     pub final_distance: f64,
     /// (C_random − C_eval) / C_random: the share of the random policy's cost removed (the
     /// normalised performance needs C_expert, which is not known yet).
@@ -121,10 +123,6 @@ pub struct IterationLog {
 }
 
 impl IterationLog {
-    /// Header of the per-iteration CSV (`expert_log.csv`, `serve_log.csv`).
-    pub const CSV_HEADER: &'static str =
-        "iteration,eval_cost,mean_sample_cost,final_distance_m,performance_proxy,kl,eta,step_mult,seconds";
-
     /// Column names of [`IterationLog::progress_line`].
     pub const PROGRESS_HEADER: &'static str =
         "iter  eval_cost  mean_cost   final_m   proxy        kl       eta   mult    sec";
@@ -133,22 +131,6 @@ impl IterationLog {
     pub fn progress_line(&self) -> String {
         format!(
             "{:>4} {:>10.4} {:>10.4} {:>9.4} {:>7.3} {:>9.3} {:>9.2e} {:>6.2} {:>6.2}",
-            self.iteration,
-            self.eval_cost,
-            self.mean_sample_cost,
-            self.final_distance,
-            self.performance_proxy,
-            self.kl,
-            self.eta,
-            self.step_mult,
-            self.seconds
-        )
-    }
-
-    /// This iteration as a CSV row (no newline), columns as in [`IterationLog::CSV_HEADER`].
-    pub fn csv_row(&self) -> String {
-        format!(
-            "{},{},{},{},{},{},{},{},{}",
             self.iteration,
             self.eval_cost,
             self.mean_sample_cost,
@@ -193,7 +175,7 @@ pub fn mean_noisy_cost(
 }
 
 /// The expert's learner as a state machine: one [`ExpertLearner::update`] is one iteration of
-/// Algorithm 1 on the true task cost, given the episodes line 1 executed (in process by
+/// Algorithm 1 on the true task cost, given the episodes step 1 executed (in process by
 /// [`train`], over IPC by `learner serve`). It owns the GPS learner state, the controller to
 /// execute next, the previous one (for the step adjustment) and the best one seen.
 pub struct ExpertLearner {

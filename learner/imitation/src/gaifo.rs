@@ -5,9 +5,9 @@
 //!    in process, or the real-time loop over IPC);
 //! 2. `update_dynamics`: refit p(s'|s,a) = N(F_t [s;a] + f_t, Σ_t) (GMM prior + regression);
 //! 3. [`LqrGaifo::update_discriminator`]: WGAN-GP steps on expert vs controller transitions;
-//! 4. [`composite_cost_derivs`]: C_t(s,a) = D(s, F_t [s;a] + f_t) and
+//! 4. [`CompositeCost`] in [`LqrIteration::expand`]: C_t(s,a) = D(s, F_t [s;a] + f_t) and
 //! 5. its second-order expansion around the samples;
-//! 6. [`improve`]: the KL-bounded LQR step.
+//! 6. [`LqrIteration::improve`]: the KL-bounded LQR step.
 //!
 //! [`LqrGaifo::learn`] is steps 2–6 (and the switch to the new controller) on episodes executed
 //! elsewhere: `learner train` executes them in process, `learner serve --algo lqr-gaifo` gets
@@ -278,7 +278,7 @@ pub fn refit_critic(
     Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
 }
 
-/// Line 3 of Algorithm 1: `updates` (at least one) WGAN-GP calls on expert vs `controller`
+/// Step 3 of Algorithm 1 (docs/design.md §1.3): `updates` (at least one) WGAN-GP calls on expert vs `controller`
 /// transitions; returns the last call's statistics. Shared with the PPO baseline.
 pub fn train_critic(
     disc: &mut Discriminator,
@@ -294,7 +294,7 @@ pub fn train_critic(
     Ok(stats.expect("at least one update"))
 }
 
-/// The state of an LQR+GAIfO run; [`LqrGaifo::iterate`] runs one iteration of Algorithm 1.
+/// The state of an LQR+GAIfO run; [`LqrGaifo::learn`] runs steps 2–6 of Algorithm 1.
 pub struct LqrGaifo {
     cfg: GaifoConfig,
     task: TaskConfig,
@@ -385,7 +385,7 @@ impl LqrGaifo {
         Ok(())
     }
 
-    /// Line 3 of Algorithm 1: `critic_updates` WGAN-GP calls on expert vs these transitions.
+    /// Step 3 of Algorithm 1 (docs/design.md §1.3): `critic_updates` WGAN-GP calls on expert vs these transitions.
     pub fn update_discriminator(
         &mut self,
         controller: &Mat<f64>,
@@ -399,10 +399,10 @@ impl LqrGaifo {
         )
     }
 
-    /// Lines 2–6 of Algorithm 1 on the `episodes` (`cfg.samples` noisy ones) and the noise-free
+    /// Steps 2–6 of Algorithm 1 (docs/design.md §1.3) on the `episodes` (`cfg.samples` noisy ones) and the noise-free
     /// `eval` episode executed with [`LqrGaifo::policy`] (as table version
     /// [`LqrGaifo::version`]); then that controller is replaced by the new one. `t_execute`
-    /// (s) is logged as the time line 1 took.
+    /// (s) is logged as the time step 1 took.
     pub fn learn(
         &mut self,
         episodes: &[Episode],

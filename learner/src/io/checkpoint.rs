@@ -9,6 +9,9 @@ use ur5_shared::layout::{DU, DX};
 
 use super::npz::{NpzFile, NpzWriter};
 
+/// Version of this file layout.
+pub const SCHEMA_VERSION: i64 = 1;
+
 /// Writes the controller to execute next and where it stands (see the module docs).
 pub fn save_checkpoint(
     path: &Path,
@@ -19,7 +22,7 @@ pub fn save_checkpoint(
 ) -> anyhow::Result<()> {
     let (t, dx, du) = (pol.t as u64, pol.dx as u64, pol.du as u64);
     let mut w = NpzWriter::create(path)?;
-    w.i64("schema_version", &[], &[1])?;
+    w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
     w.f64("K", &[t, du, dx], &pol.gain.data)?;
     w.f64("k", &[t, du], &pol.k.data)?;
     w.f64("pol_covar", &[t, du, du], &pol.pol_covar.data)?;
@@ -35,7 +38,7 @@ pub fn save_checkpoint(
 
 /// Reads a checkpoint: (controller, iteration, random-policy cost).
 pub fn load_checkpoint(path: &Path) -> anyhow::Result<(LinGaussPolicy, usize, Option<f64>)> {
-    let f = NpzFile::open(path)?;
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
     let (shape, gain) = f.f64("K")?;
     let [t, du, dx] = shape[..] else {
         anyhow::bail!(

@@ -49,13 +49,8 @@ pub fn save(demos: &Demos, path: &Path) -> Result<(), NpzError> {
 
 /// Reads and checks demonstrations.
 pub fn load(path: &Path) -> Result<Demos, NpzError> {
-    let f = NpzFile::open(path)?;
-    let bad = |name: &str, why: String| NpzError::Bad {
-        path: path.to_owned(),
-        name: name.into(),
-        why,
-    };
-    f.check_schema(SCHEMA_VERSION)?;
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let bad = |name: &str, why: String| f.bad(name, why);
     let names = f.strings("state_names")?;
     if names != STATE_NAMES {
         return Err(bad(

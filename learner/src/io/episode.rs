@@ -68,13 +68,8 @@ pub fn save_episode(
 
 /// Reads an episode written by [`save_episode`] (`eps` is not recorded: left empty).
 pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
-    let f = NpzFile::open(path)?;
-    let bad = |name: &str, why: String| NpzError::Bad {
-        path: path.to_owned(),
-        name: name.into(),
-        why,
-    };
-    f.check_schema(SCHEMA_VERSION)?;
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let bad = |name: &str, why: String| f.bad(name, why);
     let (shape, x) = f.f64("states")?;
     let [1, t, dx] = shape[..] else {
         return Err(bad(

@@ -271,7 +271,8 @@ impl NpzFile {
             .map_err(|e| self.bad(name, format!("not a valid .npy array: {e}")))
     }
 
-    fn bad(&self, name: &str, why: String) -> NpzError {
+    /// The error for array `name` of this file: `why` it is not what the reader needs.
+    pub fn bad(&self, name: &str, why: String) -> NpzError {
         NpzError::Bad {
             path: self.path.clone(),
             name: name.into(),
@@ -325,6 +326,14 @@ impl NpzFile {
             .into_vec::<u64>()
             .map_err(|e| self.bad(name, e.to_string()))?;
         Ok(v[0])
+    }
+
+    /// Opens `path` and checks that it is of layout version `schema` (its `schema_version`):
+    /// the one preamble of every project file reader.
+    pub fn open_schema(path: &Path, schema: i64) -> Result<Self, NpzError> {
+        let f = Self::open(path)?;
+        f.check_schema(schema)?;
+        Ok(f)
     }
 
     /// Checks the scalar `schema_version` array against the version this program reads.

@@ -56,13 +56,8 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
 
 /// Reads a table and validates it against `bounds`; returns it with its control period (s).
 pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f64), NpzError> {
-    let f = NpzFile::open(path)?;
-    let bad = |name: &str, why: String| NpzError::Bad {
-        path: path.to_owned(),
-        name: name.into(),
-        why,
-    };
-    f.check_schema(SCHEMA_VERSION)?;
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let bad = |name: &str, why: String| f.bad(name, why);
     let (shape, k_mat) = f.f64("K")?;
     let [t, du, dx] = shape[..] else {
         return Err(bad(

@@ -15,7 +15,7 @@ use ur5_shared::GainTable;
 use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
 use crate::io::episode::{save_episode, EpisodeOrigin};
-use crate::io::log::{open_log, write_csv_row};
+use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
 
@@ -58,12 +58,14 @@ impl ServeLearner for ExpertLearner {
             .open(&path)
             .with_context(|| format!("opening {}", path.display()))?;
         if new_csv {
-            writeln!(csv, "{}", IterationLog::CSV_HEADER)?;
+            writeln!(csv, "{EXPERT_CSV_HEADER}")?;
         }
         Ok(csv)
     }
     fn csv_row(&self, log: &IterationLog) -> anyhow::Result<String> {
-        Ok(format!("{}\n", log.csv_row()))
+        let mut row = Vec::new();
+        write_record(&mut row, log)?;
+        Ok(String::from_utf8(row)?)
     }
     fn progress_line(log: &IterationLog) -> String {
         log.progress_line()

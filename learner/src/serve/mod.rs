@@ -5,22 +5,22 @@
 //!                                     <-- controller/gains --
 //! ```
 //!
-//! Algorithm 1 with line 1 ("execute the controller") done by the real-time loop: the learner
+//! Algorithm 1 with step 1 ("execute the controller") done by the real-time loop: the learner
 //! publishes a gain table, assembles the episodes the controller runs with it from the
-//! [`StepSample`] stream, and when `samples` noisy episodes and one noise-free episode of that
-//! table version are in, runs lines 2–6 and publishes the next version. One loop serves both
+//! [`ur5_shared::StepSample`] stream, and when `samples` noisy episodes and one noise-free episode of that
+//! table version are in, runs steps 2–6 and publishes the next version. One loop serves both
 //! learners ([`ServeLearner`]):
 //! - `--algo expert` (default): [`ExpertLearner::update`] on the true task cost (the same code
 //!   as the in-process [`imitation::expert::train`]); the task is the config's `[task]`;
 //! - `--algo lqr-gaifo --demos FILE`: [`LqrGaifo::learn`] (the same code as the in-process
-//!   [`LqrGaifo::iterate`], `learner train`); the task (goal, start pose, T, dt) is the
+//!   `learner train`); the task (goal, start pose, T, dt) is the
 //!   demonstrations'.
 //!
 //! # Same episodes as in process
 //! The controller draws the noise of the k-th episode of a table version from
 //! `Noise::new(seed, version, k)`, episodes k = 0 … N−1 of a version with noise and k = N
 //! without (`noisy_episodes = N`, `eval_episodes = 1`), exactly the order of
-//! [`imitation::iteration::execute`]. With the same seed, task and arm (lockstep), the episodes over
+//! [`imitation::rollout::execute`]. With the same seed, task and arm (lockstep), the episodes over
 //! IPC equal the in-process ones bit for bit, and so does everything learned from them. The
 //! dynamics are fitted on the executed actions (`StepSample::a_sent`, after the clamp).
 //!
@@ -32,9 +32,8 @@
 //! task's by more than `serve.task_tolerance`; on the first complete noisy episode of its own
 //! table version, motion per step that is not what the task's dt gives (ratio of
 //! Σ Δq·q̄̇ / Σ q̄̇² — q̄̇ the mean joint velocity of the two ends of a step — to the same on an
-//! in-process replay of that table with the episode-0 noise, outside [1/2, 2]; measured on
-//! the initial controller, T = 30: 0.89–1.0 for the same dt on the nominal and on the perturbed
-//! "physical" arm, 0.38 at half and 2.8–3.9 at twice the dt). The dt check is a heuristic: in
+//! in-process replay of that table with the episode-0 noise, outside [1/2, 2]; the band and
+//! its measurement: docs/design.md §5 D21). The dt check is a heuristic: in
 //! lockstep the samples carry no simulated time. In real time it also catches an arm that
 //! cannot keep up with its clock (less simulated time per control period than dt).
 //!
@@ -52,16 +51,16 @@
 //! - the checkpoint of the controller to execute next, written before its table is published:
 //!   expert: `checkpoint.npz` (all GPS policy arrays, its iteration, the random-policy cost);
 //!   lqr-gaifo: `iter_NNN_table.npz` + `iter_NNN_critic.json`, as `learner train` writes them
-//!   ([`LqrGaifo::checkpoint`]);
-//! - the per-iteration CSV: expert: `serve_log.csv` ([`IterationLog::CSV_HEADER`], appended
-//!   across runs); lqr-gaifo: `gaifo_log.csv` ([`imitation::gaifo::CSV_HEADER`], as `learner train`;
+//!   ([`crate::run::Checkpoint`]);
+//! - the per-iteration CSV: expert: `serve_log.csv` ([`crate::io::log::EXPERT_CSV_HEADER`], appended
+//!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
 //!   `t_execute_s` is the time from the version's first sample to its last needed episode;
 //!   appended across resumes); `best_table.npz` at exit.
 //!
 //! # Peers that die
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
 //! A restarted learner: `--resume DIR` continues from DIR's checkpoint (expert:
-//! `checkpoint.npz`; lqr-gaifo: the latest `iter_NNN_*` pair, [`LqrGaifo::resume`]: also a
+//! `checkpoint.npz`; lqr-gaifo: the latest `iter_NNN_*` pair, [`crate::run::resume`]: also a
 //! `learner train` folder) and publishes that table version again (the controller already runs
 //! it and ignores the duplicate), then waits for N + 1 fresh episodes of it. The GPS learner
 //! state (GMM dynamics prior, step size, previous controller) is not checkpointed and starts
