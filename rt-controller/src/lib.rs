@@ -5,12 +5,13 @@
 //!
 //! - [`config`]: every option (TOML), with units;
 //! - [`controller`]: [`Controller::setup`] (allocates, may fail) and [`Controller::run`] (the
-//!   loop: no allocation, no locks, no blocking but the period wait), episodes, hot swap,
-//!   safety, statistics;
-//! - [`tables`]: the double-buffered gain table; [`safety`]: clamp and hold; [`noise`]: seeded
-//!   exploration noise; [`stats`]: allocation-free histograms; [`ports`]: the iceoryx2 ports;
-//!   [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]: dead-peer detection off the loop;
-//! - [`testkit`], [`bench`]: in-process peers and the benchmark.
+//!   loop: no allocation, no locks, no blocking but the period wait), episodes, hot swap;
+//! - [`tables`]: the double-buffered gain table; [`safety`]: faults, clamp and hold; [`noise`]:
+//!   seeded exploration noise; [`stats`]: the loop's counters and allocation-free histograms;
+//!   [`ports`]: the iceoryx2 ports; [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]:
+//!   dead-peer detection off the loop;
+//! - `testkit` (cargo feature `testkit`, not part of the production API): in-process stand-ins
+//!   for the arm and tables, for the integration tests and the binary's `bench` subcommand.
 //!
 //! Conventions (those of `ur5_shared`): SI units — rad, rad/s, m, m/s, N·m, s; timestamps are
 //! `CLOCK_MONOTONIC` ns ([`ur5_shared::clock`]); Cartesian quantities in the arm base frame;
@@ -18,7 +19,6 @@
 //! in real time the wall period is `task.dt / time_compression`. Durations in statistics are
 //! wall-clock ns.
 
-pub mod bench;
 pub mod config;
 pub mod controller;
 pub mod monitor;
@@ -28,11 +28,13 @@ pub mod rt;
 pub mod safety;
 pub mod stats;
 pub mod tables;
+#[cfg(feature = "testkit")]
 pub mod testkit;
 
 pub use config::{ControllerConfig, Mode, Pacing};
-pub use controller::{Controller, ExitReason, Fault, Summary};
+pub use controller::{Controller, ExitReason, Summary};
 pub use ports::SetupError;
+pub use safety::Fault;
 
 use core::sync::atomic::{AtomicBool, Ordering};
 

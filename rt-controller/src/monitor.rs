@@ -18,6 +18,7 @@ use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+use serde::Serialize;
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, ArmState, GainTable, StepSample};
 
@@ -30,6 +31,25 @@ pub struct PeerHealth {
     pub lost_arm: AtomicU64,
     /// Learner processes that died (or left) during the run.
     pub lost_learner: AtomicU64,
+}
+
+/// Peer processes that died or left: a snapshot of [`PeerHealth`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct LostPeers {
+    /// Arm processes.
+    pub arm: u64,
+    /// Learner processes.
+    pub learner: u64,
+}
+
+impl PeerHealth {
+    /// The counters now.
+    pub fn lost(&self) -> LostPeers {
+        LostPeers {
+            arm: self.lost_arm.load(Ordering::Relaxed),
+            learner: self.lost_learner.load(Ordering::Relaxed),
+        }
+    }
 }
 
 /// A running monitor; stops and joins on drop.

@@ -1,14 +1,45 @@
-//! The hold command (DESIGN.md §3). The action clamp itself is
-//! [`ur5_shared::safety::clamp_action`], shared with the learner's rollouts.
+//! The faults that make the controller hold ([`Fault`]) and the hold command (DESIGN.md §3).
+//! The action clamp itself is [`ur5_shared::safety::clamp_action`], shared with the learner's
+//! rollouts.
 //!
 //! The hold is "PD to the last safe pose": in goal-angle mode the arm's own servo is that PD
 //! (goal = last safe pose); in torque mode the controller computes it.
 
+use serde::Serialize;
 use ur5_shared::config::{ActionMode, ArmLimits};
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::ArmCommand;
 
 use crate::config::Safety;
+
+/// A fault that makes the controller hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fault {
+    /// No fresh arm state within `safety.stale_state_timeout_s`.
+    StaleState,
+    /// The arm reported a fault bit.
+    ArmFault,
+    /// The arm state is not finite.
+    NonFiniteState,
+    /// The controller law produced a non-finite action (or failed).
+    NonFiniteAction,
+    /// No valid table.
+    NoTable,
+}
+
+impl Fault {
+    /// What went wrong, for the log.
+    pub fn name(self) -> &'static str {
+        match self {
+            Fault::StaleState => "stale arm state",
+            Fault::ArmFault => "arm reports a fault",
+            Fault::NonFiniteState => "non-finite arm state",
+            Fault::NonFiniteAction => "non-finite action",
+            Fault::NoTable => "no valid gain table",
+        }
+    }
+}
 
 /// The hold command: PD to the last safe pose `q_safe` (rad).
 ///

@@ -1,11 +1,16 @@
-//! Loop statistics without allocating: fixed-size log-linear histograms of durations (ns) and
-//! counters, all allocated at setup.
+//! Loop statistics without allocating, all allocated at setup: [`LoopStats`] (the loop's
+//! counters and histograms), [`FaultCounts`], [`RejectCounts`], and the fixed-size log-linear
+//! [`Histogram`] of durations (ns) with its [`Percentiles`].
 //!
 //! A value v < 64 ns has its own bin; above, each power of two is split into 32 bins, so a
 //! reported percentile is the upper edge of its bin and at most ≈ 3 % above the true value
 //! (like HdrHistogram with 5 significant bits). Percentiles are exact ranks over the bins.
 
 use serde::Serialize;
+use ur5_shared::GainTableError;
+
+use crate::safety::Fault;
+use crate::tables::Rejection;
 
 const LINEAR: usize = 64;
 const SUB_BITS: u32 = 5;
@@ -157,6 +162,171 @@ impl core::fmt::Display for Percentiles {
             us(self.max_ns),
             self.count
         )
+    }
+}
+
+/// Counters and histograms of the loop, allocated at setup.
+pub struct LoopStats {
+    /// Compute time of each Running tick (state read → command and sample published), this
+    /// episode (ns).
+    pub compute_episode: Histogram,
+    /// The same over the run.
+    pub compute: Histogram,
+    /// Wake-up lateness per tick (ns): deadline pacing, wake time − deadline; lockstep and arm
+    /// pacing, time the state was seen − its stamp (arm → controller latency incl. polling).
+    pub wake_episode: Histogram,
+    /// The same over the run.
+    pub wake: Histogram,
+    /// Swap time per accepted table: copy into the inactive half + flip (ns).
+    pub swap: Histogram,
+    /// Validation time per received table (ns).
+    pub validate: Histogram,
+    /// Whole boundary intake per received table: receive + copy + validate + flip (ns).
+    pub intake: Histogram,
+    /// Loop iterations (all phases).
+    pub iterations: u64,
+    /// Running ticks (samples published or attempted).
+    pub ticks: u64,
+    /// Episodes that ran all T ticks.
+    pub episodes_completed: u64,
+    /// Episodes ended by a fault.
+    pub episodes_aborted: u64,
+    /// Deadline pacing: whole periods that passed while the loop was late.
+    pub missed_periods: u64,
+    /// Tables taken.
+    pub swaps: u64,
+    /// Tables rejected, by reason.
+    pub rejected: RejectCounts,
+    /// Faults latched, by kind.
+    pub faults: FaultCounts,
+    /// Ticks whose action the clamp changed.
+    pub saturated_ticks: u64,
+    /// Resets sent again after `safety.reset_timeout_s`.
+    pub reset_retries: u64,
+    /// Failed sends of commands / samples; failed receives.
+    pub ipc_errors: u64,
+    /// Samples delivered to no subscriber (no learner connected).
+    pub samples_unheard: u64,
+}
+
+impl Default for LoopStats {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LoopStats {
+    /// Everything zero; allocates the histograms (setup).
+    pub fn new() -> Self {
+        Self {
+            compute_episode: Histogram::new(),
+            compute: Histogram::new(),
+            wake_episode: Histogram::new(),
+            wake: Histogram::new(),
+            swap: Histogram::new(),
+            validate: Histogram::new(),
+            intake: Histogram::new(),
+            iterations: 0,
+            ticks: 0,
+            episodes_completed: 0,
+            episodes_aborted: 0,
+            missed_periods: 0,
+            swaps: 0,
+            rejected: RejectCounts::default(),
+            faults: FaultCounts::default(),
+            saturated_ticks: 0,
+            reset_retries: 0,
+            ipc_errors: 0,
+            samples_unheard: 0,
+        }
+    }
+}
+
+/// How often each fault latched.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct FaultCounts {
+    /// [`Fault::StaleState`].
+    pub stale_state: u64,
+    /// [`Fault::ArmFault`].
+    pub arm_fault: u64,
+    /// [`Fault::NonFiniteState`].
+    pub non_finite_state: u64,
+    /// [`Fault::NonFiniteAction`].
+    pub non_finite_action: u64,
+    /// [`Fault::NoTable`].
+    pub no_table: u64,
+}
+
+impl FaultCounts {
+    /// Counts one fault.
+    pub fn add(&mut self, f: Fault) {
+        match f {
+            Fault::StaleState => self.stale_state += 1,
+            Fault::ArmFault => self.arm_fault += 1,
+            Fault::NonFiniteState => self.non_finite_state += 1,
+            Fault::NonFiniteAction => self.non_finite_action += 1,
+            Fault::NoTable => self.no_table += 1,
+        }
+    }
+
+    /// All faults.
+    pub fn total(&self) -> u64 {
+        self.stale_state
+            + self.arm_fault
+            + self.non_finite_state
+            + self.non_finite_action
+            + self.no_table
+    }
+}
+
+/// Rejection reasons as counters (for the statistics and the JSON summary).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct RejectCounts {
+    /// `dx`/`du` differ from the build's layout.
+    pub dimensions: u64,
+    /// Horizon 0 or > MAX_HORIZON.
+    pub horizon: u64,
+    /// Checksum mismatch.
+    pub checksum: u64,
+    /// NaN or infinity.
+    pub non_finite: u64,
+    /// L not lower triangular, or its diagonal not positive.
+    pub cholesky: u64,
+    /// A value outside [`ur5_shared::GainBounds`].
+    pub out_of_bounds: u64,
+    /// Horizon differs from `task.horizon`.
+    pub horizon_mismatch: u64,
+    /// Version not newer than the active one.
+    pub stale_version: u64,
+}
+
+impl RejectCounts {
+    /// Counts one rejection.
+    pub fn add(&mut self, r: &Rejection) {
+        let c = match r {
+            Rejection::Invalid(GainTableError::WrongDimensions { .. }) => &mut self.dimensions,
+            Rejection::Invalid(GainTableError::BadHorizon { .. }) => &mut self.horizon,
+            Rejection::Invalid(GainTableError::ChecksumMismatch { .. }) => &mut self.checksum,
+            Rejection::Invalid(GainTableError::NonFinite { .. }) => &mut self.non_finite,
+            Rejection::Invalid(GainTableError::NotLowerTriangular { .. })
+            | Rejection::Invalid(GainTableError::NonPositiveDiagonal { .. }) => &mut self.cholesky,
+            Rejection::Invalid(GainTableError::OutOfBounds { .. }) => &mut self.out_of_bounds,
+            Rejection::HorizonMismatch { .. } => &mut self.horizon_mismatch,
+            Rejection::StaleVersion { .. } => &mut self.stale_version,
+        };
+        *c += 1;
+    }
+
+    /// All rejections.
+    pub fn total(&self) -> u64 {
+        self.dimensions
+            + self.horizon
+            + self.checksum
+            + self.non_finite
+            + self.cholesky
+            + self.out_of_bounds
+            + self.horizon_mismatch
+            + self.stale_version
     }
 }
 

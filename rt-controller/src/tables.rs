@@ -34,57 +34,6 @@ pub enum Rejection {
     },
 }
 
-/// Rejection reasons as counters (for the statistics and the JSON summary).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-pub struct RejectCounts {
-    /// `dx`/`du` differ from the build's layout.
-    pub dimensions: u64,
-    /// Horizon 0 or > MAX_HORIZON.
-    pub horizon: u64,
-    /// Checksum mismatch.
-    pub checksum: u64,
-    /// NaN or infinity.
-    pub non_finite: u64,
-    /// L not lower triangular, or its diagonal not positive.
-    pub cholesky: u64,
-    /// A value outside [`GainBounds`].
-    pub out_of_bounds: u64,
-    /// Horizon differs from `task.horizon`.
-    pub horizon_mismatch: u64,
-    /// Version not newer than the active one.
-    pub stale_version: u64,
-}
-
-impl RejectCounts {
-    /// Counts one rejection.
-    pub fn add(&mut self, r: &Rejection) {
-        let c = match r {
-            Rejection::Invalid(GainTableError::WrongDimensions { .. }) => &mut self.dimensions,
-            Rejection::Invalid(GainTableError::BadHorizon { .. }) => &mut self.horizon,
-            Rejection::Invalid(GainTableError::ChecksumMismatch { .. }) => &mut self.checksum,
-            Rejection::Invalid(GainTableError::NonFinite { .. }) => &mut self.non_finite,
-            Rejection::Invalid(GainTableError::NotLowerTriangular { .. })
-            | Rejection::Invalid(GainTableError::NonPositiveDiagonal { .. }) => &mut self.cholesky,
-            Rejection::Invalid(GainTableError::OutOfBounds { .. }) => &mut self.out_of_bounds,
-            Rejection::HorizonMismatch { .. } => &mut self.horizon_mismatch,
-            Rejection::StaleVersion { .. } => &mut self.stale_version,
-        };
-        *c += 1;
-    }
-
-    /// All rejections.
-    pub fn total(&self) -> u64 {
-        self.dimensions
-            + self.horizon
-            + self.checksum
-            + self.non_finite
-            + self.cholesky
-            + self.out_of_bounds
-            + self.horizon_mismatch
-            + self.stale_version
-    }
-}
-
 /// What [`TableBuffer::offer`] did with a table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Offer {
@@ -176,6 +125,7 @@ impl TableBuffer {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stats::RejectCounts;
     use ur5_shared::MAX_HORIZON;
 
     fn table(version: u64, horizon: usize, a_hat: f64) -> Box<GainTable> {

@@ -37,13 +37,29 @@ fn setup_err(what: &'static str) -> impl Fn(&dyn core::fmt::Debug) -> SetupError
 }
 
 /// Runs a lockstep kinematic arm on `prefix` until `stop` is raised. Joint angles move towards
-/// goal angles by at most `max_velocity` × `dt` per command; torques and holds keep the pose;
-/// a reset teleports. `ee_pos` is q scaled by 0.1 (only the layout matters here).
+/// goal angles by at most `max_velocity` (rad/s) × `dt` (s) per command; torques and holds keep
+/// the pose; a reset teleports. `ee_pos` is q scaled by 0.1 (only the layout matters here).
 pub fn run_kinematic_arm(
     prefix: &str,
     dt: f64,
     max_velocity: f64,
     stop: &AtomicBool,
+) -> Result<ArmReport, SetupError> {
+    run_kinematic_arm_with(prefix, dt, max_velocity, stop, |_| {})
+}
+
+/// [`run_kinematic_arm`] that calls `before_answer` with every command before applying and
+/// answering it. A lockstep controller waits for that answer, so a test can do something at a
+/// known point of the controller's episode sequence (e.g. publish a table while the controller
+/// waits for the reset of episode k, so that it is taken at the boundary before episode k + 1)
+/// instead of racing the loop. The controller gives up waiting after
+/// `safety.stale_state_timeout_s`.
+pub fn run_kinematic_arm_with(
+    prefix: &str,
+    dt: f64,
+    max_velocity: f64,
+    stop: &AtomicBool,
+    mut before_answer: impl FnMut(&ArmCommand),
 ) -> Result<ArmReport, SetupError> {
     let names = ServiceNames::new(prefix);
     let node = NodeBuilder::new()
@@ -107,6 +123,7 @@ pub fn run_kinematic_arm(
         report
             .round_trip
             .record(monotonic_ns().saturating_sub(last_pub));
+        before_answer(&cmd);
         report.commands += 1;
         match cmd.kind() {
             Ok(CommandKind::Reset) => {

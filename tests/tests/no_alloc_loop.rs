@@ -2,19 +2,25 @@
 //! iceoryx2 ports, across episode boundaries and a table swap, under a counting global
 //! allocator. Its own test binary, so the allocator disturbs no other test; counting is armed
 //! per thread, only on the controller's thread (the arm and learner stand-ins run on others).
+//!
+//! The order of events is fixed by the test, not by thread timing: version 1 is in the
+//! controller's queue before the loop starts, and version 2 is published while the lockstep
+//! controller waits for the arm to answer the reset of episode 3 (the arm stand-in holds that
+//! answer), so it is taken at the boundary before episode 4 on any machine.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
-use rt_controller::testkit::{constant_goal_table, run_kinematic_arm};
+use rt_controller::config::Safety;
+use rt_controller::testkit::{constant_goal_table, run_kinematic_arm_with};
 use rt_controller::{Controller, ControllerConfig, ExitReason};
 use ur5_shared::services::{self, unique_prefix, ServiceNames};
-use ur5_shared::{GainTable, StepSample};
+use ur5_shared::{ArmCommand, CommandKind, GainTable, StepSample};
 
 struct Counting;
 
@@ -57,9 +63,22 @@ static GLOBAL: Counting = Counting;
 
 const T: usize = 100;
 const EPISODES: u64 = 12;
+/// The first episode that runs on table version 2: the arm answers the reset of the episode
+/// before it only once version 2 is published, so the controller takes it at this boundary.
+const V2_FROM_EPISODE: u64 = 4;
 
-/// Publishes version 1 at once and version 2 once episode 3 has started.
-fn learner(prefix: String, stop: Arc<AtomicBool>) {
+/// The learner stand-in. Version 1 goes out once the controller's `controller/gains`
+/// subscriber exists, so it sits in the controller's queue before its first boundary (a send
+/// delivers to every connected subscriber at once); `v1_sent` reports that. Version 2 goes out
+/// when the arm asks on `publish_v2`, after draining the samples so far; `v2_sent` confirms.
+/// Returns (episode, table version) of every sample received, in order.
+fn learner(
+    prefix: String,
+    stop: Arc<AtomicBool>,
+    v1_sent: mpsc::Sender<()>,
+    publish_v2: mpsc::Receiver<()>,
+    v2_sent: mpsc::Sender<()>,
+) -> Vec<(u64, u64)> {
     let names = ServiceNames::new(&prefix);
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -73,22 +92,44 @@ fn learner(prefix: String, stop: Arc<AtomicBool>) {
         .unwrap();
     let publisher = gains.publisher_builder().create().unwrap();
     let subscriber = samples.subscriber_builder().create().unwrap();
-    publisher
-        .send_copy(*constant_goal_table(1, T, [0.2, -1.8, 2.2], 0.01))
-        .unwrap();
-    let mut sent_v2 = false;
-    while !stop.load(Ordering::Relaxed) {
-        let _ = publisher.update_connections();
+    let mut received = Vec::new();
+    let drain = |received: &mut Vec<(u64, u64)>| {
         while let Some(s) = subscriber.receive().unwrap() {
-            if !sent_v2 && s.episode >= 3 {
-                publisher
-                    .send_copy(*constant_goal_table(2, T, [-0.2, -1.7, 2.0], 0.01))
-                    .unwrap();
-                sent_v2 = true;
-            }
+            received.push((s.episode, s.table_version));
+        }
+    };
+
+    while gains.dynamic_config().number_of_subscribers() == 0 {
+        if stop.load(Ordering::Relaxed) {
+            return received;
         }
         std::thread::sleep(Duration::from_millis(1));
     }
+    publisher
+        .send_copy(*constant_goal_table(1, T, [0.2, -1.8, 2.2], 0.01))
+        .unwrap();
+    v1_sent.send(()).unwrap();
+
+    while !stop.load(Ordering::Relaxed) {
+        let _ = publisher.update_connections();
+        drain(&mut received);
+        match publish_v2.recv_timeout(Duration::from_millis(1)) {
+            Ok(()) => {
+                drain(&mut received);
+                publisher
+                    .send_copy(*constant_goal_table(2, T, [-0.2, -1.7, 2.0], 0.01))
+                    .unwrap();
+                v2_sent.send(()).unwrap();
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                std::thread::sleep(Duration::from_millis(1))
+            }
+        }
+    }
+    // Every sample was sent before the controller returned, i.e. before `stop`.
+    drain(&mut received);
+    received
 }
 
 #[test]
@@ -107,17 +148,35 @@ fn counter_sees_allocations() {
 fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
     let prefix = unique_prefix("no-alloc-loop");
     let stop = Arc::new(AtomicBool::new(false));
+    let (v1_sent_tx, v1_sent) = mpsc::channel();
+    let (publish_v2_tx, publish_v2) = mpsc::channel();
+    let (v2_sent_tx, v2_sent) = mpsc::channel();
     let arm = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
         std::thread::spawn(move || {
-            run_kinematic_arm(&prefix, 0.1, std::f64::consts::PI, &stop)
+            // Holds the answer to the reset of episode V2_FROM_EPISODE − 1 until version 2 is
+            // published: the controller has taken its table for that episode and waits, so
+            // version 2 is in its queue before the next boundary, however the threads are
+            // scheduled.
+            let mut asked = false;
+            let before_answer = |cmd: &ArmCommand| {
+                if !asked
+                    && cmd.kind() == Ok(CommandKind::Reset)
+                    && cmd.episode == V2_FROM_EPISODE - 1
+                {
+                    asked = true;
+                    publish_v2_tx.send(()).unwrap();
+                    v2_sent.recv().unwrap();
+                }
+            };
+            run_kinematic_arm_with(&prefix, 0.1, std::f64::consts::PI, &stop, before_answer)
                 .unwrap()
                 .commands
         })
     };
     let learner = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || learner(prefix, stop))
+        std::thread::spawn(move || learner(prefix, stop, v1_sent_tx, publish_v2, v2_sent_tx))
     };
 
     // Setup phase: may allocate.
@@ -127,9 +186,18 @@ fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
         wait_for_learner: true,
         // The per-episode report goes through the loop too.
         episode_report: true,
+        safety: Safety {
+            // The arm holds one answer while version 2 is published (microseconds unless a
+            // thread is descheduled); only a hang should count as a stale arm here.
+            stale_state_timeout_s: 30.0,
+            ..Safety::default()
+        },
         ..ControllerConfig::default()
     };
     let mut controller = Controller::setup(cfg).expect("setup");
+    v1_sent
+        .recv()
+        .expect("the learner stand-in did not publish version 1");
     let never = AtomicBool::new(false);
 
     // Loop phase: counted.
@@ -144,7 +212,7 @@ fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
 
     stop.store(true, Ordering::Relaxed);
     let commands = arm.join().unwrap();
-    learner.join().unwrap();
+    let received = learner.join().unwrap();
     let s = controller.stats();
     assert_eq!(reason, ExitReason::EpisodesDone);
     assert_eq!(s.episodes_completed, EPISODES);
@@ -154,10 +222,22 @@ fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
         "version 1 at the first boundary, version 2 later"
     );
     assert_eq!(
-        s.faults.stale_state + s.faults.arm_fault + s.faults.non_finite_action,
+        s.faults.stale_state + s.faults.arm_fault + s.faults.non_finite_action + s.faults.no_table,
         0
     );
     assert!(commands >= s.ticks);
+    // Swaps at boundaries only: every episode ran on one version, version 1 from the first
+    // boundary, version 2 from the one it was published before. The 1,200 samples fit in the
+    // learner's queue (8 × MAX_HORIZON) in two parts (before and after the drain at the
+    // request for version 2), so none is dropped.
+    assert_eq!(received.len() as u64, s.ticks);
+    for (episode, version) in &received {
+        let expected = if *episode < V2_FROM_EPISODE { 1 } else { 2 };
+        assert_eq!(
+            *version, expected,
+            "episode {episode} ran on version {version}"
+        );
+    }
     assert_eq!(
         (allocs, frees),
         (0, 0),

@@ -6,9 +6,12 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use rt_controller::{
-    bench, install_signal_handlers, Controller, ControllerConfig, ExitReason, Mode, Pacing, STOP,
+    install_signal_handlers, Controller, ControllerConfig, ExitReason, Mode, Pacing, STOP,
 };
 use ur5_shared::config::from_toml_file;
+
+#[cfg(feature = "testkit")]
+mod bench;
 
 const UNITS: &str = "Units: angles rad, joint velocities rad/s, torques N·m, positions m (arm base frame), times s \
 (the control period task.dt is arm time; in real time the wall period is task.dt / time_compression); statistics are \
@@ -73,7 +76,8 @@ enum Cmd {
     },
     /// Benchmark the loop in-process against a kinematic arm and a learner stand-in over real
     /// iceoryx2 ports: compute per tick (law + clamp + publish), table swap and validation, IPC
-    /// round trip state → command. Prints a table (µs).
+    /// round trip state → command. Prints a table (µs). Needs a build with the `testkit`
+    /// feature (`cargo build --release -p rt-controller --features testkit`).
     #[command(after_help = UNITS)]
     Bench {
         /// Episodes (each swaps in a new table at its boundary).
@@ -159,6 +163,11 @@ fn real_main() -> Result<i32> {
                 ExitReason::NoTable => 4,
             })
         }
+        #[cfg(not(feature = "testkit"))]
+        Cmd::Bench { .. } => anyhow::bail!(
+            "this rt-controller was built without the in-process arm and learner the benchmark runs against; build it with `cargo build --release -p rt-controller --features testkit`"
+        ),
+        #[cfg(feature = "testkit")]
         Cmd::Bench {
             episodes,
             horizon,

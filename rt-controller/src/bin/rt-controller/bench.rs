@@ -1,4 +1,4 @@
-//! `rt-controller bench`: the real loop ([`Controller::run`], lockstep) against an in-process
+//! `rt-controller bench` (needs the `testkit` feature): the real loop ([`Controller::run`], lockstep) against an in-process
 //! kinematic arm and a learner stand-in that publishes a new table before every episode, over
 //! real iceoryx2 ports. Reports, from inside the loop: compute per tick (controller law + clamp
 //! + command + sample publish), table swap (copy + flip) and validation; from the arm: the IPC
@@ -13,10 +13,10 @@ use serde::Serialize;
 use ur5_shared::services::{self, unique_prefix, ServiceNames};
 use ur5_shared::{GainTable, StepSample};
 
-use crate::config::{ControllerConfig, Mode};
-use crate::controller::{Controller, ExitReason};
-use crate::stats::Percentiles;
-use crate::testkit::{constant_goal_table, run_kinematic_arm};
+use rt_controller::config::{ControllerConfig, Mode, Polling};
+use rt_controller::stats::Percentiles;
+use rt_controller::testkit::{constant_goal_table, run_kinematic_arm};
+use rt_controller::{Controller, ExitReason};
 
 /// Benchmark results (ns).
 #[derive(Clone, Debug, Serialize)]
@@ -72,7 +72,7 @@ pub fn run(episodes: u64, horizon: usize, spin_ns: u64) -> anyhow::Result<BenchR
             horizon,
             ..Default::default()
         },
-        polling: crate::config::Polling {
+        polling: Polling {
             spin_ns,
             sleep_ns: 20_000,
         },

@@ -1,0 +1,375 @@
+//! The episode state machine of [`super`]: Boundary (table intake, reset), Resetting, Running
+//! (one tick: law, clamp, command, sample), Holding and NeedTable, with the faults that end an
+//! episode and the commands it sends. Nothing here allocates.
+
+use std::io::Write;
+
+use ur5_shared::clock::monotonic_ns;
+use ur5_shared::config::ActionMode;
+use ur5_shared::safety::clamp_action;
+use ur5_shared::{controller_action, ArmCommand, StepSample, DU, NO_NOISE};
+
+use super::wait::StateFreshness;
+use super::{Controller, ExitReason, Phase};
+use crate::config::Mode;
+use crate::monitor::LostPeers;
+use crate::safety::{hold_command, Fault};
+use crate::tables::Offer;
+
+impl Controller {
+    // ---------------------------------------------------------------- sending
+
+    fn send(&mut self, cmd: ArmCommand) {
+        match self.ports.cmd_pub.send_copy(cmd) {
+            Ok(_) => {
+                if self.cfg.mode == Mode::Lockstep {
+                    self.awaiting = Some(cmd.seq);
+                }
+            }
+            Err(_) => self.stats.ipc_errors += 1,
+        }
+    }
+
+    fn next_seq(&mut self) -> u64 {
+        self.cmd_seq += 1;
+        self.cmd_seq
+    }
+
+    pub(super) fn send_hold(&mut self) {
+        let seq = self.next_seq();
+        let fresh = self.stale_since_ns.is_none() && self.have_state;
+        let (q, qd) = (self.latest.q, self.latest.qd);
+        let cmd = hold_command(
+            self.cfg.action_mode,
+            &self.limits,
+            &self.cfg.safety,
+            &self.last_safe_q,
+            if fresh { Some((&q, &qd)) } else { None },
+            seq,
+            monotonic_ns(),
+            self.episode,
+        );
+        self.send(cmd);
+    }
+
+    fn send_reset(&mut self) -> u64 {
+        let seq = self.next_seq();
+        let cmd = ArmCommand::reset(seq, monotonic_ns(), self.episode, self.cfg.task.start_q);
+        self.send(cmd);
+        seq
+    }
+
+    // ---------------------------------------------------------------- faults
+
+    fn latch(&mut self, fault: Fault) {
+        self.stats.faults.add(fault);
+        if self.cfg.episode_report {
+            let _ = writeln!(
+                std::io::stderr(),
+                "rt-controller: fault latched: {} (episode {}, phase {:?}); holding at q = {:?} rad",
+                fault.name(),
+                self.episode,
+                self.phase,
+                self.last_safe_q
+            );
+        }
+        self.fault = Some(fault);
+    }
+
+    fn abort_episode(&mut self, fault: Fault) {
+        self.latch(fault);
+        if let Phase::Running { t } = self.phase {
+            self.stats.episodes_aborted += 1;
+            self.report_episode(t, true);
+            self.episode += 1;
+        }
+        self.phase = Phase::Holding;
+        self.send_hold();
+    }
+
+    /// Checks the state for arm faults and finiteness.
+    fn check_state(&self) -> Option<Fault> {
+        let s = &self.latest;
+        if s.faults.any() {
+            return Some(Fault::ArmFault);
+        }
+        let finite =
+            s.q.iter()
+                .chain(&s.qd)
+                .chain(&s.ee_pos)
+                .chain(&s.ee_vel)
+                .all(|v| v.is_finite());
+        if !finite {
+            return Some(Fault::NonFiniteState);
+        }
+        None
+    }
+
+    // ---------------------------------------------------------------- the state machine
+
+    fn give_up(&self) -> bool {
+        let g = self.cfg.safety.give_up_after_s;
+        match self.stale_since_ns {
+            Some(since) if g > 0.0 => (monotonic_ns() - since) as f64 * 1e-9 >= g,
+            _ => false,
+        }
+    }
+
+    /// One loop iteration after the period wait.
+    pub(super) fn step(&mut self, freshness: StateFreshness) -> Option<ExitReason> {
+        if freshness == StateFreshness::Stale && self.give_up() {
+            if self.fault != Some(Fault::StaleState) {
+                self.latch(Fault::StaleState);
+            }
+            return Some(ExitReason::ArmLost);
+        }
+        match self.phase {
+            Phase::Boundary => self.boundary(),
+            Phase::NeedTable => {
+                self.intake_tables();
+                if self.tables.active().is_some() {
+                    self.fault = None;
+                    self.phase = Phase::Boundary;
+                    return self.boundary();
+                }
+                let t = self.cfg.safety.no_table_timeout_s;
+                if t > 0.0 && (monotonic_ns() - self.no_table_since_ns) as f64 * 1e-9 >= t {
+                    return Some(ExitReason::NoTable);
+                }
+                if self.cfg.mode == Mode::RealTime {
+                    self.send_hold();
+                }
+                None
+            }
+            Phase::Resetting { seq, sent_ns } => {
+                if freshness == StateFreshness::Fresh && self.latest.last_command_seq >= seq {
+                    if let Some(f) = self.check_state() {
+                        self.abort_episode(f);
+                        return None;
+                    }
+                    self.last_safe_q = self.latest.q;
+                    self.phase = Phase::Running { t: 0 };
+                    self.tick(0);
+                } else if freshness == StateFreshness::Stale && self.cfg.mode == Mode::Lockstep {
+                    self.abort_episode(Fault::StaleState);
+                } else if monotonic_ns() - sent_ns > (self.cfg.safety.reset_timeout_s * 1e9) as u64
+                {
+                    self.stats.reset_retries += 1;
+                    let seq = self.send_reset();
+                    self.phase = Phase::Resetting {
+                        seq,
+                        sent_ns: monotonic_ns(),
+                    };
+                }
+                None
+            }
+            Phase::Running { t } => {
+                // Deadline pacing may find no new state since the last tick (the arm's clock
+                // and ours drift): it acts on the newest one, whose age the stale check bounds.
+                if freshness == StateFreshness::Stale {
+                    self.abort_episode(Fault::StaleState);
+                } else {
+                    self.tick(t);
+                }
+                None
+            }
+            Phase::Holding => {
+                if freshness == StateFreshness::Fresh && self.check_state().is_none() {
+                    self.fault = None;
+                    self.phase = Phase::Boundary;
+                    return self.boundary();
+                }
+                self.send_hold();
+                None
+            }
+        }
+    }
+
+    fn boundary(&mut self) -> Option<ExitReason> {
+        if self.cfg.episodes > 0
+            && self.stats.episodes_completed + self.stats.episodes_aborted >= self.cfg.episodes
+        {
+            return Some(ExitReason::EpisodesDone);
+        }
+        self.intake_tables();
+        let Some(version) = self.tables.active_version() else {
+            if self.phase != Phase::NeedTable {
+                self.latch(Fault::NoTable);
+                self.phase = Phase::NeedTable;
+                self.send_hold();
+            }
+            return None;
+        };
+        let cycle = self.cfg.noisy_episodes + self.cfg.eval_episodes;
+        let k = self.episodes_with_version;
+        self.noisy = k % cycle < self.cfg.noisy_episodes;
+        self.noise.reseed(self.cfg.seed, version, k);
+        self.episodes_with_version += 1;
+        self.episodes_started += 1;
+        let seq = self.send_reset();
+        self.phase = Phase::Resetting {
+            seq,
+            sent_ns: monotonic_ns(),
+        };
+        None
+    }
+
+    /// Takes the newest table from `controller/gains`, if any: the only place tables change.
+    fn intake_tables(&mut self) {
+        loop {
+            let t0 = monotonic_ns();
+            let sample = match self.ports.gains_sub.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => return,
+                Err(_) => {
+                    self.stats.ipc_errors += 1;
+                    return;
+                }
+            };
+            let result = self.tables.offer(&sample, monotonic_ns);
+            let version = sample.version;
+            drop(sample);
+            match result {
+                Ok(Offer::Swapped {
+                    copy_ns,
+                    validate_ns,
+                }) => {
+                    // The flip itself is an index store: the swap is the copy.
+                    self.stats.swap.record(copy_ns);
+                    self.stats.validate.record(validate_ns);
+                    self.stats.intake.record(monotonic_ns() - t0);
+                    self.stats.swaps += 1;
+                    self.episodes_with_version = 0;
+                    if self.cfg.episode_report {
+                        let _ = writeln!(
+                            std::io::stderr(),
+                            "rt-controller: gain table version {version} taken at the boundary before episode {} (copy {:.1} µs, validate {:.1} µs)",
+                            self.episode,
+                            copy_ns as f64 / 1e3,
+                            validate_ns as f64 / 1e3
+                        );
+                    }
+                }
+                Ok(Offer::Unchanged) => {}
+                Err(r) => {
+                    self.stats.rejected.add(&r);
+                    let _ = writeln!(
+                        std::io::stderr(),
+                        "rt-controller: rejected gain table: {r}; keeping version {:?}",
+                        self.tables.active_version()
+                    );
+                }
+            }
+        }
+    }
+
+    /// One Running tick at time step `t` on the latest state.
+    #[inline]
+    fn tick(&mut self, t: usize) {
+        if let Some(f) = self.check_state() {
+            self.abort_episode(f);
+            return;
+        }
+        let table = match self.tables.active() {
+            Some(table) => table,
+            None => {
+                self.abort_episode(Fault::NoTable);
+                return;
+            }
+        };
+        let state = self.latest;
+        let s = state.state_vector(&self.cfg.task.goal);
+        let eps = if self.noisy {
+            self.noise.next()
+        } else {
+            NO_NOISE
+        };
+        let mut a = [0.0; DU];
+        let ok = controller_action(table, t, &s, &eps, &mut a).is_ok();
+        let version = table.version;
+        if !ok || !a.iter().all(|v| v.is_finite()) {
+            self.abort_episode(Fault::NonFiniteAction);
+            return;
+        }
+        let mut sent = a;
+        let saturated = clamp_action(
+            self.cfg.action_mode,
+            &self.limits,
+            self.cfg.task.dt,
+            &state.q,
+            &mut sent,
+        );
+        let seq = self.next_seq();
+        let stamp = monotonic_ns();
+        let cmd = match self.cfg.action_mode {
+            ActionMode::GoalAngles => ArmCommand::goal_angles(seq, stamp, self.episode, sent),
+            ActionMode::Torque => ArmCommand::torques(seq, stamp, self.episode, sent),
+        };
+        self.send(cmd);
+        let sample = StepSample {
+            table_version: version,
+            episode: self.episode,
+            t: t as u32,
+            noise: self.noisy as u32,
+            s,
+            a,
+            a_sent: sent,
+            state_seq: state.seq,
+            state_stamp_ns: state.stamp_ns,
+            command_stamp_ns: stamp,
+        };
+        match self.ports.sample_pub.loan_uninit() {
+            Ok(slot) => match slot.write_payload(sample).send() {
+                Ok(0) => self.stats.samples_unheard += 1,
+                Ok(_) => {}
+                Err(_) => self.stats.ipc_errors += 1,
+            },
+            Err(_) => self.stats.ipc_errors += 1,
+        }
+        let dt = monotonic_ns() - self.tick_start_ns;
+        self.stats.compute.record(dt);
+        self.stats.compute_episode.record(dt);
+        self.stats.ticks += 1;
+        self.stats.saturated_ticks += saturated as u64;
+        self.used_state_seq = state.seq;
+        self.last_safe_q = state.q;
+        let next = t + 1;
+        if next >= self.cfg.task.horizon {
+            self.stats.episodes_completed += 1;
+            self.report_episode(next, false);
+            self.episode += 1;
+            self.phase = Phase::Boundary;
+        } else {
+            self.phase = Phase::Running { t: next };
+        }
+    }
+
+    /// One line per episode on stderr (no allocation), then clears the episode histograms.
+    fn report_episode(&mut self, ticks: usize, aborted: bool) {
+        if self.cfg.episode_report {
+            let lost = self
+                .monitor
+                .as_ref()
+                .map_or(LostPeers { arm: 0, learner: 0 }, |m| m.health.lost());
+            let _ = writeln!(
+                std::io::stderr(),
+                "rt-controller: episode {} {} (table v{}, {}, {} ticks): compute {}; wake {}; missed periods {}, swaps {}, rejected {}, faults {}, lost peers: arm {} learner {}",
+                self.episode,
+                if aborted { "ABORTED" } else { "done" },
+                self.tables.active_version().unwrap_or(0),
+                if self.noisy { "noisy" } else { "noise-free" },
+                ticks,
+                self.stats.compute_episode.summary(),
+                self.stats.wake_episode.summary(),
+                self.stats.missed_periods,
+                self.stats.swaps,
+                self.stats.rejected.total(),
+                self.stats.faults.total(),
+                lost.arm,
+                lost.learner,
+            );
+        }
+        self.stats.compute_episode.clear();
+        self.stats.wake_episode.clear();
+    }
+}

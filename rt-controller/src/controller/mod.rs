@@ -1,0 +1,350 @@
+//! The controller: a fallible [`Controller::setup`] that allocates everything, and
+//! [`Controller::run`], the loop phase, which does not allocate, lock or block except in the
+//! period wait (DESIGN.md §3; STYLE.md, the iceoryx2 split of setup and tick).
+//!
+//! # Episodes
+//!
+//! ```text
+//!            ┌──────────── no valid table ────────────┐
+//!            ▼                                         │
+//! Boundary ──take newest table──▶ Resetting ──ack──▶ Running t = 0 … T−1 ──▶ Boundary
+//!    ▲                                                 │ stale / arm fault / non-finite
+//!    └────────────── arm fresh again ◀── Holding ◀─────┘
+//! ```
+//!
+//! - **Boundary**: the only place a table is taken (copy into the inactive half, validate,
+//!   flip); then a `Reset` command to `task.start_q`.
+//! - **Resetting**: waits until the arm acknowledges the reset (`ArmState::last_command_seq`);
+//!   the arm is at rest at the start pose and holds it until the first command ("hold, then
+//!   start"). The acknowledging state is s_0.
+//! - **Running**: per tick s_t → ε_t → a_t = controller law ([`ur5_shared::controller_action`])
+//!   → clamp → command → [`ur5_shared::StepSample`].
+//! - **Holding**: a latched fault (stale state, arm fault, non-finite state or action) ends the
+//!   episode (it is counted as aborted; its samples stop) and the controller commands a hold
+//!   (PD to the last safe pose) every period until the arm is fresh and fault-free again.
+//! - **NeedTable**: no valid table yet: hold and poll `controller/gains`.
+//!
+//! # Pacing
+//!
+//! Lockstep: after each command, wait for the state that acknowledges it. Real time with
+//! deadline pacing: `clock_nanosleep(TIMER_ABSTIME)` to deadlines every `task.dt /
+//! time_compression`, act on the newest state; periods that have passed entirely are counted as
+//! missed and skipped. Real time with arm pacing: each new state starts a tick.
+//!
+//! # Files
+//!
+//! This one: the types, [`Controller::setup`], [`Controller::run`] and the summary; `wait.rs`:
+//! the period wait of each pacing mode; `episode.rs`: the state machine above (boundary and
+//! table intake, ticks, faults and holds).
+
+use core::sync::atomic::{AtomicBool, Ordering};
+use std::io::Write;
+
+use serde::Serialize;
+use ur5_shared::clock::monotonic_ns;
+use ur5_shared::config::ArmLimits;
+use ur5_shared::layout::N_JOINTS;
+use ur5_shared::ArmState;
+
+use crate::config::{ControllerConfig, Mode};
+use crate::monitor::{LostPeers, PeerMonitor};
+use crate::noise::Noise;
+use crate::ports::{ControllerPorts, SetupError};
+use crate::rt::{self, RtOutcome};
+use crate::safety::Fault;
+use crate::stats::{FaultCounts, LoopStats, Percentiles, RejectCounts};
+use crate::tables::TableBuffer;
+
+mod episode;
+mod wait;
+
+/// Why [`Controller::run`] returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExitReason {
+    /// The configured number of episodes completed.
+    EpisodesDone,
+    /// The stop flag was raised (SIGINT/SIGTERM in the binary).
+    Stopped,
+    /// The arm was stale for `safety.give_up_after_s`.
+    ArmLost,
+    /// No valid table arrived within `safety.no_table_timeout_s`.
+    NoTable,
+}
+
+/// The end-of-run summary (`--json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    /// Always "run".
+    pub command: &'static str,
+    /// Why the loop ended.
+    pub exit_reason: ExitReason,
+    /// Lockstep or real time.
+    pub mode: Mode,
+    /// Episodes that ran all T ticks.
+    pub episodes_completed: u64,
+    /// Episodes ended by a fault.
+    pub episodes_aborted: u64,
+    /// Running ticks.
+    pub ticks: u64,
+    /// Version of the active table at exit.
+    pub table_version: Option<u64>,
+    /// Tables taken.
+    pub swaps: u64,
+    /// Rejections by reason.
+    pub rejected: RejectCounts,
+    /// Total rejections.
+    pub rejected_total: u64,
+    /// Faults by kind.
+    pub faults: FaultCounts,
+    /// The fault still latched at exit, if any.
+    pub fault_at_exit: Option<Fault>,
+    /// Deadline pacing: missed periods.
+    pub missed_periods: u64,
+    /// Ticks whose action was clamped.
+    pub saturated_ticks: u64,
+    /// Resets resent.
+    pub reset_retries: u64,
+    /// IPC send/receive failures.
+    pub ipc_errors: u64,
+    /// Samples no learner received.
+    pub samples_unheard: u64,
+    /// Compute per tick (law + clamp + publish), ns.
+    pub compute: Percentiles,
+    /// Wake-up lateness, ns.
+    pub wake: Percentiles,
+    /// Table swap (copy + flip), ns.
+    pub swap: Percentiles,
+    /// Table validation, ns.
+    pub validate: Percentiles,
+    /// Boundary intake (receive + copy + validate + flip), ns.
+    pub intake: Percentiles,
+    /// Peer processes that died or left during the run ([`crate::monitor`]), if it ran.
+    pub lost_peers: Option<LostPeers>,
+    /// Real-time privileges obtained.
+    pub rt: RtOutcome,
+    /// Wall time of the loop phase (s).
+    pub wall_s: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    Boundary,
+    Resetting { seq: u64, sent_ns: u64 },
+    Running { t: usize },
+    Holding,
+    NeedTable,
+}
+
+/// The controller: configuration, ports, tables, noise, statistics and loop state.
+pub struct Controller {
+    cfg: ControllerConfig,
+    ports: ControllerPorts,
+    tables: TableBuffer,
+    limits: ArmLimits,
+    noise: Noise,
+    stats: LoopStats,
+    rt: RtOutcome,
+    period_ns: u64,
+    stale_ns: u64,
+    // Loop state.
+    phase: Phase,
+    cmd_seq: u64,
+    /// Lockstep: the command whose acknowledgement the next wait expects.
+    awaiting: Option<u64>,
+    episode: u64,
+    episodes_started: u64,
+    episodes_with_version: u64,
+    noisy: bool,
+    latest: ArmState,
+    have_state: bool,
+    used_state_seq: u64,
+    last_safe_q: [f64; N_JOINTS],
+    stale_since_ns: Option<u64>,
+    next_deadline_ns: u64,
+    tick_start_ns: u64,
+    fault: Option<Fault>,
+    no_table_since_ns: u64,
+    wall_s: f64,
+    monitor: Option<PeerMonitor>,
+}
+
+impl Controller {
+    /// Setup phase: validates `cfg`, applies the real-time privileges, creates the node and
+    /// ports, waits for the arm (a state and a command subscriber) and, if configured, the
+    /// learner, then preallocates tables, histograms and noise. Allocates; may fail.
+    pub fn setup(cfg: ControllerConfig) -> Result<Self, SetupError> {
+        cfg.validate()?;
+        let rt = rt::apply(&cfg.rt);
+        let ports = ControllerPorts::create(&cfg.prefix)?;
+        let t0 = monotonic_ns();
+        let timeout_ns = (cfg.setup_timeout_s * 1e9) as u64;
+        let mut latest = None;
+        loop {
+            if let Ok(Some(s)) = ports.state_sub.receive() {
+                latest = Some(*s);
+            }
+            let (_, cmd_subs) = ports.arm_peers();
+            if latest.is_some() && cmd_subs > 0 {
+                break;
+            }
+            if monotonic_ns() - t0 > timeout_ns {
+                return Err(SetupError::PeerTimeout {
+                    what: if latest.is_none() {
+                        "arm state on arm/state"
+                    } else {
+                        "arm subscriber on arm/command"
+                    },
+                    timeout_s: cfg.setup_timeout_s,
+                    prefix: cfg.prefix.clone(),
+                });
+            }
+            std::thread::sleep(core::time::Duration::from_millis(1));
+        }
+        if cfg.wait_for_learner {
+            loop {
+                let (subs, pubs) = ports.learner_peers();
+                if subs > 0 && pubs > 0 {
+                    break;
+                }
+                if monotonic_ns() - t0 > timeout_ns {
+                    return Err(SetupError::PeerTimeout {
+                        what: "learner (subscriber on learner/samples and publisher on controller/gains)",
+                        timeout_s: cfg.setup_timeout_s,
+                        prefix: cfg.prefix.clone(),
+                    });
+                }
+                std::thread::sleep(core::time::Duration::from_millis(1));
+            }
+        }
+        ports.connect();
+        let latest = latest.expect("loop exits with a state");
+        // Warm up stderr (its lock and handle) so the first episode report does not.
+        let _ = writeln!(
+            std::io::stderr(),
+            "rt-controller: arm connected on prefix `{}`; mode {:?}",
+            cfg.prefix,
+            cfg.mode
+        );
+        let period_ns = cfg.wall_period_ns();
+        let stale_ns = (cfg.safety.stale_state_timeout_s * 1e9) as u64;
+        Ok(Self {
+            tables: TableBuffer::new(cfg.bounds.clone(), cfg.task.horizon),
+            limits: cfg.limits.clone(),
+            noise: Noise::new(cfg.seed, 0, 0),
+            stats: LoopStats::new(),
+            rt,
+            period_ns,
+            stale_ns,
+            phase: Phase::Boundary,
+            cmd_seq: 0,
+            awaiting: None,
+            episode: 0,
+            episodes_started: 0,
+            episodes_with_version: 0,
+            noisy: false,
+            last_safe_q: latest.q,
+            have_state: true,
+            used_state_seq: 0,
+            latest,
+            stale_since_ns: None,
+            next_deadline_ns: 0,
+            tick_start_ns: 0,
+            fault: None,
+            no_table_since_ns: 0,
+            wall_s: 0.0,
+            monitor: (cfg.monitor_period_s > 0.0).then(|| {
+                PeerMonitor::spawn(
+                    &cfg.prefix,
+                    core::time::Duration::from_secs_f64(cfg.monitor_period_s),
+                )
+            }),
+            ports,
+            cfg,
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &ControllerConfig {
+        &self.cfg
+    }
+
+    /// Statistics so far.
+    pub fn stats(&self) -> &LoopStats {
+        &self.stats
+    }
+
+    /// The ports (e.g. to count connected peers).
+    pub fn ports(&self) -> &ControllerPorts {
+        &self.ports
+    }
+
+    /// Loop phase: runs episodes until `cfg.episodes` complete, `stop` is raised, the arm is
+    /// lost for `safety.give_up_after_s`, or no table arrives within
+    /// `safety.no_table_timeout_s`. Does not allocate (tested with a counting allocator in
+    /// tests/tests/no_alloc_loop.rs). Sends a hold before returning.
+    pub fn run(&mut self, stop: &AtomicBool) -> ExitReason {
+        let start = monotonic_ns();
+        self.next_deadline_ns = start + self.period_ns;
+        self.no_table_since_ns = start;
+        let reason = loop {
+            if stop.load(Ordering::Relaxed) {
+                break ExitReason::Stopped;
+            }
+            self.stats.iterations += 1;
+            let freshness = self.wait_period();
+            if let Some(reason) = self.step(freshness) {
+                break reason;
+            }
+        };
+        self.send_hold();
+        self.wall_s = (monotonic_ns() - start) as f64 * 1e-9;
+        if self.cfg.episode_report {
+            let _ = writeln!(
+                std::io::stderr(),
+                "rt-controller: exit ({reason:?}) after {} episodes ({} aborted), {} ticks; compute {}; wake {}; swaps {}, rejected {}, missed periods {}",
+                self.stats.episodes_completed,
+                self.stats.episodes_aborted,
+                self.stats.ticks,
+                self.stats.compute.summary(),
+                self.stats.wake.summary(),
+                self.stats.swaps,
+                self.stats.rejected.total(),
+                self.stats.missed_periods
+            );
+        }
+        reason
+    }
+
+    /// The end-of-run summary (allocates; call after [`Self::run`]).
+    pub fn summary(&self, exit_reason: ExitReason) -> Summary {
+        let s = &self.stats;
+        Summary {
+            command: "run",
+            exit_reason,
+            mode: self.cfg.mode,
+            episodes_completed: s.episodes_completed,
+            episodes_aborted: s.episodes_aborted,
+            ticks: s.ticks,
+            table_version: self.tables.active_version(),
+            swaps: s.swaps,
+            rejected: s.rejected,
+            rejected_total: s.rejected.total(),
+            faults: s.faults,
+            fault_at_exit: self.fault,
+            missed_periods: s.missed_periods,
+            saturated_ticks: s.saturated_ticks,
+            reset_retries: s.reset_retries,
+            ipc_errors: s.ipc_errors,
+            samples_unheard: s.samples_unheard,
+            compute: s.compute.summary(),
+            wake: s.wake.summary(),
+            swap: s.swap.summary(),
+            validate: s.validate.summary(),
+            intake: s.intake.summary(),
+            lost_peers: self.monitor.as_ref().map(|m| m.health.lost()),
+            rt: self.rt.clone(),
+            wall_s: self.wall_s,
+        }
+    }
+}
