@@ -1,4 +1,4 @@
-//! hil-sim: the simulated UR5 of the paper's set-up (DESIGN.md §2) as a library and a binary.
+//! hil-sim: the simulated UR5 of the paper's set-up (docs/design.md §2) as a library and a binary.
 //!
 //! - [`model`]: the URDF (bundled UR5 or a user file) parsed by `urdf-rs`, checked, wrist joints
 //!   locked;

@@ -1,4 +1,4 @@
-//! `hil-sim serve`: the simulated arm behind `arm/state` and `arm/command` (DESIGN.md §3), as a
+//! `hil-sim serve`: the simulated arm behind `arm/state` and `arm/command` (docs/design.md §3.1, §3.5), as a
 //! real arm driver would be.
 //!
 //! - **Zero-order hold**: the last goal (or torque) command stays in force until the next one.

@@ -142,7 +142,7 @@ pub struct ControllerConfig {
     pub polling: Polling,
     /// Setup waits this long for the arm (and the learner, if `wait_for_learner`) (s).
     pub setup_timeout_s: f64,
-    /// Setup waits for the learner's ports too (DESIGN.md §3: every peer connected before the
+    /// Setup waits for the learner's ports too (docs/design.md §5 D20: every peer connected before the
     /// first episode, because iceoryx2 allocates inside send/receive when connections change).
     /// Off, the loop starts without a learner and holds until a table arrives; a learner that
     /// connects later then costs one allocation burst in the loop (at its first sample send).

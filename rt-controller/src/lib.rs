@@ -1,4 +1,4 @@
-//! rt-controller: the real-time loop of DESIGN.md §3. It executes the time-varying
+//! rt-controller: the real-time loop of docs/design.md §3.4–§3.5. It executes the time-varying
 //! linear-Gaussian controller a = K_t (s − ŝ_t) + k_t + â_t + L_t ε published by the learner
 //! ([`ur5_shared::controller_action`], the one implementation of the law) on the arm over
 //! iceoryx2, and publishes every step for the learner.

@@ -1,4 +1,4 @@
-//! The controller's iceoryx2 node and ports, created in the setup phase (DESIGN.md §3):
+//! The controller's iceoryx2 node and ports, created in the setup phase (docs/design.md §3.2, §3.4):
 //! `arm/state` in, `arm/command` out, `learner/samples` out, `controller/gains` in, each with
 //! the quality of service of [`ur5_shared::services`].
 

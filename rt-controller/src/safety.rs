@@ -1,4 +1,4 @@
-//! The faults that make the controller hold ([`Fault`]) and the hold command (DESIGN.md §3).
+//! The faults that make the controller hold ([`Fault`]) and the hold command (docs/design.md §3.4).
 //! The action clamp itself is [`ur5_shared::safety::clamp_action`], shared with the learner's
 //! rollouts.
 //!

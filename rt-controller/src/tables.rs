@@ -1,4 +1,4 @@
-//! The double-buffered gain table (DESIGN.md §3): the loop reads the active half; a new table
+//! The double-buffered gain table (docs/design.md §3.4, §5 D19): the loop reads the active half; a new table
 //! is copied into the inactive half, validated there and made active by flipping an index, at an
 //! episode boundary only. Both halves are allocated at setup; nothing here allocates.
 //!
@@ -24,7 +24,7 @@ pub enum Rejection {
         /// `task.horizon`.
         expected: u64,
     },
-    /// The version is not newer than the active table's (versions increase, DESIGN.md §3).
+    /// The version is not newer than the active table's (versions increase, docs/design.md §3.3).
     #[error("gain table version {version} is not newer than the active version {active}; ignored")]
     StaleVersion {
         /// Received version.

@@ -1,4 +1,4 @@
-//! The host clock every timestamp in the IPC payloads uses (DESIGN.md §3, [`crate::msg`]):
+//! The host clock every timestamp in the IPC payloads uses (docs/design.md §3.2, §3.5, [`crate::msg`]):
 //! `CLOCK_MONOTONIC` in nanoseconds, so stamps written by the arm, the controller and the
 //! learner are comparable. Neither function allocates.
 

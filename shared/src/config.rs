@@ -121,7 +121,7 @@ pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
     Ok(a)
 }
 
-/// The reaching task (DESIGN.md §2, the paper's §5 set-up).
+/// The reaching task (docs/design.md §2.5, the paper's §5 set-up).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TaskConfig {
@@ -188,7 +188,7 @@ impl TaskConfig {
 #[serde(rename_all = "snake_case")]
 pub enum ActionMode {
     /// Goal joint angles (rad) tracked by the arm's own joint servo, as a UR5 executes `servoj`
-    /// (the paper's set-up, DESIGN.md §2).
+    /// (the paper's set-up, docs/design.md §2.3).
     #[default]
     GoalAngles,
     /// Joint torques (N·m), clamped to the effort limits; gravity is not compensated.
@@ -269,7 +269,7 @@ impl Default for ServoConfig {
 }
 
 /// Perturbations that turn the nominal simulated arm into a stand-in "physical arm"
-/// (DESIGN.md §2, the paper's hardware experiment). All off by default; all noise is drawn from
+/// (docs/design.md §2.7, the paper's hardware experiment). All off by default; all noise is drawn from
 /// one RNG seeded with `seed`, so a run replays bit for bit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

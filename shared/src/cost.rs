@@ -1,4 +1,4 @@
-//! Task cost of a trajectory and normalised performance (DESIGN.md §2, the paper's §5).
+//! Task cost of a trajectory and normalised performance (docs/design.md §1.6, the paper's §5).
 //!
 //! ```text
 //! C(τ) = d_n + Σ_{i=0..n} (i/n) d_i,    d_i = ‖ee_i − goal‖ (m),  n = T − 1

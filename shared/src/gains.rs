@@ -1,5 +1,5 @@
 //! Gain tables: the time-varying linear-Gaussian controller the learner publishes on
-//! `controller/gains` and the controller executes (DESIGN.md §1, §3).
+//! `controller/gains` and the controller executes (docs/design.md §1.2, §3.3).
 //!
 //! Per time step t < T the table holds the paper's controller
 //!
@@ -264,7 +264,7 @@ pub enum GainTableError {
 ///
 /// The defaults are deliberately generous: they catch a learner that has diverged or a table
 /// that is garbage, not a controller that is merely aggressive (the controller clamps actions to
-/// joint, velocity and effort limits anyway, DESIGN.md §2). A NaN bound rejects every table.
+/// joint, velocity and effort limits anyway, docs/design.md §2.4). A NaN bound rejects every table.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GainBounds {

@@ -1,4 +1,4 @@
-//! The controller law, in exactly one place (DESIGN.md §1; STYLE.md "one home for each fact").
+//! The controller law, in exactly one place (docs/design.md §1.2; STYLE.md "one home for each fact").
 //!
 //! ```text
 //! a = K_t (s − ŝ_t) + k_t + â_t + L_t ε,     ε ~ N(0, I_dU)
@@ -39,7 +39,7 @@ pub enum LawError {
 ///
 /// Only the lower triangle of L_t is read (j ≤ i), which is all of it for a validated table.
 /// The action is finite whenever the table is valid and `s`, `eps` are finite; the caller
-/// still clamps it to joint, velocity and effort limits (DESIGN.md §3).
+/// still clamps it to joint, velocity and effort limits (docs/design.md §2.4).
 #[inline]
 pub fn controller_action(
     table: &GainTable,

@@ -1,4 +1,4 @@
-//! Dimensions and the state layout of the reaching task (DESIGN.md §2).
+//! Dimensions and the state layout of the reaching task (docs/design.md §2.2).
 //!
 //! The state s ∈ R^12 is, in this order:
 //!

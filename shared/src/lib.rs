@@ -1,4 +1,4 @@
-//! The contract shared by `hil-sim`, `rt-controller` and `learner` (DESIGN.md §2–§3).
+//! The contract shared by `hil-sim`, `rt-controller` and `learner` (docs/design.md §2–§3).
 //!
 //! One home for each fact; every other crate imports these from here:
 //!

@@ -1,4 +1,4 @@
-//! IPC payloads (DESIGN.md §3): fixed-size `#[repr(C)]` `Copy` types that iceoryx2 moves
+//! IPC payloads (docs/design.md §3.2): fixed-size `#[repr(C)]` `Copy` types that iceoryx2 moves
 //! through shared memory. The gain table is in [`crate::gains`].
 //!
 //! | service ([`crate::services`]) | publisher | payload |
@@ -20,7 +20,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use crate::layout::{self, DU, DX, N_JOINTS};
 
 /// One executed step, published by the controller on `learner/samples` for the learner's
-/// dynamics fit and discriminator (DESIGN.md §3).
+/// dynamics fit and discriminator (docs/design.md §3.2; the dynamics use a_sent, §5 D18).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
 #[type_name("ur5_shared::StepSample.v1")]
@@ -160,7 +160,7 @@ pub enum CommandKind {
     Hold = 0,
     /// `values` are goal joint angles (rad) for the arm's servo (the paper's set-up).
     GoalAngles = 1,
-    /// `values` are joint torques (N·m) (research option, DESIGN.md §2).
+    /// `values` are joint torques (N·m) (research option, docs/design.md §2.3).
     Torques = 2,
     /// Move (real arm) or teleport (sim) to `reset_pose` at rest; `values` ignored.
     Reset = 3,

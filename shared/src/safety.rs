@@ -1,7 +1,7 @@
 //! The action clamp: the one place where an action is made safe before it reaches an arm.
 //!
 //! Both the real-time loop and the learner's in-process rollouts call [`clamp_action`], so a
-//! rollout in the learner sees exactly the actions the arm would execute (DESIGN.md §2: goals
+//! rollout in the learner sees exactly the actions the arm would execute (docs/design.md §2.4: goals
 //! clamped to the joint limits and to at most the velocity limit × control period away from the
 //! current angles; torques clamped to the effort limits).
 

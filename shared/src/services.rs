@@ -1,8 +1,8 @@
-//! iceoryx2 service names (DESIGN.md §3) and per-run prefixes.
+//! iceoryx2 service names (docs/design.md §3.2) and per-run prefixes.
 //!
 //! Every process builds its names through [`ServiceNames`], so a test (or a second experiment
 //! on the same machine) that picks its own prefix never meets another's services
-//! (DESIGN.md §5). Payload types per service are listed in [`crate::msg`].
+//! (docs/design.md §3.2). Payload types per service are listed in [`crate::msg`].
 
 use core::sync::atomic::{AtomicU64, Ordering};
 
@@ -14,7 +14,7 @@ pub const ARM_STATE: &str = "arm/state";
 pub const ARM_COMMAND: &str = "arm/command";
 /// Controller → learner: [`crate::msg::StepSample`].
 pub const LEARNER_SAMPLES: &str = "learner/samples";
-/// Learner → controller: [`crate::gains::GainTable`]; history 1, safe overflow (DESIGN.md §3).
+/// Learner → controller: [`crate::gains::GainTable`]; history 1, safe overflow (docs/design.md §3.2).
 pub const CONTROLLER_GAINS: &str = "controller/gains";
 
 /// All base names, in data-flow order.
@@ -100,7 +100,7 @@ impl ServiceNames {
     }
 }
 
-/// Quality of service of one publish–subscribe service (DESIGN.md §3).
+/// Quality of service of one publish–subscribe service (docs/design.md §3.2).
 ///
 /// iceoryx2 fixes these settings when the first process creates a service, and refuses to open
 /// it for a process that asks for more (e.g. a larger subscriber buffer). Every process opens
@@ -153,7 +153,7 @@ pub const LEARNER_SAMPLES_QOS: Qos = Qos {
     safe_overflow: true,
 };
 
-/// `controller/gains`: history 1, queue 1, safe overflow (DESIGN.md §3): only the newest table
+/// `controller/gains`: history 1, queue 1, safe overflow (docs/design.md §3.2): only the newest table
 /// matters, and a controller that starts late still gets it.
 pub const CONTROLLER_GAINS_QOS: Qos = Qos {
     history: 1,

@@ -1,6 +1,6 @@
 //! The controller: a fallible [`Controller::setup`] that allocates everything, and
 //! [`Controller::run`], the loop phase, which does not allocate, lock or block except in the
-//! period wait (DESIGN.md §3; STYLE.md, the iceoryx2 split of setup and tick).
+//! period wait (docs/design.md §3.4, §3.8; STYLE.md, the iceoryx2 split of setup and tick).
 //!
 //! # Episodes
 //!

@@ -1,4 +1,4 @@
-//! `rt-controller`: the real-time loop (DESIGN.md §3). `run` executes gain tables on the arm,
+//! `rt-controller`: the real-time loop (docs/design.md §3.4). `run` executes gain tables on the arm,
 //! `bench` measures the loop, `print-config` writes the default TOML.
 
 use std::path::PathBuf;
