@@ -337,15 +337,11 @@ pub fn serve(
     let node = NodeBuilder::new()
         .create::<ipc::Service>()
         .map_err(|e| ipc_err("node")(&e))?;
-    let state_name = names.arm_state().map_err(|e| ipc_err("arm/state")(&e))?;
-    let cmd_name = names
-        .arm_command()
-        .map_err(|e| ipc_err("arm/command")(&e))?;
     let state_svc = services::ARM_STATE_QOS
-        .open_or_create::<ArmState>(&node, &state_name)
+        .open_or_create_retrying::<ArmState>(&node, &names.arm_state)
         .map_err(|e| ipc_err(&names.arm_state)(&e))?;
     let cmd_svc = services::ARM_COMMAND_QOS
-        .open_or_create::<ArmCommand>(&node, &cmd_name)
+        .open_or_create_retrying::<ArmCommand>(&node, &names.arm_command)
         .map_err(|e| ipc_err(&names.arm_command)(&e))?;
     let publisher = state_svc
         .publisher_builder()

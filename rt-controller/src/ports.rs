@@ -2,14 +2,12 @@
 //! `arm/state` in, `arm/command` out, `learner/samples` out, `controller/gains` in, each with
 //! the quality of service of [`ur5_shared::services`].
 
-use core::time::Duration;
-
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
-use ur5_shared::services::{self, Qos, ServiceNames};
+use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, ArmState, GainTable, StepSample};
 
 /// Setup failures; each message says what to check.
@@ -25,13 +23,8 @@ pub enum SetupError {
     #[error("cannot create the iceoryx2 node: {0}; is /dev/shm writable?")]
     Node(String),
     /// A service could not be opened or created.
-    #[error("cannot open or create service `{name}`: {why}; a service of that name may exist with another payload type or smaller limits (another build of the project, or a stale run: use a fresh --prefix)")]
-    Service {
-        /// Full service name.
-        name: String,
-        /// iceoryx2's error.
-        why: String,
-    },
+    #[error(transparent)]
+    Service(#[from] ur5_shared::services::OpenServiceError),
     /// A port could not be created.
     #[error("cannot create a {kind} on `{name}`: {why}; too many processes may be connected (stale ports of killed processes count until cleaned up)")]
     Port {
@@ -52,27 +45,6 @@ pub enum SetupError {
         /// The service prefix.
         prefix: String,
     },
-}
-
-/// A creating process may race another: retry a few times before giving up.
-fn open_retrying<T: core::fmt::Debug + ZeroCopySend + 'static>(
-    node: &Node<ipc::Service>,
-    name: &str,
-    qos: &Qos,
-) -> Result<PubSubFactory<ipc::Service, T, ()>, SetupError> {
-    let sname = ServiceNames::service_name(name)?;
-    let mut last = String::new();
-    for attempt in 0..50 {
-        match qos.open_or_create::<T>(node, &sname) {
-            Ok(f) => return Ok(f),
-            Err(e) => last = format!("{e:?}"),
-        }
-        std::thread::sleep(Duration::from_millis(2 + attempt));
-    }
-    Err(SetupError::Service {
-        name: name.to_owned(),
-        why: last,
-    })
 }
 
 /// The node and the four ports. Fields drop in order: ports before services before the node.
@@ -99,19 +71,13 @@ impl ControllerPorts {
             .create::<ipc::Service>()
             .map_err(|e| SetupError::Node(format!("{e:?}")))?;
         let state_svc =
-            open_retrying::<ArmState>(&node, &names.arm_state, &services::ARM_STATE_QOS)?;
-        let cmd_svc =
-            open_retrying::<ArmCommand>(&node, &names.arm_command, &services::ARM_COMMAND_QOS)?;
-        let samples_svc = open_retrying::<StepSample>(
-            &node,
-            &names.learner_samples,
-            &services::LEARNER_SAMPLES_QOS,
-        )?;
-        let gains_svc = open_retrying::<GainTable>(
-            &node,
-            &names.controller_gains,
-            &services::CONTROLLER_GAINS_QOS,
-        )?;
+            services::ARM_STATE_QOS.open_or_create_retrying::<ArmState>(&node, &names.arm_state)?;
+        let cmd_svc = services::ARM_COMMAND_QOS
+            .open_or_create_retrying::<ArmCommand>(&node, &names.arm_command)?;
+        let samples_svc = services::LEARNER_SAMPLES_QOS
+            .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?;
+        let gains_svc = services::CONTROLLER_GAINS_QOS
+            .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)?;
         fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug) -> SetupError {
             SetupError::Port {
                 kind,

@@ -186,6 +186,62 @@ impl Qos {
     }
 }
 
+/// A service that could not be opened or created after [`Qos::open_or_create_retrying`]'s
+/// attempts.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenServiceError {
+    /// The name is not a valid iceoryx2 service name.
+    #[error(transparent)]
+    Name(#[from] InvalidServiceName),
+    /// Every attempt failed; `why` is iceoryx2's last error.
+    #[error("cannot open or create service `{name}` after {attempts} attempts: {why:?}; a service of that name may exist with another payload type or smaller limits (another build of the project, or a stale run: use a fresh --prefix)")]
+    Service {
+        /// Full (prefixed) service name.
+        name: String,
+        /// Attempts made.
+        attempts: u32,
+        /// iceoryx2's last error.
+        why: iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError,
+    },
+}
+
+impl Qos {
+    /// Attempts made by [`Qos::open_or_create_retrying`]; the waits between them grow from
+    /// 2 ms by 1 ms each, about 1.3 s in all.
+    pub const OPEN_ATTEMPTS: u32 = 50;
+
+    /// [`Qos::open_or_create`] for the full name `name`, retried while another process may be
+    /// creating the same service at this moment (iceoryx2 reports a service in creation as an
+    /// error to the opener). Setup only: allocates and sleeps.
+    pub fn open_or_create_retrying<T: core::fmt::Debug + ZeroCopySend + 'static>(
+        &self,
+        node: &Node<ipc::Service>,
+        name: &str,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+        OpenServiceError,
+    > {
+        let sname = ServiceNames::service_name(name)?;
+        let mut attempt = 0;
+        loop {
+            match self.open_or_create::<T>(node, &sname) {
+                Ok(f) => return Ok(f),
+                Err(why) if attempt + 1 >= Self::OPEN_ATTEMPTS => {
+                    return Err(OpenServiceError::Service {
+                        name: name.to_owned(),
+                        attempts: Self::OPEN_ATTEMPTS,
+                        why,
+                    })
+                }
+                Err(_) => {
+                    std::thread::sleep(std::time::Duration::from_millis(2 + u64::from(attempt)))
+                }
+            }
+            attempt += 1;
+        }
+    }
+}
+
 /// A prefix no other live process or earlier run will use: `"test/{tag}/{pid}-{ns}-{n}"`
 /// (process id, wall-clock ns, per-process counter). For tests that run in parallel and for
 /// leftovers of a crashed test that must not disturb the next.

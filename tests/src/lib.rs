@@ -148,13 +148,13 @@ impl TestLearner {
             .create::<ipc::Service>()
             .unwrap();
         let g = services::CONTROLLER_GAINS_QOS
-            .open_or_create::<GainTable>(&node, &names.controller_gains().unwrap())
+            .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)
             .unwrap();
         let s = services::LEARNER_SAMPLES_QOS
-            .open_or_create::<StepSample>(&node, &names.learner_samples().unwrap())
+            .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)
             .unwrap();
         let c = services::ARM_COMMAND_QOS
-            .open_or_create::<ArmCommand>(&node, &names.arm_command().unwrap())
+            .open_or_create_retrying::<ArmCommand>(&node, &names.arm_command)
             .unwrap();
         Self {
             gains: g.publisher_builder().create().unwrap(),

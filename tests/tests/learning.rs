@@ -109,9 +109,9 @@ impl SampleMonitor {
             .create::<ipc::Service>()
             .unwrap();
         let svc = services::LEARNER_SAMPLES_QOS
-            .open_or_create::<StepSample>(
+            .open_or_create_retrying::<StepSample>(
                 &node,
-                &ServiceNames::new(prefix).learner_samples().unwrap(),
+                &ServiceNames::new(prefix).learner_samples,
             )
             .unwrap();
         let sub = svc

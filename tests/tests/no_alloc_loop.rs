@@ -85,10 +85,10 @@ fn learner(
         .create::<ipc::Service>()
         .unwrap();
     let gains = services::CONTROLLER_GAINS_QOS
-        .open_or_create::<GainTable>(&node, &names.controller_gains().unwrap())
+        .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)
         .unwrap();
     let samples = services::LEARNER_SAMPLES_QOS
-        .open_or_create::<StepSample>(&node, &names.learner_samples().unwrap())
+        .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)
         .unwrap();
     let publisher = gains.publisher_builder().create().unwrap();
     let subscriber = samples.subscriber_builder().create().unwrap();

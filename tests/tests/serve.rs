@@ -33,10 +33,10 @@ impl Driver {
             .create::<ipc::Service>()
             .unwrap();
         let c = services::ARM_COMMAND_QOS
-            .open_or_create::<ArmCommand>(&node, &names.arm_command().unwrap())
+            .open_or_create_retrying::<ArmCommand>(&node, &names.arm_command)
             .unwrap();
         let s = services::ARM_STATE_QOS
-            .open_or_create::<ArmState>(&node, &names.arm_state().unwrap())
+            .open_or_create_retrying::<ArmState>(&node, &names.arm_state)
             .unwrap();
         Self {
             cmd: c.publisher_builder().create().unwrap(),

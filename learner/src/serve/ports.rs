@@ -1,11 +1,9 @@
 //! The learner's iceoryx2 ports: samples in, gain tables out (docs/design.md §3).
 
-use std::time::Duration;
-
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use ur5_shared::services::{self, Qos, ServiceNames};
+use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{GainTable, StepSample};
 
 /// The learner's iceoryx2 node and its two ports. Fields drop in order: ports before the node.
@@ -13,29 +11,6 @@ pub(super) struct Ports {
     pub(super) samples: Subscriber<ipc::Service, StepSample, ()>,
     pub(super) gains: Publisher<ipc::Service, GainTable, ()>,
     pub(super) node: Node<ipc::Service>,
-}
-
-fn open_service<T: core::fmt::Debug + ZeroCopySend + 'static>(
-    node: &Node<ipc::Service>,
-    name: &str,
-    qos: &Qos,
-) -> anyhow::Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
-> {
-    let sname = ServiceNames::service_name(name)?;
-    let mut last = String::new();
-    // Another process may be creating the service at this moment: retry briefly.
-    for attempt in 0..50 {
-        match qos.open_or_create::<T>(node, &sname) {
-            Ok(f) => return Ok(f),
-            Err(e) => last = format!("{e:?}"),
-        }
-        std::thread::sleep(Duration::from_millis(2 + attempt));
-    }
-    anyhow::bail!(
-        "cannot open or create service `{name}`: {last}; a service of that name may exist with \
-         another payload type or smaller limits (a stale run or another build: use a fresh --prefix)"
-    )
 }
 
 impl Ports {
@@ -47,16 +22,10 @@ impl Ports {
         let node = NodeBuilder::new().create::<ipc::Service>().map_err(|e| {
             anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}; is /dev/shm writable?")
         })?;
-        let samples_svc = open_service::<StepSample>(
-            &node,
-            &names.learner_samples,
-            &services::LEARNER_SAMPLES_QOS,
-        )?;
-        let gains_svc = open_service::<GainTable>(
-            &node,
-            &names.controller_gains,
-            &services::CONTROLLER_GAINS_QOS,
-        )?;
+        let samples_svc = services::LEARNER_SAMPLES_QOS
+            .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?;
+        let gains_svc = services::CONTROLLER_GAINS_QOS
+            .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)?;
         let samples = samples_svc
             .subscriber_builder()
             .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
