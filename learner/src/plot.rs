@@ -97,6 +97,36 @@ pub fn plot_curves(
     series: &[Series],
     size: (u32, u32),
 ) -> Result<()> {
+    let panel = Panel {
+        y_label,
+        series,
+        log_y: false,
+    };
+    plot_panels(path, title, x_label, &[panel], size)
+}
+
+/// One panel of [`plot_panels`]: its curves and y axis.
+#[derive(Debug, Clone, Copy)]
+pub struct Panel<'a> {
+    /// y-axis label.
+    pub y_label: &'a str,
+    /// The curves ([`plot_curves`] gives the conventions).
+    pub series: &'a [Series],
+    /// Logarithmic y axis (base 10): only points with mean > 0 are drawn, and a band's lower
+    /// edge mean − stderr ≤ 0 is drawn at the bottom of the axis.
+    pub log_y: bool,
+}
+
+/// Panels stacked vertically under one title, sharing the x label (e.g. normalised performance
+/// above final distance); each panel as in [`plot_curves`], with its own legend and y range.
+/// Errors as [`plot_curves`], per panel, and when `panels` is empty.
+pub fn plot_panels(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    panels: &[Panel<'_>],
+    size: (u32, u32),
+) -> Result<()> {
     let (width, height) = size;
     if !(MIN_SIDE..=MAX_SIDE).contains(&width) || !(MIN_SIDE..=MAX_SIDE).contains(&height) {
         bail!(
@@ -104,15 +134,40 @@ pub fn plot_curves(
             path.display()
         );
     }
-    let curves = prepare(series).with_context(|| format!("plot {}", path.display()))?;
-    let (x_range, y_range) = ranges(&curves);
+    if panels.is_empty() {
+        bail!("plot {}: no panels", path.display());
+    }
+    let prepared = panels
+        .iter()
+        .map(|p| {
+            let curves = prepare(p.series, p.log_y)?;
+            let ranges = ranges(&curves);
+            Ok((p, curves, ranges))
+        })
+        .collect::<Result<Vec<_>>>()
+        .with_context(|| format!("plot {}", path.display()))?;
     register_font()?;
 
     let mut rgb = vec![0u8; width as usize * height as usize * 3];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
-        draw(&root, title, x_label, y_label, &curves, x_range, y_range)
+        root.fill(&WHITE).map_err(plot_err)?;
+        let title_px = (height / prepared.len() as u32 / 25).clamp(14, 28);
+        let body = root
+            .titled(title, (FONT, title_px).into_font().color(&BLACK))
+            .map_err(plot_err)?;
+        let areas = body.split_evenly((prepared.len(), 1));
+        for (area, (panel, curves, (x_range, y_range))) in areas.iter().zip(&prepared) {
+            draw(
+                area,
+                x_label,
+                panel,
+                curves,
+                x_range.clone(),
+                y_range.clone(),
+            )
             .with_context(|| format!("plot {}: drawing failed", path.display()))?;
+        }
         root.present().map_err(plot_err)?;
     }
     write_png(path, width, height, &rgb)
@@ -155,8 +210,9 @@ const PALETTE: [RGBColor; 10] = [
     RGBColor(23, 190, 207),
 ];
 
-/// A point ready to draw: `(x, mean, stderr)`, all finite, `stderr >= 0`.
-type Point = (f64, f64, f64);
+/// A point ready to draw in axis units: `(x, y, y_lo, y_hi)`, all finite, `y_lo <= y <= y_hi`
+/// (mean, mean − stderr, mean + stderr; log10 of them on a log axis).
+type Point = (f64, f64, f64, f64);
 
 /// One series split at its non-finite points into contiguous drawable runs.
 struct Curve<'a> {
@@ -170,7 +226,7 @@ impl Curve<'_> {
     }
 }
 
-fn prepare(series: &[Series]) -> Result<Vec<Curve<'_>>> {
+fn prepare(series: &[Series], log_y: bool) -> Result<Vec<Curve<'_>>> {
     if series.is_empty() {
         bail!("no series to plot");
     }
@@ -189,11 +245,26 @@ fn prepare(series: &[Series]) -> Result<Vec<Curve<'_>>> {
             if se < 0.0 {
                 bail!("series {:?}: negative stderr {se} at index {i}", s.label);
             }
-            if x.is_finite() && m.is_finite() {
-                let se = if se.is_finite() { se } else { 0.0 };
-                segments.last_mut().expect("never empty").push((x, m, se));
-            } else if !segments.last().expect("never empty").is_empty() {
-                segments.push(Vec::new());
+            let se = if se.is_finite() { se } else { 0.0 };
+            let point = if !(x.is_finite() && m.is_finite()) || (log_y && m <= 0.0) {
+                None
+            } else if log_y {
+                // A lower edge at or below 0 has no logarithm: NaN, drawn at the axis bottom.
+                let lo = if m - se > 0.0 {
+                    (m - se).log10()
+                } else {
+                    f64::NAN
+                };
+                Some((x, m.log10(), lo, (m + se).log10()))
+            } else {
+                Some((x, m, m - se, m + se))
+            };
+            match point {
+                Some(p) => segments.last_mut().expect("never empty").push(p),
+                None if !segments.last().expect("never empty").is_empty() => {
+                    segments.push(Vec::new())
+                }
+                None => {}
             }
         }
         segments.retain(|seg| !seg.is_empty());
@@ -203,7 +274,26 @@ fn prepare(series: &[Series]) -> Result<Vec<Curve<'_>>> {
         });
     }
     if curves.iter().all(|c| c.segments.is_empty()) {
-        bail!("nothing to plot: no series has a point with finite x and mean (all empty or NaN)");
+        bail!(
+            "nothing to plot: no series has a point with finite x and mean{} (all empty or NaN)",
+            if log_y { " > 0" } else { "" }
+        );
+    }
+    // Lower edges without a logarithm go to the bottom of the other points' range.
+    if log_y {
+        let floor = curves
+            .iter()
+            .flat_map(Curve::points)
+            .flat_map(|&(_, y, lo, _)| [y, lo])
+            .filter(|v| v.is_finite())
+            .fold(f64::INFINITY, f64::min);
+        for c in &mut curves {
+            for p in c.segments.iter_mut().flatten() {
+                if !p.2.is_finite() {
+                    p.2 = floor;
+                }
+            }
+        }
     }
     Ok(curves)
 }
@@ -219,8 +309,8 @@ fn ranges(curves: &[Curve<'_>]) -> (std::ops::Range<f64>, std::ops::Range<f64>) 
                 (lo.min(a), hi.max(b))
             })
     };
-    let (x_lo, x_hi) = fold(&|&(x, _, _)| (x, x));
-    let (y_lo, y_hi) = fold(&|&(_, m, se)| (m - se, m + se));
+    let (x_lo, x_hi) = fold(&|&(x, _, _, _)| (x, x));
+    let (y_lo, y_hi) = fold(&|&(_, _, lo, hi)| (lo, hi));
     (pad(x_lo, x_hi, 0.02), pad(y_lo, y_hi, 0.05))
 }
 
@@ -245,34 +335,37 @@ fn plot_err<E: Display>(e: E) -> anyhow::Error {
 }
 
 fn draw(
-    root: &DrawingArea<BitMapBackend<'_>, Shift>,
-    title: &str,
+    area: &DrawingArea<BitMapBackend<'_>, Shift>,
     x_label: &str,
-    y_label: &str,
+    panel: &Panel<'_>,
     curves: &[Curve<'_>],
     x_range: std::ops::Range<f64>,
     y_range: std::ops::Range<f64>,
 ) -> Result<()> {
-    root.fill(&WHITE).map_err(plot_err)?;
-    let (_, height) = root.dim_in_pixel();
-    let title_px = (height / 25).clamp(14, 28);
+    let (_, height) = area.dim_in_pixel();
     let text_px = (height / 36).clamp(11, 20);
 
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, (FONT, title_px).into_font().color(&BLACK))
+    let mut chart = ChartBuilder::on(area)
         .margin(12)
         .x_label_area_size(text_px * 3)
-        .y_label_area_size(text_px * 4 + 10)
+        .y_label_area_size(text_px * 5 + 10)
         .build_cartesian_2d(x_range.clone(), y_range.clone())
         .map_err(plot_err)?;
     let x_span = x_range.end - x_range.start;
     let y_span = y_range.end - y_range.start;
+    let log_y = panel.log_y;
     let x_fmt = |v: &f64| tick_label(*v, x_span);
-    let y_fmt = |v: &f64| tick_label(*v, y_span);
+    let y_fmt = |v: &f64| {
+        if log_y {
+            log_tick_label(*v)
+        } else {
+            tick_label(*v, y_span)
+        }
+    };
     chart
         .configure_mesh()
         .x_desc(x_label)
-        .y_desc(y_label)
+        .y_desc(panel.y_label)
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&y_fmt)
         .max_light_lines(1)
@@ -292,8 +385,8 @@ fn draw(
         for seg in curve.segments.iter().filter(|seg| seg.len() > 1) {
             let outline: Vec<(f64, f64)> = seg
                 .iter()
-                .map(|&(x, m, se)| (x, m + se))
-                .chain(seg.iter().rev().map(|&(x, m, se)| (x, m - se)))
+                .map(|&(x, _, _, hi)| (x, hi))
+                .chain(seg.iter().rev().map(|&(x, _, lo, _)| (x, lo)))
                 .collect();
             chart
                 .draw_series(std::iter::once(Polygon::new(outline, band)))
@@ -306,19 +399,22 @@ fn draw(
         for seg in &curve.segments {
             if markers || seg.len() == 1 {
                 chart
-                    .draw_series(seg.iter().map(|&(x, m, se)| {
-                        ErrorBar::new_vertical(x, m - se, m, m + se, color.stroke_width(1), 8)
+                    .draw_series(seg.iter().map(|&(x, m, lo, hi)| {
+                        ErrorBar::new_vertical(x, lo, m, hi, color.stroke_width(1), 8)
                     }))
                     .map_err(plot_err)?;
                 chart
                     .draw_series(
                         seg.iter()
-                            .map(|&(x, m, _)| Circle::new((x, m), 3, color.filled())),
+                            .map(|&(x, m, _, _)| Circle::new((x, m), 3, color.filled())),
                     )
                     .map_err(plot_err)?;
             }
             chart
-                .draw_series(LineSeries::new(seg.iter().map(|&(x, m, _)| (x, m)), line))
+                .draw_series(LineSeries::new(
+                    seg.iter().map(|&(x, m, _, _)| (x, m)),
+                    line,
+                ))
                 .map_err(plot_err)?;
         }
         // A legend entry per series, even one with nothing drawable (an empty line series).
@@ -359,6 +455,19 @@ fn tick_label(v: f64, span: f64) -> String {
     }
 }
 
+/// The tick label of log10-axis value `v`: 10^v to two significant digits ("0.32", "0.0032",
+/// "3.2"; three at 100 and above: "316").
+fn log_tick_label(v: f64) -> String {
+    let x = 10f64.powf(v);
+    let digits = (1.0 - x.log10().floor()).max(0.0) as usize;
+    let s = format!("{x:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 /// The plot corner whose box (40% of the width, a line of height per series) holds the fewest
 /// mean ± stderr points, so the legend hides as little data as possible; ties go in reading
 /// order from the upper right.
@@ -388,7 +497,7 @@ fn legend_corner(
         curves
             .iter()
             .flat_map(Curve::points)
-            .map(|&(x, m, se)| usize::from(in_x(x) && (in_y(m) || in_y(m + se) || in_y(m - se))))
+            .map(|&(x, m, lo, hi)| usize::from(in_x(x) && (in_y(m) || in_y(hi) || in_y(lo))))
             .sum::<usize>()
     };
     corners
@@ -463,6 +572,15 @@ mod tests {
             assert!(close(mean[i], want_mean[i]), "mean[{i}] = {}", mean[i]);
             assert!(close(se[i], want_se[i]), "se[{i}] = {}", se[i]);
         }
+    }
+
+    #[test]
+    fn log_tick_labels_have_two_significant_digits() {
+        assert_eq!(log_tick_label(-0.5), "0.32");
+        assert_eq!(log_tick_label(-2.5), "0.0032");
+        assert_eq!(log_tick_label(-2.0), "0.01");
+        assert_eq!(log_tick_label(0.5), "3.2");
+        assert_eq!(log_tick_label(2.5), "316");
     }
 
     #[test]

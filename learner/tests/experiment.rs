@@ -125,4 +125,39 @@ fn bad_settings_are_refused_with_a_reason() {
     cfg.algorithms = vec!["dagger".into()];
     let e = run(ExperimentName::Comparison, &cfg, &tmp("bad2"), None).unwrap_err();
     assert!(e.to_string().contains("dagger"), "{e}");
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Ablation);
+    cfg.ablation_variants = vec!["default".into(), "no-critic".into()];
+    let e = run(ExperimentName::Ablation, &cfg, &tmp("bad3"), None).unwrap_err();
+    assert!(e.to_string().contains("no-critic"), "{e}");
+}
+
+#[test]
+fn ablation_runs_each_variant_and_reports_final_distance() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Ablation);
+    cfg.seeds = 1;
+    cfg.iterations = 3;
+    cfg.threads = 2;
+    cfg.expert.iterations = 6;
+    let out = tmp("ablation");
+    let (runs, rows) = run(ExperimentName::Ablation, &cfg, &out, None).unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r.variant.as_str()).collect();
+    assert_eq!(
+        names,
+        ["default", "raw-penalty", "constant-critic-lr", "before-d25"]
+    );
+    assert_png(&out.join("ablation.png"));
+    let text = std::fs::read_to_string(out.join("summary.txt")).unwrap();
+    assert!(text.contains("final distance, cm"), "{text}");
+    for r in &rows {
+        assert_eq!(r.final_distance_m.len(), r.performance.len());
+        assert!(r.final_distance_m.iter().all(|d| d.1 > 0.0 && d.1 < 1.0));
+    }
+    // Every variant executes the same initial controller; the critic settings change the
+    // first LQR step, so the second iteration's episode differs from the default's.
+    let log = |v: &str, i: usize| &runs.iter().find(|r| r.variant == v).unwrap().logs[i];
+    for v in ["raw-penalty", "before-d25"] {
+        assert_eq!(log(v, 0).task_cost, log("default", 0).task_cost, "{v}");
+        assert_ne!(log(v, 1).task_cost, log("default", 1).task_cost, "{v}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
 }

@@ -40,7 +40,7 @@ use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
 use crate::cpu::thread_cpu_s;
 use crate::demos::Demos;
 use crate::discriminator::{
-    AdamConfig, Discriminator, DiscriminatorConfig, Normalizer, TrainStats,
+    AdamConfig, Discriminator, DiscriminatorConfig, Normalizer, PenaltySpace, TrainStats,
 };
 use crate::iteration::LqrIteration;
 use crate::learn::{Learn, LinGaussLearn};
@@ -70,14 +70,17 @@ pub struct GaifoConfig {
     /// `Discriminator::train` calls per iteration, each `discriminator.n_critic` Adam steps
     /// (docs/design.md §5 D6).
     pub critic_updates: usize,
+    /// Half-life of the critic's learning rate, iterations: iteration i trains at
+    /// `discriminator.adam.lr · 2^(−i / h)`; 0 keeps it constant (docs/design.md §5 D25).
+    pub critic_lr_half_life: f64,
     /// GPS step-size adaptation; off: the critic's cost changes every iteration
     /// (docs/design.md §5 D5).
     pub adapt_step: bool,
     /// Project the samples' mean ∇²D per step on the PSD cone before the chain rule
     /// (docs/design.md §5 D3, D4).
     pub psd_hessian: bool,
-    /// The critic: 2 × 32 tanh, Adam 1e-3 / β1 0.5, 100 steps of batch 16 per call
-    /// (docs/design.md §5 D6–D8).
+    /// The critic: 2 × 32 tanh, Adam 3e-3 / β1 0.5, 100 steps of batch 16 per call, gradient
+    /// penalty in normalised inputs (docs/design.md §5 D6–D8, D25).
     pub discriminator: DiscriminatorConfig,
     /// Seed of every random draw of the run: noise, GMM, critic (docs/design.md §3.7).
     pub seed: u64,
@@ -100,18 +103,20 @@ impl Default for GaifoConfig {
             iterations: 20,
             init_var: 0.05,
             critic_updates: 1,
+            critic_lr_half_life: 25.0,
             adapt_step: false,
             psd_hessian: true,
             discriminator: DiscriminatorConfig {
                 hidden: vec![32, 32],
                 n_critic: 100,
                 adam: AdamConfig {
-                    lr: 1e-3,
+                    lr: 3e-3,
                     beta1: 0.5,
                     beta2: 0.9,
                     eps: 1e-8,
                 },
                 batch_size: 16,
+                penalty_space: PenaltySpace::Normalised,
                 ..DiscriminatorConfig::default()
             },
             seed: 0,
@@ -278,15 +283,24 @@ pub fn refit_critic(
     Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
 }
 
-/// Step 3 of Algorithm 1 (docs/design.md §1.3): `updates` (at least one) WGAN-GP calls on expert vs `controller`
-/// transitions; returns the last call's statistics. Shared with the PPO baseline.
+/// Step 3 of Algorithm 1 (docs/design.md §1.3) at iteration `iteration`: `updates` (at least
+/// one) WGAN-GP calls on expert vs `controller` transitions at the learning rate
+/// `disc.config().adam.lr · 2^(−iteration / half_life)` (constant for `half_life` = 0;
+/// docs/design.md §5 D25); returns the last call's statistics. Shared with the PPO baseline.
+#[allow(clippy::too_many_arguments)]
 pub fn train_critic(
     disc: &mut Discriminator,
     ws: &mut crate::discriminator::Workspace,
     expert: &Mat<f64>,
     controller: &Mat<f64>,
     updates: usize,
+    iteration: usize,
+    half_life: f64,
 ) -> Result<TrainStats, ImitationError> {
+    if half_life > 0.0 {
+        let lr = disc.config().adam.lr * (-(iteration as f64) / half_life).exp2();
+        disc.set_learning_rate(lr)?;
+    }
     let mut stats = None;
     for _ in 0..updates.max(1) {
         stats = Some(disc.train(expert.as_ref(), controller.as_ref(), ws)?);
@@ -396,6 +410,8 @@ impl LqrGaifo {
             &self.expert,
             controller,
             self.cfg.critic_updates,
+            self.lqr.iteration(),
+            self.cfg.critic_lr_half_life,
         )
     }
 

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use faer::Mat;
 use imitation::discriminator::{
-    AdamConfig, Discriminator, DiscriminatorConfig, DiscriminatorError, Normalizer,
+    AdamConfig, Discriminator, DiscriminatorConfig, DiscriminatorError, Normalizer, PenaltySpace,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -316,5 +316,65 @@ fn discriminator_train_call_timing_default_size() {
         times[0],
         times[times.len() - 1],
         hess * 1e3
+    );
+}
+
+#[test]
+fn discriminator_penalty_space_sets_the_metric_of_the_estimate() {
+    // Two inputs in very different units (as metres of end-effector offset beside rad/s of
+    // joint velocity): expert ~ N((0, 0), diag(0.01², 1)), controller shifted by 0.02 along the
+    // first. In raw units W1 = 0.02: a critic 1-Lipschitz in raw units can score the shift by
+    // no more than that, and it is what the raw-unit penalty finds (measured: ≈ 0, the slope
+    // goes to the second input, where satisfying the penalty costs the loss nothing). In the
+    // critic's normalised inputs (σ ≈ (0.01, 1)) W1 ≈ 2, which the normalised penalty finds
+    // (measured 2.00; docs/design.md §5 D25).
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let sample = |n: usize, shift: f64, rng: &mut ChaCha8Rng| {
+        Mat::from_fn(n, 2, |_, j| {
+            let z: f64 = StandardNormal.sample(rng);
+            if j == 0 {
+                shift + 0.01 * z
+            } else {
+                z
+            }
+        })
+    };
+    let (expert, controller) = (sample(1000, 0.0, &mut rng), sample(1000, 0.02, &mut rng));
+    let (fe, fc) = (
+        sample(20_000, 0.0, &mut rng),
+        sample(20_000, 0.02, &mut rng),
+    );
+    let norm = Normalizer::from_data(expert.as_ref()).unwrap();
+    let estimate = |space: PenaltySpace| {
+        let config = DiscriminatorConfig {
+            seed: 5,
+            n_critic: 25,
+            adam: AdamConfig {
+                lr: 1e-3,
+                ..Default::default()
+            },
+            penalty_space: space,
+            ..Default::default()
+        };
+        let mut d = Discriminator::new(2, config, norm.clone()).unwrap();
+        let mut ws = d.workspace();
+        for _ in 0..40 {
+            d.train(expert.as_ref(), controller.as_ref(), &mut ws)
+                .unwrap();
+        }
+        d.wasserstein_estimate(fe.as_ref(), fc.as_ref(), &mut ws)
+    };
+    let (raw, normalised) = (
+        estimate(PenaltySpace::Raw),
+        estimate(PenaltySpace::Normalised),
+    );
+    eprintln!("raw-unit estimate {raw:.4} (W1 0.02), normalised {normalised:.3} (W1 ≈ 2)");
+    assert!(
+        raw.abs() <= 0.03,
+        "raw-unit estimate {raw}: at most the raw W1 0.02"
+    );
+    assert!(
+        (1.8..=2.5).contains(&normalised),
+        "normalised estimate {normalised}, W1 ≈ 2 (up to 2.2 with the penalty's bias)"
     );
 }

@@ -20,12 +20,13 @@ pub struct ExperimentArgs {
     /// Worker threads (0 = one per core); overrides the config.
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Demonstrations to use instead of training the expert (comparison, stability,
+    /// Demonstrations to use instead of training the expert (comparison, stability, ablation,
     /// sim-vs-physical's simulated arm).
     #[arg(long)]
     pub demos: Option<PathBuf>,
     /// --config: an `ExperimentConfig` (keys `seeds`, `first_seed`, `iterations`, `threads`,
-    /// `algorithms`, `subset_sizes`, `demos_per_point`, `critic_steps`, `time_compression`;
+    /// `algorithms`, `subset_sizes`, `demos_per_point`, `critic_steps`, `time_compression`,
+    /// `ablation_variants`;
     /// tables `expert`, `lqr_gaifo`, `gaifo_ppo`, `physical`) layered over the experiment's
     /// defaults; --seed: the first seed (`first_seed`); --out [default:
     /// runs/experiments/<name>].

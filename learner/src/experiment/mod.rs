@@ -5,6 +5,7 @@
 //! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison") | 10 seeds × 100 iterations each |
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
+//! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25) | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
 //!
@@ -56,6 +57,8 @@ pub enum ExperimentName {
     SimVsPhysical,
     /// LQR+GAIfO for 200 iterations: late-iteration stability.
     Stability,
+    /// LQR+GAIfO's defaults against variants with a decision undone (precision near the goal).
+    Ablation,
 }
 
 impl ExperimentName {
@@ -66,6 +69,7 @@ impl ExperimentName {
             Self::Generalisation => "generalisation",
             Self::SimVsPhysical => "sim-vs-physical",
             Self::Stability => "stability",
+            Self::Ablation => "ablation",
         }
     }
 }
@@ -105,6 +109,51 @@ pub struct ExperimentConfig {
     pub physical: ur5_shared::config::Perturbation,
     /// Sim vs physical: simulated seconds per wall-clock second of the real-time loop.
     pub time_compression: f64,
+    /// Ablation: the variants to run, each a curve (names from [`ABLATION_VARIANTS`]).
+    pub ablation_variants: Vec<String>,
+}
+
+/// The ablation's variants: `lqr_gaifo` as configured (`default`), and the same with the
+/// critic decisions of docs/design.md §5 D25 undone one at a time.
+pub const ABLATION_VARIANTS: [(&str, &str); 4] = [
+    ("default", "LQR+GAIfO as configured"),
+    (
+        "raw-penalty",
+        "gradient penalty on the raw-unit gradient ‖∇ₓD‖ (before D25)",
+    ),
+    (
+        "constant-critic-lr",
+        "critic learning rate kept at its start value (no half-life)",
+    ),
+    (
+        "before-d25",
+        "raw-unit penalty, critic learning rate 1e-3, constant: the critic before D25",
+    ),
+];
+
+/// `base` changed as ablation variant `name` says ([`ABLATION_VARIANTS`]).
+pub fn ablation_variant(name: &str, base: &GaifoConfig) -> anyhow::Result<GaifoConfig> {
+    use imitation::discriminator::PenaltySpace;
+    let mut c = base.clone();
+    match name {
+        "default" => {}
+        "raw-penalty" => c.discriminator.penalty_space = PenaltySpace::Raw,
+        "constant-critic-lr" => c.critic_lr_half_life = 0.0,
+        "before-d25" => {
+            c.discriminator.adam.lr = 1e-3;
+            c.discriminator.penalty_space = PenaltySpace::Raw;
+            c.critic_lr_half_life = 0.0;
+        }
+        _ => anyhow::bail!(
+            "unknown ablation variant `{name}`; known: {}",
+            ABLATION_VARIANTS
+                .iter()
+                .map(|(n, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+    Ok(c)
 }
 
 impl Default for ExperimentConfig {
@@ -131,6 +180,10 @@ impl ExperimentConfig {
             critic_steps: vec![100, 1000],
             physical: ur5_shared::config::Perturbation::physical_stand_in(1),
             time_compression: 10.0,
+            ablation_variants: ABLATION_VARIANTS
+                .iter()
+                .map(|(n, _)| n.to_string())
+                .collect(),
         };
         match name {
             ExperimentName::Comparison => base,
@@ -147,6 +200,11 @@ impl ExperimentConfig {
             ExperimentName::Stability => Self {
                 seeds: 5,
                 iterations: 200,
+                ..base
+            },
+            ExperimentName::Ablation => Self {
+                seeds: 5,
+                iterations: 50,
                 ..base
             },
         }
@@ -171,6 +229,15 @@ impl ExperimentConfig {
                 "critic_steps must list numbers >= 1, got {:?}",
                 self.critic_steps
             );
+        }
+        if name == ExperimentName::Ablation {
+            anyhow::ensure!(
+                !self.ablation_variants.is_empty(),
+                "ablation_variants is empty"
+            );
+            for v in &self.ablation_variants {
+                ablation_variant(v, &self.lqr_gaifo)?;
+            }
         }
         if name == ExperimentName::Generalisation {
             anyhow::ensure!(
@@ -502,6 +569,20 @@ pub fn run(
             (
                 jobs,
                 format!("LQR+GAIfO over {} iterations", cfg.iterations),
+            )
+        }
+        ExperimentName::Ablation => {
+            let d = Arc::new(demos_for(cfg, demos, out)?);
+            let mut jobs = Vec::new();
+            for v in &cfg.ablation_variants {
+                let mut c = cfg.clone();
+                c.lqr_gaifo = ablation_variant(v, &cfg.lqr_gaifo)?;
+                jobs.extend(lqr_jobs(&c, v, d.clone()));
+            }
+            (
+                jobs,
+                "LQR+GAIfO: defaults vs critic decisions undone (docs/design.md §5 D25)"
+                    .to_string(),
             )
         }
         ExperimentName::Generalisation => {

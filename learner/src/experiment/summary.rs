@@ -8,8 +8,9 @@ use serde::Serialize;
 
 use super::Run;
 use crate::io::log::CSV_HEADER;
-use crate::plot::{mean_stderr, plot_curves, Series};
+use crate::plot::{mean_stderr, plot_panels, Panel, Series};
 use crate::stats::median;
+use imitation::gaifo::GaifoLog;
 
 /// Per-variant summary of an experiment.
 #[derive(Clone, Debug, Serialize)]
@@ -22,11 +23,20 @@ pub struct SummaryRow {
     pub iterations: usize,
     /// (iteration, mean, standard error) of the normalised performance at the report points.
     pub performance: Vec<(usize, f64, f64)>,
+    /// (iteration, mean, standard error) of the final distance to the goal (m) of the
+    /// noise-free episode at the report points.
+    pub final_distance_m: Vec<(usize, f64, f64)>,
     /// Mean (± SE over seeds) normalised performance over the last 10 iterations.
     pub last10_mean: f64,
     pub last10_se: f64,
+    /// Mean (± SE over seeds) final distance (m) over the last 10 iterations.
+    pub last10_final_distance_m: f64,
+    pub last10_final_distance_se: f64,
     /// First iteration at which the mean over seeds reaches 0.8 (None: never).
     pub first_iteration_mean_ge_0_8: Option<usize>,
+    /// First iteration at which the mean final distance over seeds is at most 1 cm (None:
+    /// never).
+    pub first_iteration_mean_within_1cm: Option<usize>,
     /// Median learner CPU time per iteration, ms.
     pub learner_cpu_ms_median: f64,
     /// Median simulator time per iteration (episodes), ms.
@@ -62,52 +72,65 @@ pub fn summarise(runs: &[Run]) -> Vec<SummaryRow> {
     by_variant(runs)
         .into_iter()
         .map(|(variant, rs)| {
-            let perf: Vec<Vec<f64>> = rs
-                .iter()
-                .map(|r| r.logs.iter().map(|l| l.performance).collect())
-                .collect();
+            let per_seed = |f: fn(&GaifoLog) -> f64| -> Vec<Vec<f64>> {
+                rs.iter().map(|r| r.logs.iter().map(f).collect()).collect()
+            };
+            let perf = per_seed(|l| l.performance);
+            let dist = per_seed(|l| l.final_distance);
             let (mean, se, _) = mean_stderr(&perf);
+            let (dmean, dse, _) = mean_stderr(&dist);
             let iterations = mean.len();
-            let last10: Vec<Vec<f64>> = perf
-                .iter()
-                .map(|p| {
-                    let tail = &p[p.len().saturating_sub(10)..];
-                    vec![tail.iter().sum::<f64>() / tail.len().max(1) as f64]
-                })
-                .collect();
-            let (l10, l10se, _) = mean_stderr(&last10);
+            let last10 = |v: &[Vec<f64>]| -> (f64, f64) {
+                let tails: Vec<Vec<f64>> = v
+                    .iter()
+                    .map(|p| {
+                        let tail = &p[p.len().saturating_sub(10)..];
+                        vec![tail.iter().sum::<f64>() / tail.len().max(1) as f64]
+                    })
+                    .collect();
+                let (m, e, _) = mean_stderr(&tails);
+                (
+                    m.first().copied().unwrap_or(f64::NAN),
+                    e.first().copied().unwrap_or(f64::NAN),
+                )
+            };
+            let (l10, l10se) = last10(&perf);
+            let (d10, d10se) = last10(&dist);
+            let at_points = |m: &[f64], e: &[f64]| -> Vec<(usize, f64, f64)> {
+                report_points(iterations.max(1))
+                    .into_iter()
+                    .filter(|&i| i < iterations)
+                    .map(|i| (i, m[i], e[i]))
+                    .collect()
+            };
+            let median_ms = |f: fn(&GaifoLog) -> f64| {
+                1e3 * median(
+                    &mut rs
+                        .iter()
+                        .flat_map(|r| r.logs.iter().map(f))
+                        .collect::<Vec<_>>(),
+                )
+            };
             SummaryRow {
                 seeds: rs.len(),
                 iterations,
-                performance: report_points(iterations.max(1))
-                    .into_iter()
-                    .filter(|&i| i < iterations)
-                    .map(|i| (i, mean[i], se[i]))
-                    .collect(),
-                last10_mean: l10.first().copied().unwrap_or(f64::NAN),
-                last10_se: l10se.first().copied().unwrap_or(f64::NAN),
+                performance: at_points(&mean, &se),
+                final_distance_m: at_points(&dmean, &dse),
+                last10_mean: l10,
+                last10_se: l10se,
+                last10_final_distance_m: d10,
+                last10_final_distance_se: d10se,
                 first_iteration_mean_ge_0_8: mean.iter().position(|&m| m >= 0.8),
-                learner_cpu_ms_median: 1e3
-                    * median(
-                        &mut rs
-                            .iter()
-                            .flat_map(|r| r.logs.iter().map(|l| l.cpu_learner))
-                            .collect::<Vec<_>>(),
-                    ),
-                execute_ms_median: 1e3
-                    * median(
-                        &mut rs
-                            .iter()
-                            .flat_map(|r| r.logs.iter().map(|l| l.t_execute))
-                            .collect::<Vec<_>>(),
-                    ),
+                first_iteration_mean_within_1cm: dmean.iter().position(|&d| d <= 0.01),
+                learner_cpu_ms_median: median_ms(|l| l.cpu_learner),
+                execute_ms_median: median_ms(|l| l.t_execute),
                 variant,
             }
         })
         .collect()
 }
 
-/// The summary as a text table.
+/// The summary as a text table: normalised performance, then final distance (cm), per variant.
 pub fn summary_text(rows: &[SummaryRow]) -> String {
     use std::fmt::Write;
     let mut s = String::new();
@@ -115,39 +138,69 @@ pub fn summary_text(rows: &[SummaryRow]) -> String {
         .first()
         .map(|r| r.performance.iter().map(|p| p.0).collect())
         .unwrap_or_default();
-    let _ = write!(s, "{:<20} {:>5}", "variant", "seeds");
-    for p in &points {
-        let _ = write!(s, " {:>13}", format!("it {}", p + 1));
-    }
-    let _ = writeln!(
-        s,
-        " {:>13} {:>8} {:>9} {:>8}",
-        "last 10", ">=0.8 at", "lrn ms", "sim ms"
+    let first = |i: Option<usize>| {
+        i.map(|i| (i + 1).to_string())
+            .unwrap_or_else(|| "never".into())
+    };
+    let cell = |v: &[(usize, f64, f64)], p: usize, scale: f64, digits: usize| match v
+        .iter()
+        .find(|q| q.0 == p)
+    {
+        Some((_, m, e)) => format!("{:.digits$}±{:.digits$}", scale * m, scale * e),
+        None => "-".into(),
+    };
+    let header = |s: &mut String, what: &str, tail: &str| {
+        let _ = write!(s, "{:<20} {:>5}", what, "seeds");
+        for p in &points {
+            let _ = write!(s, " {:>13}", format!("it {}", p + 1));
+        }
+        let _ = writeln!(s, "{tail}");
+    };
+    header(
+        &mut s,
+        "variant",
+        &format!(
+            " {:>13} {:>8} {:>9} {:>8}",
+            "last 10", ">=0.8 at", "lrn ms", "sim ms"
+        ),
     );
     for r in rows {
         let _ = write!(s, "{:<20} {:>5}", r.variant, r.seeds);
         for p in &points {
-            match r.performance.iter().find(|q| q.0 == *p) {
-                Some((_, m, e)) => {
-                    let _ = write!(s, " {:>13}", format!("{m:.3}±{e:.3}"));
-                }
-                None => {
-                    let _ = write!(s, " {:>13}", "-");
-                }
-            }
+            let _ = write!(s, " {:>13}", cell(&r.performance, *p, 1.0, 3));
         }
         let _ = writeln!(
             s,
             " {:>13} {:>8} {:>9.1} {:>8.0}",
             format!("{:.3}±{:.3}", r.last10_mean, r.last10_se),
-            r.first_iteration_mean_ge_0_8
-                .map(|i| (i + 1).to_string())
-                .unwrap_or_else(|| "never".into()),
+            first(r.first_iteration_mean_ge_0_8),
             r.learner_cpu_ms_median,
             r.execute_ms_median
         );
     }
-    s.push_str("(normalised performance of the noise-free episode, mean ± standard error over seeds; iterations counted from 1; lrn ms = median learner CPU time per iteration)\n");
+    s.push_str("(normalised performance of the noise-free episode, mean ± standard error over seeds; iterations counted from 1; lrn ms = median learner CPU time per iteration)\n\n");
+    header(
+        &mut s,
+        "final distance, cm",
+        &format!(" {:>13} {:>8}", "last 10", "<=1cm at"),
+    );
+    for r in rows {
+        let _ = write!(s, "{:<20} {:>5}", r.variant, r.seeds);
+        for p in &points {
+            let _ = write!(s, " {:>13}", cell(&r.final_distance_m, *p, 100.0, 2));
+        }
+        let _ = writeln!(
+            s,
+            " {:>13} {:>8}",
+            format!(
+                "{:.2}±{:.2}",
+                100.0 * r.last10_final_distance_m,
+                100.0 * r.last10_final_distance_se
+            ),
+            first(r.first_iteration_mean_within_1cm)
+        );
+    }
+    s.push_str("(final distance to the goal of the noise-free episode, cm, mean ± standard error over seeds)\n");
     s
 }
 
@@ -179,29 +232,39 @@ pub fn write_outputs(
         }
     }
     f.flush()?;
-    let series: Vec<Series> = by_variant(runs)
-        .into_iter()
-        .map(|(variant, rs)| {
-            let perf: Vec<Vec<f64>> = rs
-                .iter()
-                .map(|r| r.logs.iter().map(|l| l.performance).collect())
-                .collect();
-            let (mean, stderr, _) = mean_stderr(&perf);
-            Series {
-                label: format!("{variant} ({} seeds)", rs.len()),
-                x: (1..=mean.len()).map(|i| i as f64).collect(),
-                mean,
-                stderr,
-            }
-        })
-        .collect();
-    plot_curves(
+    let curves = |f: fn(&GaifoLog) -> f64| -> Vec<Series> {
+        by_variant(runs)
+            .into_iter()
+            .map(|(variant, rs)| {
+                let v: Vec<Vec<f64>> = rs.iter().map(|r| r.logs.iter().map(f).collect()).collect();
+                let (mean, stderr, _) = mean_stderr(&v);
+                Series {
+                    label: format!("{variant} ({} seeds)", rs.len()),
+                    x: (1..=mean.len()).map(|i| i as f64).collect(),
+                    mean,
+                    stderr,
+                }
+            })
+            .collect()
+    };
+    let (perf, dist) = (curves(|l| l.performance), curves(|l| l.final_distance));
+    plot_panels(
         &out.join(format!("{name}.png")),
         title,
         "iteration",
-        "normalised performance (1 = expert, 0 = random)",
-        &series,
-        (1000, 620),
+        &[
+            Panel {
+                y_label: "normalised performance (1 = expert, 0 = random)",
+                series: &perf,
+                log_y: false,
+            },
+            Panel {
+                y_label: "final distance to the goal (m, log scale)",
+                series: &dist,
+                log_y: true,
+            },
+        ],
+        (1000, 1100),
     )?;
     let rows = summarise(runs);
     std::fs::write(out.join("summary.txt"), summary_text(&rows))?;

@@ -83,6 +83,25 @@ pub struct DiscriminatorConfig {
     pub adam: AdamConfig,
     /// Seeds the weight initialisation and then the minibatch sampling.
     pub seed: u64,
+    /// The input space in which the gradient penalty measures ‖∇D‖ (docs/design.md §5 D25).
+    /// Critic files written before the field existed were trained with `raw`.
+    #[serde(default)]
+    pub penalty_space: PenaltySpace,
+}
+
+/// Where the gradient penalty `λ (‖∇D(x̂)‖ − 1)²` takes the norm, and so in which metric D is
+/// 1-Lipschitz and the Wasserstein distance is measured (docs/design.md §5 D25).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PenaltySpace {
+    /// `‖∇ₓD‖` in the raw state units (rad, rad/s, m, m/s mixed): a metre of end-effector
+    /// offset weighs as much as a rad/s of joint velocity. Gulrajani et al.'s form on
+    /// unnormalised inputs.
+    #[default]
+    Raw,
+    /// `‖∇_u D‖` in the normalised inputs `u = (x − μ) ⊘ σ`: every input in units of its own
+    /// spread in the data, as when the inputs are normalised before the critic.
+    Normalised,
 }
 
 impl Default for DiscriminatorConfig {
@@ -101,6 +120,7 @@ impl Default for DiscriminatorConfig {
             batch_size: 64,
             adam: AdamConfig::default(),
             seed: 0,
+            penalty_space: PenaltySpace::Raw,
         }
     }
 }
@@ -316,6 +336,18 @@ impl Discriminator {
         &self.adam
     }
 
+    /// Sets the Adam learning rate of the next steps (a schedule over iterations; the
+    /// configured `config().adam.lr` stays the base rate). Must be finite and > 0.
+    pub fn set_learning_rate(&mut self, lr: f64) -> Result<(), DiscriminatorError> {
+        if !(lr.is_finite() && lr > 0.0) {
+            return Err(DiscriminatorError::Config(format!(
+                "the critic's learning rate must be finite and > 0; got {lr}"
+            )));
+        }
+        self.adam.config.lr = lr;
+        Ok(())
+    }
+
     /// The flat parameter vector `θ` (layout: [`mlp`]).
     pub fn params(&self) -> &[f64] {
         self.net.params()
@@ -444,19 +476,22 @@ impl Discriminator {
         let lambda = self.config.lambda_gp;
         self.forward_raw(x_hat, mlp_ws);
         self.net.backward(mlp_ws, true);
+        // v = ∇ₓD = ∇_u net ⊘ σ (raw) or v = ∇_u net (normalised): scale w = 1/σ or 1.
+        let raw = self.config.penalty_space == PenaltySpace::Raw;
         let s = &self.norm.std;
+        let w = |si: f64| if raw { 1.0 / si } else { 1.0 };
         let norm2: f64 = mlp_ws
             .grad_u
             .iter()
             .zip(s)
-            .map(|(g, s)| (g / s) * (g / s))
+            .map(|(&g, &si)| (g * w(si)) * (g * w(si)))
             .sum();
         let nv = norm2.sqrt();
         let p = lambda * (nv - 1.0) * (nv - 1.0);
         if nv > 0.0 && c != 0.0 && lambda != 0.0 {
             let coef = c * 2.0 * lambda * (nv - 1.0) / nv;
             for ((rho, &g), &si) in mlp_ws.rho.iter_mut().zip(&mlp_ws.grad_u).zip(s) {
-                *rho = coef * g / (si * si);
+                *rho = coef * g * w(si) * w(si);
             }
             self.net
                 .accumulate_directional_grad_param_grad(mlp_ws, grad_params);

@@ -40,11 +40,37 @@ fn rel_err(analytic: &[f64], fd: &[f64]) -> (f64, f64) {
     (rel, abs)
 }
 
+#[derive(Clone)]
 struct Case {
     d: usize,
     hidden: Vec<usize>,
     normalise: bool,
     seed: u64,
+    space: PenaltySpace,
+}
+
+/// Every case once per gradient-penalty space.
+fn cases_both_spaces() -> Vec<Case> {
+    let mut v = Vec::new();
+    for space in [PenaltySpace::Raw, PenaltySpace::Normalised] {
+        v.extend(cases().into_iter().map(|c| Case { space, ..c }));
+    }
+    v
+}
+
+/// The penalty `λ (‖v‖ − 1)²` as its definition states, from D's raw-input gradient `g`:
+/// `v = g` (raw) or `v = g ⊙ σ = ∇_u D` (normalised).
+fn penalty_by_definition(d: &Discriminator, x: &[f64]) -> f64 {
+    let mut ws = d.workspace();
+    let mut g = vec![0.0; d.input_dim()];
+    d.value_gradient(x, &mut ws, &mut g);
+    if d.config().penalty_space == PenaltySpace::Normalised {
+        for (gi, s) in g.iter_mut().zip(&d.normalizer().std) {
+            *gi *= s;
+        }
+    }
+    let n = g.iter().map(|v| v * v).sum::<f64>().sqrt();
+    d.config().lambda_gp * (n - 1.0) * (n - 1.0)
 }
 
 fn cases() -> Vec<Case> {
@@ -64,6 +90,7 @@ fn cases() -> Vec<Case> {
                 hidden: hidden.clone(),
                 normalise,
                 seed: 100 + seed as u64,
+                space: PenaltySpace::Raw,
             });
         }
     }
@@ -87,6 +114,7 @@ fn random_critic(c: &Case) -> (Discriminator, Vec<Vec<f64>>) {
     let config = DiscriminatorConfig {
         hidden: c.hidden.clone(),
         seed: c.seed,
+        penalty_space: c.space,
         ..Default::default()
     };
     let mut disc = Discriminator::new(c.d, config, norm.clone()).unwrap();
@@ -241,20 +269,13 @@ fn discriminator_weight_gradient_of_a_loss_matches_finite_differences() {
 #[test]
 fn discriminator_penalty_gradient_matches_finite_differences() {
     let mut worst: f64 = 0.0;
-    for c in cases() {
+    for c in cases_both_spaces() {
         let (mut disc, xs) = random_critic(&c);
         let mut ws = disc.workspace();
         for x in &xs {
             let mut grad = vec![0.0; disc.params().len()];
             let p = disc.accumulate_penalty_gradient(x, 0.8, &mut ws, &mut grad);
-            let lambda = disc.config().lambda_gp;
-            let penalty = |d: &Discriminator| {
-                let mut ws = d.workspace();
-                let mut g = vec![0.0; d.input_dim()];
-                d.value_gradient(x, &mut ws, &mut g);
-                let n = g.iter().map(|v| v * v).sum::<f64>().sqrt();
-                lambda * (n - 1.0) * (n - 1.0)
-            };
+            let penalty = |d: &Discriminator| penalty_by_definition(d, x);
             assert!((p - penalty(&disc)).abs() <= 1e-12 * p.abs().max(1.0));
             let fd: Vec<f64> = fd_params(&mut disc, penalty)
                 .into_iter()
@@ -263,8 +284,9 @@ fn discriminator_penalty_gradient_matches_finite_differences() {
             let (rel, _) = rel_err(&grad, &fd);
             assert!(
                 rel <= TOL,
-                "penalty gradient rel err {rel:e}, sizes {:?}",
-                c.hidden
+                "penalty gradient rel err {rel:e}, sizes {:?}, {:?}",
+                c.hidden,
+                c.space
             );
             worst = worst.max(rel);
         }
@@ -273,10 +295,44 @@ fn discriminator_penalty_gradient_matches_finite_differences() {
 }
 
 #[test]
+fn discriminator_penalty_spaces_differ_only_under_normalisation() {
+    // Without normalisation (σ = 1) the two spaces are the same penalty; with σ ≠ 1 they are not.
+    for c in cases().into_iter().take(2) {
+        let raw = random_critic(&c);
+        let nrm = random_critic(&Case {
+            space: PenaltySpace::Normalised,
+            ..c.clone()
+        });
+        let x = raw.1[0].clone();
+        let (pr, pn) = (
+            penalty_by_definition(&raw.0, &x),
+            penalty_by_definition(&nrm.0, &x),
+        );
+        let (mut wr, mut wn) = (raw.0.workspace(), nrm.0.workspace());
+        let mut g = vec![0.0; raw.0.params().len()];
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(1.0);
+        let got_r = raw.0.accumulate_penalty_gradient(&x, 1.0, &mut wr, &mut g);
+        let got_n = nrm.0.accumulate_penalty_gradient(&x, 1.0, &mut wn, &mut g);
+        assert!(
+            close(got_r, pr) && close(got_n, pn),
+            "{got_r} {pr} {got_n} {pn}"
+        );
+        if c.normalise {
+            assert!(
+                (pr - pn).abs() > 1e-6 * pr.abs().max(pn.abs()),
+                "{pr} vs {pn}"
+            );
+        } else {
+            assert!((pr - pn).abs() <= 1e-12 * pr.abs().max(1.0), "{pr} vs {pn}");
+        }
+    }
+}
+
+#[test]
 fn discriminator_critic_loss_gradient_matches_finite_differences() {
     // The whole per-sample WGAN-GP loss as `train` uses it: sign and composition included.
     let mut worst: f64 = 0.0;
-    for c in cases().iter().filter(|c| c.normalise) {
+    for c in cases_both_spaces().iter().filter(|c| c.normalise) {
         let (mut disc, xs) = random_critic(c);
         let mut ws = disc.workspace();
         let triples = [(0, 1, 0.3), (1, 2, 0.9), (2, 0, 0.05)];
@@ -290,10 +346,7 @@ fn discriminator_critic_loss_gradient_matches_finite_differences() {
                 .zip(&xs[k])
                 .map(|(a, b)| eps * a + (1.0 - eps) * b)
                 .collect();
-            let mut g = vec![0.0; c.d];
-            disc.value_gradient(&x_hat, &mut ws, &mut g);
-            let n = g.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let want_p = disc.config().lambda_gp * (n - 1.0) * (n - 1.0);
+            let want_p = penalty_by_definition(&disc, &x_hat);
             let want_l = disc.value(&xs[e], &mut ws) - disc.value(&xs[k], &mut ws) + want_p;
             assert!((p - want_p).abs() <= 1e-12 * want_p.max(1.0));
             assert!((l - want_l).abs() <= 1e-12 * want_l.abs().max(1.0));

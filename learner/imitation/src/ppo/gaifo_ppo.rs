@@ -49,6 +49,8 @@ pub struct GaifoPpoConfig {
     pub iterations: usize,
     /// `Discriminator::train` calls per iteration (LQR+GAIfO's).
     pub critic_updates: usize,
+    /// Half-life of the critic's learning rate, iterations; 0 = constant (LQR+GAIfO's).
+    pub critic_lr_half_life: f64,
     /// The critic (LQR+GAIfO's).
     pub discriminator: DiscriminatorConfig,
     /// Seed of every random draw (noise, critic, nets, minibatches).
@@ -72,6 +74,7 @@ impl GaifoPpoConfig {
             samples: g.samples,
             iterations: g.iterations,
             critic_updates: g.critic_updates,
+            critic_lr_half_life: g.critic_lr_half_life,
             discriminator: g.discriminator.clone(),
             seed: g.seed,
             ppo: PpoConfig {
@@ -211,6 +214,8 @@ impl Learn for GaifoPpo {
             &self.expert,
             &controller,
             self.cfg.critic_updates,
+            self.iteration,
+            self.cfg.critic_lr_half_life,
         )?;
         // 4. Reward from the critic.
         let t2 = Instant::now();
