@@ -664,8 +664,24 @@ mod tests {
             base.lqr_gaifo.discriminator.batch_size
         );
         std::fs::write(&p, "seedz = 2\n").unwrap();
-        let e = ur5_shared::config::from_toml_file_over(&p, base).unwrap_err();
+        let e = ur5_shared::config::from_toml_file_over(&p, base.clone()).unwrap_err();
         assert!(e.to_string().contains("seedz"), "{e}");
+        // Unknown keys in the critic's tables are errors too (they were ignored before).
+        for (text, key) in [
+            ("[lqr_gaifo.discriminator]\nhiddn = [8]\n", "hiddn"),
+            ("[lqr_gaifo.discriminator.adam]\nlrr = 1.0\n", "lrr"),
+            ("[gaifo_ppo.discriminator]\npenalty = \"raw\"\n", "penalty"),
+        ] {
+            std::fs::write(&p, text).unwrap();
+            let e = ur5_shared::config::from_toml_file_over(&p, base.clone()).unwrap_err();
+            assert!(e.to_string().contains(key), "{text}: {e}");
+        }
+        std::fs::write(&p, "[lqr_gaifo.discriminator]\npenalty_space = \"raw\"\n").unwrap();
+        let c: ExperimentConfig = ur5_shared::config::from_toml_file_over(&p, base).unwrap();
+        assert_eq!(
+            c.lqr_gaifo.discriminator.penalty_space,
+            imitation::discriminator::PenaltySpace::Raw
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 /// Adam's hyper-parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct AdamConfig {
     /// Step size α.
     pub lr: f64,

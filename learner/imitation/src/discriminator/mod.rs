@@ -71,6 +71,7 @@ pub enum DiscriminatorError {
 /// Configuration of the critic and its training; defaults follow Gulrajani et al. (2017),
 /// Algorithm 1, except where noted.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DiscriminatorConfig {
     /// Hidden layer widths (at least one layer).
     pub hidden: Vec<usize>,
