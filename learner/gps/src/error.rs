@@ -18,7 +18,26 @@ pub enum GpsError {
     /// GPS raises this when the PD retry fails on dynamics containing NaN.
     #[error("NaNs encountered in the dynamics (Fm or fv); the dynamics fit failed upstream")]
     NanDynamics,
+    /// A setting that cannot work; the message names it and its allowed range.
+    #[error("invalid setting: {0}")]
+    Config(String),
     /// Too few samples for a regression.
     #[error("cannot fit dynamics on {0} sample(s); need at least 2 trajectories")]
     TooFewSamples(usize),
+}
+
+/// `Err(GpsError::Config)` naming `name` unless `ok`; the message says what is allowed.
+pub(crate) fn check(
+    ok: bool,
+    name: &str,
+    value: impl std::fmt::Debug,
+    allowed: &str,
+) -> Result<(), GpsError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(GpsError::Config(format!(
+            "{name} = {value:?}: must be {allowed}"
+        )))
+    }
 }

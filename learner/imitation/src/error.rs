@@ -26,6 +26,9 @@ pub enum ImitationError {
     /// A checkpoint that does not belong to this run.
     #[error("checkpoint: {0}")]
     Checkpoint(String),
+    /// Settings that cannot work; the message names the setting and its allowed range.
+    #[error("invalid setting: {0}")]
+    Config(String),
     /// PPO settings that cannot work.
     #[error("PPO: {0}")]
     Ppo(String),

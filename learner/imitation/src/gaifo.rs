@@ -132,6 +132,72 @@ impl Default for GaifoConfig {
     }
 }
 
+impl GaifoConfig {
+    /// Largest accepted `samples`, `iterations`, `critic_updates`, critic batch and steps:
+    /// far above any use, low enough that a typo cannot ask for terabytes up front.
+    pub const MAX_COUNT: usize = 100_000;
+    /// Largest accepted critic hidden-layer width.
+    pub const MAX_WIDTH: usize = 4096;
+
+    /// Checks every setting's range before anything is allocated or run (issue 15).
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        let bad = |name: &str, v: &dyn std::fmt::Debug, allowed: &str| {
+            Err(ImitationError::Config(format!(
+                "{name} = {v:?}: must be {allowed}"
+            )))
+        };
+        let count = |n: usize| (1..=Self::MAX_COUNT).contains(&n);
+        let allowed = format!("in 1..={}", Self::MAX_COUNT);
+        if self.samples < 2 || self.samples > Self::MAX_COUNT {
+            return bad(
+                "samples",
+                &self.samples,
+                &format!("in 2..={} (the dynamics fit needs 2)", Self::MAX_COUNT),
+            );
+        }
+        if !count(self.iterations) {
+            return bad("iterations", &self.iterations, &allowed);
+        }
+        if !count(self.critic_updates) {
+            return bad("critic_updates", &self.critic_updates, &allowed);
+        }
+        if !(self.init_var.is_finite() && self.init_var > 0.0 && self.init_var <= 10.0) {
+            return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
+        }
+        if !(self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0) {
+            return bad(
+                "critic_lr_half_life",
+                &self.critic_lr_half_life,
+                "finite and >= 0 (0 = constant)",
+            );
+        }
+        let d = &self.discriminator;
+        if !count(d.n_critic) || !count(d.batch_size) {
+            return bad(
+                "discriminator.n_critic/batch_size",
+                &(d.n_critic, d.batch_size),
+                &allowed,
+            );
+        }
+        if d.hidden.iter().any(|&w| w > Self::MAX_WIDTH) || d.hidden.len() > 16 {
+            return bad(
+                "discriminator.hidden",
+                &d.hidden,
+                &format!("at most 16 layers of at most {} units", Self::MAX_WIDTH),
+            );
+        }
+        d.validate()?;
+        self.sim
+            .validate()
+            .map_err(|e| ImitationError::Config(e.to_string()))?;
+        self.algorithm.validate()?;
+        self.prior.validate()?;
+        self.fit.validate()?;
+        self.traj_opt.validate()?;
+        Ok(())
+    }
+}
+
 /// Per-iteration log (progress line and CSV row).
 #[derive(Clone, Debug, Serialize)]
 pub struct GaifoLog {
@@ -323,6 +389,7 @@ pub struct LqrGaifo {
 impl LqrGaifo {
     /// Sets up a run imitating `demos` (the task — goal, start pose, T, dt — is theirs).
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
+        cfg.validate()?;
         let task = demos.task()?;
         let expert = expert_transitions(&demos);
         let norm = Normalizer::from_data(expert.as_ref())?;
@@ -555,5 +622,47 @@ impl Learn for LqrGaifo {
 impl LinGaussLearn for LqrGaifo {
     fn policy(&self) -> &LinGaussPolicy {
         self.lqr.policy()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_that_cannot_work_are_refused_naming_the_setting() {
+        assert!(GaifoConfig::default().validate().is_ok());
+        let cases: Vec<(&str, Box<dyn Fn(&mut GaifoConfig)>)> = vec![
+            ("kl_step", Box::new(|c| c.algorithm.kl_step = -1.0)),
+            ("kl_step", Box::new(|c| c.algorithm.kl_step = f64::NAN)),
+            ("init_var", Box::new(|c| c.init_var = 1e300)),
+            ("min_eta/max_eta", Box::new(|c| c.traj_opt.max_eta = 1e-9)),
+            ("max_clusters", Box::new(|c| c.prior.max_clusters = 0)),
+            ("regularization", Box::new(|c| c.fit.regularization = -1.0)),
+            (
+                "critic_updates",
+                Box::new(|c| c.critic_updates = 1_000_000_000),
+            ),
+            (
+                "n_critic/batch_size",
+                Box::new(|c| c.discriminator.batch_size = 1_000_000_000),
+            ),
+            (
+                "hidden",
+                Box::new(|c| c.discriminator.hidden = vec![1_000_000_000]),
+            ),
+            ("samples", Box::new(|c| c.samples = 1_000_000_000)),
+            ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
+            (
+                "critic_lr_half_life",
+                Box::new(|c| c.critic_lr_half_life = -2.0),
+            ),
+        ];
+        for (name, set) in cases {
+            let mut c = GaifoConfig::default();
+            set(&mut c);
+            let e = c.validate().expect_err(name).to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        }
     }
 }

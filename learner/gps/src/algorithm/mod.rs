@@ -23,6 +23,40 @@ pub struct AlgorithmConfig {
     pub eta_initial: f64,
 }
 
+impl AlgorithmConfig {
+    /// Checks every setting's range (a NaN or negative KL step would freeze learning).
+    pub fn validate(&self) -> Result<(), crate::GpsError> {
+        use crate::error::check;
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        check(
+            pos(self.kl_step),
+            "algorithm.kl_step",
+            self.kl_step,
+            "finite and > 0",
+        )?;
+        check(
+            pos(self.min_step_mult)
+                && pos(self.max_step_mult)
+                && self.min_step_mult <= self.max_step_mult,
+            "algorithm.min_step_mult/max_step_mult",
+            (self.min_step_mult, self.max_step_mult),
+            "finite, > 0, min <= max",
+        )?;
+        check(
+            self.initial_state_var.is_finite() && self.initial_state_var >= 0.0,
+            "algorithm.initial_state_var",
+            self.initial_state_var,
+            "finite and >= 0",
+        )?;
+        check(
+            pos(self.eta_initial),
+            "algorithm.eta_initial",
+            self.eta_initial,
+            "finite and > 0",
+        )
+    }
+}
+
 impl Default for AlgorithmConfig {
     fn default() -> Self {
         // GPS algorithm/config.py ALG and algorithm_utils.py IterationData.

@@ -20,6 +20,18 @@ pub struct LrPriorConfig {
     pub regularization: f64,
 }
 
+impl LrPriorConfig {
+    /// Checks the setting's range.
+    pub fn validate(&self) -> Result<(), crate::GpsError> {
+        crate::error::check(
+            self.regularization.is_finite() && self.regularization >= 0.0,
+            "fit.regularization",
+            self.regularization,
+            "finite and >= 0",
+        )
+    }
+}
+
 impl Default for LrPriorConfig {
     fn default() -> Self {
         Self {

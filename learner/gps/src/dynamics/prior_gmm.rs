@@ -30,6 +30,43 @@ pub struct PriorGmmConfig {
     pub max_iterations: usize,
 }
 
+impl PriorGmmConfig {
+    /// Checks every setting's range.
+    pub fn validate(&self) -> Result<(), GpsError> {
+        use crate::error::check;
+        check(
+            self.min_samples_per_cluster >= 1,
+            "prior.min_samples_per_cluster",
+            self.min_samples_per_cluster,
+            ">= 1",
+        )?;
+        check(
+            self.max_clusters >= 1,
+            "prior.max_clusters",
+            self.max_clusters,
+            ">= 1",
+        )?;
+        check(
+            (2..=10_000).contains(&self.max_samples),
+            "prior.max_samples",
+            self.max_samples,
+            "in 2..=10000 (trajectories kept + 1)",
+        )?;
+        check(
+            self.strength.is_finite() && self.strength > 0.0,
+            "prior.strength",
+            self.strength,
+            "finite and > 0",
+        )?;
+        check(
+            self.max_iterations >= 1,
+            "prior.max_iterations",
+            self.max_iterations,
+            ">= 1",
+        )
+    }
+}
+
 impl Default for PriorGmmConfig {
     fn default() -> Self {
         // Values of the GPS example configs and of gps-vectors (max_clusters 20,

@@ -51,6 +51,27 @@ pub struct TrajOptConfig {
     pub max_ent_traj: f64,
 }
 
+impl TrajOptConfig {
+    /// Checks every setting's range.
+    pub fn validate(&self) -> Result<(), crate::GpsError> {
+        use crate::error::check;
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        check(pos(self.del0), "traj_opt.del0", self.del0, "finite and > 0")?;
+        check(
+            pos(self.min_eta) && pos(self.max_eta) && self.min_eta < self.max_eta,
+            "traj_opt.min_eta/max_eta",
+            (self.min_eta, self.max_eta),
+            "finite, > 0, min < max",
+        )?;
+        check(
+            self.max_ent_traj.is_finite() && self.max_ent_traj >= 0.0,
+            "traj_opt.max_ent_traj",
+            self.max_ent_traj,
+            "finite and >= 0",
+        )
+    }
+}
+
 impl Default for TrajOptConfig {
     fn default() -> Self {
         // GPS traj_opt/config.py TRAJ_OPT_LQR and algorithm/config.py ALG['max_ent_traj'].
