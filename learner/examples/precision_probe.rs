@@ -14,14 +14,20 @@ use imitation::rollout::Episode;
 use learner::run::arm_for;
 use ur5_shared::layout::{DX, EE_MINUS_GOAL};
 
+/// The transition [s; s] of an arm at rest in `s`.
+fn at_rest(s: &[f64; DX]) -> [f64; 2 * DX] {
+    let mut x = [0.0; 2 * DX];
+    x[..DX].copy_from_slice(s);
+    x[DX..].copy_from_slice(s);
+    x
+}
+
 /// D at the resting transition [s; s] of `s`, and dD/dr along the end effector's offset from
 /// the goal (r = ‖ee − goal‖, s and s' moved together: an arm resting a little further out).
 fn critic_at_rest(run: &LqrGaifo, s: &[f64; DX]) -> (f64, f64) {
     let disc = run.discriminator();
     let mut ws = disc.workspace();
-    let mut x = [0.0; 2 * DX];
-    x[..DX].copy_from_slice(s);
-    x[DX..].copy_from_slice(s);
+    let x = at_rest(s);
     let mut g = [0.0; 2 * DX];
     let v = disc.value_gradient(&x, &mut ws, &mut g);
     let e = &s[EE_MINUS_GOAL];
@@ -81,13 +87,8 @@ fn fresh_critic(
     for k in 0..steps / 100 {
         let st = d.train(expert.as_ref(), ctrl.as_ref(), &mut ws)?;
         if (k + 1) % (steps / 1000).max(1) == 0 {
-            let mut x = [0.0; 2 * DX];
-            x[..DX].copy_from_slice(&end);
-            x[DX..].copy_from_slice(&end);
-            let a = d.value(&x, &mut ws);
-            x[..DX].copy_from_slice(&demo_end);
-            x[DX..].copy_from_slice(&demo_end);
-            let b = d.value(&x, &mut ws);
+            let a = d.value(&at_rest(&end), &mut ws);
+            let b = d.value(&at_rest(&demo_end), &mut ws);
             println!(
                 "fresh critic {:>6} steps: W1 {:.3}  D(eval end) - D(demo end) {:.3}",
                 (k + 1) * 100,
@@ -151,9 +152,7 @@ fn main() -> anyhow::Result<()> {
             // Normalised gradient of D at the resting transition of the eval end, by block.
             let disc = run.discriminator();
             let mut ws = disc.workspace();
-            let mut x = [0.0; 2 * DX];
-            x[..DX].copy_from_slice(&end);
-            x[DX..].copy_from_slice(&end);
+            let x = at_rest(&end);
             let mut g = [0.0; 2 * DX];
             disc.value_gradient(&x, &mut ws, &mut g);
             let sd = &disc.normalizer().std;

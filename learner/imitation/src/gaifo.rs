@@ -133,11 +133,10 @@ impl Default for GaifoConfig {
 }
 
 impl GaifoConfig {
-    /// Largest accepted `samples`, `iterations`, `critic_updates`, critic batch and steps:
-    /// far above any use, low enough that a typo cannot ask for terabytes up front.
-    pub const MAX_COUNT: usize = 100_000;
-    /// Largest accepted critic hidden-layer width.
-    pub const MAX_WIDTH: usize = 4096;
+    /// Largest accepted `samples`, `iterations`, `critic_updates` (the critic's own bounds:
+    /// [`DiscriminatorConfig::validate`]): far above any use, low enough that a typo cannot ask
+    /// for terabytes up front.
+    pub const MAX_COUNT: usize = DiscriminatorConfig::MAX_COUNT;
 
     /// Checks every setting's range before anything is allocated or run (issue 15).
     pub fn validate(&self) -> Result<(), ImitationError> {
@@ -171,22 +170,7 @@ impl GaifoConfig {
                 "finite and >= 0 (0 = constant)",
             );
         }
-        let d = &self.discriminator;
-        if !count(d.n_critic) || !count(d.batch_size) {
-            return bad(
-                "discriminator.n_critic/batch_size",
-                &(d.n_critic, d.batch_size),
-                &allowed,
-            );
-        }
-        if d.hidden.iter().any(|&w| w > Self::MAX_WIDTH) || d.hidden.len() > 16 {
-            return bad(
-                "discriminator.hidden",
-                &d.hidden,
-                &format!("at most 16 layers of at most {} units", Self::MAX_WIDTH),
-            );
-        }
-        d.validate()?;
+        self.discriminator.validate()?;
         self.sim
             .validate()
             .map_err(|e| ImitationError::Config(e.to_string()))?;

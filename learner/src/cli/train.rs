@@ -118,11 +118,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(s) = args.common.seed {
         cfg.seed = s;
     }
-    cfg.sim.validate()?;
-    anyhow::ensure!(
-        cfg.samples >= 1 && cfg.iterations >= 1,
-        "samples and iterations must be >= 1"
-    );
+    // Every setting, before anything is printed or written (the run checks them again).
+    cfg.validate()?;
     let out = args.out_dir();
     if let Some(dir) = &args.resume {
         anyhow::ensure!(

@@ -67,16 +67,18 @@ fn by_variant(runs: &[Run]) -> Vec<(String, Vec<&Run>)> {
     out
 }
 
+/// `f` of every iteration's log, one vector per run (seed) of a variant.
+fn per_seed(rs: &[&Run], f: fn(&GaifoLog) -> f64) -> Vec<Vec<f64>> {
+    rs.iter().map(|r| r.logs.iter().map(f).collect()).collect()
+}
+
 /// The summary table of `runs`.
 pub fn summarise(runs: &[Run]) -> Vec<SummaryRow> {
     by_variant(runs)
         .into_iter()
         .map(|(variant, rs)| {
-            let per_seed = |f: fn(&GaifoLog) -> f64| -> Vec<Vec<f64>> {
-                rs.iter().map(|r| r.logs.iter().map(f).collect()).collect()
-            };
-            let perf = per_seed(|l| l.performance);
-            let dist = per_seed(|l| l.final_distance);
+            let perf = per_seed(&rs, |l| l.performance);
+            let dist = per_seed(&rs, |l| l.final_distance);
             let (mean, se, _) = mean_stderr(&perf);
             let (dmean, dse, _) = mean_stderr(&dist);
             let iterations = mean.len();
@@ -236,8 +238,7 @@ pub fn write_outputs(
         by_variant(runs)
             .into_iter()
             .map(|(variant, rs)| {
-                let v: Vec<Vec<f64>> = rs.iter().map(|r| r.logs.iter().map(f).collect()).collect();
-                let (mean, stderr, _) = mean_stderr(&v);
+                let (mean, stderr, _) = mean_stderr(&per_seed(&rs, f));
                 Series {
                     label: format!("{variant} ({} seeds)", rs.len()),
                     x: (1..=mean.len()).map(|i| i as f64).collect(),

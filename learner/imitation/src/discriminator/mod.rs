@@ -127,7 +127,16 @@ impl Default for DiscriminatorConfig {
 }
 
 impl DiscriminatorConfig {
-    /// Checks that the config can build and train a net.
+    /// Largest accepted `n_critic` and `batch_size`: far above any use, low enough that a
+    /// typo cannot ask for hours of steps or gigabytes of batch.
+    pub const MAX_COUNT: usize = 100_000;
+    /// Largest accepted hidden-layer width.
+    pub const MAX_WIDTH: usize = 4096;
+    /// Largest accepted number of hidden layers.
+    pub const MAX_LAYERS: usize = 16;
+
+    /// Checks that the config can build and train a net (and does not ask for an allocation
+    /// that would abort the process).
     pub fn validate(&self) -> Result<(), DiscriminatorError> {
         let bad = |m: String| Err(DiscriminatorError::Config(m));
         if self.hidden.is_empty() || self.hidden.contains(&0) {
@@ -137,16 +146,28 @@ impl DiscriminatorConfig {
                 self.hidden
             ));
         }
+        if self.hidden.len() > Self::MAX_LAYERS || self.hidden.iter().any(|&w| w > Self::MAX_WIDTH)
+        {
+            return bad(format!(
+                "hidden = {:?}: must be at most {} layers of at most {} units",
+                self.hidden,
+                Self::MAX_LAYERS,
+                Self::MAX_WIDTH
+            ));
+        }
         if !(self.lambda_gp.is_finite() && self.lambda_gp >= 0.0) {
             return bad(format!(
                 "lambda_gp must be finite and >= 0; got {}",
                 self.lambda_gp
             ));
         }
-        if self.n_critic == 0 || self.batch_size == 0 {
+        let count = |n: usize| (1..=Self::MAX_COUNT).contains(&n);
+        if !count(self.n_critic) || !count(self.batch_size) {
             return bad(format!(
-                "n_critic and batch_size must be >= 1; got {} and {}",
-                self.n_critic, self.batch_size
+                "n_critic/batch_size = ({}, {}): must be in 1..={}",
+                self.n_critic,
+                self.batch_size,
+                Self::MAX_COUNT
             ));
         }
         self.adam.validate().map_err(DiscriminatorError::Config)
