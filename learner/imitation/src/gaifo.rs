@@ -183,7 +183,7 @@ impl GaifoConfig {
 }
 
 /// Per-iteration log (progress line and CSV row).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct GaifoLog {
     /// Iteration (0-based).
     pub iteration: usize,

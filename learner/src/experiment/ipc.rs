@@ -8,8 +8,9 @@
 //! hil-sim serve (real time, arm clock)  <->  rt-controller run (real time)  <->  learner serve --algo lqr-gaifo
 //! ```
 //!
-//! Each arm gets its own expert, trained in process on that arm, and its own demonstrations,
-//! so that each curve is normalised by its own arm's expert and random policy. Runs (arm ×
+//! Both arms imitate the same demonstrations, recorded on the nominal arm (one variable
+//! changes: the arm); each curve is normalised by its own arm's converged expert and random
+//! policy, trained in process on that arm (docs/design.md §5 D26). Runs (arm ×
 //! seed) execute `threads` at a time (0 = one per core), each on its own iceoryx2 prefix; the
 //! binaries `hil-sim` and `rt-controller` are taken from the directory of the running
 //! `learner` executable. Real time is not lockstep: episodes depend on scheduling, so these
@@ -25,6 +26,7 @@ use ur5_shared::config::Perturbation;
 
 use super::summary::{summary_text, write_outputs, SummaryRow};
 use super::{expert_demos, pool, ExperimentConfig, ExperimentName, Run};
+use imitation::demos::Demos;
 use crate::io::log::read_gaifo_csv;
 use crate::process::{sibling, Spawned};
 
@@ -182,6 +184,8 @@ impl IpcRun<'_> {
             variant: self.arm.to_string(),
             algorithm: "lqr-gaifo".into(),
             seed: self.seed,
+            episodes_per_iteration: n,
+            horizon: task.horizon,
             logs,
             wall_s: t0.elapsed().as_secs_f64(),
         })
@@ -213,22 +217,36 @@ pub fn run(
         ("simulated", Perturbation::default()),
         ("physical", cfg.physical.clone()),
     ];
-    // One expert per arm, trained in process on that arm.
-    let demo_paths: Vec<PathBuf> = pool.install(|| {
-        arms.par_iter()
-            .map(|(arm, p)| -> anyhow::Result<PathBuf> {
-                let path = out.join(format!("demos_{arm}.npz"));
-                if let (Some(d), true) = (demos, p.is_nominal()) {
-                    std::fs::copy(d, &path).with_context(|| format!("copying {}", d.display()))?;
-                    return Ok(path);
-                }
-                let mut e = cfg.expert.clone();
-                e.sim.perturbation = p.clone();
-                crate::io::demos::save(&expert_demos(&e)?, &path)?;
-                Ok(path)
-            })
-            .collect::<anyhow::Result<Vec<_>>>()
-    })?;
+    // The demonstrations: the nominal arm's expert, imitated on both arms (docs/design.md §5
+    // D26). Each arm's curve is normalised by its own converged expert and random policy.
+    let nominal_path = out.join("demos_simulated.npz");
+    let nominal = match demos {
+        Some(d) => crate::io::demos::load(d)
+            .with_context(|| format!("loading demonstrations {}", d.display()))?,
+        None => expert_demos(&cfg.expert)?,
+    };
+    crate::io::demos::save(&nominal, &nominal_path)?;
+    let mut e = cfg.expert.clone();
+    e.sim.perturbation = cfg.physical.clone();
+    e.iterations = cfg.physical_expert_iterations;
+    e.patience = cfg.physical_expert_iterations;
+    let own = expert_demos(&e)?;
+    crate::io::demos::save(&own, &out.join("expert_physical.npz"))?;
+    let physical = Demos {
+        cost_expert: own.cost_expert,
+        cost_random: own.cost_random,
+        ..nominal.clone()
+    };
+    let physical_path = out.join("demos_physical.npz");
+    crate::io::demos::save(&physical, &physical_path)?;
+    eprintln!(
+        "both arms imitate {}; the perturbed arm is normalised by its own expert ({} iterations): expert cost {:.4}, random {:.4}",
+        nominal_path.display(),
+        cfg.physical_expert_iterations,
+        own.cost_expert,
+        own.cost_random
+    );
+    let demo_paths = [nominal_path, physical_path];
     let mut jobs = Vec::new();
     for ((arm, p), d) in arms.iter().zip(&demo_paths) {
         for i in 0..cfg.seeds as u64 {

@@ -37,10 +37,61 @@ pub struct SummaryRow {
     /// First iteration at which the mean final distance over seeds is at most 1 cm (None:
     /// never).
     pub first_iteration_mean_within_1cm: Option<usize>,
+    /// Noisy (training) episodes per iteration N and steps per episode T of the variant.
+    pub episodes_per_iteration: usize,
+    pub horizon: usize,
+    /// Training episodes each seed needed to first reach normalised performance 0.9.
+    pub to_performance_0_9: Reach,
+    /// Training episodes each seed needed to first end within 1 cm of the goal.
+    pub to_within_1cm: Reach,
     /// Median learner CPU time per iteration, ms.
     pub learner_cpu_ms_median: f64,
     /// Median simulator time per iteration (episodes), ms.
     pub execute_ms_median: f64,
+}
+
+/// How many training episodes the seeds of a variant needed to first reach a threshold with
+/// the noise-free episode. The controller evaluated at iteration i (0-based) was learned from
+/// the i·N noisy episodes of the iterations before it, so a seed that first reaches the
+/// threshold there needed i·N episodes and i·N·T environment steps (the noise-free evaluation
+/// episodes are measurements and are not counted, for either algorithm).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Reach {
+    /// Seeds that reached the threshold within the run.
+    pub seeds_reached: usize,
+    /// Seeds run.
+    pub seeds: usize,
+    /// Mean and standard error over the seeds that reached it (NaN if none did); a lower
+    /// bound of the true mean when some seeds never did.
+    pub episodes_mean: f64,
+    pub episodes_se: f64,
+    /// The same in environment steps (episodes × T).
+    pub env_steps_mean: f64,
+    pub env_steps_se: f64,
+}
+
+impl Reach {
+    /// From per-seed curves of a variant with N episodes per iteration and T steps.
+    fn of(curves: &[Vec<f64>], reached: impl Fn(f64) -> bool, n: usize, t: usize) -> Self {
+        let episodes: Vec<f64> = curves
+            .iter()
+            .filter_map(|c| c.iter().position(|&v| reached(v)))
+            .map(|i| (i * n) as f64)
+            .collect();
+        let (m, e, _) = mean_stderr(&episodes.iter().map(|&x| vec![x]).collect::<Vec<_>>());
+        let (m, e) = (
+            m.first().copied().unwrap_or(f64::NAN),
+            e.first().copied().unwrap_or(f64::NAN),
+        );
+        Self {
+            seeds_reached: episodes.len(),
+            seeds: curves.len(),
+            episodes_mean: m,
+            episodes_se: e,
+            env_steps_mean: m * t as f64,
+            env_steps_se: e * t as f64,
+        }
+    }
 }
 
 /// Iterations reported in the summary (0-based), those below `iterations`, and the last.
@@ -113,7 +164,12 @@ pub fn summarise(runs: &[Run]) -> Vec<SummaryRow> {
                         .collect::<Vec<_>>(),
                 )
             };
+            let (n, t) = (rs[0].episodes_per_iteration, rs[0].horizon);
             SummaryRow {
+                episodes_per_iteration: n,
+                horizon: t,
+                to_performance_0_9: Reach::of(&perf, |p| p >= 0.9, n, t),
+                to_within_1cm: Reach::of(&dist, |d| d <= 0.01, n, t),
                 seeds: rs.len(),
                 iterations,
                 performance: at_points(&mean, &se),
@@ -202,8 +258,58 @@ pub fn summary_text(rows: &[SummaryRow]) -> String {
             first(r.first_iteration_mean_within_1cm)
         );
     }
-    s.push_str("(final distance to the goal of the noise-free episode, cm, mean ± standard error over seeds)\n");
+    s.push_str("(final distance to the goal of the noise-free episode, cm, mean ± standard error over seeds)\n\n");
+    sample_efficiency_text(&mut s, rows);
     s
+}
+
+/// The sample-efficiency table: training episodes and environment steps to normalised 0.9
+/// and to 1 cm ([`Reach`]), with the ratio to the first variant.
+fn sample_efficiency_text(s: &mut String, rows: &[SummaryRow]) {
+    use std::fmt::Write;
+    let _ = writeln!(
+        s,
+        "{:<20} {:>5} | {:>6} {:>13} {:>17} {:>8} | {:>6} {:>13} {:>17} {:>8}",
+        "to threshold", "ep/it", "≥0.9", "episodes", "env steps", "ratio", "≤1 cm", "episodes", "env steps", "ratio"
+    );
+    let reference = rows.first();
+    let cells = |r: &Reach, base: Option<&Reach>| -> [String; 4] {
+        let none = r.seeds_reached == 0;
+        let fmt = |m: f64, e: f64| {
+            if none {
+                "never".to_string()
+            } else {
+                format!("{m:.0}±{e:.0}")
+            }
+        };
+        let ratio = match base {
+            Some(b) if !none && b.seeds_reached > 0 => {
+                let bound = if r.seeds_reached < r.seeds { "≥" } else { "" };
+                format!("{bound}{:.1}×", r.episodes_mean / b.episodes_mean)
+            }
+            _ => "-".into(),
+        };
+        [
+            format!("{}/{}", r.seeds_reached, r.seeds),
+            fmt(r.episodes_mean, r.episodes_se),
+            fmt(r.env_steps_mean, r.env_steps_se),
+            ratio,
+        ]
+    };
+    for r in rows {
+        let a = cells(&r.to_performance_0_9, reference.map(|b| &b.to_performance_0_9));
+        let b = cells(&r.to_within_1cm, reference.map(|b| &b.to_within_1cm));
+        let _ = writeln!(
+            s,
+            "{:<20} {:>5} | {:>6} {:>13} {:>17} {:>8} | {:>6} {:>13} {:>17} {:>8}",
+            r.variant, r.episodes_per_iteration, a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]
+        );
+    }
+    let _ = writeln!(
+        s,
+        "(training episodes before the noise-free episode first reached normalised 0.9 / ended within 1 cm, mean ± standard error over the seeds that reached it (k/n); env steps = episodes × T; ratio to {}; ≥: some seeds never reached it, so a lower bound)",
+        reference.map(|r| r.variant.as_str()).unwrap_or("-")
+    );
 }
 
 /// Header of the experiment CSV.

@@ -57,6 +57,23 @@ pub struct GaifoPpoConfig {
     pub seed: u64,
     /// PPO.
     pub ppo: PpoConfig,
+    /// Where PPO's reward comes from: the critic (GAIfO, the default) or, as a diagnostic
+    /// only, the true task cost (then it is reinforcement learning, not imitation: used to
+    /// tell PPO's own behaviour from the critic's, docs/design.md §5 D14).
+    pub reward: PpoReward,
+}
+
+/// PPO's reward ([`GaifoPpoConfig::reward`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PpoReward {
+    /// `r_t = −D(s_t, s_{t+1})`: GAIfO.
+    #[default]
+    Critic,
+    /// `r_t = −((t+1)/n) d_{t+1}`, and `−d_n` more on the last transition, so that the
+    /// episode's return is `−C(τ) + 0·d_0` (`ur5_shared::cost`): RL with the task cost, a
+    /// diagnostic that sees the goal; not imitation from observation.
+    TaskCost,
 }
 
 impl Default for GaifoPpoConfig {
@@ -81,8 +98,58 @@ impl GaifoPpoConfig {
                 init_std: g.init_var.sqrt(),
                 ..PpoConfig::default()
             },
+            reward: PpoReward::Critic,
         }
     }
+
+    /// Refuses settings that cannot work, naming the setting and its range (counts as
+    /// [`GaifoConfig::MAX_COUNT`]; the critic as [`DiscriminatorConfig::validate`]; PPO as
+    /// [`PpoConfig::validate`]).
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        let max = GaifoConfig::MAX_COUNT;
+        for (name, n) in [
+            ("samples", self.samples),
+            ("iterations", self.iterations),
+            ("critic_updates", self.critic_updates),
+        ] {
+            if !(1..=max).contains(&n) {
+                return Err(ImitationError::Config(format!(
+                    "{name} = {n}: must be in 1..={max}"
+                )));
+            }
+        }
+        if !(self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0) {
+            return Err(ImitationError::Config(format!(
+                "critic_lr_half_life = {}: must be finite and >= 0 (0 = constant)",
+                self.critic_lr_half_life
+            )));
+        }
+        self.discriminator.validate()?;
+        self.sim
+            .validate()
+            .map_err(|e| ImitationError::Config(e.to_string()))?;
+        self.ppo.validate().map_err(ImitationError::Ppo)
+    }
+}
+
+/// Rewards of [`PpoReward::TaskCost`] for every transition of every episode: the episode's
+/// return is `−C(τ)` less its `d_0` term, which no action changes.
+pub fn task_rewards(episodes: &[Episode]) -> Vec<Vec<f64>> {
+    use ur5_shared::layout::EE_MINUS_GOAL;
+    episodes
+        .iter()
+        .map(|ep| {
+            let n = ep.horizon() - 1;
+            (0..n)
+                .map(|t| {
+                    let e = &ep.x[(t + 1) * DX..(t + 2) * DX][EE_MINUS_GOAL];
+                    let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+                    let w = (t + 1) as f64 / n as f64 + if t + 1 == n { 1.0 } else { 0.0 };
+                    -w * d
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// The state of a GAIfO (PPO) run.
@@ -123,6 +190,7 @@ pub fn critic_rewards(
 impl GaifoPpo {
     /// Sets up a run imitating `demos` (the task is theirs).
     pub fn new(cfg: GaifoPpoConfig, demos: Demos) -> Result<Self, ImitationError> {
+        cfg.validate()?;
         let task = demos.task()?;
         let expert = expert_transitions(&demos);
         let norm = Normalizer::from_data(expert.as_ref())?;
@@ -219,7 +287,10 @@ impl Learn for GaifoPpo {
         )?;
         // 4. Reward from the critic.
         let t2 = Instant::now();
-        let rewards = critic_rewards(&self.disc, &mut self.disc_ws, episodes);
+        let rewards = match self.cfg.reward {
+            PpoReward::Critic => critic_rewards(&self.disc, &mut self.disc_ws, episodes),
+            PpoReward::TaskCost => task_rewards(episodes),
+        };
         // 6. PPO update.
         let t3 = Instant::now();
         let st = self.ppo.update(episodes, &rewards);
@@ -242,5 +313,63 @@ impl Learn for GaifoPpo {
 
     fn eval_cost(log: &GaifoLog) -> f64 {
         log.task_cost
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ur5_shared::layout::EE_MINUS_GOAL;
+
+    #[test]
+    fn settings_that_cannot_work_are_refused_naming_the_setting() {
+        assert!(GaifoPpoConfig::default().validate().is_ok());
+        let cases: Vec<(&str, Box<dyn Fn(&mut GaifoPpoConfig)>)> = vec![
+            ("samples", Box::new(|c| c.samples = 0)),
+            ("samples", Box::new(|c| c.samples = 1_000_000_000)),
+            ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
+            ("critic_updates", Box::new(|c| c.critic_updates = 0)),
+            ("critic_lr_half_life", Box::new(|c| c.critic_lr_half_life = f64::NAN)),
+            ("n_critic/batch_size", Box::new(|c| c.discriminator.batch_size = 0)),
+            ("pi_hidden", Box::new(|c| c.ppo.pi_hidden = vec![1_000_000_000])),
+            ("v_hidden", Box::new(|c| c.ppo.v_hidden = vec![])),
+            ("init_std", Box::new(|c| c.ppo.init_std = 1e300)),
+            ("gamma", Box::new(|c| c.ppo.gamma = f64::NAN)),
+            ("clip_range", Box::new(|c| c.ppo.clip_range = -0.2)),
+            ("epochs", Box::new(|c| c.ppo.epochs = 1_000_000_000)),
+            ("minibatch", Box::new(|c| c.ppo.minibatch = 0)),
+        ];
+        for (name, set) in cases {
+            let mut c = GaifoPpoConfig::default();
+            set(&mut c);
+            let e = c.validate().expect_err(name).to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        }
+    }
+
+    /// The task-cost rewards of an episode add up to −C(τ) + 0·d_0 (`ur5_shared::cost`).
+    #[test]
+    fn task_rewards_return_minus_the_task_cost() {
+        let t = 7;
+        let mut ep = Episode {
+            x: vec![0.0; t * DX],
+            u: vec![],
+            u_policy: vec![],
+            eps: vec![],
+            noisy: false,
+        };
+        let mut states = Vec::new();
+        for i in 0..t {
+            let s = &mut ep.x[i * DX..(i + 1) * DX];
+            s[EE_MINUS_GOAL][0] = 0.3 / (1.0 + i as f64);
+            s[EE_MINUS_GOAL][2] = -0.1 * (i % 3) as f64;
+            states.push(<[f64; DX]>::try_from(&*s).unwrap());
+        }
+        let r = task_rewards(std::slice::from_ref(&ep));
+        assert_eq!(r[0].len(), t - 1);
+        let ret: f64 = r[0].iter().sum();
+        let c = ur5_shared::cost::task_cost_from_states(&states).unwrap();
+        // d_0 has weight 0 in C(τ).
+        assert!((ret + c).abs() < 1e-12, "return {ret} vs −C {}", -c);
     }
 }
