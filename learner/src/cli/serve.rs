@@ -47,6 +47,10 @@ pub struct ServeArgs {
     /// re-publishes its table version and continues learning from that controller.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
+    /// Start a new run in --out even though another run's files are there: they are deleted
+    /// first (without it such a folder is refused).
+    #[arg(long)]
+    pub force: bool,
     /// Largest number of iterations (counted from the first, across resumes); overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
@@ -103,6 +107,7 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
     if args.resume.is_some() {
         opts.resume = args.resume;
     }
+    opts.force |= args.force;
     match opts.algo {
         ServeAlgo::Expert => {
             anyhow::ensure!(

@@ -10,6 +10,7 @@ use imitation::gaifo::{GaifoConfig, GaifoLog};
 use imitation::ppo::UpdateStats;
 
 use super::CommonArgs;
+use crate::io::manifest::{self, Claim, Manifest};
 use crate::run::{train, train_resumed};
 use imitation::ppo::gaifo_ppo::GaifoPpoConfig;
 
@@ -42,6 +43,10 @@ pub struct TrainArgs {
     /// checkpointed and start afresh, so the result differs from an uninterrupted run.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
+    /// Start a new run in --out even though another run's files are there: they are deleted
+    /// first (without it such a folder is refused; docs/design.md §4.4).
+    #[arg(long)]
+    pub force: bool,
     /// --config: for lqr-gaifo a `GaifoConfig` (keys `samples`, `iterations`, `init_var`,
     /// `critic_updates`, `adapt_step`, `psd_hessian`, `seed`; tables `sim`, `discriminator`,
     /// `algorithm`, `prior`, `fit`, `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys
@@ -104,11 +109,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         if let Some(s) = args.common.seed {
             pcfg.seed = s;
         }
-        pcfg.sim.validate()?;
-        anyhow::ensure!(
-            pcfg.samples >= 1 && pcfg.iterations >= 1,
-            "samples and iterations must be >= 1"
-        );
+        pcfg.validate()?;
+        let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&args.demos), &pcfg)?;
+        manifest::claim(&args.out_dir(), &m, Claim::New { force: args.force })?;
         return run_ppo(&args, demos, &pcfg);
     }
     let mut cfg: GaifoConfig = args.common.settings()?;
@@ -133,6 +136,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             dir.display()
         );
     }
+    let m = Manifest::new("train", "lqr-gaifo", cfg.seed, Some(&args.demos), &cfg)?;
+    let claim = match args.resume {
+        Some(_) => Claim::Resume,
+        None => Claim::New { force: args.force },
+    };
+    manifest::claim(&out, &m, claim)?;
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,

@@ -26,9 +26,9 @@ use ur5_shared::config::Perturbation;
 
 use super::summary::{summary_text, write_outputs, SummaryRow};
 use super::{expert_demos, pool, ExperimentConfig, ExperimentName, Run};
-use imitation::demos::Demos;
 use crate::io::log::read_gaifo_csv;
 use crate::process::{sibling, Spawned};
+use imitation::demos::Demos;
 
 /// Time a process gets to stop on SIGTERM before it is killed.
 const GRACE: Duration = Duration::from_secs(3);

@@ -270,7 +270,16 @@ fn sample_efficiency_text(s: &mut String, rows: &[SummaryRow]) {
     let _ = writeln!(
         s,
         "{:<20} {:>5} | {:>6} {:>13} {:>17} {:>8} | {:>6} {:>13} {:>17} {:>8}",
-        "to threshold", "ep/it", "≥0.9", "episodes", "env steps", "ratio", "≤1 cm", "episodes", "env steps", "ratio"
+        "to threshold",
+        "ep/it",
+        "≥0.9",
+        "episodes",
+        "env steps",
+        "ratio",
+        "≤1 cm",
+        "episodes",
+        "env steps",
+        "ratio"
     );
     let reference = rows.first();
     let cells = |r: &Reach, base: Option<&Reach>| -> [String; 4] {
@@ -297,7 +306,10 @@ fn sample_efficiency_text(s: &mut String, rows: &[SummaryRow]) {
         ]
     };
     for r in rows {
-        let a = cells(&r.to_performance_0_9, reference.map(|b| &b.to_performance_0_9));
+        let a = cells(
+            &r.to_performance_0_9,
+            reference.map(|b| &b.to_performance_0_9),
+        );
         let b = cells(&r.to_within_1cm, reference.map(|b| &b.to_within_1cm));
         let _ = writeln!(
             s,

@@ -4,5 +4,6 @@ pub mod checkpoint;
 pub mod demos;
 pub mod episode;
 pub mod log;
+pub mod manifest;
 pub mod npz;
 pub mod table;

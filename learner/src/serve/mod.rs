@@ -125,6 +125,9 @@ pub struct ServeOptions {
     pub out: PathBuf,
     /// Continue from the checkpoint in this folder of an earlier run (see the module docs).
     pub resume: Option<PathBuf>,
+    /// Start a new run in `out` even though another run's files are there: they are deleted
+    /// first (without it such a folder is refused; [`crate::io::manifest`]).
+    pub force: bool,
     /// Record every complete episode to `out/episodes/`.
     pub record_episodes: bool,
     /// While no sample arrives, say so every this many seconds (wall clock).
@@ -145,6 +148,7 @@ impl Default for ServeOptions {
             prefix: String::new(),
             out: PathBuf::from("runs/serve"),
             resume: None,
+            force: false,
             record_episodes: true,
             wait_report_s: 5.0,
             idle_sleep_us: 500,
@@ -238,6 +242,7 @@ pub fn serve(
     progress: impl FnMut(&IterationLog),
 ) -> anyhow::Result<ServeSummary> {
     validate(&cfg.task, cfg.samples, cfg.init_var, &opts)?;
+    claim_dirs(&opts, "expert", cfg.seed, &cfg)?;
     let el = match &opts.resume {
         Some(dir) => {
             let path = dir.join("checkpoint.npz");
@@ -269,11 +274,32 @@ pub fn serve_gaifo(
     let task = demos.task()?;
     validate(&task, cfg.samples, cfg.init_var, &opts)
         .context("the demonstrations' task or the settings")?;
+    cfg.validate()?;
+    claim_dirs(&opts, "lqr-gaifo", cfg.seed, &cfg)?;
     let run = match &opts.resume {
         Some(dir) => crate::run::resume(cfg, demos, dir)?,
         None => LqrGaifo::new(cfg, demos)?,
     };
     serve_loop(run, opts, progress)
+}
+
+/// Takes the run directories ([`crate::io::manifest`]): `resume` must hold this run; `out`,
+/// unless it is that folder, is taken for a new one.
+fn claim_dirs<S: Serialize>(
+    opts: &ServeOptions,
+    algo: &str,
+    seed: u64,
+    settings: &S,
+) -> anyhow::Result<()> {
+    use crate::io::manifest::{claim, Claim, Manifest};
+    let m = Manifest::new("serve", algo, seed, opts.demos.as_deref(), settings)?;
+    if let Some(dir) = &opts.resume {
+        claim(dir, &m, Claim::Resume)?;
+        if *dir == opts.out {
+            return Ok(());
+        }
+    }
+    claim(&opts.out, &m, Claim::New { force: opts.force })
 }
 
 /// The one serve loop (module docs) around `learner`.

@@ -329,9 +329,18 @@ mod tests {
             ("samples", Box::new(|c| c.samples = 1_000_000_000)),
             ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
             ("critic_updates", Box::new(|c| c.critic_updates = 0)),
-            ("critic_lr_half_life", Box::new(|c| c.critic_lr_half_life = f64::NAN)),
-            ("n_critic/batch_size", Box::new(|c| c.discriminator.batch_size = 0)),
-            ("pi_hidden", Box::new(|c| c.ppo.pi_hidden = vec![1_000_000_000])),
+            (
+                "critic_lr_half_life",
+                Box::new(|c| c.critic_lr_half_life = f64::NAN),
+            ),
+            (
+                "n_critic/batch_size",
+                Box::new(|c| c.discriminator.batch_size = 0),
+            ),
+            (
+                "pi_hidden",
+                Box::new(|c| c.ppo.pi_hidden = vec![1_000_000_000]),
+            ),
             ("v_hidden", Box::new(|c| c.ppo.v_hidden = vec![])),
             ("init_std", Box::new(|c| c.ppo.init_std = 1e300)),
             ("gamma", Box::new(|c| c.ppo.gamma = f64::NAN)),

@@ -108,7 +108,10 @@ impl PpoConfig {
     pub fn validate(&self) -> Result<(), String> {
         use crate::discriminator::DiscriminatorConfig as D;
         let widths = |name: &str, h: &[usize]| -> Result<(), String> {
-            if h.is_empty() || h.len() > D::MAX_LAYERS || h.iter().any(|&w| w == 0 || w > D::MAX_WIDTH) {
+            if h.is_empty()
+                || h.len() > D::MAX_LAYERS
+                || h.iter().any(|&w| w == 0 || w > D::MAX_WIDTH)
+            {
                 return Err(format!(
                     "{name} = {h:?}: must list 1..={} widths, each in 1..={}",
                     D::MAX_LAYERS,
@@ -120,15 +123,60 @@ impl PpoConfig {
         widths("pi_hidden", &self.pi_hidden)?;
         widths("v_hidden", &self.v_hidden)?;
         let checks: [(&str, f64, bool, &str); 9] = [
-            ("init_std", self.init_std, self.init_std > 0.0 && self.init_std <= 10.0, "in (0, 10] rad"),
-            ("init_out_scale", self.init_out_scale, self.init_out_scale.is_finite(), "finite"),
-            ("clip_range", self.clip_range, self.clip_range > 0.0 && self.clip_range <= 10.0, "in (0, 10]"),
-            ("gamma", self.gamma, (0.0..=1.0).contains(&self.gamma), "in [0, 1]"),
-            ("gae_lambda", self.gae_lambda, (0.0..=1.0).contains(&self.gae_lambda), "in [0, 1]"),
-            ("vf_coef", self.vf_coef, self.vf_coef >= 0.0 && self.vf_coef.is_finite(), "finite and >= 0"),
-            ("ent_coef", self.ent_coef, self.ent_coef.is_finite(), "finite"),
-            ("max_grad_norm", self.max_grad_norm, self.max_grad_norm > 0.0 && self.max_grad_norm.is_finite(), "finite and > 0"),
-            ("epochs", self.epochs as f64, (1..=D::MAX_COUNT).contains(&self.epochs), "in 1..=100000"),
+            (
+                "init_std",
+                self.init_std,
+                self.init_std > 0.0 && self.init_std <= 10.0,
+                "in (0, 10] rad",
+            ),
+            (
+                "init_out_scale",
+                self.init_out_scale,
+                self.init_out_scale.is_finite(),
+                "finite",
+            ),
+            (
+                "clip_range",
+                self.clip_range,
+                self.clip_range > 0.0 && self.clip_range <= 10.0,
+                "in (0, 10]",
+            ),
+            (
+                "gamma",
+                self.gamma,
+                (0.0..=1.0).contains(&self.gamma),
+                "in [0, 1]",
+            ),
+            (
+                "gae_lambda",
+                self.gae_lambda,
+                (0.0..=1.0).contains(&self.gae_lambda),
+                "in [0, 1]",
+            ),
+            (
+                "vf_coef",
+                self.vf_coef,
+                self.vf_coef >= 0.0 && self.vf_coef.is_finite(),
+                "finite and >= 0",
+            ),
+            (
+                "ent_coef",
+                self.ent_coef,
+                self.ent_coef.is_finite(),
+                "finite",
+            ),
+            (
+                "max_grad_norm",
+                self.max_grad_norm,
+                self.max_grad_norm > 0.0 && self.max_grad_norm.is_finite(),
+                "finite and > 0",
+            ),
+            (
+                "epochs",
+                self.epochs as f64,
+                (1..=D::MAX_COUNT).contains(&self.epochs),
+                "in 1..=100000",
+            ),
         ];
         for (name, v, ok, allowed) in checks {
             if !ok {

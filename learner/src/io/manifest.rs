@@ -1,0 +1,321 @@
+//! Who owns a run directory (docs/design.md §4.4): `run.json` records what made the run in it
+//! (command, algorithm, seed, a hash of the demonstrations' file, a hash of the settings), so
+//! that a second run cannot mix its files and rows into the first one's and a resume cannot
+//! continue a run with other demonstrations or settings.
+//!
+//! - A new run ([`Claim::New`]) into a directory that already holds a run's files is refused,
+//!   naming the run found there, unless `force` is set: then those files (and only those) are
+//!   deleted first.
+//! - A resume ([`Claim::Resume`]) needs the directory's `run.json` and its `gaifo_log.csv` or
+//!   `serve_log.csv`, and the same command, algorithm, seed, demonstrations and settings
+//!   (the number of iterations may differ: a resume extends the run).
+//!
+//! The hashes are FNV-1a 64 (identity, not security): of the demonstrations file's bytes, and
+//! of the settings serialised as JSON with `iterations` removed.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+
+/// The file name of the manifest.
+pub const MANIFEST: &str = "run.json";
+
+/// What made a run.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// `train` or `serve`.
+    pub command: String,
+    /// `lqr-gaifo`, `gaifo-ppo` or `expert`.
+    pub algo: String,
+    /// The run's seed.
+    pub seed: u64,
+    /// The demonstrations' path as given (informative) and the FNV-1a 64 hash of their bytes
+    /// (`-` for the expert, which has none).
+    pub demos: String,
+    pub demos_hash: String,
+    /// FNV-1a 64 of the settings as JSON without `iterations`.
+    pub config_hash: String,
+    /// When the run was made (s since the Unix epoch).
+    pub created_unix_s: u64,
+}
+
+/// How a run takes a directory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Claim {
+    /// A new run; `force` deletes another run's files found there first.
+    New { force: bool },
+    /// Continue the run in the directory.
+    Resume,
+}
+
+/// FNV-1a 64 of `bytes`, as 16 hex digits.
+pub fn fnv1a64(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+impl Manifest {
+    /// The manifest of a run of `command`/`algo` with `seed` on the demonstrations in `demos`
+    /// (read and hashed) and `settings`.
+    pub fn new<S: Serialize>(
+        command: &str,
+        algo: &str,
+        seed: u64,
+        demos: Option<&Path>,
+        settings: &S,
+    ) -> anyhow::Result<Self> {
+        let (demos, demos_hash) = match demos {
+            Some(p) => {
+                let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+                (p.display().to_string(), fnv1a64(&bytes))
+            }
+            None => ("-".into(), "-".into()),
+        };
+        let mut v = serde_json::to_value(settings)?;
+        if let Some(m) = v.as_object_mut() {
+            m.remove("iterations");
+        }
+        Ok(Self {
+            command: command.into(),
+            algo: algo.into(),
+            seed,
+            demos,
+            demos_hash,
+            config_hash: fnv1a64(serde_json::to_string(&v)?.as_bytes()),
+            created_unix_s: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0),
+        })
+    }
+
+    /// The differences that make `other` another run than `self` (empty: the same run).
+    fn differences(&self, other: &Self) -> Vec<String> {
+        let mut d = Vec::new();
+        let mut cmp = |what: &str, a: &str, b: &str| {
+            if a != b {
+                d.push(format!("{what} {a} there, {b} now"));
+            }
+        };
+        cmp("command", &self.command, &other.command);
+        cmp("algorithm", &self.algo, &other.algo);
+        cmp("seed", &self.seed.to_string(), &other.seed.to_string());
+        cmp("settings hash", &self.config_hash, &other.config_hash);
+        if self.demos_hash != other.demos_hash {
+            d.push(format!(
+                "demonstrations {} (hash {}) there, {} (hash {}) now",
+                self.demos, self.demos_hash, other.demos, other.demos_hash
+            ));
+        }
+        d
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "`learner {}` {} seed {} on {} (made at Unix time {})",
+            self.command, self.algo, self.seed, self.demos, self.created_unix_s
+        )
+    }
+}
+
+/// Files and folders a run writes into its directory.
+fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    const NAMES: [&str; 9] = [
+        MANIFEST,
+        "gaifo_log.csv",
+        "serve_log.csv",
+        "checkpoint.npz",
+        "latest_table.npz",
+        "best_table.npz",
+        "demos.npz",
+        "tables",
+        "episodes",
+    ];
+    let mut found = Vec::new();
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(found),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", dir.display())),
+    };
+    for e in entries {
+        let e = e.with_context(|| format!("reading {}", dir.display()))?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        let iter_file = name.starts_with("iter_")
+            && (name.ends_with("_table.npz") || name.ends_with("_critic.json"));
+        if NAMES.contains(&name.as_str()) || iter_file {
+            found.push(e.path());
+        }
+    }
+    found.sort();
+    Ok(found)
+}
+
+/// Reads `dir`'s manifest, if any.
+pub fn read(dir: &Path) -> anyhow::Result<Option<Manifest>> {
+    let p = dir.join(MANIFEST);
+    match std::fs::read(&p) {
+        Ok(bytes) => Ok(Some(serde_json::from_slice(&bytes).with_context(|| {
+            format!("{}: not a run manifest of this build", p.display())
+        })?)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(e).with_context(|| format!("reading {}", p.display())),
+    }
+}
+
+/// Writes `bytes` to `path` atomically (a temporary file beside it, then a rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
+}
+
+/// Takes `dir` for the run `m` as `claim` says (module docs); creates `dir` if needed.
+pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
+    let found = read(dir)?;
+    match claim {
+        Claim::Resume => {
+            let Some(there) = found else {
+                anyhow::bail!(
+                    "{} has no {MANIFEST}: it is not a run of this build (or not a run at all); \
+                     start a new run instead of resuming",
+                    dir.display()
+                );
+            };
+            let d = there.differences(m);
+            anyhow::ensure!(
+                d.is_empty(),
+                "{} holds another run than this one: {}; resume it with its own command, \
+                 algorithm, seed, demonstrations and settings, or start a new run in another --out",
+                dir.display(),
+                d.join("; ")
+            );
+            let log = if m.algo == "expert" {
+                "serve_log.csv"
+            } else {
+                "gaifo_log.csv"
+            };
+            anyhow::ensure!(
+                dir.join(log).is_file(),
+                "{} has no {log}: its per-iteration log is missing, so a resumed run would \
+                 write rows with a gap; restore the file or start a new run",
+                dir.display()
+            );
+            Ok(())
+        }
+        Claim::New { force } => {
+            let files = run_files(dir)?;
+            if !files.is_empty() {
+                let what = found
+                    .as_ref()
+                    .map(Manifest::describe)
+                    .unwrap_or_else(|| "a run without a manifest".into());
+                anyhow::ensure!(
+                    force,
+                    "{} already holds {what} ({} of its files, e.g. {}): continue it with \
+                     --resume {}, choose another --out, or pass --force to delete those files \
+                     and start over",
+                    dir.display(),
+                    files.len(),
+                    files[0].display(),
+                    dir.display()
+                );
+                for f in &files {
+                    let r = if f.is_dir() {
+                        std::fs::remove_dir_all(f)
+                    } else {
+                        std::fs::remove_file(f)
+                    };
+                    r.with_context(|| format!("--force: deleting {}", f.display()))?;
+                }
+            }
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            write_atomic(&dir.join(MANIFEST), &serde_json::to_vec_pretty(m)?)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("manifest-{name}-{}", std::process::id()));
+        std::fs::remove_dir_all(&d).ok();
+        d
+    }
+
+    fn manifest(seed: u64, settings: &serde_json::Value) -> Manifest {
+        Manifest::new("train", "lqr-gaifo", seed, None, settings).unwrap()
+    }
+
+    #[test]
+    fn fnv1a64_matches_the_reference_vectors() {
+        // The FNV reference's test vectors for FNV-1a 64.
+        assert_eq!(fnv1a64(b""), "cbf29ce484222325");
+        assert_eq!(fnv1a64(b"a"), "af63dc4c8601ec8c");
+        assert_eq!(fnv1a64(b"foobar"), "85944171f73967e8");
+    }
+
+    #[test]
+    fn a_second_run_is_refused_unless_forced_and_force_deletes_only_run_files() {
+        let dir = tmp("new");
+        let s = serde_json::json!({"iterations": 20, "kl": 1.0});
+        claim(&dir, &manifest(0, &s), Claim::New { force: false }).unwrap();
+        std::fs::write(dir.join("gaifo_log.csv"), "x").unwrap();
+        std::fs::write(dir.join("iter_003_table.npz"), "x").unwrap();
+        std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+        let e = claim(&dir, &manifest(5, &s), Claim::New { force: false })
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("seed 0") && e.contains("--force") && e.contains("--resume"),
+            "{e}"
+        );
+        claim(&dir, &manifest(5, &s), Claim::New { force: true }).unwrap();
+        assert!(!dir.join("iter_003_table.npz").exists());
+        assert!(!dir.join("gaifo_log.csv").exists());
+        assert!(dir.join("notes.txt").exists(), "not a run file: kept");
+        assert_eq!(read(&dir).unwrap().unwrap().seed, 5);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_resume_needs_the_same_run_and_its_log() {
+        let dir = tmp("resume");
+        let s = serde_json::json!({"iterations": 20, "kl": 1.0});
+        let e = claim(&dir, &manifest(0, &s), Claim::Resume)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no run.json"), "{e}");
+        claim(&dir, &manifest(0, &s), Claim::New { force: false }).unwrap();
+        let e = claim(&dir, &manifest(0, &s), Claim::Resume)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no gaifo_log.csv"), "{e}");
+        std::fs::write(dir.join("gaifo_log.csv"), "x").unwrap();
+        // More iterations: the same run.
+        let more = serde_json::json!({"iterations": 40, "kl": 1.0});
+        claim(&dir, &manifest(0, &more), Claim::Resume).unwrap();
+        let e = claim(&dir, &manifest(1, &s), Claim::Resume)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("seed 0 there, 1 now"), "{e}");
+        let other = serde_json::json!({"iterations": 20, "kl": 2.0});
+        let e = claim(&dir, &manifest(0, &other), Claim::Resume)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("settings hash"), "{e}");
+        let demos = dir.join("d.npz");
+        std::fs::write(&demos, "other demos").unwrap();
+        let m = Manifest::new("train", "lqr-gaifo", 0, Some(&demos), &s).unwrap();
+        let e = claim(&dir, &m, Claim::Resume).unwrap_err().to_string();
+        assert!(e.contains("demonstrations"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
