@@ -139,6 +139,8 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
             if let Some(i) = args.iterations {
                 cfg.iterations = i;
             }
+            crate::io::demos::check_against_arm(&demos, &cfg.sim)
+                .with_context(|| format!("demonstrations {}", demos_path.display()))?;
             finish(&serve_gaifo(cfg, demos, opts, |_| {})?, args.common.json)
         }
     }

@@ -110,6 +110,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             pcfg.seed = s;
         }
         pcfg.validate()?;
+        crate::io::demos::check_against_arm(&demos, &pcfg.sim)
+            .with_context(|| format!("demonstrations {}", args.demos.display()))?;
         let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&args.demos), &pcfg)?;
         manifest::claim(&args.out_dir(), &m, Claim::New { force: args.force })?;
         return run_ppo(&args, demos, &pcfg);
@@ -123,6 +125,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     // Every setting, before anything is printed or written (the run checks them again).
     cfg.validate()?;
+    crate::io::demos::check_against_arm(&demos, &cfg.sim)
+        .with_context(|| format!("demonstrations {}", args.demos.display()))?;
     let out = args.out_dir();
     if let Some(dir) = &args.resume {
         anyhow::ensure!(

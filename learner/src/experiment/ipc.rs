@@ -221,8 +221,13 @@ pub fn run(
     // D26). Each arm's curve is normalised by its own converged expert and random policy.
     let nominal_path = out.join("demos_simulated.npz");
     let nominal = match demos {
-        Some(d) => crate::io::demos::load(d)
-            .with_context(|| format!("loading demonstrations {}", d.display()))?,
+        Some(d) => {
+            let demos = crate::io::demos::load(d)
+                .with_context(|| format!("loading demonstrations {}", d.display()))?;
+            crate::io::demos::check_against_arm(&demos, &cfg.expert.sim)
+                .with_context(|| format!("demonstrations {}", d.display()))?;
+            demos
+        }
         None => expert_demos(&cfg.expert)?,
     };
     crate::io::demos::save(&nominal, &nominal_path)?;

@@ -519,6 +519,8 @@ fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow:
     if let Some(p) = path {
         let d = crate::io::demos::load(p)
             .with_context(|| format!("loading demonstrations {}", p.display()))?;
+        crate::io::demos::check_against_arm(&d, &cfg.lqr_gaifo.sim)
+            .with_context(|| format!("demonstrations {}", p.display()))?;
         eprintln!(
             "demonstrations: {} ({} of goal {:?})",
             p.display(),

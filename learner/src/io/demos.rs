@@ -119,6 +119,84 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
     Ok(demos)
 }
 
+/// Largest difference (rad) between a demonstration's first joint angles and `start_q`, and
+/// (m) between a demonstrated end-effector point and the arm's forward kinematics at the
+/// demonstrated joint angles. Ours: 0.01, ten times the perturbed arm's sensor noise (1e-3).
+pub const CONSISTENCY_TOLERANCE: f64 = 0.01;
+
+/// Largest joint speed (rad/s) a demonstration may show, as a multiple of the arm's limit
+/// (the servo may overshoot it briefly). Ours: 2.
+pub const SPEED_LIMIT_FACTOR: f64 = 2.0;
+
+/// Checks that `demos` could have come from the arm of `sim` (issue 15 item 11; docs/design.md
+/// §4.2): normalisation costs finite and different; the goal within the
+/// arm's reach; every joint angle within the arm's limits; every joint speed within
+/// [`SPEED_LIMIT_FACTOR`] × its limit; each demonstration starting at `start_q`; and every
+/// end-effector point (`ee − goal` + goal) within [`CONSISTENCY_TOLERANCE`] of the arm's
+/// forward kinematics at the demonstrated joint angles. Each error names the array, the
+/// demonstration, the step and the value.
+pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
+    use ur5_shared::layout::{EE_MINUS_GOAL, Q, QD};
+    anyhow::ensure!(
+        d.cost_random.is_finite() && d.cost_expert.is_finite() && d.cost_expert != d.cost_random,
+        "cost_expert = {} and cost_random = {}: both must be finite and differ, or normalised \
+         performance (C_random − C) / (C_random − C_expert) is undefined",
+        d.cost_expert,
+        d.cost_random
+    );
+    let mut arm = hil_sim::Ur5Sim::new(sim.clone(), d.dt)?;
+    arm.check_goal(d.goal)?;
+    let limits = arm.limits();
+    let tol = CONSISTENCY_TOLERANCE;
+    for i in 0..d.count {
+        for t in 0..d.horizon {
+            let s = &d.states[(i * d.horizon + t) * DX..(i * d.horizon + t + 1) * DX];
+            let at = format!("states[{i}, {t}]");
+            let q: [f64; 3] = s[Q].try_into().expect("3");
+            let qd: [f64; 3] = s[QD].try_into().expect("3");
+            for j in 0..3 {
+                anyhow::ensure!(
+                    q[j] >= limits.lower[j] - tol && q[j] <= limits.upper[j] + tol,
+                    "{at}: joint {j} at {} rad, outside the arm's limits [{}, {}]",
+                    q[j],
+                    limits.lower[j],
+                    limits.upper[j]
+                );
+                anyhow::ensure!(
+                    qd[j].abs() <= SPEED_LIMIT_FACTOR * limits.velocity[j],
+                    "{at}: joint {j} at {} rad/s, more than {SPEED_LIMIT_FACTOR} × the arm's \
+                     speed limit {} rad/s",
+                    qd[j],
+                    limits.velocity[j]
+                );
+                if t == 0 {
+                    anyhow::ensure!(
+                        (q[j] - d.start_q[j]).abs() <= tol,
+                        "{at}: joint {j} starts at {} rad, start_q says {} (tolerance {tol})",
+                        q[j],
+                        d.start_q[j]
+                    );
+                }
+            }
+            arm.set_joint_state(q, [0.0; 3]);
+            let fk = arm.true_observation().ee_pos;
+            let e = &s[EE_MINUS_GOAL];
+            let err = (0..3)
+                .map(|k| (e[k] + d.goal[k] - fk[k]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            anyhow::ensure!(
+                err <= tol,
+                "{at}: the end effector is {:.4} m from where the arm's forward kinematics puts \
+                 it at these joint angles (tolerance {tol} m): recorded on another arm or \
+                 edited; record demonstrations with `learner expert` on this arm",
+                err
+            );
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,5 +265,52 @@ mod tests {
             "{e}"
         );
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Issue 15 item 11: each kind of impossible demonstration is refused, naming what is wrong.
+    #[test]
+    fn demonstrations_the_arm_could_not_have_made_are_refused() {
+        let cfg = imitation::expert::ExpertConfig {
+            task: ur5_shared::config::TaskConfig {
+                horizon: 10,
+                ..Default::default()
+            },
+            iterations: 1,
+            random_episodes: 2,
+            demos: 2,
+            ..Default::default()
+        };
+        let run = crate::run::expert(&cfg, |_| {}).unwrap();
+        let good = crate::run::demos(&cfg, &run).unwrap();
+        check_against_arm(&good, &cfg.sim).unwrap();
+        let idx = |i: usize, t: usize, k: usize| (i * good.horizon + t) * DX + k;
+        let cases: Vec<(&str, Box<dyn Fn(&mut Demos)>)> = vec![
+            (
+                "outside the arm's limits",
+                Box::new(|d| d.states[idx(1, 4, 2)] = 4.0),
+            ),
+            (
+                "outside the arm's limits",
+                Box::new(|d| d.states.iter_mut().for_each(|v| *v *= 1e6)),
+            ),
+            ("speed limit", Box::new(|d| d.states[idx(0, 3, 4)] = 50.0)),
+            ("start_q says", Box::new(|d| d.start_q[1] += 0.1)),
+            (
+                "forward kinematics",
+                Box::new(|d| d.states[idx(1, 7, 6)] += 0.05),
+            ),
+            (
+                "forward kinematics",
+                Box::new(|d| d.states[idx(0, 2, 0)] += 0.2),
+            ),
+            ("reach", Box::new(|d| d.goal[0] += 10.0)),
+            ("cost_expert", Box::new(|d| d.cost_expert = d.cost_random)),
+        ];
+        for (what, edit) in cases {
+            let mut d = good.clone();
+            edit(&mut d);
+            let e = format!("{:#}", check_against_arm(&d, &cfg.sim).unwrap_err());
+            assert!(e.contains(what), "{what}: {e}");
+        }
     }
 }
