@@ -225,6 +225,18 @@ fn discriminator_rejects_corrupted_or_mismatched_files() {
         "{}",
         msg(&err)
     );
+    // Issue 15 item 9: every weight 1e300 (finite, absurd) is refused, naming the bound.
+    let err = edited("absurd_params.json", &|j| {
+        for v in j["params"].as_array_mut().unwrap() {
+            *v = serde_json::json!(1e300);
+        }
+    });
+    assert!(
+        matches!(err, DiscriminatorError::BadFile { .. })
+            && msg(&err).contains("params[0] = 1e300"),
+        "{}",
+        msg(&err)
+    );
     let start = text.find("\"params\":[").unwrap() + "\"params\":[".len();
     let end = start + text[start..].find(',').unwrap();
     let overflow = format!("{}1e999{}", &text[..start], &text[end..]);

@@ -13,6 +13,11 @@ use super::mlp::{param_count, Mlp};
 use super::{Adam, Discriminator, DiscriminatorConfig, DiscriminatorError, Normalizer};
 
 const FORMAT: &str = "ur5-gaifo/discriminator";
+
+/// Largest |θ| a critic file may hold. A trained critic's weights are O(1) (0.74 at most after
+/// 5 iterations of the default run); one beyond 1e6 comes from a corrupt or edited file, and
+/// would give the LQR a cost of absurd scale (issue 15 item 9).
+pub const MAX_ABS_PARAM: f64 = 1e6;
 const VERSION: u32 = 1;
 
 #[derive(Serialize, Deserialize)]
@@ -118,6 +123,12 @@ impl Discriminator {
             if let Some(i) = v.iter().position(|x| !x.is_finite()) {
                 return Err(bad(format!("{name}[{i}] is not finite")));
             }
+        }
+        if let Some(i) = f.params.iter().position(|x| x.abs() > MAX_ABS_PARAM) {
+            return Err(bad(format!(
+                "params[{i}] = {:e}: beyond ±{MAX_ABS_PARAM:e}, not a trained critic's weight",
+                f.params[i]
+            )));
         }
         if let Some(i) = f.adam_v.iter().position(|&x| x < 0.0) {
             return Err(bad(format!("adam_v[{i}] is negative")));
