@@ -210,9 +210,40 @@ fn inspect(
         ..SimConfig::default()
     };
     let mut sim = Ur5Sim::new(sim_cfg, substep)?;
+    // Every input within the arm's limits, so that every output is a number (issue 15 item 12).
+    let limits = sim.limits();
+    for j in 0..3 {
+        let name = &sim.model().active[j].name;
+        anyhow::ensure!(
+            q[j] >= limits.lower[j] && q[j] <= limits.upper[j],
+            "--q: joint `{name}` at {} rad is outside its limits [{}, {}]",
+            q[j],
+            limits.lower[j],
+            limits.upper[j]
+        );
+        anyhow::ensure!(
+            qd[j].abs() <= limits.velocity[j],
+            "--qd: joint `{name}` at {} rad/s is beyond its speed limit {} rad/s",
+            qd[j],
+            limits.velocity[j]
+        );
+        anyhow::ensure!(
+            tau[j].abs() <= limits.effort[j],
+            "--tau: joint `{name}` at {} N·m is beyond its effort limit {} N·m",
+            tau[j],
+            limits.effort[j]
+        );
+    }
     sim.set_joint_state(q, qd);
     let obs = sim.true_observation();
     let qdd = sim.joint_acceleration(q, qd, tau);
+    anyhow::ensure!(
+        obs.ee_pos.iter().chain(&obs.ee_vel).chain(&qdd).all(|v| v.is_finite()),
+        "the model gives non-finite results at this state (ee_pos {:?}, ee_vel {:?}, qdd {:?}): check the URDF's inertias and origins",
+        obs.ee_pos,
+        obs.ee_vel,
+        qdd
+    );
     let m = sim.model();
     println!(
         "{}",

@@ -91,10 +91,24 @@ impl ArmModel {
         ee_link: &str,
         ee_offset: [f64; 3],
     ) -> Result<Self, SimError> {
-        let urdf = urdf_rs::read_from_string(text).map_err(|e| SimError::UrdfParse {
+        let parse_error = |message: String| SimError::UrdfParse {
             path: source.clone(),
-            message: e.to_string(),
-        })?;
+            message,
+        };
+        if text.len() > MAX_URDF_BYTES {
+            return Err(parse_error(format!(
+                "{} bytes, more than the {MAX_URDF_BYTES} a robot description needs",
+                text.len()
+            )));
+        }
+        let depth = xml_depth(text);
+        if depth > MAX_XML_DEPTH {
+            return Err(parse_error(format!(
+                "elements nested {depth} deep, more than {MAX_XML_DEPTH} (a URDF needs 4)"
+            )));
+        }
+        let urdf = urdf_rs::read_from_string(text).map_err(|e| parse_error(e.to_string()))?;
+        check_structure(&urdf)?;
         let joint_names = || {
             urdf.joints
                 .iter()
@@ -142,19 +156,7 @@ impl ArmModel {
             });
         }
         for link in &urdf.links {
-            let m = link.inertial.mass.value;
-            let i = &link.inertial.inertia;
-            if !(m.is_finite()
-                && m > 0.0
-                && [i.ixx, i.iyy, i.izz]
-                    .iter()
-                    .all(|v| v.is_finite() && *v > 0.0))
-            {
-                return Err(SimError::BadLink {
-                    name: link.name.clone(),
-                    why: format!("mass {m} kg and inertia diagonal must be finite and > 0 (every link needs an <inertial>)"),
-                });
-            }
+            check_inertial(link)?;
         }
 
         // Lock every movable joint that is not active, in chain order from the root.
@@ -244,7 +246,145 @@ impl ArmModel {
     }
 }
 
-/// Joint indices ordered from the root to the leaves (the URDF must be a tree).
+/// Largest URDF text accepted (bytes). A robot description is kilobytes; ours is 9 kB.
+pub const MAX_URDF_BYTES: usize = 16 << 20;
+
+/// Deepest element nesting accepted. A URDF nests 4 deep (robot, link, inertial, origin); the
+/// XML parser recurses per level, so a file nested 200,000 deep would overflow the stack.
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// Heaviest link accepted (kg). A UR5 link weighs at most 3.9 kg.
+pub const MAX_LINK_MASS: f64 = 1e4;
+
+/// The deepest element nesting of XML text, counted without parsing it (start tags that do not
+/// close themselves open a level, end tags close one; declarations, comments and processing
+/// instructions do not count).
+fn xml_depth(text: &str) -> usize {
+    let b = text.as_bytes();
+    let (mut depth, mut max, mut i) = (0usize, 0usize, 0usize);
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        if b[i..].starts_with(b"<!--") {
+            i = text[i..].find("-->").map_or(b.len(), |k| i + k + 3);
+            continue;
+        }
+        let end = text[i..].find('>').map_or(b.len(), |k| i + k);
+        match b.get(i + 1) {
+            Some(b'/') => depth = depth.saturating_sub(1),
+            Some(b'?') | Some(b'!') => {}
+            _ if b[end.saturating_sub(1)] == b'/' => {}
+            _ => {
+                depth += 1;
+                max = max.max(depth);
+            }
+        }
+        i = end + 1;
+    }
+    max
+}
+
+/// The structure a tree of links needs, each problem named: unique link and joint names, every
+/// joint between two existing links, no link the child of two joints, finite joint origins and
+/// limits, non-zero finite axes of movable joints.
+fn check_structure(robot: &Robot) -> Result<(), SimError> {
+    use std::collections::HashSet;
+    let mut links = HashSet::new();
+    for l in &robot.links {
+        if !links.insert(l.name.as_str()) {
+            return Err(SimError::BadLink {
+                name: l.name.clone(),
+                why: "defined twice (link names must be unique)".into(),
+            });
+        }
+    }
+    let mut joints = HashSet::new();
+    let mut children = HashSet::new();
+    for j in &robot.joints {
+        let bad = |why: String| SimError::BadJoint {
+            name: j.name.clone(),
+            why,
+        };
+        if !joints.insert(j.name.as_str()) {
+            return Err(bad("defined twice (joint names must be unique)".into()));
+        }
+        for (role, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
+            if !links.contains(link.as_str()) {
+                return Err(bad(format!("its {role} link `{link}` is not defined")));
+            }
+        }
+        if !children.insert(j.child.link.as_str()) {
+            return Err(bad(format!(
+                "link `{}` is already the child of another joint (a URDF is a tree)",
+                j.child.link
+            )));
+        }
+        let o = &j.origin;
+        if o.xyz.0.iter().chain(o.rpy.0.iter()).any(|v| !v.is_finite()) {
+            return Err(bad(format!(
+                "origin xyz {:?} rpy {:?} must be finite",
+                o.xyz.0, o.rpy.0
+            )));
+        }
+        if j.joint_type != JointType::Fixed {
+            let a = j.axis.xyz.0;
+            let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+            if !(n.is_finite() && n > 1e-9) {
+                return Err(bad(format!("axis {a:?} must be finite and non-zero")));
+            }
+            let l = &j.limit;
+            if [l.lower, l.upper, l.effort, l.velocity]
+                .iter()
+                .any(|v| !v.is_finite())
+            {
+                return Err(bad(format!(
+                    "limits lower {} upper {} effort {} velocity {} must be finite",
+                    l.lower, l.upper, l.effort, l.velocity
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A link's mass and inertia must describe a rigid body: mass finite, > 0 and at most
+/// [`MAX_LINK_MASS`]; inertia tensor finite with positive principal moments that satisfy the
+/// triangle inequality (each at most the sum of the other two).
+fn check_inertial(link: &urdf_rs::Link) -> Result<(), SimError> {
+    let m = link.inertial.mass.value;
+    let i = &link.inertial.inertia;
+    let bad = |why: String| SimError::BadLink {
+        name: link.name.clone(),
+        why,
+    };
+    if !(m.is_finite() && m > 0.0 && m <= MAX_LINK_MASS) {
+        return Err(bad(format!(
+            "mass {m:?} kg must be finite, > 0 and at most {MAX_LINK_MASS} kg (every link needs an <inertial>)"
+        )));
+    }
+    let t = nalgebra::Matrix3::new(
+        i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz,
+    );
+    if t.iter().any(|v| !v.is_finite()) {
+        return Err(bad(format!("inertia {t:?} kg·m² must be finite")));
+    }
+    let e = t.symmetric_eigenvalues();
+    let (p, tol) = ([e[0], e[1], e[2]], 1e-9 * e.amax().max(1e-12));
+    let triangle = (0..3).all(|k| p[k] <= p[(k + 1) % 3] + p[(k + 2) % 3] + tol);
+    if !(p.iter().all(|&v| v > 0.0) && triangle) {
+        return Err(bad(format!(
+            "inertia principal moments {p:?} kg·m² must be > 0 and each at most the sum of the \
+             other two (ixx {} iyy {} izz {} ixy {} ixz {} iyz {})",
+            i.ixx, i.iyy, i.izz, i.ixy, i.ixz, i.iyz
+        )));
+    }
+    Ok(())
+}
+
+/// Joint indices ordered from the root to the leaves (the URDF must be a tree; names and links
+/// are checked by [`check_structure`] first).
 fn chain_order(robot: &Robot) -> Result<Vec<usize>, SimError> {
     let is_child = |name: &str| robot.joints.iter().any(|j| j.child.link == name);
     let roots: Vec<&str> = robot
@@ -253,10 +393,18 @@ fn chain_order(robot: &Robot) -> Result<Vec<usize>, SimError> {
         .map(|l| l.name.as_str())
         .filter(|n| !is_child(n))
         .collect();
-    if roots.len() != 1 {
+    if roots.is_empty() {
+        return Err(SimError::BadJoint {
+            name: "<tree>".into(),
+            why: "every link is some joint's child: the joints form a cycle".into(),
+        });
+    }
+    if roots.len() > 1 {
         return Err(SimError::BadLink {
             name: format!("{roots:?}"),
-            why: "the URDF must have exactly one root link".into(),
+            why: "these links hang from no joint: the URDF must be one tree with one root link \
+                  (a joint missing?)"
+                .into(),
         });
     }
     let mut order = Vec::new();

@@ -352,3 +352,76 @@ fn bad_inputs_give_clear_errors() {
     assert!(Ur5Sim::new(SimConfig::default(), 0.1005).is_err());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 15 items 4, 5, 12, 13: each malformed arm description is refused with a message that
+/// names the problem, never a panic, an abort or a silently wrong model.
+#[test]
+fn malformed_urdfs_are_refused_naming_the_problem() {
+    use hil_sim::model::{ArmModel, BUNDLED_URDF};
+    let load = |text: &str| {
+        ArmModel::from_str(
+            text,
+            "test.urdf".into(),
+            SimConfig::default().wrist_q,
+            &SimConfig::default().ee_link,
+            [0.0; 3],
+        )
+    };
+    load(BUNDLED_URDF).unwrap();
+    let u = BUNDLED_URDF;
+    let nested = format!(
+        "<robot name=\"x\">{}{}</robot>",
+        "<a>".repeat(200_000),
+        "</a>".repeat(200_000)
+    );
+    let second_base = u.replacen(
+        "<link name=\"shoulder_link\">",
+        "<link name=\"base_link\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link>\n  <link name=\"shoulder_link\">",
+        1,
+    );
+    let cases: Vec<(&str, String)> = vec![
+        ("nested 200001 deep", nested),
+        ("`base_link`: defined twice", second_base),
+        (
+            "`elbow_joint`: its child link `forearm` is not defined",
+            u.replacen(
+                "<child link=\"forearm_link\"/>",
+                "<child link=\"forearm\"/>",
+                1,
+            ),
+        ),
+        (
+            "already the child of another joint",
+            u.replacen(
+                "<child link=\"forearm_link\"/>",
+                "<child link=\"upper_arm_link\"/>",
+                1,
+            ),
+        ),
+        ("hang from no joint", {
+            let a = u.find("<joint name=\"wrist_3_joint\"").unwrap();
+            let b = a + u[a..].find("</joint>").unwrap() + "</joint>".len();
+            format!("{}{}", &u[..a], &u[b..])
+        }),
+        (
+            "origin xyz [NaN",
+            u.replacen("<origin xyz=\"-0.425 0 0\"", "<origin xyz=\"NaN 0 0\"", 1),
+        ),
+        (
+            "axis [0.0, 0.0, 0.0] must be finite and non-zero",
+            u.replacen("<axis xyz=\"0 0 1\"/>", "<axis xyz=\"0 0 0\"/>", 1),
+        ),
+        (
+            "mass 1e30 kg",
+            u.replacen("<mass value=\"8.393\"/>", "<mass value=\"1e30\"/>", 1),
+        ),
+        (
+            "each at most the sum of the other two",
+            u.replacen("ixx=\"0.0151074\"", "ixx=\"5.0\"", 1),
+        ),
+    ];
+    for (what, text) in cases {
+        let e = load(&text).expect_err(what).to_string();
+        assert!(e.contains(what), "{what}: {e}");
+    }
+}
