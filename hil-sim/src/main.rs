@@ -216,20 +216,20 @@ fn inspect(
         let name = &sim.model().active[j].name;
         anyhow::ensure!(
             q[j] >= limits.lower[j] && q[j] <= limits.upper[j],
-            "--q: joint `{name}` at {} rad is outside its limits [{}, {}]",
+            "--q: joint `{name}` at {:?} rad is outside its limits [{}, {}]",
             q[j],
             limits.lower[j],
             limits.upper[j]
         );
         anyhow::ensure!(
             qd[j].abs() <= limits.velocity[j],
-            "--qd: joint `{name}` at {} rad/s is beyond its speed limit {} rad/s",
+            "--qd: joint `{name}` at {:?} rad/s is beyond its speed limit {} rad/s",
             qd[j],
             limits.velocity[j]
         );
         anyhow::ensure!(
             tau[j].abs() <= limits.effort[j],
-            "--tau: joint `{name}` at {} N·m is beyond its effort limit {} N·m",
+            "--tau: joint `{name}` at {:?} N·m is beyond its effort limit {} N·m",
             tau[j],
             limits.effort[j]
         );

@@ -28,7 +28,7 @@ fn inspect_answers_in_range_and_refuses_out_of_range() {
     for (args, what) in [
         (
             ["--q", "0,-1.5,4.0"],
-            "--q: joint `elbow_joint` at 4 rad is outside its limits",
+            "--q: joint `elbow_joint` at 4.0 rad is outside its limits",
         ),
         (["--q", "0,NaN,1.5"], "values must be finite"),
         (
