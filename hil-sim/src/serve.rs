@@ -166,6 +166,9 @@ pub enum ServeError {
     /// Invalid configuration.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// Another arm serves the prefix.
+    #[error(transparent)]
+    Role(#[from] ur5_shared::services::RoleLockError),
     /// iceoryx2 setup failed.
     #[error("iceoryx2 setup failed for `{what}`: {why}; use a fresh --prefix if a stale run left services of other types")]
     Ipc {
@@ -333,6 +336,7 @@ pub fn serve(
         ServeMode::RealTime => cfg.state_period_s,
     };
     let sim = Ur5Sim::new(sim_cfg.clone(), period_s)?;
+    let _role = services::RoleLock::acquire(&cfg.prefix, "arm")?;
     let names = ServiceNames::new(&cfg.prefix);
     let node = NodeBuilder::new()
         .create::<ipc::Service>()

@@ -16,6 +16,9 @@ pub enum SetupError {
     /// Invalid configuration.
     #[error(transparent)]
     Config(#[from] ur5_shared::config::ConfigError),
+    /// Another controller runs on the prefix.
+    #[error(transparent)]
+    Role(#[from] ur5_shared::services::RoleLockError),
     /// A service name iceoryx2 refused.
     #[error(transparent)]
     Name(#[from] ur5_shared::services::InvalidServiceName),
@@ -60,11 +63,14 @@ pub struct ControllerPorts {
     /// Names in use.
     pub names: ServiceNames,
     _node: Node<ipc::Service>,
+    /// This controller is the prefix's only one while it runs.
+    _role: services::RoleLock,
 }
 
 impl ControllerPorts {
     /// Creates the node (signal handling left to the caller) and every port.
     pub fn create(prefix: &str) -> Result<Self, SetupError> {
+        let role = services::RoleLock::acquire(prefix, "controller")?;
         let names = ServiceNames::new(prefix);
         let node = NodeBuilder::new()
             .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -112,6 +118,7 @@ impl ControllerPorts {
             gains_svc,
             names,
             _node: node,
+            _role: role,
         })
     }
 

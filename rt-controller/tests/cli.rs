@@ -99,3 +99,48 @@ fn a_missing_arm_is_a_clear_setup_error() {
         "{err}"
     );
 }
+
+/// Issue 15 item 2: a second controller on a prefix exits at once naming the running one; the
+/// first is undisturbed.
+#[test]
+fn a_second_controller_on_a_prefix_is_refused() {
+    let prefix = ur5_shared::services::unique_prefix("two-ctl");
+    // The first waits for an arm that never comes (up to 20 s), holding the prefix.
+    let cfg = scratch_file("wait.toml", "setup_timeout_s = 20.0\n");
+    let mut first = bin()
+        .args([
+            "run",
+            "--prefix",
+            &prefix,
+            "--config",
+            cfg.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let lock = ur5_shared::services::RoleLock::path(&prefix, "controller");
+    let pid = first.id().to_string();
+    // The lock file names the first controller once it holds the role.
+    let t0 = std::time::Instant::now();
+    while std::fs::read_to_string(&lock).unwrap_or_default() != pid {
+        assert!(
+            t0.elapsed().as_secs() < 15,
+            "the first controller never took the prefix"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let out = bin().args(["run", "--prefix", &prefix]).output().unwrap();
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("another controller is running") && err.contains(&pid),
+        "{err}"
+    );
+    assert!(
+        first.try_wait().unwrap().is_none(),
+        "the first controller was disturbed"
+    );
+    first.kill().unwrap();
+    first.wait().unwrap();
+}

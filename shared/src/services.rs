@@ -291,3 +291,124 @@ mod tests {
         assert!(ServiceNames::service_name("iox2://x").is_err());
     }
 }
+
+/// One process per role on a prefix (issue 15 item 2; docs/design.md §3.2): the controller,
+/// the arm and the learner each hold an exclusive `flock` on
+/// `{temp_dir}/ur5-gaifo-locks/{prefix}.{role}.lock` for their lifetime. The kernel drops the
+/// lock when the process ends, however it ends (kill -9 included), so a restart always gets
+/// it; a second process of the same role while the first runs does not, and says who holds it.
+/// Setup only (opens a file).
+#[derive(Debug)]
+pub struct RoleLock {
+    _file: std::fs::File,
+    /// The lock file.
+    pub path: std::path::PathBuf,
+}
+
+/// Why a [`RoleLock`] could not be taken.
+#[derive(Debug, thiserror::Error)]
+pub enum RoleLockError {
+    /// Another live process holds the role.
+    #[error("another {role} is running on prefix `{prefix}` (pid {pid}; lock {path}): stop it first, or give this one another --prefix")]
+    Taken {
+        /// `controller`, `arm` or `learner`.
+        role: &'static str,
+        /// The prefix.
+        prefix: String,
+        /// Its process id, as it wrote it ("?" if unreadable).
+        pid: String,
+        /// The lock file.
+        path: std::path::PathBuf,
+    },
+    /// The lock file could not be opened.
+    #[error("cannot open the lock file {path}: {source}")]
+    Io {
+        /// The lock file.
+        path: std::path::PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+}
+
+impl RoleLock {
+    /// The lock file of `role` on `prefix` (slashes in the prefix become `%`).
+    pub fn path(prefix: &str, role: &str) -> std::path::PathBuf {
+        let name: String = prefix
+            .trim_matches('/')
+            .chars()
+            .map(|c| if c == '/' { '%' } else { c })
+            .collect();
+        std::env::temp_dir()
+            .join("ur5-gaifo-locks")
+            .join(format!("{name}.{role}.lock"))
+    }
+
+    /// Takes `role` on `prefix`, or says which process has it.
+    pub fn acquire(prefix: &str, role: &'static str) -> Result<Self, RoleLockError> {
+        use std::io::{Read, Seek, Write};
+        use std::os::fd::AsRawFd;
+        let path = Self::path(prefix, role);
+        let dir = path.parent().expect("a lock file has a folder").to_owned();
+        let io = |source| RoleLockError::Io {
+            path: path.clone(),
+            source,
+        };
+        std::fs::create_dir_all(&dir).map_err(io)?;
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io)?;
+        // SAFETY: flock on a file descriptor this function owns.
+        let r = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+        if r != 0 {
+            let err = std::io::Error::last_os_error();
+            if err.raw_os_error() != Some(libc::EWOULDBLOCK) {
+                return Err(io(err));
+            }
+            let mut pid = String::new();
+            let _ = file.read_to_string(&mut pid);
+            let pid = pid.trim();
+            return Err(RoleLockError::Taken {
+                role,
+                prefix: prefix.to_owned(),
+                pid: if pid.is_empty() {
+                    "?".into()
+                } else {
+                    pid.to_owned()
+                },
+                path,
+            });
+        }
+        file.set_len(0).map_err(io)?;
+        file.rewind().map_err(io)?;
+        write!(file, "{}", std::process::id()).map_err(io)?;
+        Ok(Self { _file: file, path })
+    }
+}
+
+#[cfg(test)]
+mod role_lock_tests {
+    use super::*;
+
+    #[test]
+    fn a_role_has_one_holder_until_it_is_dropped() {
+        let prefix = unique_prefix("role-lock");
+        let a = RoleLock::acquire(&prefix, "controller").unwrap();
+        let e = RoleLock::acquire(&prefix, "controller")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("another controller is running")
+                && e.contains(&std::process::id().to_string()),
+            "{e}"
+        );
+        // Other roles and other prefixes are independent.
+        let _arm = RoleLock::acquire(&prefix, "arm").unwrap();
+        let _other = RoleLock::acquire(&unique_prefix("role-lock"), "controller").unwrap();
+        drop(a);
+        RoleLock::acquire(&prefix, "controller").unwrap();
+    }
+}

@@ -11,12 +11,15 @@ pub(super) struct Ports {
     pub(super) samples: Subscriber<ipc::Service, StepSample, ()>,
     pub(super) gains: Publisher<ipc::Service, GainTable, ()>,
     pub(super) node: Node<ipc::Service>,
+    /// This learner is the prefix's only one while it runs.
+    _role: services::RoleLock,
 }
 
 impl Ports {
     /// Setup: removes what dead processes left behind (e.g. this learner's killed
     /// predecessor), then opens both services with the project's QoS and creates the ports.
     pub(super) fn create(prefix: &str) -> anyhow::Result<Self> {
+        let role = services::RoleLock::acquire(prefix, "learner")?;
         let _ = Node::<ipc::Service>::try_cleanup_dead_nodes(Config::global_config());
         let names = ServiceNames::new(prefix);
         let node = NodeBuilder::new().create::<ipc::Service>().map_err(|e| {
@@ -40,6 +43,7 @@ impl Ports {
             samples,
             gains,
             node,
+            _role: role,
         })
     }
 
