@@ -147,7 +147,9 @@ fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         let e = e.with_context(|| format!("reading {}", dir.display()))?;
         let name = e.file_name().to_string_lossy().into_owned();
         let iter_file = name.starts_with("iter_")
-            && (name.ends_with("_table.npz") || name.ends_with("_critic.json"));
+            && (name.ends_with("_table.npz")
+                || name.ends_with("_critic.json")
+                || name.ends_with("_policy.json"));
         if NAMES.contains(&name.as_str()) || iter_file {
             found.push(e.path());
         }
