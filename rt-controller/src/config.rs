@@ -255,6 +255,9 @@ impl ControllerConfig {
                 format!("{} must be >= 0 (0 = off)", self.monitor_period_s),
             );
         }
+        if let Err((key, v)) = self.bounds.validate() {
+            return bad("bounds", format!("{key} = {v}: must be finite and > 0"));
+        }
         if !pos(self.setup_timeout_s) {
             return bad(
                 "setup_timeout_s",

@@ -76,6 +76,16 @@ fn bad_configs_fail_with_the_key_named() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("task.dt") && err.contains("10 Hz"), "{err}");
+
+    // Issue 15 item 3: a NaN bound would reject every table; refused before the run.
+    let nan = scratch_file("nan.toml", "[bounds]\nmax_abs_k_mat = nan\n");
+    let out = bin()
+        .args(["run", "--config", nan.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(err.contains("max_abs_k_mat = NaN"), "{err}");
 }
 
 #[test]

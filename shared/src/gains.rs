@@ -303,6 +303,24 @@ impl Default for GainBounds {
 }
 
 impl GainBounds {
+    /// Every bound finite and > 0: a NaN bound would reject every table (`|x| <= NaN` is
+    /// false) and leave the controller holding forever (issue 15 item 3). Returns the name of
+    /// the first bad key and its value.
+    pub fn validate(&self) -> Result<(), (&'static str, f64)> {
+        for (name, v) in [
+            ("max_abs_k_mat", self.max_abs_k_mat),
+            ("max_abs_k_vec", self.max_abs_k_vec),
+            ("max_abs_s_hat", self.max_abs_s_hat),
+            ("max_abs_a_hat", self.max_abs_a_hat),
+            ("max_abs_chol", self.max_abs_chol),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err((name, v));
+            }
+        }
+        Ok(())
+    }
+
     fn for_field(&self, field: GainField) -> f64 {
         match field {
             GainField::KMat => self.max_abs_k_mat,
