@@ -48,18 +48,28 @@ fn comparison_outputs_learning_and_thread_independence() {
     cfg.seeds = 2;
     cfg.iterations = 4;
     cfg.threads = 2;
+    // The converged-budget PPO variant with 6 episodes per iteration, to keep the test short.
+    cfg.ppo_converged_samples = 6;
     let out2 = tmp("cmp2");
     let (runs, rows) = run(ExperimentName::Comparison, &cfg, &out2, None).unwrap();
-    assert_eq!(runs.len(), 4, "2 algorithms x 2 seeds");
+    assert_eq!(runs.len(), 6, "3 algorithms x 2 seeds");
     let csv = out2.join("comparison.csv");
     let rows2 = rows_without_times(&csv);
-    assert_eq!(rows2.len(), 2 * 2 * 4);
+    assert_eq!(rows2.len(), 3 * 2 * 4);
+    let converged = rows.iter().find(|r| r.variant == "gaifo-ppo-6ep").unwrap();
+    assert_eq!(converged.episodes_per_iteration, 6);
+    assert_eq!(converged.to_performance_0_9.seeds, 2);
+    let text = std::fs::read_to_string(out2.join("summary.txt")).unwrap();
+    assert!(
+        text.contains("to threshold") && text.contains("ratio to lqr-gaifo"),
+        "{text}"
+    );
     assert_png(&out2.join("comparison.png"));
     assert!(out2.join("summary.txt").exists() && out2.join("demos.npz").exists());
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out2.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(json.as_array().unwrap().len(), 2);
-    assert_eq!(rows.len(), 2);
+    assert_eq!(json.as_array().unwrap().len(), 3);
+    assert_eq!(rows.len(), 3);
     let lqr = rows.iter().find(|r| r.variant == "lqr-gaifo").unwrap();
     let (first, last) = (lqr.performance[0].1, lqr.performance.last().unwrap().1);
     eprintln!("LQR+GAIfO mean normalised performance {first:.3} -> {last:.3}");
