@@ -114,3 +114,27 @@ mod tests {
         assert_eq!(parse("movej([0,0,0,0,0,0])\n"), Err(ScriptError::NotOurs));
     }
 }
+
+#[cfg(test)]
+mod shipped {
+    use super::*;
+
+    /// The program shipped in the repository has the marker, the parameter line and every
+    /// placeholder, and renders to a program `parse` reads back.
+    #[test]
+    fn shipped_program_renders_and_parses() {
+        let template = include_str!("../../../rt-controller/urscript/external_control.script");
+        assert!(template.contains(MARKER));
+        for ph in [PH_REVERSE_IP, PH_REVERSE_PORT, PH_STEPTIME] {
+            assert!(template.contains(ph), "{ph}");
+        }
+        let p = ScriptParams {
+            reverse_ip: "127.0.0.1".parse().unwrap(),
+            reverse_port: 50001,
+            steptime_s: 0.008,
+        };
+        let s = render(template, &p);
+        assert_eq!(parse(&s).unwrap(), p);
+        assert!(s.contains("servoj(target, t=0.008,"));
+    }
+}
