@@ -162,11 +162,18 @@ impl Arm {
         s.actual_q = six(obs.q, w);
         s.actual_qd = six(obs.qd, [0.0; 3]);
         s.target_q = six(self.goal, w);
+        // Joint torques (N·m) stand in for currents: the sim has no motor model.
         s.actual_current = six(self.sim.last_torque(), [0.0; 3]);
         // Position of the project's end-effector point; its orientation is not modelled.
         s.actual_tcp_pose = [obs.ee_pos[0], obs.ee_pos[1], obs.ee_pos[2], 0.0, 0.0, 0.0];
         s.actual_tcp_speed = [obs.ee_vel[0], obs.ee_vel[1], obs.ee_vel[2], 0.0, 0.0, 0.0];
+        s.target_tcp_pose = s.actual_tcp_pose;
+        s.target_moment = s.actual_current;
         s.joint_temperatures = [30.0; 6];
+        // A powered arm's bus voltages (V); not modelled further.
+        s.actual_main_voltage = 48.0;
+        s.actual_robot_voltage = 48.0;
+        s.actual_joint_voltage = [48.0; 6];
         s.robot_mode = RobotMode::Running.code();
         s.safety_mode = self.safety.code();
         s.safety_status = self.safety.code();

@@ -167,12 +167,65 @@ pub enum Output {
     TargetSpeedFraction,
     /// `actual_execution_time` DOUBLE: controller real-time thread time (ms).
     ActualExecutionTime,
+    /// `target_qdd` VECTOR6D: target joint accelerations (rad/s²).
+    TargetQdd,
+    /// `target_current` VECTOR6D: target joint currents (A).
+    TargetCurrent,
+    /// `target_moment` VECTOR6D: target joint torques (N·m).
+    TargetMoment,
+    /// `joint_control_output` VECTOR6D: joint control currents (A).
+    JointControlOutput,
+    /// `actual_TCP_force` VECTOR6D: generalised tool force (N, N·m).
+    ActualTcpForce,
+    /// `target_TCP_pose` VECTOR6D (m, axis-angle rad).
+    TargetTcpPose,
+    /// `target_TCP_speed` VECTOR6D (m/s, rad/s).
+    TargetTcpSpeed,
+    /// `actual_joint_voltage` VECTOR6D (V).
+    ActualJointVoltage,
+    /// `actual_digital_input_bits` UINT64.
+    ActualDigitalInputBits,
+    /// `actual_digital_output_bits` UINT64.
+    ActualDigitalOutputBits,
+    /// `actual_tool_accelerometer` VECTOR3D (m/s²).
+    ActualToolAccelerometer,
+    /// `actual_momentum` DOUBLE: norm of the Cartesian momentum (kg·m/s).
+    ActualMomentum,
+    /// `actual_main_voltage` DOUBLE (V).
+    ActualMainVoltage,
+    /// `actual_robot_voltage` DOUBLE (V).
+    ActualRobotVoltage,
+    /// `actual_robot_current` DOUBLE (A).
+    ActualRobotCurrent,
+    /// `joint_position_deviation_ratio` DOUBLE.
+    JointPositionDeviationRatio,
+    /// `safety_status_bits` UINT32.
+    SafetyStatusBits,
+    /// `standard_analog_input0` (A or V).
+    StandardAnalogInput0,
+    /// `standard_analog_input1` (A or V).
+    StandardAnalogInput1,
+    /// `standard_analog_output0` (A or V).
+    StandardAnalogOutput0,
+    /// `standard_analog_output1` (A or V).
+    StandardAnalogOutput1,
+    /// `ft_raw_wrench`: raw force/torque sensor wrench (N, N·m).
+    FtRawWrench,
+    /// `payload`: payload mass (kg).
+    Payload,
+    /// `payload_cog`: payload centre of gravity (m).
+    PayloadCog,
+    /// `payload_inertia` (kg·m²).
+    PayloadInertia,
     /// `output_int_register_N` INT32, N < [`N_REGISTERS`].
     OutputIntRegister(u8),
+    /// `output_double_register_N` DOUBLE, N < [`N_REGISTERS`].
+    OutputDoubleRegister(u8),
 }
 
 /// Names and types of the fixed outputs (registers are matched by pattern).
-const OUTPUT_TABLE: [(Output, &str, VarType); 18] = [
+#[rustfmt::skip]
+const OUTPUT_TABLE: [(Output, &str, VarType); 43] = [
     (Output::Timestamp, "timestamp", VarType::Double),
     (Output::TargetQ, "target_q", VarType::Vector6d),
     (Output::TargetQd, "target_qd", VarType::Vector6d),
@@ -180,37 +233,42 @@ const OUTPUT_TABLE: [(Output, &str, VarType); 18] = [
     (Output::ActualQd, "actual_qd", VarType::Vector6d),
     (Output::ActualCurrent, "actual_current", VarType::Vector6d),
     (Output::ActualTcpPose, "actual_TCP_pose", VarType::Vector6d),
-    (
-        Output::ActualTcpSpeed,
-        "actual_TCP_speed",
-        VarType::Vector6d,
-    ),
-    (
-        Output::JointTemperatures,
-        "joint_temperatures",
-        VarType::Vector6d,
-    ),
+    (Output::ActualTcpSpeed, "actual_TCP_speed", VarType::Vector6d),
+    (Output::JointTemperatures, "joint_temperatures", VarType::Vector6d),
     (Output::RobotMode, "robot_mode", VarType::Int32),
     (Output::SafetyMode, "safety_mode", VarType::Int32),
     (Output::SafetyStatus, "safety_status", VarType::Int32),
     (Output::JointMode, "joint_mode", VarType::Vector6Int32),
     (Output::RuntimeState, "runtime_state", VarType::Uint32),
-    (
-        Output::RobotStatusBits,
-        "robot_status_bits",
-        VarType::Uint32,
-    ),
+    (Output::RobotStatusBits, "robot_status_bits", VarType::Uint32),
     (Output::SpeedScaling, "speed_scaling", VarType::Double),
-    (
-        Output::TargetSpeedFraction,
-        "target_speed_fraction",
-        VarType::Double,
-    ),
-    (
-        Output::ActualExecutionTime,
-        "actual_execution_time",
-        VarType::Double,
-    ),
+    (Output::TargetSpeedFraction, "target_speed_fraction", VarType::Double),
+    (Output::ActualExecutionTime, "actual_execution_time", VarType::Double),
+    (Output::TargetQdd, "target_qdd", VarType::Vector6d),
+    (Output::TargetCurrent, "target_current", VarType::Vector6d),
+    (Output::TargetMoment, "target_moment", VarType::Vector6d),
+    (Output::JointControlOutput, "joint_control_output", VarType::Vector6d),
+    (Output::ActualTcpForce, "actual_TCP_force", VarType::Vector6d),
+    (Output::TargetTcpPose, "target_TCP_pose", VarType::Vector6d),
+    (Output::TargetTcpSpeed, "target_TCP_speed", VarType::Vector6d),
+    (Output::ActualJointVoltage, "actual_joint_voltage", VarType::Vector6d),
+    (Output::ActualDigitalInputBits, "actual_digital_input_bits", VarType::Uint64),
+    (Output::ActualDigitalOutputBits, "actual_digital_output_bits", VarType::Uint64),
+    (Output::ActualToolAccelerometer, "actual_tool_accelerometer", VarType::Vector3d),
+    (Output::ActualMomentum, "actual_momentum", VarType::Double),
+    (Output::ActualMainVoltage, "actual_main_voltage", VarType::Double),
+    (Output::ActualRobotVoltage, "actual_robot_voltage", VarType::Double),
+    (Output::ActualRobotCurrent, "actual_robot_current", VarType::Double),
+    (Output::JointPositionDeviationRatio, "joint_position_deviation_ratio", VarType::Double),
+    (Output::SafetyStatusBits, "safety_status_bits", VarType::Uint32),
+    (Output::StandardAnalogInput0, "standard_analog_input0", VarType::Double),
+    (Output::StandardAnalogInput1, "standard_analog_input1", VarType::Double),
+    (Output::StandardAnalogOutput0, "standard_analog_output0", VarType::Double),
+    (Output::StandardAnalogOutput1, "standard_analog_output1", VarType::Double),
+    (Output::FtRawWrench, "ft_raw_wrench", VarType::Vector6d),
+    (Output::Payload, "payload", VarType::Double),
+    (Output::PayloadCog, "payload_cog", VarType::Vector3d),
+    (Output::PayloadInertia, "payload_inertia", VarType::Vector6d),
 ];
 
 /// `prefix` followed by a register number below [`N_REGISTERS`].
@@ -230,13 +288,16 @@ impl Output {
         if let Some((o, _, _)) = OUTPUT_TABLE.iter().find(|(_, n, _)| *n == name) {
             return Some(*o);
         }
-        register(name, "output_int_register_").map(Output::OutputIntRegister)
+        register(name, "output_int_register_")
+            .map(Output::OutputIntRegister)
+            .or_else(|| register(name, "output_double_register_").map(Output::OutputDoubleRegister))
     }
 
     /// Its type on the wire.
     pub fn var_type(self) -> VarType {
         match self {
             Output::OutputIntRegister(_) => VarType::Int32,
+            Output::OutputDoubleRegister(_) => VarType::Double,
             o => OUTPUT_TABLE
                 .iter()
                 .find(|(x, _, _)| *x == o)
@@ -248,6 +309,7 @@ impl Output {
     pub fn base_name(self) -> &'static str {
         match self {
             Output::OutputIntRegister(_) => "output_int_register_",
+            Output::OutputDoubleRegister(_) => "output_double_register_",
             o => OUTPUT_TABLE
                 .iter()
                 .find(|(x, _, _)| *x == o)

@@ -13,73 +13,179 @@ use crate::{DecodeError, EncodeError};
 /// Six joint values, base to wrist 3.
 pub type Joints = [f64; 6];
 
-/// The controller's outputs this project knows. Units: rad, rad/s, s, A, m, °C.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RobotState {
-    /// `timestamp`: s since the controller started.
-    pub timestamp: f64,
-    /// `target_q` (rad).
-    pub target_q: Joints,
-    /// `target_qd` (rad/s).
-    pub target_qd: Joints,
-    /// `actual_q` (rad).
-    pub actual_q: Joints,
-    /// `actual_qd` (rad/s).
-    pub actual_qd: Joints,
-    /// `actual_current` (A).
-    pub actual_current: Joints,
-    /// `actual_TCP_pose`: x, y, z (m), rx, ry, rz (axis-angle, rad).
-    pub actual_tcp_pose: Joints,
-    /// `actual_TCP_speed` (m/s, rad/s).
-    pub actual_tcp_speed: Joints,
-    /// `joint_temperatures` (°C).
-    pub joint_temperatures: Joints,
-    /// `robot_mode` ([`crate::RobotMode`] code).
-    pub robot_mode: i32,
-    /// `safety_mode` ([`crate::SafetyMode`] code).
-    pub safety_mode: i32,
-    /// `safety_status`.
-    pub safety_status: i32,
-    /// `joint_mode` per joint.
-    pub joint_mode: [i32; 6],
-    /// `runtime_state`: 1 stopped, 2 playing, 3 pausing, 4 paused, 5 resuming.
-    pub runtime_state: u32,
-    /// `robot_status_bits`.
-    pub robot_status_bits: u32,
-    /// `speed_scaling` (0..1).
-    pub speed_scaling: f64,
-    /// `target_speed_fraction` (0..1).
-    pub target_speed_fraction: f64,
-    /// `actual_execution_time` (ms).
-    pub actual_execution_time: f64,
-    /// `output_int_register_N`.
-    pub output_int_registers: [i32; N_REGISTERS],
+/// One output's storage, typed as it travels (its [`crate::VarType`]).
+enum Slot<'a> {
+    F64(&'a mut f64),
+    U32(&'a mut u32),
+    I32(&'a mut i32),
+    U64(&'a mut u64),
+    V3(&'a mut [f64; 3]),
+    V6(&'a mut [f64; 6]),
+    V6I32(&'a mut [i32; 6]),
 }
 
-impl Default for RobotState {
-    fn default() -> Self {
-        Self {
-            timestamp: 0.0,
-            target_q: [0.0; 6],
-            target_qd: [0.0; 6],
-            actual_q: [0.0; 6],
-            actual_qd: [0.0; 6],
-            actual_current: [0.0; 6],
-            actual_tcp_pose: [0.0; 6],
-            actual_tcp_speed: [0.0; 6],
-            joint_temperatures: [0.0; 6],
-            robot_mode: 0,
-            safety_mode: 0,
-            safety_status: 0,
-            joint_mode: [0; 6],
-            runtime_state: 0,
-            robot_status_bits: 0,
-            speed_scaling: 0.0,
-            target_speed_fraction: 0.0,
-            actual_execution_time: 0.0,
-            output_int_registers: [0; N_REGISTERS],
+impl Slot<'_> {
+    fn read(self, r: &mut Reader<'_>) -> Result<(), DecodeError> {
+        match self {
+            Slot::F64(v) => *v = r.f64()?,
+            Slot::U32(v) => *v = r.u32()?,
+            Slot::I32(v) => *v = r.i32()?,
+            Slot::U64(v) => *v = r.u64()?,
+            Slot::V3(v) => v.iter_mut().try_for_each(|x| r.f64().map(|y| *x = y))?,
+            Slot::V6(v) => v.iter_mut().try_for_each(|x| r.f64().map(|y| *x = y))?,
+            Slot::V6I32(v) => v.iter_mut().try_for_each(|x| r.i32().map(|y| *x = y))?,
+        }
+        Ok(())
+    }
+
+    fn write(self, w: &mut Writer<'_>) -> Result<(), EncodeError> {
+        match self {
+            Slot::F64(v) => w.f64(*v),
+            Slot::U32(v) => w.u32(*v),
+            Slot::I32(v) => w.i32(*v),
+            Slot::U64(v) => w.u64(*v),
+            Slot::V3(v) => v.iter().try_for_each(|x| w.f64(*x)),
+            Slot::V6(v) => v.iter().try_for_each(|x| w.f64(*x)),
+            Slot::V6I32(v) => v.iter().try_for_each(|x| w.i32(*x)),
         }
     }
+
+    /// Bytes on the wire (checked against the output table in the tests).
+    #[cfg(test)]
+    fn size(&self) -> usize {
+        match self {
+            Slot::F64(_) | Slot::U64(_) => 8,
+            Slot::U32(_) | Slot::I32(_) => 4,
+            Slot::V3(_) | Slot::V6I32(_) => 24,
+            Slot::V6(_) => 48,
+        }
+    }
+}
+
+/// Declares [`RobotState`] and its output → field map from one list.
+macro_rules! robot_state {
+    ($($(#[$doc:meta])* $output:ident => $field:ident : $ty:ty = $slot:ident,)*) => {
+        /// The controller's outputs this project knows, one field per [`Output`]. Units: rad,
+        /// rad/s, rad/s², s, A, V, N, N·m, m, °C.
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct RobotState {
+            $($(#[$doc])* pub $field: $ty,)*
+            /// `output_int_register_N`.
+            pub output_int_registers: [i32; N_REGISTERS],
+            /// `output_double_register_N`.
+            pub output_double_registers: [f64; N_REGISTERS],
+        }
+
+        impl Default for RobotState {
+            fn default() -> Self {
+                Self {
+                    $($field: Default::default(),)*
+                    output_int_registers: [0; N_REGISTERS],
+                    output_double_registers: [0.0; N_REGISTERS],
+                }
+            }
+        }
+
+        impl RobotState {
+            /// The storage of output `o`; `None` for a register number out of range.
+            fn slot(&mut self, o: Output) -> Option<Slot<'_>> {
+                Some(match o {
+                    $(Output::$output => Slot::$slot(&mut self.$field),)*
+                    Output::OutputIntRegister(n) => Slot::I32(self.output_int_registers.get_mut(usize::from(n))?),
+                    Output::OutputDoubleRegister(n) => Slot::F64(self.output_double_registers.get_mut(usize::from(n))?),
+                })
+            }
+        }
+    };
+}
+
+robot_state! {
+    /// `timestamp`: s since the controller started.
+    Timestamp => timestamp: f64 = F64,
+    /// `target_q` (rad).
+    TargetQ => target_q: Joints = V6,
+    /// `target_qd` (rad/s).
+    TargetQd => target_qd: Joints = V6,
+    /// `target_qdd` (rad/s²).
+    TargetQdd => target_qdd: Joints = V6,
+    /// `target_current` (A).
+    TargetCurrent => target_current: Joints = V6,
+    /// `target_moment` (N·m).
+    TargetMoment => target_moment: Joints = V6,
+    /// `actual_q` (rad).
+    ActualQ => actual_q: Joints = V6,
+    /// `actual_qd` (rad/s).
+    ActualQd => actual_qd: Joints = V6,
+    /// `actual_current` (A).
+    ActualCurrent => actual_current: Joints = V6,
+    /// `joint_control_output` (A).
+    JointControlOutput => joint_control_output: Joints = V6,
+    /// `actual_TCP_pose`: x, y, z (m), rx, ry, rz (axis-angle, rad).
+    ActualTcpPose => actual_tcp_pose: Joints = V6,
+    /// `actual_TCP_speed` (m/s, rad/s).
+    ActualTcpSpeed => actual_tcp_speed: Joints = V6,
+    /// `actual_TCP_force` (N, N·m).
+    ActualTcpForce => actual_tcp_force: Joints = V6,
+    /// `target_TCP_pose` (m, rad).
+    TargetTcpPose => target_tcp_pose: Joints = V6,
+    /// `target_TCP_speed` (m/s, rad/s).
+    TargetTcpSpeed => target_tcp_speed: Joints = V6,
+    /// `joint_temperatures` (°C).
+    JointTemperatures => joint_temperatures: Joints = V6,
+    /// `actual_joint_voltage` (V).
+    ActualJointVoltage => actual_joint_voltage: Joints = V6,
+    /// `actual_digital_input_bits`.
+    ActualDigitalInputBits => actual_digital_input_bits: u64 = U64,
+    /// `actual_digital_output_bits`.
+    ActualDigitalOutputBits => actual_digital_output_bits: u64 = U64,
+    /// `actual_tool_accelerometer` (m/s²).
+    ActualToolAccelerometer => actual_tool_accelerometer: [f64; 3] = V3,
+    /// `robot_mode` ([`crate::RobotMode`] code).
+    RobotMode => robot_mode: i32 = I32,
+    /// `safety_mode` ([`crate::SafetyMode`] code).
+    SafetyMode => safety_mode: i32 = I32,
+    /// `safety_status`.
+    SafetyStatus => safety_status: i32 = I32,
+    /// `safety_status_bits`.
+    SafetyStatusBits => safety_status_bits: u32 = U32,
+    /// `joint_mode` per joint.
+    JointMode => joint_mode: [i32; 6] = V6I32,
+    /// `runtime_state`: 1 stopped, 2 playing, 3 pausing, 4 paused, 5 resuming.
+    RuntimeState => runtime_state: u32 = U32,
+    /// `robot_status_bits`.
+    RobotStatusBits => robot_status_bits: u32 = U32,
+    /// `speed_scaling` (0..1).
+    SpeedScaling => speed_scaling: f64 = F64,
+    /// `target_speed_fraction` (0..1).
+    TargetSpeedFraction => target_speed_fraction: f64 = F64,
+    /// `actual_execution_time` (ms).
+    ActualExecutionTime => actual_execution_time: f64 = F64,
+    /// `actual_momentum` (kg·m/s).
+    ActualMomentum => actual_momentum: f64 = F64,
+    /// `actual_main_voltage` (V).
+    ActualMainVoltage => actual_main_voltage: f64 = F64,
+    /// `actual_robot_voltage` (V).
+    ActualRobotVoltage => actual_robot_voltage: f64 = F64,
+    /// `actual_robot_current` (A).
+    ActualRobotCurrent => actual_robot_current: f64 = F64,
+    /// `joint_position_deviation_ratio`.
+    JointPositionDeviationRatio => joint_position_deviation_ratio: f64 = F64,
+    /// `standard_analog_input0` (A or V).
+    StandardAnalogInput0 => standard_analog_input0: f64 = F64,
+    /// `standard_analog_input1` (A or V).
+    StandardAnalogInput1 => standard_analog_input1: f64 = F64,
+    /// `standard_analog_output0` (A or V).
+    StandardAnalogOutput0 => standard_analog_output0: f64 = F64,
+    /// `standard_analog_output1` (A or V).
+    StandardAnalogOutput1 => standard_analog_output1: f64 = F64,
+    /// `ft_raw_wrench`: raw force/torque sensor wrench (N, N·m).
+    FtRawWrench => ft_raw_wrench: Joints = V6,
+    /// `payload`: payload mass (kg).
+    Payload => payload: f64 = F64,
+    /// `payload_cog`: payload centre of gravity (m).
+    PayloadCog => payload_cog: [f64; 3] = V3,
+    /// `payload_inertia` (kg·m²).
+    PayloadInertia => payload_inertia: Joints = V6,
 }
 
 /// `runtime_state` values.
@@ -88,18 +194,6 @@ pub mod runtime_state {
     pub const STOPPED: u32 = 1;
     /// A program is running.
     pub const PLAYING: u32 = 2;
-}
-
-fn read6(r: &mut Reader<'_>) -> Result<Joints, DecodeError> {
-    let mut v = [0.0; 6];
-    for x in &mut v {
-        *x = r.f64()?;
-    }
-    Ok(v)
-}
-
-fn write6(w: &mut Writer<'_>, v: &Joints) -> Result<(), EncodeError> {
-    v.iter().try_for_each(|x| w.f64(*x))
 }
 
 impl RobotState {
@@ -119,34 +213,11 @@ impl RobotState {
         }
         let mut r = Reader::new(values, "DATA_PACKAGE values");
         for f in &recipe.fields {
-            match *f {
-                Output::Timestamp => self.timestamp = r.f64()?,
-                Output::TargetQ => self.target_q = read6(&mut r)?,
-                Output::TargetQd => self.target_qd = read6(&mut r)?,
-                Output::ActualQ => self.actual_q = read6(&mut r)?,
-                Output::ActualQd => self.actual_qd = read6(&mut r)?,
-                Output::ActualCurrent => self.actual_current = read6(&mut r)?,
-                Output::ActualTcpPose => self.actual_tcp_pose = read6(&mut r)?,
-                Output::ActualTcpSpeed => self.actual_tcp_speed = read6(&mut r)?,
-                Output::JointTemperatures => self.joint_temperatures = read6(&mut r)?,
-                Output::RobotMode => self.robot_mode = r.i32()?,
-                Output::SafetyMode => self.safety_mode = r.i32()?,
-                Output::SafetyStatus => self.safety_status = r.i32()?,
-                Output::JointMode => {
-                    for m in &mut self.joint_mode {
-                        *m = r.i32()?;
-                    }
-                }
-                Output::RuntimeState => self.runtime_state = r.u32()?,
-                Output::RobotStatusBits => self.robot_status_bits = r.u32()?,
-                Output::SpeedScaling => self.speed_scaling = r.f64()?,
-                Output::TargetSpeedFraction => self.target_speed_fraction = r.f64()?,
-                Output::ActualExecutionTime => self.actual_execution_time = r.f64()?,
-                Output::OutputIntRegister(n) => {
-                    let v = r.i32()?;
-                    if let Some(slot) = self.output_int_registers.get_mut(usize::from(n)) {
-                        *slot = v;
-                    }
+            match self.slot(*f) {
+                Some(slot) => slot.read(&mut r)?,
+                // A register beyond the table (not produced by `OutputRecipe`): skip its bytes.
+                None => {
+                    r.bytes(f.var_type().size())?;
                 }
             }
         }
@@ -178,32 +249,12 @@ impl RobotState {
     ) -> Result<usize, EncodeError> {
         let mut w = Writer::package(buf)?;
         w.u8(recipe.id)?;
+        // The slots borrow mutably; encode from a copy (plain data, no allocation).
+        let mut s = *self;
         for f in &recipe.fields {
-            match *f {
-                Output::Timestamp => w.f64(self.timestamp)?,
-                Output::TargetQ => write6(&mut w, &self.target_q)?,
-                Output::TargetQd => write6(&mut w, &self.target_qd)?,
-                Output::ActualQ => write6(&mut w, &self.actual_q)?,
-                Output::ActualQd => write6(&mut w, &self.actual_qd)?,
-                Output::ActualCurrent => write6(&mut w, &self.actual_current)?,
-                Output::ActualTcpPose => write6(&mut w, &self.actual_tcp_pose)?,
-                Output::ActualTcpSpeed => write6(&mut w, &self.actual_tcp_speed)?,
-                Output::JointTemperatures => write6(&mut w, &self.joint_temperatures)?,
-                Output::RobotMode => w.i32(self.robot_mode)?,
-                Output::SafetyMode => w.i32(self.safety_mode)?,
-                Output::SafetyStatus => w.i32(self.safety_status)?,
-                Output::JointMode => self.joint_mode.iter().try_for_each(|m| w.i32(*m))?,
-                Output::RuntimeState => w.u32(self.runtime_state)?,
-                Output::RobotStatusBits => w.u32(self.robot_status_bits)?,
-                Output::SpeedScaling => w.f64(self.speed_scaling)?,
-                Output::TargetSpeedFraction => w.f64(self.target_speed_fraction)?,
-                Output::ActualExecutionTime => w.f64(self.actual_execution_time)?,
-                Output::OutputIntRegister(n) => w.i32(
-                    self.output_int_registers
-                        .get(usize::from(n))
-                        .copied()
-                        .unwrap_or(0),
-                )?,
+            match s.slot(*f) {
+                Some(slot) => slot.write(&mut w)?,
+                None => w.put(&[0u8; 48][..f.var_type().size()])?,
             }
         }
         w.finish_package(crate::PackageType::DataPackage as u8)
@@ -304,6 +355,18 @@ mod tests {
         let mut out = [0u8; 64];
         let n = s.encode_package(&recipe, &mut out).unwrap();
         assert_eq!(&out[..n], &bytes[..]);
+    }
+
+    #[test]
+    fn every_output_slot_has_its_wire_size() {
+        let mut s = RobotState::default();
+        let regs = [
+            Output::OutputIntRegister(47),
+            Output::OutputDoubleRegister(0),
+        ];
+        for o in Output::fixed().chain(regs) {
+            assert_eq!(s.slot(o).unwrap().size(), o.var_type().size(), "{o:?}");
+        }
     }
 
     #[test]

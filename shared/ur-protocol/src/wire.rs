@@ -49,6 +49,9 @@ impl<'a> Reader<'a> {
     pub(crate) fn i32(&mut self) -> Result<i32, DecodeError> {
         Ok(i32::from_be_bytes(self.array()?))
     }
+    pub(crate) fn u64(&mut self) -> Result<u64, DecodeError> {
+        Ok(u64::from_be_bytes(self.array()?))
+    }
     pub(crate) fn f64(&mut self) -> Result<f64, DecodeError> {
         Ok(f64::from_be_bytes(self.array()?))
     }
@@ -137,6 +140,9 @@ impl<'a> Writer<'a> {
         self.put(&v.to_be_bytes())
     }
     pub(crate) fn i32(&mut self, v: i32) -> Result<(), EncodeError> {
+        self.put(&v.to_be_bytes())
+    }
+    pub(crate) fn u64(&mut self, v: u64) -> Result<(), EncodeError> {
         self.put(&v.to_be_bytes())
     }
     pub(crate) fn f64(&mut self, v: f64) -> Result<(), EncodeError> {

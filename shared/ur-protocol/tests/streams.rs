@@ -183,7 +183,7 @@ proptest! {
 
     #[test]
     fn state_round_trips_through_any_recipe(
-        mask in prop::collection::vec(any::<bool>(), 18),
+        mask in prop::collection::vec(any::<bool>(), 43),
         t in -1e6f64..1e6, q in prop::array::uniform6(-7.0f64..7.0), mode in any::<i32>(), rt in any::<u32>(),
     ) {
         let names: Vec<&str> = ur_protocol::Output::fixed()
