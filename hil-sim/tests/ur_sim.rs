@@ -341,6 +341,40 @@ fn ur_other_scripts_are_refused_with_a_text_message() {
 }
 
 #[test]
+fn ur_input_registers_taken_by_another_client_are_in_use() {
+    let sim = start(true, Faults::default());
+    let setup_inputs = |c: &mut Client, names: &str| {
+        c.send(ClientMessage::SetupInputs { names });
+        let f = c.next().unwrap();
+        let RobotMessage::SetupInputs { recipe_id, types } = f.msg(c.protocol) else {
+            panic!("expected a SETUP_INPUTS answer")
+        };
+        (recipe_id, types.to_owned())
+    };
+    let mut a = Client::connect(sim.rtde_addr);
+    assert!(a.negotiate(2));
+    let (id, types) = setup_inputs(&mut a, "input_int_register_24,input_double_register_24");
+    assert!(id > 0);
+    assert_eq!(types, "INT32,DOUBLE");
+    let mut b = Client::connect(sim.rtde_addr);
+    assert!(b.negotiate(2));
+    let (_, types) = setup_inputs(&mut b, "input_int_register_24,input_int_register_25,bogus");
+    assert_eq!(types, "IN_USE,INT32,NOT_FOUND");
+    // Released when the first client leaves.
+    drop(a);
+    let t0 = Instant::now();
+    loop {
+        let (_, types) = setup_inputs(&mut b, "input_int_register_24");
+        if types == "INT32" {
+            break;
+        }
+        assert!(t0.elapsed() < DEADLINE, "register not released");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    sim.stop();
+}
+
+#[test]
 fn ur_fault_version_refusals() {
     let sim = start(
         true,

@@ -137,6 +137,7 @@ pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) {
 /// How the program ended.
 enum End {
     Timeout,
+    Closed,
     Stopped,
     Replaced,
     ProtectiveStop,
@@ -163,12 +164,19 @@ fn program(ctx: &Ctx, generation: u64, p: ScriptParams) {
     if matches!(end, End::Replaced) {
         return;
     }
-    if matches!(end, End::Timeout) {
-        Stats::add(&ctx.stats.receive_timeouts);
-        ctx.broadcast(
-            "program: no command from the PC within the receive timeout; stopping the arm",
+    match end {
+        End::Timeout => {
+            Stats::add(&ctx.stats.receive_timeouts);
+            ctx.broadcast(
+                "program: no command from the PC within the receive timeout; stopping the arm",
+                level::WARNING,
+            );
+        }
+        End::Closed => ctx.broadcast(
+            "program: the PC closed the reverse connection; stopping the arm",
             level::WARNING,
-        );
+        ),
+        _ => {}
     }
     // stopj: the clock (real time) or this thread (lockstep) decelerates the arm to rest.
     let lockstep = ctx.cfg.lockstep;
@@ -213,10 +221,13 @@ fn command_loop(ctx: &Ctx, generation: u64, mut s: TcpStream) -> End {
         let wall = Duration::from_secs_f64((timeout_s / compression).max(1e-3));
         let _ = s.set_read_timeout(Some(wall));
         let mut bytes = [0u8; COMMAND_LEN];
-        if s.read_exact(&mut bytes).is_err() {
+        if let Err(e) = s.read_exact(&mut bytes) {
             // A timeout, a closed socket or a partial command: the URScript's read returns
-            // fewer than 8 integers in every case.
-            return End::Timeout;
+            // fewer than 8 integers in every case, and the program stops the arm.
+            return match e.kind() {
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => End::Timeout,
+                _ => End::Closed,
+            };
         }
         Stats::add(&ctx.stats.commands);
         let cmd = ReverseCommand::decode(&bytes).ok();
