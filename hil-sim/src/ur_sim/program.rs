@@ -114,10 +114,10 @@ pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) {
     let generation = {
         let mut arm = ctx.plant.lock();
         if arm.safety != SafetyMode::Normal {
+            let safety = arm.safety;
             drop(arm);
             return refuse(format!(
-                "program not started: safety mode is {} (unlocking a protective stop is not simulated; restart ur-sim)",
-                ctx.plant.lock().safety
+                "program not started: safety mode is {safety} (unlocking a protective stop is not simulated; restart ur-sim)"
             ));
         }
         arm.program += 1;

@@ -19,6 +19,9 @@ use super::{Ctx, Stats};
 /// Largest frame accepted from a client (long recipes of registers fit).
 const RX_CAPACITY: usize = 16 * 1024;
 
+/// A client whose socket takes no bytes for this long is dropped.
+const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
+
 /// The writing end of one connection.
 pub(crate) struct Outlet {
     stream: Mutex<TcpStream>,
@@ -30,12 +33,23 @@ impl Outlet {
         Protocol::from_u16(self.protocol.load(Ordering::Relaxed).into()).unwrap_or(Protocol::V1)
     }
 
-    /// Writes bytes as one `write_all` under the lock.
+    /// Writes bytes as one `write_all` under the lock. A client that does not read for
+    /// [`WRITE_TIMEOUT`] is dropped, as a real controller drops a client that falls behind.
     fn send(&self, bytes: &[u8]) -> std::io::Result<()> {
-        self.stream
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .write_all(bytes)
+        let mut s = self.stream.lock().unwrap_or_else(|e| e.into_inner());
+        let r = s.write_all(bytes);
+        if let Err(e) = &r {
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+            ) {
+                eprintln!(
+                    "hil-sim ur-sim: dropping an RTDE client that does not read its packages"
+                );
+            }
+            let _ = s.shutdown(Shutdown::Both);
+        }
+        r
     }
 
     /// Sends a robot package.
@@ -92,6 +106,7 @@ pub(crate) fn serve_connection(ctx: Arc<Ctx>, stream: TcpStream) {
     let Ok(wstream) = stream.try_clone() else {
         return;
     };
+    let _ = wstream.set_write_timeout(Some(WRITE_TIMEOUT));
     let outlet = Arc::new(Outlet {
         stream: Mutex::new(wstream),
         protocol: AtomicU8::new(1),
