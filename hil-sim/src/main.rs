@@ -102,58 +102,92 @@ enum Cmd {
     /// secondary interface, which runs this project's external_control program
     /// (rt-controller/urscript/external_control.script) and refuses other scripts. Prints one
     /// JSON line with the bound addresses on stdout, then serves until killed.
-    UrSim {
-        /// TOML file with optional [task] and [sim] tables (start pose: task.start_q).
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// Listen address (loopback only).
-        #[arg(long, default_value = "127.0.0.1")]
-        host: std::net::Ipv4Addr,
-        /// RTDE port (0: any free port).
-        #[arg(long, default_value_t = 30004)]
-        rtde_port: u16,
-        /// Secondary-interface port (0: any free port).
-        #[arg(long, default_value_t = 30002)]
-        secondary_port: u16,
-        /// Controller generation: e (e-Series, 500 Hz, 5.x) or cb3 (125 Hz, 3.x).
-        #[arg(long, default_value = "e")]
-        series: String,
-        /// Lockstep: each reverse command advances one arm cycle, then that cycle's data
-        /// package is sent (deterministic tests).
-        #[arg(long)]
-        lockstep: bool,
-        /// Real time runs this many times faster than wall time.
-        #[arg(long, default_value_t = 1.0)]
-        time_compression: f64,
-        /// Fault: refuse RTDE protocol version 2.
-        #[arg(long)]
-        fault_refuse_v2: bool,
-        /// Fault: refuse every protocol version.
-        #[arg(long)]
-        fault_refuse_versions: bool,
-        /// Fault: a text message before every answer.
-        #[arg(long)]
-        fault_text_before_reply: bool,
-        /// Fault: refuse START.
-        #[arg(long)]
-        fault_refuse_start: bool,
-        /// Fault: per three data packages, one merged with a repeat of the previous in one
-        /// write and one split over two writes.
-        #[arg(long)]
-        fault_merge_split: bool,
-        /// Fault: every N-th data package is late by --fault-delay-ms.
-        #[arg(long, default_value_t = 0)]
-        fault_delay_every: u64,
-        /// Fault: delay (ms) of a late package.
-        #[arg(long, default_value_t = 50)]
-        fault_delay_ms: u64,
-        /// Fault: every N-th data package is dropped.
-        #[arg(long, default_value_t = 0)]
-        fault_drop_every: u64,
-        /// Fault: close the RTDE connection after N data packages.
-        #[arg(long, default_value_t = 0)]
-        fault_disconnect_after: u64,
-    },
+    UrSim(UrSimArgs),
+}
+
+/// Options of `hil-sim ur-sim` (see `hil_sim::ur_sim`).
+#[derive(clap::Args)]
+struct UrSimArgs {
+    /// TOML file with optional [task] and [sim] tables (start pose: task.start_q).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Listen address (loopback only).
+    #[arg(long, default_value = "127.0.0.1")]
+    host: std::net::Ipv4Addr,
+    /// RTDE port (0: any free port).
+    #[arg(long, default_value_t = 30004)]
+    rtde_port: u16,
+    /// Secondary-interface port (0: any free port).
+    #[arg(long, default_value_t = 30002)]
+    secondary_port: u16,
+    /// Controller generation: e (e-Series, 500 Hz, 5.x) or cb3 (125 Hz, 3.x).
+    #[arg(long, default_value = "e")]
+    series: String,
+    /// Lockstep: each reverse command advances one arm cycle, then that cycle's data
+    /// package is sent (deterministic tests).
+    #[arg(long)]
+    lockstep: bool,
+    /// Real time runs this many times faster than wall time.
+    #[arg(long, default_value_t = 1.0)]
+    time_compression: f64,
+    /// Fault: refuse RTDE protocol version 2.
+    #[arg(long)]
+    fault_refuse_v2: bool,
+    /// Fault: refuse every protocol version.
+    #[arg(long)]
+    fault_refuse_versions: bool,
+    /// Fault: a text message before every answer.
+    #[arg(long)]
+    fault_text_before_reply: bool,
+    /// Fault: refuse START.
+    #[arg(long)]
+    fault_refuse_start: bool,
+    /// Fault: per three data packages, one merged with a repeat of the previous in one
+    /// write and one split over two writes.
+    #[arg(long)]
+    fault_merge_split: bool,
+    /// Fault: every N-th data package is late by --fault-delay-ms.
+    #[arg(long, default_value_t = 0)]
+    fault_delay_every: u64,
+    /// Fault: delay (ms) of a late package.
+    #[arg(long, default_value_t = 50)]
+    fault_delay_ms: u64,
+    /// Fault: every N-th data package is dropped.
+    #[arg(long, default_value_t = 0)]
+    fault_drop_every: u64,
+    /// Fault: close the RTDE connection after N data packages.
+    #[arg(long, default_value_t = 0)]
+    fault_disconnect_after: u64,
+}
+
+impl UrSimArgs {
+    fn config(&self) -> Result<hil_sim::ur_sim::UrSimConfig> {
+        use hil_sim::ur_sim::{Faults, Series, UrSimConfig};
+        let series = match self.series.as_str() {
+            "e" | "e-series" => Series::E,
+            "cb3" => Series::Cb3,
+            other => anyhow::bail!("--series {other}: expected e or cb3"),
+        };
+        Ok(UrSimConfig {
+            host: self.host,
+            rtde_port: self.rtde_port,
+            secondary_port: self.secondary_port,
+            series,
+            lockstep: self.lockstep,
+            time_compression: self.time_compression,
+            faults: Faults {
+                refuse_v2: self.fault_refuse_v2,
+                refuse_versions: self.fault_refuse_versions,
+                text_before_reply: self.fault_text_before_reply,
+                refuse_start: self.fault_refuse_start,
+                merge_split: self.fault_merge_split,
+                delay_every: self.fault_delay_every,
+                delay_ms: self.fault_delay_ms,
+                drop_every: self.fault_drop_every,
+                disconnect_after: self.fault_disconnect_after,
+            },
+        })
+    }
 }
 
 /// A config file for hil-sim: both tables optional.
@@ -186,50 +220,9 @@ fn main() -> Result<()> {
             time_compression,
             json,
         } => serve(config, prefix, mode, time_compression, json),
-        Cmd::UrSim {
-            config,
-            host,
-            rtde_port,
-            secondary_port,
-            series,
-            lockstep,
-            time_compression,
-            fault_refuse_v2,
-            fault_refuse_versions,
-            fault_text_before_reply,
-            fault_refuse_start,
-            fault_merge_split,
-            fault_delay_every,
-            fault_delay_ms,
-            fault_drop_every,
-            fault_disconnect_after,
-        } => {
-            use hil_sim::ur_sim::{Faults, Series, UrSimConfig};
-            let series = match series.as_str() {
-                "e" | "e-series" => Series::E,
-                "cb3" => Series::Cb3,
-                other => anyhow::bail!("--series {other}: expected e or cb3"),
-            };
-            let cfg = UrSimConfig {
-                host,
-                rtde_port,
-                secondary_port,
-                series,
-                lockstep,
-                time_compression,
-                faults: Faults {
-                    refuse_v2: fault_refuse_v2,
-                    refuse_versions: fault_refuse_versions,
-                    text_before_reply: fault_text_before_reply,
-                    refuse_start: fault_refuse_start,
-                    merge_split: fault_merge_split,
-                    delay_every: fault_delay_every,
-                    delay_ms: fault_delay_ms,
-                    drop_every: fault_drop_every,
-                    disconnect_after: fault_disconnect_after,
-                },
-            };
-            ur_sim(config, cfg)
+        Cmd::UrSim(args) => {
+            let cfg = args.config()?;
+            ur_sim(args.config, cfg)
         }
     }
 }
