@@ -273,7 +273,10 @@ fn ur_lockstep_servoj_moves_the_arm_and_a_silent_controller_stops_it() {
     // takes longer (1.06 s from 3.09 rad/s, design §3.10): at rest within twice the ideal.
     let stop_s = last.timestamp - t_silent;
     eprintln!("stopj from {moving:.3} rad/s took {stop_s:.3} s of arm time");
-    assert!(stop_s > 0.0 && stop_s < 2.0 * moving / 4.0, "stop took {stop_s} s");
+    assert!(
+        stop_s > 0.0 && stop_s < 2.0 * moving / 4.0,
+        "stop took {stop_s} s"
+    );
     let still = last.actual_qd.iter().map(|v| v.abs()).fold(0.0, f64::max);
     assert!(still < 1e-3, "held at rest: {still} rad/s");
     assert!(
@@ -547,4 +550,42 @@ fn ur_binary_prints_its_ports_and_answers_rtde() {
     assert_eq!((ver.major, ver.max_frequency_hz()), (3, 125.0));
     child.kill().unwrap();
     child.wait().unwrap();
+}
+
+#[test]
+fn ur_real_time_servoj_and_the_watchdog_stop() {
+    // Real time x5: the arm's own clock, a command per package; only event order is asserted.
+    let cfg = UrSimConfig {
+        rtde_port: 0,
+        secondary_port: 0,
+        time_compression: 5.0,
+        ..UrSimConfig::default()
+    };
+    let sim = ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).unwrap();
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    let s0 = c.state(&recipe).unwrap();
+    let start_q = TaskConfig::default().start_q;
+    let target = [start_q[0] + 0.2, start_q[1], start_q[2]];
+    let mut rev = run_program(&sim);
+    let mut last = s0;
+    let t0 = Instant::now();
+    while dist(&last.actual_q, target) > 0.01 {
+        assert!(
+            t0.elapsed() < DEADLINE,
+            "never reached the target: {:?}",
+            last.actual_q
+        );
+        servoj(&mut rev, target, 5_000);
+        last = c.state(&recipe).unwrap();
+        assert_eq!(last.safety_mode, SafetyMode::Normal.code());
+    }
+    assert!(last.timestamp > s0.timestamp);
+    // Silence after a 20 ms timeout (4 ms of wall time at x5): the program stops and ends.
+    servoj(&mut rev, target, 20);
+    while last.runtime_state != runtime_state::STOPPED {
+        assert!(t0.elapsed() < DEADLINE, "the program did not stop");
+        last = c.state(&recipe).unwrap();
+    }
+    let sum = sim.stop();
+    assert_eq!((sum.receive_timeouts, sum.programs), (1, 1));
 }
