@@ -5,12 +5,15 @@
 //! - [`sim`]: the rapier3d multibody built by `rapier3d-urdf`, its physics loop, the 12-dim
 //!   state of the task, the perturbation knobs of the stand-in "physical arm";
 //! - [`servo`]: the arm's own joint servo for goal-angle actions;
-//! - [`serve`]: the arm behind `arm/state` / `arm/command` over iceoryx2 (`hil-sim serve`).
+//! - [`serve`]: the arm behind `arm/state` / `arm/command` over iceoryx2 (`hil-sim serve`);
+//! - [`ur_sim`]: the arm behind a UR controller's RTDE and secondary interfaces
+//!   (`hil-sim ur-sim`).
 
 pub mod model;
 pub mod serve;
 pub mod servo;
 pub mod sim;
+pub mod ur_sim;
 
 use std::path::PathBuf;
 

@@ -4,7 +4,9 @@
 //! - `demo`: moves the arm through a few goal angles and prints the trajectory;
 //! - `inspect`: one JSON object describing the model at a given state (for debugging a URDF);
 //! - `bench`: physics throughput;
-//! - `serve`: the arm behind `arm/state` / `arm/command` over iceoryx2 (see `hil_sim::serve`).
+//! - `serve`: the arm behind `arm/state` / `arm/command` over iceoryx2 (see `hil_sim::serve`);
+//! - `ur-sim`: the arm as a UR controller: RTDE and the secondary interface (see
+//!   `hil_sim::ur_sim`).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -96,6 +98,96 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// The simulated arm as a UR controller (docs/design.md §3.10): an RTDE server and the
+    /// secondary interface, which runs this project's external_control program
+    /// (rt-controller/urscript/external_control.script) and refuses other scripts. Prints one
+    /// JSON line with the bound addresses on stdout, then serves until killed.
+    UrSim(UrSimArgs),
+}
+
+/// Options of `hil-sim ur-sim` (see `hil_sim::ur_sim`).
+#[derive(clap::Args)]
+struct UrSimArgs {
+    /// TOML file with optional [task] and [sim] tables (start pose: task.start_q).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Listen address (loopback only).
+    #[arg(long, default_value = "127.0.0.1")]
+    host: std::net::Ipv4Addr,
+    /// RTDE port (0: any free port).
+    #[arg(long, default_value_t = 30004)]
+    rtde_port: u16,
+    /// Secondary-interface port (0: any free port).
+    #[arg(long, default_value_t = 30002)]
+    secondary_port: u16,
+    /// Controller generation: e (e-Series, 500 Hz, 5.x) or cb3 (125 Hz, 3.x).
+    #[arg(long, default_value = "e")]
+    series: String,
+    /// Lockstep: each reverse command advances one arm cycle, then that cycle's data
+    /// package is sent (deterministic tests).
+    #[arg(long)]
+    lockstep: bool,
+    /// Real time runs this many times faster than wall time.
+    #[arg(long, default_value_t = 1.0)]
+    time_compression: f64,
+    /// Fault: refuse RTDE protocol version 2.
+    #[arg(long)]
+    fault_refuse_v2: bool,
+    /// Fault: refuse every protocol version.
+    #[arg(long)]
+    fault_refuse_versions: bool,
+    /// Fault: a text message before every answer.
+    #[arg(long)]
+    fault_text_before_reply: bool,
+    /// Fault: refuse START.
+    #[arg(long)]
+    fault_refuse_start: bool,
+    /// Fault: per three data packages, one merged with a repeat of the previous in one
+    /// write and one split over two writes.
+    #[arg(long)]
+    fault_merge_split: bool,
+    /// Fault: every N-th data package is late by --fault-delay-ms.
+    #[arg(long, default_value_t = 0)]
+    fault_delay_every: u64,
+    /// Fault: delay (ms) of a late package.
+    #[arg(long, default_value_t = 50)]
+    fault_delay_ms: u64,
+    /// Fault: every N-th data package is dropped.
+    #[arg(long, default_value_t = 0)]
+    fault_drop_every: u64,
+    /// Fault: close the RTDE connection after N data packages.
+    #[arg(long, default_value_t = 0)]
+    fault_disconnect_after: u64,
+}
+
+impl UrSimArgs {
+    fn config(&self) -> Result<hil_sim::ur_sim::UrSimConfig> {
+        use hil_sim::ur_sim::{Faults, Series, UrSimConfig};
+        let series = match self.series.as_str() {
+            "e" | "e-series" => Series::E,
+            "cb3" => Series::Cb3,
+            other => anyhow::bail!("--series {other}: expected e or cb3"),
+        };
+        Ok(UrSimConfig {
+            host: self.host,
+            rtde_port: self.rtde_port,
+            secondary_port: self.secondary_port,
+            series,
+            lockstep: self.lockstep,
+            time_compression: self.time_compression,
+            faults: Faults {
+                refuse_v2: self.fault_refuse_v2,
+                refuse_versions: self.fault_refuse_versions,
+                text_before_reply: self.fault_text_before_reply,
+                refuse_start: self.fault_refuse_start,
+                merge_split: self.fault_merge_split,
+                delay_every: self.fault_delay_every,
+                delay_ms: self.fault_delay_ms,
+                drop_every: self.fault_drop_every,
+                disconnect_after: self.fault_disconnect_after,
+            },
+        })
+    }
 }
 
 /// A config file for hil-sim: both tables optional.
@@ -128,7 +220,36 @@ fn main() -> Result<()> {
             time_compression,
             json,
         } => serve(config, prefix, mode, time_compression, json),
+        Cmd::UrSim(args) => {
+            let cfg = args.config()?;
+            ur_sim(args.config, cfg)
+        }
     }
+}
+
+fn ur_sim(config: Option<PathBuf>, cfg: hil_sim::ur_sim::UrSimConfig) -> Result<()> {
+    use std::io::Write;
+    let file = load(config)?;
+    let handle = hil_sim::ur_sim::spawn(&file.task, &file.sim, &cfg)?;
+    println!(
+        "{}",
+        serde_json::json!({"rtde": handle.rtde_addr.to_string(), "secondary": handle.secondary_addr.to_string(),
+            "series": cfg.series, "lockstep": cfg.lockstep, "time_compression": cfg.time_compression})
+    );
+    std::io::stdout().flush()?;
+    eprintln!(
+        "hil-sim ur-sim: {:?} controller, RTDE on {}, secondary interface on {}, {}",
+        cfg.series,
+        handle.rtde_addr,
+        handle.secondary_addr,
+        if cfg.lockstep {
+            "lockstep".to_string()
+        } else {
+            format!("real time x{}", cfg.time_compression)
+        }
+    );
+    handle.wait();
+    Ok(())
 }
 
 fn load(config: Option<PathBuf>) -> Result<FileConfig> {

@@ -1,0 +1,234 @@
+//! The simulated arm as a UR controller sees it: the physics advanced one arm cycle at a time,
+//! the program's servo goal, the robot/safety/runtime modes, and the RTDE snapshot every
+//! connection reads. Shared by the physics clock, the program and the RTDE connections
+//! through one mutex and a condition variable that signals each new cycle.
+
+use std::sync::{Condvar, Mutex, MutexGuard};
+use std::time::Duration;
+
+use ur5_shared::layout::N_JOINTS;
+use ur_protocol::state::runtime_state;
+use ur_protocol::{RobotMode, RobotState, SafetyMode};
+
+use crate::Ur5Sim;
+
+/// Deceleration of `stopj(4.0)` (rad/s²), as the project's program calls it.
+pub const STOPJ_DECELERATION: f64 = 4.0;
+
+/// Joint speed below which a stopping arm counts as at rest (rad/s).
+const AT_REST: f64 = 1e-3;
+
+/// What the robot-side program is doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// No program: the arm holds its last goal.
+    Idle,
+    /// The project's program runs (servoj toward the goal).
+    Running,
+    /// `stopj`: decelerating to rest; then the program ends.
+    Stopping,
+}
+
+/// The arm and the modes the controller reports.
+pub struct Arm {
+    sim: Ur5Sim,
+    /// Arm cycles since start.
+    pub cycle: u64,
+    /// Arm cycle (s): 0.002 (e-Series) or 0.008 (CB3).
+    pub dt: f64,
+    /// Servo goal of the active joints (rad).
+    goal: [f64; N_JOINTS],
+    /// Program phase.
+    pub phase: Phase,
+    /// Incremented per program start, so a stale program thread cannot act on a new one.
+    pub program: u64,
+    /// Safety mode (NORMAL, or PROTECTIVE_STOP after a limit violation).
+    pub safety: SafetyMode,
+    /// What RTDE connections send.
+    pub snapshot: RobotState,
+}
+
+/// A limit violation that triggers a protective stop.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Violation(pub String);
+
+impl Arm {
+    /// The arm at rest at `start_q` (rad), arm cycle `dt` (s).
+    pub fn new(
+        mut sim: Ur5Sim,
+        start_q: [f64; N_JOINTS],
+        goal_point: [f64; 3],
+        dt: f64,
+    ) -> Result<Self, crate::SimError> {
+        sim.reset(start_q, goal_point)?;
+        let mut arm = Self {
+            sim,
+            cycle: 0,
+            dt,
+            goal: start_q,
+            phase: Phase::Idle,
+            program: 0,
+            safety: SafetyMode::Normal,
+            snapshot: RobotState::default(),
+        };
+        arm.refresh();
+        Ok(arm)
+    }
+
+    /// Checks a servo target of the active joints against the URDF limits.
+    pub fn check_target(&self, q: &[f64; N_JOINTS]) -> Result<(), Violation> {
+        for (j, l) in self.sim.model().active.iter().enumerate() {
+            if !(q[j].is_finite() && q[j] >= l.lower && q[j] <= l.upper) {
+                return Err(Violation(format!(
+                    "joint `{}` target {} rad is outside its limits [{}, {}]",
+                    l.name, q[j], l.lower, l.upper
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The locked wrist angles (rad).
+    pub fn wrist_q(&self) -> [f64; 3] {
+        self.sim.model().wrist_q
+    }
+
+    /// Sets the servo goal (SERVOJ target of the active joints, rad).
+    pub fn set_goal(&mut self, q: [f64; N_JOINTS]) {
+        self.goal = q;
+    }
+
+    /// Holds where the arm is now.
+    pub fn hold_here(&mut self) {
+        self.goal = self.sim.joint_state().0;
+    }
+
+    /// Starts `stopj`: the goal becomes the point where a deceleration of
+    /// [`STOPJ_DECELERATION`] would bring each joint to rest; the servo decelerates toward it.
+    pub fn begin_stop(&mut self) {
+        if self.phase == Phase::Running {
+            let (q, qd) = self.sim.joint_state();
+            self.goal =
+                core::array::from_fn(|j| q[j] + qd[j] * qd[j].abs() / (2.0 * STOPJ_DECELERATION));
+            self.phase = Phase::Stopping;
+        }
+    }
+
+    /// A protective stop: the program stops the arm and ends, safety reports PROTECTIVE_STOP.
+    pub fn protective_stop(&mut self) {
+        self.safety = SafetyMode::ProtectiveStop;
+        self.begin_stop();
+        if self.phase == Phase::Idle {
+            self.hold_here();
+        }
+        self.refresh();
+    }
+
+    /// Advances one arm cycle under the goal and refreshes the snapshot. Returns a violation
+    /// if the arm ended outside its joint limits (the caller raises a protective stop).
+    pub fn step(&mut self) -> Option<Violation> {
+        self.sim.step(self.goal);
+        self.cycle += 1;
+        let (q, qd) = self.sim.joint_state();
+        if self.phase == Phase::Stopping && qd.iter().all(|v| v.abs() < AT_REST) {
+            self.goal = q;
+            self.phase = Phase::Idle;
+        }
+        self.refresh();
+        // The sim clamps goals to the limits; an overshoot beyond them is a violation.
+        let margin = 1e-3;
+        self.sim
+            .model()
+            .active
+            .iter()
+            .enumerate()
+            .find_map(|(j, l)| {
+                (!(q[j] >= l.lower - margin && q[j] <= l.upper + margin)).then(|| {
+                    Violation(format!(
+                        "joint `{}` at {} rad is outside its limits [{}, {}]",
+                        l.name, q[j], l.lower, l.upper
+                    ))
+                })
+            })
+    }
+
+    fn refresh(&mut self) {
+        let obs = self.sim.true_observation();
+        let w = self.sim.model().wrist_q;
+        let six =
+            |a: [f64; N_JOINTS], wrist: [f64; 3]| [a[0], a[1], a[2], wrist[0], wrist[1], wrist[2]];
+        let s = &mut self.snapshot;
+        s.timestamp = self.cycle as f64 * self.dt;
+        s.actual_q = six(obs.q, w);
+        s.actual_qd = six(obs.qd, [0.0; 3]);
+        s.target_q = six(self.goal, w);
+        // Joint torques (N·m) stand in for currents: the sim has no motor model.
+        s.actual_current = six(self.sim.last_torque(), [0.0; 3]);
+        // Position of the project's end-effector point; its orientation is not modelled.
+        s.actual_tcp_pose = [obs.ee_pos[0], obs.ee_pos[1], obs.ee_pos[2], 0.0, 0.0, 0.0];
+        s.actual_tcp_speed = [obs.ee_vel[0], obs.ee_vel[1], obs.ee_vel[2], 0.0, 0.0, 0.0];
+        s.target_tcp_pose = s.actual_tcp_pose;
+        s.target_moment = s.actual_current;
+        s.joint_temperatures = [30.0; 6];
+        // A powered arm's bus voltages (V); not modelled further.
+        s.actual_main_voltage = 48.0;
+        s.actual_robot_voltage = 48.0;
+        s.actual_joint_voltage = [48.0; 6];
+        s.robot_mode = RobotMode::Running.code();
+        s.safety_mode = self.safety.code();
+        s.safety_status = self.safety.code();
+        // 253: the joints' RUNNING mode.
+        s.joint_mode = [253; 6];
+        s.runtime_state = match self.phase {
+            Phase::Idle => runtime_state::STOPPED,
+            Phase::Running | Phase::Stopping => runtime_state::PLAYING,
+        };
+        s.speed_scaling = 1.0;
+        s.target_speed_fraction = 1.0;
+        s.actual_execution_time = 0.1;
+    }
+}
+
+/// The arm shared between threads.
+pub struct Plant {
+    arm: Mutex<Arm>,
+    cycled: Condvar,
+}
+
+impl Plant {
+    /// Shares `arm`.
+    pub fn new(arm: Arm) -> Self {
+        Self {
+            arm: Mutex::new(arm),
+            cycled: Condvar::new(),
+        }
+    }
+
+    /// Locks the arm (a panicked holder does not poison the plant: the arm data stays usable).
+    pub fn lock(&self) -> MutexGuard<'_, Arm> {
+        self.arm.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Wakes every thread waiting for a new cycle (after a step, or on shutdown).
+    pub fn notify(&self) {
+        self.cycled.notify_all();
+    }
+
+    /// Waits until the cycle count passes `after` or `wake()` holds, at most `timeout`;
+    /// returns the guard.
+    pub fn wait_cycle(
+        &self,
+        after: u64,
+        timeout: Duration,
+        wake: impl Fn() -> bool,
+    ) -> MutexGuard<'_, Arm> {
+        let guard = self.lock();
+        match self
+            .cycled
+            .wait_timeout_while(guard, timeout, |a| a.cycle <= after && !wake())
+        {
+            Ok((g, _)) => g,
+            Err(e) => e.into_inner().0,
+        }
+    }
+}
