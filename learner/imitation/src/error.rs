@@ -33,3 +33,19 @@ pub enum ImitationError {
     #[error("PPO: {0}")]
     Ppo(String),
 }
+
+/// Each `(name, value, min)` must lie in `min..=max`; else a [`ImitationError::Config`] naming
+/// the first that does not (the counts of the settings types' `validate`).
+pub(crate) fn check_counts(
+    items: &[(&str, usize, usize)],
+    max: usize,
+) -> Result<(), ImitationError> {
+    for &(name, n, min) in items {
+        if !(min..=max).contains(&n) {
+            return Err(ImitationError::Config(format!(
+                "{name} = {n}: must be in {min}..={max}"
+            )));
+        }
+    }
+    Ok(())
+}

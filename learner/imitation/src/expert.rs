@@ -73,6 +73,86 @@ pub struct ExpertConfig {
     pub traj_opt: TrajOptConfig,
 }
 
+impl ExpertConfig {
+    /// Refuses settings that cannot work, naming the setting and its range (issue 15 items 7,
+    /// 8): counts in their ranges up to [`crate::gaifo::GaifoConfig::MAX_COUNT`] (samples ≥ 2
+    /// for the dynamics fit), `init_var` in (0, 10] rad², the cost weights finite and ≥ 0 with
+    /// α > 0, the square's half side in (0, 1] m, then the task, the arm and GPS's settings.
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        crate::error::check_counts(
+            &[
+                ("samples", self.samples, 2),
+                ("iterations", self.iterations, 1),
+                ("patience", self.patience, 1),
+                ("random_episodes", self.random_episodes, 1),
+                ("demos", self.demos, 1),
+            ],
+            crate::gaifo::GaifoConfig::MAX_COUNT,
+        )?;
+        let c = &self.cost;
+        let reals = [
+            (
+                "init_var",
+                self.init_var,
+                self.init_var > 0.0 && self.init_var <= 10.0,
+                "in (0, 10] rad²",
+            ),
+            (
+                "square_half_side",
+                self.square_half_side,
+                self.square_half_side > 0.0 && self.square_half_side <= 1.0,
+                "in (0, 1] m",
+            ),
+            (
+                "cost.l1",
+                c.l1,
+                c.l1 >= 0.0 && c.l1.is_finite(),
+                "finite and >= 0",
+            ),
+            (
+                "cost.l2",
+                c.l2,
+                c.l2 >= 0.0 && c.l2.is_finite(),
+                "finite and >= 0",
+            ),
+            (
+                "cost.alpha",
+                c.alpha,
+                c.alpha > 0.0 && c.alpha.is_finite(),
+                "finite and > 0 m²",
+            ),
+            (
+                "cost.final_weight",
+                c.final_weight,
+                c.final_weight >= 0.0 && c.final_weight.is_finite(),
+                "finite and >= 0",
+            ),
+            (
+                "cost.action_weight",
+                c.action_weight,
+                c.action_weight >= 0.0 && c.action_weight.is_finite(),
+                "finite and >= 0",
+            ),
+        ];
+        for (name, v, ok, allowed) in reals {
+            if !ok {
+                return Err(ImitationError::Config(format!(
+                    "{name} = {v:?}: must be {allowed}"
+                )));
+            }
+        }
+        self.task.validate().map_err(ImitationError::Task)?;
+        self.sim
+            .validate()
+            .map_err(|e| ImitationError::Config(e.to_string()))?;
+        self.algorithm.validate()?;
+        self.prior.validate()?;
+        self.fit.validate()?;
+        self.traj_opt.validate()?;
+        Ok(())
+    }
+}
+
 impl Default for ExpertConfig {
     fn default() -> Self {
         Self {
@@ -335,6 +415,7 @@ pub fn train(
     arm: &mut dyn Arm,
     mut progress: impl FnMut(&IterationLog),
 ) -> Result<ExpertRun, ImitationError> {
+    cfg.validate()?;
     let task = &cfg.task;
     let cost_random = mean_noisy_cost(
         arm,
@@ -456,5 +537,34 @@ impl Learn for ExpertLearner {
 impl LinGaussLearn for ExpertLearner {
     fn policy(&self) -> &LinGaussPolicy {
         self.lqr.policy()
+    }
+}
+
+#[cfg(test)]
+mod validate_tests {
+    use super::*;
+
+    #[test]
+    fn settings_that_cannot_work_are_refused_naming_the_setting() {
+        assert!(ExpertConfig::default().validate().is_ok());
+        let cases: Vec<(&str, Box<dyn Fn(&mut ExpertConfig)>)> = vec![
+            ("samples", Box::new(|c| c.samples = 1)),
+            ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
+            ("patience", Box::new(|c| c.patience = 0)),
+            ("random_episodes", Box::new(|c| c.random_episodes = 0)),
+            ("demos", Box::new(|c| c.demos = 1_000_000_000)),
+            ("init_var", Box::new(|c| c.init_var = f64::NAN)),
+            ("square_half_side", Box::new(|c| c.square_half_side = 1e9)),
+            ("cost.alpha", Box::new(|c| c.cost.alpha = 0.0)),
+            ("cost.l2", Box::new(|c| c.cost.l2 = -1.0)),
+            ("kl_step", Box::new(|c| c.algorithm.kl_step = -1.0)),
+            ("max_clusters", Box::new(|c| c.prior.max_clusters = 0)),
+        ];
+        for (name, set) in cases {
+            let mut c = ExpertConfig::default();
+            set(&mut c);
+            let e = c.validate().expect_err(name).to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        }
     }
 }

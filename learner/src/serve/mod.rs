@@ -242,6 +242,7 @@ pub fn serve(
     progress: impl FnMut(&IterationLog),
 ) -> anyhow::Result<ServeSummary> {
     validate(&cfg.task, cfg.samples, cfg.init_var, &opts)?;
+    cfg.validate()?;
     claim_dirs(&opts, "expert", cfg.seed, &cfg)?;
     let el = match &opts.resume {
         Some(dir) => {

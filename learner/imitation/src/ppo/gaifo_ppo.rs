@@ -106,18 +106,14 @@ impl GaifoPpoConfig {
     /// [`GaifoConfig::MAX_COUNT`]; the critic as [`DiscriminatorConfig::validate`]; PPO as
     /// [`PpoConfig::validate`]).
     pub fn validate(&self) -> Result<(), ImitationError> {
-        let max = GaifoConfig::MAX_COUNT;
-        for (name, n) in [
-            ("samples", self.samples),
-            ("iterations", self.iterations),
-            ("critic_updates", self.critic_updates),
-        ] {
-            if !(1..=max).contains(&n) {
-                return Err(ImitationError::Config(format!(
-                    "{name} = {n}: must be in 1..={max}"
-                )));
-            }
-        }
+        crate::error::check_counts(
+            &[
+                ("samples", self.samples, 1),
+                ("iterations", self.iterations, 1),
+                ("critic_updates", self.critic_updates, 1),
+            ],
+            GaifoConfig::MAX_COUNT,
+        )?;
         if !(self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0) {
             return Err(ImitationError::Config(format!(
                 "critic_lr_half_life = {}: must be finite and >= 0 (0 = constant)",
