@@ -642,6 +642,20 @@ mod tests {
         )
         .unwrap();
         check(&ep).unwrap();
+        // A controller with another seed (issue 15 item 10).
+        let mut sim = SimArm::new(SimConfig::default(), cfg.task.dt).unwrap();
+        let other_seed = run_episode(
+            &mut sim,
+            &cfg.task,
+            &mut table.clone(),
+            Some(&mut Noise::new(7, 1, 0)),
+        )
+        .unwrap();
+        let e = format!("{:#}", check(&other_seed).unwrap_err());
+        assert!(
+            e.contains("learner's seed 0") && e.contains("seed = 0"),
+            "{e}"
+        );
         let err = |task: TaskConfig| format!("{:#}", check(&episode(&task, 0)).unwrap_err());
         let e = err(TaskConfig {
             goal: [-0.45, -0.2, 0.25],

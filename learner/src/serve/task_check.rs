@@ -72,6 +72,8 @@ pub(super) struct TaskCheck {
     dt_checked: bool,
     /// Length of the last partial episodes and how many in a row had it.
     short: (usize, u32),
+    /// The first noisy episode of the learner's version carried the learner's own noise.
+    seed_checked: bool,
 }
 
 impl TaskCheck {
@@ -113,6 +115,37 @@ impl TaskCheck {
         Ok(())
     }
 
+    /// The controller draws exploration noise from the learner's seed (issue 15 item 10): the
+    /// action it computed at t = 0 of a noisy episode of the learner's table must be the law's
+    /// with the noise of one of that version's episodes k = 0…N under the learner's seed
+    /// (docs/design.md §3.7). Another seed gives other draws, off by about L_0 (ε − ε′).
+    fn check_seed<L: ServeLearner>(
+        &mut self,
+        ep: &Episode,
+        version: u64,
+        learner: &L,
+    ) -> anyhow::Result<()> {
+        let table = to_gain_table(learner.policy(), version);
+        let s0 = ep.state(0);
+        let got: [f64; DU] = ep.u_policy[..DU].try_into()?;
+        let seed = learner.seed();
+        let matches = (0..=learner.samples() as u64).any(|k| {
+            let eps = Noise::new(seed, version, k).next();
+            let mut a = [0.0; DU];
+            ur5_shared::controller_action(&table, 0, &s0, &eps, &mut a).is_ok()
+                && (0..DU).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
+        });
+        anyhow::ensure!(
+            matches,
+            "the controller's exploration noise is not that of the learner's seed {seed} (its \
+             action at t = 0 of a noisy episode of table v{version} is {got:?}, which no episode \
+             of that version under seed {seed} gives): run rt-controller with seed = {seed}, or \
+             the learner with the controller's seed"
+        );
+        self.seed_checked = true;
+        Ok(())
+    }
+
     /// On every complete episode (table `version`).
     pub(super) fn episode<L: ServeLearner>(
         &mut self,
@@ -122,7 +155,11 @@ impl TaskCheck {
         tolerance: f64,
     ) -> anyhow::Result<()> {
         self.short = (0, 0);
-        let check_dt = !self.dt_checked && ep.noisy && version == learner.version();
+        let own = ep.noisy && version == learner.version();
+        let check_dt = !self.dt_checked && own;
+        if !self.seed_checked && own {
+            self.check_seed(ep, version, learner)?;
+        }
         if self.start_checked && !check_dt {
             return Ok(());
         }
