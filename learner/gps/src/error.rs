@@ -11,8 +11,10 @@ pub enum GpsError {
     NotPositiveDefinite { what: &'static str, t: usize },
     /// GPS `TrajOptLQRPython.backward`: raising η never made Q_uu positive definite.
     #[error(
-        "failed to find a PD Q_uu even for eta = {eta:e} (>= 1e16); check that the dynamics and \
-         cost are reasonably well conditioned"
+        "failed to find a PD Q_uu even for eta = {eta:e} (>= 1e16): the cost's Hessians or the \
+         fitted dynamics are not finite or absurdly scaled; check the cost (for LQR+GAIfO the \
+         critic: its checkpoint and [discriminator] settings) and the dynamics fit settings \
+         (fit.regularization, [prior])"
     )]
     EtaOverflow { eta: f64 },
     /// GPS raises this when the PD retry fails on dynamics containing NaN.
