@@ -18,8 +18,11 @@ pub enum SetupError {
     #[error(transparent)]
     Config(#[from] ur5_shared::config::ConfigError),
     /// The configured arm backend is not the one this setup builds, or not available.
-    #[error("arm.backend = \"{0}\" is not available yet: the UR driver (issue 13) has its configuration but not its setup and loop; use arm.backend = \"iceoryx2\" with `hil-sim serve`")]
+    #[error("arm.backend = \"{0}\" is not available yet: the UR driver (issue 13) has its configuration and setup (rt_controller::arm::ur) but not its loop; use arm.backend = \"iceoryx2\" with `hil-sim serve`")]
     BackendUnavailable(&'static str),
+    /// The `ur` arm's setup failed.
+    #[error(transparent)]
+    Ur(#[from] crate::arm::ur::UrSetupError),
     /// Another controller runs on the prefix.
     #[error(transparent)]
     Role(#[from] ur5_shared::services::RoleLockError),

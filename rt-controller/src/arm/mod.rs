@@ -5,8 +5,11 @@
 //!
 //! - [`iceoryx2`]: `arm/state` in, `arm/command` out: `hil-sim serve` or another process on the
 //!   same service prefix.
+//! - [`ur`]: a Universal Robots controller over RTDE and the reverse interface: setup only so
+//!   far ([`ur::UrSession::connect`]).
 
 pub mod iceoryx2;
+pub mod ur;
 
 pub use self::iceoryx2::Iceoryx2Arm;
 
