@@ -103,6 +103,128 @@ impl Default for Polling {
     }
 }
 
+/// Which arm the loop drives ([`crate::arm`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmKind {
+    /// `arm/state` and `arm/command` over iceoryx2 on `prefix` (`hil-sim serve`).
+    #[default]
+    Iceoryx2,
+    /// A Universal Robots controller (or `hil-sim ur-sim`): RTDE for the state, the project's
+    /// URScript program and its reverse socket for the commands (docs/design.md §3.10).
+    Ur,
+}
+
+/// Which UR controller generation, hence the arm cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum UrSeries {
+    /// From the controller version RTDE reports: major ≥ 5 is an e-Series (500 Hz), below a
+    /// CB3 (125 Hz).
+    #[default]
+    Auto,
+    /// e-Series: 500 Hz (2 ms cycle); setup fails if the controller reports a CB3.
+    E,
+    /// CB3: 125 Hz (8 ms cycle); setup fails if the controller reports an e-Series.
+    Cb3,
+}
+
+/// The `ur` arm: where the robot is and how the program watches the PC (`[arm.ur]`). Ports are
+/// Universal Robots' (and URCL's) defaults.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct UrConfig {
+    /// The robot controller's IPv4 address.
+    pub host: String,
+    /// RTDE port on the robot.
+    pub rtde_port: u16,
+    /// Secondary-interface port on the robot (the program is sent there, headless).
+    pub secondary_port: u16,
+    /// Port this PC listens on for the program's reverse connection.
+    pub reverse_port: u16,
+    /// Controller generation; `auto` reads it from the controller version.
+    pub series: UrSeries,
+    /// The program's receive timeout on the reverse socket (ms): with no command for this long
+    /// it runs `stopj` and exits, the arm's own watchdog for a dead controller. URCL's default
+    /// is 20 ms; it must exceed an arm cycle (8 ms on a CB3).
+    pub receive_timeout_ms: u32,
+}
+
+impl Default for UrConfig {
+    fn default() -> Self {
+        Self {
+            host: "127.0.0.1".into(),
+            rtde_port: 30004,
+            secondary_port: 30002,
+            reverse_port: 50001,
+            series: UrSeries::Auto,
+            receive_timeout_ms: 20,
+        }
+    }
+}
+
+/// The arm backend (`[arm]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArmConfig {
+    /// `iceoryx2` (default) or `ur`.
+    pub backend: ArmKind,
+    /// Used when `backend = "ur"`.
+    pub ur: UrConfig,
+}
+
+/// Accepted `arm.ur.receive_timeout_ms` (ms): above a CB3 cycle, at most a second.
+pub const UR_RECEIVE_TIMEOUT_RANGE_MS: (u32, u32) = (10, 1000);
+
+impl ArmConfig {
+    /// Checks the `ur` settings when that backend is chosen.
+    fn validate(&self, action_mode: ActionMode) -> Result<(), ConfigError> {
+        if self.backend != ArmKind::Ur {
+            return Ok(());
+        }
+        let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
+        let u = &self.ur;
+        if u.host.parse::<std::net::Ipv4Addr>().is_err() {
+            return bad(
+                "arm.ur.host",
+                format!("`{}` is not an IPv4 address; give the robot's address (e.g. \"192.168.1.10\", or \"127.0.0.1\" for hil-sim ur-sim)", u.host),
+            );
+        }
+        for (key, port) in [
+            ("arm.ur.rtde_port", u.rtde_port),
+            ("arm.ur.secondary_port", u.secondary_port),
+            ("arm.ur.reverse_port", u.reverse_port),
+        ] {
+            if port == 0 {
+                return bad(key, "0 is not a port; the defaults are 30004 (RTDE), 30002 (secondary), 50001 (reverse)".into());
+            }
+        }
+        if u.rtde_port == u.secondary_port {
+            return bad(
+                "arm.ur.secondary_port",
+                format!("{} is also arm.ur.rtde_port; the robot serves them on different ports (30002, 30004)", u.secondary_port),
+            );
+        }
+        let (lo, hi) = UR_RECEIVE_TIMEOUT_RANGE_MS;
+        if !(lo..=hi).contains(&u.receive_timeout_ms) {
+            return bad(
+                "arm.ur.receive_timeout_ms",
+                format!(
+                    "{} must be in {lo}..={hi} (above a CB3 cycle of 8 ms)",
+                    u.receive_timeout_ms
+                ),
+            );
+        }
+        if action_mode != ActionMode::GoalAngles {
+            return bad(
+                "action_mode",
+                format!("{action_mode:?} is not possible with arm.backend = \"ur\": the reverse interface carries joint position targets (servoj); use action_mode = \"goal_angles\""),
+            );
+        }
+        Ok(())
+    }
+}
+
 /// Everything `rt-controller run` reads.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -127,6 +249,8 @@ pub struct ControllerConfig {
     pub eval_episodes: u64,
     /// Meaning of actions (must match the arm's).
     pub action_mode: ActionMode,
+    /// The arm backend and, for `ur`, the robot's address and ports.
+    pub arm: ArmConfig,
     /// Control period (s), horizon T, start pose and goal. Tables whose horizon differs from
     /// `task.horizon` are rejected.
     pub task: TaskConfig,
@@ -165,6 +289,7 @@ impl Default for ControllerConfig {
             noisy_episodes: 5,
             eval_episodes: 1,
             action_mode: ActionMode::GoalAngles,
+            arm: ArmConfig::default(),
             task: TaskConfig::default(),
             limits: ArmLimits::default(),
             safety: Safety::default(),
@@ -255,6 +380,7 @@ impl ControllerConfig {
                 format!("{} must be >= 0 (0 = off)", self.monitor_period_s),
             );
         }
+        self.arm.validate(self.action_mode)?;
         if let Err((key, v)) = self.bounds.validate() {
             return bad("bounds", format!("{key} = {v}: must be finite and > 0"));
         }
@@ -323,5 +449,48 @@ mod tests {
         assert!(c.validate().is_err());
         let c: ControllerConfig = toml::from_str("[task]\nstart_q = [0.0, 0.0, 4.0]").unwrap();
         assert!(c.validate().unwrap_err().to_string().contains("start_q"));
+    }
+
+    #[test]
+    fn arm_backend_defaults_to_iceoryx2_and_ur_settings_are_checked() {
+        assert_eq!(ControllerConfig::default().arm.backend, ArmKind::Iceoryx2);
+        let c: ControllerConfig =
+            toml::from_str("[arm]\nbackend = \"ur\"\n[arm.ur]\nhost = \"127.0.0.1\"").unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.arm.ur.rtde_port, 30004);
+        assert_eq!(c.arm.ur.reverse_port, 50001);
+        assert_eq!(c.arm.ur.secondary_port, 30002);
+        assert_eq!(c.arm.ur.series, UrSeries::Auto);
+        assert!(toml::from_str::<ControllerConfig>("[arm]\nbackend = \"ros\"").is_err());
+        assert!(toml::from_str::<ControllerConfig>("[arm.ur]\nhots = \"x\"").is_err());
+        for (text, key) in [
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nhost = \"robot.local\"",
+                "arm.ur.host",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nrtde_port = 0",
+                "arm.ur.rtde_port",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nsecondary_port = 30004",
+                "arm.ur.secondary_port",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nreceive_timeout_ms = 5",
+                "arm.ur.receive_timeout_ms",
+            ),
+            (
+                "action_mode = \"torque\"\n[arm]\nbackend = \"ur\"",
+                "action_mode",
+            ),
+        ] {
+            let c: ControllerConfig = toml::from_str(text).unwrap();
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains(key), "{text}: {e}");
+        }
+        // The iceoryx2 backend ignores the ur settings.
+        let c: ControllerConfig = toml::from_str("[arm.ur]\nhost = \"robot.local\"").unwrap();
+        c.validate().unwrap();
     }
 }

@@ -8,7 +8,8 @@
 //!   loop: no allocation, no locks, no blocking but the period wait), episodes, hot swap;
 //! - [`tables`]: the double-buffered gain table; [`safety`]: faults, clamp and hold; [`noise`]:
 //!   seeded exploration noise; [`stats`]: the loop's counters and allocation-free histograms;
-//!   [`ports`]: the iceoryx2 ports; [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]:
+//!   [`arm`]: the arm backends the loop is generic over (iceoryx2); [`ports`]: the node and the
+//!   learner's iceoryx2 ports; [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]:
 //!   dead-peer detection off the loop;
 //! - `testkit` (cargo feature `testkit`, not part of the production API): in-process stand-ins
 //!   for the arm and tables, for the integration tests and the binary's `bench` subcommand.
@@ -19,6 +20,7 @@
 //! in real time the wall period is `task.dt / time_compression`. Durations in statistics are
 //! wall-clock ns.
 
+pub mod arm;
 pub mod config;
 pub mod controller;
 pub mod monitor;
@@ -31,6 +33,7 @@ pub mod tables;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 
+pub use arm::{ArmBackend, Iceoryx2Arm};
 pub use config::{ControllerConfig, Mode, Pacing};
 pub use controller::{Controller, ExitReason, Summary};
 pub use ports::SetupError;

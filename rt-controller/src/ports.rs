@@ -1,6 +1,7 @@
-//! The controller's iceoryx2 node and ports, created in the setup phase (docs/design.md §3.2, §3.4):
-//! `arm/state` in, `arm/command` out, `learner/samples` out, `controller/gains` in, each with
-//! the quality of service of [`ur5_shared::services`].
+//! The controller's iceoryx2 node and learner ports, created in the setup phase (docs/design.md
+//! §3.2, §3.4): `learner/samples` out, `controller/gains` in, each with the quality of service of
+//! [`ur5_shared::services`]. The arm's ports are the arm backend's ([`crate::arm`]); the
+//! iceoryx2 arm ([`crate::arm::Iceoryx2Arm`]) is created on this node.
 
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -8,7 +9,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use ur5_shared::services::{self, ServiceNames};
-use ur5_shared::{ArmCommand, ArmState, GainTable, StepSample};
+use ur5_shared::{GainTable, StepSample};
 
 /// Setup failures; each message says what to check.
 #[derive(Debug, thiserror::Error)]
@@ -16,6 +17,12 @@ pub enum SetupError {
     /// Invalid configuration.
     #[error(transparent)]
     Config(#[from] ur5_shared::config::ConfigError),
+    /// The configured arm backend is not the one this setup builds, or not available.
+    #[error("arm.backend = \"{0}\" is not available yet: the UR driver (issue 13) has its configuration and setup (rt_controller::arm::ur) but not its loop; use arm.backend = \"iceoryx2\" with `hil-sim serve`")]
+    BackendUnavailable(&'static str),
+    /// The `ur` arm's setup failed.
+    #[error(transparent)]
+    Ur(#[from] crate::arm::ur::UrSetupError),
     /// Another controller runs on the prefix.
     #[error(transparent)]
     Role(#[from] ur5_shared::services::RoleLockError),
@@ -50,14 +57,20 @@ pub enum SetupError {
     },
 }
 
-/// The node and the four ports. Fields drop in order: ports before services before the node.
+/// `SetupError::Port` for a port iceoryx2 refused.
+pub(crate) fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug) -> SetupError {
+    SetupError::Port {
+        kind,
+        name: name.to_owned(),
+        why: format!("{e:?}"),
+    }
+}
+
+/// The node and the two learner ports. Fields drop in order: ports before services before the
+/// node (an arm created on [`Self::node`] must be dropped before this).
 pub struct ControllerPorts {
-    pub(crate) state_sub: Subscriber<ipc::Service, ArmState, ()>,
-    pub(crate) cmd_pub: Publisher<ipc::Service, ArmCommand, ()>,
     pub(crate) sample_pub: Publisher<ipc::Service, StepSample, ()>,
     pub(crate) gains_sub: Subscriber<ipc::Service, GainTable, ()>,
-    pub(crate) state_svc: PubSubFactory<ipc::Service, ArmState, ()>,
-    pub(crate) cmd_svc: PubSubFactory<ipc::Service, ArmCommand, ()>,
     pub(crate) samples_svc: PubSubFactory<ipc::Service, StepSample, ()>,
     pub(crate) gains_svc: PubSubFactory<ipc::Service, GainTable, ()>,
     /// Names in use.
@@ -68,7 +81,7 @@ pub struct ControllerPorts {
 }
 
 impl ControllerPorts {
-    /// Creates the node (signal handling left to the caller) and every port.
+    /// Creates the node (signal handling left to the caller) and the learner ports.
     pub fn create(prefix: &str) -> Result<Self, SetupError> {
         let role = services::RoleLock::acquire(prefix, "controller")?;
         let names = ServiceNames::new(prefix);
@@ -76,29 +89,10 @@ impl ControllerPorts {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| SetupError::Node(format!("{e:?}")))?;
-        let state_svc =
-            services::ARM_STATE_QOS.open_or_create_retrying::<ArmState>(&node, &names.arm_state)?;
-        let cmd_svc = services::ARM_COMMAND_QOS
-            .open_or_create_retrying::<ArmCommand>(&node, &names.arm_command)?;
         let samples_svc = services::LEARNER_SAMPLES_QOS
             .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?;
         let gains_svc = services::CONTROLLER_GAINS_QOS
             .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)?;
-        fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug) -> SetupError {
-            SetupError::Port {
-                kind,
-                name: name.to_owned(),
-                why: format!("{e:?}"),
-            }
-        }
-        let state_sub = state_svc
-            .subscriber_builder()
-            .create()
-            .map_err(|e| port_err("subscriber", &names.arm_state, &e))?;
-        let cmd_pub = cmd_svc
-            .publisher_builder()
-            .create()
-            .map_err(|e| port_err("publisher", &names.arm_command, &e))?;
         let sample_pub = samples_svc
             .publisher_builder()
             .create()
@@ -108,12 +102,8 @@ impl ControllerPorts {
             .create()
             .map_err(|e| port_err("subscriber", &names.controller_gains, &e))?;
         Ok(Self {
-            state_sub,
-            cmd_pub,
             sample_pub,
             gains_sub,
-            state_svc,
-            cmd_svc,
             samples_svc,
             gains_svc,
             names,
@@ -122,12 +112,9 @@ impl ControllerPorts {
         })
     }
 
-    /// Number of arm-state publishers and arm-command subscribers connected.
-    pub fn arm_peers(&self) -> (usize, usize) {
-        (
-            self.state_svc.dynamic_config().number_of_publishers(),
-            self.cmd_svc.dynamic_config().number_of_subscribers(),
-        )
+    /// The node, for the iceoryx2 arm's ports.
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self._node
     }
 
     /// Number of sample subscribers and gain publishers connected (the learner's ports).
@@ -138,12 +125,10 @@ impl ControllerPorts {
         )
     }
 
-    /// Establishes the connections to every peer now, so that the loop's first send does not
+    /// Establishes the connections to the learner now, so that the loop's first send does not
     /// (connection changes allocate inside iceoryx2).
     pub fn connect(&self) {
-        let _ = self.cmd_pub.update_connections();
         let _ = self.sample_pub.update_connections();
-        let _ = self.state_sub.update_connections();
         let _ = self.gains_sub.update_connections();
     }
 }

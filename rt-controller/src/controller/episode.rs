@@ -11,16 +11,17 @@ use ur5_shared::{controller_action, ArmCommand, StepSample, DU, NO_NOISE};
 
 use super::wait::StateFreshness;
 use super::{Controller, ExitReason, Phase};
+use crate::arm::ArmBackend;
 use crate::config::Mode;
 use crate::monitor::LostPeers;
 use crate::safety::{hold_command, Fault};
 use crate::tables::Offer;
 
-impl Controller {
+impl<A: ArmBackend> Controller<A> {
     // ---------------------------------------------------------------- sending
 
     fn send(&mut self, cmd: ArmCommand) {
-        match self.ports.cmd_pub.send_copy(cmd) {
+        match self.arm.send(&cmd) {
             Ok(_) => {
                 if self.cfg.mode == Mode::Lockstep {
                     self.awaiting = Some(cmd.seq);

@@ -46,7 +46,8 @@ use ur5_shared::config::ArmLimits;
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::ArmState;
 
-use crate::config::{ControllerConfig, Mode};
+use crate::arm::{ArmBackend, Iceoryx2Arm};
+use crate::config::{ArmKind, ControllerConfig, Mode};
 use crate::monitor::{LostPeers, PeerMonitor};
 use crate::noise::Noise;
 use crate::ports::{ControllerPorts, SetupError};
@@ -136,9 +137,12 @@ enum Phase {
     NeedTable,
 }
 
-/// The controller: configuration, ports, tables, noise, statistics and loop state.
-pub struct Controller {
+/// The controller: configuration, arm, learner ports, tables, noise, statistics and loop state.
+/// Generic over the arm ([`crate::arm`]; static dispatch). `arm` is declared before `ports` so
+/// that it drops first: the iceoryx2 arm's ports live on the node `ports` owns.
+pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     cfg: ControllerConfig,
+    arm: A,
     ports: ControllerPorts,
     tables: TableBuffer,
     limits: ArmLimits,
@@ -169,38 +173,36 @@ pub struct Controller {
     monitor: Option<PeerMonitor>,
 }
 
-impl Controller {
-    /// Setup phase: validates `cfg`, applies the real-time privileges, creates the node and
-    /// ports, waits for the arm (a state and a command subscriber) and, if configured, the
-    /// learner, then preallocates tables, histograms and noise. Allocates; may fail.
+impl Controller<Iceoryx2Arm> {
+    /// Setup phase with the iceoryx2 arm (`arm/state`, `arm/command` on `cfg.prefix`): see
+    /// [`Controller::setup_with`].
     pub fn setup(cfg: ControllerConfig) -> Result<Self, SetupError> {
+        cfg.validate()?;
+        if cfg.arm.backend != ArmKind::Iceoryx2 {
+            return Err(SetupError::BackendUnavailable("ur"));
+        }
+        Self::setup_with(cfg, |_, ports| {
+            Iceoryx2Arm::create(ports.node(), &ports.names)
+        })
+    }
+}
+
+impl<A: ArmBackend> Controller<A> {
+    /// Setup phase: validates `cfg`, applies the real-time privileges, creates the node and
+    /// learner ports, creates the arm with `make_arm` and waits for it (a state, and commands
+    /// accepted) and, if configured, for the learner, then preallocates tables, histograms and
+    /// noise. Allocates; may fail.
+    pub fn setup_with(
+        cfg: ControllerConfig,
+        make_arm: impl FnOnce(&ControllerConfig, &ControllerPorts) -> Result<A, SetupError>,
+    ) -> Result<Self, SetupError> {
         cfg.validate()?;
         let rt = rt::apply(&cfg.rt);
         let ports = ControllerPorts::create(&cfg.prefix)?;
+        let mut arm = make_arm(&cfg, &ports)?;
         let t0 = monotonic_ns();
         let timeout_ns = (cfg.setup_timeout_s * 1e9) as u64;
-        let mut latest = None;
-        loop {
-            if let Ok(Some(s)) = ports.state_sub.receive() {
-                latest = Some(*s);
-            }
-            let (_, cmd_subs) = ports.arm_peers();
-            if latest.is_some() && cmd_subs > 0 {
-                break;
-            }
-            if monotonic_ns() - t0 > timeout_ns {
-                return Err(SetupError::PeerTimeout {
-                    what: if latest.is_none() {
-                        "arm state on arm/state"
-                    } else {
-                        "arm subscriber on arm/command"
-                    },
-                    timeout_s: cfg.setup_timeout_s,
-                    prefix: cfg.prefix.clone(),
-                });
-            }
-            std::thread::sleep(core::time::Duration::from_millis(1));
-        }
+        let latest = arm.wait_ready(cfg.setup_timeout_s)?;
         if cfg.wait_for_learner {
             loop {
                 let (subs, pubs) = ports.learner_peers();
@@ -217,8 +219,8 @@ impl Controller {
                 std::thread::sleep(core::time::Duration::from_millis(1));
             }
         }
+        arm.connect();
         ports.connect();
-        let latest = latest.expect("loop exits with a state");
         // Warm up stderr (its lock and handle) so the first episode report does not.
         let _ = writeln!(
             std::io::stderr(),
@@ -259,6 +261,7 @@ impl Controller {
                     core::time::Duration::from_secs_f64(cfg.monitor_period_s),
                 )
             }),
+            arm,
             ports,
             cfg,
         })
@@ -274,9 +277,14 @@ impl Controller {
         &self.stats
     }
 
-    /// The ports (e.g. to count connected peers).
+    /// The learner ports (e.g. to count connected peers).
     pub fn ports(&self) -> &ControllerPorts {
         &self.ports
+    }
+
+    /// The arm backend.
+    pub fn arm(&self) -> &A {
+        &self.arm
     }
 
     /// Loop phase: runs episodes until `cfg.episodes` complete, `stop` is raised, the arm is

@@ -1,12 +1,13 @@
 //! The period wait of every pacing mode (see [`super`], "Pacing"): lockstep waits for the
 //! state acknowledging the last command, arm pacing for any new state, deadline pacing sleeps
-//! to the next absolute deadline. Each wait drains `arm/state` and says whether the newest
+//! to the next absolute deadline. Each wait drains the arm's queued states and says whether the newest
 //! state is fresh.
 
 use ur5_shared::clock::{monotonic_ns, sleep_until_ns};
 use ur5_shared::ArmState;
 
 use super::Controller;
+use crate::arm::ArmBackend;
 use crate::config::{Mode, Pacing};
 
 /// Whether the period wait ended with a fresh arm state.
@@ -19,15 +20,15 @@ pub(super) enum StateFreshness {
     Stale,
 }
 
-impl Controller {
+impl<A: ArmBackend> Controller<A> {
     /// Takes every queued state; returns whether a new one arrived.
     #[inline]
     fn drain_states(&mut self) -> bool {
         let mut got = false;
         loop {
-            match self.ports.state_sub.receive() {
+            match self.arm.receive() {
                 Ok(Some(s)) => {
-                    self.latest = *s;
+                    self.latest = s;
                     got = true;
                 }
                 Ok(None) => break,

@@ -1,0 +1,50 @@
+//! The arm as the controller loop sees it: a source of [`ArmState`]s and a sink of
+//! [`ArmCommand`]s (docs/design.md §3.4, §3.10). The loop ([`crate::controller`]) is generic over
+//! [`ArmBackend`] (static dispatch: no virtual call, no allocation per cycle); samples and gain
+//! tables stay on iceoryx2 whatever the arm.
+//!
+//! - [`iceoryx2`]: `arm/state` in, `arm/command` out: `hil-sim serve` or another process on the
+//!   same service prefix.
+//! - [`ur`]: a Universal Robots controller over RTDE and the reverse interface: setup only so
+//!   far ([`ur::UrSession::connect`]).
+
+pub mod iceoryx2;
+pub mod ur;
+
+pub use self::iceoryx2::Iceoryx2Arm;
+
+use ur5_shared::{ArmCommand, ArmState};
+
+use crate::ports::SetupError;
+
+/// A failed receive or send in the loop; counted (`ipc_errors`), never allocated or formatted
+/// there.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ArmIoError {
+    /// The state could not be read.
+    #[error("cannot receive the arm state")]
+    Receive,
+    /// The command could not be sent.
+    #[error("cannot send the arm command")]
+    Send,
+}
+
+/// What the controller loop needs from an arm.
+///
+/// [`Self::wait_ready`] belongs to the setup phase (may allocate, block and fail); every other
+/// method is called in the loop and must not allocate, lock or block.
+pub trait ArmBackend {
+    /// Setup: waits until the arm delivers a state and accepts commands, at most `timeout_s`;
+    /// returns the first state. The error names what did not show up and what to do.
+    fn wait_ready(&mut self, timeout_s: f64) -> Result<ArmState, SetupError>;
+
+    /// Setup, last step: establishes every connection now, so that the loop's first receive and
+    /// send do not.
+    fn connect(&mut self);
+
+    /// Loop: takes the next queued state, oldest first (`Ok(None)`: nothing new).
+    fn receive(&mut self) -> Result<Option<ArmState>, ArmIoError>;
+
+    /// Loop: sends one command.
+    fn send(&mut self, cmd: &ArmCommand) -> Result<(), ArmIoError>;
+}
