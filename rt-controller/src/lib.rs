@@ -23,6 +23,7 @@
 pub mod arm;
 pub mod config;
 pub mod controller;
+pub mod error;
 pub mod monitor;
 pub mod noise;
 pub mod ports;

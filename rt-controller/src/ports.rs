@@ -11,60 +11,8 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFac
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{GainTable, StepSample};
 
-/// Setup failures; each message says what to check.
-#[derive(Debug, thiserror::Error)]
-pub enum SetupError {
-    /// Invalid configuration.
-    #[error(transparent)]
-    Config(#[from] ur5_shared::config::ConfigError),
-    /// The configured arm backend is not the one this setup builds, or not available.
-    #[error("arm.backend = \"{0}\" is not available yet: the UR driver (issue 13) has its configuration and setup (rt_controller::arm::ur) but not its loop; use arm.backend = \"iceoryx2\" with `hil-sim serve`")]
-    BackendUnavailable(&'static str),
-    /// The `ur` arm's setup failed.
-    #[error(transparent)]
-    Ur(#[from] crate::arm::ur::UrSetupError),
-    /// Another controller runs on the prefix.
-    #[error(transparent)]
-    Role(#[from] ur5_shared::services::RoleLockError),
-    /// A service name iceoryx2 refused.
-    #[error(transparent)]
-    Name(#[from] ur5_shared::services::InvalidServiceName),
-    /// The iceoryx2 node could not be created.
-    #[error("cannot create the iceoryx2 node: {0}; is /dev/shm writable?")]
-    Node(String),
-    /// A service could not be opened or created.
-    #[error(transparent)]
-    Service(#[from] ur5_shared::services::OpenServiceError),
-    /// A port could not be created.
-    #[error("cannot create a {kind} on `{name}`: {why}; too many processes may be connected (stale ports of killed processes count until cleaned up)")]
-    Port {
-        /// publisher / subscriber.
-        kind: &'static str,
-        /// Full service name.
-        name: String,
-        /// iceoryx2's error.
-        why: String,
-    },
-    /// A peer did not show up in time.
-    #[error("no {what} within {timeout_s} s on prefix `{prefix}`: start it with the same --prefix (e.g. `hil-sim serve --prefix {prefix}`), or raise setup_timeout_s")]
-    PeerTimeout {
-        /// What was waited for.
-        what: &'static str,
-        /// Timeout (s).
-        timeout_s: f64,
-        /// The service prefix.
-        prefix: String,
-    },
-}
-
-/// `SetupError::Port` for a port iceoryx2 refused.
-pub(crate) fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug) -> SetupError {
-    SetupError::Port {
-        kind,
-        name: name.to_owned(),
-        why: format!("{e:?}"),
-    }
-}
+use crate::error::port_err;
+pub use crate::error::SetupError;
 
 /// The node and the two learner ports. Fields drop in order: ports before services before the
 /// node (an arm created on [`Self::node`] must be dropped before this).

@@ -340,7 +340,11 @@ fn serve_loop<L: ServeLearner>(
         noisy: Vec::with_capacity(n),
         eval: None,
     };
+    // The seed is checked on the first version this learner publishes itself: the controller
+    // may have run the start version (a resumed one, or one it already had) for longer, with
+    // later episodes' noise.
     let mut check = TaskCheck::default();
+    check.seed_from_version = start_version + 1;
     let mut counts = Counts::default();
     let mut log = Vec::new();
     let mut best: Option<(LinGaussPolicy, f64)> = None;

@@ -12,7 +12,7 @@ use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, ArmState};
 
 use super::{ArmBackend, ArmIoError};
-use crate::ports::{port_err, SetupError};
+use crate::error::{port_err, SetupError};
 
 /// The arm's two ports and their services. Created on the controller's node
 /// ([`crate::ports::ControllerPorts::node`]), which must outlive it.
@@ -77,6 +77,7 @@ impl ArmBackend for Iceoryx2Arm {
                     } else {
                         "arm subscriber on arm/command"
                     },
+                    start: "hil-sim serve",
                     timeout_s,
                     prefix: self.prefix.clone(),
                 });

@@ -15,7 +15,7 @@ pub use self::iceoryx2::Iceoryx2Arm;
 
 use ur5_shared::{ArmCommand, ArmState};
 
-use crate::ports::SetupError;
+use crate::error::SetupError;
 
 /// A failed receive or send in the loop; counted (`ipc_errors`), never allocated or formatted
 /// there.

@@ -9,12 +9,10 @@ use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream};
 use std::time::{Duration, Instant};
 
 use ur_protocol::modes::{robot_mode_name, safety_mode_name};
-use ur_protocol::recipe::RecipeError;
-use ur_protocol::rtde::{ControllerVersion, FrameError, PackageType, Protocol};
+use ur_protocol::rtde::{ControllerVersion, PackageType, Protocol};
 use ur_protocol::script::{self, ScriptParams};
 use ur_protocol::{
-    ClientMessage, DecodeError, FrameDecoder, OutputRecipe, RobotMessage, RobotMode, RobotState,
-    SafetyMode,
+    ClientMessage, FrameDecoder, OutputRecipe, RobotMessage, RobotMode, RobotState, SafetyMode,
 };
 
 use crate::config::{UrConfig, UrSeries};
@@ -26,112 +24,7 @@ pub const PROGRAM: &str = include_str!("../../urscript/external_control.script")
 pub const OUTPUTS: &str =
     "timestamp,actual_q,actual_qd,robot_mode,safety_mode,runtime_state,speed_scaling";
 
-/// Why the `ur` arm could not be set up.
-#[derive(Debug, thiserror::Error)]
-pub enum UrSetupError {
-    /// No TCP connection.
-    #[error("cannot connect to the robot's {what} at {addr}: {why}; is the robot (or `hil-sim ur-sim`) running, and are arm.ur.host and the port right?")]
-    Connect {
-        /// RTDE or secondary interface.
-        what: &'static str,
-        /// Where.
-        addr: SocketAddr,
-        /// The OS error.
-        why: std::io::Error,
-    },
-    /// A read or write failed (a read timeout included).
-    #[error("RTDE {during}: {why}; the robot stopped answering (check the network, or raise setup_timeout_s)")]
-    Io {
-        /// The step.
-        during: &'static str,
-        /// The OS error.
-        why: std::io::Error,
-    },
-    /// The robot closed the RTDE connection.
-    #[error("the robot closed the RTDE connection during {0}; see its log (another client, or a controller restart)")]
-    Closed(&'static str),
-    /// Framing lost.
-    #[error("RTDE {during}: {why}")]
-    Frame {
-        /// The step.
-        during: &'static str,
-        /// The decoder's error.
-        why: FrameError,
-    },
-    /// A package that does not decode.
-    #[error("RTDE {during}: {why}")]
-    Decode {
-        /// The step.
-        during: &'static str,
-        /// The decoder's error.
-        why: DecodeError,
-    },
-    /// An answer of the wrong type.
-    #[error("RTDE {during}: expected its answer, got a {got:?} package")]
-    Unexpected {
-        /// The step.
-        during: &'static str,
-        /// What came.
-        got: PackageType,
-    },
-    /// Neither protocol version accepted.
-    #[error("the controller refused RTDE protocol versions 2 and 1; is this a UR controller (CB3 ≥ 3.4 or e-Series)?")]
-    NoProtocol,
-    /// `arm.ur.series` disagrees with the controller.
-    #[error("arm.ur.series = {configured:?} but the controller reports version {reported} ({}); set arm.ur.series = \"auto\" or the right one", if reported.is_e_series() { "e-Series" } else { "CB3" })]
-    SeriesMismatch {
-        /// Configured.
-        configured: UrSeries,
-        /// Reported.
-        reported: ControllerVersion,
-    },
-    /// The output recipe is unusable.
-    #[error("RTDE output recipe: {0}")]
-    Recipe(#[from] RecipeError),
-    /// START refused.
-    #[error("the controller refused RTDE START; another client may hold the interface, or the controller is busy: try again")]
-    StartRefused,
-    /// robot_mode is not RUNNING.
-    #[error("robot mode is {name} ({code}), not RUNNING: power the arm on and release the brakes (teach pendant or dashboard server), then start again")]
-    NotRunning {
-        /// The mode's name.
-        name: &'static str,
-        /// Its code.
-        code: i32,
-    },
-    /// safety_mode is not NORMAL.
-    #[error("safety mode is {name} ({code}), not NORMAL: clear the stop on the teach pendant (and its cause), then start again")]
-    NotNormal {
-        /// The mode's name.
-        name: &'static str,
-        /// Its code.
-        code: i32,
-    },
-    /// The RTDE socket's local address is not IPv4 (the program connects back to it).
-    #[error("this PC's address toward the robot is {0}, not IPv4; the program needs an IPv4 address to connect back to")]
-    NotIpv4(IpAddr),
-    /// The reverse port could not be opened.
-    #[error("cannot listen on {addr} for the program's reverse connection: {why}; is another driver running, or arm.ur.reverse_port taken?")]
-    Listen {
-        /// Where.
-        addr: SocketAddr,
-        /// The OS error.
-        why: std::io::Error,
-    },
-    /// Sending the program failed.
-    #[error("cannot send the program to the secondary interface: {0}")]
-    SendProgram(std::io::Error),
-    /// The program did not connect back.
-    #[error("the program did not connect back to {addr} within {timeout_s} s: can the robot reach this PC on that port (firewall, route)? Is the robot in remote control (e-Series)? The robot's text messages so far: {texts:?}")]
-    NoCallback {
-        /// Our reverse address.
-        addr: SocketAddr,
-        /// Waited (s).
-        timeout_s: f64,
-        /// Text messages the robot sent on RTDE.
-        texts: Vec<String>,
-    },
-}
+pub use crate::error::UrSetupError;
 
 /// A UR controller after setup: RTDE streaming the recipe, the program connected back.
 pub struct UrSession {

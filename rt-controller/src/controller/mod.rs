@@ -212,6 +212,7 @@ impl<A: ArmBackend> Controller<A> {
                 if monotonic_ns() - t0 > timeout_ns {
                     return Err(SetupError::PeerTimeout {
                         what: "learner (subscriber on learner/samples and publisher on controller/gains)",
+                        start: "learner serve",
                         timeout_s: cfg.setup_timeout_s,
                         prefix: cfg.prefix.clone(),
                     });

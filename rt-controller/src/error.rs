@@ -1,0 +1,174 @@
+//! The controller's setup errors, every backend's in one place below the modules that raise
+//! them (`ports`, `arm`, `controller`), so that none of those imports another for its errors.
+
+use std::net::{IpAddr, SocketAddr};
+
+use ur_protocol::recipe::RecipeError;
+use ur_protocol::rtde::{ControllerVersion, FrameError, PackageType};
+use ur_protocol::DecodeError;
+
+use crate::config::UrSeries;
+
+/// Setup failures; each message says what to check.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// Invalid configuration.
+    #[error(transparent)]
+    Config(#[from] ur5_shared::config::ConfigError),
+    /// The configured arm backend is not the one this setup builds, or not available.
+    #[error("arm.backend = \"{0}\" is not available yet: the UR driver (issue 13) has its configuration and setup (rt_controller::arm::ur) but not its loop; use arm.backend = \"iceoryx2\" with `hil-sim serve`")]
+    BackendUnavailable(&'static str),
+    /// The `ur` arm's setup failed.
+    #[error(transparent)]
+    Ur(#[from] UrSetupError),
+    /// Another controller runs on the prefix.
+    #[error(transparent)]
+    Role(#[from] ur5_shared::services::RoleLockError),
+    /// A service name iceoryx2 refused.
+    #[error(transparent)]
+    Name(#[from] ur5_shared::services::InvalidServiceName),
+    /// The iceoryx2 node could not be created.
+    #[error("cannot create the iceoryx2 node: {0}; is /dev/shm writable?")]
+    Node(String),
+    /// A service could not be opened or created.
+    #[error(transparent)]
+    Service(#[from] ur5_shared::services::OpenServiceError),
+    /// A port could not be created.
+    #[error("cannot create a {kind} on `{name}`: {why}; too many processes may be connected (stale ports of killed processes count until cleaned up)")]
+    Port {
+        /// publisher / subscriber.
+        kind: &'static str,
+        /// Full service name.
+        name: String,
+        /// iceoryx2's error.
+        why: String,
+    },
+    /// A peer did not show up in time.
+    #[error("no {what} within {timeout_s} s on prefix `{prefix}`: start it with the same --prefix (`{start} --prefix {prefix}`), or raise setup_timeout_s")]
+    PeerTimeout {
+        /// What was waited for.
+        what: &'static str,
+        /// The command that provides it (`hil-sim serve`, `learner serve`).
+        start: &'static str,
+        /// Timeout (s).
+        timeout_s: f64,
+        /// The service prefix.
+        prefix: String,
+    },
+}
+
+/// `SetupError::Port` for a port iceoryx2 refused.
+pub(crate) fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug) -> SetupError {
+    SetupError::Port {
+        kind,
+        name: name.to_owned(),
+        why: format!("{e:?}"),
+    }
+}
+
+/// Why the `ur` arm could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum UrSetupError {
+    /// No TCP connection.
+    #[error("cannot connect to the robot's {what} at {addr}: {why}; is the robot (or `hil-sim ur-sim`) running, and are arm.ur.host and the port right?")]
+    Connect {
+        /// RTDE or secondary interface.
+        what: &'static str,
+        /// Where.
+        addr: SocketAddr,
+        /// The OS error.
+        why: std::io::Error,
+    },
+    /// A read or write failed (a read timeout included).
+    #[error("RTDE {during}: {why}; the robot stopped answering (check the network, or raise setup_timeout_s)")]
+    Io {
+        /// The step.
+        during: &'static str,
+        /// The OS error.
+        why: std::io::Error,
+    },
+    /// The robot closed the RTDE connection.
+    #[error("the robot closed the RTDE connection during {0}; see its log (another client, or a controller restart)")]
+    Closed(&'static str),
+    /// Framing lost.
+    #[error("RTDE {during}: {why}")]
+    Frame {
+        /// The step.
+        during: &'static str,
+        /// The decoder's error.
+        why: FrameError,
+    },
+    /// A package that does not decode.
+    #[error("RTDE {during}: {why}")]
+    Decode {
+        /// The step.
+        during: &'static str,
+        /// The decoder's error.
+        why: DecodeError,
+    },
+    /// An answer of the wrong type.
+    #[error("RTDE {during}: expected its answer, got a {got:?} package")]
+    Unexpected {
+        /// The step.
+        during: &'static str,
+        /// What came.
+        got: PackageType,
+    },
+    /// Neither protocol version accepted.
+    #[error("the controller refused RTDE protocol versions 2 and 1; is this a UR controller (CB3 ≥ 3.4 or e-Series)?")]
+    NoProtocol,
+    /// `arm.ur.series` disagrees with the controller.
+    #[error("arm.ur.series = {configured:?} but the controller reports version {reported} ({}); set arm.ur.series = \"auto\" or the right one", if reported.is_e_series() { "e-Series" } else { "CB3" })]
+    SeriesMismatch {
+        /// Configured.
+        configured: UrSeries,
+        /// Reported.
+        reported: ControllerVersion,
+    },
+    /// The output recipe is unusable.
+    #[error("RTDE output recipe: {0}")]
+    Recipe(#[from] RecipeError),
+    /// START refused.
+    #[error("the controller refused RTDE START; another client may hold the interface, or the controller is busy: try again")]
+    StartRefused,
+    /// robot_mode is not RUNNING.
+    #[error("robot mode is {name} ({code}), not RUNNING: power the arm on and release the brakes (teach pendant or dashboard server), then start again")]
+    NotRunning {
+        /// The mode's name.
+        name: &'static str,
+        /// Its code.
+        code: i32,
+    },
+    /// safety_mode is not NORMAL.
+    #[error("safety mode is {name} ({code}), not NORMAL: clear the stop on the teach pendant (and its cause), then start again")]
+    NotNormal {
+        /// The mode's name.
+        name: &'static str,
+        /// Its code.
+        code: i32,
+    },
+    /// The RTDE socket's local address is not IPv4 (the program connects back to it).
+    #[error("this PC's address toward the robot is {0}, not IPv4; the program needs an IPv4 address to connect back to")]
+    NotIpv4(IpAddr),
+    /// The reverse port could not be opened.
+    #[error("cannot listen on {addr} for the program's reverse connection: {why}; is another driver running, or arm.ur.reverse_port taken?")]
+    Listen {
+        /// Where.
+        addr: SocketAddr,
+        /// The OS error.
+        why: std::io::Error,
+    },
+    /// Sending the program failed.
+    #[error("cannot send the program to the secondary interface: {0}")]
+    SendProgram(std::io::Error),
+    /// The program did not connect back.
+    #[error("the program did not connect back to {addr} within {timeout_s} s: can the robot reach this PC on that port (firewall, route)? Is the robot in remote control (e-Series)? The robot's text messages so far: {texts:?}")]
+    NoCallback {
+        /// Our reverse address.
+        addr: SocketAddr,
+        /// Waited (s).
+        timeout_s: f64,
+        /// Text messages the robot sent on RTDE.
+        texts: Vec<String>,
+    },
+}
