@@ -34,18 +34,37 @@ pub enum ImitationError {
     Ppo(String),
 }
 
-/// Each `(name, value, min)` must lie in `min..=max`; else a [`ImitationError::Config`] naming
-/// the first that does not (the counts of the settings types' `validate`).
-pub(crate) fn check_counts(
-    items: &[(&str, usize, usize)],
-    max: usize,
-) -> Result<(), ImitationError> {
-    for &(name, n, min) in items {
-        if !(min..=max).contains(&n) {
-            return Err(ImitationError::Config(format!(
-                "{name} = {n}: must be in {min}..={max}"
-            )));
-        }
+/// Each `(name, value, min)` must lie in `min..=max`; else a message naming the first that
+/// does not (the counts of the settings types' `validate`).
+pub(crate) fn check_counts(items: &[(&str, usize, usize)], max: usize) -> Result<(), String> {
+    match items.iter().find(|(_, n, min)| !(*min..=max).contains(n)) {
+        Some((name, n, min)) => Err(format!("{name} = {n}: must be in {min}..={max}")),
+        None => Ok(()),
     }
+}
+
+/// Each `(name, value, ok, allowed)` must have `ok`; else a message naming the first that does
+/// not, with its value and `allowed` (the real-valued settings of the types' `validate`).
+pub(crate) fn check_reals(items: &[(&str, f64, bool, &str)]) -> Result<(), String> {
+    match items.iter().find(|(_, _, ok, _)| !ok) {
+        Some((name, v, _, allowed)) => Err(format!("{name} = {v:?}: must be {allowed}")),
+        None => Ok(()),
+    }
+}
+
+/// The arm and GPS's settings, shared by the expert's and LQR+GAIfO's configs.
+pub(crate) fn check_arm_and_gps(
+    sim: &ur5_shared::config::SimConfig,
+    algorithm: &gps::algorithm::AlgorithmConfig,
+    prior: &gps::dynamics::prior_gmm::PriorGmmConfig,
+    fit: &gps::dynamics::lr_prior::LrPriorConfig,
+    traj_opt: &gps::traj_opt::lqr::TrajOptConfig,
+) -> Result<(), ImitationError> {
+    sim.validate()
+        .map_err(|e| ImitationError::Config(e.to_string()))?;
+    algorithm.validate()?;
+    prior.validate()?;
+    fit.validate()?;
+    traj_opt.validate()?;
     Ok(())
 }

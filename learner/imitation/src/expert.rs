@@ -88,9 +88,10 @@ impl ExpertConfig {
                 ("demos", self.demos, 1),
             ],
             crate::gaifo::GaifoConfig::MAX_COUNT,
-        )?;
+        )
+        .map_err(ImitationError::Config)?;
         let c = &self.cost;
-        let reals = [
+        crate::error::check_reals(&[
             (
                 "init_var",
                 self.init_var,
@@ -133,23 +134,16 @@ impl ExpertConfig {
                 c.action_weight >= 0.0 && c.action_weight.is_finite(),
                 "finite and >= 0",
             ),
-        ];
-        for (name, v, ok, allowed) in reals {
-            if !ok {
-                return Err(ImitationError::Config(format!(
-                    "{name} = {v:?}: must be {allowed}"
-                )));
-            }
-        }
+        ])
+        .map_err(ImitationError::Config)?;
         self.task.validate().map_err(ImitationError::Task)?;
-        self.sim
-            .validate()
-            .map_err(|e| ImitationError::Config(e.to_string()))?;
-        self.algorithm.validate()?;
-        self.prior.validate()?;
-        self.fit.validate()?;
-        self.traj_opt.validate()?;
-        Ok(())
+        crate::error::check_arm_and_gps(
+            &self.sim,
+            &self.algorithm,
+            &self.prior,
+            &self.fit,
+            &self.traj_opt,
+        )
     }
 }
 

@@ -171,14 +171,13 @@ impl GaifoConfig {
             );
         }
         self.discriminator.validate()?;
-        self.sim
-            .validate()
-            .map_err(|e| ImitationError::Config(e.to_string()))?;
-        self.algorithm.validate()?;
-        self.prior.validate()?;
-        self.fit.validate()?;
-        self.traj_opt.validate()?;
-        Ok(())
+        crate::error::check_arm_and_gps(
+            &self.sim,
+            &self.algorithm,
+            &self.prior,
+            &self.fit,
+            &self.traj_opt,
+        )
     }
 }
 

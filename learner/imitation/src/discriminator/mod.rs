@@ -135,6 +135,22 @@ impl DiscriminatorConfig {
     /// Largest accepted number of hidden layers.
     pub const MAX_LAYERS: usize = 16;
 
+    /// The hidden widths `h` of a net (the critic's, PPO's): 1 to [`Self::MAX_LAYERS`] layers,
+    /// each 1 to [`Self::MAX_WIDTH`] units; else a message naming `name`.
+    pub fn check_widths(name: &str, h: &[usize]) -> Result<(), String> {
+        if h.is_empty()
+            || h.len() > Self::MAX_LAYERS
+            || h.iter().any(|&w| w == 0 || w > Self::MAX_WIDTH)
+        {
+            return Err(format!(
+                "{name} = {h:?}: must list 1..={} widths, each in 1..={}",
+                Self::MAX_LAYERS,
+                Self::MAX_WIDTH
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks that the config can build and train a net (and does not ask for an allocation
     /// that would abort the process).
     pub fn validate(&self) -> Result<(), DiscriminatorError> {
@@ -146,15 +162,7 @@ impl DiscriminatorConfig {
                 self.hidden
             ));
         }
-        if self.hidden.len() > Self::MAX_LAYERS || self.hidden.iter().any(|&w| w > Self::MAX_WIDTH)
-        {
-            return bad(format!(
-                "hidden = {:?}: must be at most {} layers of at most {} units",
-                self.hidden,
-                Self::MAX_LAYERS,
-                Self::MAX_WIDTH
-            ));
-        }
+        Self::check_widths("hidden", &self.hidden).map_err(DiscriminatorError::Config)?;
         if !(self.lambda_gp.is_finite() && self.lambda_gp >= 0.0) {
             return bad(format!(
                 "lambda_gp must be finite and >= 0; got {}",

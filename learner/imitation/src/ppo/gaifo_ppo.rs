@@ -113,13 +113,16 @@ impl GaifoPpoConfig {
                 ("critic_updates", self.critic_updates, 1),
             ],
             GaifoConfig::MAX_COUNT,
-        )?;
-        if !(self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0) {
-            return Err(ImitationError::Config(format!(
-                "critic_lr_half_life = {}: must be finite and >= 0 (0 = constant)",
-                self.critic_lr_half_life
-            )));
-        }
+        )
+        .and_then(|()| {
+            crate::error::check_reals(&[(
+                "critic_lr_half_life",
+                self.critic_lr_half_life,
+                self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0,
+                "finite and >= 0 (0 = constant)",
+            )])
+        })
+        .map_err(ImitationError::Config)?;
         self.discriminator.validate()?;
         self.sim
             .validate()

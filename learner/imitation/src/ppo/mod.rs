@@ -107,22 +107,9 @@ impl PpoConfig {
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), String> {
         use crate::discriminator::DiscriminatorConfig as D;
-        let widths = |name: &str, h: &[usize]| -> Result<(), String> {
-            if h.is_empty()
-                || h.len() > D::MAX_LAYERS
-                || h.iter().any(|&w| w == 0 || w > D::MAX_WIDTH)
-            {
-                return Err(format!(
-                    "{name} = {h:?}: must list 1..={} widths, each in 1..={}",
-                    D::MAX_LAYERS,
-                    D::MAX_WIDTH
-                ));
-            }
-            Ok(())
-        };
-        widths("pi_hidden", &self.pi_hidden)?;
-        widths("v_hidden", &self.v_hidden)?;
-        let checks: [(&str, f64, bool, &str); 9] = [
+        D::check_widths("pi_hidden", &self.pi_hidden)?;
+        D::check_widths("v_hidden", &self.v_hidden)?;
+        crate::error::check_reals(&[
             (
                 "init_std",
                 self.init_std,
@@ -171,25 +158,11 @@ impl PpoConfig {
                 self.max_grad_norm > 0.0 && self.max_grad_norm.is_finite(),
                 "finite and > 0",
             ),
-            (
-                "epochs",
-                self.epochs as f64,
-                (1..=D::MAX_COUNT).contains(&self.epochs),
-                "in 1..=100000",
-            ),
-        ];
-        for (name, v, ok, allowed) in checks {
-            if !ok {
-                return Err(format!("{name} = {v:?}: must be {allowed}"));
-            }
-        }
-        if !(1..=D::MAX_COUNT).contains(&self.minibatch) {
-            return Err(format!(
-                "minibatch = {}: must be in 1..={}",
-                self.minibatch,
-                D::MAX_COUNT
-            ));
-        }
+        ])?;
+        crate::error::check_counts(
+            &[("epochs", self.epochs, 1), ("minibatch", self.minibatch, 1)],
+            D::MAX_COUNT,
+        )?;
         self.adam.validate()
     }
 }
