@@ -2,7 +2,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use serde::Serialize;
 
 use imitation::expert::ExpertConfig;
@@ -130,8 +129,6 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
                      to imitate, from `learner expert`"
                 );
             };
-            let demos = crate::io::demos::load(&demos_path)
-                .with_context(|| format!("loading demonstrations {}", demos_path.display()))?;
             let mut cfg: GaifoConfig = settings(rest, &path, "LQR+GAIfO")?;
             if let Some(s) = args.common.seed {
                 cfg.seed = s;
@@ -139,8 +136,7 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
             if let Some(i) = args.iterations {
                 cfg.iterations = i;
             }
-            crate::io::demos::check_against_arm(&demos, &cfg.sim)
-                .with_context(|| format!("demonstrations {}", demos_path.display()))?;
+            let demos = crate::io::demos::load_checked(&demos_path, &cfg.sim)?;
             finish(&serve_gaifo(cfg, demos, opts, |_| {})?, args.common.json)
         }
     }

@@ -2,7 +2,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use imitation::demos::Demos;
@@ -95,8 +94,6 @@ impl TrainArgs {
 
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
-    let demos = crate::io::demos::load(&args.demos)
-        .with_context(|| format!("loading demonstrations {}", args.demos.display()))?;
     if args.algo == Algo::GaifoPpo {
         anyhow::ensure!(
             args.resume.is_none(),
@@ -110,8 +107,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             pcfg.seed = s;
         }
         pcfg.validate()?;
-        crate::io::demos::check_against_arm(&demos, &pcfg.sim)
-            .with_context(|| format!("demonstrations {}", args.demos.display()))?;
+        let demos = crate::io::demos::load_checked(&args.demos, &pcfg.sim)?;
         let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&args.demos), &pcfg)?;
         manifest::claim(&args.out_dir(), &m, Claim::New { force: args.force })?;
         return run_ppo(&args, demos, &pcfg);
@@ -125,8 +121,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     // Every setting, before anything is printed or written (the run checks them again).
     cfg.validate()?;
-    crate::io::demos::check_against_arm(&demos, &cfg.sim)
-        .with_context(|| format!("demonstrations {}", args.demos.display()))?;
+    let demos = crate::io::demos::load_checked(&args.demos, &cfg.sim)?;
     let out = args.out_dir();
     if let Some(dir) = &args.resume {
         anyhow::ensure!(

@@ -20,7 +20,6 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use rayon::prelude::*;
 use ur5_shared::config::Perturbation;
 
@@ -221,13 +220,7 @@ pub fn run(
     // D26). Each arm's curve is normalised by its own converged expert and random policy.
     let nominal_path = out.join("demos_simulated.npz");
     let nominal = match demos {
-        Some(d) => {
-            let demos = crate::io::demos::load(d)
-                .with_context(|| format!("loading demonstrations {}", d.display()))?;
-            crate::io::demos::check_against_arm(&demos, &cfg.expert.sim)
-                .with_context(|| format!("demonstrations {}", d.display()))?;
-            demos
-        }
+        Some(d) => crate::io::demos::load_checked(d, &cfg.expert.sim)?,
         None => expert_demos(&cfg.expert)?,
     };
     crate::io::demos::save(&nominal, &nominal_path)?;

@@ -517,10 +517,7 @@ pub fn lqr_jobs(cfg: &ExperimentConfig, variant: &str, demos: Arc<Demos>) -> Vec
 /// `out/demos.npz`.
 fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow::Result<Demos> {
     if let Some(p) = path {
-        let d = crate::io::demos::load(p)
-            .with_context(|| format!("loading demonstrations {}", p.display()))?;
-        crate::io::demos::check_against_arm(&d, &cfg.lqr_gaifo.sim)
-            .with_context(|| format!("demonstrations {}", p.display()))?;
+        let d = crate::io::demos::load_checked(p, &cfg.lqr_gaifo.sim)?;
         eprintln!(
             "demonstrations: {} ({} of goal {:?})",
             p.display(),

@@ -119,6 +119,16 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
     Ok(demos)
 }
 
+/// Loads the demonstrations in `path` and checks them against the arm of `sim`
+/// ([`load`], [`check_against_arm`]), each error naming the file: what every run that imitates
+/// a file calls.
+pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<Demos> {
+    use anyhow::Context;
+    let demos = load(path).with_context(|| format!("loading demonstrations {}", path.display()))?;
+    check_against_arm(&demos, sim).with_context(|| format!("demonstrations {}", path.display()))?;
+    Ok(demos)
+}
+
 /// Largest difference (rad) between a demonstration's first joint angles and `start_q`, and
 /// (m) between a demonstrated end-effector point and the arm's forward kinematics at the
 /// demonstrated joint angles. Ours: 0.01, ten times the perturbed arm's sensor noise (1e-3).
