@@ -12,6 +12,8 @@
 //! - [`services`]: iceoryx2 service names, per-run prefixes and the quality of service of each
 //!   service ([`services::Qos`]).
 //! - [`clock`]: the monotonic clock of every timestamp.
+//! - [`kinematics`]: the UR5's end-effector point and velocity from joint angles (f64, no
+//!   simulator), for arms that report joint states only.
 //! - [`cost`]: the task cost C(τ) and normalised performance.
 //! - [`noise`]: seeded exploration noise ε, per (run seed, table version, episode).
 //! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
@@ -26,6 +28,7 @@ pub mod clock;
 pub mod config;
 pub mod cost;
 pub mod gains;
+pub mod kinematics;
 pub mod law;
 pub mod layout;
 pub mod msg;
