@@ -140,7 +140,8 @@ pub struct UrConfig {
     pub rtde_port: u16,
     /// Secondary-interface port on the robot (the program is sent there, headless).
     pub secondary_port: u16,
-    /// Port this PC listens on for the program's reverse connection.
+    /// Port this PC listens on for the program's reverse connection (0: any free port; the
+    /// program sent to the robot names the one bound).
     pub reverse_port: u16,
     /// Controller generation; `auto` reads it from the controller version.
     pub series: UrSeries,
@@ -148,6 +149,33 @@ pub struct UrConfig {
     /// it runs `stopj` and exits, the arm's own watchdog for a dead controller. URCL's default
     /// is 20 ms; it must exceed an arm cycle (8 ms on a CB3).
     pub receive_timeout_ms: u32,
+    /// What the program servos to between the controller's goals, every arm cycle
+    /// (docs/design.md §3.10): `hold` (the goal as sent, the zero-order hold the learner's
+    /// model and hil-sim serve assume) or `ramp` (a straight line from the previous target to
+    /// the goal over one control period).
+    pub servo_target: ServoTarget,
+    /// The wrist angles (rad, wrist 1–3) the arm keeps: the resets move the wrists there, every
+    /// servo target carries them. Must equal the sim's `sim.wrist_q` the demonstrations were
+    /// made with.
+    pub wrist_q: [f64; 3],
+    /// The end-effector point in the `wrist_3_link` (flange) frame (m): the sim's
+    /// `sim.ee_offset`.
+    pub ee_offset: [f64; 3],
+    /// Peak joint speed of the reset motion to `task.start_q` (rad/s): a smooth (quintic)
+    /// joint-space move; keep it low on a real arm.
+    pub reset_speed_rad_s: f64,
+}
+
+/// What the `ur` arm's program servos to between two controller goals.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ServoTarget {
+    /// The newest goal, held for the control period (zero-order hold).
+    #[default]
+    Hold,
+    /// A straight line from the previous target to the new goal, reached after one control
+    /// period.
+    Ramp,
 }
 
 impl Default for UrConfig {
@@ -159,6 +187,10 @@ impl Default for UrConfig {
             reverse_port: 50001,
             series: UrSeries::Auto,
             receive_timeout_ms: 20,
+            servo_target: ServoTarget::Hold,
+            wrist_q: ur5_shared::config::SimConfig::default().wrist_q,
+            ee_offset: [0.0; 3],
+            reset_speed_rad_s: 0.5,
         }
     }
 }
@@ -193,10 +225,9 @@ impl ArmConfig {
         for (key, port) in [
             ("arm.ur.rtde_port", u.rtde_port),
             ("arm.ur.secondary_port", u.secondary_port),
-            ("arm.ur.reverse_port", u.reverse_port),
         ] {
             if port == 0 {
-                return bad(key, "0 is not a port; the defaults are 30004 (RTDE), 30002 (secondary), 50001 (reverse)".into());
+                return bad(key, "0 is not a port on the robot; the defaults are 30004 (RTDE) and 30002 (secondary)".into());
             }
         }
         if u.rtde_port == u.secondary_port {
@@ -213,6 +244,18 @@ impl ArmConfig {
                     "{} must be in {lo}..={hi} (above a CB3 cycle of 8 ms)",
                     u.receive_timeout_ms
                 ),
+            );
+        }
+        if !u.wrist_q.iter().chain(&u.ee_offset).all(|v| v.is_finite() && v.abs() <= 7.0) {
+            return bad(
+                "arm.ur.wrist_q/ee_offset",
+                format!("{:?} / {:?} must be finite, within ±7 (rad, m)", u.wrist_q, u.ee_offset),
+            );
+        }
+        if !(u.reset_speed_rad_s > 0.0 && u.reset_speed_rad_s <= 3.0) {
+            return bad(
+                "arm.ur.reset_speed_rad_s",
+                format!("{} must be in (0, 3] rad/s (UR joints: π rad/s at most)", u.reset_speed_rad_s),
             );
         }
         if action_mode != ActionMode::GoalAngles {
@@ -381,6 +424,15 @@ impl ControllerConfig {
             );
         }
         self.arm.validate(self.action_mode)?;
+        if self.arm.backend == ArmKind::Ur
+            && self.mode == Mode::RealTime
+            && self.pacing != Pacing::Arm
+        {
+            return bad(
+                "pacing",
+                "arm.backend = \"ur\" is clocked by the robot's RTDE packages: set pacing = \"arm\" (or --pacing arm)".into(),
+            );
+        }
         if let Err((key, v)) = self.bounds.validate() {
             return bad("bounds", format!("{key} = {v}: must be finite and > 0"));
         }

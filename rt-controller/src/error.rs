@@ -15,9 +15,9 @@ pub enum SetupError {
     /// Invalid configuration.
     #[error(transparent)]
     Config(#[from] ur5_shared::config::ConfigError),
-    /// The configured arm backend is not the one this setup builds, or not available.
-    #[error("arm.backend = \"{0}\" is not available yet: the UR driver (issue 13) has its configuration and setup (rt_controller::arm::ur) but not its loop; use arm.backend = \"iceoryx2\" with `hil-sim serve`")]
-    BackendUnavailable(&'static str),
+    /// The configured arm backend is not the one this setup builds.
+    #[error("this setup builds the {0} arm but the configuration's arm.backend differs; call the setup of the configured backend (Controller::setup for iceoryx2, Controller::setup_ur for ur)")]
+    BackendMismatch(&'static str),
     /// The `ur` arm's setup failed.
     #[error(transparent)]
     Ur(#[from] UrSetupError),

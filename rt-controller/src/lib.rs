@@ -34,7 +34,7 @@ pub mod tables;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 
-pub use arm::{ArmBackend, Iceoryx2Arm};
+pub use arm::{ArmBackend, Iceoryx2Arm, UrArm};
 pub use config::{ControllerConfig, Mode, Pacing};
 pub use controller::{Controller, ExitReason, Summary};
 pub use ports::SetupError;

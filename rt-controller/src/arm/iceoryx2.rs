@@ -86,9 +86,10 @@ impl ArmBackend for Iceoryx2Arm {
         }
     }
 
-    fn connect(&mut self) {
+    fn connect(&mut self) -> Result<(), SetupError> {
         let _ = self.cmd_pub.update_connections();
         let _ = self.state_sub.update_connections();
+        Ok(())
     }
 
     #[inline]

@@ -5,13 +5,14 @@
 //!
 //! - [`iceoryx2`]: `arm/state` in, `arm/command` out: `hil-sim serve` or another process on the
 //!   same service prefix.
-//! - [`ur`]: a Universal Robots controller over RTDE and the reverse interface: setup only so
-//!   far ([`ur::UrSession::connect`]).
+//! - [`ur`]: a Universal Robots controller (or `hil-sim ur-sim`) over RTDE and the reverse
+//!   interface ([`ur::UrArm`]).
 
 pub mod iceoryx2;
 pub mod ur;
 
 pub use self::iceoryx2::Iceoryx2Arm;
+pub use self::ur::UrArm;
 
 use ur5_shared::{ArmCommand, ArmState};
 
@@ -40,11 +41,31 @@ pub trait ArmBackend {
 
     /// Setup, last step: establishes every connection now, so that the loop's first receive and
     /// send do not.
-    fn connect(&mut self);
+    fn connect(&mut self) -> Result<(), SetupError>;
 
     /// Loop: takes the next queued state, oldest first (`Ok(None)`: nothing new).
     fn receive(&mut self) -> Result<Option<ArmState>, ArmIoError>;
 
     /// Loop: sends one command.
     fn send(&mut self, cmd: &ArmCommand) -> Result<(), ArmIoError>;
+
+    /// Loop: why the arm is gone for good (its connection closed), if it is; the loop then
+    /// ends with [`crate::ExitReason::ArmLost`] at the first stale wait instead of waiting for
+    /// `safety.give_up_after_s`.
+    fn lost(&self) -> Option<&'static str> {
+        None
+    }
+
+    /// After the loop (may allocate): what the backend has to add to the summary.
+    fn report(&self) -> Option<ArmReport> {
+        None
+    }
+}
+
+/// A backend's own part of the run summary (`arm` in `--json`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "backend", rename_all = "snake_case")]
+pub enum ArmReport {
+    /// The `ur` arm's counters.
+    Ur(ur::UrReport),
 }

@@ -7,7 +7,7 @@ use std::io::Write;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
 use ur5_shared::safety::clamp_action;
-use ur5_shared::{controller_action, ArmCommand, StepSample, DU, NO_NOISE};
+use ur5_shared::{controller_action, ArmCommand, ArmFaults, StepSample, DU, NO_NOISE};
 
 use super::wait::StateFreshness;
 use super::{Controller, ExitReason, Phase};
@@ -118,11 +118,17 @@ impl<A: ArmBackend> Controller<A> {
 
     /// One loop iteration after the period wait.
     pub(super) fn step(&mut self, freshness: StateFreshness) -> Option<ExitReason> {
-        if freshness == StateFreshness::Stale && self.give_up() {
+        if freshness == StateFreshness::Stale && (self.give_up() || self.arm.lost().is_some()) {
             if self.fault != Some(Fault::StaleState) {
                 self.latch(Fault::StaleState);
             }
             return Some(ExitReason::ArmLost);
+        }
+        if freshness == StateFreshness::Fresh && self.latest.faults.contains(ArmFaults::DRIVER) {
+            // The robot stopped (protective stop, safety mode, program ended): only a person
+            // at the robot can clear that. End the episode, hold, exit.
+            self.abort_episode(Fault::ArmFault);
+            return Some(ExitReason::ArmStopped);
         }
         match self.phase {
             Phase::Boundary => self.boundary(),

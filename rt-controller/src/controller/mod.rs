@@ -46,7 +46,7 @@ use ur5_shared::config::ArmLimits;
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::ArmState;
 
-use crate::arm::{ArmBackend, Iceoryx2Arm};
+use crate::arm::{ArmBackend, ArmReport, Iceoryx2Arm, UrArm};
 use crate::config::{ArmKind, ControllerConfig, Mode};
 use crate::monitor::{LostPeers, PeerMonitor};
 use crate::noise::Noise;
@@ -71,6 +71,10 @@ pub enum ExitReason {
     ArmLost,
     /// No valid table arrived within `safety.no_table_timeout_s`.
     NoTable,
+    /// The arm's driver reported a stop the controller cannot clear (`ArmFaults::DRIVER`: a
+    /// protective stop, safety mode not NORMAL, robot not RUNNING, or the robot's program
+    /// ended): the arm holds; clear the cause on the robot, then start again.
+    ArmStopped,
 }
 
 /// The end-of-run summary (`--json`).
@@ -122,6 +126,11 @@ pub struct Summary {
     pub intake: Percentiles,
     /// Peer processes that died or left during the run ([`crate::monitor`]), if it ran.
     pub lost_peers: Option<LostPeers>,
+    /// Why the arm is gone, if the backend knows (e.g. the robot closed RTDE).
+    pub arm_lost: Option<&'static str>,
+    /// The arm backend's own counters (the `ur` arm: packages, commands, keepalives, robot
+    /// stop).
+    pub arm: Option<ArmReport>,
     /// Real-time privileges obtained.
     pub rt: RtOutcome,
     /// Wall time of the loop phase (s).
@@ -179,11 +188,23 @@ impl Controller<Iceoryx2Arm> {
     pub fn setup(cfg: ControllerConfig) -> Result<Self, SetupError> {
         cfg.validate()?;
         if cfg.arm.backend != ArmKind::Iceoryx2 {
-            return Err(SetupError::BackendUnavailable("ur"));
+            return Err(SetupError::BackendMismatch("iceoryx2"));
         }
         Self::setup_with(cfg, |_, ports| {
             Iceoryx2Arm::create(ports.node(), &ports.names)
         })
+    }
+}
+
+impl Controller<UrArm> {
+    /// Setup phase with the `ur` arm (`cfg.arm.ur`; docs/design.md §3.10): see
+    /// [`Controller::setup_with`].
+    pub fn setup_ur(cfg: ControllerConfig) -> Result<Self, SetupError> {
+        cfg.validate()?;
+        if cfg.arm.backend != ArmKind::Ur {
+            return Err(SetupError::BackendMismatch("ur"));
+        }
+        Self::setup_with(cfg, |cfg, _| Ok(UrArm::new(cfg)))
     }
 }
 
@@ -220,7 +241,7 @@ impl<A: ArmBackend> Controller<A> {
                 std::thread::sleep(core::time::Duration::from_millis(1));
             }
         }
-        arm.connect();
+        arm.connect()?;
         ports.connect();
         // Warm up stderr (its lock and handle) so the first episode report does not.
         let _ = writeln!(
@@ -311,7 +332,9 @@ impl<A: ArmBackend> Controller<A> {
         if self.cfg.episode_report {
             let _ = writeln!(
                 std::io::stderr(),
-                "rt-controller: exit ({reason:?}) after {} episodes ({} aborted), {} ticks; compute {}; wake {}; swaps {}, rejected {}, missed periods {}",
+                "rt-controller: exit ({reason:?}{}{}) after {} episodes ({} aborted), {} ticks; compute {}; wake {}; swaps {}, rejected {}, missed periods {}",
+                if self.arm.lost().is_some() { ": " } else { "" },
+                self.arm.lost().unwrap_or(""),
                 self.stats.episodes_completed,
                 self.stats.episodes_aborted,
                 self.stats.ticks,
@@ -352,6 +375,8 @@ impl<A: ArmBackend> Controller<A> {
             validate: s.validate.summary(),
             intake: s.intake.summary(),
             lost_peers: self.monitor.as_ref().map(|m| m.health.lost()),
+            arm_lost: self.arm.lost(),
+            arm: self.arm.report(),
             rt: self.rt.clone(),
             wall_s: self.wall_s,
         }

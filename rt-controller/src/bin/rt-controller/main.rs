@@ -5,8 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
+use rt_controller::config::ArmKind;
 use rt_controller::{
-    install_signal_handlers, Controller, ControllerConfig, ExitReason, Mode, Pacing, STOP,
+    install_signal_handlers, ArmBackend, Controller, ControllerConfig, ExitReason, Mode, Pacing,
+    Summary, STOP,
 };
 use ur5_shared::config::from_toml_file;
 
@@ -19,7 +21,7 @@ wall-clock and printed in µs (JSON: ns). Every option lives in the TOML file (`
 of them with their defaults); the flags below override it.";
 
 #[derive(Parser)]
-#[command(name = "rt-controller", version, about = "Real-time controller: executes the learner's gain tables on the arm over iceoryx2.", long_about = None, after_help = UNITS)]
+#[command(name = "rt-controller", version, about = "Real-time controller: executes the learner's gain tables on the arm (hil-sim over iceoryx2, or a UR robot over RTDE).", long_about = None, after_help = UNITS)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -45,8 +47,11 @@ enum PacingArg {
 enum Cmd {
     /// Run episodes: reset the arm to task.start_q (rad), execute the newest gain table for
     /// task.horizon ticks of task.dt s, publish every step on learner/samples, take a new table
-    /// only at the episode boundary. Exit codes: 0 done or stopped (SIGINT/SIGTERM), 2 setup
-    /// error, 3 arm lost (stale for safety.give_up_after_s), 4 no table (safety.no_table_timeout_s).
+    /// only at the episode boundary. The arm is `hil-sim serve` over iceoryx2 or a UR robot
+    /// (`[arm] backend = "ur"`, `[arm.ur]`). Exit codes: 0 done or stopped (SIGINT/SIGTERM),
+    /// 2 setup error, 3 arm lost (stale for safety.give_up_after_s, or its connection closed),
+    /// 4 no table (safety.no_table_timeout_s), 5 the arm stopped itself (a UR protective stop,
+    /// safety mode not NORMAL, or its program ended).
     #[command(after_help = UNITS)]
     Run {
         /// TOML configuration file (all keys optional).
@@ -107,6 +112,12 @@ fn main() {
     }
 }
 
+/// The loop phase of any arm; the summary.
+fn run_loop<A: ArmBackend>(mut controller: Controller<A>) -> Summary {
+    let reason = controller.run(&STOP);
+    controller.summary(reason)
+}
+
 fn real_main() -> Result<i32> {
     // iceoryx2 warns about running without its config file; IOX2_LOG_LEVEL=Warn shows it.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
@@ -152,15 +163,18 @@ fn real_main() -> Result<i32> {
                 cfg.seed = s;
             }
             install_signal_handlers();
-            let mut controller = Controller::setup(cfg)?;
-            let reason = controller.run(&STOP);
+            let summary = match cfg.arm.backend {
+                ArmKind::Iceoryx2 => run_loop(Controller::setup(cfg)?),
+                ArmKind::Ur => run_loop(Controller::setup_ur(cfg)?),
+            };
             if json {
-                println!("{}", serde_json::to_string(&controller.summary(reason))?);
+                println!("{}", serde_json::to_string(&summary)?);
             }
-            Ok(match reason {
+            Ok(match summary.exit_reason {
                 ExitReason::EpisodesDone | ExitReason::Stopped => 0,
                 ExitReason::ArmLost => 3,
                 ExitReason::NoTable => 4,
+                ExitReason::ArmStopped => 5,
             })
         }
         #[cfg(not(feature = "testkit"))]
