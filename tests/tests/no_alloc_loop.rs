@@ -245,3 +245,146 @@ fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
         s.ticks
     );
 }
+
+/// The `ur` arm's loop (RTDE packages in, servoj targets out) against `hil-sim ur-sim` in this
+/// process (lockstep; its threads are not counted), across boundaries and a table swap. The
+/// order is fixed by the test: version 1 waits in the controller's queue before the loop; the
+/// learner stand-in raises `pause` at the first sample (version 1 is then in use), the loop
+/// returns, the test publishes version 2 (not counted) and runs the loop again, which takes
+/// version 2 at its next boundary.
+#[test]
+fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
+    use hil_sim::ur_sim::{self, UrSimConfig};
+    use rt_controller::config::{ArmConfig, ArmKind, UrConfig};
+    use rt_controller::UrArm;
+    use ur5_shared::config::{SimConfig, TaskConfig};
+
+    const T_UR: usize = 20;
+    const EPISODES_UR: u64 = 5;
+    let sim = ur_sim::spawn(
+        &TaskConfig::default(),
+        &SimConfig::default(),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            lockstep: true,
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim");
+    let prefix = unique_prefix("no-alloc-ur");
+    let names = ServiceNames::new(&prefix);
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .unwrap();
+    let gains = services::CONTROLLER_GAINS_QOS
+        .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)
+        .unwrap();
+    let publisher = gains.publisher_builder().create().unwrap();
+    // The sample watcher (its own node: iceoryx2 ports stay on their thread); `pause` at the
+    // first sample.
+    let pause = Arc::new(AtomicBool::new(false));
+    let stop = Arc::new(AtomicBool::new(false));
+    let (ready_tx, ready) = mpsc::channel();
+    let watcher = {
+        let (pause, stop, prefix) = (pause.clone(), stop.clone(), prefix.clone());
+        std::thread::spawn(move || {
+            let node = NodeBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::Disabled)
+                .create::<ipc::Service>()
+                .unwrap();
+            let samples = services::LEARNER_SAMPLES_QOS
+                .open_or_create_retrying::<StepSample>(
+                    &node,
+                    &ServiceNames::new(&prefix).learner_samples,
+                )
+                .unwrap();
+            let subscriber = samples
+                .subscriber_builder()
+                .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
+                .create()
+                .unwrap();
+            ready_tx.send(()).unwrap();
+            let mut received = Vec::new();
+            while !stop.load(Ordering::Relaxed) {
+                while let Some(s) = subscriber.receive().unwrap() {
+                    received.push((s.episode, s.table_version));
+                    pause.store(true, Ordering::Relaxed);
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            while let Some(s) = subscriber.receive().unwrap() {
+                received.push((s.episode, s.table_version));
+            }
+            received
+        })
+    };
+    ready.recv().unwrap();
+
+    let cfg = ControllerConfig {
+        prefix: prefix.clone(),
+        episodes: EPISODES_UR,
+        wait_for_learner: true,
+        episode_report: true,
+        task: TaskConfig {
+            horizon: T_UR,
+            ..TaskConfig::default()
+        },
+        safety: Safety {
+            stale_state_timeout_s: 30.0,
+            ..Safety::default()
+        },
+        arm: ArmConfig {
+            backend: ArmKind::Ur,
+            ur: UrConfig {
+                host: "127.0.0.1".into(),
+                rtde_port: sim.rtde_addr.port(),
+                secondary_port: sim.secondary_addr.port(),
+                reverse_port: 0,
+                // Long: a descheduled test thread must not end the program.
+                receive_timeout_ms: 1000,
+                ..UrConfig::default()
+            },
+        },
+        ..ControllerConfig::default()
+    };
+    let mut controller: Controller<UrArm> = Controller::setup_ur(cfg).expect("setup");
+    while gains.dynamic_config().number_of_subscribers() == 0 {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    publisher
+        .send_copy(*constant_goal_table(1, T_UR, [0.2, -1.8, 2.2], 0.01))
+        .unwrap();
+    ALLOCS.with(|c| c.set(0));
+    FREES.with(|c| c.set(0));
+    ARMED.with(|a| a.set(true));
+    let first = controller.run(&pause);
+    ARMED.with(|a| a.set(false));
+    publisher
+        .send_copy(*constant_goal_table(2, T_UR, [-0.2, -1.7, 2.0], 0.01))
+        .unwrap();
+    let never = AtomicBool::new(false);
+    ARMED.with(|a| a.set(true));
+    let second = controller.run(&never);
+    ARMED.with(|a| a.set(false));
+    let (allocs, frees) = (ALLOCS.with(|c| c.get()), FREES.with(|c| c.get()));
+
+    stop.store(true, Ordering::Relaxed);
+    let received = watcher.join().unwrap();
+    let report = controller.arm().report();
+    let s = controller.stats();
+    sim.stop();
+    assert_eq!((first, second), (ExitReason::Stopped, ExitReason::EpisodesDone));
+    assert_eq!(s.swaps, 2, "version 1 first, version 2 after the pause");
+    assert!(s.ticks >= 80, "only {} ticks", s.ticks);
+    assert!(report.packages >= 50 * s.ticks, "{report:?}");
+    assert!(received.iter().any(|(_, v)| *v == 2));
+    assert_eq!(
+        (allocs, frees),
+        (0, 0),
+        "the ur loop allocated {allocs} and freed {frees} times over {} ticks and {} packages",
+        s.ticks,
+        report.packages
+    );
+}

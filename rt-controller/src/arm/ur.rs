@@ -27,6 +27,7 @@ use ur_protocol::{ControlMode, ReverseCommand};
 use super::{ArmBackend, ArmIoError};
 use crate::config::{ServoTarget, UrConfig, UrSeries};
 use crate::error::SetupError;
+use crate::stats::{Histogram, Percentiles};
 
 /// The project's robot-side program (placeholders filled in by [`script::render`]).
 pub const PROGRAM: &str = include_str!("../../urscript/external_control.script");
@@ -456,7 +457,17 @@ pub struct UrReport {
     pub robot_stop: Option<String>,
     /// Why the arm is gone, if it is (connection closed).
     pub lost: Option<&'static str>,
+    /// Per package: decode + state build (FK) + reverse write, ns.
+    pub cycle: Percentiles,
+    /// Real time only: when a package was handled, against the arm's clock (its timestamps),
+    /// ns: (wall − wall₀) − (ts − ts₀)/time_compression, minus its minimum over the first
+    /// [`LATENESS_BASELINE`] packages (the network's fixed delay is not known). Includes the
+    /// robot's and this PC's clock drift (µs per s on real hardware; none against ur-sim).
+    pub lateness: Option<Percentiles>,
 }
+
+/// Packages that set the lateness baseline.
+pub const LATENESS_BASELINE: u64 = 100;
 
 /// Counters of the loop (no allocation; [`UrReport`] at the end).
 #[derive(Clone, Copy, Debug, Default)]
@@ -502,8 +513,34 @@ struct Live {
     last_write_ns: u64,
     last_text: heapless::String<256>,
     robot_stop: Option<(i32, i32, u32)>,
+    /// The program has been seen running (runtime state PLAYING).
+    program_seen: bool,
     lost: Option<&'static str>,
     counts: Counts,
+    cycle_ns: Histogram,
+    /// Real time: the time compression, the first package's (wall ns, arm s), the baseline
+    /// offset (ns) and the histogram.
+    lateness: Option<Lateness>,
+}
+
+/// The lateness measurement of [`UrReport::lateness`].
+struct Lateness {
+    compression: f64,
+    first: Option<(u64, f64)>,
+    baseline_ns: i64,
+    hist: Histogram,
+}
+
+impl Lateness {
+    fn record(&mut self, package: u64, wall_ns: u64, ts: f64) {
+        let (w0, t0) = *self.first.get_or_insert((wall_ns, ts));
+        let offset = (wall_ns - w0) as i64 - ((ts - t0) * 1e9 / self.compression) as i64;
+        if package <= LATENESS_BASELINE {
+            self.baseline_ns = if package == 1 { offset } else { self.baseline_ns.min(offset) };
+        } else {
+            self.hist.record((offset - self.baseline_ns).max(0) as u64);
+        }
+    }
 }
 
 /// The `ur` arm backend: [`UrRtde::connect`] in [`ArmBackend::wait_ready`], the program
@@ -514,6 +551,8 @@ pub struct UrArm {
     limits: ArmLimits,
     /// Control period (s of arm time): `task.dt`.
     period_s: f64,
+    /// Real time: the time compression (lateness is measured); lockstep: `None`.
+    real_time: Option<f64>,
     timeout: Duration,
     rtde: Option<UrRtde>,
     live: Option<Live>,
@@ -526,6 +565,7 @@ impl UrArm {
             cfg: cfg.arm.ur.clone(),
             limits: cfg.limits.clone(),
             period_s: cfg.task.dt,
+            real_time: (cfg.mode == crate::config::Mode::RealTime).then_some(cfg.time_compression),
             timeout: Duration::from_secs_f64(cfg.setup_timeout_s),
             rtde: None,
             live: None,
@@ -558,6 +598,8 @@ impl UrArm {
                 )
             }),
             lost: l.lost,
+            cycle: l.cycle_ns.summary(),
+            lateness: l.lateness.as_ref().map(|x| x.hist.summary()),
         }
     }
 }
@@ -603,8 +645,16 @@ impl ArmBackend for UrArm {
             last_write_ns: monotonic_ns(),
             last_text: heapless::String::new(),
             robot_stop: None,
+            program_seen: false,
             lost: None,
             counts: Counts::default(),
+            cycle_ns: Histogram::new(),
+            lateness: self.real_time.map(|compression| Lateness {
+                compression,
+                first: None,
+                baseline_ns: 0,
+                hist: Histogram::new(),
+            }),
         };
         // The program's first command: hold where the arm is.
         live.write(&self.cfg)
@@ -736,6 +786,7 @@ impl Live {
                     }
                 }
             };
+            let t_frame = monotonic_ns();
             let message = match RobotMessage::decode(&frame, self.protocol) {
                 Ok(m) => m,
                 Err(_) => {
@@ -766,14 +817,18 @@ impl Live {
                 continue;
             }
             self.counts.packages += 1;
-            if let Some(s) = self.on_package() {
+            if let Some(l) = self.lateness.as_mut() {
+                l.record(self.counts.packages, t_frame, self.robot.timestamp);
+            }
+            let emitted = self.on_package();
+            if emitted.is_none() || !self.awaiting_answer {
+                self.write(cfg)?;
+                self.cycle_ns.record(monotonic_ns() - t_frame);
+            }
+            if let Some(s) = emitted {
                 self.counts.states += 1;
-                if !self.awaiting_answer {
-                    self.write(cfg)?;
-                }
                 return Ok(Some(s));
             }
-            self.write(cfg)?;
         }
     }
 
@@ -783,9 +838,13 @@ impl Live {
         let period_s = self.period_s;
         let r = &self.robot;
         let ts = r.timestamp;
+        // The program counts as ended once it was seen running and is no longer (packages
+        // queued before it started say STOPPED).
+        let playing = r.runtime_state == runtime_state::PLAYING;
+        self.program_seen |= playing;
         let stopped = r.robot_mode != RobotMode::Running.code()
             || r.safety_mode != SafetyMode::Normal.code()
-            || r.runtime_state != runtime_state::PLAYING;
+            || (self.program_seen && !playing);
         if stopped && self.robot_stop.is_none() {
             self.robot_stop = Some((r.robot_mode, r.safety_mode, r.runtime_state));
             // The controller hears of it at once, not at the next control period.

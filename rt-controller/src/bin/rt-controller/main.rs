@@ -98,6 +98,25 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Benchmark the `ur` arm's loop in real time against the robot (or `hil-sim ur-sim`) the
+    /// configuration's `[arm.ur]` names, holding the arm where it is (no learner, no table):
+    /// per RTDE package the decode + state build + reverse write, the handling's lateness
+    /// against the arm's clock, and the state-to-tick latency. Prints a table (µs).
+    #[command(after_help = UNITS)]
+    BenchUr {
+        /// TOML configuration file with `[arm] backend = "ur"` and `[arm.ur]`.
+        #[arg(long)]
+        config: PathBuf,
+        /// How long to run (s).
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+        /// iceoryx2 service prefix of the controller's (unused) learner ports.
+        #[arg(long, default_value = "bench-ur")]
+        prefix: String,
+        /// Print a one-line JSON summary on stdout at the end.
+        #[arg(long)]
+        json: bool,
+    },
     /// Print the default configuration as TOML (every option, with its default).
     PrintConfig,
 }
@@ -176,6 +195,63 @@ fn real_main() -> Result<i32> {
                 ExitReason::NoTable => 4,
                 ExitReason::ArmStopped => 5,
             })
+        }
+        Cmd::BenchUr {
+            config,
+            seconds,
+            prefix,
+            json,
+        } => {
+            let mut cfg: ControllerConfig = from_toml_file(&config)
+                .with_context(|| format!("--config {}", config.display()))?;
+            anyhow::ensure!(
+                cfg.arm.backend == ArmKind::Ur,
+                "--config {}: bench-ur needs [arm] backend = \"ur\"",
+                config.display()
+            );
+            anyhow::ensure!(
+                seconds.is_finite() && seconds > 0.0,
+                "--seconds {seconds} must be > 0"
+            );
+            cfg.prefix = prefix;
+            cfg.mode = Mode::RealTime;
+            cfg.pacing = Pacing::Arm;
+            cfg.wait_for_learner = false;
+            cfg.episodes = 0;
+            cfg.safety.no_table_timeout_s = seconds;
+            install_signal_handlers();
+            let mut controller = Controller::setup_ur(cfg)?;
+            let reason = controller.run(&STOP);
+            let summary = controller.summary(reason);
+            let r = controller.arm().report();
+            let us = |v: u64| v as f64 / 1e3;
+            println!(
+                "rt-controller bench-ur: {seconds} s, real time, arm held (no table); {} packages, {} commands written, {} keepalives; exit {:?}",
+                r.packages, r.commands_written, r.keepalives, reason
+            );
+            println!("| measure (µs) | n | p50 | p99 | p99.9 | max |");
+            println!("|---|---|---|---|---|---|");
+            let rows = [
+                ("package: decode + state (FK) + reverse write", Some(r.cycle)),
+                ("package handled, late against the arm's clock", r.lateness),
+                ("state → controller tick (arm pacing)", Some(summary.wake)),
+            ];
+            for (name, p) in rows {
+                if let Some(p) = p {
+                    println!(
+                        "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+                        p.count,
+                        us(p.p50_ns),
+                        us(p.p99_ns),
+                        us(p.p999_ns),
+                        us(p.max_ns)
+                    );
+                }
+            }
+            if json {
+                println!("{}", serde_json::to_string(&summary)?);
+            }
+            Ok(if r.lost.is_some() || r.robot_stop.is_some() { 3 } else { 0 })
         }
         #[cfg(not(feature = "testkit"))]
         Cmd::Bench { .. } => anyhow::bail!(
