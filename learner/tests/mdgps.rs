@@ -59,7 +59,11 @@ fn mean_action_jacobian_matches_central_differences() {
             let s = random_state(&mut rng);
             let mut jac = [[0.0; DX]; DU];
             let a = pol.mean_action_jacobian(&s, mode, &mut ws, &mut jac);
-            assert_eq!(a, pol.mean_action(&s, mode, &mut ws), "same mean either way");
+            assert_eq!(
+                a,
+                pol.mean_action(&s, mode, &mut ws),
+                "same mean either way"
+            );
             let h = 1e-6;
             for i in 0..DX {
                 let (mut sp, mut sm) = (s, s);
@@ -86,7 +90,8 @@ fn mean_action_jacobian_matches_central_differences() {
 /// Targets from a smooth function of the state with random SPD precisions.
 fn synthetic_targets(n: usize, seed: u64) -> Targets {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let a: [[f64; DX]; DU] = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-0.3..0.3)));
+    let a: [[f64; DX]; DU] =
+        std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-0.3..0.3)));
     let mut t = Targets::default();
     for _ in 0..n {
         let s = random_state(&mut rng);
@@ -94,7 +99,8 @@ fn synthetic_targets(n: usize, seed: u64) -> Targets {
             (0..DX).map(|i| a[j][i] * s[i]).sum::<f64>() + 0.2 * (2.0 * s[j]).sin()
         }));
         // P = B Bᵀ + 0.5 I.
-        let b: [[f64; DU]; DU] = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0)));
+        let b: [[f64; DU]; DU] =
+            std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0)));
         t.precisions.push(std::array::from_fn(|i| {
             std::array::from_fn(|j| {
                 (0..DU).map(|k| b[i][k] * b[j][k]).sum::<f64>() + if i == j { 0.5 } else { 0.0 }
@@ -137,7 +143,11 @@ fn s_step_reduces_the_weighted_loss_and_is_deterministic_for_a_seed() {
         assert!((pol.std()[j] - (1.0 / m).sqrt()).abs() < 1e-12);
     }
     let (again, a1, _) = fit(5);
-    assert_eq!(again.flat(), pol.flat(), "same seed, same policy bit for bit");
+    assert_eq!(
+        again.flat(),
+        pol.flat(),
+        "same seed, same policy bit for bit"
+    );
     assert_eq!(a1, r1);
     let (other, _, _) = fit(6);
     assert_ne!(other.flat(), pol.flat(), "the seed orders the minibatches");
@@ -183,7 +193,9 @@ fn edit(src: &Path, dst: &Path, name: &str, new: Option<(&[u64], &[f64])>) {
                 let r: Vec<&str> = s.iter().map(String::as_str).collect();
                 w.strings(&n, &r).unwrap();
             }
-            "seed" | "horizon" | "iterations" => w.u64(&n, &[], &[f.u64_scalar(&n).unwrap()]).unwrap(),
+            "seed" | "horizon" | "iterations" => {
+                w.u64(&n, &[], &[f.u64_scalar(&n).unwrap()]).unwrap()
+            }
             _ => {
                 let (shape, v) = f.f64(&n).unwrap();
                 w.f64(&n, &shape, &v).unwrap();
@@ -287,7 +299,9 @@ fn a_tiny_mdgps_run_is_reproducible_bit_for_bit() {
             l.t_policy = 0.0;
             logs.push(format!("{l:?}"));
         }
-        let ctrl: Vec<_> = (0..m.conditions()).map(|c| m.controller(c).clone()).collect();
+        let ctrl: Vec<_> = (0..m.conditions())
+            .map(|c| m.controller(c).clone())
+            .collect();
         (m.policy().flat(), ctrl, logs)
     };
     let a = run(&cfg);
@@ -313,7 +327,9 @@ fn evaluation_goals_are_seeded_and_where_they_should_be() {
         match e.kind {
             "inside" => {
                 assert!(dx < 0.1 && dy < 0.1);
-                assert!(sq.iter().all(|p| (p[0] - e.goal[0]).hypot(p[1] - e.goal[1]) >= 0.01));
+                assert!(sq
+                    .iter()
+                    .all(|p| (p[0] - e.goal[0]).hypot(p[1] - e.goal[1]) >= 0.01));
             }
             "outside" => assert!((dx.max(dy) - 0.13).abs() < 1e-12, "{e:?}"),
             _ => {}
@@ -374,7 +390,11 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
         .args(["--goal", "-0.45,-0.25,0.25", "--json"])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let d = v["result"]["final_distance_m"].as_f64().unwrap();
     assert!(d > 0.1 && d.is_finite(), "{v}");

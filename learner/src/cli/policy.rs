@@ -68,7 +68,10 @@ pub fn run(cmd: PolicyCmd) -> anyhow::Result<()> {
                 s.steps
             );
             if args.json {
-                println!("{}", serde_json::json!({"command": "policy eval", "result": s}));
+                println!(
+                    "{}",
+                    serde_json::json!({"command": "policy eval", "result": s})
+                );
             }
             Ok(())
         }
@@ -92,7 +95,12 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
     };
     let mut arm = SimArm::new(sim, task.dt).context("building the simulated arm")?;
     let mut ws = file.policy.workspace();
-    let ep = run_episode(&mut arm, &task, &mut GlobalActor::new(&file.policy, &mut ws), None)?;
+    let ep = run_episode(
+        &mut arm,
+        &task,
+        &mut GlobalActor::new(&file.policy, &mut ws),
+        None,
+    )?;
     Ok(EvalSummary {
         policy: args.policy.clone(),
         goal: args.goal,

@@ -606,8 +606,7 @@ pub fn generalisation_demos(
     let centre_goal = cfg.expert.task.goal;
     let mut wanted = vec![(centre_goal, cfg.expert.demos)];
     wanted.extend(
-        square_goals(centre_goal, cfg.expert.square_half_side)
-            .map(|g| (g, cfg.demos_per_point)),
+        square_goals(centre_goal, cfg.expert.square_half_side).map(|g| (g, cfg.demos_per_point)),
     );
     let experts = experts_at(&cfg.expert, pool, &wanted)?;
     let dir = out.join("experts");

@@ -222,11 +222,23 @@ fn run_lqr_centre(
     let mut arm = crate::run::arm_for(&run)?;
     let mut evals = Vec::with_capacity(cfg.iterations + 1);
     for _ in 0..cfg.iterations {
-        evals.push(evaluate(&mut arm, &base, &mut *run.table(), goals, experts)?);
+        evals.push(evaluate(
+            &mut arm,
+            &base,
+            &mut *run.table(),
+            goals,
+            experts,
+        )?);
         let (log, _) = iterate(&mut run, &mut arm)?;
         eprintln!("[lqr-gaifo centre seed {seed}] {}", log.progress_line());
     }
-    evals.push(evaluate(&mut arm, &base, &mut *run.table(), goals, experts)?);
+    evals.push(evaluate(
+        &mut arm,
+        &base,
+        &mut *run.table(),
+        goals,
+        experts,
+    )?);
     Ok(MethodRun {
         method: METHODS[1],
         seed,
@@ -306,10 +318,10 @@ pub fn summarise(runs: &[MethodRun], goals: &[EvalGoal]) -> Vec<MultiGoalRow> {
                 performance_se: pse[0],
                 final_distance_m_mean: dm[0],
                 final_distance_m_se: dse[0],
-                performance_min: all(|g| g.performance).into_iter().fold(f64::INFINITY, f64::min),
-                final_distance_m_max: all(|g| g.final_distance_m)
+                performance_min: all(|g| g.performance)
                     .into_iter()
-                    .fold(0.0, f64::max),
+                    .fold(f64::INFINITY, f64::min),
+                final_distance_m_max: all(|g| g.final_distance_m).into_iter().fold(0.0, f64::max),
             });
         }
     }
@@ -450,7 +462,9 @@ fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()
         let mut v = Vec::new();
         for method in METHODS {
             for kind in ["centre", "inside", "outside"] {
-                let idx: Vec<usize> = (0..goals.len()).filter(|&g| goals[g].kind == kind).collect();
+                let idx: Vec<usize> = (0..goals.len())
+                    .filter(|&g| goals[g].kind == kind)
+                    .collect();
                 let rs: Vec<&MethodRun> = runs.iter().filter(|r| r.method == method).collect();
                 if idx.is_empty() || rs.is_empty() {
                     continue;
@@ -460,7 +474,9 @@ fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()
                     .map(|r| {
                         r.evals
                             .iter()
-                            .map(|ev| idx.iter().map(|&g| f(&ev[g])).sum::<f64>() / idx.len() as f64)
+                            .map(|ev| {
+                                idx.iter().map(|&g| f(&ev[g])).sum::<f64>() / idx.len() as f64
+                            })
                             .collect()
                     })
                     .collect();
@@ -524,8 +540,13 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<MultiGoalRo
     // Experts: the 8 square points (their demonstrations train both methods and normalise the
     // "demonstrated" goals) and one per never-demonstrated goal (normalisation only).
     let square: Vec<[f64; 3]> = square_goals(centre, h).to_vec();
-    let unseen: Vec<EvalGoal> = goals.iter().filter(|g| g.kind != "demonstrated").copied().collect();
-    let mut wanted: Vec<([f64; 3], usize)> = square.iter().map(|&g| (g, cfg.demos_per_point)).collect();
+    let unseen: Vec<EvalGoal> = goals
+        .iter()
+        .filter(|g| g.kind != "demonstrated")
+        .copied()
+        .collect();
+    let mut wanted: Vec<([f64; 3], usize)> =
+        square.iter().map(|&g| (g, cfg.demos_per_point)).collect();
     wanted.extend(unseen.iter().map(|g| (g.goal, cfg.expert.demos)));
     let experts = experts_at(&cfg.expert, &pool, &wanted)?;
     let (square_demos, unseen_experts) = experts.split_at(square.len());

@@ -41,8 +41,7 @@ use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, Normalizer, TrainStats};
 use crate::gaifo::{
-    critic_config, episode_transitions, expert_transitions, refit_critic, train_critic,
-    GaifoConfig,
+    critic_config, episode_transitions, expert_transitions, refit_critic, train_critic, GaifoConfig,
 };
 use crate::iteration::LqrIteration;
 use crate::rollout::{run_episode, Arm, Episode, SampleList};
@@ -170,9 +169,10 @@ impl Mdgps {
         let first = demos
             .first()
             .ok_or_else(|| ImitationError::Config("MDGPS needs at least one condition".into()))?;
-        if let Some(d) = demos.iter().find(|d| {
-            d.horizon != first.horizon || d.dt != first.dt || d.start_q != first.start_q
-        }) {
+        if let Some(d) = demos
+            .iter()
+            .find(|d| d.horizon != first.horizon || d.dt != first.dt || d.start_q != first.start_q)
+        {
             return Err(ImitationError::Config(format!(
                 "the demonstrations of goal {:?} have another T, dt or start pose than those of \
                  goal {:?}: every condition must share them",
@@ -331,13 +331,21 @@ impl Mdgps {
         })
     }
 
-    fn check_episodes(&self, samples: &[Vec<Episode>], evals: &[Episode]) -> Result<(), ImitationError> {
+    fn check_episodes(
+        &self,
+        samples: &[Vec<Episode>],
+        evals: &[Episode],
+    ) -> Result<(), ImitationError> {
         let (m, n) = (self.conds.len(), self.cfg.lqr_gaifo.samples);
         let t_len = self.conds[0].task.horizon;
         let ok = samples.len() == m
             && evals.len() == m
             && samples.iter().all(|s| s.len() == n)
-            && samples.iter().flatten().chain(evals).all(|e| e.horizon() == t_len);
+            && samples
+                .iter()
+                .flatten()
+                .chain(evals)
+                .all(|e| e.horizon() == t_len);
         if ok {
             Ok(())
         } else {
@@ -363,11 +371,15 @@ impl Mdgps {
     /// Step 3: the one critic on the demonstrations of every goal against every condition's
     /// controller transitions (its input normalisation refitted on both at iteration 0,
     /// docs/design.md §5 D2).
-    fn update_discriminator(&mut self, samples: &[Vec<Episode>]) -> Result<TrainStats, ImitationError> {
+    fn update_discriminator(
+        &mut self,
+        samples: &[Vec<Episode>],
+    ) -> Result<TrainStats, ImitationError> {
         let controller = episode_transitions(&samples.concat());
         if self.iteration == 0 {
             self.disc = refit_critic(&self.expert, &controller, self.disc.config())?;
-            self.cost_ws = CompositeWorkspace::new(&self.disc).with_psd(self.cfg.lqr_gaifo.psd_hessian);
+            self.cost_ws =
+                CompositeWorkspace::new(&self.disc).with_psd(self.cfg.lqr_gaifo.psd_hessian);
         }
         let g = &self.cfg.lqr_gaifo;
         train_critic(
@@ -404,7 +416,8 @@ impl Mdgps {
             rows.extend((0..ep.horizon()).map(|t| ep.state(t)));
         }
         let x = Mat::from_fn(rows.len(), DX, |r, c| rows[r][c]);
-        self.policy.set_normalizer(Normalizer::from_data(x.as_ref())?);
+        self.policy
+            .set_normalizer(Normalizer::from_data(x.as_ref())?);
         Ok(())
     }
 
@@ -424,7 +437,9 @@ impl Mdgps {
                     }
                 }
                 let mut jac = [[0.0; DX]; DU];
-                let a = self.policy.mean_action_jacobian(&s_bar, mode, &mut ws, &mut jac);
+                let a = self
+                    .policy
+                    .mean_action_jacobian(&s_bar, mode, &mut ws, &mut jac);
                 linear_gaussian_step(&mut c.lin, t, &s_bar, &a, &jac, &std);
             }
         }
@@ -467,8 +482,9 @@ impl Mdgps {
                     let prc = pol.inv_pol_covar.slice(t);
                     out.states.push(s);
                     out.offsets.push(std::array::from_fn(|j| a[j] - base[j]));
-                    out.precisions
-                        .push(std::array::from_fn(|i| std::array::from_fn(|j| prc[i * DU + j])));
+                    out.precisions.push(std::array::from_fn(|i| {
+                        std::array::from_fn(|j| prc[i * DU + j])
+                    }));
                 }
             }
         }
@@ -498,7 +514,12 @@ impl Mdgps {
         MdgpsLog {
             iteration: self.iteration,
             task_cost: evals.iter().map(Episode::task_cost).collect(),
-            performance: self.conds.iter().zip(evals).map(|(c, e)| perf(c, e)).collect(),
+            performance: self
+                .conds
+                .iter()
+                .zip(evals)
+                .map(|(c, e)| perf(c, e))
+                .collect(),
             final_distance: evals.iter().map(Episode::final_distance).collect(),
             controller_cost: samples
                 .iter()
@@ -526,7 +547,9 @@ fn stack(parts: &[Mat<f64>]) -> Mat<f64> {
     let mut out = Mat::zeros(rows, D_IN);
     let mut r0 = 0;
     for p in parts {
-        out.as_mut().submatrix_mut(r0, 0, p.nrows(), D_IN).copy_from(p);
+        out.as_mut()
+            .submatrix_mut(r0, 0, p.nrows(), D_IN)
+            .copy_from(p);
         r0 += p.nrows();
     }
     out
@@ -550,7 +573,11 @@ fn linear_gaussian_step(
     for j in 0..DU {
         k[j] = a[j] - (0..DX).map(|i| jac[j][i] * s_bar[i]).sum::<f64>();
     }
-    for m in [&mut lin.pol_covar, &mut lin.chol_pol_covar, &mut lin.inv_pol_covar] {
+    for m in [
+        &mut lin.pol_covar,
+        &mut lin.chol_pol_covar,
+        &mut lin.inv_pol_covar,
+    ] {
         m.slice_mut(t).fill(0.0);
     }
     for j in 0..DU {

@@ -176,9 +176,11 @@ impl PolicyOpt {
                 let e = residual(pol, data, i, &mut ws);
                 let p = &data.precisions[i];
                 // ∂L/∂μ = P e / b; the heads' gradients are accumulated per joint.
-                let c: [f64; DU] =
-                    std::array::from_fn(|j| (0..DU).map(|l| p[j][l] * e[l]).sum::<f64>() / b as f64);
-                pol.net().accumulate_mean_grad(&mut ws.net, &c, &mut self.grad);
+                let c: [f64; DU] = std::array::from_fn(|j| {
+                    (0..DU).map(|l| p[j][l] * e[l]).sum::<f64>() / b as f64
+                });
+                pol.net()
+                    .accumulate_mean_grad(&mut ws.net, &c, &mut self.grad);
             }
             cursor += b;
             pol.net().read_params(&mut self.theta);
