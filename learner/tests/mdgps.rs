@@ -366,8 +366,19 @@ fn command_line_errors_are_clear() {
         "-0.45,-0.25,0.25",
     ]);
     assert!(!ok && e.contains("missing.npz"), "{e}");
-    let (ok, e) = learner(&["experiment", "multi-goal", "--demos", "d.npz"]);
-    assert!(!ok && e.contains("--demos does not apply"), "{e}");
+    let no_experts = tmp("cli").join("no-experts");
+    let (ok, e) = learner(&[
+        "experiment",
+        "multi-goal",
+        "--demos",
+        no_experts.to_str().unwrap(),
+        "--out",
+        tmp("cli").join("out").to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && e.contains("no-experts/point_0.npz"),
+        "a missing experts folder is named: {e}"
+    );
     let (ok, e) = learner(&["experiment", "multi-goal", "--iterations", "0"]);
     assert!(!ok && e.contains("iterations"), "{e}");
 }

@@ -21,7 +21,8 @@ pub struct ExperimentArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Demonstrations to use instead of training the expert (comparison, stability, ablation,
-    /// sim-vs-physical's simulated arm).
+    /// sim-vs-physical's simulated arm); for multi-goal, the `experts/` folder of an earlier
+    /// multi-goal run with the same square, evaluation goals and expert settings.
     #[arg(long)]
     pub demos: Option<PathBuf>,
     /// --config: an `ExperimentConfig` (keys `seeds`, `first_seed`, `iterations`, `threads`,
@@ -69,12 +70,7 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
             serde_json::to_value(ipc::run(&cfg, &out, args.demos.as_deref())?.1)?
         }
         ExperimentName::MultiGoal => {
-            anyhow::ensure!(
-                args.demos.is_none(),
-                "--demos does not apply to the multi-goal experiment (it trains an expert per \
-                 square point and per evaluation goal)"
-            );
-            serde_json::to_value(multi_goal::run(&cfg, &out)?)?
+            serde_json::to_value(multi_goal::run(&cfg, &out, args.demos.as_deref())?)?
         }
         name => serde_json::to_value(run(name, &cfg, &out, args.demos.as_deref())?.1)?,
     };

@@ -512,8 +512,40 @@ fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()
     )
 }
 
-/// Runs the experiment (module docs) and writes its outputs into `out`.
-pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<MultiGoalRow>> {
+/// The experts of `wanted` from `dir` (the `experts/` folder of an earlier run: `names[i]`
+/// holds expert i), each checked against the arm and against its goal and demonstration count.
+fn load_experts(
+    cfg: &ExperimentConfig,
+    dir: &Path,
+    wanted: &[([f64; 3], usize)],
+    names: &[String],
+) -> anyhow::Result<Vec<Demos>> {
+    wanted
+        .iter()
+        .zip(names)
+        .map(|(&(goal, n), name)| {
+            let p = dir.join(name);
+            let d = crate::io::demos::load_checked(&p, &cfg.lqr_gaifo.sim)?;
+            anyhow::ensure!(
+                d.goal == goal && d.count == n,
+                "{}: {} demonstrations of goal {:?}, this run needs {n} of goal {goal:?} (another \
+                 square, eval_seed or demos count: train the experts again without --demos)",
+                p.display(),
+                d.count,
+                d.goal
+            );
+            Ok(d)
+        })
+        .collect()
+}
+
+/// Runs the experiment (module docs) and writes its outputs into `out`; the experts come from
+/// `experts` (an earlier run's `experts/` folder) when it is given, else they are trained.
+pub fn run(
+    cfg: &ExperimentConfig,
+    out: &Path,
+    experts: Option<&Path>,
+) -> anyhow::Result<Vec<MultiGoalRow>> {
     cfg.validate(super::ExperimentName::MultiGoal)?;
     let pool = pool(cfg.threads)?;
     let t0 = Instant::now();
@@ -548,16 +580,20 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<MultiGoalRo
     let mut wanted: Vec<([f64; 3], usize)> =
         square.iter().map(|&g| (g, cfg.demos_per_point)).collect();
     wanted.extend(unseen.iter().map(|g| (g.goal, cfg.expert.demos)));
-    let experts = experts_at(&cfg.expert, &pool, &wanted)?;
-    let (square_demos, unseen_experts) = experts.split_at(square.len());
+    let names: Vec<String> = (0..square.len())
+        .map(|i| format!("point_{i}.npz"))
+        .chain(unseen.iter().enumerate().map(|(i, g)| format!("eval_{i}_{}.npz", g.kind)))
+        .collect();
     let dir = out.join("experts");
+    let experts = match experts {
+        Some(from) => load_experts(cfg, from, &wanted, &names)?,
+        None => experts_at(&cfg.expert, &pool, &wanted)?,
+    };
     std::fs::create_dir_all(&dir)?;
-    for (i, d) in square_demos.iter().enumerate() {
-        crate::io::demos::save(d, &dir.join(format!("point_{i}.npz")))?;
+    for (d, name) in experts.iter().zip(&names) {
+        crate::io::demos::save(d, &dir.join(name))?;
     }
-    for (i, d) in unseen_experts.iter().enumerate() {
-        crate::io::demos::save(d, &dir.join(format!("eval_{i}_{}.npz", unseen[i].kind)))?;
-    }
+    let (square_demos, unseen_experts) = experts.split_at(square.len());
     let norm: Vec<Demos> = unseen_experts.iter().chain(square_demos).cloned().collect();
     let pts: Vec<&Demos> = square_demos.iter().collect();
     let centre_set = Arc::new(combine_demos(&unseen_experts[0], &pts)?);
