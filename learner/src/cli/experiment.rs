@@ -27,7 +27,8 @@ pub struct ExperimentArgs {
     pub demos: Option<PathBuf>,
     /// --config: an `ExperimentConfig` (keys `seeds`, `first_seed`, `iterations`, `threads`,
     /// `algorithms`, `subset_sizes`, `demos_per_point`, `critic_steps`, `time_compression`,
-    /// `ablation_variants`, `eval_inside`, `eval_outside`, `eval_outside_margin`, `eval_seed`;
+    /// `ablation_variants`, `eval_inside`, `eval_outside`, `eval_outside_margin`, `eval_seed`,
+    /// `mdgps_kl_step`;
     /// tables `expert`, `lqr_gaifo`, `gaifo_ppo`, `physical`, `mdgps_policy`) layered over the experiment's
     /// defaults; --seed: the first seed (`first_seed`); --out [default:
     /// runs/experiments/<name>].

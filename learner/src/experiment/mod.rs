@@ -129,6 +129,9 @@ pub struct ExperimentConfig {
     /// Multi-goal: the global policy and its S-step (MDGPS's per-condition settings are
     /// `lqr_gaifo`'s, so it uses LQR+GAIfO's N episodes per condition).
     pub mdgps_policy: imitation::mdgps::s_step::PolicyOptConfig,
+    /// Multi-goal: MDGPS's C-step KL bound, nats per time step (`MdgpsConfig::kl_step`; the
+    /// centre's LQR+GAIfO keeps `lqr_gaifo.algorithm.kl_step`).
+    pub mdgps_kl_step: f64,
     /// Multi-goal: seeded evaluation goals inside the square (besides the centre). Ours: 8.
     pub eval_inside: usize,
     /// Multi-goal: evaluation goals just outside the square. Ours: 4, one per edge.
@@ -217,6 +220,7 @@ impl ExperimentConfig {
                 .map(|(n, _)| n.to_string())
                 .collect(),
             mdgps_policy: Default::default(),
+            mdgps_kl_step: imitation::mdgps::MdgpsConfig::default().kl_step,
             eval_inside: 8,
             eval_outside: 4,
             eval_outside_margin: 0.03,
@@ -301,8 +305,12 @@ impl ExperimentConfig {
                 self.eval_inside,
                 self.eval_outside
             );
-            self.mdgps_policy.validate()?;
-            self.lqr_gaifo.validate()?;
+            imitation::mdgps::MdgpsConfig {
+                lqr_gaifo: self.lqr_gaifo.clone(),
+                kl_step: self.mdgps_kl_step,
+                policy: self.mdgps_policy.clone(),
+            }
+            .validate()?;
         }
         if name == ExperimentName::Generalisation {
             anyhow::ensure!(

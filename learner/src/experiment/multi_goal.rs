@@ -165,6 +165,7 @@ fn run_mdgps(
 ) -> anyhow::Result<MethodRun> {
     let mut c = MdgpsConfig {
         lqr_gaifo: cfg.lqr_gaifo.clone(),
+        kl_step: cfg.mdgps_kl_step,
         policy: cfg.mdgps_policy.clone(),
     };
     c.lqr_gaifo.seed = seed;
