@@ -93,7 +93,7 @@ impl LqrIteration {
         self.step(samples, adapt_step, None)
     }
 
-    /// Step 6 of MDGPS (the C-step, docs/design.md §6): as [`LqrIteration::improve`] without
+    /// Step 6 of MDGPS (the C-step, docs/design.md §6.3): as [`LqrIteration::improve`] without
     /// step adaptation, but the KL bound and the backward pass's KL term are taken towards
     /// `anchor` (the global policy's linearisation at this condition) instead of the controller
     /// executed this iteration (GPS `TrajOptLQRPython.update` for `AlgorithmMDGPS`).
