@@ -5,19 +5,21 @@
 //! ([`LqrIteration`]); one critic D(s, s') serves all of them. One iteration
 //! ([`Mdgps::learn`]), in order:
 //!
-//! 1. execute N noisy episodes of every condition's controller, and the global policy once
-//!    without noise per condition (the evaluation) — [`Mdgps::execute`];
-//! 2. fit each condition's dynamics (GMM prior + Bayesian regression);
-//! 3. one WGAN-GP critic update on the demonstrations of every goal against the controllers'
-//!    transitions of every condition;
-//! 4–5. each condition's composite cost and its expansion;
-//!    (iteration 0 only: the S-step onto the initial controllers, so that the policy is
-//!    caught up with them before the first C-step, as GPS does);
-//! 6a. linearise the global policy at each condition's mean sample states;
-//! 6b. the C-step: each condition's KL-bounded LQR with the bound and KL term towards that
-//!    linearisation ([`LqrIteration::improve_towards`]);
-//! 7. the S-step: regress the policy onto the new controllers' action means at the sampled
-//!    states, weighted by their precision ([`s_step`]).
+//! ```text
+//! 1.   execute    N noisy episodes of every condition's controller, and the global policy
+//!                 once without noise per condition (the evaluation): Mdgps::execute
+//! 2.   dynamics   each condition's fit (GMM prior + Bayesian regression)
+//! 3.   critic     one WGAN-GP update, the demonstrations of every goal against the
+//!                 controllers' transitions of every condition
+//! 4–5. cost       each condition's composite cost and its expansion
+//!                 (iteration 0 only: the S-step onto the initial controllers, so that the
+//!                 policy has caught up with them before the first C-step, as GPS does)
+//! 6a.  linearise  the global policy at each condition's mean sample states
+//! 6b.  C-step     each condition's KL-bounded LQR with the bound and KL term towards that
+//!                 linearisation (LqrIteration::improve_towards)
+//! 7.   S-step     regress the policy onto the new controllers' action means at the sampled
+//!                 states, weighted by their precision (module s_step)
+//! ```
 //!
 //! Every random draw is seeded from the run seed (noise per condition, GMM per condition,
 //! critic, policy initialisation, minibatch order); nothing runs in parallel inside a run, so a
