@@ -583,7 +583,12 @@ pub fn run(
     wanted.extend(unseen.iter().map(|g| (g.goal, cfg.expert.demos)));
     let names: Vec<String> = (0..square.len())
         .map(|i| format!("point_{i}.npz"))
-        .chain(unseen.iter().enumerate().map(|(i, g)| format!("eval_{i}_{}.npz", g.kind)))
+        .chain(
+            unseen
+                .iter()
+                .enumerate()
+                .map(|(i, g)| format!("eval_{i}_{}.npz", g.kind)),
+        )
         .collect();
     let dir = out.join("experts");
     let experts = match experts {
