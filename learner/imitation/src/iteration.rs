@@ -90,6 +90,27 @@ impl LqrIteration {
         samples: &SampleList,
         adapt_step: bool,
     ) -> Result<StepReport, ImitationError> {
+        self.step(samples, adapt_step, None)
+    }
+
+    /// Step 6 of MDGPS (the C-step, docs/design.md §6.3): as [`LqrIteration::improve`] without
+    /// step adaptation, but the KL bound and the backward pass's KL term are taken towards
+    /// `anchor` (the global policy's linearisation at this condition) instead of the controller
+    /// executed this iteration (GPS `TrajOptLQRPython.update` for `AlgorithmMDGPS`).
+    pub fn improve_towards(
+        &mut self,
+        samples: &SampleList,
+        anchor: &LinGaussPolicy,
+    ) -> Result<StepReport, ImitationError> {
+        self.step(samples, false, Some(anchor))
+    }
+
+    fn step(
+        &mut self,
+        samples: &SampleList,
+        adapt_step: bool,
+        anchor: Option<&LinGaussPolicy>,
+    ) -> Result<StepReport, ImitationError> {
         let learner = &mut self.learner;
         eval_cost(
             &samples.x,
@@ -107,7 +128,7 @@ impl LqrIteration {
             learner.update_step_size(prev, &self.pol)?;
         }
         let step_mult = learner.step_mult;
-        let res = learner.update_trajectories(&self.pol, &mut self.new_pol)?;
+        let res = learner.update_trajectories(anchor.unwrap_or(&self.pol), &mut self.new_pol)?;
         let kl = res.trace.last().map(|s| s.kl).unwrap_or(f64::NAN);
         match self.prev_pol.as_mut() {
             Some(p) => p.copy_from(&self.pol),

@@ -12,6 +12,7 @@
 //! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
 //! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`];
 //! - [`ppo`]: the GAIfO (PPO) baseline;
+//! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
 //!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table.
 //!
@@ -28,6 +29,7 @@ pub mod expert;
 pub mod gaifo;
 pub mod iteration;
 pub mod learn;
+pub mod mdgps;
 pub mod ppo;
 pub mod rollout;
 

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use super::CommonArgs;
-use crate::experiment::{ipc, run, ExperimentConfig, ExperimentName};
+use crate::experiment::{ipc, multi_goal, run, ExperimentConfig, ExperimentName};
 
 /// Arguments of `learner experiment`.
 #[derive(clap::Args, Debug)]
@@ -21,13 +21,15 @@ pub struct ExperimentArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Demonstrations to use instead of training the expert (comparison, stability, ablation,
-    /// sim-vs-physical's simulated arm).
+    /// sim-vs-physical's simulated arm); for multi-goal, the `experts/` folder of an earlier
+    /// multi-goal run with the same square, evaluation goals and expert settings.
     #[arg(long)]
     pub demos: Option<PathBuf>,
     /// --config: an `ExperimentConfig` (keys `seeds`, `first_seed`, `iterations`, `threads`,
     /// `algorithms`, `subset_sizes`, `demos_per_point`, `critic_steps`, `time_compression`,
-    /// `ablation_variants`;
-    /// tables `expert`, `lqr_gaifo`, `gaifo_ppo`, `physical`) layered over the experiment's
+    /// `ablation_variants`, `eval_inside`, `eval_outside`, `eval_outside_margin`, `eval_seed`,
+    /// `mdgps_kl_step`;
+    /// tables `expert`, `lqr_gaifo`, `gaifo_ppo`, `physical`, `mdgps_policy`) layered over the experiment's
     /// defaults; --seed: the first seed (`first_seed`); --out [default:
     /// runs/experiments/<name>].
     #[command(flatten)]
@@ -65,8 +67,13 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs/experiments").join(args.name.as_str()));
     let rows = match args.name {
-        ExperimentName::SimVsPhysical => ipc::run(&cfg, &out, args.demos.as_deref())?.1,
-        name => run(name, &cfg, &out, args.demos.as_deref())?.1,
+        ExperimentName::SimVsPhysical => {
+            serde_json::to_value(ipc::run(&cfg, &out, args.demos.as_deref())?.1)?
+        }
+        ExperimentName::MultiGoal => {
+            serde_json::to_value(multi_goal::run(&cfg, &out, args.demos.as_deref())?)?
+        }
+        name => serde_json::to_value(run(name, &cfg, &out, args.demos.as_deref())?.1)?,
     };
     if args.common.json {
         println!(

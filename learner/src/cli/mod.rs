@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 pub mod bench;
 pub mod experiment;
 pub mod expert;
+pub mod policy;
 pub mod serve;
 pub mod train;
 
@@ -82,6 +83,9 @@ pub enum Cmd {
     /// Time LQR+GAIfO iterations on real demonstrations; prints per-phase medians and the
     /// learner CPU time. --config: a `GaifoConfig`.
     BenchGaifo(bench::BenchGaifoArgs),
+    /// Run a saved MDGPS policy (`policy eval --policy FILE --goal x,y,z`).
+    #[command(subcommand)]
+    Policy(policy::PolicyCmd),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -94,5 +98,6 @@ pub fn main() -> anyhow::Result<()> {
         Cmd::Conformance(args) => bench::conformance(args),
         Cmd::BenchGaifo(args) => bench::run_gaifo(args),
         Cmd::Bench(args) => bench::run(args),
+        Cmd::Policy(cmd) => policy::run(cmd),
     }
 }

@@ -6,6 +6,7 @@
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25) | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
+//! | `multi-goal` | one MDGPS policy from the 8 square points vs the centre's LQR+GAIfO controller, at never-demonstrated goals ([`multi_goal`]) | 3 seeds × 20 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
 //!
@@ -41,6 +42,7 @@ use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 use crate::run::{arm_for, run_iterations};
 
 pub mod ipc;
+pub mod multi_goal;
 pub mod summary;
 
 pub use summary::{csv_header, summarise, summary_text, write_outputs, SummaryRow};
@@ -59,6 +61,8 @@ pub enum ExperimentName {
     Stability,
     /// LQR+GAIfO's defaults against variants with a decision undone (precision near the goal).
     Ablation,
+    /// One MDGPS policy for many goals vs the centre's linear-Gaussian controller.
+    MultiGoal,
 }
 
 impl ExperimentName {
@@ -70,6 +74,7 @@ impl ExperimentName {
             Self::SimVsPhysical => "sim-vs-physical",
             Self::Stability => "stability",
             Self::Ablation => "ablation",
+            Self::MultiGoal => "multi-goal",
         }
     }
 }
@@ -121,6 +126,21 @@ pub struct ExperimentConfig {
     pub time_compression: f64,
     /// Ablation: the variants to run, each a curve (names from [`ABLATION_VARIANTS`]).
     pub ablation_variants: Vec<String>,
+    /// Multi-goal: the global policy and its S-step (MDGPS's per-condition settings are
+    /// `lqr_gaifo`'s, so it uses LQR+GAIfO's N episodes per condition).
+    pub mdgps_policy: imitation::mdgps::s_step::PolicyOptConfig,
+    /// Multi-goal: MDGPS's C-step KL bound, nats per time step (`MdgpsConfig::kl_step`; the
+    /// centre's LQR+GAIfO keeps `lqr_gaifo.algorithm.kl_step`).
+    pub mdgps_kl_step: f64,
+    /// Multi-goal: seeded evaluation goals inside the square (besides the centre). Ours: 8.
+    pub eval_inside: usize,
+    /// Multi-goal: evaluation goals just outside the square. Ours: 4, one per edge.
+    pub eval_outside: usize,
+    /// Multi-goal: how far outside the square those are (m). Ours: 0.03.
+    pub eval_outside_margin: f64,
+    /// Multi-goal: seed of the evaluation goals (fixed across run seeds, so every seed is
+    /// evaluated at the same goals).
+    pub eval_seed: u64,
 }
 
 /// The comparison's algorithms ([`ExperimentConfig::algorithms`]).
@@ -199,6 +219,12 @@ impl ExperimentConfig {
                 .iter()
                 .map(|(n, _)| n.to_string())
                 .collect(),
+            mdgps_policy: Default::default(),
+            mdgps_kl_step: imitation::mdgps::MdgpsConfig::default().kl_step,
+            eval_inside: 8,
+            eval_outside: 4,
+            eval_outside_margin: 0.03,
+            eval_seed: 14,
         };
         match name {
             ExperimentName::Comparison => base,
@@ -220,6 +246,11 @@ impl ExperimentConfig {
             ExperimentName::Ablation => Self {
                 seeds: 5,
                 iterations: 50,
+                ..base
+            },
+            ExperimentName::MultiGoal => Self {
+                seeds: 3,
+                iterations: 20,
                 ..base
             },
         }
@@ -260,6 +291,26 @@ impl ExperimentConfig {
             for v in &self.ablation_variants {
                 ablation_variant(v, &self.lqr_gaifo)?;
             }
+        }
+        if name == ExperimentName::MultiGoal {
+            anyhow::ensure!(self.demos_per_point >= 1, "demos_per_point must be >= 1");
+            anyhow::ensure!(
+                self.eval_outside_margin > 0.0 && self.eval_outside_margin <= 1.0,
+                "eval_outside_margin = {}: must be in (0, 1] m",
+                self.eval_outside_margin
+            );
+            anyhow::ensure!(
+                self.eval_inside <= 1000 && self.eval_outside <= 1000,
+                "eval_inside = {}, eval_outside = {}: each must be in 0..=1000",
+                self.eval_inside,
+                self.eval_outside
+            );
+            imitation::mdgps::MdgpsConfig {
+                lqr_gaifo: self.lqr_gaifo.clone(),
+                kl_step: self.mdgps_kl_step,
+                policy: self.mdgps_policy.clone(),
+            }
+            .validate()?;
         }
         if name == ExperimentName::Generalisation {
             anyhow::ensure!(
@@ -532,6 +583,26 @@ fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow:
     Ok(d)
 }
 
+/// Trains one expert per `(goal, demonstrations)` of `wanted` (`cfg` with that goal and that
+/// many demonstrations), in parallel on `pool`; results in order.
+pub fn experts_at(
+    cfg: &ExpertConfig,
+    pool: &rayon::ThreadPool,
+    wanted: &[([f64; 3], usize)],
+) -> anyhow::Result<Vec<Demos>> {
+    pool.install(|| {
+        wanted
+            .par_iter()
+            .map(|&(g, n)| {
+                let mut e = cfg.clone();
+                e.task.goal = g;
+                e.demos = n;
+                expert_demos(&e)
+            })
+            .collect()
+    })
+}
+
 /// The generalisation experiment's demonstration sets: trains the centre expert and the 8
 /// square experts (in parallel), saves them under `out/experts/`, returns one set per subset
 /// size.
@@ -541,22 +612,11 @@ pub fn generalisation_demos(
     out: &Path,
 ) -> anyhow::Result<Vec<(usize, Demos)>> {
     let centre_goal = cfg.expert.task.goal;
-    let mut goals = vec![centre_goal];
-    goals.extend(square_goals(centre_goal, cfg.expert.square_half_side));
-    let experts: Vec<Demos> = pool.install(|| {
-        goals
-            .par_iter()
-            .enumerate()
-            .map(|(i, g)| {
-                let mut e = cfg.expert.clone();
-                e.task.goal = *g;
-                if i > 0 {
-                    e.demos = cfg.demos_per_point;
-                }
-                expert_demos(&e)
-            })
-            .collect::<anyhow::Result<Vec<_>>>()
-    })?;
+    let mut wanted = vec![(centre_goal, cfg.expert.demos)];
+    wanted.extend(
+        square_goals(centre_goal, cfg.expert.square_half_side).map(|g| (g, cfg.demos_per_point)),
+    );
+    let experts = experts_at(&cfg.expert, pool, &wanted)?;
     let dir = out.join("experts");
     std::fs::create_dir_all(&dir)?;
     crate::io::demos::save(&experts[0], &dir.join("centre.npz"))?;
@@ -649,6 +709,9 @@ pub fn run(
         }
         ExperimentName::SimVsPhysical => {
             anyhow::bail!("sim-vs-physical runs over IPC: learner::experiment::ipc::run")
+        }
+        ExperimentName::MultiGoal => {
+            anyhow::bail!("multi-goal has its own outputs: learner::experiment::multi_goal::run")
         }
     };
     let runs = run_jobs(&pool, &jobs)?;

@@ -99,6 +99,11 @@ impl GaussianMlpPolicy {
         &self.log_std
     }
 
+    /// Sets the per-joint log σ.
+    pub fn set_log_std(&mut self, log_std: [f64; DU]) {
+        self.log_std = log_std;
+    }
+
     /// Parameters per head (`DU × n_head`) plus `DU` log σ.
     pub fn n_params(&self) -> usize {
         self.heads.iter().map(|h| h.params().len()).sum::<usize>() + DU
@@ -179,7 +184,25 @@ impl GaussianMlpPolicy {
         }
     }
 
-    fn read_params(&self, out: &mut [f64]) {
+    /// `jac[j] = ∂μ_j/∂s` (row j of the `DU × DX` Jacobian of the mean) at `s`; leaves every
+    /// head's forward and backward pass in `ws`. Exact (the MLP's backward pass with its input
+    /// gradient); checked against central differences in `tests/mdgps.rs`.
+    pub fn mean_jacobian(
+        &self,
+        s: &[f64; DX],
+        ws: &mut PolicyWorkspace,
+        jac: &mut [[f64; DX]; DU],
+    ) -> [f64; DU] {
+        let mu = self.mean(s, ws);
+        for ((h, w), row) in self.heads.iter().zip(&mut ws.heads).zip(jac.iter_mut()) {
+            h.backward(w, true);
+            row.copy_from_slice(&w.grad_u);
+        }
+        mu
+    }
+
+    /// Copies the flat parameters (heads, then log σ) into `out` (`n_params`).
+    pub(crate) fn read_params(&self, out: &mut [f64]) {
         let mut off = 0;
         for h in &self.heads {
             let p = h.params();
@@ -189,7 +212,8 @@ impl GaussianMlpPolicy {
         out[off..off + DU].copy_from_slice(&self.log_std);
     }
 
-    fn write_params(&mut self, src: &[f64]) {
+    /// Sets the flat parameters (heads, then log σ) from `src` (`n_params`).
+    pub(crate) fn write_params(&mut self, src: &[f64]) {
         let mut off = 0;
         for h in &mut self.heads {
             let p = h.params_mut();

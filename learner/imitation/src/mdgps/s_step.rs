@@ -1,0 +1,230 @@
+//! The S-step of MDGPS (docs/design.md §6.4; GPS `PolicyOpt.update(obs, tgt_mu, tgt_prc,
+//! tgt_wt)`): regress the global policy's mean onto the controllers' action means at the
+//! sampled states, each residual weighted by that controller's action precision Σ_t⁻¹:
+//!
+//! ```text
+//! L(θ) = 1/n Σ_i ½ (μ_θ(u_i) − Δ*_i)ᵀ P_i (μ_θ(u_i) − Δ*_i),   Δ*_i = K_t s_i + k_t − base(s_i),
+//! P_i = Σ_t⁻¹ (rad⁻²),
+//! ```
+//!
+//! minimised by Adam on shuffled minibatches (the order seeded, so a seed gives the same policy
+//! bit for bit on any machine and thread count). Then the policy's σ is set to the precision
+//! the controllers ask for on average, σ_j² = 1 / mean_i (P_i)_jj (GPS `policy_opt_tf`'s
+//! variance update, without its entropy term).
+
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use ur5_shared::layout::{DU, DX};
+
+use super::policy::{GlobalPolicy, GlobalPolicyWorkspace};
+use crate::discriminator::{Adam, AdamConfig};
+use crate::ImitationError;
+
+/// Settings of the global policy and its S-step (TOML table `[mdgps.policy]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PolicyOptConfig {
+    /// Hidden widths of each mean head. Ours: 64, 64, the PPO baseline's (docs/design.md §1.5).
+    pub hidden: Vec<usize>,
+    /// Adam. Ours: GPS `policy_opt` defaults (lr 1e-3, β 0.9 / 0.999).
+    pub adam: AdamConfig,
+    /// Minibatch size. Ours: 64.
+    pub batch_size: usize,
+    /// Adam steps per S-step. Ours: 1000 (docs/design.md §6.4).
+    pub steps: usize,
+    /// Lower bound on σ (rad) after the variance update, so that a controller that has become
+    /// nearly deterministic does not make the policy's linearisation singular in the C-step's
+    /// KL term. Ours: 1e-3.
+    pub min_std: f64,
+}
+
+impl Default for PolicyOptConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![64, 64],
+            adam: AdamConfig {
+                lr: 1e-3,
+                beta1: 0.9,
+                beta2: 0.999,
+                eps: 1e-8,
+            },
+            batch_size: 64,
+            steps: 1000,
+            min_std: 1e-3,
+        }
+    }
+}
+
+impl PolicyOptConfig {
+    /// Checks the ranges (widths and counts as the critic's, Adam's own, σ floor in (0, 1]).
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        crate::discriminator::DiscriminatorConfig::check_widths("policy.hidden", &self.hidden)
+            .map_err(ImitationError::Config)?;
+        crate::error::check_counts(
+            &[
+                ("policy.batch_size", self.batch_size, 1),
+                ("policy.steps", self.steps, 1),
+            ],
+            crate::gaifo::GaifoConfig::MAX_COUNT,
+        )
+        .map_err(ImitationError::Config)?;
+        self.adam
+            .validate()
+            .map_err(|e| ImitationError::Config(format!("policy.adam: {e}")))?;
+        crate::error::check_reals(&[(
+            "policy.min_std",
+            self.min_std,
+            self.min_std > 0.0 && self.min_std <= 1.0,
+            "in (0, 1] rad",
+        )])
+        .map_err(ImitationError::Config)
+    }
+}
+
+/// The regression targets of one S-step: per sample the state s_i, the target offset Δ*_i
+/// and the precision P_i (row-major 3 × 3, symmetric positive definite).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Targets {
+    /// States, one per sample.
+    pub states: Vec<[f64; DX]>,
+    /// Target offsets Δ* (rad), one per sample.
+    pub offsets: Vec<[f64; DU]>,
+    /// Precisions P (rad⁻²), one per sample.
+    pub precisions: Vec<[[f64; DU]; DU]>,
+}
+
+impl Targets {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.states.len()
+    }
+
+    /// No samples.
+    pub fn is_empty(&self) -> bool {
+        self.states.is_empty()
+    }
+}
+
+/// What one S-step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SStepReport {
+    /// L(θ) over all targets before and after the Adam steps.
+    pub loss_before: f64,
+    pub loss_after: f64,
+}
+
+/// The S-step's optimiser state: Adam's moments carry over from one S-step to the next (GPS
+/// keeps its solver), the minibatch order is drawn from `rng`.
+pub struct PolicyOpt {
+    cfg: PolicyOptConfig,
+    adam: Adam,
+    rng: ChaCha8Rng,
+    theta: Vec<f64>,
+    grad: Vec<f64>,
+    order: Vec<usize>,
+}
+
+impl PolicyOpt {
+    /// The optimiser for `pol`, its minibatch order seeded with `seed`.
+    pub fn new(cfg: PolicyOptConfig, pol: &GlobalPolicy, seed: u64) -> Self {
+        let n = pol.net().n_params();
+        Self {
+            adam: Adam::new(cfg.adam, n),
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            theta: vec![0.0; n],
+            grad: vec![0.0; n],
+            order: Vec::new(),
+            cfg,
+        }
+    }
+
+    /// L(θ) of `pol` on `data` (module docs).
+    pub fn loss(pol: &GlobalPolicy, data: &Targets, ws: &mut GlobalPolicyWorkspace) -> f64 {
+        let mut total = 0.0;
+        for i in 0..data.len() {
+            let e = residual(pol, data, i, ws);
+            total += 0.5 * quad(&data.precisions[i], &e);
+        }
+        total / data.len().max(1) as f64
+    }
+
+    /// One S-step on `data`: `cfg.steps` Adam steps on shuffled minibatches, then the variance
+    /// update.
+    pub fn update(
+        &mut self,
+        pol: &mut GlobalPolicy,
+        data: &Targets,
+    ) -> Result<SStepReport, ImitationError> {
+        if data.is_empty() {
+            return Err(ImitationError::Episodes("an S-step needs samples".into()));
+        }
+        let mut ws = pol.workspace();
+        let loss_before = Self::loss(pol, data, &mut ws);
+        let b = self.cfg.batch_size.min(data.len());
+        let mut cursor = data.len();
+        for _ in 0..self.cfg.steps {
+            if cursor + b > self.order.len() || self.order.len() != data.len() {
+                self.order = (0..data.len()).collect();
+                self.order.shuffle(&mut self.rng);
+                cursor = 0;
+            }
+            self.grad.fill(0.0);
+            for k in cursor..cursor + b {
+                let i = self.order[k];
+                let e = residual(pol, data, i, &mut ws);
+                let p = &data.precisions[i];
+                // ∂L/∂μ = P e / b; the heads' gradients are accumulated per joint.
+                let c: [f64; DU] = std::array::from_fn(|j| {
+                    (0..DU).map(|l| p[j][l] * e[l]).sum::<f64>() / b as f64
+                });
+                pol.net()
+                    .accumulate_mean_grad(&mut ws.net, &c, &mut self.grad);
+            }
+            cursor += b;
+            pol.net().read_params(&mut self.theta);
+            self.adam.step(&mut self.theta, &self.grad);
+            pol.net_mut().write_params(&self.theta);
+        }
+        self.update_variance(pol, data);
+        let loss_after = Self::loss(pol, data, &mut ws);
+        if !loss_after.is_finite() {
+            return Err(ImitationError::Config(format!(
+                "the S-step diverged (loss {loss_after}); lower policy.adam.lr"
+            )));
+        }
+        Ok(SStepReport {
+            loss_before,
+            loss_after,
+        })
+    }
+
+    /// σ_j² = 1 / mean_i (P_i)_jj, σ_j ≥ `min_std`.
+    fn update_variance(&self, pol: &mut GlobalPolicy, data: &Targets) {
+        let n = data.len() as f64;
+        let log_std = std::array::from_fn(|j| {
+            let mean_prc = data.precisions.iter().map(|p| p[j][j]).sum::<f64>() / n;
+            (1.0 / mean_prc).sqrt().max(self.cfg.min_std).ln()
+        });
+        pol.net_mut().set_log_std(log_std);
+    }
+}
+
+/// e_i = μ_θ(u(s_i)) − Δ*_i; leaves the heads' forward passes in `ws` (for the gradient).
+fn residual(
+    pol: &GlobalPolicy,
+    data: &Targets,
+    i: usize,
+    ws: &mut GlobalPolicyWorkspace,
+) -> [f64; DU] {
+    let mu = pol.offset(&data.states[i], ws);
+    std::array::from_fn(|j| mu[j] - data.offsets[i][j])
+}
+
+/// eᵀ P e.
+fn quad(p: &[[f64; DU]; DU], e: &[f64; DU]) -> f64 {
+    (0..DU)
+        .map(|j| e[j] * (0..DU).map(|l| p[j][l] * e[l]).sum::<f64>())
+        .sum()
+}

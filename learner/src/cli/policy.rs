@@ -1,0 +1,111 @@
+//! `learner policy`: run a saved MDGPS policy (`learner::io::policy`).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use serde::Serialize;
+
+use imitation::mdgps::policy::GlobalActor;
+use imitation::rollout::run_episode;
+use ur5_shared::config::{parse_triple, SimConfig, TaskConfig};
+
+use crate::arm::SimArm;
+use crate::io::policy::load_policy;
+
+/// What `learner policy` does.
+#[derive(Subcommand, Debug)]
+pub enum PolicyCmd {
+    /// One noise-free episode of a saved policy to any goal on the simulated arm (from the
+    /// start pose it was trained from); prints the final distance to the goal (m) and the task
+    /// cost C(τ) (m).
+    Eval(EvalArgs),
+}
+
+/// Arguments of `learner policy eval`.
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// The policy file (`policy_seed<S>.npz` of `learner experiment multi-goal`).
+    #[arg(long)]
+    pub policy: PathBuf,
+    /// Goal point x,y,z (m, arm base frame), e.g. `-0.45,-0.25,0.25`.
+    #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
+    pub goal: [f64; 3],
+    /// Steps of the episode (control periods of the file's dt); default: the training T.
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Print a one-line JSON summary at the end (stdout).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What `learner policy eval` reports (also its `--json` line).
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalSummary {
+    /// The policy file.
+    pub policy: PathBuf,
+    /// Goal point (m).
+    pub goal: [f64; 3],
+    /// Steps run.
+    pub steps: usize,
+    /// Final end-effector distance to the goal (m).
+    pub final_distance_m: f64,
+    /// Task cost C(τ) of the episode (m, docs/design.md §1.6).
+    pub task_cost: f64,
+}
+
+/// Runs `learner policy`.
+pub fn run(cmd: PolicyCmd) -> anyhow::Result<()> {
+    match cmd {
+        PolicyCmd::Eval(args) => {
+            let s = eval(&args)?;
+            eprintln!(
+                "policy {} to goal {:?}: final distance {:.4} m, task cost {:.4} ({} steps)",
+                s.policy.display(),
+                s.goal,
+                s.final_distance_m,
+                s.task_cost,
+                s.steps
+            );
+            if args.json {
+                println!(
+                    "{}",
+                    serde_json::json!({"command": "policy eval", "result": s})
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
+/// One noise-free episode of the policy of `args.policy` to `args.goal`.
+pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
+    let file = load_policy(&args.policy)?;
+    let task = TaskConfig {
+        dt: file.dt,
+        horizon: args.steps.unwrap_or(file.horizon),
+        start_q: file.start_q,
+        goal: args.goal,
+    };
+    task.validate()
+        .with_context(|| format!("--goal {:?} / --steps {}", args.goal, task.horizon))?;
+    let sim = SimConfig {
+        mode: file.mode,
+        ..SimConfig::default()
+    };
+    let mut arm = SimArm::new(sim, task.dt).context("building the simulated arm")?;
+    let mut ws = file.policy.workspace();
+    let ep = run_episode(
+        &mut arm,
+        &task,
+        &mut GlobalActor::new(&file.policy, &mut ws),
+        None,
+    )?;
+    Ok(EvalSummary {
+        policy: args.policy.clone(),
+        goal: args.goal,
+        steps: task.horizon,
+        final_distance_m: ep.final_distance(),
+        task_cost: ep.task_cost(),
+    })
+}

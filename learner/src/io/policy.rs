@@ -1,0 +1,148 @@
+//! The MDGPS global policy on disk (`policy.npz`, docs/design.md §4.10), readable by numpy:
+//!
+//! | array | shape | meaning |
+//! |---|---|---|
+//! | `params` | (P,) f64 | the flat parameter vector θ (layout in `imitation::mdgps::policy`: input mean and scale, 3 mean heads, log σ) |
+//! | `hidden` | (H,) i64 | hidden widths of each mean head; P = `flat_len(hidden)` |
+//! | `action_mode` | str | `goal_angles` (a = q + μ + σ ε, rad) or `torque` (a = μ + σ ε, N·m) |
+//! | `start_q` | (3,) f64 | start pose the policy was trained from (rad) |
+//! | `dt` | () f64 | control period (s) |
+//! | `horizon` | () u64 | T of the training episodes (the policy itself is time-invariant) |
+//! | `seed`, `iterations` | () u64 | the training run's seed and MDGPS iterations |
+//! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
+//! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
+//!
+//! Loading checks the schema, the layout names, every shape (P against `hidden`), finiteness
+//! and the input scale's sign, naming the file and array at fault.
+
+use std::path::Path;
+
+use imitation::mdgps::policy::{flat_len, GlobalPolicy};
+use ur5_shared::config::ActionMode;
+use ur5_shared::layout::{ACTION_NAMES, STATE_NAMES};
+
+use super::npz::{NpzError, NpzFile, NpzWriter};
+
+/// Version of this file layout.
+pub const SCHEMA_VERSION: i64 = 1;
+
+/// Widest hidden layer a file may ask for (far above any use; a corrupt width cannot ask for
+/// gigabytes).
+pub const MAX_WIDTH: usize = 4096;
+
+/// A saved policy and what it was trained for.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolicyFile {
+    /// The policy.
+    pub policy: GlobalPolicy,
+    /// What its output is.
+    pub mode: ActionMode,
+    /// Start pose of the training episodes (rad).
+    pub start_q: [f64; 3],
+    /// Control period (s).
+    pub dt: f64,
+    /// Steps of the training episodes.
+    pub horizon: usize,
+    /// Seed of the training run.
+    pub seed: u64,
+    /// MDGPS iterations it was trained for.
+    pub iterations: u64,
+}
+
+fn mode_name(mode: ActionMode) -> &'static str {
+    match mode {
+        ActionMode::GoalAngles => "goal_angles",
+        ActionMode::Torque => "torque",
+    }
+}
+
+/// Writes `p` to `path` (atomically).
+pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
+    let flat = p.policy.flat();
+    let hidden: Vec<i64> = p.policy.hidden().iter().map(|&h| h as i64).collect();
+    let mut w = NpzWriter::create(path)?;
+    w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
+    w.f64("params", &[flat.len() as u64], &flat)?;
+    w.i64("hidden", &[hidden.len() as u64], &hidden)?;
+    w.string("action_mode", mode_name(p.mode))?;
+    w.f64("start_q", &[3], &p.start_q)?;
+    w.f64("dt", &[], &[p.dt])?;
+    w.u64("horizon", &[], &[p.horizon as u64])?;
+    w.u64("seed", &[], &[p.seed])?;
+    w.u64("iterations", &[], &[p.iterations])?;
+    w.strings("state_names", &STATE_NAMES)?;
+    w.strings("action_names", &ACTION_NAMES)?;
+    w.finish()?;
+    Ok(())
+}
+
+/// Reads and checks a policy file.
+pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let bad = |name: &str, why: String| f.bad(name, why);
+    for (name, want) in [
+        ("state_names", &STATE_NAMES[..]),
+        ("action_names", &ACTION_NAMES[..]),
+    ] {
+        let got = f.strings(name)?;
+        if got != want {
+            return Err(bad(
+                name,
+                format!("{got:?} is not this project's layout {want:?}"),
+            ));
+        }
+    }
+    let (shape, hidden) = f.f64("hidden")?;
+    if shape.len() != 1 || hidden.is_empty() {
+        return Err(bad(
+            "hidden",
+            format!("shape {shape:?}, expected (H,) with H >= 1 hidden layers"),
+        ));
+    }
+    if let Some(h) = hidden
+        .iter()
+        .find(|&&h| !(h >= 1.0 && h <= MAX_WIDTH as f64 && h.fract() == 0.0))
+    {
+        return Err(bad(
+            "hidden",
+            format!("width {h}: every width must be an integer in 1..={MAX_WIDTH}"),
+        ));
+    }
+    let hidden: Vec<usize> = hidden.iter().map(|&h| h as usize).collect();
+    let params = f.f64_shaped("params", &[flat_len(&hidden) as u64])?;
+    let policy = GlobalPolicy::from_flat(&hidden, &params).map_err(|e| bad("params", e))?;
+    let mode = match f.string("action_mode")?.as_str() {
+        "goal_angles" => ActionMode::GoalAngles,
+        "torque" => ActionMode::Torque,
+        other => {
+            return Err(bad(
+                "action_mode",
+                format!("`{other}`, expected `goal_angles` or `torque`"),
+            ))
+        }
+    };
+    let start_q: [f64; 3] = f
+        .f64_shaped("start_q", &[3])?
+        .try_into()
+        .expect("shape checked");
+    if start_q.iter().any(|v| !v.is_finite()) {
+        return Err(bad("start_q", format!("{start_q:?} is not finite")));
+    }
+    let dt = f.f64_shaped("dt", &[])?[0];
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(bad("dt", format!("{dt}: must be finite and > 0 s")));
+    }
+    let horizon = f.u64_scalar("horizon")?;
+    if horizon < 2 {
+        return Err(bad("horizon", format!("{horizon}: must be >= 2 steps")));
+    }
+    Ok(PolicyFile {
+        policy,
+        mode,
+        start_q,
+        dt,
+        horizon: horizon as usize,
+        seed: f.u64_scalar("seed")?,
+        iterations: f.u64_scalar("iterations")?,
+    })
+}
