@@ -246,16 +246,27 @@ impl ArmConfig {
                 ),
             );
         }
-        if !u.wrist_q.iter().chain(&u.ee_offset).all(|v| v.is_finite() && v.abs() <= 7.0) {
+        if !u
+            .wrist_q
+            .iter()
+            .chain(&u.ee_offset)
+            .all(|v| v.is_finite() && v.abs() <= 7.0)
+        {
             return bad(
                 "arm.ur.wrist_q/ee_offset",
-                format!("{:?} / {:?} must be finite, within ±7 (rad, m)", u.wrist_q, u.ee_offset),
+                format!(
+                    "{:?} / {:?} must be finite, within ±7 (rad, m)",
+                    u.wrist_q, u.ee_offset
+                ),
             );
         }
         if !(u.reset_speed_rad_s > 0.0 && u.reset_speed_rad_s <= 3.0) {
             return bad(
                 "arm.ur.reset_speed_rad_s",
-                format!("{} must be in (0, 3] rad/s (UR joints: π rad/s at most)", u.reset_speed_rad_s),
+                format!(
+                    "{} must be in (0, 3] rad/s (UR joints: π rad/s at most)",
+                    u.reset_speed_rad_s
+                ),
             );
         }
         if action_mode != ActionMode::GoalAngles {

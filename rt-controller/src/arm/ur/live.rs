@@ -1,19 +1,15 @@
-//! The `ur` arm's setup (docs/design.md §3.10; issue 13): RTDE handshake, controller version,
-//! output recipe, START and the mode checks, then the project's URScript program sent headless
-//! to the secondary interface and its reverse connection accepted. Allocates, blocks and fails
-//! with [`UrSetupError`]s that say what is wrong and what to do. The loop side (states from the
-//! packages, servoj targets on the reverse socket) is not written yet.
+//! The `ur` arm in the loop (docs/design.md §3.10): RTDE packages in (non-blocking), one
+//! servoj target per package on the reverse socket, one [`ArmState`] per control period of
+//! arm time; resets as quintic joint moves; a robot stop or a closed connection reported.
+//! Nothing here allocates after [`ArmBackend::connect`].
 
 use std::io::{Read, Write};
-use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream};
-use std::time::{Duration, Instant};
+use std::net::TcpStream;
+use std::time::Duration;
 
 use ur_protocol::modes::{robot_mode_name, safety_mode_name};
-use ur_protocol::rtde::{ControllerVersion, PackageType, Protocol};
-use ur_protocol::script::{self, ScriptParams};
-use ur_protocol::{
-    ClientMessage, FrameDecoder, OutputRecipe, RobotMessage, RobotMode, RobotState, SafetyMode,
-};
+use ur_protocol::rtde::Protocol;
+use ur_protocol::{FrameDecoder, OutputRecipe, RobotMessage, RobotMode, RobotState, SafetyMode};
 
 use serde::Serialize;
 use ur5_shared::clock::monotonic_ns;
@@ -24,382 +20,12 @@ use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind};
 use ur_protocol::state::runtime_state;
 use ur_protocol::{ControlMode, ReverseCommand};
 
-use super::{ArmBackend, ArmIoError};
-use crate::config::{ServoTarget, UrConfig, UrSeries};
+use crate::arm::{ArmBackend, ArmIoError};
+use crate::config::{ServoTarget, UrConfig};
 use crate::error::SetupError;
 use crate::stats::{Histogram, Percentiles};
 
-/// The project's robot-side program (placeholders filled in by [`script::render`]).
-pub const PROGRAM: &str = include_str!("../../urscript/external_control.script");
-
-/// The outputs the driver asks for (issue 13: at least these).
-pub const OUTPUTS: &str =
-    "timestamp,actual_q,actual_qd,robot_mode,safety_mode,runtime_state,speed_scaling";
-
-pub use crate::error::UrSetupError;
-
-/// A UR controller after setup: RTDE streaming the recipe, the program connected back.
-pub struct UrSession {
-    /// The RTDE connection (blocking, with the setup timeout, until the loop side takes it).
-    pub rtde: TcpStream,
-    /// Its decoder (frames left over from setup included).
-    pub decoder: Box<FrameDecoder<8192>>,
-    /// Negotiated protocol.
-    pub protocol: Protocol,
-    /// The controller's version.
-    pub version: ControllerVersion,
-    /// The arm cycle (s): 0.002 (e-Series) or 0.008 (CB3).
-    pub cycle_s: f64,
-    /// The accepted output recipe.
-    pub recipe: OutputRecipe,
-    /// The newest state seen during setup (RUNNING, NORMAL).
-    pub state: RobotState,
-    /// The program's reverse connection.
-    pub reverse: TcpStream,
-    /// Text messages the robot sent during setup.
-    pub texts: Vec<String>,
-}
-
-struct Rtde {
-    s: TcpStream,
-    dec: Box<FrameDecoder<8192>>,
-    protocol: Protocol,
-    texts: Vec<String>,
-}
-
-/// A frame copied out of the decoder (setup only).
-struct Owned(PackageType, Vec<u8>);
-
-impl Owned {
-    fn decode(
-        &self,
-        protocol: Protocol,
-        during: &'static str,
-    ) -> Result<RobotMessage<'_>, UrSetupError> {
-        let f = ur_protocol::Frame {
-            kind: self.0,
-            payload: &self.1,
-        };
-        RobotMessage::decode(&f, protocol).map_err(|why| UrSetupError::Decode { during, why })
-    }
-}
-
-impl Rtde {
-    fn send(&mut self, m: ClientMessage<'_>, during: &'static str) -> Result<(), UrSetupError> {
-        let mut buf = [0u8; 1024];
-        let n = m
-            .encode(&mut buf)
-            .expect("the driver's requests fit in 1 KB");
-        self.s
-            .write_all(&buf[..n])
-            .map_err(|why| UrSetupError::Io { during, why })
-    }
-
-    /// The next frame that is not a text message (texts are kept).
-    fn next(&mut self, during: &'static str) -> Result<Owned, UrSetupError> {
-        loop {
-            let frame = self
-                .dec
-                .next_frame()
-                .map_err(|why| UrSetupError::Frame { during, why })?
-                .map(|f| Owned(f.kind, f.payload.to_vec()));
-            if let Some(Owned(kind, payload)) = frame {
-                if kind == PackageType::TextMessage {
-                    let f = ur_protocol::Frame {
-                        kind,
-                        payload: &payload,
-                    };
-                    let text = match RobotMessage::decode(&f, self.protocol) {
-                        Ok(RobotMessage::TextMessage(t)) => format!("{t:?}"),
-                        _ => "(undecodable text message)".into(),
-                    };
-                    self.texts.push(text);
-                    continue;
-                }
-                return Ok(Owned(kind, payload));
-            }
-            match self.s.read(self.dec.spare()) {
-                Ok(0) => return Err(UrSetupError::Closed(during)),
-                Ok(n) => self.dec.commit(n),
-                Err(why) => return Err(UrSetupError::Io { during, why }),
-            }
-        }
-    }
-
-    fn ask<T>(
-        &mut self,
-        m: ClientMessage<'_>,
-        during: &'static str,
-        pick: impl Fn(RobotMessage<'_>) -> Option<T>,
-    ) -> Result<T, UrSetupError> {
-        self.send(m, during)?;
-        let frame = self.next(during)?;
-        pick(frame.decode(self.protocol, during)?).ok_or(UrSetupError::Unexpected {
-            during,
-            got: frame.0,
-        })
-    }
-}
-
-/// The `ur` arm after the RTDE half of the setup: streaming the recipe, RUNNING and NORMAL,
-/// the program not sent yet ([`UrRtde::start_program`] does that).
-pub struct UrRtde {
-    c: Rtde,
-    version: ControllerVersion,
-    rate_hz: f64,
-    recipe: OutputRecipe,
-    state: RobotState,
-}
-
-impl UrSession {
-    /// Setup of the `ur` arm, in the order of docs/design.md §3.10: [`UrRtde::connect`], then
-    /// [`UrRtde::start_program`]. Each wait is bounded by `timeout`.
-    pub fn connect(cfg: &UrConfig, timeout: Duration) -> Result<Self, UrSetupError> {
-        UrRtde::connect(cfg, timeout)?.start_program(cfg, timeout)
-    }
-}
-
-impl UrRtde {
-    /// RTDE v2 (v1 fallback), the controller version and series, the output recipe at the
-    /// controller's rate, START, the first package (RUNNING and NORMAL or refuse).
-    pub fn connect(cfg: &UrConfig, timeout: Duration) -> Result<Self, UrSetupError> {
-        let host: Ipv4Addr = cfg
-            .host
-            .parse()
-            .expect("validated by ControllerConfig::validate");
-        let rtde_addr = SocketAddr::from((host, cfg.rtde_port));
-        let s = TcpStream::connect_timeout(&rtde_addr, timeout).map_err(|why| {
-            UrSetupError::Connect {
-                what: "RTDE interface",
-                addr: rtde_addr,
-                why,
-            }
-        })?;
-        s.set_read_timeout(Some(timeout)).map_err(io("setup"))?;
-        s.set_nodelay(true).map_err(io("setup"))?;
-        let mut c = Rtde {
-            s,
-            dec: Box::default(),
-            protocol: Protocol::V1,
-            texts: Vec::new(),
-        };
-        let mut negotiated = None;
-        for (v, p) in [(2u16, Protocol::V2), (1, Protocol::V1)] {
-            let accepted = c.ask(
-                ClientMessage::RequestProtocolVersion(v),
-                "protocol negotiation",
-                |m| match m {
-                    RobotMessage::ProtocolVersion { accepted } => Some(accepted),
-                    _ => None,
-                },
-            )?;
-            if accepted {
-                negotiated = Some(p);
-                break;
-            }
-        }
-        c.protocol = negotiated.ok_or(UrSetupError::NoProtocol)?;
-        let version = c.ask(
-            ClientMessage::GetUrcontrolVersion,
-            "controller version",
-            |m| match m {
-                RobotMessage::UrcontrolVersion(v) => Some(v),
-                _ => None,
-            },
-        )?;
-        let mismatch = match cfg.series {
-            UrSeries::Auto => false,
-            UrSeries::E => !version.is_e_series(),
-            UrSeries::Cb3 => version.is_e_series(),
-        };
-        if mismatch {
-            return Err(UrSetupError::SeriesMismatch {
-                configured: cfg.series,
-                reported: version,
-            });
-        }
-        let rate_hz = version.max_frequency_hz();
-        let protocol = c.protocol;
-        let (recipe_id, types) = c.ask(
-            ClientMessage::SetupOutputs {
-                frequency: (protocol == Protocol::V2).then_some(rate_hz),
-                names: OUTPUTS,
-            },
-            "output recipe",
-            |m| match m {
-                RobotMessage::SetupOutputs { recipe_id, types } => {
-                    Some((recipe_id, types.to_owned()))
-                }
-                _ => None,
-            },
-        )?;
-        let recipe = OutputRecipe::from_answer(OUTPUTS, recipe_id, &types)?;
-        let started = c.ask(ClientMessage::Start, "START", |m| match m {
-            RobotMessage::Start { accepted } => Some(accepted),
-            _ => None,
-        })?;
-        if !started {
-            return Err(UrSetupError::StartRefused);
-        }
-        let state = c.state(&recipe)?;
-        check_modes(&state)?;
-        Ok(Self {
-            c,
-            version,
-            rate_hz,
-            recipe,
-            state,
-        })
-    }
-
-    /// The newest state (setup).
-    pub fn state(&self) -> &RobotState {
-        &self.state
-    }
-
-    /// Blocks for the next data package (bounded by the setup timeout) and returns its state:
-    /// an observer's read (tests watch the arm through a second RTDE connection with it).
-    pub fn next_state(&mut self) -> Result<&RobotState, UrSetupError> {
-        self.state = self.c.state(&self.recipe)?;
-        Ok(&self.state)
-    }
-
-    /// The rest of the setup: the packages queued meanwhile read (the newest must still be
-    /// RUNNING and NORMAL), a listener on `reverse_port` at the RTDE socket's local address,
-    /// the program rendered with it and sent to the secondary port, its connection back.
-    pub fn start_program(
-        mut self,
-        cfg: &UrConfig,
-        timeout: Duration,
-    ) -> Result<UrSession, UrSetupError> {
-        self.catch_up()?;
-        check_modes(&self.state)?;
-        let c = &mut self.c;
-        let host: Ipv4Addr = cfg
-            .host
-            .parse()
-            .expect("validated by ControllerConfig::validate");
-        // The program connects back to the address this PC has toward the robot.
-        let local = c.s.local_addr().map_err(io("setup"))?;
-        let IpAddr::V4(reverse_ip) = local.ip() else {
-            return Err(UrSetupError::NotIpv4(local.ip()));
-        };
-        let reverse_addr = SocketAddr::from((reverse_ip, cfg.reverse_port));
-        let listener = TcpListener::bind(reverse_addr).map_err(|why| UrSetupError::Listen {
-            addr: reverse_addr,
-            why,
-        })?;
-        let bound = listener.local_addr().map_err(io("setup"))?;
-        let program = script::render(
-            PROGRAM,
-            &ScriptParams {
-                reverse_ip,
-                reverse_port: bound.port(),
-                steptime_s: 1.0 / self.rate_hz,
-            },
-        );
-        let sec_addr = SocketAddr::from((host, cfg.secondary_port));
-        let mut sec = TcpStream::connect_timeout(&sec_addr, timeout).map_err(|why| {
-            UrSetupError::Connect {
-                what: "secondary interface",
-                addr: sec_addr,
-                why,
-            }
-        })?;
-        sec.write_all(program.as_bytes())
-            .map_err(UrSetupError::SendProgram)?;
-        drop(sec);
-        listener.set_nonblocking(true).map_err(io("setup"))?;
-        let t0 = Instant::now();
-        let reverse = loop {
-            match listener.accept() {
-                Ok((r, _)) => break r,
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock && t0.elapsed() < timeout => {
-                    std::thread::sleep(Duration::from_millis(2))
-                }
-                Err(_) => {
-                    return Err(UrSetupError::NoCallback {
-                        addr: bound,
-                        timeout_s: timeout.as_secs_f64(),
-                        texts: std::mem::take(&mut c.texts),
-                    })
-                }
-            }
-        };
-        reverse.set_nonblocking(false).map_err(io("setup"))?;
-        reverse.set_nodelay(true).map_err(io("setup"))?;
-        let Self {
-            c,
-            version,
-            rate_hz,
-            recipe,
-            state,
-        } = self;
-        Ok(UrSession {
-            rtde: c.s,
-            decoder: c.dec,
-            protocol: c.protocol,
-            version,
-            cycle_s: 1.0 / rate_hz,
-            recipe,
-            state,
-            reverse,
-            texts: c.texts,
-        })
-    }
-
-    /// Reads every package queued since the last read (non-blocking) into the newest state.
-    fn catch_up(&mut self) -> Result<(), UrSetupError> {
-        let during = "reading the queued packages";
-        self.c.s.set_nonblocking(true).map_err(io(during))?;
-        let result = loop {
-            match self.c.s.read(self.c.dec.spare()) {
-                Ok(0) => break Err(UrSetupError::Closed(during)),
-                Ok(n) => {
-                    self.c.dec.commit(n);
-                    while let Some(f) = self
-                        .c
-                        .dec
-                        .next_frame()
-                        .map_err(|why| UrSetupError::Frame { during, why })?
-                    {
-                        let m = RobotMessage::decode(&f, self.c.protocol)
-                            .map_err(|why| UrSetupError::Decode { during, why })?;
-                        self.state
-                            .update(&self.recipe, &m)
-                            .map_err(|why| UrSetupError::Decode { during, why })?;
-                    }
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break Ok(()),
-                Err(why) => break Err(UrSetupError::Io { during, why }),
-            }
-        };
-        self.c.s.set_nonblocking(false).map_err(io(during))?;
-        result
-    }
-}
-
-fn io(during: &'static str) -> impl Fn(std::io::Error) -> UrSetupError {
-    move |why| UrSetupError::Io { during, why }
-}
-
-impl Rtde {
-    /// The next data package decoded into a state.
-    fn state(&mut self, recipe: &OutputRecipe) -> Result<RobotState, UrSetupError> {
-        let during = "first data package";
-        loop {
-            let frame = self.next(during)?;
-            let m = frame.decode(self.protocol, during)?;
-            let mut s = RobotState::default();
-            if s.update(recipe, &m)
-                .map_err(|why| UrSetupError::Decode { during, why })?
-            {
-                return Ok(s);
-            }
-        }
-    }
-}
-
+use super::setup::{UrRtde, UrSetupError};
 // ------------------------------------------------------------------------------ the loop side
 
 /// A reset to the start pose counts as done when every joint is this close (rad) …
@@ -536,7 +162,11 @@ impl Lateness {
         let (w0, t0) = *self.first.get_or_insert((wall_ns, ts));
         let offset = (wall_ns - w0) as i64 - ((ts - t0) * 1e9 / self.compression) as i64;
         if package <= LATENESS_BASELINE {
-            self.baseline_ns = if package == 1 { offset } else { self.baseline_ns.min(offset) };
+            self.baseline_ns = if package == 1 {
+                offset
+            } else {
+                self.baseline_ns.min(offset)
+            };
         } else {
             self.hist.record((offset - self.baseline_ns).max(0) as u64);
         }
@@ -594,7 +224,11 @@ impl UrArm {
                     "robot mode {} ({r}), safety mode {} ({s}), program {}",
                     robot_mode_name(r),
                     safety_mode_name(s),
-                    if p == runtime_state::PLAYING { "running" } else { "not running" }
+                    if p == runtime_state::PLAYING {
+                        "running"
+                    } else {
+                        "not running"
+                    }
                 )
             }),
             lost: l.lost,
@@ -619,7 +253,12 @@ impl ArmBackend for UrArm {
             .take()
             .expect("wait_ready succeeded before connect");
         let session = r.start_program(&self.cfg, self.timeout)?;
-        let setup = |why| SetupError::Ur(UrSetupError::Io { during: "setup", why });
+        let setup = |why| {
+            SetupError::Ur(UrSetupError::Io {
+                during: "setup",
+                why,
+            })
+        };
         session.rtde.set_nonblocking(true).map_err(setup)?;
         let q = session.state.actual_q;
         let ts = session.state.timestamp;
@@ -657,8 +296,11 @@ impl ArmBackend for UrArm {
             }),
         };
         // The program's first command: hold where the arm is.
-        live.write(&self.cfg)
-            .map_err(|_| setup(std::io::Error::other("the first reverse command could not be written")))?;
+        live.write(&self.cfg).map_err(|_| {
+            setup(std::io::Error::other(
+                "the first reverse command could not be written",
+            ))
+        })?;
         self.live = Some(live);
         Ok(())
     }
@@ -688,8 +330,8 @@ impl ArmBackend for UrArm {
         self.live.as_ref().and_then(|l| l.lost)
     }
 
-    fn report(&self) -> Option<super::ArmReport> {
-        Some(super::ArmReport::Ur(UrArm::report(self)))
+    fn report(&self) -> Option<crate::arm::ArmReport> {
+        Some(crate::arm::ArmReport::Ur(UrArm::report(self)))
     }
 }
 
@@ -800,7 +442,9 @@ impl Live {
                     self.last_text.clear();
                     let text = match t {
                         ur_protocol::TextMessage::V2 { message, .. } => message,
-                        ur_protocol::TextMessage::V1(b) => core::str::from_utf8(b).unwrap_or("(v1 text, not UTF-8)"),
+                        ur_protocol::TextMessage::V1(b) => {
+                            core::str::from_utf8(b).unwrap_or("(v1 text, not UTF-8)")
+                        }
                     };
                     for ch in text.chars() {
                         if self.last_text.push(ch).is_err() {
@@ -916,7 +560,8 @@ impl Live {
         let here = self.robot.actual_q;
         let hold_here = Ur5Kinematics::six(&[here[0], here[1], here[2]], &cfg.wrist_q);
         let in_limits = |q: &[f64; N_JOINTS]| {
-            (0..N_JOINTS).all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
+            (0..N_JOINTS)
+                .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
         };
         let (goal, ok) = match cmd.kind() {
             Ok(CommandKind::GoalAngles) if in_limits(&cmd.values) => {
@@ -974,7 +619,9 @@ impl Live {
                 ServoTarget::Hold => self.goal,
                 ServoTarget::Ramp => {
                     let f = ((ts + self.cycle_s - self.goal_ts) / self.period_s).clamp(0.0, 1.0);
-                    core::array::from_fn(|j| self.ramp_from[j] + f * (self.goal[j] - self.ramp_from[j]))
+                    core::array::from_fn(|j| {
+                        self.ramp_from[j] + f * (self.goal[j] - self.ramp_from[j])
+                    })
                 }
             },
         }
@@ -1000,47 +647,5 @@ impl Live {
                 Err(ArmIoError::Send)
             }
         }
-    }
-}
-
-/// Refuses to drive an arm that is not RUNNING with safety NORMAL.
-pub fn check_modes(s: &RobotState) -> Result<(), UrSetupError> {
-    let (robot, safety) = (s.robot_mode, s.safety_mode);
-    if robot != RobotMode::Running.code() {
-        return Err(UrSetupError::NotRunning {
-            name: robot_mode_name(robot),
-            code: robot,
-        });
-    }
-    if safety != SafetyMode::Normal.code() {
-        return Err(UrSetupError::NotNormal {
-            name: safety_mode_name(safety),
-            code: safety,
-        });
-    }
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_mode_check_names_the_mode() {
-        let mut s = RobotState {
-            robot_mode: RobotMode::Running.code(),
-            safety_mode: SafetyMode::Normal.code(),
-            ..RobotState::default()
-        };
-        check_modes(&s).unwrap();
-        s.safety_mode = SafetyMode::ProtectiveStop.code();
-        let e = check_modes(&s).unwrap_err().to_string();
-        assert!(
-            e.contains("PROTECTIVE_STOP") && e.contains("not NORMAL"),
-            "{e}"
-        );
-        s.robot_mode = 3;
-        let e = check_modes(&s).unwrap_err().to_string();
-        assert!(e.contains("POWER_OFF") && e.contains("not RUNNING"), "{e}");
     }
 }
