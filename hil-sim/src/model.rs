@@ -12,7 +12,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use ur5_shared::layout::{ACTIVE_JOINTS, N_JOINTS};
 use urdf_rs::{JointType, Robot};
 
@@ -228,6 +228,41 @@ impl ArmModel {
         r
     }
 
+    /// The robot the simulator builds: [`Self::locked`] with masses and inertias multiplied by
+    /// `mass_scale` and every link that hangs on a fixed joint merged into its parent, so that
+    /// each rigid body of the arm is one multibody link (see [`merge_fixed_links`]). With the
+    /// wrists locked the UR5 is four links (base, shoulder, upper arm, forearm carrying the
+    /// wrists) instead of seven; the multibody's work per physics step (forward kinematics,
+    /// mass matrix, Jacobians) grows with its links. Link and joint names of the links that
+    /// remain are those of the URDF.
+    pub fn rigid_robot(&self, mass_scale: f64) -> Robot {
+        merge_fixed_links(&self.locked_with_mass_scale(mass_scale))
+    }
+
+    /// Where link `name` of the URDF ends up in [`Self::rigid_robot`]: the link that carries it
+    /// and the pose of `name`'s frame in that link's frame (identity if it was not merged).
+    /// `None` for an unknown link.
+    pub fn carrier_of(&self, name: &str) -> Option<(String, Isometry3<f64>)> {
+        let mut link = self
+            .locked
+            .links
+            .iter()
+            .find(|l| l.name == name)?
+            .name
+            .clone();
+        let mut pose = Isometry3::identity();
+        while let Some(j) = self
+            .locked
+            .joints
+            .iter()
+            .find(|j| j.child.link == link && j.joint_type == JointType::Fixed)
+        {
+            pose = urdf_pose_to_isometry(&j.origin) * pose;
+            link = j.parent.link.clone();
+        }
+        Some((link, pose))
+    }
+
     /// Upper bound of the distance from the shoulder-lift joint to the end-effector point (m):
     /// the sum of the lengths of the joint offsets after it, plus the end-effector offset.
     pub fn reach(&self) -> f64 {
@@ -427,6 +462,103 @@ fn chain_order(robot: &Robot) -> Result<Vec<usize>, SimError> {
     Ok(order)
 }
 
+/// `robot` with the child of every fixed joint merged into the parent link: one link with the
+/// summed mass, the mass-weighted centre of mass and the inertia of both about it (each link's
+/// inertia rotated into the parent's frame and moved by the parallel-axis theorem), written
+/// with its origin at that centre of mass, axes of the parent frame (rpy 0) and the full
+/// symmetric tensor. Joints that hung from the merged child hang from the parent, their origin
+/// composed with the fixed joint's. A rigid assembly moves the same either way; the merged
+/// form is what the multibody integrates faster.
+pub fn merge_fixed_links(robot: &Robot) -> Robot {
+    let mut r = robot.clone();
+    while let Some(ji) = r
+        .joints
+        .iter()
+        .position(|j| j.joint_type == JointType::Fixed)
+    {
+        let joint = r.joints.remove(ji);
+        let (parent, child) = (joint.parent.link.clone(), joint.child.link.clone());
+        let to_parent = urdf_pose_to_isometry(&joint.origin);
+        let ci = r
+            .links
+            .iter()
+            .position(|l| l.name == child)
+            .expect("joint child exists (checked)");
+        let child_link = r.links.remove(ci);
+        let pl = r
+            .links
+            .iter_mut()
+            .find(|l| l.name == parent)
+            .expect("joint parent exists (checked)");
+        pl.inertial = merge_inertials(&pl.inertial, &child_link.inertial, &to_parent);
+        for j in r.joints.iter_mut().filter(|j| j.parent.link == child) {
+            j.parent.link = parent.clone();
+            j.origin = isometry_to_urdf_pose(&(to_parent * urdf_pose_to_isometry(&j.origin)));
+        }
+    }
+    r
+}
+
+/// Mass, centre of mass (parent frame) and inertia about that centre (parent axes) of an
+/// inertial whose link frame sits at `to_parent` in the parent's frame.
+fn inertial_in_parent(
+    i: &urdf_rs::Inertial,
+    to_parent: &Isometry3<f64>,
+) -> (f64, Vector3<f64>, Matrix3<f64>) {
+    let at = to_parent * urdf_pose_to_isometry(&i.origin);
+    let t = &i.inertia;
+    let local = Matrix3::new(
+        t.ixx, t.ixy, t.ixz, t.ixy, t.iyy, t.iyz, t.ixz, t.iyz, t.izz,
+    );
+    let rot = at.rotation.to_rotation_matrix();
+    (
+        i.mass.value,
+        at.translation.vector,
+        rot.matrix() * local * rot.matrix().transpose(),
+    )
+}
+
+/// `parent`'s and `child`'s inertials as one, in the parent's frame (see [`merge_fixed_links`]).
+fn merge_inertials(
+    parent: &urdf_rs::Inertial,
+    child: &urdf_rs::Inertial,
+    child_to_parent: &Isometry3<f64>,
+) -> urdf_rs::Inertial {
+    let parts = [
+        inertial_in_parent(parent, &Isometry3::identity()),
+        inertial_in_parent(child, child_to_parent),
+    ];
+    let mass: f64 = parts.iter().map(|p| p.0).sum();
+    let com = if mass > 0.0 {
+        parts.iter().map(|p| p.0 * p.1).sum::<Vector3<f64>>() / mass
+    } else {
+        Vector3::zeros()
+    };
+    // Parallel-axis theorem: I_com = Σ (I_i + m_i (|d|² E − d dᵀ)), d = com_i − com.
+    let inertia: Matrix3<f64> = parts
+        .iter()
+        .map(|(m, c, i)| {
+            let d = c - com;
+            i + *m * (Matrix3::identity() * d.norm_squared() - d * d.transpose())
+        })
+        .sum();
+    urdf_rs::Inertial {
+        origin: urdf_rs::Pose {
+            xyz: urdf_rs::Vec3(com.into()),
+            rpy: urdf_rs::Vec3([0.0; 3]),
+        },
+        mass: urdf_rs::Mass { value: mass },
+        inertia: urdf_rs::Inertia {
+            ixx: inertia[(0, 0)],
+            ixy: inertia[(0, 1)],
+            ixz: inertia[(0, 2)],
+            iyy: inertia[(1, 1)],
+            iyz: inertia[(1, 2)],
+            izz: inertia[(2, 2)],
+        },
+    }
+}
+
 /// The origin of a fixed joint equivalent to a revolute joint held at angle `q` about `axis`.
 fn lock_origin(origin: &urdf_rs::Pose, axis: [f64; 3], q: f64) -> urdf_rs::Pose {
     let iso = urdf_pose_to_isometry(origin)
@@ -443,10 +575,121 @@ pub fn urdf_pose_to_isometry(p: &urdf_rs::Pose) -> Isometry3<f64> {
     )
 }
 
+/// Isometry to URDF pose. The roll-pitch-yaw angles (R = R_z(y) R_y(p) R_x(r)) are taken as
+/// y = atan2(R₁₀, R₀₀), then p and r from R_z(−y) R = R_y(p) R_x(r), which stays exact at
+/// p = ±π/2, where nalgebra's `euler_angles` returns a different rotation (a wrist locked at
+/// ±π/2 composed with the next joint's origin lands there).
 fn isometry_to_urdf_pose(iso: &Isometry3<f64>) -> urdf_rs::Pose {
-    let (r, p, y) = iso.rotation.euler_angles();
+    let m = iso.rotation.to_rotation_matrix().into_inner();
+    let y = m[(1, 0)].atan2(m[(0, 0)]);
+    let (sy, cy) = y.sin_cos();
+    let p = (-m[(2, 0)]).atan2(cy * m[(0, 0)] + sy * m[(1, 0)]);
+    let r = (sy * m[(0, 2)] - cy * m[(1, 2)]).atan2(cy * m[(1, 1)] - sy * m[(0, 1)]);
     urdf_rs::Pose {
         xyz: urdf_rs::Vec3(iso.translation.vector.into()),
         rpy: urdf_rs::Vec3([r, p, y]),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Mass, first moment and inertia about the frame origin of an inertial at `pose`.
+    fn moments(i: &urdf_rs::Inertial, pose: &Isometry3<f64>) -> (f64, Vector3<f64>, Matrix3<f64>) {
+        let (m, c, ic) = inertial_in_parent(i, pose);
+        let shift = m * (Matrix3::identity() * c.norm_squared() - c * c.transpose());
+        (m, m * c, ic + shift)
+    }
+
+    #[test]
+    fn urdf_pose_round_trips_through_gimbal_lock() {
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        for rpy in [
+            [0.0, 0.0, 0.0],
+            [0.3, -0.4, 2.9],
+            [0.0, -half_pi, 3.0],
+            [1.1, half_pi, -0.2],
+            [-0.7, half_pi - 1e-9, 0.4],
+        ] {
+            let pose = urdf_rs::Pose {
+                xyz: urdf_rs::Vec3([0.1, -0.2, 0.3]),
+                rpy: urdf_rs::Vec3(rpy),
+            };
+            let iso = urdf_pose_to_isometry(&pose);
+            let back = urdf_pose_to_isometry(&isometry_to_urdf_pose(&iso));
+            let err = (back.to_homogeneous() - iso.to_homogeneous()).abs().max();
+            assert!(err < 1e-14, "rpy {rpy:?}: {err:e}");
+        }
+    }
+
+    #[test]
+    fn merging_keeps_mass_centre_and_inertia_of_the_rigid_assembly() {
+        for wrist_q in [
+            [-1.5707963267948966, 1.5707963267948966, 0.0],
+            [0.3, -0.7, 1.1],
+        ] {
+            let model = ArmModel::load(None, wrist_q, "wrist_3_link", [0.0, 0.0, 0.1]).unwrap();
+            let merged = model.rigid_robot(1.0);
+            let names: Vec<&str> = merged.links.iter().map(|l| l.name.as_str()).collect();
+            assert_eq!(
+                names,
+                [
+                    "base_link",
+                    "shoulder_link",
+                    "upper_arm_link",
+                    "forearm_link"
+                ]
+            );
+            assert_eq!(merged.joints.len(), 3);
+            // The forearm and the three wrist links, each at its pose in the forearm frame.
+            let (mut m, mut first, mut inertia) = (0.0, Vector3::zeros(), Matrix3::zeros());
+            for name in [
+                "forearm_link",
+                "wrist_1_link",
+                "wrist_2_link",
+                "wrist_3_link",
+            ] {
+                let (carrier, pose) = model.carrier_of(name).unwrap();
+                assert_eq!(carrier, "forearm_link");
+                let link = model.locked.links.iter().find(|l| l.name == name).unwrap();
+                let (mi, fi, ii) = moments(&link.inertial, &pose);
+                m += mi;
+                first += fi;
+                inertia += ii;
+            }
+            let forearm = merged
+                .links
+                .iter()
+                .find(|l| l.name == "forearm_link")
+                .unwrap();
+            let (mm, fm, im) = moments(&forearm.inertial, &Isometry3::identity());
+            assert!((mm - m).abs() < 1e-12);
+            assert!((fm - first).norm() < 1e-12, "{fm} vs {first}");
+            assert!((im - inertia).abs().max() < 1e-12, "{im} vs {inertia}");
+            // Links that were not merged keep their inertials.
+            let upper = |r: &Robot| {
+                r.links
+                    .iter()
+                    .find(|l| l.name == "upper_arm_link")
+                    .unwrap()
+                    .inertial
+                    .clone()
+            };
+            assert_eq!(
+                format!("{:?}", upper(&merged)),
+                format!("{:?}", upper(&model.locked))
+            );
+            // The end-effector link sits where the locked joints put it.
+            let (_, ee) = model.carrier_of("wrist_3_link").unwrap();
+            let chain = ["wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+                .iter()
+                .map(|n| {
+                    let j = model.locked.joints.iter().find(|j| j.name == *n).unwrap();
+                    urdf_pose_to_isometry(&j.origin)
+                })
+                .fold(Isometry3::identity(), |a, b| a * b);
+            assert!((ee.to_homogeneous() - chain.to_homogeneous()).abs().max() < 1e-12);
+        }
     }
 }

@@ -63,8 +63,12 @@ pub struct Ur5Sim {
     dofs: [ActiveDof; N_JOINTS],
     /// (multibody link id, nominal mass kg) of every moving link, for gravity compensation.
     nominal_masses: Vec<(usize, f64)>,
+    /// Multibody link and body that carry the end-effector link (after merging, the forearm).
     ee_link: usize,
     ee_body: RigidBodyHandle,
+    /// The end-effector point in that link's frame (m): `ee_offset` moved through the locked
+    /// joints between the end-effector link and its carrier.
+    ee_point: Vec3,
     rng: ChaCha8Rng,
     /// Action waiting one control period when `latency_steps == 1`.
     pending: Option<[f64; N_JOINTS]>,
@@ -116,8 +120,9 @@ impl Ur5Sim {
             rigid_body_blueprint: RigidBodyBuilder::dynamic().can_sleep(false),
             ..Default::default()
         };
-        let robot = model.locked_with_mass_scale(cfg.perturbation.mass_scale);
-        let nominal = &model.locked;
+        // One multibody link per rigid body: the locked wrists ride on the forearm.
+        let robot = model.rigid_robot(cfg.perturbation.mass_scale);
+        let nominal = &model.rigid_robot(1.0);
         let urdf_robot = UrdfRobot::from_robot(&robot, options, std::path::Path::new("."));
         let link_names: Vec<String> = urdf_robot
             .links
@@ -195,10 +200,15 @@ impl Ur5Sim {
                 .value;
             nominal_masses.push((link, mass));
         }
+        let (ee_carrier, ee_in_carrier) = model
+            .carrier_of(&model.ee_link)
+            .expect("ee link was checked");
+        let ee_point = ee_in_carrier * nalgebra::Point3::from(cfg.ee_offset);
+        let ee_point = Vec3::new(ee_point.x as f32, ee_point.y as f32, ee_point.z as f32);
         let ee_index = link_names
             .iter()
-            .position(|n| *n == model.ee_link)
-            .expect("ee link was checked");
+            .position(|n| *n == ee_carrier)
+            .expect("the carrier is a link of the merged robot");
         let ee_body = handles.links[ee_index].body;
         let ee_link = link_of(ee_body, &world).id;
 
@@ -238,6 +248,7 @@ impl Ur5Sim {
             nominal_masses,
             ee_link,
             ee_body,
+            ee_point,
             rng,
             pending: None,
             current: [0.0; N_JOINTS],
@@ -502,8 +513,7 @@ impl Ur5Sim {
         let (q, qd) = self.joint_state();
         let mb = self.multibody();
         let pose = *mb.link(self.ee_link).expect("ee link").local_to_world();
-        let off = self.cfg.ee_offset;
-        let ee = pose.transform_point(Vec3::new(off[0] as f32, off[1] as f32, off[2] as f32));
+        let ee = pose.transform_point(self.ee_point);
         let com = pose.transform_point(self.world.bodies[self.ee_body].local_center_of_mass());
         let jac = mb.body_jacobian(self.ee_link);
         let mut v = [0.0f64; 3];

@@ -111,7 +111,9 @@ fn shared_kinematics_match_the_simulated_arm() {
             worst_p = worst_p.max((Vector3::from(p) - Vector3::from(o.ee_pos)).norm());
             worst_v = worst_v.max((Vector3::from(v) - Vector3::from(o.ee_vel)).norm());
         }
-        eprintln!("wrist {wrist_q:?}, offset {ee_offset:?}: |Δp| {worst_p:.2e} m, |Δv| {worst_v:.2e} m/s");
+        eprintln!(
+            "wrist {wrist_q:?}, offset {ee_offset:?}: |Δp| {worst_p:.2e} m, |Δv| {worst_v:.2e} m/s"
+        );
         assert!(worst_p <= 1e-6, "|Δp| = {worst_p:.3e} m");
         // rapier's Jacobian is f32: 1e-5 m/s at speeds of a few m/s.
         assert!(worst_v <= 1e-4, "|Δv| = {worst_v:.3e} m/s");

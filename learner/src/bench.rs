@@ -1,5 +1,7 @@
 //! `learner bench`: one full learner update on an arm-sized synthetic problem (GMM prior
-//! update, dynamics fit, η search), timed per piece.
+//! update, dynamics fit, η search), timed per piece; with `--vectors`, the same pieces redone
+//! on the recorded inputs of a GPS reference-vectors file, for a like-for-like comparison with
+//! GPS's numpy code.
 
 use std::time::Instant;
 
@@ -10,13 +12,17 @@ use crate::stats::{median, quantile};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use gps::algorithm::init_state::fit_x0;
 use gps::algorithm::update::Learner;
 use gps::algorithm::AlgorithmConfig;
-use gps::dynamics::lr_prior::LrPriorConfig;
-use gps::dynamics::prior_gmm::PriorGmmConfig;
+use gps::conformance::rel_err;
+use gps::dynamics::gmm::ClusterInit;
+use gps::dynamics::lr_prior::{fit, FitWorkspace, LrPriorConfig};
+use gps::dynamics::prior_gmm::{DynamicsPriorGmm, PriorGmmConfig};
+use gps::dynamics::Dynamics;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::synthetic::random_problem;
-use gps::traj_opt::lqr::TrajOptConfig;
+use gps::traj_opt::lqr::{TrajOptConfig, TrajOptLqr};
 
 /// Median timings (seconds) of the pieces of one update.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -55,8 +61,12 @@ pub fn run(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (sys, pol, truth) = random_problem(&mut rng, t, dx, du);
     let (x, u) = sys.rollout(&pol, n, &mut rng);
-    let (mut g, mut f, mut e, mut tot) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let (mut gc, mut fc, mut ec, mut totc) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut g, mut f, mut e, mut tot) = (
+        Samples::default(),
+        Samples::default(),
+        Samples::default(),
+        Samples::default(),
+    );
     let mut out = LinGaussPolicy::zeros(t, dx, du);
     let (mut k, mut its, mut calls) = (0, 0, 0);
     let mut trace = Vec::new();
@@ -73,53 +83,242 @@ pub fn run(
             n,
             ChaCha8Rng::seed_from_u64(seed.wrapping_add(1)),
         );
-        let c0 = thread_cpu_s();
-        let t0 = Instant::now();
-        let rep = l.update_prior(&x, &u, n)?;
-        let t1 = Instant::now();
-        let c1 = thread_cpu_s();
-        l.fit_dynamics(&x, &u, n)?;
+        let (rep, gw, gc) = timed(|| l.update_prior(&x, &u, n));
+        let rep = rep?;
+        let (fitted, fw, fc) = timed(|| l.fit_dynamics(&x, &u, n));
+        fitted?;
         l.info.cc.clone_from(&truth.cc);
         l.info.cv.copy_from(&truth.cv);
         l.info.cm.copy_from(&truth.cm);
-        let t2 = Instant::now();
-        let c2 = thread_cpu_s();
-        let res = l.update_trajectories(&pol, &mut out)?;
-        let t3 = Instant::now();
-        let c3 = thread_cpu_s();
-        gc.push(c1 - c0);
-        fc.push(c2 - c1);
-        ec.push(c3 - c2);
-        totc.push(c3 - c0);
-        g.push((t1 - t0).as_secs_f64());
-        f.push((t2 - t1).as_secs_f64());
-        e.push((t3 - t2).as_secs_f64());
-        tot.push((t3 - t0).as_secs_f64());
+        let (res, ew, ec) = timed(|| l.update_trajectories(&pol, &mut out));
+        let res = res?;
+        g.push(gw, gc);
+        f.push(fw, fc);
+        e.push(ew, ec);
+        tot.push(gw + fw + ew, gc + fc + ec);
         k = rep.k;
         its = rep.ll_trace.len();
         calls = res.trace.len();
         trace = res.trace.iter().map(|s| (s.eta_out, s.kl)).collect();
         kl_target = l.alg.kl_step * l.step_mult * t as f64;
     }
+    let (g, f, e, tot) = (g.median(), f.median(), e.median(), tot.median());
     Ok(BenchResult {
         t,
         dx,
         du,
         n,
         reps,
-        gmm_prior_update_s: median(&mut g),
-        dynamics_fit_s: median(&mut f),
-        eta_search_s: median(&mut e),
-        total_s: median(&mut tot),
-        total_cpu_s: median(&mut totc),
-        gmm_prior_update_cpu_s: median(&mut gc),
-        dynamics_fit_cpu_s: median(&mut fc),
-        eta_search_cpu_s: median(&mut ec),
+        gmm_prior_update_s: g.wall_s,
+        dynamics_fit_s: f.wall_s,
+        eta_search_s: e.wall_s,
+        total_s: tot.wall_s,
+        total_cpu_s: tot.cpu_s,
+        gmm_prior_update_cpu_s: g.cpu_s,
+        dynamics_fit_cpu_s: f.cpu_s,
+        eta_search_cpu_s: e.cpu_s,
         gmm_k: k,
         gmm_em_iterations: its,
         dgd_backward_calls: calls,
         dgd_trace: trace,
         kl_target,
+    })
+}
+
+/// Wall and thread-CPU time of a closure, s.
+fn timed<R>(f: impl FnOnce() -> R) -> (R, f64, f64) {
+    let c0 = thread_cpu_s();
+    let t0 = Instant::now();
+    let r = f();
+    let wall = t0.elapsed().as_secs_f64();
+    (r, wall, thread_cpu_s() - c0)
+}
+
+/// Median wall and thread-CPU time of one piece over the repetitions, s.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct PieceTime {
+    pub wall_s: f64,
+    pub cpu_s: f64,
+}
+
+/// Per-repetition samples of one piece, s.
+#[derive(Default)]
+struct Samples {
+    wall: Vec<f64>,
+    cpu: Vec<f64>,
+}
+
+impl Samples {
+    fn push(&mut self, wall: f64, cpu: f64) {
+        self.wall.push(wall);
+        self.cpu.push(cpu);
+    }
+
+    fn median(&mut self) -> PieceTime {
+        PieceTime {
+            wall_s: median(&mut self.wall),
+            cpu_s: median(&mut self.cpu),
+        }
+    }
+}
+
+/// `learner bench --vectors`: the three GPS pieces of one recorded iteration of a vectors
+/// file, redone on GPS's recorded inputs, timed, and compared with GPS's recorded outputs.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct VectorsIterationBench {
+    /// Index of the iteration in the file.
+    pub iteration: usize,
+    /// Samples N of the iteration.
+    pub n: usize,
+    /// GMM prior update: append the samples, refit the GMM by EM (from GPS's cluster
+    /// assignment, or warm-started from GPS's previous GMM, as GPS did).
+    pub gmm_prior_update: PieceTime,
+    /// Dynamics fit (prior evaluation + normal-inverse-Wishart regression per step) and x0 fit.
+    pub dynamics_fit: PieceTime,
+    /// KL-bounded LQR update: the η search from GPS's recorded dynamics, cost, previous
+    /// controller, start η and KL target.
+    pub eta_search: PieceTime,
+    /// The three pieces (median of the per-repetition sums).
+    pub total: PieceTime,
+    /// Clusters and EM iterations (ours, GPS's).
+    pub gmm_k: usize,
+    pub gps_gmm_k: usize,
+    pub em_iterations: usize,
+    pub gps_em_iterations: usize,
+    /// Backward passes of the η search (ours, GPS's).
+    pub backward_calls: usize,
+    pub gps_backward_calls: usize,
+    /// Relative error of the final η and largest of the new controller's arrays against GPS's
+    /// (`gps::conformance::rel_err`).
+    pub eta_rel_err: f64,
+    pub controller_rel_err: f64,
+}
+
+impl VectorsIterationBench {
+    /// The same work as GPS (clusters, EM iterations, backward passes) and the same result
+    /// (η and controller within [`gps::conformance::TOL_DET`]).
+    pub fn matches_gps(&self) -> bool {
+        self.gmm_k == self.gps_gmm_k
+            && self.em_iterations == self.gps_em_iterations
+            && self.backward_calls == self.gps_backward_calls
+            && self.eta_rel_err <= gps::conformance::TOL_DET
+            && self.controller_rel_err <= gps::conformance::TOL_DET
+    }
+}
+
+/// `learner bench --vectors` on a whole file.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct VectorsBenchResult {
+    pub file: String,
+    pub t: usize,
+    pub dx: usize,
+    pub du: usize,
+    pub reps: usize,
+    pub iterations: Vec<VectorsIterationBench>,
+}
+
+/// Redoes, `reps` times, the GMM prior update, dynamics fit and η search of every recorded
+/// iteration of the vectors file `file` on GPS's recorded inputs (one thread), and returns the
+/// median timings with the comparison against GPS's recorded outputs.
+pub fn vectors(file: &str, reps: usize) -> Result<VectorsBenchResult, crate::LearnerError> {
+    let p = gps::conformance::recorded::load_file(file)?;
+    let (t, dx, du) = (p.t, p.dx, p.du);
+    let cfg = &p.settings;
+    let mut iterations = Vec::with_capacity(p.iterations.len());
+    for (index, it) in p.iterations.iter().enumerate() {
+        let (mut g, mut f, mut e, mut tot) = (
+            Samples::default(),
+            Samples::default(),
+            Samples::default(),
+            Samples::default(),
+        );
+        let mut last = None;
+        for _ in 0..reps.max(1) {
+            // Outside the timing: the prior's dataset as GPS had it before this iteration, the
+            // workspaces (built once per problem size).
+            let mut prior = DynamicsPriorGmm::new(cfg.prior.clone(), t, dx, du);
+            if it.earlier_n > 0 {
+                prior.append(&it.earlier_x, &it.earlier_u, it.earlier_n)?;
+            }
+            if let Some(w) = &it.warm_start {
+                prior
+                    .gmm
+                    .set_params(w.k, &w.mu, &w.sigma, &w.logmass, w.self_n);
+            }
+            let mut fit_ws = FitWorkspace::new(it.n, dx, du);
+            let mut dynamics = Dynamics::zeros(t, dx, du);
+            let mut opt = TrajOptLqr::new(cfg.opt.clone(), t, dx, du);
+            let mut new_pol = LinGaussPolicy::zeros(t, dx, du);
+
+            let (em, gw, gc) = timed(|| {
+                prior.update(&it.x, &it.u, it.n, ClusterInit::Given(&it.init_cluster_idx))
+            });
+            let em = em?;
+            let (fitted, fw, fc) = timed(|| -> Result<_, gps::GpsError> {
+                fit(
+                    &it.x,
+                    &it.u,
+                    it.n,
+                    &mut prior,
+                    &cfg.fit,
+                    &mut fit_ws,
+                    &mut dynamics,
+                )?;
+                let p0 = prior.initial_state();
+                Ok(fit_x0(
+                    &it.x,
+                    it.n,
+                    t,
+                    dx,
+                    cfg.alg.initial_state_var,
+                    Some(&p0),
+                ))
+            });
+            fitted?;
+            let (dgd, ew, ec) =
+                timed(|| opt.update(&it.prev, &it.info, it.eta_start, it.kl_step, &mut new_pol));
+            let dgd = dgd?;
+            g.push(gw, gc);
+            f.push(fw, fc);
+            e.push(ew, ec);
+            tot.push(gw + fw + ew, gc + fc + ec);
+            last = Some((em, dgd, new_pol));
+        }
+        let (em, dgd, new_pol) = last.expect("at least one repetition");
+        let gpsc = &it.gps_new_controller;
+        let controller_rel_err = [
+            rel_err(&new_pol.gain.data, &gpsc.gain.data),
+            rel_err(&new_pol.k.data, &gpsc.k.data),
+            rel_err(&new_pol.pol_covar.data, &gpsc.pol_covar.data),
+            rel_err(&new_pol.chol_pol_covar.data, &gpsc.chol_pol_covar.data),
+            rel_err(&new_pol.inv_pol_covar.data, &gpsc.inv_pol_covar.data),
+        ]
+        .into_iter()
+        .fold(0.0, f64::max);
+        iterations.push(VectorsIterationBench {
+            iteration: index,
+            n: it.n,
+            gmm_prior_update: g.median(),
+            dynamics_fit: f.median(),
+            eta_search: e.median(),
+            total: tot.median(),
+            gmm_k: em.k,
+            gps_gmm_k: it.gps_k,
+            em_iterations: em.ll_trace.len(),
+            gps_em_iterations: it.gps_em_iterations,
+            backward_calls: dgd.trace.len(),
+            gps_backward_calls: it.gps_backward_calls,
+            eta_rel_err: rel_err(&[dgd.eta], &[it.gps_eta_final]),
+            controller_rel_err,
+        });
+    }
+    Ok(VectorsBenchResult {
+        file: file.to_string(),
+        t,
+        dx,
+        du,
+        reps: reps.max(1),
+        iterations,
     })
 }
 
@@ -167,4 +366,47 @@ pub fn gaifo(
         execute_s: median(&mut col(|l| l.t_execute)),
         final_performance: logs.last().map(|l| l.performance).unwrap_or(f64::NAN),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The in-crate copies of the GPS reference vectors (as the gps crate's conformance tests).
+    fn vectors_file(name: &str) -> String {
+        format!(
+            "{}/gps/tests/data/gps-vectors/{name}",
+            env!("CARGO_MANIFEST_DIR")
+        )
+    }
+
+    #[test]
+    fn vectors_bench_redoes_gps_work_with_gps_results() {
+        // (file, per iteration: clusters, EM iterations, backward passes), as GPS recorded them.
+        for (name, expect) in [
+            ("problem_A.json", [(2, 8, 7), (2, 3, 2)]),
+            ("problem_B.json", [(5, 11, 5), (11, 36, 4)]),
+        ] {
+            let r = vectors(&vectors_file(name), 1).unwrap();
+            assert_eq!(r.iterations.len(), 2, "{name}");
+            for (it, (k, em, calls)) in r.iterations.iter().zip(expect) {
+                assert!(it.matches_gps(), "{name}: {it:?}");
+                assert_eq!(
+                    (it.gmm_k, it.em_iterations, it.backward_calls),
+                    (k, em, calls),
+                    "{name} iteration {}",
+                    it.iteration
+                );
+                for p in [it.gmm_prior_update, it.dynamics_fit, it.eta_search] {
+                    assert!(p.wall_s >= 0.0 && p.cpu_s >= 0.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn vectors_bench_names_a_missing_file() {
+        let e = vectors("/nonexistent/problem_X.json", 1).unwrap_err();
+        assert!(e.to_string().contains("problem_X.json"), "{e}");
+    }
 }

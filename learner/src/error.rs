@@ -9,4 +9,7 @@ pub enum LearnerError {
     /// A GPS piece (dynamics fit, LQR step, step adjustment) failed.
     #[error(transparent)]
     Gps(#[from] gps::GpsError),
+    /// A GPS reference-vectors file that cannot be read or does not follow the layout.
+    #[error(transparent)]
+    Vectors(#[from] gps::conformance::ConformanceError),
 }

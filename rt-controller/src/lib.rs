@@ -10,7 +10,8 @@
 //!   seeded exploration noise; [`stats`]: the loop's counters and allocation-free histograms;
 //!   [`arm`]: the arm backends the loop is generic over (iceoryx2); [`ports`]: the node and the
 //!   learner's iceoryx2 ports; [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]:
-//!   dead-peer detection off the loop;
+//!   dead-peer detection off the loop; [`latency`]: the period wait's wake-up lateness alone
+//!   (`rt-controller bench --real-time`);
 //! - `testkit` (cargo feature `testkit`, not part of the production API): in-process stand-ins
 //!   for the arm and tables, for the integration tests and the binary's `bench` subcommand.
 //!
@@ -24,6 +25,7 @@ pub mod arm;
 pub mod config;
 pub mod controller;
 pub mod error;
+pub mod latency;
 pub mod monitor;
 pub mod noise;
 pub mod ports;

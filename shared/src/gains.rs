@@ -22,21 +22,24 @@
 //!
 //! # Checksum
 //!
-//! [`GainTable::compute_checksum`] is 64-bit FNV-1a (offset basis `0xcbf29ce484222325`, prime
-//! `0x100000001b3`, one byte at a time) over, in this order:
-//! `version` (u64), `horizon` (u32), `dx` (u32), `du` (u32), then for t = 0..T every f64 of
-//! `steps[t]` in memory order (K row-major, k, ŝ, â, L row-major), each value as its IEEE-754
-//! bit pattern; all integers and bit patterns little-endian. On a little-endian machine this is
-//! exactly the raw bytes of those header fields followed by the raw bytes of `steps[..T]`, so
-//! any other language can recompute it from the struct. Steps at t ≥ T, the reserved field and
-//! the checksum field itself are not covered. Note that 0.0 and −0.0 hash differently.
-//! The checksum guards against corruption and half-written tables, not against an adversary.
+//! [`GainTable::compute_checksum`] is XXH3-64 (xxHash 0.8's `XXH3_64bits`, seed 0) of one byte
+//! string: `version` (u64), `horizon` (u32), `dx` (u32), `du` (u32), then for t = 0..T every f64
+//! of `steps[t]` in memory order (K row-major, k, ŝ, â, L row-major), each value as its IEEE-754
+//! bit pattern; all integers and bit patterns little-endian (20 + 504·T bytes). On a
+//! little-endian machine this is exactly the raw bytes of those header fields followed by the raw
+//! bytes of `steps[..T]`, so any other language with an xxHash library can recompute it from the
+//! struct. Steps at t ≥ T, the reserved field and the checksum field itself are not covered. Note
+//! that 0.0 and −0.0 hash differently. The checksum guards against corruption and half-written
+//! tables, not against an adversary. Tables of wire type `GainTable.v1` (and table files of
+//! schema 1) carried a byte-wise FNV-1a 64 instead; XXH3 reads 8 bytes at a time with SIMD and
+//! replaced it for speed (docs/design.md §5 D27).
 
 use core::fmt;
 use core::mem::MaybeUninit;
 
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
+use xxhash_rust::xxh3::Xxh3;
 
 use crate::layout::{DU, DX, MAX_HORIZON};
 
@@ -85,7 +88,7 @@ impl GainStep {
 /// buffer rather than by value onto a stack.
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("ur5_shared::GainTable.v1")]
+#[type_name("ur5_shared::GainTable.v2")]
 pub struct GainTable {
     /// Table version, chosen by the learner (increasing). Samples carry the version of the
     /// table that produced them.
@@ -98,7 +101,7 @@ pub struct GainTable {
     pub du: u32,
     /// Keeps the layout free of implicit padding; write 0. Not hashed.
     pub reserved: u32,
-    /// FNV-1a 64 checksum (module docs), set by [`GainTable::seal`].
+    /// XXH3-64 checksum (module docs), set by [`GainTable::seal`].
     pub checksum: u64,
     /// Steps t = 0..MAX_HORIZON; only t < `horizon` are meaningful.
     pub steps: [GainStep; MAX_HORIZON],
@@ -332,16 +335,27 @@ impl GainBounds {
     }
 }
 
-const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-const FNV_PRIME: u64 = 0x0000_0100_0000_01b3;
+/// Length of the hashed header: version (8), horizon, dx, du (4 each).
+const HASHED_HEADER_BYTES: usize = 20;
 
-#[inline]
-fn fnv1a(mut h: u64, bytes: &[u8]) -> u64 {
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(FNV_PRIME);
+/// The hashed header fields as little-endian bytes (module docs).
+fn header_bytes(table: &GainTable) -> [u8; HASHED_HEADER_BYTES] {
+    let mut b = [0u8; HASHED_HEADER_BYTES];
+    b[0..8].copy_from_slice(&table.version.to_le_bytes());
+    b[8..12].copy_from_slice(&table.horizon.to_le_bytes());
+    b[12..16].copy_from_slice(&table.dx.to_le_bytes());
+    b[16..20].copy_from_slice(&table.du.to_le_bytes());
+    b
+}
+
+/// The raw bytes of `steps`: f64 bit patterns in memory order, little-endian on this target.
+#[cfg(target_endian = "little")]
+fn steps_bytes(steps: &[GainStep]) -> &[u8] {
+    // SAFETY: GainStep is plain f64 data without padding (size assertion above); any initialised
+    // memory may be viewed as bytes, and u8 has alignment 1.
+    unsafe {
+        core::slice::from_raw_parts(steps.as_ptr().cast::<u8>(), core::mem::size_of_val(steps))
     }
-    h
 }
 
 /// Iterates the arrays of a step with their field tags.
@@ -438,17 +452,15 @@ impl GainTable {
     /// Checksum of the current contents (module docs). Uses at most [`MAX_HORIZON`] steps even
     /// if `horizon` is larger.
     pub fn compute_checksum(&self) -> u64 {
-        let mut h = FNV_OFFSET;
-        h = fnv1a(h, &self.version.to_le_bytes());
-        h = fnv1a(h, &self.horizon.to_le_bytes());
-        h = fnv1a(h, &self.dx.to_le_bytes());
-        h = fnv1a(h, &self.du.to_le_bytes());
-        for step in self.used_steps() {
-            for v in step.as_flat() {
-                h = fnv1a(h, &v.to_bits().to_le_bytes());
-            }
+        let mut h = Xxh3::new();
+        h.update(&header_bytes(self));
+        #[cfg(target_endian = "little")]
+        h.update(steps_bytes(self.used_steps()));
+        #[cfg(target_endian = "big")]
+        for v in self.used_steps().iter().flat_map(GainStep::as_flat) {
+            h.update(&v.to_bits().to_le_bytes());
         }
-        h
+        h.digest()
     }
 
     /// Stores the checksum of the current contents. Call after the last change, before
@@ -459,9 +471,8 @@ impl GainTable {
 
     /// Checks the table before use, in this order: dimensions, horizon, checksum, then for each
     /// step t < T: every value finite, L lower triangular, L diagonal > 0, every |value| within
-    /// `bounds`. Returns the first problem found. Allocation-free. Cost is dominated by the
-    /// byte-serial checksum: ≈ 60 µs for T = 100 on the project VM (release build), so the
-    /// controller validates when a table arrives, not on every tick.
+    /// `bounds`. Returns the first problem found. Allocation-free. The controller validates when a
+    /// table arrives, not on every tick (cost: docs/design.md §3.9).
     pub fn validate(&self, bounds: &GainBounds) -> Result<(), GainTableError> {
         if self.dx as usize != DX || self.du as usize != DU {
             return Err(GainTableError::WrongDimensions {
@@ -802,33 +813,50 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn checksum_is_fnv1a_of_the_documented_bytes() {
-        // Known FNV-1a 64 test vectors.
-        assert_eq!(fnv1a(FNV_OFFSET, b""), 0xcbf29ce484222325);
-        assert_eq!(fnv1a(FNV_OFFSET, b"a"), 0xaf63dc4c8601ec8c);
-        assert_eq!(fnv1a(FNV_OFFSET, b"foobar"), 0x85944171f73967e8);
-        // The documented byte string, built independently.
-        let table = random_table(3, 4);
-        let mut bytes = Vec::new();
-        bytes.extend_from_slice(&table.version.to_le_bytes());
-        bytes.extend_from_slice(&table.horizon.to_le_bytes());
-        bytes.extend_from_slice(&table.dx.to_le_bytes());
-        bytes.extend_from_slice(&table.du.to_le_bytes());
-        for s in &table.steps[..4] {
-            for row in &s.k_mat {
-                row.iter()
-                    .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+    fn checksum_is_xxh3_of_the_documented_bytes() {
+        // XXH3_64bits test vector of the reference implementation (empty input, seed 0).
+        assert_eq!(xxhash_rust::xxh3::xxh3_64(b""), 0x2d06_8005_38d3_94c2);
+        // The documented byte string, built independently and hashed in one call, for short and
+        // full horizons (the streaming hasher must agree with the one-shot hash at every length).
+        for (seed, horizon) in [(3, 1), (4, 4), (5, 100), (6, MAX_HORIZON)] {
+            let table = random_table(seed, horizon);
+            let mut bytes = Vec::new();
+            bytes.extend_from_slice(&table.version.to_le_bytes());
+            bytes.extend_from_slice(&table.horizon.to_le_bytes());
+            bytes.extend_from_slice(&table.dx.to_le_bytes());
+            bytes.extend_from_slice(&table.du.to_le_bytes());
+            for s in &table.steps[..horizon] {
+                for row in &s.k_mat {
+                    row.iter()
+                        .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+                }
+                for v in s.k_vec.iter().chain(&s.s_hat).chain(&s.a_hat) {
+                    bytes.extend_from_slice(&v.to_le_bytes());
+                }
+                for row in &s.chol {
+                    row.iter()
+                        .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+                }
             }
-            for v in s.k_vec.iter().chain(&s.s_hat).chain(&s.a_hat) {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
-            for row in &s.chol {
-                row.iter()
-                    .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+            assert_eq!(bytes.len(), 20 + horizon * STEP_LEN * 8);
+            assert_eq!(table.checksum, xxhash_rust::xxh3::xxh3_64(&bytes));
+        }
+    }
+
+    #[test]
+    fn checksum_matches_the_reference_xxhash() {
+        // A table anyone can rebuild: version 1, T = 2, value i of step t = (63 t + i) / 4.
+        // The expected value is from the xxHash reference implementation (C libxxhash 0.8.4 via
+        // Python's `xxhash.xxh3_64_intdigest`) over the documented byte string.
+        let mut table = GainTable::new_boxed();
+        table.set_version(1);
+        table.set_horizon(2).unwrap();
+        for t in 0..2 {
+            for i in 0..STEP_LEN {
+                set_flat(&mut table.steps[t], i, (STEP_LEN * t + i) as f64 / 4.0);
             }
         }
-        assert_eq!(bytes.len(), 20 + 4 * STEP_LEN * 8);
-        assert_eq!(table.checksum, fnv1a(FNV_OFFSET, &bytes));
+        assert_eq!(table.compute_checksum(), 0x846a_c5be_5d90_5f00);
     }
 
     #[test]

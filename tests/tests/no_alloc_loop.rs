@@ -375,7 +375,10 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
     let report = controller.arm().report();
     let s = controller.stats();
     sim.stop();
-    assert_eq!((first, second), (ExitReason::Stopped, ExitReason::EpisodesDone));
+    assert_eq!(
+        (first, second),
+        (ExitReason::Stopped, ExitReason::EpisodesDone)
+    );
     assert_eq!(s.swaps, 2, "version 1 first, version 2 after the pause");
     assert!(s.ticks >= 80, "only {} ticks", s.ticks);
     assert!(report.packages >= 50 * s.ticks, "{report:?}");

@@ -190,7 +190,12 @@ fn learn(dir: &Path, prefix: &str, ctl_cfg: &str, label: &str) -> serde_json::Va
     );
     let (code, out) = learner.wait(LONG);
     let log = learner.log();
-    assert_eq!(code, Some(0), "learner ({label}):\n{log}\ncontroller:\n{}", ctl.log());
+    assert_eq!(
+        code,
+        Some(0),
+        "learner ({label}):\n{log}\ncontroller:\n{}",
+        ctl.log()
+    );
     ctl.signal(libc::SIGTERM);
     let (code, cout) = ctl.wait(LONG);
     let clog = ctl.log();
@@ -228,7 +233,11 @@ fn ur_learning_has_the_outcome_of_the_iceoryx2_run_in_lockstep() {
     let ur = learn(
         &dir,
         &prefix,
-        &write_config(&dir, "ctl-ur.toml", &format!("{common}{}", arm_toml(Ports::from(&s), 1000))),
+        &write_config(
+            &dir,
+            "ctl-ur.toml",
+            &format!("{common}{}", arm_toml(Ports::from(&s), 1000)),
+        ),
         "ur",
     );
     let summary = s.stop();
@@ -248,7 +257,10 @@ fn ur_learning_has_the_outcome_of_the_iceoryx2_run_in_lockstep() {
         );
         eprintln!("iteration {i}: cost {a:.5} (iceoryx2) vs {b:.5} (ur); final distance {da:.5} vs {db:.5} m");
         assert!((a - b).abs() <= 0.01 * a, "iteration {i}: cost {a} vs {b}");
-        assert!((da - db).abs() <= 1e-3, "iteration {i}: distance {da} vs {db}");
+        assert!(
+            (da - db).abs() <= 1e-3,
+            "iteration {i}: distance {da} vs {db}"
+        );
     }
     assert!(
         ur["eval_costs"][2].as_f64().unwrap() < ur["eval_costs"][0].as_f64().unwrap(),
@@ -285,7 +297,14 @@ fn run_against(
         "rt-controller",
         "controller",
         &[
-            "run", "--config", &cfg, "--prefix", &prefix, "--json", "--episodes", &episodes,
+            "run",
+            "--config",
+            &cfg,
+            "--prefix",
+            &prefix,
+            "--json",
+            "--episodes",
+            &episodes,
         ],
         &dir,
     );
@@ -358,7 +377,10 @@ fn ur_fault_injections_give_clear_reports_and_no_crash() {
     assert_eq!(code, Some(3), "{j}\n{log}");
     assert_eq!(j["exit_reason"], "arm_lost", "{j}");
     assert_eq!(j["arm_lost"], "the robot closed the RTDE connection", "{j}");
-    assert!(log.contains("the robot closed the RTDE connection"), "{log}");
+    assert!(
+        log.contains("the robot closed the RTDE connection"),
+        "{log}"
+    );
     cleanup_dead_nodes();
 }
 

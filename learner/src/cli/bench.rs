@@ -1,10 +1,12 @@
 //! `learner bench`, `learner bench-gaifo` and `learner conformance`: timings and the GPS
 //! reference check.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use imitation::gaifo::GaifoConfig;
+
+use crate::bench::PieceTime;
 
 use super::CommonArgs;
 
@@ -54,13 +56,38 @@ pub struct BenchArgs {
     /// RNG seed of the synthetic problem.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Instead of the synthetic problem, redo GPS's work on the recorded inputs of a GPS
+    /// reference-vectors file (e.g. `../shared/gps-vectors/problem_B.json`): per recorded
+    /// iteration its GMM prior update (GPS's cluster assignment or warm start, so the same EM
+    /// iterations), dynamics fit and η search (from GPS's start η and KL target), checked against
+    /// GPS's recorded outputs. --t, --dx, --du, --n and --seed are then the file's.
+    #[arg(long, value_name = "FILE.json")]
+    pub vectors: Option<PathBuf>,
     /// Print only a one-line JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
 }
 
+/// Prints the timing table of `learner bench`: one row per piece (milliseconds), then a
+/// `total` row; the text after a row's figures says what work it did.
+fn print_pieces(rows: &[(&str, PieceTime, String)]) {
+    println!("{:<22} {:>9} {:>9}", "piece", "wall ms", "cpu ms");
+    for (name, p, extra) in rows {
+        println!(
+            "{:<22} {:>9.3} {:>9.3}   {}",
+            name,
+            p.wall_s * 1e3,
+            p.cpu_s * 1e3,
+            extra
+        );
+    }
+}
+
 /// Runs `learner bench`.
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
+    if let Some(file) = &args.vectors {
+        return run_vectors(file, args.reps.max(1), args.json);
+    }
     let r = crate::bench::run(
         args.t,
         args.dx,
@@ -71,45 +98,91 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     )?;
     if args.json {
         println!("{}", serde_json::to_string(&r)?);
+        return Ok(());
+    }
+    println!(
+        "learner bench: T={} dX={} dU={} N={}, {} reps, medians, one thread",
+        r.t, r.dx, r.du, r.n, r.reps
+    );
+    let piece = |wall_s, cpu_s| PieceTime { wall_s, cpu_s };
+    print_pieces(&[
+        (
+            "GMM prior update",
+            piece(r.gmm_prior_update_s, r.gmm_prior_update_cpu_s),
+            format!("(K={}, {} EM iterations)", r.gmm_k, r.gmm_em_iterations),
+        ),
+        (
+            "dynamics fit + x0",
+            piece(r.dynamics_fit_s, r.dynamics_fit_cpu_s),
+            String::new(),
+        ),
+        (
+            "eta search",
+            piece(r.eta_search_s, r.eta_search_cpu_s),
+            format!("({} backward passes)", r.dgd_backward_calls),
+        ),
+        ("total", piece(r.total_s, r.total_cpu_s), String::new()),
+    ]);
+    let tr: Vec<String> = r
+        .dgd_trace
+        .iter()
+        .map(|(e, k)| format!("eta={e:.3e} kl={k:.3}"))
+        .collect();
+    println!(
+        "eta search (target KL {:.1}): {}",
+        r.kl_target,
+        tr.join(", ")
+    );
+    Ok(())
+}
+
+/// `learner bench --vectors FILE`: one table per recorded iteration; exits with an error if
+/// any iteration did other work than GPS or reached another result.
+fn run_vectors(file: &Path, reps: usize, json: bool) -> anyhow::Result<()> {
+    let name = file.to_string_lossy();
+    let r = crate::bench::vectors(&name, reps).with_context(|| format!("bench on {name}"))?;
+    if json {
+        println!("{}", serde_json::to_string(&r)?);
     } else {
         println!(
-            "learner bench: T={} dX={} dU={} N={}, {} reps, medians, one thread",
-            r.t, r.dx, r.du, r.n, r.reps
+            "learner bench --vectors {}: T={} dX={} dU={}, GPS's recorded inputs, {} reps, medians, one thread",
+            r.file, r.t, r.dx, r.du, r.reps
         );
-        println!("{:<22} {:>9} {:>9}", "piece", "wall ms", "cpu ms");
-        let row = |name: &str, w: f64, c: f64, extra: String| {
-            println!("{:<22} {:>9.3} {:>9.3}   {}", name, w * 1e3, c * 1e3, extra);
-        };
-        row(
-            "GMM prior update",
-            r.gmm_prior_update_s,
-            r.gmm_prior_update_cpu_s,
-            format!("(K={}, {} EM iterations)", r.gmm_k, r.gmm_em_iterations),
-        );
-        row(
-            "dynamics fit + x0",
-            r.dynamics_fit_s,
-            r.dynamics_fit_cpu_s,
-            String::new(),
-        );
-        row(
-            "eta search",
-            r.eta_search_s,
-            r.eta_search_cpu_s,
-            format!("({} backward passes)", r.dgd_backward_calls),
-        );
-        row("total", r.total_s, r.total_cpu_s, String::new());
-        let tr: Vec<String> = r
-            .dgd_trace
-            .iter()
-            .map(|(e, k)| format!("eta={e:.3e} kl={k:.3}"))
-            .collect();
-        println!(
-            "eta search (target KL {:.1}): {}",
-            r.kl_target,
-            tr.join(", ")
-        );
+        for it in &r.iterations {
+            println!("iteration {} (N={}):", it.iteration, it.n);
+            print_pieces(&[
+                (
+                    "GMM prior update",
+                    it.gmm_prior_update,
+                    format!(
+                        "(K={}, {} EM iterations; GPS K={}, {})",
+                        it.gmm_k, it.em_iterations, it.gps_gmm_k, it.gps_em_iterations
+                    ),
+                ),
+                ("dynamics fit + x0", it.dynamics_fit, String::new()),
+                (
+                    "eta search",
+                    it.eta_search,
+                    format!(
+                        "({} backward passes; GPS {})",
+                        it.backward_calls, it.gps_backward_calls
+                    ),
+                ),
+                ("total", it.total, String::new()),
+            ]);
+            println!(
+                "against GPS's outputs: final eta rel. err {:.1e}, new controller max rel. err {:.1e} (tol {:.0e}): {}",
+                it.eta_rel_err,
+                it.controller_rel_err,
+                gps::conformance::TOL_DET,
+                if it.matches_gps() { "same work, same result" } else { "DIFFERS" }
+            );
+        }
     }
+    anyhow::ensure!(
+        r.iterations.iter().all(|it| it.matches_gps()),
+        "{name}: the benchmark did other work than GPS or reached another result (see the table)"
+    );
     Ok(())
 }
 

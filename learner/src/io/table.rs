@@ -22,8 +22,9 @@ use ur5_shared::{GainBounds, GainStep, GainTable};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
-/// Version of this file layout.
-pub const SCHEMA_VERSION: i64 = 1;
+/// Version of this file layout: 2 since the checksum became XXH3-64 (schema 1 stored FNV-1a 64;
+/// such files are refused by their schema version rather than by a checksum mismatch).
+pub const SCHEMA_VERSION: i64 = 2;
 
 /// Writes `table` (its used steps) with control period `dt` (s).
 pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzError> {

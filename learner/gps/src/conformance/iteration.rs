@@ -37,18 +37,11 @@ pub(super) fn check_gmm(
     if it > 0 {
         let po = path(&iters[it - 1], "outputs");
         let dj = 2 * dx + du;
-        let rec = po.and_then(|po| {
-            let k = path(po, "gmm.K")?.as_u64()? as usize;
-            Some((
-                k,
-                req_arr(po, "gmm.mu", k * dj).ok()?,
-                req_arr(po, "gmm.sigma", k * dj * dj).ok()?,
-                req_arr(po, "gmm.logmass", k).ok()?,
-                path(po, "gmm.self_N")?.as_u64()? as usize,
-            ))
-        });
-        if let Some((k, mu, sigma, logmass, self_n)) = rec {
-            prior.gmm.set_params(k, &mu, &sigma, &logmass, self_n);
+        let rec = po.and_then(|po| super::recorded::recorded_gmm(po, dj));
+        if let Some(g) = rec {
+            prior
+                .gmm
+                .set_params(g.k, &g.mu, &g.sigma, &g.logmass, g.self_n);
         }
     }
     let init_idx = usize_list(path(out, "gmm.init_cluster_idx"));
@@ -368,18 +361,11 @@ pub(super) fn check_prior_and_fit(
     let (t, dx, du) = (d.t, d.dx, d.du);
     let dj = 2 * dx + du;
     // Prior eval from the recorded GMM.
-    let rec_gmm = (|| {
-        let k = path(out, "gmm.K")?.as_u64()? as usize;
-        let mu = req_arr(out, "gmm.mu", k * dj).ok()?;
-        let sigma = req_arr(out, "gmm.sigma", k * dj * dj).ok()?;
-        let logmass = req_arr(out, "gmm.logmass", k).ok()?;
-        let self_n = path(out, "gmm.self_N")?.as_u64()? as usize;
-        Some((k, mu, sigma, logmass, self_n))
-    })();
-    match rec_gmm {
-        Some((k, mu, sigma, logmass, self_n)) => {
+    match super::recorded::recorded_gmm(out, dj) {
+        Some(g) => {
             let mut pr = DynamicsPriorGmm::new(cfg.clone(), t, dx, du);
-            pr.gmm.set_params(k, &mu, &sigma, &logmass, self_n);
+            pr.gmm
+                .set_params(g.k, &g.mu, &g.sigma, &g.logmass, g.self_n);
             let mut ys = Mat::<f64>::zeros(n, dj);
             let mut niw = NiwPrior::zeros(dj);
             let (mut mu0, mut phi, mut m, mut n0) =

@@ -18,14 +18,13 @@ use std::fmt;
 
 use serde_json::Value;
 
-use crate::algorithm::AlgorithmConfig;
-use crate::dynamics::lr_prior::LrPriorConfig;
-use crate::dynamics::prior_gmm::{DynamicsPriorGmm, PriorGmmConfig};
+use crate::dynamics::prior_gmm::DynamicsPriorGmm;
 use crate::policy::lin_gauss::LinGaussPolicy;
-use crate::traj_opt::lqr::{TrajInfo, TrajOptConfig, TrajOptLqr};
+use crate::traj_opt::lqr::{TrajInfo, TrajOptLqr};
 
 mod iteration;
 mod json;
+pub mod recorded;
 mod unit;
 
 use iteration::*;
@@ -334,16 +333,21 @@ pub enum ConformanceError {
     Field(String),
 }
 
-/// Runs the conformance checks on a vectors file.
-pub fn run_file(file: &str) -> Result<Report, ConformanceError> {
+/// Reads and parses a vectors file.
+fn read_json(file: &str) -> Result<Value, ConformanceError> {
     let text = std::fs::read_to_string(file).map_err(|e| ConformanceError::Io {
         path: file.to_string(),
         source: e,
     })?;
-    let v: Value = serde_json::from_str(&text).map_err(|e| ConformanceError::Json {
+    serde_json::from_str(&text).map_err(|e| ConformanceError::Json {
         path: file.to_string(),
         source: e,
-    })?;
+    })
+}
+
+/// Runs the conformance checks on a vectors file.
+pub fn run_file(file: &str) -> Result<Report, ConformanceError> {
+    let v = read_json(file)?;
     let mut r = run_value(&v)?;
     r.file = file.to_string();
     Ok(r)
@@ -360,48 +364,19 @@ pub fn run_value(v: &Value) -> Result<Report, ConformanceError> {
     };
     let (t_len, dx, du) = (d.t, d.dx, d.du);
     let hp = req(v, "hyperparams")?;
-    // A hyperparameter the file leaves out has GPS's default, which is ours (`Default` impls).
-    let (alg, opt0, prior0) = (
-        AlgorithmConfig::default(),
-        TrajOptConfig::default(),
-        PriorGmmConfig::default(),
+    let recorded::Settings {
+        alg,
+        opt: opt_cfg,
+        prior: prior_cfg,
+        fit,
+    } = recorded::settings(v)?;
+    let (alg_kl_step, min_sm, max_sm, init_var) = (
+        alg.kl_step,
+        alg.min_step_mult,
+        alg.max_step_mult,
+        alg.initial_state_var,
     );
-    let alg_kl_step = opt_f64(hp, "algorithm.kl_step", alg.kl_step);
-    let min_sm = opt_f64(hp, "algorithm.min_step_mult", alg.min_step_mult);
-    let max_sm = opt_f64(hp, "algorithm.max_step_mult", alg.max_step_mult);
-    let init_var = opt_f64(hp, "algorithm.initial_state_var", alg.initial_state_var);
-    let opt_cfg = TrajOptConfig {
-        del0: opt_f64(hp, "traj_opt.del0", opt0.del0),
-        min_eta: opt_f64(hp, "traj_opt.min_eta", opt0.min_eta),
-        max_eta: opt_f64(hp, "traj_opt.max_eta", opt0.max_eta),
-        cons_per_step: path(hp, "traj_opt.cons_per_step")
-            .and_then(Value::as_bool)
-            .unwrap_or(opt0.cons_per_step),
-        use_prev_distr: path(hp, "traj_opt.use_prev_distr")
-            .and_then(Value::as_bool)
-            .unwrap_or(opt0.use_prev_distr),
-        max_ent_traj: opt_f64(hp, "algorithm.max_ent_traj", opt0.max_ent_traj),
-    };
-    let prior_cfg = PriorGmmConfig {
-        min_samples_per_cluster: opt_f64(
-            hp,
-            "dynamics.prior.min_samples_per_cluster",
-            prior0.min_samples_per_cluster as f64,
-        ) as usize,
-        max_clusters: opt_f64(
-            hp,
-            "dynamics.prior.max_clusters",
-            prior0.max_clusters as f64,
-        ) as usize,
-        max_samples: opt_f64(hp, "dynamics.prior.max_samples", prior0.max_samples as f64) as usize,
-        strength: opt_f64(hp, "dynamics.prior.strength", prior0.strength),
-        ..prior0
-    };
-    let reg = opt_f64(
-        hp,
-        "dynamics.regularization",
-        LrPriorConfig::default().regularization,
-    );
+    let reg = fit.regularization;
 
     // --- controller initialisation ---
     let init_rec = load_policy(req(v, "init_controller")?, &d)?;

@@ -14,6 +14,7 @@ use ur5_shared::config::from_toml_file;
 
 #[cfg(feature = "testkit")]
 mod bench;
+mod realtime;
 
 const UNITS: &str = "Units: angles rad, joint velocities rad/s, torques N·m, positions m (arm base frame), times s \
 (the control period task.dt is arm time; in real time the wall period is task.dt / time_compression); statistics are \
@@ -82,9 +83,31 @@ enum Cmd {
     /// Benchmark the loop in-process against a kinematic arm and a learner stand-in over real
     /// iceoryx2 ports: compute per tick (law + clamp + publish), table swap and validation, IPC
     /// round trip state → command. Prints a table (µs). Needs a build with the `testkit`
-    /// feature (`cargo build --release -p rt-controller --features testkit`).
+    /// feature (`cargo build --release -p rt-controller --features testkit`). With
+    /// `--real-time`, instead: the wake-up lateness of the period wait alone (sleep to absolute
+    /// deadlines at --rate for --seconds), beside cyclictest's (rt-tests) run at the same time
+    /// with the same rate, wake-ups and privileges when it is installed; needs no feature.
     #[command(after_help = UNITS)]
     Bench {
+        /// Measure the wake-up lateness of the period wait (p50/p99/p99.9/max) instead of the
+        /// loop, beside cyclictest when it is on PATH.
+        #[arg(long)]
+        real_time: bool,
+        /// --real-time: wake-ups per second (Hz).
+        #[arg(long, default_value_t = 1000.0)]
+        rate: f64,
+        /// --real-time: duration (s).
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+        /// --real-time: SCHED_FIFO priority 1–99 for both loops (0: the normal scheduler).
+        #[arg(long, default_value_t = 0)]
+        fifo_priority: i32,
+        /// --real-time: mlockall in both.
+        #[arg(long)]
+        mlockall: bool,
+        /// --real-time: pin both to this CPU.
+        #[arg(long)]
+        cpu: Option<usize>,
         /// Episodes (each swaps in a new table at its boundary).
         #[arg(long, default_value_t = 200)]
         episodes: u64,
@@ -253,6 +276,29 @@ fn real_main() -> Result<i32> {
             }
             Ok(if r.lost.is_some() || r.robot_stop.is_some() { 3 } else { 0 })
         }
+        Cmd::Bench {
+            real_time: true,
+            rate,
+            seconds,
+            fifo_priority,
+            mlockall,
+            cpu,
+            json,
+            ..
+        } => {
+            let setup = rt_controller::config::RtSetup {
+                mlockall,
+                fifo_priority,
+                cpu,
+            };
+            let r = realtime::run(rate, seconds, &setup)?;
+            if json {
+                println!("{}", serde_json::to_string(&r)?);
+            } else {
+                realtime::print(&r, &setup);
+            }
+            Ok(0)
+        }
         #[cfg(not(feature = "testkit"))]
         Cmd::Bench { .. } => anyhow::bail!(
             "this rt-controller was built without the in-process arm and learner the benchmark runs against; build it with `cargo build --release -p rt-controller --features testkit`"
@@ -263,6 +309,7 @@ fn real_main() -> Result<i32> {
             horizon,
             spin_ns,
             json,
+            ..
         } => {
             let r = bench::run(episodes, horizon, spin_ns)?;
             let us = |v: u64| v as f64 / 1e3;
