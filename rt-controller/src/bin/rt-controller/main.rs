@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use rt_controller::config::ArmKind;
+use rt_controller::stats::Percentiles;
 use rt_controller::{
     install_signal_handlers, ArmBackend, Controller, ControllerConfig, ExitReason, Mode, Pacing,
     Summary, STOP,
@@ -154,6 +155,23 @@ fn main() {
     }
 }
 
+/// A benchmark's table: one row of percentiles per measure, in µs.
+fn print_table(rows: &[(&str, Percentiles)]) {
+    let us = |v: u64| v as f64 / 1e3;
+    println!("| measure (µs) | n | p50 | p99 | p99.9 | max |");
+    println!("|---|---|---|---|---|---|");
+    for (name, p) in rows {
+        println!(
+            "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            p.count,
+            us(p.p50_ns),
+            us(p.p99_ns),
+            us(p.p999_ns),
+            us(p.max_ns)
+        );
+    }
+}
+
 /// The loop phase of any arm; the summary.
 fn run_loop<A: ArmBackend>(mut controller: Controller<A>) -> Summary {
     let reason = controller.run(&STOP);
@@ -247,30 +265,16 @@ fn real_main() -> Result<i32> {
             let reason = controller.run(&STOP);
             let summary = controller.summary(reason);
             let r = controller.arm().report();
-            let us = |v: u64| v as f64 / 1e3;
             println!(
                 "rt-controller bench-ur: {seconds} s, real time, arm held (no table); {} packages, {} commands written, {} keepalives; exit {:?}",
                 r.packages, r.commands_written, r.keepalives, reason
             );
-            println!("| measure (µs) | n | p50 | p99 | p99.9 | max |");
-            println!("|---|---|---|---|---|---|");
-            let rows = [
-                ("package: decode + state (FK) + reverse write", Some(r.cycle)),
-                ("package handled, late against the arm's clock", r.lateness),
-                ("state → controller tick (arm pacing)", Some(summary.wake)),
-            ];
-            for (name, p) in rows {
-                if let Some(p) = p {
-                    println!(
-                        "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
-                        p.count,
-                        us(p.p50_ns),
-                        us(p.p99_ns),
-                        us(p.p999_ns),
-                        us(p.max_ns)
-                    );
-                }
+            let mut rows = vec![("package: decode + state (FK) + reverse write", r.cycle)];
+            if let Some(l) = r.lateness {
+                rows.push(("package handled, late against the arm's clock", l));
             }
+            rows.push(("state → controller tick (arm pacing)", summary.wake));
+            print_table(&rows);
             if json {
                 println!("{}", serde_json::to_string(&summary)?);
             }
@@ -312,26 +316,14 @@ fn real_main() -> Result<i32> {
             ..
         } => {
             let r = bench::run(episodes, horizon, spin_ns)?;
-            let us = |v: u64| v as f64 / 1e3;
             println!("rt-controller bench: {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc", r.episodes, horizon);
-            println!("| measure (µs) | n | p50 | p99 | p99.9 | max |");
-            println!("|---|---|---|---|---|---|");
-            for (name, p) in [
+            print_table(&[
                 ("tick compute (law + clamp + command + sample)", r.compute),
                 ("table swap (copy 64 KB + flip)", r.swap),
                 ("table validation", r.validate),
                 ("table intake (receive + copy + validate + flip)", r.intake),
                 ("IPC round trip state → command", r.round_trip),
-            ] {
-                println!(
-                    "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
-                    p.count,
-                    us(p.p50_ns),
-                    us(p.p99_ns),
-                    us(p.p999_ns),
-                    us(p.max_ns)
-                );
-            }
+            ]);
             if json {
                 println!("{}", serde_json::to_string(&r)?);
             }
