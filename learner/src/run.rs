@@ -39,7 +39,7 @@ impl Checkpoint for LqrGaifo {
     /// `iter_NNN_table.npz` (the controller as gain table version NNN + 1) and
     /// `iter_NNN_critic.json`, NNN = iterations done.
     fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
-        std::fs::create_dir_all(dir)?;
+        crate::io::create_dir(dir)?;
         let i = self.iteration();
         let table = dir.join(format!("iter_{i:03}_table.npz"));
         save_table(
@@ -56,7 +56,7 @@ impl Checkpoint for LqrGaifo {
 impl Checkpoint for GaifoPpo {
     /// `iter_NNN_policy.json` (the policy nets) and `iter_NNN_critic.json`.
     fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
-        std::fs::create_dir_all(dir)?;
+        crate::io::create_dir(dir)?;
         let i = self.iteration();
         let pol = dir.join(format!("iter_{i:03}_policy.json"));
         let file = self
@@ -156,7 +156,7 @@ pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
 ) -> anyhow::Result<Vec<GaifoLog>> {
     let csv = match out {
         Some(dir) => {
-            std::fs::create_dir_all(dir)?;
+            crate::io::create_dir(dir)?;
             let f = open_log(&dir.join("gaifo_log.csv"), None)?;
             run.checkpoint(dir)?;
             Some((f, dir))
@@ -297,7 +297,7 @@ pub fn train_and_record(
 ) -> anyhow::Result<ExpertSummary> {
     use std::io::Write;
     let run = expert(cfg, progress)?;
-    std::fs::create_dir_all(out)?;
+    crate::io::create_dir(out)?;
     let table_path = out.join("expert_table.npz");
     save_table(
         &table_path,

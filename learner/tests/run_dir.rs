@@ -157,3 +157,41 @@ fn a_run_directory_is_never_mixed_with_another_run() {
     assert!(!ok && err.contains("no gaifo_log.csv"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 15 item 13: an `--out` that cannot be created is named in the error, for every command
+/// that writes one (here the expert and an experiment, whose folders are created at different
+/// depths).
+#[test]
+fn an_out_folder_that_cannot_be_made_is_named() {
+    let dir = scratch("out");
+    let file = dir.join("a-file");
+    std::fs::write(&file, b"not a folder").unwrap();
+    let bad = file.join("run");
+    let bad_s = bad.display().to_string();
+    for args in [
+        vec!["expert", "--iterations", "1", "--out", &bad_s],
+        vec![
+            "experiment",
+            "stability",
+            "--iterations",
+            "1",
+            "--seeds",
+            "1",
+            "--out",
+            &bad_s,
+        ],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_learner"))
+            .args(&args)
+            .env("RUST_BACKTRACE", "0")
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}: {err}");
+        assert!(
+            err.contains(&format!("cannot create the folder {bad_s}")),
+            "{args:?}: {err}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -52,7 +52,7 @@ impl IpcRun<'_> {
         let t0 = Instant::now();
         let cfg = self.cfg;
         let dir = &self.dir;
-        std::fs::create_dir_all(dir)?;
+        crate::io::create_dir(dir)?;
         let prefix =
             ur5_shared::services::unique_prefix(&format!("exp-{}-{}", self.arm, self.seed));
         let task = &cfg.expert.task;
@@ -201,7 +201,7 @@ pub fn run(
     let name = ExperimentName::SimVsPhysical;
     cfg.validate(name)?;
     let pool = pool(cfg.threads)?;
-    std::fs::create_dir_all(out)?;
+    crate::io::create_dir(out)?;
     eprintln!(
         "experiment sim-vs-physical: {} seed(s) from {}, {} iterations, real time x{} over IPC, {} run(s) at a time -> {}",
         cfg.seeds,

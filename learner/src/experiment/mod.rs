@@ -578,7 +578,7 @@ fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow:
         return Ok(d);
     }
     let d = expert_demos(&cfg.expert)?;
-    std::fs::create_dir_all(out)?;
+    crate::io::create_dir(out)?;
     crate::io::demos::save(&d, &out.join("demos.npz"))?;
     Ok(d)
 }
@@ -618,7 +618,7 @@ pub fn generalisation_demos(
     );
     let experts = experts_at(&cfg.expert, pool, &wanted)?;
     let dir = out.join("experts");
-    std::fs::create_dir_all(&dir)?;
+    crate::io::create_dir(&dir)?;
     crate::io::demos::save(&experts[0], &dir.join("centre.npz"))?;
     for (i, d) in experts[1..].iter().enumerate() {
         crate::io::demos::save(d, &dir.join(format!("point_{i}.npz")))?;

@@ -550,7 +550,7 @@ pub fn run(
     cfg.validate(super::ExperimentName::MultiGoal)?;
     let pool = pool(cfg.threads)?;
     let t0 = Instant::now();
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    crate::io::create_dir(out)?;
     let centre = cfg.expert.task.goal;
     let h = cfg.expert.square_half_side;
     let goals = eval_goals(
@@ -595,7 +595,7 @@ pub fn run(
         Some(from) => load_experts(cfg, from, &wanted, &names)?,
         None => experts_at(&cfg.expert, &pool, &wanted)?,
     };
-    std::fs::create_dir_all(&dir)?;
+    crate::io::create_dir(&dir)?;
     for (d, name) in experts.iter().zip(&names) {
         crate::io::demos::save(d, &dir.join(name))?;
     }

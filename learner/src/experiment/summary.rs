@@ -338,7 +338,7 @@ pub fn write_outputs(
     out: &Path,
 ) -> anyhow::Result<Vec<SummaryRow>> {
     use std::io::Write;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    crate::io::create_dir(out)?;
     let csv_path = out.join(format!("{name}.csv"));
     let mut f = std::io::BufWriter::new(
         std::fs::File::create(&csv_path)

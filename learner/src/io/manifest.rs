@@ -236,7 +236,7 @@ pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
                     r.with_context(|| format!("--force: deleting {}", f.display()))?;
                 }
             }
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            crate::io::create_dir(dir)?;
             write_atomic(&dir.join(MANIFEST), &serde_json::to_vec_pretty(m)?)
         }
     }

@@ -9,3 +9,11 @@ pub mod manifest;
 pub mod npz;
 pub mod policy;
 pub mod table;
+
+/// Creates the folder `dir` and its parents (an `--out` folder or one inside it); the error
+/// names the folder, whatever the OS says.
+pub fn create_dir(dir: impl AsRef<std::path::Path>) -> anyhow::Result<()> {
+    let dir = dir.as_ref();
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("cannot create the folder {}: {e}", dir.display()))
+}

@@ -311,7 +311,7 @@ fn serve_loop<L: ServeLearner>(
 ) -> anyhow::Result<ServeSummary<L::Log>> {
     let out = opts.out.clone();
     for d in [out.clone(), out.join("tables"), out.join("episodes")] {
-        std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
+        crate::io::create_dir(&d)?;
     }
     let csv = learner.open_csv(&out, opts.resume.is_some())?;
     let mut run = Run {

@@ -260,11 +260,17 @@ impl Normalizer {
                 self.std.len()
             ));
         }
-        if !self.mean.iter().all(|m| m.is_finite()) {
-            return Err("normalisation mean is not finite".into());
+        if let Some(i) = self.mean.iter().position(|m| !m.is_finite()) {
+            return Err(format!(
+                "normalisation mean (norm_mean[{i}]) = {} is not finite",
+                self.mean[i]
+            ));
         }
-        if !self.std.iter().all(|s| s.is_finite() && *s > 0.0) {
-            return Err("normalisation std must be finite and > 0".into());
+        if let Some(i) = self.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(format!(
+                "normalisation std (norm_std[{i}]) = {} must be finite and > 0",
+                self.std[i]
+            ));
         }
         Ok(())
     }
