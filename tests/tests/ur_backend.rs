@@ -384,21 +384,27 @@ fn ur_fault_injections_give_clear_reports_and_no_crash() {
     cleanup_dead_nodes();
 }
 
+/// A second RTDE client on the ur-sim at `rtde_port` that watches the arm
+/// ([`UrRtde::next_state`]).
+fn observer(rtde_port: u16) -> UrRtde {
+    UrRtde::connect(
+        &UrConfig {
+            host: "127.0.0.1".into(),
+            rtde_port,
+            ..UrConfig::default()
+        },
+        TIMEOUT,
+    )
+    .expect("observer")
+}
+
 #[test]
 fn ur_a_stopped_ur_sim_gives_the_controller_a_clear_exit() {
     let s = sim(UrSimConfig::default());
     let (addr, ports) = (s.rtde_addr, Ports::from(&s));
     let stopper = std::thread::spawn(move || {
         // Let the controller run an episode or so, then take the robot away.
-        let mut obs = UrRtde::connect(
-            &UrConfig {
-                host: "127.0.0.1".into(),
-                rtde_port: addr.port(),
-                ..UrConfig::default()
-            },
-            TIMEOUT,
-        )
-        .expect("observer");
+        let mut obs = observer(addr.port());
         while obs.next_state().expect("observer reads").timestamp < 1.0 {}
         s.stop()
     });
@@ -465,15 +471,7 @@ fn ur_a_frozen_controller_is_stopped_by_the_programs_watchdog() {
     learner.poll_until(&mut ctl, LONG, "ticks of episode 0", |l| {
         l.received.iter().any(|x| x.episode == 0 && x.t >= 3)
     });
-    let mut obs = UrRtde::connect(
-        &UrConfig {
-            host: "127.0.0.1".into(),
-            rtde_port: s.rtde_addr.port(),
-            ..UrConfig::default()
-        },
-        TIMEOUT,
-    )
-    .expect("observer");
+    let mut obs = observer(s.rtde_addr.port());
     let moving = obs.next_state().unwrap().actual_qd[..3]
         .iter()
         .any(|v| v.abs() > 0.05);

@@ -312,6 +312,18 @@ pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConf
     dcfg
 }
 
+/// The run's first critic: input normalisation fitted on the expert transitions `expert`,
+/// `dcfg` seeded from the run seed `seed` ([`critic_config`]); LQR+GAIfO, MDGPS and the PPO
+/// baseline start from it (docs/design.md §5 D2, D23).
+pub fn initial_critic(
+    expert: &Mat<f64>,
+    dcfg: &DiscriminatorConfig,
+    seed: u64,
+) -> Result<Discriminator, ImitationError> {
+    let norm = Normalizer::from_data(expert.as_ref())?;
+    Ok(Discriminator::new(D_IN, critic_config(dcfg, seed), norm)?)
+}
+
 /// A fresh critic (`dcfg`, weights drawn again from its seed) whose input normalisation is
 /// fitted on expert ∪ `controller` transitions; LQR+GAIfO and the PPO baseline call it once,
 /// on the first iteration's samples (docs/design.md §5 D2).
@@ -375,8 +387,7 @@ impl LqrGaifo {
         cfg.validate()?;
         let task = demos.task()?;
         let expert = expert_transitions(&demos);
-        let norm = Normalizer::from_data(expert.as_ref())?;
-        let disc = Discriminator::new(D_IN, critic_config(&cfg.discriminator, cfg.seed), norm)?;
+        let disc = initial_critic(&expert, &cfg.discriminator, cfg.seed)?;
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),

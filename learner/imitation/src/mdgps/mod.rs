@@ -43,7 +43,8 @@ use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, Normalizer, TrainStats};
 use crate::gaifo::{
-    critic_config, episode_transitions, expert_transitions, refit_critic, train_critic, GaifoConfig,
+    episode_transitions, expert_transitions, initial_critic, refit_critic, train_critic,
+    GaifoConfig,
 };
 use crate::iteration::LqrIteration;
 use crate::rollout::{run_episode, Arm, Episode, SampleList};
@@ -204,8 +205,7 @@ impl Mdgps {
         }
         let g = &cfg.lqr_gaifo;
         let expert = stack(&demos.iter().map(expert_transitions).collect::<Vec<_>>());
-        let norm = Normalizer::from_data(expert.as_ref())?;
-        let disc = Discriminator::new(D_IN, critic_config(&g.discriminator, g.seed), norm)?;
+        let disc = initial_critic(&expert, &g.discriminator, g.seed)?;
         let mut conds = Vec::with_capacity(demos.len());
         for (m, d) in demos.into_iter().enumerate() {
             let task = d.task()?;

@@ -27,9 +27,9 @@ use super::rollout::execute_mlp;
 use super::{Ppo, PpoConfig, UpdateStats};
 use crate::cost::composite::D_IN;
 use crate::demos::Demos;
-use crate::discriminator::{Discriminator, DiscriminatorConfig, Normalizer};
+use crate::discriminator::{Discriminator, DiscriminatorConfig};
 use crate::gaifo::{
-    critic_config, episode_transitions, expert_transitions, refit_critic, train_critic,
+    episode_transitions, expert_transitions, initial_critic, refit_critic, train_critic,
     GaifoConfig, GaifoLog,
 };
 use crate::learn::Learn;
@@ -192,8 +192,7 @@ impl GaifoPpo {
         cfg.validate()?;
         let task = demos.task()?;
         let expert = expert_transitions(&demos);
-        let norm = Normalizer::from_data(expert.as_ref())?;
-        let disc = Discriminator::new(D_IN, critic_config(&cfg.discriminator, cfg.seed), norm)?;
+        let disc = initial_critic(&expert, &cfg.discriminator, cfg.seed)?;
         let ppo = Ppo::new(cfg.ppo.clone(), cfg.sim.mode, cfg.seed ^ 0x5050_4f00) // "PPO"
             .map_err(ImitationError::Ppo)?;
         Ok(Self {

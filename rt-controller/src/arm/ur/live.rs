@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use ur_protocol::modes::{robot_mode_name, safety_mode_name};
 use ur_protocol::rtde::Protocol;
-use ur_protocol::{FrameDecoder, OutputRecipe, RobotMessage, RobotMode, RobotState, SafetyMode};
+use ur_protocol::{FrameDecoder, OutputRecipe, RobotMessage, RobotState};
 
 use serde::Serialize;
 use ur5_shared::clock::monotonic_ns;
@@ -25,7 +25,7 @@ use crate::config::{ServoTarget, UrConfig};
 use crate::error::SetupError;
 use crate::stats::{Histogram, Percentiles};
 
-use super::setup::{UrRtde, UrSetupError};
+use super::setup::{check_modes, UrRtde, UrSetupError};
 // ------------------------------------------------------------------------------ the loop side
 
 /// A reset to the start pose counts as done when every joint is this close (rad) …
@@ -337,6 +337,7 @@ impl ArmBackend for UrArm {
 
 /// The controller's [`ArmState`] from an RTDE state: the three active joints, the
 /// end-effector point and velocity from all six measured joints (`ur5_shared::kinematics`).
+/// No fault bits: [`Live::emit`] sets `DRIVER` from the modes [`Live::on_package`] checked.
 fn state_from(
     kin: &Ur5Kinematics,
     r: &RobotState,
@@ -346,10 +347,6 @@ fn state_from(
     status: ArmStatus,
 ) -> ArmState {
     let (ee_pos, ee_vel) = kin.ee_point_velocity(&r.actual_q, &r.actual_qd);
-    let mut faults = ArmFaults::default();
-    if r.robot_mode != RobotMode::Running.code() || r.safety_mode != SafetyMode::Normal.code() {
-        faults.insert(ArmFaults::DRIVER);
-    }
     ArmState {
         seq,
         stamp_ns: monotonic_ns(),
@@ -360,7 +357,7 @@ fn state_from(
         ee_pos,
         ee_vel,
         status,
-        faults,
+        faults: ArmFaults::default(),
     }
 }
 
@@ -486,9 +483,7 @@ impl Live {
         // queued before it started say STOPPED).
         let playing = r.runtime_state == runtime_state::PLAYING;
         self.program_seen |= playing;
-        let stopped = r.robot_mode != RobotMode::Running.code()
-            || r.safety_mode != SafetyMode::Normal.code()
-            || (self.program_seen && !playing);
+        let stopped = check_modes(r).is_err() || (self.program_seen && !playing);
         if stopped && self.robot_stop.is_none() {
             self.robot_stop = Some((r.robot_mode, r.safety_mode, r.runtime_state));
             // The controller hears of it at once, not at the next control period.
