@@ -134,6 +134,10 @@ fn ur_backend_setup_skips_text_messages_and_reports_refused_versions() {
 
 const LONG: Duration = Duration::from_secs(120);
 
+/// The program's receive timeout in these tests (ms): long enough that a test process
+/// descheduled on a loaded machine does not trip the watchdog (20 ms did, one run in seven).
+const WATCHDOG_MS: u32 = 200;
+
 /// The reaching tables' goal (rad).
 const GOAL: [f64; 3] = [0.3, -1.7, 2.0];
 
@@ -334,7 +338,8 @@ fn ur_fault_injections_give_clear_reports_and_no_crash() {
             "late packages",
             Faults {
                 delay_every: 97,
-                delay_ms: 30,
+                // Longer than a keepalive (half the watchdog), shorter than the watchdog.
+                delay_ms: 150,
                 ..Faults::default()
             },
         ),
@@ -351,7 +356,7 @@ fn ur_fault_injections_give_clear_reports_and_no_crash() {
             faults: f,
             ..UrSimConfig::default()
         });
-        let (code, j, log) = run_against(Ports::from(&s), "ur-fault", "", 20, 2, GOAL);
+        let (code, j, log) = run_against(Ports::from(&s), "ur-fault", "", WATCHDOG_MS, 2, GOAL);
         let summary = s.stop();
         assert_eq!(code, Some(0), "{what}: {j}\n{log}");
         assert_eq!(j["episodes_completed"], 2, "{what}: {j}");
@@ -372,7 +377,7 @@ fn ur_fault_injections_give_clear_reports_and_no_crash() {
         },
         ..UrSimConfig::default()
     });
-    let (code, j, log) = run_against(Ports::from(&s), "ur-fault-d", "", 20, 50, GOAL);
+    let (code, j, log) = run_against(Ports::from(&s), "ur-fault-d", "", WATCHDOG_MS, 50, GOAL);
     s.stop();
     assert_eq!(code, Some(3), "{j}\n{log}");
     assert_eq!(j["exit_reason"], "arm_lost", "{j}");
@@ -408,7 +413,7 @@ fn ur_a_stopped_ur_sim_gives_the_controller_a_clear_exit() {
         while obs.next_state().expect("observer reads").timestamp < 1.0 {}
         s.stop()
     });
-    let (code, j, log) = run_against(ports, "ur-dead", "", 20, 50, GOAL);
+    let (code, j, log) = run_against(ports, "ur-dead", "", WATCHDOG_MS, 50, GOAL);
     let summary = stopper.join().unwrap();
     assert_eq!(summary.programs, 1, "{summary:?}");
     assert_eq!(code, Some(3), "{j}\n{log}");
@@ -426,7 +431,7 @@ fn ur_a_protective_stop_ends_the_run_with_its_own_exit_code() {
         Ports::from(&s),
         "ur-pstop",
         "[limits]\nlower = [-6.28, -6.28, -3.5]\nupper = [6.28, 6.28, 3.5]\nvelocity = [3.14, 3.14, 30.0]\neffort = [150.0, 150.0, 150.0]",
-        20,
+        WATCHDOG_MS,
         5,
         // Past the URDF's elbow limit (π).
         [0.3, -1.7, 3.3],
@@ -457,7 +462,7 @@ fn ur_a_frozen_controller_is_stopped_by_the_programs_watchdog() {
         "ctl.toml",
         &format!(
             "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"real_time\"\npacing = \"arm\"\n[task]\nhorizon = 40\n{}",
-            arm_toml(Ports::from(&s), 50)
+            arm_toml(Ports::from(&s), WATCHDOG_MS)
         ),
     );
     let mut learner = TestLearner::learner_only(&prefix);
