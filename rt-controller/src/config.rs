@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{ActionMode, ArmLimits, ConfigError, TaskConfig};
 use ur5_shared::layout::N_JOINTS;
-use ur5_shared::GainBounds;
+use ur5_shared::{GainBounds, PolicyBounds};
 
 /// How the loop is paced.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -312,8 +312,10 @@ pub struct ControllerConfig {
     pub limits: ArmLimits,
     /// Hold conditions.
     pub safety: Safety,
-    /// Bounds a table must satisfy ([`GainBounds`]).
+    /// Bounds a gain table must satisfy ([`GainBounds`]).
     pub bounds: GainBounds,
+    /// Bounds a policy table must satisfy ([`PolicyBounds`]).
+    pub policy_bounds: PolicyBounds,
     /// Real-time privileges.
     pub rt: RtSetup,
     /// Message polling.
@@ -348,6 +350,7 @@ impl Default for ControllerConfig {
             limits: ArmLimits::default(),
             safety: Safety::default(),
             bounds: GainBounds::default(),
+            policy_bounds: PolicyBounds::default(),
             rt: RtSetup::default(),
             polling: Polling::default(),
             setup_timeout_s: 10.0,
@@ -446,6 +449,14 @@ impl ControllerConfig {
         }
         if let Err((key, v)) = self.bounds.validate() {
             return bad("bounds", format!("{key} = {v}: must be finite and > 0"));
+        }
+        if let Err((key, v)) = self.policy_bounds.validate() {
+            return bad(
+                "policy_bounds",
+                format!(
+                    "{key} = {v}: must be finite and > 0 (and min_input_scale < max_input_scale)"
+                ),
+            );
         }
         if !pos(self.setup_timeout_s) {
             return bad(

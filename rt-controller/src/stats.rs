@@ -298,6 +298,10 @@ pub struct RejectCounts {
     pub horizon_mismatch: u64,
     /// Version not newer than the active one.
     pub stale_version: u64,
+    /// A policy table failed [`ur5_shared::PolicyTable::validate`].
+    pub invalid_policy: u64,
+    /// A policy table acts in another action mode than the controller's.
+    pub mode_mismatch: u64,
 }
 
 impl RejectCounts {
@@ -313,6 +317,8 @@ impl RejectCounts {
             Rejection::Invalid(GainTableError::OutOfBounds { .. }) => &mut self.out_of_bounds,
             Rejection::HorizonMismatch { .. } => &mut self.horizon_mismatch,
             Rejection::StaleVersion { .. } => &mut self.stale_version,
+            Rejection::InvalidPolicy(_) => &mut self.invalid_policy,
+            Rejection::ModeMismatch { .. } => &mut self.mode_mismatch,
         };
         *c += 1;
     }
@@ -327,6 +333,8 @@ impl RejectCounts {
             + self.out_of_bounds
             + self.horizon_mismatch
             + self.stale_version
+            + self.invalid_policy
+            + self.mode_mismatch
     }
 }
 

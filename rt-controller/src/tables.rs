@@ -1,12 +1,19 @@
-//! The double-buffered gain table (docs/design.md §3.4, §5 D19): the loop reads the active half; a new table
-//! is copied into the inactive half, validated there and made active by flipping an index, at an
-//! episode boundary only. Both halves are allocated at setup; nothing here allocates.
+//! The double-buffered controller tables (docs/design.md §3.4, §3.11, §5 D19): the loop reads
+//! the active half; a new table is copied into the inactive half, validated there and made
+//! active by flipping an index, at an episode boundary only. There are two kinds, gain tables
+//! ([`GainTable`]) and policy tables ([`PolicyTable`]), each with its own two halves; versions
+//! form one sequence, so the newest table of either kind is the active controller and a swap
+//! from one kind to the other is the same flip. All four halves are allocated at setup;
+//! nothing here allocates.
 //!
 //! The copy comes before the validation, unlike the order "validate, copy, flip" one might
 //! expect: the private copy cannot change while it is checked, whereas the shared-memory sample
 //! is written by another process. A rejected table only ever overwrites the inactive half.
 
-use ur5_shared::{GainBounds, GainTable, GainTableError};
+use ur5_shared::config::ActionMode;
+use ur5_shared::{
+    GainBounds, GainTable, GainTableError, PolicyBounds, PolicyTable, PolicyTableError,
+};
 
 /// Why a received table was not taken.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -14,6 +21,19 @@ pub enum Rejection {
     /// [`GainTable::validate`] failed.
     #[error(transparent)]
     Invalid(#[from] GainTableError),
+    /// [`PolicyTable::validate`] failed.
+    #[error(transparent)]
+    InvalidPolicy(#[from] PolicyTableError),
+    /// A policy table's action mode is not the controller's `action_mode`.
+    #[error("policy table version {version} acts in {table:?}, the controller in {expected:?} (action_mode): learner and controller disagree about the task")]
+    ModeMismatch {
+        /// Table version.
+        version: u64,
+        /// The table's mode.
+        table: ActionMode,
+        /// `action_mode`.
+        expected: ActionMode,
+    },
     /// The table's horizon differs from the controller's episode length.
     #[error("gain table version {version} has horizon T = {horizon}, the controller runs episodes of T = {expected} (task.horizon): learner and controller disagree about the task")]
     HorizonMismatch {
@@ -34,6 +54,20 @@ pub enum Rejection {
     },
 }
 
+impl Rejection {
+    /// A rejection that says the learner and the controller run different tasks or builds
+    /// (horizon, action mode, dimensions): waiting cannot fix it (docs/design.md §3.12).
+    pub fn is_task_mismatch(&self) -> bool {
+        matches!(
+            self,
+            Rejection::HorizonMismatch { .. }
+                | Rejection::ModeMismatch { .. }
+                | Rejection::Invalid(GainTableError::WrongDimensions { .. })
+                | Rejection::InvalidPolicy(PolicyTableError::WrongDimensions { .. })
+        )
+    }
+}
+
 /// What [`TableBuffer::offer`] did with a table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Offer {
@@ -48,58 +82,139 @@ pub enum Offer {
     Unchanged,
 }
 
-/// Two preallocated tables and which one is active.
+/// The active controller: a gain table or a policy table.
+#[derive(Clone, Copy, Debug)]
+pub enum Active<'a> {
+    /// A time-varying linear-Gaussian controller.
+    Gains(&'a GainTable),
+    /// A Gaussian MLP policy.
+    Policy(&'a PolicyTable),
+}
+
+impl Active<'_> {
+    /// The table's version.
+    pub fn version(&self) -> u64 {
+        match self {
+            Active::Gains(t) => t.version,
+            Active::Policy(p) => p.version,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Gains,
+    Policy,
+}
+
+/// Two preallocated tables of each kind and which one is active.
 pub struct TableBuffer {
     halves: [Box<GainTable>; 2],
-    active: Option<usize>,
+    policies: [Box<PolicyTable>; 2],
+    active: Option<(Kind, usize)>,
     bounds: GainBounds,
+    policy_bounds: PolicyBounds,
     horizon: usize,
+    mode: ActionMode,
 }
 
 impl TableBuffer {
-    /// Allocates both halves (setup). `horizon` is the episode length tables must have.
-    pub fn new(bounds: GainBounds, horizon: usize) -> Self {
+    /// Allocates all halves (setup). `horizon` is the episode length gain tables must have;
+    /// `mode` the action mode policy tables must have.
+    pub fn new(
+        bounds: GainBounds,
+        policy_bounds: PolicyBounds,
+        horizon: usize,
+        mode: ActionMode,
+    ) -> Self {
         Self {
             halves: [GainTable::new_boxed(), GainTable::new_boxed()],
+            policies: [PolicyTable::new_boxed(), PolicyTable::new_boxed()],
             active: None,
             bounds,
+            policy_bounds,
             horizon,
+            mode,
         }
     }
 
-    /// The active table, if any was ever accepted.
+    /// The active controller, if any table was ever accepted.
     #[inline]
-    pub fn active(&self) -> Option<&GainTable> {
-        self.active.map(|i| &*self.halves[i])
+    pub fn active(&self) -> Option<Active<'_>> {
+        self.active.map(|(kind, i)| match kind {
+            Kind::Gains => Active::Gains(&self.halves[i]),
+            Kind::Policy => Active::Policy(&self.policies[i]),
+        })
     }
 
     /// Version of the active table.
     pub fn active_version(&self) -> Option<u64> {
-        self.active().map(|t| t.version)
+        self.active().map(|t| t.version())
     }
 
-    /// Takes `incoming` if it is valid and newer: copy into the inactive half, validate the
-    /// copy, flip. Call only at an episode boundary. `now` is a clock for the timings (ns).
+    /// `Some(Unchanged)` for the active version, `Err` for an older one, `None` to go on.
+    fn check_version(&self, version: u64) -> Option<Result<Offer, Rejection>> {
+        let active = self.active_version()?;
+        if version == active {
+            return Some(Ok(Offer::Unchanged));
+        }
+        (version < active).then_some(Err(Rejection::StaleVersion { version, active }))
+    }
+
+    /// The half of `kind` that is not active.
+    fn inactive(&self, kind: Kind) -> usize {
+        match self.active {
+            Some((k, i)) if k == kind => 1 - i,
+            _ => 0,
+        }
+    }
+
+    /// Takes the policy table `incoming` if it is valid, newer than the active table of either
+    /// kind and acts in the controller's action mode: copy into the inactive policy half,
+    /// validate the copy, flip. Call only at an episode boundary.
+    pub fn offer_policy(
+        &mut self,
+        incoming: &PolicyTable,
+        now: impl Fn() -> u64,
+    ) -> Result<Offer, Rejection> {
+        if let Some(r) = self.check_version(incoming.version) {
+            return r;
+        }
+        let inactive = self.inactive(Kind::Policy);
+        let t0 = now();
+        self.policies[inactive].copy_from(incoming);
+        let t1 = now();
+        let table = &self.policies[inactive];
+        let checked = table.validate(&self.policy_bounds);
+        let t2 = now();
+        checked?;
+        let mode = table.mode().expect("validated");
+        if mode != self.mode {
+            return Err(Rejection::ModeMismatch {
+                version: table.version,
+                table: mode,
+                expected: self.mode,
+            });
+        }
+        self.active = Some((Kind::Policy, inactive));
+        Ok(Offer::Swapped {
+            copy_ns: t1 - t0,
+            validate_ns: t2 - t1,
+        })
+    }
+
+    /// Takes the gain table `incoming` if it is valid and newer than the active table of
+    /// either kind: copy into the inactive half, validate the copy, flip. Call only at an
+    /// episode boundary. `now` is a clock for the timings (ns).
     pub fn offer(
         &mut self,
         incoming: &GainTable,
         now: impl Fn() -> u64,
     ) -> Result<Offer, Rejection> {
-        if let Some(active) = self.active() {
-            if incoming.version == active.version {
-                return Ok(Offer::Unchanged);
-            }
-            if incoming.version < active.version {
-                return Err(Rejection::StaleVersion {
-                    version: incoming.version,
-                    active: active.version,
-                });
-            }
+        if let Some(r) = self.check_version(incoming.version) {
+            return r;
         }
-        let inactive = match self.active {
-            Some(i) => 1 - i,
-            None => 0,
-        };
+        let inactive = self.inactive(Kind::Gains);
         let t0 = now();
         self.halves[inactive].copy_from(incoming);
         let t1 = now();
@@ -114,7 +229,7 @@ impl TableBuffer {
                 expected: self.horizon as u64,
             });
         }
-        self.active = Some(inactive);
+        self.active = Some((Kind::Gains, inactive));
         Ok(Offer::Swapped {
             copy_ns: t1 - t0,
             validate_ns: t2 - t1,
@@ -127,6 +242,87 @@ mod tests {
     use super::*;
     use crate::stats::RejectCounts;
     use ur5_shared::MAX_HORIZON;
+
+    fn buffer(horizon: usize) -> TableBuffer {
+        TableBuffer::new(
+            GainBounds::default(),
+            PolicyBounds::default(),
+            horizon,
+            ActionMode::GoalAngles,
+        )
+    }
+
+    fn gains<'a>(b: &'a TableBuffer) -> &'a GainTable {
+        match b.active() {
+            Some(Active::Gains(t)) => t,
+            other => panic!("active: {other:?}"),
+        }
+    }
+
+    /// A policy table with one hidden layer of 4 whose output bias is `bias`.
+    fn policy(version: u64, bias: f64) -> Box<PolicyTable> {
+        let hidden = [4];
+        let n = ur5_shared::policy::flat_len(&hidden);
+        let mut theta = vec![0.0; n];
+        theta[12..24].fill(1.0);
+        theta[n - 4] = bias; // head 2's output bias
+        let mut p = PolicyTable::new_boxed();
+        p.fill(version, ActionMode::GoalAngles, &hidden, &theta)
+            .unwrap();
+        p
+    }
+
+    #[test]
+    fn swaps_between_kinds_in_one_version_sequence() {
+        let clock = || 0;
+        let mut b = buffer(100);
+        b.offer(&table(1, 100, 0.5), clock).unwrap();
+        assert!(matches!(
+            b.offer_policy(&policy(2, 0.25), clock),
+            Ok(Offer::Swapped { .. })
+        ));
+        assert!(matches!(b.active(), Some(Active::Policy(p)) if p.version == 2));
+        // Same version redelivered; older of either kind is stale.
+        assert_eq!(
+            b.offer_policy(&policy(2, 0.25), clock),
+            Ok(Offer::Unchanged)
+        );
+        assert!(matches!(
+            b.offer(&table(1, 100, 0.5), clock),
+            Err(Rejection::StaleVersion {
+                version: 1,
+                active: 2
+            })
+        ));
+        // A bad policy keeps the active one and counts as invalid_policy.
+        let mut counts = RejectCounts::default();
+        let mut nan = policy(3, 0.25);
+        nan.params[30] = f64::NAN;
+        nan.seal();
+        let r = b.offer_policy(&nan, clock).unwrap_err();
+        counts.add(&r);
+        let mut torque = policy(4, 0.25);
+        torque.action_mode = 1;
+        torque.seal();
+        let r = b.offer_policy(&torque, clock).unwrap_err();
+        assert!(r.to_string().contains("Torque"), "{r}");
+        counts.add(&r);
+        assert_eq!((counts.invalid_policy, counts.mode_mismatch), (1, 1));
+        assert_eq!(b.active_version(), Some(2));
+        // Policy → gains → policy: each flip lands in the other kind's inactive half.
+        b.offer(&table(5, 100, 0.75), clock).unwrap();
+        assert_eq!(gains(&b).steps[0].a_hat, [0.75; 3]);
+        b.offer_policy(&policy(6, -0.5), clock).unwrap();
+        match b.active() {
+            Some(Active::Policy(p)) => {
+                assert_eq!(p.version, 6);
+                assert_eq!(p.theta()[p.n_params as usize - 4], -0.5);
+            }
+            other => panic!("{other:?}"),
+        }
+        b.offer_policy(&policy(7, 0.125), clock).unwrap();
+        assert_eq!(b.active_version(), Some(7));
+    }
 
     fn table(version: u64, horizon: usize, a_hat: f64) -> Box<GainTable> {
         let mut t = GainTable::new_boxed();
@@ -144,7 +340,7 @@ mod tests {
     #[test]
     fn swaps_valid_tables_and_keeps_the_old_one_on_rejection() {
         let clock = || 0;
-        let mut b = TableBuffer::new(GainBounds::default(), 100);
+        let mut b = buffer(100);
         assert!(b.active().is_none());
         assert!(matches!(
             b.offer(&table(1, 100, 0.5), clock),
@@ -171,7 +367,7 @@ mod tests {
             let r = b.offer(&bad, clock).unwrap_err();
             counts.add(&r);
             assert_eq!(b.active_version(), Some(1), "{field}");
-            assert_eq!(b.active().unwrap().steps[0].a_hat, [0.5; 3]);
+            assert_eq!(gains(&b).steps[0].a_hat, [0.5; 3]);
         }
         assert_eq!(
             (
@@ -187,7 +383,7 @@ mod tests {
             b.offer(&table(7, 100, 0.75), clock),
             Ok(Offer::Swapped { .. })
         ));
-        assert_eq!(b.active().unwrap().steps[99].a_hat, [0.75; 3]);
+        assert_eq!(gains(&b).steps[99].a_hat, [0.75; 3]);
         let r = b.offer(&table(6, 100, 0.5), clock).unwrap_err();
         assert!(matches!(
             r,
@@ -198,7 +394,7 @@ mod tests {
         ));
         assert_eq!(b.active_version(), Some(7));
         // A full-horizon table passes when the task runs that long.
-        let mut long = TableBuffer::new(GainBounds::default(), MAX_HORIZON);
+        let mut long = buffer(MAX_HORIZON);
         long.offer(&table(1, MAX_HORIZON, 0.0), clock).unwrap();
     }
 }

@@ -1,6 +1,6 @@
 //! In-process stand-ins for the controller's peers, for the benchmark and the tests: a
 //! kinematic arm (no physics: goal angles are reached at the velocity limit) that answers every
-//! command with a state (lockstep), and a table builder. They use the same services and QoS as
+//! command with a state (lockstep), and table builders (gain and policy). They use the same services and QoS as
 //! the real processes. Not for experiments: use `hil-sim serve` for an arm.
 
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -8,9 +8,10 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use ur5_shared::clock::monotonic_ns;
+use ur5_shared::config::ActionMode;
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::services::{self, ServiceNames};
-use ur5_shared::{ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, DU};
+use ur5_shared::{ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, PolicyTable, DU, DX};
 
 use crate::ports::SetupError;
 use crate::stats::Histogram;
@@ -172,4 +173,37 @@ pub fn constant_goal_table(
     }
     t.seal();
     t
+}
+
+/// A seeded random policy table (docs/design.md §3.11) in goal-angle mode: heads of hidden
+/// widths `hidden` with Glorot-uniform weights (tanh layers) and an output layer scaled by
+/// `out_scale` (so that μ, the goal offset from q in rad, stays of order `out_scale`), input
+/// normalisation m = 0, r = 1, σ = `sigma` rad on every joint. Sealed.
+pub fn random_policy_table(
+    version: u64,
+    hidden: &[usize],
+    out_scale: f64,
+    sigma: f64,
+    seed: u64,
+) -> Box<PolicyTable> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut theta = Vec::with_capacity(ur5_shared::policy::flat_len(hidden));
+    theta.extend([0.0; DX]);
+    theta.extend([1.0; DX]);
+    for _ in 0..DU {
+        let mut prev = DX;
+        for (l, &n) in hidden.iter().chain(&[1]).enumerate() {
+            let a = (6.0 / (prev + n) as f64).sqrt();
+            let scale = if l == hidden.len() { out_scale } else { 1.0 };
+            theta.extend((0..prev * n).map(|_| scale * rng.random_range(-a..a)));
+            theta.extend((0..n).map(|_| 0.0));
+            prev = n;
+        }
+    }
+    theta.extend([sigma.ln(); DU]);
+    let mut p = PolicyTable::new_boxed();
+    p.fill(version, ActionMode::GoalAngles, hidden, &theta)
+        .expect("a policy within the table's limits");
+    p
 }

@@ -8,9 +8,13 @@
 //!   and [`GainTable::validate`] against [`GainBounds`].
 //! - [`law`]: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε ([`controller_action`]),
 //!   used by both the real-time loop and the learner's rollouts.
+//! - [`policy`]: the policy table ([`PolicyTable`], ≈ 256 KB), the second controller kind: the
+//!   weights of a Gaussian MLP policy, checksum, validation and [`policy_action`].
 //! - [`msg`]: the other IPC payloads ([`ArmState`], [`ArmCommand`], [`StepSample`]).
 //! - [`services`]: iceoryx2 service names, per-run prefixes and the quality of service of each
 //!   service ([`services::Qos`]).
+//! - [`status`]: why a peer stopped ([`status::PeerStatus`], on `controller/status` and
+//!   `learner/status`), so that neither side waits silently for the other.
 //! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`kinematics`]: the UR5's end-effector point and velocity from joint angles (f64, no
 //!   simulator), for arms that report joint states only.
@@ -33,12 +37,15 @@ pub mod law;
 pub mod layout;
 pub mod msg;
 pub mod noise;
+pub mod policy;
 pub mod safety;
 pub mod services;
+pub mod status;
 
 pub use cost::{normalised_performance, task_cost, task_cost_from_distances, CostError};
 pub use gains::{GainBounds, GainEntry, GainField, GainStep, GainTable, GainTableError};
 pub use law::{controller_action, LawError, NO_NOISE};
 pub use layout::{state_vector, DU, DX, MAX_HORIZON};
 pub use msg::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind, StepSample};
+pub use policy::{policy_action, PolicyBounds, PolicyScratch, PolicyTable, PolicyTableError};
 pub use services::ServiceNames;

@@ -16,9 +16,25 @@ pub const ARM_COMMAND: &str = "arm/command";
 pub const LEARNER_SAMPLES: &str = "learner/samples";
 /// Learner → controller: [`crate::gains::GainTable`]; history 1, safe overflow (docs/design.md §3.2).
 pub const CONTROLLER_GAINS: &str = "controller/gains";
+/// Learner → controller: [`crate::policy::PolicyTable`], the second controller kind; same
+/// quality of service as `controller/gains` (docs/design.md §3.11).
+pub const CONTROLLER_POLICY: &str = "controller/policy";
+
+/// Controller → learner: [`crate::status::PeerStatus`], why the controller stopped.
+pub const CONTROLLER_STATUS: &str = "controller/status";
+/// Learner → controller: [`crate::status::PeerStatus`], why the learner stopped.
+pub const LEARNER_STATUS: &str = "learner/status";
 
 /// All base names, in data-flow order.
-pub const ALL: [&str; 4] = [ARM_STATE, ARM_COMMAND, LEARNER_SAMPLES, CONTROLLER_GAINS];
+pub const ALL: [&str; 7] = [
+    ARM_STATE,
+    ARM_COMMAND,
+    LEARNER_SAMPLES,
+    CONTROLLER_GAINS,
+    CONTROLLER_POLICY,
+    CONTROLLER_STATUS,
+    LEARNER_STATUS,
+];
 
 /// A service name that iceoryx2 refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -41,7 +57,7 @@ pub fn prefixed(prefix: &str, base: &str) -> String {
     }
 }
 
-/// The four service names under one prefix. Built at setup (allocates), never in a loop.
+/// The service names under one prefix. Built at setup (allocates), never in a loop.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ServiceNames {
     /// The prefix ("" for the default, unprefixed names).
@@ -54,6 +70,12 @@ pub struct ServiceNames {
     pub learner_samples: String,
     /// `controller/gains` under the prefix.
     pub controller_gains: String,
+    /// `controller/policy` under the prefix.
+    pub controller_policy: String,
+    /// `controller/status` under the prefix.
+    pub controller_status: String,
+    /// `learner/status` under the prefix.
+    pub learner_status: String,
 }
 
 impl Default for ServiceNames {
@@ -71,6 +93,9 @@ impl ServiceNames {
             arm_command: prefixed(prefix, ARM_COMMAND),
             learner_samples: prefixed(prefix, LEARNER_SAMPLES),
             controller_gains: prefixed(prefix, CONTROLLER_GAINS),
+            controller_policy: prefixed(prefix, CONTROLLER_POLICY),
+            controller_status: prefixed(prefix, CONTROLLER_STATUS),
+            learner_status: prefixed(prefix, LEARNER_STATUS),
         }
     }
 
@@ -97,6 +122,10 @@ impl ServiceNames {
     /// `controller/gains` as an iceoryx2 name.
     pub fn controller_gains(&self) -> Result<ServiceName, InvalidServiceName> {
         Self::service_name(&self.controller_gains)
+    }
+    /// `controller/policy` as an iceoryx2 name.
+    pub fn controller_policy(&self) -> Result<ServiceName, InvalidServiceName> {
+        Self::service_name(&self.controller_policy)
     }
 }
 
@@ -162,6 +191,20 @@ pub const CONTROLLER_GAINS_QOS: Qos = Qos {
     max_subscribers: 4,
     safe_overflow: true,
 };
+
+/// `controller/status`, `learner/status`: no history (a status is about the peer that is
+/// connected now, never a dead predecessor), a queue of 2.
+pub const STATUS_QOS: Qos = Qos {
+    history: 0,
+    subscriber_buffer: 2,
+    max_publishers: 2,
+    max_subscribers: 4,
+    safe_overflow: true,
+};
+
+/// `controller/policy`: as `controller/gains` (the newest table of either kind is the
+/// controller; docs/design.md §3.11).
+pub const CONTROLLER_POLICY_QOS: Qos = CONTROLLER_GAINS_QOS;
 
 impl Qos {
     /// Opens the service `name` with payload `T`, or creates it with these settings. Setup

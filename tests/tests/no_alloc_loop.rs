@@ -1,6 +1,7 @@
 //! The loop phase does not touch the heap: ≥ 1,000 ticks of [`Controller::run`] over real
-//! iceoryx2 ports, across episode boundaries and a table swap, under a counting global
-//! allocator. Its own test binary, so the allocator disturbs no other test; counting is armed
+//! iceoryx2 ports, across episode boundaries and a table swap from one controller kind to the
+//! other (gain table → policy table and policy table → gain table; docs/design.md §3.11), under
+//! a counting global allocator. Its own test binary, so the allocator disturbs no other test; counting is armed
 //! per thread, only on the controller's thread (the arm and learner stand-ins run on others).
 //!
 //! The order of events is fixed by the test, not by thread timing: version 1 is in the
@@ -17,10 +18,10 @@ use std::time::{Duration, Instant};
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use rt_controller::config::Safety;
-use rt_controller::testkit::{constant_goal_table, run_kinematic_arm_with};
+use rt_controller::testkit::{constant_goal_table, random_policy_table, run_kinematic_arm_with};
 use rt_controller::{Controller, ControllerConfig, ExitReason};
 use ur5_shared::services::{self, unique_prefix, ServiceNames};
-use ur5_shared::{ArmCommand, CommandKind, GainTable, StepSample};
+use ur5_shared::{ArmCommand, CommandKind, GainTable, PolicyTable, StepSample};
 
 struct Counting;
 
@@ -67,6 +68,52 @@ const EPISODES: u64 = 12;
 /// before it only once version 2 is published, so the controller takes it at this boundary.
 const V2_FROM_EPISODE: u64 = 4;
 
+/// A controller kind the learner stand-in publishes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Gains,
+    Policy,
+}
+
+/// The stand-in's table of `kind` and `version`: a constant goal with noise, or a random
+/// 12-64-64-1 policy (σ = 0.01 rad).
+fn send(
+    kind: Kind,
+    version: u64,
+    gains: &iceoryx2::port::publisher::Publisher<ipc::Service, GainTable, ()>,
+    policy: &iceoryx2::port::publisher::Publisher<ipc::Service, PolicyTable, ()>,
+) {
+    let q = if version == 1 {
+        [0.2, -1.8, 2.2]
+    } else {
+        [-0.2, -1.7, 2.0]
+    };
+    match kind {
+        Kind::Gains => {
+            gains
+                .send_copy(*constant_goal_table(version, T, q, 0.01))
+                .unwrap();
+        }
+        Kind::Policy => {
+            publish_policy(
+                policy,
+                &random_policy_table(version, &[64, 64], 0.05, 0.01, version),
+            );
+        }
+    }
+}
+
+/// Sends `table` through a loaned sample (no 256 KB value on the stack).
+fn publish_policy(
+    publisher: &iceoryx2::port::publisher::Publisher<ipc::Service, PolicyTable, ()>,
+    table: &PolicyTable,
+) {
+    let mut slot = publisher.loan_uninit().unwrap();
+    PolicyTable::init_zeroed(slot.payload_mut()).copy_from(table);
+    // SAFETY: init_zeroed initialised the payload.
+    unsafe { slot.assume_init() }.send().unwrap();
+}
+
 /// The learner stand-in. Version 1 goes out once the controller's `controller/gains`
 /// subscriber exists, so it sits in the controller's queue before its first boundary (a send
 /// delivers to every connected subscriber at once); `v1_sent` reports that. Version 2 goes out
@@ -74,6 +121,7 @@ const V2_FROM_EPISODE: u64 = 4;
 /// Returns (episode, table version) of every sample received, in order.
 fn learner(
     prefix: String,
+    kinds: [Kind; 2],
     stop: Arc<AtomicBool>,
     v1_sent: mpsc::Sender<()>,
     publish_v2: mpsc::Receiver<()>,
@@ -87,10 +135,16 @@ fn learner(
     let gains = services::CONTROLLER_GAINS_QOS
         .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)
         .unwrap();
+    let policy = services::CONTROLLER_POLICY_QOS
+        .open_or_create_retrying::<PolicyTable>(&node, &names.controller_policy)
+        .unwrap();
     let samples = services::LEARNER_SAMPLES_QOS
         .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)
         .unwrap();
+    // Both publishers before the subscriber: the controller's setup waits for a sample
+    // subscriber, and every connection must exist before its loop (D20).
     let publisher = gains.publisher_builder().create().unwrap();
+    let policy_pub = policy.publisher_builder().create().unwrap();
     let subscriber = samples.subscriber_builder().create().unwrap();
     let mut received = Vec::new();
     let drain = |received: &mut Vec<(u64, u64)>| {
@@ -99,26 +153,25 @@ fn learner(
         }
     };
 
-    while gains.dynamic_config().number_of_subscribers() == 0 {
+    while gains.dynamic_config().number_of_subscribers() == 0
+        || policy.dynamic_config().number_of_subscribers() == 0
+    {
         if stop.load(Ordering::Relaxed) {
             return received;
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    publisher
-        .send_copy(*constant_goal_table(1, T, [0.2, -1.8, 2.2], 0.01))
-        .unwrap();
+    send(kinds[0], 1, &publisher, &policy_pub);
     v1_sent.send(()).unwrap();
 
     while !stop.load(Ordering::Relaxed) {
         let _ = publisher.update_connections();
+        let _ = policy_pub.update_connections();
         drain(&mut received);
         match publish_v2.recv_timeout(Duration::from_millis(1)) {
             Ok(()) => {
                 drain(&mut received);
-                publisher
-                    .send_copy(*constant_goal_table(2, T, [-0.2, -1.7, 2.0], 0.01))
-                    .unwrap();
+                send(kinds[1], 2, &publisher, &policy_pub);
                 v2_sent.send(()).unwrap();
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
@@ -145,7 +198,17 @@ fn counter_sees_allocations() {
 }
 
 #[test]
-fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
+fn the_loop_does_not_allocate_across_a_swap_from_gains_to_a_policy() {
+    no_allocation_across_a_swap([Kind::Gains, Kind::Policy]);
+}
+
+#[test]
+fn the_loop_does_not_allocate_across_a_swap_from_a_policy_to_gains() {
+    no_allocation_across_a_swap([Kind::Policy, Kind::Gains]);
+}
+
+/// Version 1 of kind `kinds[0]`, version 2 of kind `kinds[1]`.
+fn no_allocation_across_a_swap(kinds: [Kind; 2]) {
     let prefix = unique_prefix("no-alloc-loop");
     let stop = Arc::new(AtomicBool::new(false));
     let (v1_sent_tx, v1_sent) = mpsc::channel();
@@ -176,7 +239,7 @@ fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
     };
     let learner = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || learner(prefix, stop, v1_sent_tx, publish_v2, v2_sent_tx))
+        std::thread::spawn(move || learner(prefix, kinds, stop, v1_sent_tx, publish_v2, v2_sent_tx))
     };
 
     // Setup phase: may allocate.
@@ -247,7 +310,8 @@ fn the_loop_does_not_allocate_across_boundaries_and_a_swap() {
 }
 
 /// The `ur` arm's loop (RTDE packages in, servoj targets out) against `hil-sim ur-sim` in this
-/// process (lockstep; its threads are not counted), across boundaries and a table swap. The
+/// process (lockstep; its threads are not counted), across boundaries and a table swap from a
+/// gain table to a policy table. The
 /// order is fixed by the test: version 1 waits in the controller's queue before the loop; the
 /// learner stand-in raises `pause` at the first sample (version 1 is then in use), the loop
 /// returns, the test publishes version 2 (not counted) and runs the loop again, which takes
@@ -282,6 +346,10 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
         .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)
         .unwrap();
     let publisher = gains.publisher_builder().create().unwrap();
+    let policy = services::CONTROLLER_POLICY_QOS
+        .open_or_create_retrying::<PolicyTable>(&node, &names.controller_policy)
+        .unwrap();
+    let policy_pub = policy.publisher_builder().create().unwrap();
     // The sample watcher (its own node: iceoryx2 ports stay on their thread); `pause` at the
     // first sample.
     let pause = Arc::new(AtomicBool::new(false));
@@ -361,9 +429,11 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
     ARMED.with(|a| a.set(true));
     let first = controller.run(&pause);
     ARMED.with(|a| a.set(false));
-    publisher
-        .send_copy(*constant_goal_table(2, T_UR, [-0.2, -1.7, 2.0], 0.01))
-        .unwrap();
+    // Version 2 is the other controller kind, a policy table.
+    publish_policy(
+        &policy_pub,
+        &random_policy_table(2, &[64, 64], 0.05, 0.01, 2),
+    );
     let never = AtomicBool::new(false);
     ARMED.with(|a| a.set(true));
     let second = controller.run(&never);
@@ -379,7 +449,10 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
         (first, second),
         (ExitReason::Stopped, ExitReason::EpisodesDone)
     );
-    assert_eq!(s.swaps, 2, "version 1 first, version 2 after the pause");
+    assert_eq!(
+        s.swaps, 2,
+        "version 1 (gains) first, version 2 (policy) after the pause"
+    );
     assert!(s.ticks >= 80, "only {} ticks", s.ticks);
     assert!(report.packages >= 50 * s.ticks, "{report:?}");
     assert!(received.iter().any(|(_, v)| *v == 2));

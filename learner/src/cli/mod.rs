@@ -83,7 +83,8 @@ pub enum Cmd {
     /// Time LQR+GAIfO iterations on real demonstrations; prints per-phase medians and the
     /// learner CPU time. --config: a `GaifoConfig`.
     BenchGaifo(bench::BenchGaifoArgs),
-    /// Run a saved MDGPS policy (`policy eval --policy FILE --goal x,y,z`).
+    /// Run a saved MDGPS policy: `policy eval --policy FILE --goal x,y,z` in simulation,
+    /// `policy serve --policy FILE` on the real-time controller.
     #[command(subcommand)]
     Policy(policy::PolicyCmd),
 }

@@ -1,4 +1,5 @@
-//! `learner policy`: run a saved MDGPS policy (`learner::io::policy`).
+//! `learner policy`: run a saved MDGPS policy (`learner::io::policy`) in simulation (`eval`) or
+//! on the real-time controller (`serve`).
 
 use std::path::PathBuf;
 
@@ -12,6 +13,7 @@ use ur5_shared::config::{parse_triple, SimConfig, TaskConfig};
 
 use crate::arm::SimArm;
 use crate::io::policy::load_policy;
+use crate::serve::policy::{serve_policy, PolicyServeOptions};
 
 /// What `learner policy` does.
 #[derive(Subcommand, Debug)]
@@ -20,6 +22,39 @@ pub enum PolicyCmd {
     /// start pose it was trained from); prints the final distance to the goal (m) and the task
     /// cost C(τ) (m).
     Eval(EvalArgs),
+    /// Publish a saved policy to the real-time controller as a policy table on
+    /// `controller/policy` (docs/design.md §3.11) and report the episodes it runs with it
+    /// (steps, distance to the goal at the last step, and for noise-free episodes the actions
+    /// that differ from the policy's own on the recorded states: 0 means executed exactly).
+    /// The goal is the controller's: `rt-controller run --goal x,y,z`.
+    Serve(ServeArgs),
+}
+
+/// Arguments of `learner policy serve`.
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// The policy file (`policy_seed<S>.npz` of `learner experiment multi-goal`).
+    #[arg(long)]
+    pub policy: PathBuf,
+    /// iceoryx2 service prefix (the controller's).
+    #[arg(long, default_value = "")]
+    pub prefix: String,
+    /// Table version to publish (the controller takes a table only if it is newer than its
+    /// active one).
+    #[arg(long, default_value_t = 1)]
+    pub version: u64,
+    /// Steps per episode: the controller's task.horizon (default: the policy file's T).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Stop after this many complete episodes.
+    #[arg(long, default_value_t = 1)]
+    pub episodes: usize,
+    /// Give up when no sample arrives for this long (s).
+    #[arg(long, default_value_t = 60.0)]
+    pub timeout_s: f64,
+    /// Print a one-line JSON summary at the end (stdout).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `learner policy eval`.
@@ -71,6 +106,48 @@ pub fn run(cmd: PolicyCmd) -> anyhow::Result<()> {
                 println!(
                     "{}",
                     serde_json::json!({"command": "policy eval", "result": s})
+                );
+            }
+            Ok(())
+        }
+        PolicyCmd::Serve(args) => {
+            let file = load_policy(&args.policy)?;
+            let table = file
+                .policy
+                .to_table(args.version, file.mode)
+                .with_context(|| format!("{} as a policy table", args.policy.display()))?;
+            let opts = PolicyServeOptions {
+                prefix: args.prefix.clone(),
+                steps: args.steps.unwrap_or(file.horizon),
+                episodes: args.episodes,
+                timeout_s: args.timeout_s,
+            };
+            eprintln!(
+                "learner policy serve: {} as policy table version {} on prefix `{}` ({} parameters); waiting for {} episode(s) of {} steps",
+                args.policy.display(),
+                args.version,
+                args.prefix,
+                table.n_params,
+                opts.episodes,
+                opts.steps
+            );
+            let episodes = serve_policy(&table, &opts, |e| {
+                eprintln!(
+                    "episode {} ({}, table v{}): {} steps, distance to the goal at the last step {:.4} m{}",
+                    e.episode,
+                    if e.noisy { "noisy" } else { "noise-free" },
+                    e.version,
+                    e.steps,
+                    e.distance_last_m,
+                    e.mismatched_actions
+                        .map(|m| format!(", actions differing from the policy's: {m}"))
+                        .unwrap_or_default()
+                );
+            })?;
+            if args.json {
+                println!(
+                    "{}",
+                    serde_json::json!({"command": "policy serve", "policy": args.policy, "version": args.version, "episodes": episodes})
                 );
             }
             Ok(())

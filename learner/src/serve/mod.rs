@@ -85,6 +85,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 
 mod assemble;
 mod learner;
+pub mod policy;
 mod ports;
 mod task_check;
 
@@ -314,7 +315,7 @@ fn serve_loop<L: ServeLearner>(
         crate::io::create_dir(&d)?;
     }
     let csv = learner.open_csv(&out, opts.resume.is_some())?;
-    let mut run = Run {
+    let run = Run {
         learner,
         opts,
         csv,
@@ -323,6 +324,21 @@ fn serve_loop<L: ServeLearner>(
 
     // Setup: every port before anything runs.
     let ports = Ports::create(&run.opts.prefix)?;
+    // Any error from here on is told to the controller before it is returned (§3.12).
+    let result = serve_with_ports(&ports, run, &mut progress);
+    if let Err(e) = &result {
+        ports.status.stopping(e);
+    }
+    result
+}
+
+/// [`serve_loop`] once its ports exist.
+fn serve_with_ports<L: ServeLearner>(
+    ports: &Ports,
+    mut run: Run<L>,
+    progress: &mut impl FnMut(&L::Log),
+) -> anyhow::Result<ServeSummary<L::Log>> {
+    let out = run.opts.out.clone();
     let start_version = run.learner.version();
     let table = run.save_current()?;
     ports.publish(&table)?;
@@ -449,8 +465,10 @@ fn serve_loop<L: ServeLearner>(
             last_sample = Instant::now();
             continue;
         }
-        // Idle: deliver the table (history) to a controller that connected late.
+        // Idle: deliver the table (history) to a controller that connected late, and stop
+        // with the controller's message if it stopped (§3.12).
         let _ = ports.gains.update_connections();
+        ports.status.check_controller()?;
         if last_sample.elapsed() >= report && last_report.elapsed() >= report {
             last_report = Instant::now();
             eprintln!(

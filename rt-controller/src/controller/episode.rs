@@ -7,7 +7,9 @@ use std::io::Write;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
 use ur5_shared::safety::clamp_action;
-use ur5_shared::{controller_action, ArmCommand, ArmFaults, StepSample, DU, NO_NOISE};
+use ur5_shared::{
+    controller_action, policy_action, ArmCommand, ArmFaults, StepSample, DU, NO_NOISE,
+};
 
 use super::wait::StateFreshness;
 use super::{Controller, ExitReason, Phase};
@@ -15,7 +17,8 @@ use crate::arm::ArmBackend;
 use crate::config::Mode;
 use crate::monitor::LostPeers;
 use crate::safety::{hold_command, Fault};
-use crate::tables::Offer;
+use crate::tables::{Active, Offer, Rejection};
+use ur5_shared::status::PeerStatus;
 
 impl<A: ArmBackend> Controller<A> {
     // ---------------------------------------------------------------- sending
@@ -130,10 +133,20 @@ impl<A: ArmBackend> Controller<A> {
             self.abort_episode(Fault::ArmFault);
             return Some(ExitReason::ArmStopped);
         }
+        if !matches!(self.phase, Phase::Running { .. }) {
+            if let Some(st) = self.ports.learner_status() {
+                // The learner stopped and said why: stop with the same message.
+                self.stop_status = Some(st);
+                return Some(ExitReason::LearnerStopped);
+            }
+        }
         match self.phase {
             Phase::Boundary => self.boundary(),
             Phase::NeedTable => {
                 self.intake_tables();
+                if let Some(reason) = self.pending_exit {
+                    return Some(reason);
+                }
                 if self.tables.active().is_some() {
                     self.fault = None;
                     self.phase = Phase::Boundary;
@@ -199,6 +212,9 @@ impl<A: ArmBackend> Controller<A> {
             return Some(ExitReason::EpisodesDone);
         }
         self.intake_tables();
+        if let Some(reason) = self.pending_exit {
+            return Some(reason);
+        }
         let Some(version) = self.tables.active_version() else {
             if self.phase != Phase::NeedTable {
                 self.latch(Fault::NoTable);
@@ -221,11 +237,28 @@ impl<A: ArmBackend> Controller<A> {
         None
     }
 
-    /// Takes the newest table from `controller/gains`, if any: the only place tables change.
+    /// Takes the newest tables from `controller/gains` and `controller/policy`, if any: the
+    /// only place tables change. Gains are read first, then policies; since versions form one
+    /// sequence, the newest of either kind ends up active.
     fn intake_tables(&mut self) {
         loop {
             let t0 = monotonic_ns();
             let sample = match self.ports.gains_sub.receive() {
+                Ok(Some(s)) => s,
+                Ok(None) => break,
+                Err(_) => {
+                    self.stats.ipc_errors += 1;
+                    break;
+                }
+            };
+            let result = self.tables.offer(&sample, monotonic_ns);
+            let version = sample.version;
+            drop(sample);
+            self.record_offer(t0, version, "gain", result);
+        }
+        loop {
+            let t0 = monotonic_ns();
+            let sample = match self.ports.policy_sub.receive() {
                 Ok(Some(s)) => s,
                 Ok(None) => return,
                 Err(_) => {
@@ -233,39 +266,62 @@ impl<A: ArmBackend> Controller<A> {
                     return;
                 }
             };
-            let result = self.tables.offer(&sample, monotonic_ns);
+            let result = self.tables.offer_policy(&sample, monotonic_ns);
             let version = sample.version;
             drop(sample);
-            match result {
-                Ok(Offer::Swapped {
-                    copy_ns,
-                    validate_ns,
-                }) => {
-                    // The flip itself is an index store: the swap is the copy.
-                    self.stats.swap.record(copy_ns);
-                    self.stats.validate.record(validate_ns);
-                    self.stats.intake.record(monotonic_ns() - t0);
-                    self.stats.swaps += 1;
-                    self.episodes_with_version = 0;
-                    if self.cfg.episode_report {
-                        let _ = writeln!(
-                            std::io::stderr(),
-                            "rt-controller: gain table version {version} taken at the boundary before episode {} (copy {:.1} µs, validate {:.1} µs)",
-                            self.episode,
-                            copy_ns as f64 / 1e3,
-                            validate_ns as f64 / 1e3
-                        );
-                    }
-                }
-                Ok(Offer::Unchanged) => {}
-                Err(r) => {
-                    self.stats.rejected.add(&r);
+            self.record_offer(t0, version, "policy", result);
+        }
+    }
+
+    /// Statistics and the report line of one offered table.
+    fn record_offer(
+        &mut self,
+        t0: u64,
+        version: u64,
+        kind: &str,
+        result: Result<Offer, Rejection>,
+    ) {
+        match result {
+            Ok(Offer::Swapped {
+                copy_ns,
+                validate_ns,
+            }) => {
+                // The flip itself is an index store: the swap is the copy.
+                self.stats.swap.record(copy_ns);
+                self.stats.validate.record(validate_ns);
+                self.stats.intake.record(monotonic_ns() - t0);
+                self.stats.swaps += 1;
+                self.episodes_with_version = 0;
+                if self.cfg.episode_report {
                     let _ = writeln!(
                         std::io::stderr(),
-                        "rt-controller: rejected gain table: {r}; keeping version {:?}",
-                        self.tables.active_version()
+                        "rt-controller: {kind} table version {version} taken at the boundary before episode {} (copy {:.1} µs, validate {:.1} µs)",
+                        self.episode,
+                        copy_ns as f64 / 1e3,
+                        validate_ns as f64 / 1e3
                     );
                 }
+            }
+            Ok(Offer::Unchanged) => {}
+            Err(r) => {
+                self.stats.rejected.add(&r);
+                if r.is_task_mismatch() {
+                    // Learner and controller cannot work together: say why to the learner and
+                    // stop, rather than hold and wait (docs/design.md §3.12).
+                    let st = PeerStatus::fatal(
+                        monotonic_ns(),
+                        format_args!("rt-controller rejected the learner's {kind} table: {r}"),
+                    );
+                    self.ports.send_status(&st);
+                    self.stop_status = Some(st);
+                    self.pending_exit = Some(ExitReason::TaskMismatch);
+                    return;
+                }
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "rt-controller: rejected {kind} table: {r}; keeping version {:?}",
+                    self.tables.active_version()
+                );
             }
         }
     }
@@ -277,13 +333,6 @@ impl<A: ArmBackend> Controller<A> {
             self.abort_episode(f);
             return;
         }
-        let table = match self.tables.active() {
-            Some(table) => table,
-            None => {
-                self.abort_episode(Fault::NoTable);
-                return;
-            }
-        };
         let state = self.latest;
         let s = state.state_vector(&self.cfg.task.goal);
         let eps = if self.noisy {
@@ -292,8 +341,20 @@ impl<A: ArmBackend> Controller<A> {
             NO_NOISE
         };
         let mut a = [0.0; DU];
-        let ok = controller_action(table, t, &s, &eps, &mut a).is_ok();
-        let version = table.version;
+        let (ok, version) = match self.tables.active() {
+            Some(Active::Gains(table)) => (
+                controller_action(table, t, &s, &eps, &mut a).is_ok(),
+                table.version,
+            ),
+            Some(Active::Policy(table)) => {
+                policy_action(table, &s, &eps, &mut self.scratch, &mut a);
+                (true, table.version)
+            }
+            None => {
+                self.abort_episode(Fault::NoTable);
+                return;
+            }
+        };
         if !ok || !a.iter().all(|v| v.is_finite()) {
             self.abort_episode(Fault::NonFiniteAction);
             return;

@@ -12,13 +12,15 @@
 //!    └────────────── arm fresh again ◀── Holding ◀─────┘
 //! ```
 //!
-//! - **Boundary**: the only place a table is taken (copy into the inactive half, validate,
-//!   flip); then a `Reset` command to `task.start_q`.
+//! - **Boundary**: the only place a table is taken, of either kind (copy into the inactive
+//!   half, validate, flip; the newest version wins); then a `Reset` command to `task.start_q`.
 //! - **Resetting**: waits until the arm acknowledges the reset (`ArmState::last_command_seq`);
 //!   the arm is at rest at the start pose and holds it until the first command ("hold, then
 //!   start"). The acknowledging state is s_0.
-//! - **Running**: per tick s_t → ε_t → a_t = controller law ([`ur5_shared::controller_action`])
-//!   → clamp → command → [`ur5_shared::StepSample`].
+//! - **Running**: per tick s_t → ε_t → a_t = the active table's law
+//!   ([`ur5_shared::controller_action`] for a gain table, [`ur5_shared::policy_action`] for a
+//!   policy table) → clamp → command → [`ur5_shared::StepSample`]. The state's goal is
+//!   `task.goal` (set at run time: `rt-controller run --goal x,y,z`).
 //! - **Holding**: a latched fault (stale state, arm fault, non-finite state or action) ends the
 //!   episode (it is counted as aborted; its samples stop) and the controller commands a hold
 //!   (PD to the last safe pose) every period until the arm is fresh and fault-free again.
@@ -44,7 +46,8 @@ use serde::Serialize;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ArmLimits;
 use ur5_shared::layout::N_JOINTS;
-use ur5_shared::ArmState;
+use ur5_shared::status::PeerStatus;
+use ur5_shared::{ArmState, PolicyScratch};
 
 use crate::arm::{ArmBackend, ArmReport, Iceoryx2Arm, UrArm};
 use crate::config::{ArmKind, ControllerConfig, Mode};
@@ -75,6 +78,12 @@ pub enum ExitReason {
     /// protective stop, safety mode not NORMAL, robot not RUNNING, or the robot's program
     /// ended): the arm holds; clear the cause on the robot, then start again.
     ArmStopped,
+    /// The controller rejected the learner's table for a task reason (horizon, action mode,
+    /// dimensions) and told the learner so on `controller/status` (docs/design.md §3.12).
+    TaskMismatch,
+    /// The learner stopped and said why on `learner/status` (e.g. the episodes are not its
+    /// task, or the seed differs).
+    LearnerStopped,
 }
 
 /// The end-of-run summary (`--json`).
@@ -128,6 +137,9 @@ pub struct Summary {
     pub lost_peers: Option<LostPeers>,
     /// Why the arm is gone, if the backend knows (e.g. the robot closed RTDE).
     pub arm_lost: Option<&'static str>,
+    /// Why the controller or the learner stopped the run (`task_mismatch`, `learner_stopped`):
+    /// the same message on both sides.
+    pub stop_message: Option<String>,
     /// The arm backend's own counters (the `ur` arm: packages, commands, keepalives, robot
     /// stop).
     pub arm: Option<ArmReport>,
@@ -154,6 +166,8 @@ pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     arm: A,
     ports: ControllerPorts,
     tables: TableBuffer,
+    /// Layer buffers of [`ur5_shared::policy_action`] (allocated at setup).
+    scratch: Box<PolicyScratch>,
     limits: ArmLimits,
     noise: Noise,
     stats: LoopStats,
@@ -177,6 +191,10 @@ pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     next_deadline_ns: u64,
     tick_start_ns: u64,
     fault: Option<Fault>,
+    /// Why the run stops (a task mismatch found here, or the learner's fatal status).
+    stop_status: Option<PeerStatus>,
+    /// The exit the loop takes at its next check ([`ExitReason::TaskMismatch`]).
+    pending_exit: Option<ExitReason>,
     no_table_since_ns: u64,
     wall_s: f64,
     monitor: Option<PeerMonitor>,
@@ -253,7 +271,13 @@ impl<A: ArmBackend> Controller<A> {
         let period_ns = cfg.wall_period_ns();
         let stale_ns = (cfg.safety.stale_state_timeout_s * 1e9) as u64;
         Ok(Self {
-            tables: TableBuffer::new(cfg.bounds.clone(), cfg.task.horizon),
+            tables: TableBuffer::new(
+                cfg.bounds,
+                cfg.policy_bounds,
+                cfg.task.horizon,
+                cfg.action_mode,
+            ),
+            scratch: Box::default(),
             limits: cfg.limits.clone(),
             noise: Noise::new(cfg.seed, 0, 0),
             stats: LoopStats::new(),
@@ -275,6 +299,8 @@ impl<A: ArmBackend> Controller<A> {
             next_deadline_ns: 0,
             tick_start_ns: 0,
             fault: None,
+            stop_status: None,
+            pending_exit: None,
             no_table_since_ns: 0,
             wall_s: 0.0,
             monitor: (cfg.monitor_period_s > 0.0).then(|| {
@@ -329,6 +355,13 @@ impl<A: ArmBackend> Controller<A> {
         };
         self.send_hold();
         self.wall_s = (monotonic_ns() - start) as f64 * 1e-9;
+        if let Some(st) = &self.stop_status {
+            let _ = writeln!(
+                std::io::stderr(),
+                "rt-controller: stopping ({reason:?}): {}",
+                st.text()
+            );
+        }
         if self.cfg.episode_report {
             let _ = writeln!(
                 std::io::stderr(),
@@ -376,6 +409,7 @@ impl<A: ArmBackend> Controller<A> {
             intake: s.intake.summary(),
             lost_peers: self.monitor.as_ref().map(|m| m.health.lost()),
             arm_lost: self.arm.lost(),
+            stop_message: self.stop_status.as_ref().map(|s| s.text().to_owned()),
             arm: self.arm.report(),
             rt: self.rt.clone(),
             wall_s: self.wall_s,

@@ -30,6 +30,9 @@
 //!   `ż̄_{k−1} = W_kᵀ ǡ_k`, `z̄_{k−1} = W_kᵀ ā_k` (with `ż_{−1} = ρ`, `z_{−1} = u`).
 
 use rand::Rng;
+// The one dot product and affine map of every MLP (the controller's policy_action uses the
+// same, so learner and controller agree bit for bit).
+use ur5_shared::policy::{affine, dot};
 
 /// A tanh MLP `R^{n_0} → R` with a flat parameter vector (layout in the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -398,42 +401,12 @@ impl MlpWorkspace {
     }
 }
 
-/// `Σ a_i b_i` with four running sums (lets the compiler vectorise; fixed order, so
-/// deterministic).
-#[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    debug_assert_eq!(a.len(), b.len());
-    let mut s = [0.0f64; 4];
-    let (ca, ra) = a.split_at(a.len() / 4 * 4);
-    let (cb, rb) = b.split_at(ca.len());
-    for (x, y) in ca.chunks_exact(4).zip(cb.chunks_exact(4)) {
-        s[0] += x[0] * y[0];
-        s[1] += x[1] * y[1];
-        s[2] += x[2] * y[2];
-        s[3] += x[3] * y[3];
-    }
-    let mut t = (s[0] + s[1]) + (s[2] + s[3]);
-    for (x, y) in ra.iter().zip(rb) {
-        t += x * y;
-    }
-    t
-}
-
 /// `y += a x`.
 #[inline]
 fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
     debug_assert_eq!(x.len(), y.len());
     for (yi, xi) in y.iter_mut().zip(x) {
         *yi += a * xi;
-    }
-}
-
-/// `out = W x + b`, `W` row-major `out.len() × x.len()`.
-#[inline]
-fn affine(w: &[f64], b: &[f64], x: &[f64], out: &mut [f64]) {
-    let n_in = x.len();
-    for (i, (o, &bi)) in out.iter_mut().zip(b).enumerate() {
-        *o = dot(&w[i * n_in..(i + 1) * n_in], x) + bi;
     }
 }
 

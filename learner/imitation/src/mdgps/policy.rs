@@ -23,20 +23,16 @@
 use rand::Rng;
 use ur5_shared::config::ActionMode;
 use ur5_shared::layout::{DU, DX};
+use ur5_shared::policy::{PolicyTable, PolicyTableError};
 
 use crate::discriminator::Normalizer;
-use crate::ppo::policy::{net_sizes, GaussianMlpPolicy, PolicyWorkspace};
+use crate::ppo::policy::{GaussianMlpPolicy, PolicyWorkspace};
 use crate::ppo::rollout::action_base;
 use crate::rollout::Policy;
 
-/// Length of the flat parameter vector for mean heads of hidden widths `hidden`.
-pub fn flat_len(hidden: &[usize]) -> usize {
-    let head: usize = net_sizes(hidden)
-        .windows(2)
-        .map(|w| w[0] * w[1] + w[1])
-        .sum();
-    2 * DX + DU * head + DU
-}
+/// Length of the flat parameter vector for mean heads of hidden widths `hidden` (the policy
+/// table's layout, [`ur5_shared::policy`]).
+pub use ur5_shared::policy::flat_len;
 
 /// The global policy: input normalisation and the Gaussian MLP (module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -111,6 +107,19 @@ impl GlobalPolicy {
         out.resize(start + n, 0.0);
         self.net.read_params(&mut out[start..]);
         out
+    }
+
+    /// The policy as a sealed policy table of `version` acting in `mode`, the form the
+    /// real-time controller executes ([`ur5_shared::policy`], docs/design.md §3.11). `Err` if
+    /// the widths exceed the table's limits.
+    pub fn to_table(
+        &self,
+        version: u64,
+        mode: ActionMode,
+    ) -> Result<Box<PolicyTable>, PolicyTableError> {
+        let mut table = PolicyTable::new_boxed();
+        table.fill(version, mode, &self.hidden, &self.flat())?;
+        Ok(table)
     }
 
     /// Hidden widths of every mean head.
@@ -255,5 +264,47 @@ mod tests {
         bad[DX + 2] = 0.0;
         let e = GlobalPolicy::from_flat(&[64, 64], &bad).unwrap_err();
         assert!(e.contains("r[2]"), "{e}");
+    }
+
+    /// The controller's `policy_action` on the table gives the learner's action bit for bit,
+    /// noisy and noise-free, in both action modes and for several shapes.
+    #[test]
+    fn the_policy_table_acts_bit_for_bit_as_the_learner() {
+        use rand::Rng;
+        use ur5_shared::policy::{policy_action, PolicyBounds, PolicyScratch};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut scratch = PolicyScratch::default();
+        for hidden in [vec![64, 64], vec![7], vec![5, 9, 3]] {
+            let p = GlobalPolicy::new(&hidden, 0.3, &mut rng);
+            let mut flat = p.flat();
+            for v in flat.iter_mut() {
+                *v += rng.random_range(-0.3..0.3);
+            }
+            for v in &mut flat[DX..2 * DX] {
+                *v = rng.random_range(0.2..3.0);
+            }
+            let p = GlobalPolicy::from_flat(&hidden, &flat).unwrap();
+            let mut ws = p.workspace();
+            for mode in [ActionMode::GoalAngles, ActionMode::Torque] {
+                let table = p.to_table(4, mode).unwrap();
+                table.validate(&PolicyBounds::default()).unwrap();
+                for k in 0..50 {
+                    let s: [f64; DX] = std::array::from_fn(|_| rng.random_range(-2.0..2.0));
+                    let eps: [f64; DU] = if k % 2 == 0 {
+                        [0.0; DU]
+                    } else {
+                        std::array::from_fn(|_| rng.random_range(-2.0..2.0))
+                    };
+                    let want = GlobalActor::new(&p, &mut ws).act(0, &s, &eps, mode);
+                    let mut got = [f64::NAN; DU];
+                    policy_action(&table, &s, &eps, &mut scratch, &mut got);
+                    assert_eq!(
+                        got.map(f64::to_bits),
+                        want.map(f64::to_bits),
+                        "{hidden:?} {mode:?}"
+                    );
+                }
+            }
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! `rt-controller bench` (needs the `testkit` feature): the real loop ([`Controller::run`], lockstep) against an in-process
 //! kinematic arm and a learner stand-in that publishes a new table before every episode, over
-//! real iceoryx2 ports. Reports, from inside the loop: compute per tick (controller law + clamp
+//! real iceoryx2 ports, once with gain tables and once with policy tables (the MDGPS policy's
+//! default shape, three heads 12-64-64-1; docs/design.md §3.11). Reports, from inside the loop: compute per tick (controller law + clamp
 //! + command + sample publish), table swap (copy + flip) and validation; from the arm: the IPC
 //! round trip state → command.
 
@@ -11,11 +12,11 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use serde::Serialize;
 use ur5_shared::services::{self, unique_prefix, ServiceNames};
-use ur5_shared::{GainTable, StepSample};
+use ur5_shared::{GainTable, PolicyTable, StepSample};
 
 use rt_controller::config::{ControllerConfig, Mode, Polling};
 use rt_controller::stats::Percentiles;
-use rt_controller::testkit::{constant_goal_table, run_kinematic_arm};
+use rt_controller::testkit::{constant_goal_table, random_policy_table, run_kinematic_arm};
 use rt_controller::{Controller, ExitReason};
 
 /// Benchmark results (ns).
@@ -45,9 +46,21 @@ pub struct BenchReport {
     pub spin_ns: u64,
 }
 
+/// Which controller kind the learner stand-in publishes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// Gain tables (a constant goal with noise).
+    Gains,
+    /// Policy tables of hidden widths [`POLICY_HIDDEN`] (random weights).
+    Policy,
+}
+
+/// Hidden widths of the benchmark's policy: the MDGPS default (docs/design.md §6.1).
+pub const POLICY_HIDDEN: [usize; 2] = [64, 64];
+
 /// Runs `episodes` episodes of `horizon` ticks. `spin_ns`: the controller's busy-poll budget
 /// per wait (longer measures the IPC, shorter measures the sleep granularity too).
-pub fn run(episodes: u64, horizon: usize, spin_ns: u64) -> anyhow::Result<BenchReport> {
+pub fn run(episodes: u64, horizon: usize, spin_ns: u64, kind: Kind) -> anyhow::Result<BenchReport> {
     let prefix = unique_prefix("rt-bench");
     let stop = Arc::new(AtomicBool::new(false));
     let dt = 0.01;
@@ -58,7 +71,7 @@ pub fn run(episodes: u64, horizon: usize, spin_ns: u64) -> anyhow::Result<BenchR
     };
     let learner = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || learner_stand_in(&prefix, horizon, &stop))
+        std::thread::spawn(move || learner_stand_in(&prefix, horizon, kind, &stop))
     };
 
     let cfg = ControllerConfig {
@@ -106,7 +119,15 @@ pub fn run(episodes: u64, horizon: usize, spin_ns: u64) -> anyhow::Result<BenchR
 
 /// Publishes table version 1, then a new version whenever an episode starts (seen on
 /// `learner/samples`), so that every boundary swaps.
-fn learner_stand_in(prefix: &str, horizon: usize, stop: &AtomicBool) -> anyhow::Result<()> {
+fn learner_stand_in(
+    prefix: &str,
+    horizon: usize,
+    kind: Kind,
+    stop: &AtomicBool,
+) -> anyhow::Result<()> {
+    if kind == Kind::Policy {
+        return policy_stand_in(prefix, stop);
+    }
     let names = ServiceNames::new(prefix);
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -137,6 +158,49 @@ fn learner_stand_in(prefix: &str, horizon: usize, stop: &AtomicBool) -> anyhow::
         // Short sleeps: an episode of the kinematic arm lasts about a millisecond and most
         // boundaries should find a new table, but a spinning third thread on a 2-core machine
         // would distort the round trip being measured.
+        std::thread::sleep(core::time::Duration::from_micros(100));
+    }
+    Ok(())
+}
+
+/// As [`learner_stand_in`] with policy tables (seeded random weights, σ = 0.01 rad) on
+/// `controller/policy`; also subscribes to `controller/gains`' publisher count by opening it,
+/// so the controller's learner check sees a table publisher.
+fn policy_stand_in(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
+    let names = ServiceNames::new(prefix);
+    let node = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()?;
+    let policy = services::CONTROLLER_POLICY_QOS
+        .open_or_create::<PolicyTable>(&node, &names.controller_policy()?)?;
+    let samples = services::LEARNER_SAMPLES_QOS
+        .open_or_create::<StepSample>(&node, &names.learner_samples()?)?;
+    let publisher = policy.publisher_builder().create()?;
+    let subscriber = samples.subscriber_builder().create()?;
+    let table = |v: u64| random_policy_table(v, &POLICY_HIDDEN, 0.05, 0.01, v);
+    let mut version = 1;
+    {
+        let first = table(version);
+        let mut slot = publisher.loan_uninit()?;
+        PolicyTable::init_zeroed(slot.payload_mut()).copy_from(&first);
+        // SAFETY: init_zeroed initialised the payload.
+        unsafe { slot.assume_init() }.send()?;
+    }
+    let mut last_episode = 0;
+    while !stop.load(Ordering::Relaxed) {
+        let _ = publisher.update_connections();
+        while let Some(s) = subscriber.receive()? {
+            if s.episode > last_episode || (s.episode == 0 && s.t == 0 && version == 1) {
+                last_episode = s.episode;
+                version += 1;
+                let next = table(version);
+                let mut slot = publisher.loan_uninit()?;
+                let p = PolicyTable::init_zeroed(slot.payload_mut());
+                p.copy_from(&next);
+                // SAFETY: init_zeroed initialised the payload.
+                unsafe { slot.assume_init() }.send()?;
+            }
+        }
         std::thread::sleep(core::time::Duration::from_micros(100));
     }
     Ok(())

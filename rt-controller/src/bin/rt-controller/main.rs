@@ -53,7 +53,9 @@ enum Cmd {
     /// (`[arm] backend = "ur"`, `[arm.ur]`). Exit codes: 0 done or stopped (SIGINT/SIGTERM),
     /// 2 setup error, 3 arm lost (stale for safety.give_up_after_s, or its connection closed),
     /// 4 no table (safety.no_table_timeout_s), 5 the arm stopped itself (a UR protective stop,
-    /// safety mode not NORMAL, or its program ended).
+    /// safety mode not NORMAL, or its program ended), 6 learner and controller disagree (a
+    /// table rejected for its horizon, action mode or dimensions, or the learner stopped and
+    /// said why; both print the same message).
     #[command(after_help = UNITS)]
     Run {
         /// TOML configuration file (all keys optional).
@@ -77,13 +79,19 @@ enum Cmd {
         /// Seed of the exploration noise.
         #[arg(long)]
         seed: Option<u64>,
+        /// The goal x,y,z (m, arm base frame): overrides task.goal. The state the controller
+        /// builds holds ee − goal, so a policy table reaches the goal given here (a gain table
+        /// was trained for one goal: give that one).
+        #[arg(long, value_parser = parse_goal, allow_hyphen_values = true)]
+        goal: Option<[f64; 3]>,
         /// Print a one-line JSON summary on stdout at the end.
         #[arg(long)]
         json: bool,
     },
     /// Benchmark the loop in-process against a kinematic arm and a learner stand-in over real
-    /// iceoryx2 ports: compute per tick (law + clamp + publish), table swap and validation, IPC
-    /// round trip state → command. Prints a table (µs). Needs a build with the `testkit`
+    /// iceoryx2 ports, with gain tables and then with policy tables (12-64-64-1 heads): compute
+    /// per tick (law + clamp + publish), table swap and validation, IPC round trip state →
+    /// command. Prints a table (µs). Needs a build with the `testkit`
     /// feature (`cargo build --release -p rt-controller --features testkit`). With
     /// `--real-time`, instead: the wake-up lateness of the period wait alone (sleep to absolute
     /// deadlines at --rate for --seconds), beside cyclictest's (rt-tests) run at the same time
@@ -145,6 +153,18 @@ enum Cmd {
     PrintConfig,
 }
 
+/// `x,y,z` (m) → [x, y, z].
+fn parse_goal(s: &str) -> std::result::Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|e| format!("`{p}`: {e}")))
+        .collect::<std::result::Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("`{s}`: give three finite numbers x,y,z in metres")),
+    }
+}
+
 fn main() {
     match real_main() {
         Ok(code) => std::process::exit(code),
@@ -175,6 +195,12 @@ fn print_table(rows: &[(&str, Percentiles)]) {
 /// The loop phase of any arm; the summary.
 fn run_loop<A: ArmBackend>(mut controller: Controller<A>) -> Summary {
     let reason = controller.run(&STOP);
+    if reason == ExitReason::TaskMismatch {
+        // Until the learner has read why (it exits on reading it), at most 2 s.
+        controller
+            .ports()
+            .linger_for_status(std::time::Duration::from_secs(2));
+    }
     controller.summary(reason)
 }
 
@@ -190,6 +216,7 @@ fn real_main() -> Result<i32> {
             time_compression,
             episodes,
             seed,
+            goal,
             json,
         } => {
             let mut cfg: ControllerConfig = match &config {
@@ -222,6 +249,9 @@ fn real_main() -> Result<i32> {
             if let Some(s) = seed {
                 cfg.seed = s;
             }
+            if let Some(g) = goal {
+                cfg.task.goal = g;
+            }
             install_signal_handlers();
             let summary = match cfg.arm.backend {
                 ArmKind::Iceoryx2 => run_loop(Controller::setup(cfg)?),
@@ -235,6 +265,7 @@ fn real_main() -> Result<i32> {
                 ExitReason::ArmLost => 3,
                 ExitReason::NoTable => 4,
                 ExitReason::ArmStopped => 5,
+                ExitReason::TaskMismatch | ExitReason::LearnerStopped => 6,
             })
         }
         Cmd::BenchUr {
@@ -315,17 +346,24 @@ fn real_main() -> Result<i32> {
             json,
             ..
         } => {
-            let r = bench::run(episodes, horizon, spin_ns)?;
-            println!("rt-controller bench: {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc", r.episodes, horizon);
+            let r = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains)?;
+            let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy)?;
+            println!("rt-controller bench: {} + {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc; gain tables, then policy tables (heads 12-{}-1, {} parameters)", r.episodes, p.episodes, horizon,
+                bench::POLICY_HIDDEN.map(|h| h.to_string()).join("-"), ur5_shared::policy::flat_len(&bench::POLICY_HIDDEN));
             print_table(&[
-                ("tick compute (law + clamp + command + sample)", r.compute),
-                ("table swap (copy 64 KB + flip)", r.swap),
-                ("table validation", r.validate),
-                ("table intake (receive + copy + validate + flip)", r.intake),
-                ("IPC round trip state → command", r.round_trip),
+                ("gain table: tick compute (law + clamp + command + sample)", r.compute),
+                ("gain table: swap (copy 64 KB + flip)", r.swap),
+                ("gain table: validation", r.validate),
+                ("gain table: intake (receive + copy + validate + flip)", r.intake),
+                ("gain table: IPC round trip state → command", r.round_trip),
+                ("policy: tick compute (MLP + clamp + command + sample)", p.compute),
+                ("policy: swap (copy used part + flip)", p.swap),
+                ("policy: validation", p.validate),
+                ("policy: intake (receive + copy + validate + flip)", p.intake),
+                ("policy: IPC round trip state → command", p.round_trip),
             ]);
             if json {
-                println!("{}", serde_json::to_string(&r)?);
+                println!("{}", serde_json::json!({"gains": r, "policy": p}));
             }
             Ok(0)
         }

@@ -1,0 +1,204 @@
+//! `learner policy serve`: publishes a saved MDGPS policy as a policy table on
+//! `controller/policy` (docs/design.md §3.11) and reports the episodes the controller runs
+//! with it, from the `learner/samples` stream: per episode its steps, the distance to the goal
+//! at the last step (|s[6..9]|, m) and, for noise-free episodes, how many actions differ from
+//! the policy's own [`policy_action`] on the recorded state (0: the controller executed the
+//! policy exactly). The goal is the controller's (`rt-controller run --goal x,y,z`); the
+//! policy is time-invariant, so one table serves any goal.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use serde::Serialize;
+use ur5_shared::layout::EE_MINUS_GOAL;
+use ur5_shared::services::{self, ServiceNames};
+use ur5_shared::{policy_action, PolicyScratch, PolicyTable, StepSample, NO_NOISE};
+
+use super::ports::StatusPorts;
+
+/// One episode the controller ran with the policy.
+#[derive(Clone, Debug, Serialize)]
+pub struct PolicyEpisode {
+    /// The controller's episode number.
+    pub episode: u64,
+    /// Table version it ran.
+    pub version: u64,
+    /// With exploration noise.
+    pub noisy: bool,
+    /// Steps received (t = 0 … steps − 1).
+    pub steps: usize,
+    /// |ee − goal| at the last step's state (m).
+    pub distance_last_m: f64,
+    /// Noise-free episodes: actions that differ (any bit) from [`policy_action`] on the
+    /// recorded state; `None` for noisy ones.
+    pub mismatched_actions: Option<usize>,
+}
+
+/// Options of [`serve_policy`].
+#[derive(Clone, Debug)]
+pub struct PolicyServeOptions {
+    /// iceoryx2 prefix.
+    pub prefix: String,
+    /// Steps per episode (the controller's task.horizon).
+    pub steps: usize,
+    /// Stop after this many complete episodes.
+    pub episodes: usize,
+    /// Give up when no sample arrives for this long (s).
+    pub timeout_s: f64,
+}
+
+struct PolicyPorts {
+    status: StatusPorts,
+    samples: Subscriber<ipc::Service, StepSample, ()>,
+    policy: Publisher<ipc::Service, PolicyTable, ()>,
+    _node: Node<ipc::Service>,
+    _role: services::RoleLock,
+}
+
+impl PolicyPorts {
+    fn create(prefix: &str) -> anyhow::Result<Self> {
+        let role = services::RoleLock::acquire(prefix, "learner")?;
+        let _ = Node::<ipc::Service>::try_cleanup_dead_nodes(Config::global_config());
+        let names = ServiceNames::new(prefix);
+        let node = NodeBuilder::new().create::<ipc::Service>().map_err(|e| {
+            anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}; is /dev/shm writable?")
+        })?;
+        let status = StatusPorts::create(&node, &names)?;
+        let samples = services::LEARNER_SAMPLES_QOS
+            .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?
+            .subscriber_builder()
+            .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
+            .create()
+            .map_err(|e| {
+                anyhow::anyhow!("cannot subscribe to `{}`: {e:?}", names.learner_samples)
+            })?;
+        let policy = services::CONTROLLER_POLICY_QOS
+            .open_or_create_retrying::<PolicyTable>(&node, &names.controller_policy)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| {
+                anyhow::anyhow!("cannot publish on `{}`: {e:?}", names.controller_policy)
+            })?;
+        Ok(Self {
+            status,
+            samples,
+            policy,
+            _node: node,
+            _role: role,
+        })
+    }
+
+    fn publish(&self, table: &PolicyTable) -> anyhow::Result<()> {
+        let mut slot = self
+            .policy
+            .loan_uninit()
+            .map_err(|e| anyhow::anyhow!("loaning a policy-table sample: {e:?}"))?;
+        PolicyTable::init_zeroed(slot.payload_mut()).copy_from(table);
+        // SAFETY: init_zeroed initialised the whole payload.
+        unsafe { slot.assume_init() }
+            .send()
+            .map_err(|e| anyhow::anyhow!("publishing the policy table: {e:?}"))?;
+        Ok(())
+    }
+}
+
+/// Publishes `table` and collects `opts.episodes` complete episodes of it, calling `report`
+/// on each. Errors if no sample arrives for `opts.timeout_s`.
+pub fn serve_policy(
+    table: &PolicyTable,
+    opts: &PolicyServeOptions,
+    mut report: impl FnMut(&PolicyEpisode),
+) -> anyhow::Result<Vec<PolicyEpisode>> {
+    anyhow::ensure!(opts.steps >= 1, "--steps must be >= 1");
+    anyhow::ensure!(
+        opts.timeout_s.is_finite() && opts.timeout_s > 0.0,
+        "--timeout-s {} must be > 0",
+        opts.timeout_s
+    );
+    let ports = PolicyPorts::create(&opts.prefix)?;
+    let result = collect(&ports, table, opts, &mut report);
+    if let Err(e) = &result {
+        ports.status.stopping(e);
+    }
+    result
+}
+
+/// [`serve_policy`] once its ports exist.
+fn collect(
+    ports: &PolicyPorts,
+    table: &PolicyTable,
+    opts: &PolicyServeOptions,
+    report: &mut impl FnMut(&PolicyEpisode),
+) -> anyhow::Result<Vec<PolicyEpisode>> {
+    ports.publish(table)?;
+    let mut scratch = PolicyScratch::default();
+    let mut done = Vec::new();
+    // The episode being assembled: (episode, version, noisy, next t, last |ee − goal|, mismatches).
+    let mut cur: Option<(u64, u64, bool, usize, f64, usize)> = None;
+    let mut last_sample = Instant::now();
+    while done.len() < opts.episodes {
+        let _ = ports.policy.update_connections();
+        let sample = match ports.samples.receive() {
+            Ok(Some(s)) => *s,
+            Ok(None) => {
+                ports.status.check_controller()?;
+                anyhow::ensure!(
+                    last_sample.elapsed().as_secs_f64() < opts.timeout_s,
+                    "no sample on prefix `{}` for {} s: is `rt-controller run --prefix {}` running (with hil-sim serve or a robot)?",
+                    opts.prefix,
+                    opts.timeout_s,
+                    opts.prefix
+                );
+                std::thread::sleep(Duration::from_millis(1));
+                continue;
+            }
+            Err(e) => anyhow::bail!("receiving samples: {e:?}"),
+        };
+        last_sample = Instant::now();
+        if sample.table_version != table.version {
+            continue; // another controller kind or version (e.g. an older gain table)
+        }
+        let t = sample.t as usize;
+        let noisy = sample.noise != 0;
+        let fresh = t == 0;
+        let continues = matches!(cur, Some((e, v, n, next, _, _))
+            if e == sample.episode && v == sample.table_version && n == noisy && next == t);
+        if fresh {
+            cur = Some((sample.episode, sample.table_version, noisy, 0, 0.0, 0));
+        } else if !continues {
+            cur = None; // samples lost or an aborted episode: discard
+            continue;
+        }
+        let c = cur.as_mut().expect("set above");
+        if !noisy {
+            let mut a = [0.0; 3];
+            policy_action(table, &sample.s, &NO_NOISE, &mut scratch, &mut a);
+            if a.map(f64::to_bits) != sample.a.map(f64::to_bits) {
+                c.5 += 1;
+            }
+        }
+        c.3 = t + 1;
+        c.4 = sample.s[EE_MINUS_GOAL]
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+        if c.3 == opts.steps {
+            let ep = PolicyEpisode {
+                episode: c.0,
+                version: c.1,
+                noisy: c.2,
+                steps: c.3,
+                distance_last_m: c.4,
+                mismatched_actions: (!c.2).then_some(c.5),
+            };
+            report(&ep);
+            done.push(ep);
+            cur = None;
+        }
+    }
+    Ok(done)
+}
