@@ -327,27 +327,18 @@ impl Ur5Sim {
     /// perturbation RNG at its seed), without parsing and building the URDF again: what
     /// parallel episodes run on (docs/design.md §5 D29).
     pub fn fresh(&self) -> Self {
-        Self {
+        let mut sim = Self {
             model: self.model.clone(),
             cfg: self.cfg.clone(),
-            control_dt: self.control_dt,
-            physics_steps_per_control: self.physics_steps_per_control,
             world: self.pristine.world(),
             pristine: self.pristine.clone(),
-            mb: self.mb,
-            dofs: self.dofs,
             nominal_masses: self.nominal_masses.clone(),
-            ee_link: self.ee_link,
-            ee_body: self.ee_body,
-            ee_point: self.ee_point,
             rng: ChaCha8Rng::seed_from_u64(self.cfg.perturbation.seed),
-            pending: None,
-            current: [0.0; N_JOINTS],
-            last_tau: [0.0; N_JOINTS],
-            max_abs_tau: [0.0; N_JOINTS],
-            goal: [0.0; 3],
-            time: 0.0,
-        }
+            ..*self
+        };
+        (sim.pending, sim.current, sim.goal, sim.time) = (None, [0.0; N_JOINTS], [0.0; 3], 0.0);
+        (sim.last_tau, sim.max_abs_tau) = ([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        sim
     }
 
     /// Restarts the perturbation RNG (actuator and sensor noise) on its own stream `stream` of

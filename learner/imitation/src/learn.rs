@@ -1,9 +1,10 @@
 //! The one driver interface of the learners (docs/design.md §1): an iterative learner is run one
-//! iteration of Algorithm 1 at a time, step 1 executed either in process ([`iterate`], on an
-//! [`Arm`]) or by the real-time loop over IPC (`learner serve` collects the episodes and calls
-//! [`Learn::learn`]). The expert, LQR+GAIfO and the GAIfO (PPO) baseline implement it; the two
-//! whose policy is a linear-Gaussian controller also implement [`LinGaussLearn`], which is what
-//! a served run publishes as gain tables.
+//! iteration of Algorithm 1 at a time, step 1 executed either in process ([`iterate`], its
+//! episodes in parallel on arms from an [`Arms`] source) or by the real-time loop over IPC
+//! (`learner serve` collects the episodes and calls [`Learn::learn`]). The expert, LQR+GAIfO
+//! and the GAIfO (PPO) baseline implement it; the two whose policy is a linear-Gaussian
+//! controller also implement [`LinGaussLearn`], which is what a served run publishes as gain
+//! tables.
 
 use std::time::Instant;
 
