@@ -14,6 +14,8 @@ use rapier3d_urdf::{UrdfLoaderOptions, UrdfMultibodyOptions, UrdfRobot};
 use ur5_shared::config::{ActionMode, SimConfig};
 use ur5_shared::layout::N_JOINTS;
 
+use std::sync::Arc;
+
 use crate::model::ArmModel;
 use crate::servo::servo_torque;
 use crate::SimError;
@@ -52,6 +54,60 @@ struct ActiveDof {
     child_body: RigidBodyHandle,
 }
 
+/// The state of a rapier world without its pipelines (which hold only scratch memory):
+/// enough to rebuild the world exactly as it was.
+#[derive(Clone)]
+struct Pristine {
+    gravity: Vec3,
+    integration_parameters: IntegrationParameters,
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd_solver: CCDSolver,
+}
+
+impl Pristine {
+    fn take(w: &PhysicsWorld) -> Self {
+        Self {
+            gravity: w.gravity,
+            integration_parameters: w.integration_parameters,
+            islands: w.islands.clone(),
+            broad_phase: w.broad_phase.clone(),
+            narrow_phase: w.narrow_phase.clone(),
+            bodies: w.bodies.clone(),
+            colliders: w.colliders.clone(),
+            impulse_joints: w.impulse_joints.clone(),
+            multibody_joints: w.multibody_joints.clone(),
+            soft_bodies: w.soft_bodies.clone(),
+            ccd_solver: w.ccd_solver.clone(),
+        }
+    }
+
+    /// The world again, with new (empty) pipelines.
+    fn world(&self) -> PhysicsWorld {
+        let p = self.clone();
+        PhysicsWorld {
+            gravity: p.gravity,
+            integration_parameters: p.integration_parameters,
+            islands: p.islands,
+            broad_phase: p.broad_phase,
+            narrow_phase: p.narrow_phase,
+            bodies: p.bodies,
+            colliders: p.colliders,
+            impulse_joints: p.impulse_joints,
+            multibody_joints: p.multibody_joints,
+            soft_bodies: p.soft_bodies,
+            ccd_solver: p.ccd_solver,
+            ..PhysicsWorld::new()
+        }
+    }
+}
+
 /// The simulated arm.
 pub struct Ur5Sim {
     model: ArmModel,
@@ -59,6 +115,9 @@ pub struct Ur5Sim {
     control_dt: f64,
     physics_steps_per_control: usize,
     world: PhysicsWorld,
+    /// The world as [`Ur5Sim::new`] left it: every reset starts from it, so an episode does
+    /// not depend on the ones before it (docs/design.md §5 D29).
+    pristine: Arc<Pristine>,
     mb: MultibodyIndex,
     dofs: [ActiveDof; N_JOINTS],
     /// (multibody link id, nominal mass kg) of every moving link, for gravity compensation.
@@ -237,12 +296,14 @@ impl Ur5Sim {
         }
 
         let rng = ChaCha8Rng::seed_from_u64(cfg.perturbation.seed);
+        let pristine = Arc::new(Pristine::take(&world));
         let mut sim = Self {
             model,
             cfg,
             control_dt,
             physics_steps_per_control,
             world,
+            pristine,
             mb,
             dofs,
             nominal_masses,
@@ -258,7 +319,34 @@ impl Ur5Sim {
             time: 0.0,
         };
         sim.set_joint_state([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        sim.pristine = Arc::new(Pristine::take(&sim.world));
         Ok(sim)
+    }
+
+    /// A new arm as [`Ur5Sim::new`] built this one (same model and configuration, at rest,
+    /// perturbation RNG at its seed), without parsing and building the URDF again: what
+    /// parallel episodes run on (docs/design.md §5 D29).
+    pub fn fresh(&self) -> Self {
+        let mut sim = Self {
+            model: self.model.clone(),
+            cfg: self.cfg.clone(),
+            world: self.pristine.world(),
+            pristine: self.pristine.clone(),
+            nominal_masses: self.nominal_masses.clone(),
+            rng: ChaCha8Rng::seed_from_u64(self.cfg.perturbation.seed),
+            ..*self
+        };
+        (sim.pending, sim.current, sim.goal, sim.time) = (None, [0.0; N_JOINTS], [0.0; 3], 0.0);
+        (sim.last_tau, sim.max_abs_tau) = ([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        sim
+    }
+
+    /// Restarts the perturbation RNG (actuator and sensor noise) on its own stream `stream` of
+    /// the configured `perturbation.seed`: an episode that calls it first draws the same
+    /// noise whatever ran before it.
+    pub fn reseed(&mut self, stream: u64) {
+        self.rng = ChaCha8Rng::seed_from_u64(self.cfg.perturbation.seed);
+        self.rng.set_stream(stream);
     }
 
     /// The checked model (limits, wrist lock, end-effector definition).
@@ -308,8 +396,11 @@ impl Ur5Sim {
         self.max_abs_tau
     }
 
-    /// Starts an episode: puts the arm at rest at `start_q` and sets the goal. Re-seeds
-    /// nothing: the perturbation RNG runs on across episodes, so a run replays as a whole.
+    /// Starts an episode: puts the arm at rest at `start_q` and sets the goal. The physics
+    /// restarts from the world [`Ur5Sim::new`] built (not from the last episode's end), so the
+    /// episode's motion does not depend on what ran before (docs/design.md §5 D29). Re-seeds
+    /// nothing: the perturbation RNG runs on across episodes unless [`Ur5Sim::reseed`] is
+    /// called, so a run replays as a whole.
     pub fn reset(
         &mut self,
         start_q: [f64; N_JOINTS],
@@ -326,6 +417,7 @@ impl Ur5Sim {
             }
         }
         self.check_goal(goal)?;
+        self.world = self.pristine.world();
         self.set_joint_state(start_q, [0.0; N_JOINTS]);
         self.goal = goal;
         self.pending = None;

@@ -468,3 +468,59 @@ fn malformed_urdfs_are_refused_naming_the_problem() {
         assert!(e.contains(what), "{what}: {e}");
     }
 }
+
+/// An episode (reset, then a sequence of actions) on an arm with any history gives the same
+/// bits as on a new arm and on a `fresh` copy: reset restarts the physics from the built
+/// world, and `reseed` restarts the perturbation noise (docs/design.md §5 D29). What makes
+/// episodes of one iteration safe to run in parallel.
+#[test]
+fn an_episode_does_not_depend_on_the_arm_history() {
+    let task = TaskConfig::default();
+    let episode = |sim: &mut Ur5Sim| -> Vec<u64> {
+        sim.reseed(7);
+        let mut bits = Vec::new();
+        let o = sim.reset(task.start_q, task.goal).unwrap();
+        bits.extend(o.q.iter().chain(&o.ee_pos).map(|v| v.to_bits()));
+        for k in 0..15 {
+            let a = [0.1 * k as f64, -1.5 + 0.02 * k as f64, 1.8];
+            let o = sim.step(a);
+            bits.extend(
+                o.q.iter()
+                    .chain(&o.qd)
+                    .chain(&o.ee_pos)
+                    .chain(&o.ee_vel)
+                    .map(|v| v.to_bits()),
+            );
+        }
+        bits
+    };
+    for perturbation in [Perturbation::default(), Perturbation::physical_stand_in(3)] {
+        let cfg = SimConfig {
+            perturbation,
+            ..SimConfig::default()
+        };
+        let nominal = cfg.perturbation.is_nominal();
+        let mut new = Ur5Sim::new(cfg.clone(), task.dt).unwrap();
+        let reference = episode(&mut new);
+        // History: another episode from another pose with other actions and noise.
+        let mut used = Ur5Sim::new(cfg, task.dt).unwrap();
+        used.reset([0.4, -1.2, 1.3], task.goal).unwrap();
+        for k in 0..12 {
+            used.step([0.5, -1.0 - 0.05 * k as f64, 1.0]);
+        }
+        let mut fresh = used.fresh();
+        assert_eq!(episode(&mut used), reference, "after another episode");
+        assert_eq!(episode(&mut used), reference, "run twice");
+        assert_eq!(episode(&mut fresh), reference, "on a fresh copy");
+        // Another stream draws other noise, so the test sees the perturbation noise.
+        if !nominal {
+            fresh.reseed(8);
+            let o = fresh.reset(task.start_q, task.goal).unwrap();
+            assert_ne!(
+                o.q[0].to_bits(),
+                reference[0],
+                "another stream, other noise"
+            );
+        }
+    }
+}

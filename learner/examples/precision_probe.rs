@@ -114,10 +114,10 @@ fn main() -> anyhow::Result<()> {
     let t_len = demos.horizon;
     let demo_end = demos.state(0, t_len - 1);
     let mut run = LqrGaifo::new(cfg, demos)?;
-    let mut arm = arm_for(&run)?;
+    let arm = arm_for(&run)?;
     println!("it  eval_mm  noisy_mm(mean sd)  sd_end_mrad  D(eval)-D(demo)  dD/dr(eval)  dD/dr(demo)  W1     eta");
     for _ in 0..iters {
-        let (noisy, eval) = run.execute(&mut arm)?;
+        let (noisy, eval) = run.execute(&arm)?;
         let pol = run.policy();
         let sd_end = {
             let c = pol.pol_covar.slice(t_len - 2);

@@ -1,9 +1,11 @@
 //! The in-process arm: hil-sim's simulated UR5 as an [`imitation::rollout::Arm`], so the
 //! learners' one episode loop (`imitation::rollout::run_episode`) runs on it in lockstep, no
-//! IPC, through the same controller law, action clamp and noise as the real-time loop.
+//! IPC, through the same controller law, action clamp and noise as the real-time loop. As an
+//! [`Arms`] source it gives every episode of an iteration a fresh copy of itself, so that the
+//! episodes can run in parallel (docs/design.md §5 D29).
 
 use hil_sim::{SimError, Ur5Sim};
-use imitation::rollout::Arm;
+use imitation::rollout::{Arm, Arms};
 use imitation::ImitationError;
 use ur5_shared::config::{ActionMode, ArmLimits, SimConfig};
 use ur5_shared::layout::{DU, DX};
@@ -26,6 +28,20 @@ impl SimArm {
     /// The simulator.
     pub fn sim(&self) -> &Ur5Sim {
         &self.sim
+    }
+}
+
+/// Episode k of version v under run seed s runs on a fresh copy of this arm (`Ur5Sim::fresh`)
+/// whose perturbation noise is the stream `ur5_shared::noise::episode_seed(s, v, k)` of its
+/// `perturbation.seed`.
+impl Arms for SimArm {
+    fn episode_arm(&self, seed: u64, version: u64, k: u64) -> Result<Box<dyn Arm>, ImitationError> {
+        let mut sim = self.sim.fresh();
+        sim.reseed(ur5_shared::noise::episode_seed(seed, version, k));
+        Ok(Box::new(SimArm {
+            sim,
+            goal: [0.0; 3],
+        }))
     }
 }
 

@@ -149,7 +149,7 @@ pub fn resume(cfg: GaifoConfig, demos: Demos, dir: &Path) -> anyhow::Result<LqrG
 /// when it is given.
 pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
     run: &mut R,
-    arm: &mut SimArm,
+    arm: &SimArm,
     iterations: usize,
     out: Option<&Path>,
     progress: impl FnMut(&GaifoLog, &R),
@@ -169,7 +169,7 @@ pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
 /// The iterations of [`run_iterations`] and [`train_resumed`]: iterate, report, log, checkpoint.
 fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
     run: &mut R,
-    arm: &mut SimArm,
+    arm: &SimArm,
     iterations: usize,
     mut csv: Option<(std::fs::File, &Path)>,
     mut progress: impl FnMut(&GaifoLog, &R),
@@ -197,8 +197,8 @@ pub fn train(
     mut progress: impl FnMut(&GaifoLog),
 ) -> anyhow::Result<Vec<GaifoLog>> {
     let mut run = LqrGaifo::new(cfg.clone(), demos)?;
-    let mut arm = arm_for(&run)?;
-    run_iterations(&mut run, &mut arm, cfg.iterations, out, |l, _| progress(l))
+    let arm = arm_for(&run)?;
+    run_iterations(&mut run, &arm, cfg.iterations, out, |l, _| progress(l))
 }
 
 /// Runs `cfg.iterations` iterations of GAIfO (PPO) on `demos`, calling `progress` after each
@@ -210,8 +210,8 @@ pub fn train_ppo(
     mut progress: impl FnMut(&GaifoLog, &UpdateStats),
 ) -> anyhow::Result<Vec<GaifoLog>> {
     let mut run = GaifoPpo::new(cfg.clone(), demos)?;
-    let mut arm = arm_for(&run)?;
-    run_iterations(&mut run, &mut arm, cfg.iterations, out, |l, r| {
+    let arm = arm_for(&run)?;
+    run_iterations(&mut run, &arm, cfg.iterations, out, |l, r| {
         progress(l, &r.last_update)
     })
 }
@@ -234,11 +234,11 @@ pub fn train_resumed(
         dir.display(),
         cfg.iterations
     );
-    let mut arm = arm_for(&run)?;
+    let arm = arm_for(&run)?;
     let csv = open_log(&dir.join("gaifo_log.csv"), Some(start))?;
     drive(
         &mut run,
-        &mut arm,
+        &arm,
         cfg.iterations - start,
         Some((csv, dir)),
         |l, _| progress(l),
@@ -250,17 +250,15 @@ pub fn expert(
     cfg: &ExpertConfig,
     progress: impl FnMut(&IterationLog),
 ) -> anyhow::Result<ExpertRun> {
-    let mut arm =
-        SimArm::new(cfg.sim.clone(), cfg.task.dt).context("building the simulated arm")?;
-    Ok(train_expert(cfg, &mut arm, progress)?)
+    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).context("building the simulated arm")?;
+    Ok(train_expert(cfg, &arm, progress)?)
 }
 
 /// Records `cfg.demos` demonstrations of `run`'s best controller on a fresh in-process arm
 /// ([`imitation::expert::record_demos`]).
 pub fn demos(cfg: &ExpertConfig, run: &ExpertRun) -> anyhow::Result<Demos> {
-    let mut arm =
-        SimArm::new(cfg.sim.clone(), cfg.task.dt).context("building the simulated arm")?;
-    Ok(record_demos(cfg, &mut arm, &run.policy, run.cost_random)?)
+    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).context("building the simulated arm")?;
+    Ok(record_demos(cfg, &arm, &run.policy, run.cost_random)?)
 }
 
 /// What `learner expert` reports at the end (also its `--json` line).

@@ -75,12 +75,12 @@ fn learning_on_executed_episodes_equals_iterate() {
     };
     let mut a = LqrGaifo::new(cfg.clone(), demos.clone()).unwrap();
     let mut b = LqrGaifo::new(cfg.clone(), demos).unwrap();
-    let mut arm_a = SimArm::new(cfg.sim.clone(), a.task().dt).unwrap();
-    let mut sim = SimArm::new(cfg.sim.clone(), b.task().dt).unwrap();
+    let arm_a = SimArm::new(cfg.sim.clone(), a.task().dt).unwrap();
+    let sim = SimArm::new(cfg.sim.clone(), b.task().dt).unwrap();
     for i in 0..3 {
-        let (la, ea) = iterate(&mut a, &mut arm_a).unwrap();
+        let (la, ea) = iterate(&mut a, &arm_a).unwrap();
         let task = b.task().clone();
-        let (noisy, eval) = execute(&mut sim, &task, &mut *b.table(), b.version(), 5, 5).unwrap();
+        let (noisy, eval) = execute(&sim, &task, &*b.table(), b.version(), 5, 5).unwrap();
         assert_eq!(ea, eval);
         let lb = b.learn(&noisy, &eval, 0.0).unwrap();
         let key = |l: &imitation::gaifo::GaifoLog| {
@@ -90,9 +90,70 @@ fn learning_on_executed_episodes_equals_iterate() {
         assert_eq!(a.policy(), b.policy());
     }
     let e = b
-        .learn(&[], &iterate(&mut a, &mut arm_a).unwrap().1, 0.0)
+        .learn(&[], &iterate(&mut a, &arm_a).unwrap().1, 0.0)
         .unwrap_err();
     assert!(e.to_string().contains("needs 5 noisy episodes"), "{e}");
+}
+
+/// Issue 16 goal 2: the episodes of an iteration run in parallel, each on its own fresh arm
+/// (docs/design.md §5 D29), so the thread count changes no bit: the expert (its demonstrations),
+/// 3 iterations of LQR+GAIfO and 2 of the GAIfO (PPO) baseline with 1, 2 and 3 worker threads
+/// give the same demonstrations, logged figures, controllers and noise-free episodes.
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    use imitation::gaifo::LqrGaifo;
+    use imitation::learn::{iterate, LinGaussLearn};
+    use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
+    use learner::run::arm_for;
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+    let key = |l: &imitation::gaifo::GaifoLog| {
+        [
+            l.task_cost,
+            l.critic_loss,
+            l.wasserstein,
+            l.kl,
+            l.eta,
+            l.performance,
+        ]
+        .map(f64::to_bits)
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let demos = short_demos();
+            let mut out = vec![bits(&demos.states), bits(&[demos.cost_random])];
+            let cfg = GaifoConfig {
+                seed: 3,
+                ..GaifoConfig::default()
+            };
+            let mut lqr = LqrGaifo::new(cfg, demos.clone()).unwrap();
+            let arm = arm_for(&lqr).unwrap();
+            for _ in 0..3 {
+                let (log, eval) = iterate(&mut lqr, &arm).unwrap();
+                out.push(key(&log).to_vec());
+                out.push(bits(&eval.x));
+            }
+            out.push(vec![lqr.table().compute_checksum()]);
+            let cfg = GaifoPpoConfig {
+                seed: 3,
+                ..GaifoPpoConfig::default()
+            };
+            let mut ppo = GaifoPpo::new(cfg, demos).unwrap();
+            let arm = arm_for(&ppo).unwrap();
+            for _ in 0..2 {
+                let (log, eval) = iterate(&mut ppo, &arm).unwrap();
+                out.push(key(&log).to_vec());
+                out.push(bits(&eval.x));
+            }
+            out
+        })
+    };
+    let one = run(1);
+    assert_eq!(run(2), one, "2 threads");
+    assert_eq!(run(3), one, "3 threads");
 }
 
 mod resume {

@@ -269,8 +269,8 @@ fn tiny_demos(goal: [f64; 3], horizon: usize) -> Demos {
         demos: 2,
         ..ExpertConfig::default()
     };
-    let mut arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
-    let mut d = record_demos(&cfg, &mut arm, &init_hold(&cfg.task, 0.01), 0.0).unwrap();
+    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+    let mut d = record_demos(&cfg, &arm, &init_hold(&cfg.task, 0.01), 0.0).unwrap();
     d.cost_random = d.cost_expert + 1.0;
     d
 }
@@ -287,10 +287,10 @@ fn a_tiny_mdgps_run_is_reproducible_bit_for_bit() {
     cfg.policy.steps = 20;
     let run = |cfg: &MdgpsConfig| {
         let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
-        let mut arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+        let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
         let mut logs = Vec::new();
         for _ in 0..3 {
-            let (samples, evals) = m.execute(&mut arm).unwrap();
+            let (samples, evals) = m.execute(&arm).unwrap();
             let mut l = m.learn(&samples, &evals, 0.0).unwrap();
             l.t_dynamics = 0.0;
             l.t_critic = 0.0;

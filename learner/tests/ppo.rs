@@ -144,13 +144,12 @@ fn ppo_on_task_cost(
     iterations: usize,
     seed: u64,
 ) -> (Vec<f64>, Vec<f64>) {
-    let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
+    let sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
     let mut ppo = Ppo::new(cfg, ActionMode::GoalAngles, seed).unwrap();
     let mut costs = Vec::new();
     for it in 0..=iterations {
-        let (pol, ws) = ppo.policy_and_workspace();
-        let (eps, eval) =
-            execute_mlp(&mut sim, task, pol, ws, it as u64 + 1, seed, samples).unwrap();
+        let (pol, _) = ppo.policy_and_workspace();
+        let (eps, eval) = execute_mlp(&sim, task, pol, it as u64 + 1, seed, samples).unwrap();
         costs.push(eval.task_cost());
         if it < iterations {
             let st = ppo.update(&eps, &distance_rewards(&eps));
@@ -249,10 +248,10 @@ fn same_seed_same_run_bit_for_bit() {
 
 /// Demonstrations stand-in: two episodes of a fresh noisy policy (the loop only needs states).
 fn fake_demos(task: &TaskConfig) -> Demos {
-    let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
+    let sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
     let mut ppo = Ppo::new(PpoConfig::default(), ActionMode::GoalAngles, 99).unwrap();
-    let (pol, ws) = ppo.policy_and_workspace();
-    let (eps, _) = execute_mlp(&mut sim, task, pol, ws, 1, 5, 2).unwrap();
+    let (pol, _) = ppo.policy_and_workspace();
+    let (eps, _) = execute_mlp(&sim, task, pol, 1, 5, 2).unwrap();
     Demos {
         states: eps.iter().flat_map(|e| e.x.iter().copied()).collect(),
         actions: eps.iter().flat_map(|e| e.u.iter().copied()).collect(),
@@ -280,10 +279,10 @@ fn gaifo_ppo_is_deterministic_and_logs_like_lqr_gaifo() {
     };
     let run = |cfg: &GaifoPpoConfig| {
         let mut r = GaifoPpo::new(cfg.clone(), demos.clone()).unwrap();
-        let mut arm = learner::run::arm_for(&r).unwrap();
+        let arm = learner::run::arm_for(&r).unwrap();
         let mut out = Vec::new();
         for _ in 0..cfg.iterations {
-            let (log, eval) = iterate(&mut r, &mut arm).unwrap();
+            let (log, eval) = iterate(&mut r, &arm).unwrap();
             out.push((
                 log.task_cost,
                 log.critic_loss,

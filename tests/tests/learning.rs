@@ -188,15 +188,15 @@ fn in_process(
     Vec<Box<GainTable>>,
     Vec<(Vec<Episode>, Episode, IterationLog)>,
 ) {
-    let mut sim = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+    let sim = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
     let mut el = ExpertLearner::new(cfg.clone(), None);
     let (mut tables, mut iterations) = (Vec::new(), Vec::new());
     while !el.done() {
         tables.push(to_gain_table(el.policy(), el.version()));
         let (noisy, eval) = execute(
-            &mut sim,
+            &sim,
             &cfg.task,
-            &mut *to_gain_table(el.policy(), el.version()),
+            &*to_gain_table(el.policy(), el.version()),
             el.version(),
             cfg.seed,
             cfg.samples,
@@ -485,12 +485,12 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
         let (cfg, demos, ref_out) = (cfg.clone(), demos.clone(), ref_out.clone());
         std::thread::spawn(move || {
             let mut run = LqrGaifo::new(cfg, demos).unwrap();
-            let mut arm = arm_for(&run).unwrap();
+            let arm = arm_for(&run).unwrap();
             let (mut tables, mut iterations) = (Vec::new(), Vec::new());
             for _ in 0..ITERATIONS {
                 tables.push(to_gain_table(run.policy(), run.version()));
                 run.checkpoint(&ref_out).unwrap();
-                iterations.push(iterate(&mut run, &mut arm).unwrap());
+                iterations.push(iterate(&mut run, &arm).unwrap());
             }
             tables.push(to_gain_table(run.policy(), run.version()));
             run.checkpoint(&ref_out).unwrap();

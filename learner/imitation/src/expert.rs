@@ -18,7 +18,7 @@ use crate::cost::task::TaskCostConfig;
 use crate::demos::Demos;
 use crate::iteration::LqrIteration;
 use crate::learn::{Learn, LinGaussLearn};
-use crate::rollout::{run_episode, Arm, Episode, SampleList};
+use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
 use gps::algorithm::AlgorithmConfig;
@@ -231,20 +231,26 @@ pub struct ExpertRun {
 }
 
 /// Mean task cost of `count` episodes of `pol` with exploration noise; episode k draws its
-/// noise from `Noise::new(seed, 0, k)`.
+/// noise from `Noise::new(seed, 0, k)`; the episodes run in parallel, each on its own arm
+/// from `arms` ([`run_episodes`]).
 pub fn mean_noisy_cost(
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
     task: &TaskConfig,
     pol: &LinGaussPolicy,
     count: usize,
     seed: u64,
 ) -> Result<f64, ImitationError> {
-    let mut table = to_gain_table(pol, 0);
-    let mut total = 0.0;
-    for k in 0..count {
-        let mut noise = Noise::new(seed, 0, k as u64);
-        total += run_episode(arm, task, &mut *table, Some(&mut noise))?.task_cost();
-    }
+    let table = to_gain_table(pol, 0);
+    let episodes = run_episodes(
+        arms,
+        count,
+        |k| (seed, 0, k as u64),
+        |k, arm| {
+            let mut noise = Noise::new(seed, 0, k as u64);
+            run_episode(arm, task, &mut &*table, Some(&mut noise))
+        },
+    )?;
+    let total: f64 = episodes.iter().map(Episode::task_cost).sum();
     Ok(total / count.max(1) as f64)
 }
 
@@ -401,18 +407,18 @@ impl ExpertLearner {
     }
 }
 
-/// Trains the expert in process on `arm` (lockstep, no IPC): the random policy's cost, then
+/// Trains the expert in process on arms from `arms` (lockstep, no IPC): the random policy's cost, then
 /// [`crate::learn::iterate`] until [`ExpertLearner::done`]. `progress` receives each
 /// iteration's log (`seconds`: episodes and update) as soon as it is done.
 pub fn train(
     cfg: &ExpertConfig,
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
     mut progress: impl FnMut(&IterationLog),
 ) -> Result<ExpertRun, ImitationError> {
     cfg.validate()?;
     let task = &cfg.task;
     let cost_random = mean_noisy_cost(
-        arm,
+        arms,
         task,
         &init_hold(task, cfg.init_var),
         cfg.random_episodes,
@@ -421,7 +427,7 @@ pub fn train(
     let mut el = ExpertLearner::new(cfg.clone(), Some(cost_random));
     let mut log = Vec::new();
     while !el.done() {
-        let (entry, _) = crate::learn::iterate(&mut el, arm)?;
+        let (entry, _) = crate::learn::iterate(&mut el, arms)?;
         progress(&entry);
         log.push(entry);
     }
@@ -434,23 +440,31 @@ pub fn train(
     })
 }
 
-/// Records `cfg.demos` demonstrations of `policy` on `arm` (with its exploration noise when
-/// `cfg.demo_noise`), seeded from `cfg.seed`.
+/// Records `cfg.demos` demonstrations of `policy` (with its exploration noise when
+/// `cfg.demo_noise`), seeded from `cfg.seed`, in parallel on arms from `arms`.
 pub fn record_demos(
     cfg: &ExpertConfig,
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
     policy: &LinGaussPolicy,
     cost_random: f64,
 ) -> Result<Demos, ImitationError> {
     let task = &cfg.task;
-    let mut table = to_gain_table(policy, 0);
+    let table = to_gain_table(policy, 0);
     let mut states = Vec::with_capacity(cfg.demos * task.horizon * DX);
     let mut actions = Vec::with_capacity(cfg.demos * task.horizon * DU);
     let mut total = 0.0;
-    for k in 0..cfg.demos {
-        let mut noise = Noise::new(cfg.seed ^ SEED_DEMOS, 0, k as u64);
-        let noise = cfg.demo_noise.then_some(&mut noise);
-        let ep = run_episode(arm, task, &mut *table, noise)?;
+    let seed = cfg.seed ^ SEED_DEMOS;
+    let episodes = run_episodes(
+        arms,
+        cfg.demos,
+        |k| (seed, 0, k as u64),
+        |k, arm| {
+            let mut noise = Noise::new(seed, 0, k as u64);
+            let noise = cfg.demo_noise.then_some(&mut noise);
+            run_episode(arm, task, &mut &*table, noise)
+        },
+    )?;
+    for ep in &episodes {
         total += ep.task_cost();
         states.extend_from_slice(&ep.x);
         actions.extend_from_slice(&ep.u);
@@ -509,8 +523,8 @@ impl Learn for ExpertLearner {
     fn done(&self) -> bool {
         ExpertLearner::done(self)
     }
-    fn execute(&mut self, arm: &mut dyn Arm) -> Result<(Vec<Episode>, Episode), ImitationError> {
-        crate::learn::execute_table(self, arm)
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+        crate::learn::execute_table(self, arms)
     }
     /// [`ExpertLearner::update`]; `seconds` counts `t_execute` too.
     fn learn(

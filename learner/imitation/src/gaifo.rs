@@ -44,7 +44,7 @@ use crate::discriminator::{
 };
 use crate::iteration::LqrIteration;
 use crate::learn::{Learn, LinGaussLearn};
-use crate::rollout::{Arm, Episode, SampleList};
+use crate::rollout::{Arms, Episode, SampleList};
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
 use gps::algorithm::AlgorithmConfig;
@@ -597,8 +597,8 @@ impl Learn for LqrGaifo {
     fn done(&self) -> bool {
         LqrGaifo::done(self)
     }
-    fn execute(&mut self, arm: &mut dyn Arm) -> Result<(Vec<Episode>, Episode), ImitationError> {
-        crate::learn::execute_table(self, arm)
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+        crate::learn::execute_table(self, arms)
     }
     fn learn(
         &mut self,

@@ -1,9 +1,10 @@
 //! The one driver interface of the learners (docs/design.md §1): an iterative learner is run one
-//! iteration of Algorithm 1 at a time, step 1 executed either in process ([`iterate`], on an
-//! [`Arm`]) or by the real-time loop over IPC (`learner serve` collects the episodes and calls
-//! [`Learn::learn`]). The expert, LQR+GAIfO and the GAIfO (PPO) baseline implement it; the two
-//! whose policy is a linear-Gaussian controller also implement [`LinGaussLearn`], which is what
-//! a served run publishes as gain tables.
+//! iteration of Algorithm 1 at a time, step 1 executed either in process ([`iterate`], its
+//! episodes in parallel on arms from an [`Arms`] source) or by the real-time loop over IPC
+//! (`learner serve` collects the episodes and calls [`Learn::learn`]). The expert, LQR+GAIfO
+//! and the GAIfO (PPO) baseline implement it; the two whose policy is a linear-Gaussian
+//! controller also implement [`LinGaussLearn`], which is what a served run publishes as gain
+//! tables.
 
 use std::time::Instant;
 
@@ -12,7 +13,7 @@ use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::GainTable;
 
 use crate::controller::to_gain_table;
-use crate::rollout::{execute, Arm, Episode};
+use crate::rollout::{execute, Arms, Episode};
 use crate::ImitationError;
 
 /// An iterative learner.
@@ -37,9 +38,9 @@ pub trait Learn {
     }
     /// Nothing more to learn.
     fn done(&self) -> bool;
-    /// Step 1 in process: N noisy episodes and one noise-free episode of the current policy on
-    /// `arm`.
-    fn execute(&mut self, arm: &mut dyn Arm) -> Result<(Vec<Episode>, Episode), ImitationError>;
+    /// Step 1 in process: N noisy episodes and one noise-free episode of the current policy,
+    /// in parallel, each on its own arm from `arms` (`rollout::execute`).
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError>;
     /// Steps 2–6 on the `noisy` episodes and the noise-free `eval` episode of the current
     /// policy (version [`Learn::version`]), then the switch to the new policy. `t_execute` (s)
     /// is logged as the time step 1 took.
@@ -66,27 +67,27 @@ pub trait LinGaussLearn: Learn {
 /// [`Learn::execute`] of a [`LinGaussLearn`]: its gain table through the controller law.
 pub fn execute_table<L: LinGaussLearn + ?Sized>(
     learner: &L,
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
 ) -> Result<(Vec<Episode>, Episode), ImitationError> {
-    let mut table = learner.table();
+    let table = learner.table();
     execute(
-        arm,
+        arms,
         learner.task(),
-        &mut *table,
+        &*table,
         learner.version(),
         learner.seed(),
         learner.samples(),
     )
 }
 
-/// One in-process iteration: step 1 on `arm`, then steps 2–6. Returns the log and the
-/// noise-free episode.
+/// One in-process iteration: step 1 on arms from `arms`, then steps 2–6. Returns the log and
+/// the noise-free episode.
 pub fn iterate<L: Learn + ?Sized>(
     learner: &mut L,
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
 ) -> Result<(L::Log, Episode), ImitationError> {
     let t0 = Instant::now();
-    let (episodes, eval) = learner.execute(arm)?;
+    let (episodes, eval) = learner.execute(arms)?;
     let log = learner.learn(&episodes, &eval, t0.elapsed().as_secs_f64())?;
     Ok((log, eval))
 }

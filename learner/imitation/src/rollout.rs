@@ -6,7 +6,12 @@
 //! `ur5_shared::safety`, exactly what the real-time loop executes, and the exploration noise of
 //! the k-th noisy episode of policy version v is `Noise::new(run seed, v, k)`, as in the
 //! real-time loop, so an in-process episode equals the one run over IPC.
+//!
+//! The episodes of one iteration are independent, so [`run_episodes`] runs them in parallel on
+//! the current rayon pool, each on its own arm from an [`Arms`] source and with its own actor:
+//! the results do not depend on the thread count or the order (docs/design.md §5 D29).
 
+use rayon::prelude::*;
 use ur5_shared::config::{ActionMode, ArmLimits, TaskConfig};
 use ur5_shared::layout::{DU, DX, Q};
 use ur5_shared::noise::Noise;
@@ -91,6 +96,21 @@ pub trait Arm {
     fn limits(&self) -> ArmLimits;
 }
 
+/// Where the episodes of an iteration run: a new arm per episode, so that episodes are
+/// independent of each other and of the order they run in (docs/design.md §5 D29).
+pub trait Arms: Sync {
+    /// The arm episode `k` of policy version `version` under run seed `seed` runs on, as
+    /// built; its own random streams (a perturbed arm's noise) are derived from the three.
+    fn episode_arm(&self, seed: u64, version: u64, k: u64) -> Result<Box<dyn Arm>, ImitationError>;
+}
+
+/// A policy that several episodes can run at once: each gets its own [`Policy`] (its own
+/// scratch memory), all acting alike.
+pub trait Actors: Sync {
+    /// A new actor.
+    fn actor(&self) -> Box<dyn Policy + '_>;
+}
+
 /// What picks the actions of an episode.
 pub trait Policy {
     /// Steps the policy can act for (a gain table's horizon).
@@ -102,7 +122,7 @@ pub trait Policy {
 
 /// A gain table as a policy: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε of
 /// `ur5_shared::controller_action`, the real-time loop's.
-impl Policy for GainTable {
+impl Policy for &GainTable {
     fn horizon(&self) -> usize {
         GainTable::horizon(self)
     }
@@ -111,6 +131,24 @@ impl Policy for GainTable {
         let mut a = [0.0; DU];
         controller_action(self, t, s, eps, &mut a).expect("t < horizon");
         a
+    }
+}
+
+impl Policy for GainTable {
+    fn horizon(&self) -> usize {
+        GainTable::horizon(self)
+    }
+
+    fn act(&mut self, t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
+        let mut shared: &GainTable = self;
+        shared.act(t, s, eps, mode)
+    }
+}
+
+/// The gain table acts through a shared reference: it holds no scratch memory.
+impl Actors for GainTable {
+    fn actor(&self) -> Box<dyn Policy + '_> {
+        Box::new(self)
     }
 }
 
@@ -150,22 +188,50 @@ pub fn run_episode(
     Ok(ep)
 }
 
+/// `count` independent episodes in parallel on the current rayon pool (docs/design.md §5 D29):
+/// `episode(i, arm)` runs the i-th on the arm `arms.episode_arm(key(i))`. Results in index
+/// order, so they do not depend on the thread count; the first error (by index) is returned.
+pub fn run_episodes<F, K>(
+    arms: &dyn Arms,
+    count: usize,
+    key: K,
+    episode: F,
+) -> Result<Vec<Episode>, ImitationError>
+where
+    K: Fn(usize) -> (u64, u64, u64) + Sync,
+    F: Fn(usize, &mut dyn Arm) -> Result<Episode, ImitationError> + Sync,
+{
+    (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let (seed, version, k) = key(i);
+            let mut arm = arms.episode_arm(seed, version, k)?;
+            episode(i, &mut *arm)
+        })
+        .collect()
+}
+
 /// Step 1 of Algorithm 1: `n` episodes of `policy` (as version `version`) with exploration
 /// noise — episode k draws `Noise::new(seed, version, k)`, as the real-time loop does — and one
-/// without noise for evaluation.
+/// without noise for evaluation (episode k = n), all in parallel ([`run_episodes`]).
 pub fn execute(
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
     task: &TaskConfig,
-    policy: &mut dyn Policy,
+    policy: &dyn Actors,
     version: u64,
     seed: u64,
     n: usize,
 ) -> Result<(Vec<Episode>, Episode), ImitationError> {
-    let mut episodes = Vec::with_capacity(n);
-    for k in 0..n {
-        let mut noise = Noise::new(seed, version, k as u64);
-        episodes.push(run_episode(arm, task, policy, Some(&mut noise))?);
-    }
-    let eval = run_episode(arm, task, policy, None)?;
+    let key = |k: usize| (seed, version, k as u64);
+    let mut episodes = run_episodes(arms, n + 1, key, |k, arm| {
+        let mut actor = policy.actor();
+        if k < n {
+            let mut noise = Noise::new(seed, version, k as u64);
+            run_episode(arm, task, &mut *actor, Some(&mut noise))
+        } else {
+            run_episode(arm, task, &mut *actor, None)
+        }
+    })?;
+    let eval = episodes.pop().expect("n + 1 episodes");
     Ok((episodes, eval))
 }

@@ -25,6 +25,10 @@ pub struct ExpertArgs {
     /// Largest number of iterations; overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
+    /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
+    /// core); results are the same for any number (docs/design.md §5 D29).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
     /// --config: an `ExpertConfig` (tables `task`, `sim`, `cost`, `algorithm`, `prior`, `fit`,
     /// `traj_opt`); --out default `runs/expert`.
     #[command(flatten)]

@@ -92,8 +92,8 @@ pub enum Cmd {
 /// Parses the command line and runs the subcommand.
 pub fn main() -> anyhow::Result<()> {
     match Cli::parse().cmd {
-        Cmd::Expert(args) => expert::run(args),
-        Cmd::Train(args) => train::run(args),
+        Cmd::Expert(args) => crate::experiment::pool(args.threads)?.install(|| expert::run(args)),
+        Cmd::Train(args) => crate::experiment::pool(args.threads)?.install(|| train::run(args)),
         Cmd::Experiment(args) => experiment::run_cli(args),
         Cmd::Serve(args) => serve::run_cli(args),
         Cmd::Conformance(args) => bench::conformance(args),

@@ -46,6 +46,10 @@ pub struct TrainArgs {
     /// first (without it such a folder is refused; docs/design.md §4.4).
     #[arg(long)]
     pub force: bool,
+    /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
+    /// core); results are the same for any number (docs/design.md §5 D29).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
     /// --config: for lqr-gaifo a `GaifoConfig` (keys `samples`, `iterations`, `init_var`,
     /// `critic_updates`, `adapt_step`, `psd_hessian`, `seed`; tables `sim`, `discriminator`,
     /// `algorithm`, `prior`, `fit`, `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys

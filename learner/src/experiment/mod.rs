@@ -90,7 +90,8 @@ pub struct ExperimentConfig {
     pub first_seed: u64,
     /// Iterations per run (overrides `lqr_gaifo.iterations` and `gaifo_ppo.iterations`).
     pub iterations: usize,
-    /// Worker threads; 0 = one per core.
+    /// Worker threads for the runs (seeds) and, inside each, the episodes of an iteration
+    /// (one rayon pool, so never more threads in all); 0 = one per core.
     pub threads: usize,
     /// Algorithms of the comparison: `lqr-gaifo`, `gaifo-ppo` (the paper's budget, N =
     /// `gaifo_ppo.samples` episodes per iteration) and `gaifo-ppo-converged` (the same with
@@ -405,13 +406,13 @@ impl Job {
         let logs = match &self.spec {
             Spec::LqrGaifo(c) => {
                 let mut run = LqrGaifo::new(c.clone(), demos)?;
-                let mut arm = arm_for(&run)?;
-                run_iterations(&mut run, &mut arm, c.iterations, None, |_, _| {})?
+                let arm = arm_for(&run)?;
+                run_iterations(&mut run, &arm, c.iterations, None, |_, _| {})?
             }
             Spec::GaifoPpo(c) => {
                 let mut run = GaifoPpo::new(c.clone(), demos)?;
-                let mut arm = arm_for(&run)?;
-                run_iterations(&mut run, &mut arm, c.iterations, None, |_, _| {})?
+                let arm = arm_for(&run)?;
+                run_iterations(&mut run, &arm, c.iterations, None, |_, _| {})?
             }
         };
         let episodes_per_iteration = match &self.spec {

@@ -178,7 +178,7 @@ fn run_mdgps(
     let mut logs = Vec::with_capacity(cfg.iterations);
     for _ in 0..cfg.iterations {
         let t0 = Instant::now();
-        let (samples, own) = run.execute(&mut arm)?;
+        let (samples, own) = run.execute(&arm)?;
         let t_execute = t0.elapsed().as_secs_f64();
         let mut actor = GlobalActor::new(run.policy(), &mut ws);
         evals.push(evaluate(&mut arm, &base, &mut actor, goals, experts)?);
@@ -230,7 +230,7 @@ fn run_lqr_centre(
             goals,
             experts,
         )?);
-        let (log, _) = iterate(&mut run, &mut arm)?;
+        let (log, _) = iterate(&mut run, &arm)?;
         eprintln!("[lqr-gaifo centre seed {seed}] {}", log.progress_line());
     }
     evals.push(evaluate(

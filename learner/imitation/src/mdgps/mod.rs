@@ -47,7 +47,7 @@ use crate::gaifo::{
     GaifoConfig,
 };
 use crate::iteration::LqrIteration;
-use crate::rollout::{run_episode, Arm, Episode, SampleList};
+use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
 use gps::policy::lin_gauss::LinGaussPolicy;
@@ -295,25 +295,41 @@ impl Mdgps {
     }
 
     /// Step 1 in process: per condition, N noisy episodes of its controller and one noise-free
-    /// episode of the global policy at its goal (the evaluation, never trained on).
+    /// episode of the global policy at its goal (the evaluation, never trained on): all M (N + 1)
+    /// in parallel, each on its own arm from `arms` ([`run_episodes`]; condition m's episode k
+    /// keyed by (`noise_seed(m)`, version, k), the evaluation k = N).
     #[allow(clippy::type_complexity)]
     pub fn execute(
         &self,
-        arm: &mut dyn Arm,
+        arms: &dyn Arms,
     ) -> Result<(Vec<Vec<Episode>>, Vec<Episode>), ImitationError> {
+        let n = self.cfg.lqr_gaifo.samples;
+        let version = self.version();
+        let tables: Vec<_> = self
+            .conds
+            .iter()
+            .map(|c| to_gain_table(c.lqr.policy(), version))
+            .collect();
+        let per = n + 1;
+        let key = |i: usize| (self.noise_seed(i / per), version, (i % per) as u64);
+        let mut all = run_episodes(arms, self.conds.len() * per, key, |i, arm| {
+            let (m, k) = (i / per, i % per);
+            let task = &self.conds[m].task;
+            if k < n {
+                let mut noise = Noise::new(self.noise_seed(m), version, k as u64);
+                run_episode(arm, task, &mut &*tables[m], Some(&mut noise))
+            } else {
+                let mut ws = self.policy.workspace();
+                let mut actor = GlobalActor::new(&self.policy, &mut ws);
+                run_episode(arm, task, &mut actor, None)
+            }
+        })?
+        .into_iter();
         let mut samples = Vec::with_capacity(self.conds.len());
         let mut evals = Vec::with_capacity(self.conds.len());
-        let mut ws = self.policy.workspace();
-        for (m, c) in self.conds.iter().enumerate() {
-            let mut table = to_gain_table(c.lqr.policy(), self.version());
-            let mut eps = Vec::with_capacity(self.cfg.lqr_gaifo.samples);
-            for k in 0..self.cfg.lqr_gaifo.samples {
-                let mut noise = Noise::new(self.noise_seed(m), self.version(), k as u64);
-                eps.push(run_episode(arm, &c.task, &mut *table, Some(&mut noise))?);
-            }
-            samples.push(eps);
-            let mut actor = GlobalActor::new(&self.policy, &mut ws);
-            evals.push(run_episode(arm, &c.task, &mut actor, None)?);
+        for _ in &self.conds {
+            samples.push(all.by_ref().take(n).collect());
+            evals.push(all.next().expect("M (N + 1) episodes"));
         }
         Ok((samples, evals))
     }

@@ -33,7 +33,7 @@ use crate::gaifo::{
     GaifoConfig, GaifoLog,
 };
 use crate::learn::Learn;
-use crate::rollout::{Arm, Episode};
+use crate::rollout::{Arms, Episode};
 use crate::ImitationError;
 
 /// Settings of a GAIfO (PPO) run. Everything the two algorithms share has LQR+GAIfO's value
@@ -253,10 +253,10 @@ impl Learn for GaifoPpo {
     }
 
     /// Step 1: the MLP policy with noise, and its mean for the evaluation.
-    fn execute(&mut self, arm: &mut dyn Arm) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
         let (version, seed, n) = (self.version(), self.cfg.seed, self.cfg.samples);
-        let (pol, ws) = self.ppo.policy_and_workspace();
-        execute_mlp(arm, &self.task, pol, ws, version, seed, n)
+        let (pol, _) = self.ppo.policy_and_workspace();
+        execute_mlp(arms, &self.task, pol, version, seed, n)
     }
 
     /// Steps 3, 4 and 6 of the module docs on the episodes of the current policy.

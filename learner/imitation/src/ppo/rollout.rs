@@ -13,7 +13,7 @@ use ur5_shared::config::{ActionMode, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 
 use super::policy::{GaussianMlpPolicy, PolicyWorkspace};
-use crate::rollout::{execute, Arm, Episode, Policy};
+use crate::rollout::{execute, Actors, Arms, Episode, Policy};
 use crate::ImitationError;
 
 /// What the policy's offset is added to: the joint angles `s[0..DU]` in goal-angle mode, 0 in
@@ -32,18 +32,25 @@ pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> [f64; DU] {
 }
 
 /// The Gaussian MLP policy as a [`Policy`] for [`crate::rollout::run_episode`]:
-/// `a = base(s) + (μ(s) + σ ⊙ ε)`.
+/// `a = base(s) + (μ(s) + σ ⊙ ε)`, with its own scratch memory.
 pub struct MlpActor<'a> {
     pol: &'a GaussianMlpPolicy,
-    ws: &'a mut PolicyWorkspace,
+    ws: PolicyWorkspace,
     std: [f64; DU],
 }
 
 impl<'a> MlpActor<'a> {
     /// `pol` acting with scratch memory `ws`.
-    pub fn new(pol: &'a GaussianMlpPolicy, ws: &'a mut PolicyWorkspace) -> Self {
+    pub fn new(pol: &'a GaussianMlpPolicy, ws: PolicyWorkspace) -> Self {
         let std = std::array::from_fn(|j| pol.log_std()[j].exp());
         Self { pol, ws, std }
+    }
+}
+
+/// Parallel episodes of the MLP policy: each with its own workspace.
+impl Actors for GaussianMlpPolicy {
+    fn actor(&self) -> Box<dyn Policy + '_> {
+        Box::new(MlpActor::new(self, self.workspace()))
     }
 }
 
@@ -53,7 +60,7 @@ impl Policy for MlpActor<'_> {
     }
 
     fn act(&mut self, _t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
-        let mu = self.pol.mean(s, self.ws);
+        let mu = self.pol.mean(s, &mut self.ws);
         let base = action_base(mode, s);
         std::array::from_fn(|j| base[j] + (mu[j] + self.std[j] * eps[j]))
     }
@@ -61,15 +68,14 @@ impl Policy for MlpActor<'_> {
 
 /// Step 1 of Algorithm 1 for the MLP policy ([`crate::rollout::execute`]): `n` noisy
 /// episodes (episode k draws `Noise::new(seed, version, k)`) and one noise-free evaluation
-/// episode (the policy mean).
+/// episode (the policy mean), in parallel on arms from `arms`.
 pub fn execute_mlp(
-    arm: &mut dyn Arm,
+    arms: &dyn Arms,
     task: &TaskConfig,
     pol: &GaussianMlpPolicy,
-    ws: &mut PolicyWorkspace,
     version: u64,
     seed: u64,
     n: usize,
 ) -> Result<(Vec<Episode>, Episode), ImitationError> {
-    execute(arm, task, &mut MlpActor::new(pol, ws), version, seed, n)
+    execute(arms, task, pol, version, seed, n)
 }
