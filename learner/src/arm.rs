@@ -27,6 +27,11 @@ impl SimArm {
     pub fn sim(&self) -> &Ur5Sim {
         &self.sim
     }
+
+    /// The simulator, to move its noise stream on a resume.
+    pub fn sim_mut(&mut self) -> &mut Ur5Sim {
+        &mut self.sim
+    }
 }
 
 impl Arm for SimArm {

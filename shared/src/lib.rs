@@ -11,6 +11,8 @@
 //! - [`msg`]: the other IPC payloads ([`ArmState`], [`ArmCommand`], [`StepSample`]).
 //! - [`services`]: iceoryx2 service names, per-run prefixes and the quality of service of each
 //!   service ([`services::Qos`]).
+//! - [`atomic_file`]: the one atomic write (temporary file, fsync, rename) of every file a
+//!   restart reads back.
 //! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`kinematics`]: the UR5's end-effector point and velocity from joint angles (f64, no
 //!   simulator), for arms that report joint states only.
@@ -24,6 +26,7 @@
 //! controller calls per tick ([`controller_action`], [`GainTable::validate`],
 //! [`GainTable::copy_from`], [`state_vector`], the payload types) allocates.
 
+pub mod atomic_file;
 pub mod clock;
 pub mod config;
 pub mod cost;
