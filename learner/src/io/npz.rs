@@ -226,6 +226,7 @@ impl NpzFile {
             path: path.to_owned(),
             message: e.to_string(),
         };
+        let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
         let mut zip = ZipArchive::new(file).map_err(zerr)?;
         let mut arrays = BTreeMap::new();
         for i in 0..zip.len() {
@@ -237,7 +238,9 @@ impl NpzFile {
             let Some(name) = entry_name.strip_suffix(".npy").map(str::to_owned) else {
                 continue;
             };
-            let mut bytes = Vec::with_capacity(entry.size() as usize);
+            // The size in the zip header is the file's word: never reserve more than the file
+            // holds (a damaged header asked for 26 TB; found by tests/tests/fuzz.rs).
+            let mut bytes = Vec::with_capacity(entry.size().min(file_len) as usize);
             entry
                 .read_to_end(&mut bytes)
                 .map_err(|source| NpzError::Io {
