@@ -359,6 +359,21 @@ impl Ur5Sim {
         &self.cfg
     }
 
+    /// Position (ChaCha8 word position) of the stream of the arm's actuator and sensor noise,
+    /// seeded from `perturbation.seed` when the arm is built; in-process episodes restart it
+    /// on their own stream ([`Ur5Sim::reseed`]), so it matters only to an arm that runs on
+    /// across episodes; an exact checkpoint of an in-process run stores it (docs/design.md
+    /// §4.11).
+    pub fn noise_position(&self) -> u128 {
+        self.rng.get_word_pos()
+    }
+
+    /// Moves the noise stream to `pos` (a [`Ur5Sim::noise_position`] of an arm of the same
+    /// configuration).
+    pub fn set_noise_position(&mut self, pos: u128) {
+        self.rng.set_word_pos(pos);
+    }
+
     /// Limits of the active joints as written in the URDF, for the action clamp
     /// (`ur5_shared::safety::clamp_action`).
     pub fn limits(&self) -> ur5_shared::config::ArmLimits {

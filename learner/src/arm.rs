@@ -29,6 +29,11 @@ impl SimArm {
     pub fn sim(&self) -> &Ur5Sim {
         &self.sim
     }
+
+    /// The simulator, to move its noise stream on a resume.
+    pub fn sim_mut(&mut self) -> &mut Ur5Sim {
+        &mut self.sim
+    }
 }
 
 /// Episode k of version v under run seed s runs on a fresh copy of this arm (`Ur5Sim::fresh`)

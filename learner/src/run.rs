@@ -1,11 +1,11 @@
 //! In-process runs (lockstep on hil-sim, no IPC): every learner driven through the one
 //! [`Learn`] interface, one [`iterate`] per iteration, with its per-iteration CSV and
-//! checkpoints (docs/design.md §4), and resuming an LQR+GAIfO run from them.
+//! checkpoints (docs/design.md §4), and resuming an LQR+GAIfO run from them exactly (§4.11).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use imitation::controller::{policy_from_gain_table, to_gain_table};
+use imitation::controller::to_gain_table;
 use imitation::cost::composite::D_IN;
 use imitation::demos::Demos;
 use imitation::discriminator::Discriminator;
@@ -20,7 +20,8 @@ use serde::Serialize;
 
 use crate::arm::SimArm;
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
-use crate::io::table::{load_table, save_table};
+use crate::io::checkpoint::{load_state, save_state};
+use crate::io::table::save_table;
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
 /// period.
@@ -31,47 +32,68 @@ pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> anyhow::Result<SimArm> {
 
 /// What an imitation run saves before every iteration so that it can be resumed.
 pub trait Checkpoint {
-    /// Saves the policy executed next and the critic into `dir`; returns both paths.
-    fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)>;
+    /// Saves the policy executed next and the critic into `dir` (with the in-process `arm`'s
+    /// noise position when there is one); returns both paths.
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)>;
 }
 
+/// The name of checkpoint file `kind` (`table.npz`, `critic.json`, `state.npz`, ...) after `i`
+/// iterations: `iter_{i:03}_{kind}`.
+fn checkpoint_file(dir: &Path, i: usize, kind: &str) -> PathBuf {
+    dir.join(format!("iter_{i:03}_{kind}"))
+}
+
+/// The entry of [`LqrGaifo::snapshot`] holding the in-process arm's noise position
+/// ([`hil_sim::Ur5Sim::noise_position`], low and high word).
+const ARM_NOISE: &str = "arm.noise_position";
+
 impl Checkpoint for LqrGaifo {
-    /// `iter_NNN_table.npz` (the controller as gain table version NNN + 1) and
-    /// `iter_NNN_critic.json`, NNN = iterations done.
-    fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
+    /// `iter_NNN_table.npz` (the controller as gain table version NNN + 1),
+    /// `iter_NNN_critic.json` and, last, `iter_NNN_state.npz` (the rest of the learner state,
+    /// [`LqrGaifo::snapshot`], and the arm's noise position), NNN = iterations done; each file
+    /// written atomically, so that a state file marks a complete checkpoint.
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
-        let table = dir.join(format!("iter_{i:03}_table.npz"));
+        let table = checkpoint_file(dir, i, "table.npz");
         save_table(
             &table,
             &to_gain_table(self.policy(), self.version()),
             self.task().dt,
         )?;
-        let critic = dir.join(format!("iter_{i:03}_critic.json"));
+        let critic = checkpoint_file(dir, i, "critic.json");
         self.discriminator().save(&critic)?;
+        let mut snap = self.snapshot();
+        if let Some(arm) = arm {
+            let pos = arm.sim().noise_position();
+            snap.put_words(ARM_NOISE, &[pos as u64, (pos >> 64) as u64]);
+        }
+        save_state(&checkpoint_file(dir, i, "state.npz"), &snap)?;
         Ok((table, critic))
     }
 }
 
 impl Checkpoint for GaifoPpo {
-    /// `iter_NNN_policy.json` (the policy nets) and `iter_NNN_critic.json`.
-    fn checkpoint(&self, dir: &Path) -> anyhow::Result<(PathBuf, PathBuf)> {
+    /// `iter_NNN_policy.json` (the policy nets) and `iter_NNN_critic.json` (not an exact
+    /// checkpoint: there is no resume for this baseline).
+    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
-        let pol = dir.join(format!("iter_{i:03}_policy.json"));
+        let pol = checkpoint_file(dir, i, "policy.json");
         let file = self
             .ppo()
             .actor_critic()
             .policy_file(&self.config().ppo.pi_hidden);
-        std::fs::write(&pol, serde_json::to_vec(&file)?)?;
-        let critic = dir.join(format!("iter_{i:03}_critic.json"));
+        ur5_shared::atomic_file::write(&pol, &serde_json::to_vec(&file)?)?;
+        let critic = checkpoint_file(dir, i, "critic.json");
         self.discriminator().save(&critic)?;
         Ok((pol, critic))
     }
 }
 
-/// The latest complete checkpoint in `dir`: (NNN, `iter_NNN_table.npz`, `iter_NNN_critic.json`)
-/// with the largest NNN for which both files exist. A clear error when there is none.
+/// The latest complete checkpoint in `dir`: (NNN, `iter_NNN_state.npz`,
+/// `iter_NNN_critic.json`) with the largest NNN for which both files exist (the state file is
+/// written last, atomically). A clear error when there is none.
 pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)> {
     let entries = std::fs::read_dir(dir).map_err(|e| {
         anyhow::anyhow!(
@@ -81,67 +103,76 @@ pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)
         )
     })?;
     let mut best: Option<usize> = None;
+    let mut tables_only = false;
     for entry in entries {
         let name = entry?.file_name();
-        let Some(n) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix("iter_"))
-            .and_then(|n| n.strip_suffix("_table.npz"))
-            .filter(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
-            .and_then(|n| n.parse::<usize>().ok())
-        else {
+        let number = |suffix: &str| {
+            name.to_str()
+                .and_then(|n| n.strip_prefix("iter_"))
+                .and_then(|n| n.strip_suffix(suffix))
+                .filter(|n| n.len() >= 3 && n.bytes().all(|b| b.is_ascii_digit()))
+                .and_then(|n| n.parse::<usize>().ok())
+        };
+        tables_only |= number("_table.npz").is_some();
+        let Some(n) = number("_state.npz") else {
             continue;
         };
-        if dir.join(format!("iter_{n:03}_critic.json")).is_file() && best.is_none_or(|b| n > b) {
+        if checkpoint_file(dir, n, "critic.json").is_file() && best.is_none_or(|b| n > b) {
             best = Some(n);
         }
     }
     let n = best.ok_or_else(|| {
+        let older = if tables_only {
+            " (its iter_NNN_table.npz files come from a build before exact resume, which wrote \
+             no learner state: start a new run)"
+        } else {
+            ""
+        };
         anyhow::anyhow!(
-            "cannot resume from {}: no checkpoint in it (no pair iter_NNN_table.npz + \
-             iter_NNN_critic.json, written by `learner train` and `learner serve --algo lqr-gaifo`)",
+            "cannot resume from {}: no checkpoint in it (no iter_NNN_state.npz with its \
+             iter_NNN_critic.json, written by `learner train` and `learner serve --algo \
+             lqr-gaifo`){older}",
             dir.display()
         )
     })?;
     Ok((
         n,
-        dir.join(format!("iter_{n:03}_table.npz")),
-        dir.join(format!("iter_{n:03}_critic.json")),
+        checkpoint_file(dir, n, "state.npz"),
+        checkpoint_file(dir, n, "critic.json"),
     ))
 }
 
-/// Continues an LQR+GAIfO run from the latest checkpoint in `dir` ([`latest_checkpoint`]): the
-/// controller of `iter_NNN_table.npz` (executed next, as table version NNN + 1), the critic of
-/// `iter_NNN_critic.json`, NNN iterations done ([`LqrGaifo::from_checkpoint`]). `cfg` and
-/// `demos` must be the run's own: the critic's settings and seed are checked against `cfg`, the
-/// table's horizon and control period against the demonstrations.
-pub fn resume(cfg: GaifoConfig, demos: Demos, dir: &Path) -> anyhow::Result<LqrGaifo> {
-    let (iteration, table_path, critic_path) = latest_checkpoint(dir)?;
-    let task = demos.task()?;
-    let (table, dt) = load_table(&table_path, &ur5_shared::GainBounds::default())
-        .with_context(|| format!("resuming from {}", table_path.display()))?;
+/// Continues an LQR+GAIfO run exactly from the latest checkpoint in `dir`
+/// ([`latest_checkpoint`]): the learner state of `iter_NNN_state.npz` and the critic of
+/// `iter_NNN_critic.json`, NNN iterations done ([`LqrGaifo::from_snapshot`]). Also returns the
+/// in-process arm's noise position when the checkpoint holds one. `cfg` and `demos` must be the
+/// run's own: the critic's settings and seed are checked against `cfg`, the state's horizon
+/// against the demonstrations.
+pub fn resume(cfg: GaifoConfig, demos: Demos, dir: &Path) -> anyhow::Result<(LqrGaifo, Option<u128>)> {
+    let (iteration, state_path, critic_path) = latest_checkpoint(dir)?;
+    let snap = load_state(&state_path)?;
+    let at = snap
+        .words("lqr.iteration", 1)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?[0];
     anyhow::ensure!(
-        table.horizon() == task.horizon && dt.to_bits() == task.dt.to_bits(),
-        "{}: a controller of T = {} steps at dt = {dt} s, the demonstrations have T = {} at \
-         dt = {} s: resume with the run's own demonstrations",
-        table_path.display(),
-        table.horizon(),
-        task.horizon,
-        task.dt
+        at == iteration as u64,
+        "{}: holds iteration {at}, its name says {iteration}",
+        state_path.display()
     );
-    anyhow::ensure!(
-        table.version == iteration as u64 + 1,
-        "{}: table version {}, expected {} for iteration {iteration}",
-        table_path.display(),
-        table.version,
-        iteration + 1
-    );
-    let pol = policy_from_gain_table(&table)
-        .with_context(|| format!("resuming from {}", table_path.display()))?;
+    let arm = match snap.words.get(ARM_NOISE).map(Vec::as_slice) {
+        None => None,
+        Some(&[lo, hi]) => Some(u128::from(lo) | (u128::from(hi) << 64)),
+        Some(w) => anyhow::bail!(
+            "{}: array `{ARM_NOISE}` has {} values, expected 2",
+            state_path.display(),
+            w.len()
+        ),
+    };
     let disc = Discriminator::load(&critic_path, D_IN)
         .with_context(|| format!("resuming from {}", critic_path.display()))?;
-    LqrGaifo::from_checkpoint(cfg, demos, pol, disc, iteration)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", critic_path.display()))
+    let run = LqrGaifo::from_snapshot(cfg, demos, &snap, disc)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?;
+    Ok((run, arm))
 }
 
 /// Runs `iterations` iterations of `run` on `arm`, calling `progress` after each, writing
@@ -158,7 +189,7 @@ pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
         Some(dir) => {
             crate::io::create_dir(dir)?;
             let f = open_log(&dir.join("gaifo_log.csv"), None)?;
-            run.checkpoint(dir)?;
+            run.checkpoint(dir, Some(arm))?;
             Some((f, dir))
         }
         None => None,
@@ -182,7 +213,7 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
         if let Some((f, dir)) = csv.as_mut() {
             write_csv_row(f, &log, run.seed(), R::ALGO)?;
             f.flush()?;
-            run.checkpoint(dir)?;
+            run.checkpoint(dir, Some(arm))?;
         }
         logs.push(log);
     }
@@ -216,16 +247,18 @@ pub fn train_ppo(
     })
 }
 
-/// Continues the LQR+GAIfO run whose checkpoints are in `dir` ([`resume`]) up to
-/// `cfg.iterations` iterations in all, appending to `dir/gaifo_log.csv` ([`open_log`]) and
-/// writing the next checkpoints into `dir`. Iterations are numbered on from the checkpoint.
+/// Continues the LQR+GAIfO run whose checkpoints are in `dir` ([`resume`], with the arm's noise
+/// stream where the checkpoint left it) up to `cfg.iterations` iterations in all, appending to
+/// `dir/gaifo_log.csv` ([`open_log`]) and writing the next checkpoints into `dir`. Iterations
+/// are numbered on from the checkpoint; tables and CSV rows are the uninterrupted run's bit
+/// for bit (timing columns aside).
 pub fn train_resumed(
     cfg: &GaifoConfig,
     demos: Demos,
     dir: &Path,
     mut progress: impl FnMut(&GaifoLog),
 ) -> anyhow::Result<Vec<GaifoLog>> {
-    let mut run = resume(cfg.clone(), demos, dir)?;
+    let (mut run, arm_noise) = resume(cfg.clone(), demos, dir)?;
     let start = run.iteration();
     anyhow::ensure!(
         start < cfg.iterations,
@@ -234,7 +267,10 @@ pub fn train_resumed(
         dir.display(),
         cfg.iterations
     );
-    let arm = arm_for(&run)?;
+    let mut arm = arm_for(&run)?;
+    if let Some(pos) = arm_noise {
+        arm.sim_mut().set_noise_position(pos);
+    }
     let csv = open_log(&dir.join("gaifo_log.csv"), Some(start))?;
     drive(
         &mut run,

@@ -161,8 +161,6 @@ mod resume {
 
     use super::short_demos;
     use imitation::controller::{policy_from_gain_table, to_gain_table};
-    use imitation::cost::composite::D_IN;
-    use imitation::discriminator::Discriminator;
     use imitation::gaifo::GaifoConfig;
     use learner::io::log::CSV_HEADER;
     use learner::io::table::load_table;
@@ -201,110 +199,200 @@ mod resume {
         v.iter().map(|x| x.to_bits()).collect()
     }
 
-    fn same_critic(a: &Discriminator, b: &Discriminator) -> bool {
-        // Adam (step count, both moments) and the normaliser compare by value; all finite.
-        bits(a.params()) == bits(b.params())
-            && a.adam() == b.adam()
-            && a.adam().steps() > 0
-            && a.normalizer() == b.normalizer()
+    /// Files of checkpoint `i` in `dir`.
+    fn ckpt(dir: &Path, i: usize, kind: &str) -> PathBuf {
+        dir.join(format!("iter_{i:03}_{kind}"))
     }
 
-    /// 4 iterations in one go vs 2 + `train_resumed` to 4. Not bit for bit overall (the GMM
-    /// dynamics prior and the previous controller restart), but: the resumed run starts from
-    /// the checkpointed table and critic (the uninterrupted run's at that point), numbers on
-    /// from 2, appends to the CSV, and its first iteration — same episodes, same critic
-    /// update — logs the uninterrupted run's task cost, critic loss and Wasserstein estimate
-    /// bit for bit. Then the errors: nothing to resume, no checkpoint, a malformed critic, a
-    /// different seed.
+    /// Where a `learner train` process may be killed after its checkpoint `k` is complete, and
+    /// what it leaves behind (each write is atomic: temporary file, fsync, rename).
+    #[derive(Clone, Copy, Debug)]
+    enum Kill {
+        /// While executing or learning iteration k: nothing of it written.
+        Learning,
+        /// While writing iteration k's CSV row: a row cut short, no newline.
+        MidRow,
+        /// While writing checkpoint k + 1's table: a `.partial` file.
+        MidTable,
+        /// While writing its critic: the table, and a `.tmp` critic.
+        MidCritic,
+        /// While writing its state: table, critic, and a `.partial` state.
+        MidState,
+        /// Right after checkpoint k + 1 (resumes from there).
+        After,
+    }
+
+    const KILLS: [Kill; 6] = [
+        Kill::Learning,
+        Kill::MidRow,
+        Kill::MidTable,
+        Kill::MidCritic,
+        Kill::MidState,
+        Kill::After,
+    ];
+
+    /// Turns `dir`, a run stopped right after checkpoint k + 1, into what a kill at `kill`
+    /// during iteration k would have left (`cut` picks where a file is cut short).
+    fn unwind(dir: &Path, k: usize, kill: Kill, cut: f64) {
+        let truncate_to = |from: &Path, to: &Path| {
+            let bytes = std::fs::read(from).unwrap();
+            std::fs::write(to, &bytes[..(bytes.len() as f64 * cut) as usize]).unwrap();
+            std::fs::remove_file(from).unwrap();
+        };
+        let partial = |p: &Path, ext: &str| PathBuf::from(format!("{}.{ext}", p.display()));
+        let (table, critic, state) = (
+            ckpt(dir, k + 1, "table.npz"),
+            ckpt(dir, k + 1, "critic.json"),
+            ckpt(dir, k + 1, "state.npz"),
+        );
+        let remove = |ps: &[&PathBuf]| ps.iter().for_each(|p| std::fs::remove_file(p).unwrap());
+        match kill {
+            Kill::Learning | Kill::MidRow => {
+                remove(&[&table, &critic, &state]);
+                let csv = dir.join("gaifo_log.csv");
+                let text = std::fs::read_to_string(&csv).unwrap();
+                let body = text.trim_end_matches('\n');
+                let last = body.rfind('\n').unwrap() + 1;
+                assert!(body[last..].starts_with(&format!("{k},")));
+                let keep = match kill {
+                    Kill::Learning => last,
+                    _ => last + 1 + ((body.len() - last - 2) as f64 * cut) as usize,
+                };
+                std::fs::write(&csv, &text[..keep]).unwrap();
+            }
+            Kill::MidTable => {
+                remove(&[&critic, &state]);
+                truncate_to(&table, &partial(&table, "partial"));
+            }
+            Kill::MidCritic => {
+                remove(&[&state]);
+                truncate_to(&critic, &partial(&critic, "tmp"));
+            }
+            Kill::MidState => truncate_to(&state, &partial(&state, "partial")),
+            Kill::After => {}
+        }
+    }
+
+    /// Every table, learner state and CSV row (timing columns aside) of `dir` is `full`'s, bit
+    /// for bit, for iterations 0..=n.
+    fn assert_same_run(dir: &Path, full: &Path, n: usize, what: &str) {
+        use learner::io::checkpoint::load_state;
+        for i in 0..=n {
+            let (a, _) = load_table(&ckpt(dir, i, "table.npz"), &GainBounds::default()).unwrap();
+            let (b, _) = load_table(&ckpt(full, i, "table.npz"), &GainBounds::default()).unwrap();
+            assert_eq!(a.checksum, b.checksum, "{what}: table {i}");
+            let (a, b) = (
+                load_state(&ckpt(dir, i, "state.npz")).unwrap(),
+                load_state(&ckpt(full, i, "state.npz")).unwrap(),
+            );
+            let bits = |s: &gps::snapshot::Snapshot| -> Vec<(String, Vec<u64>)> {
+                let reals = s.reals.iter().map(|(k, (_, v))| (k.clone(), bits(v)));
+                reals.chain(s.words.clone()).collect()
+            };
+            assert_eq!(bits(&a), bits(&b), "{what}: learner state {i}");
+            let (a, b) = (
+                std::fs::read(ckpt(dir, i, "critic.json")).unwrap(),
+                std::fs::read(ckpt(full, i, "critic.json")).unwrap(),
+            );
+            assert!(a == b, "{what}: critic {i}");
+        }
+        let (a, b) = (rows(dir), rows(full));
+        assert_eq!(a.len(), n, "{what}: {a:?}");
+        for (ra, rb) in a.iter().zip(&b) {
+            assert_eq!(learned(ra), learned(rb), "{what}");
+        }
+    }
+
+    /// Exact resume (issue 15): N iterations in one go vs runs stopped after a seeded random
+    /// iteration k, at every moment of iteration k (learning, mid CSV row, mid table, mid critic,
+    /// mid state write, just after the next checkpoint), then resumed to N, and once more
+    /// stopped and resumed: every table, learner state, critic file and CSV row (timing columns
+    /// aside) is the uninterrupted run's, bit for bit. The arm has sensor noise, so its noise
+    /// stream's position must resume too.
     #[test]
-    fn a_resumed_run_continues_from_its_checkpoint() {
+    fn a_run_killed_anywhere_resumes_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        const N: usize = 6;
         let demos = short_demos();
-        let root = scratch("a");
-        let (full, split) = (root.join("full"), root.join("split"));
-        let logs_full = train(&cfg(4), demos.clone(), Some(&full), |_| {}).unwrap();
-        let logs_a = train(&cfg(2), demos.clone(), Some(&split), |_| {}).unwrap();
-        assert_eq!(logs_a.len(), 2);
+        let noisy = |iterations: usize| {
+            let mut c = cfg(iterations);
+            c.sim.perturbation.sensor_noise_q_std = 1e-4;
+            c.sim.perturbation.seed = 11;
+            c
+        };
+        let root = scratch("exact");
+        let full = root.join("full");
+        train(&noisy(N), demos.clone(), Some(&full), |_| {}).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(15);
+        for (case, kill) in KILLS.into_iter().enumerate() {
+            let k = rng.random_range(0..N - 1);
+            let cut = rng.random_range(0.05..0.95);
+            let what = format!("kill at {kill:?} of iteration {k} (cut {cut:.2})");
+            let dir = root.join(format!("case{case}"));
+            train(&noisy(k + 1), demos.clone(), Some(&dir), |_| {}).unwrap();
+            unwind(&dir, k, kill, cut);
+            // A second stop on the way, after a whole checkpoint.
+            let mid = rng.random_range(k + 1..=N);
+            if mid < N {
+                train_resumed(&noisy(mid), demos.clone(), &dir, |_| {}).unwrap();
+            }
+            let logs = train_resumed(&noisy(N), demos.clone(), &dir, |_| {}).unwrap();
+            assert_eq!(logs.last().map(|l| l.iteration), Some(N - 1), "{what}");
+            assert_same_run(&dir, &full, N, &what);
+            eprintln!("{what}, second stop at {mid}: bit for bit");
+        }
+        std::fs::remove_dir_all(&root).ok();
+    }
 
-        // What the resumed run starts from: the checkpointed table and critic, which are the
-        // uninterrupted run's after 2 iterations.
-        let resumed = resume(cfg(4), demos.clone(), &split).unwrap();
+    /// What a resume refuses, by name: nothing left to do, no checkpoint (or only tables of a
+    /// build before exact resume), a missing folder, a malformed critic, another seed, a
+    /// learner state of another horizon.
+    #[test]
+    fn a_resume_that_cannot_be_exact_is_refused() {
+        let demos = short_demos();
+        let root = scratch("refused");
+        let split = root.join("split");
+        train(&cfg(2), demos.clone(), Some(&split), |_| {}).unwrap();
+        let resumed = resume(cfg(4), demos.clone(), &split).unwrap().0;
         assert_eq!((resumed.iteration(), resumed.version()), (2, 3));
-        let (table, dt) =
-            load_table(&split.join("iter_002_table.npz"), &GainBounds::default()).unwrap();
-        let (full_table, _) =
-            load_table(&full.join("iter_002_table.npz"), &GainBounds::default()).unwrap();
-        assert_eq!(dt, demos.dt);
-        let first = to_gain_table(resumed.policy(), resumed.version());
-        assert_eq!(first.version, 3);
-        assert_eq!(first.checksum, table.checksum, "first table = checkpoint");
-        assert_eq!(first.checksum, full_table.checksum);
-        assert!(first.used_steps() == table.used_steps());
-        let critic = Discriminator::load(split.join("iter_002_critic.json"), D_IN).unwrap();
-        let full_critic = Discriminator::load(full.join("iter_002_critic.json"), D_IN).unwrap();
-        assert!(same_critic(resumed.discriminator(), &critic));
-        assert!(same_critic(&critic, &full_critic));
         drop(resumed);
-
-        let logs_b = train_resumed(&cfg(4), demos.clone(), &split, |_| {}).unwrap();
-        let numbers: Vec<usize> = logs_b.iter().map(|l| l.iteration).collect();
-        assert_eq!(numbers, [2, 3], "numbering continues");
-        let (b, f) = (&logs_b[0], &logs_full[2]);
-        assert_eq!(b.task_cost.to_bits(), f.task_cost.to_bits());
-        assert_eq!(b.critic_loss.to_bits(), f.critic_loss.to_bits());
-        assert_eq!(b.wasserstein.to_bits(), f.wasserstein.to_bits());
-
-        // The CSV: 2 rows of the first run, 2 appended; the first two are the uninterrupted
-        // run's.
-        let (split_rows, full_rows) = (rows(&split), rows(&full));
-        assert_eq!(split_rows.len(), 4, "{split_rows:?}");
-        for (i, r) in split_rows.iter().enumerate() {
-            assert!(r.starts_with(&format!("{i},3,lqr-gaifo,")), "{r}");
-        }
-        for i in 0..2 {
-            assert_eq!(learned(&split_rows[i]), learned(&full_rows[i]));
-        }
-        for i in 0..=4 {
-            assert!(split.join(format!("iter_{i:03}_table.npz")).is_file());
-            assert!(split.join(format!("iter_{i:03}_critic.json")).is_file());
-        }
-
-        // Rows written after the checkpoint resumed from (a run stopped between its CSV row
-        // and its next checkpoint) are dropped, not duplicated.
-        let stale = root.join("stale");
-        std::fs::create_dir_all(&stale).unwrap();
-        for f in [
-            "iter_003_table.npz",
-            "iter_003_critic.json",
-            "gaifo_log.csv",
-        ] {
-            std::fs::copy(split.join(f), stale.join(f)).unwrap();
-        }
-        let logs_c = train_resumed(&cfg(4), demos.clone(), &stale, |_| {}).unwrap();
-        assert_eq!(logs_c.len(), 1);
-        let stale_rows = rows(&stale);
-        assert_eq!(stale_rows.len(), 4, "{stale_rows:?}");
-        assert!(stale_rows[3].starts_with("3,"));
-
-        // Errors.
         let msg = |e: anyhow::Error| format!("{e:#}");
-        let e = msg(train_resumed(&cfg(4), demos.clone(), &split, |_| {}).unwrap_err());
+        let e = msg(train_resumed(&cfg(2), demos.clone(), &split, |_| {}).unwrap_err());
         assert!(e.contains("nothing to resume"), "{e}");
         let empty = root.join("empty");
         std::fs::create_dir_all(&empty).unwrap();
         let e = msg(train_resumed(&cfg(4), demos.clone(), &empty, |_| {}).unwrap_err());
         assert!(e.contains("no checkpoint"), "{e}");
+        std::fs::copy(ckpt(&split, 0, "table.npz"), ckpt(&empty, 0, "table.npz")).unwrap();
+        std::fs::copy(ckpt(&split, 0, "critic.json"), ckpt(&empty, 0, "critic.json")).unwrap();
+        let e = msg(train_resumed(&cfg(4), demos.clone(), &empty, |_| {}).unwrap_err());
+        assert!(e.contains("before exact resume"), "{e}");
         let e =
             msg(train_resumed(&cfg(4), demos.clone(), &root.join("missing"), |_| {}).unwrap_err());
         assert!(e.contains("cannot resume"), "{e}");
-        std::fs::write(split.join("iter_004_critic.json"), "{\"format\": ").unwrap();
+        let other_seed = GaifoConfig { seed: 4, ..cfg(6) };
+        let e = msg(train_resumed(&other_seed, demos.clone(), &split, |_| {}).unwrap_err());
+        assert!(e.contains("another seed"), "{e}");
+        // The same demonstrations one step longer (the last step repeated).
+        let longer = |v: &[f64], w: usize| -> Vec<f64> {
+            v.chunks(demos.horizon * w)
+                .flat_map(|d| d.iter().chain(&d[d.len() - w..]).copied().collect::<Vec<_>>())
+                .collect()
+        };
+        let longer = imitation::demos::Demos {
+            states: longer(&demos.states, 12),
+            actions: longer(&demos.actions, 3),
+            horizon: demos.horizon + 1,
+            ..demos.clone()
+        };
+        let e = msg(train_resumed(&cfg(6), longer, &split, |_| {}).unwrap_err());
+        assert!(e.contains("iter_002_state.npz") && e.contains("policy.K"), "{e}");
+        std::fs::write(ckpt(&split, 2, "critic.json"), "{\"format\": ").unwrap();
         let e = msg(train_resumed(&cfg(6), demos.clone(), &split, |_| {}).unwrap_err());
         assert!(
-            e.contains("iter_004_critic.json") && e.contains("not a valid critic file"),
+            e.contains("iter_002_critic.json") && e.contains("not a valid critic file"),
             "{e}"
         );
-        let other_seed = GaifoConfig { seed: 4, ..cfg(6) };
-        let e = msg(train_resumed(&other_seed, demos.clone(), &stale, |_| {}).unwrap_err());
-        assert!(e.contains("another seed"), "{e}");
         std::fs::remove_dir_all(&root).ok();
     }
 

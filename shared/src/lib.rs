@@ -15,6 +15,8 @@
 //!   service ([`services::Qos`]).
 //! - [`status`]: why a peer stopped ([`status::PeerStatus`], on `controller/status` and
 //!   `learner/status`), so that neither side waits silently for the other.
+//! - [`atomic_file`]: the one atomic write (temporary file, fsync, rename) of every file a
+//!   restart reads back.
 //! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`kinematics`]: the UR5's end-effector point and velocity from joint angles (f64, no
 //!   simulator), for arms that report joint states only.
@@ -28,6 +30,7 @@
 //! controller calls per tick ([`controller_action`], [`GainTable::validate`],
 //! [`GainTable::copy_from`], [`state_vector`], the payload types) allocates.
 
+pub mod atomic_file;
 pub mod clock;
 pub mod config;
 pub mod cost;

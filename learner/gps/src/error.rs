@@ -23,6 +23,9 @@ pub enum GpsError {
     /// A setting that cannot work; the message names it and its allowed range.
     #[error("invalid setting: {0}")]
     Config(String),
+    /// A learner snapshot (checkpoint) that does not fit this learner; names the array.
+    #[error("learner checkpoint: {0}")]
+    Snapshot(String),
     /// Too few samples for a regression.
     #[error("cannot fit dynamics on {0} sample(s); need at least 2 trajectories")]
     TooFewSamples(usize),

@@ -10,6 +10,7 @@
 //! - [`algorithm`] (algorithm.py / algorithm_traj_opt.py: cost averaging, x0, step size, and
 //!   [`algorithm::update::Learner`], the state one iteration updates);
 //! - [`policy::lin_gauss`], [`policy::init`] (lin_gauss_policy.py, lin_gauss_init.py);
+//! - [`snapshot`]: the learner state as named arrays (exact checkpoints);
 //! - [`conformance`]: the checker against the reference vectors; [`synthetic`]: random
 //!   linear-Gaussian test problems.
 //!
@@ -23,6 +24,7 @@ pub mod dynamics;
 pub mod error;
 pub mod linalg;
 pub mod policy;
+pub mod snapshot;
 pub mod synthetic;
 pub mod traj_opt;
 

@@ -15,14 +15,14 @@
 //!
 //! # Checkpoints and resuming
 //! A checkpoint (written by the `learner` application before every iteration) holds the
-//! controller executed next as its gain table and the critic (weights, input normalisation,
-//! Adam moments and step count, minibatch RNG position). [`LqrGaifo::from_checkpoint`]
-//! continues from one: the critic exactly, the controller as its gain table (K, k, L;
-//! Σ = L Lᵀ is recomputed). The GPS learner state — the GMM dynamics prior (and the
-//! transitions it was fitted on), the previous controller and the step size — is not
-//! checkpointed and starts afresh, so a resumed run's first iteration executes the same
-//! episodes and makes the same critic update as the uninterrupted run would, but its dynamics
-//! fit, and hence its LQR step, differ from there on.
+//! critic (weights, input normalisation, Adam moments and step count, minibatch RNG position)
+//! and the rest of the run's state as a [`Snapshot`] ([`LqrGaifo::snapshot`]: the controller
+//! executed next and the previous one with every array, the GMM dynamics prior and the
+//! trajectories it is fitted on, the trajectory info, η, the step multiplier, the prior's RNG
+//! position, the iteration). [`LqrGaifo::from_snapshot`] continues from one exactly: the same
+//! episodes, critic updates, dynamics fits and LQR steps as the uninterrupted run, bit for bit
+//! (docs/design.md §4.11). The exploration noise needs no state: it is a function of (seed,
+//! table version, episode).
 //!
 //! Only state transitions of the expert are used (`Demos::states`); its actions are never read.
 
@@ -51,6 +51,7 @@ use gps::algorithm::AlgorithmConfig;
 use gps::dynamics::lr_prior::LrPriorConfig;
 use gps::dynamics::prior_gmm::PriorGmmConfig;
 use gps::policy::lin_gauss::LinGaussPolicy;
+use gps::snapshot::Snapshot;
 use gps::traj_opt::lqr::TrajOptConfig;
 
 /// Settings of an LQR+GAIfO run (TOML: `learner train --config FILE`). The task (goal, start
@@ -540,16 +541,23 @@ impl LqrGaifo {
         Ok(log)
     }
 
-    /// A run that continues from controller `pol` and critic `disc` after `iteration`
-    /// iterations (a checkpoint: `learner train --resume`). The critic must have been trained
-    /// with this run's settings and seed; what a checkpoint does not hold (the GMM dynamics
-    /// prior, the previous controller, the step size) starts afresh (module docs).
-    pub fn from_checkpoint(
+    /// Everything but the critic that the next iteration depends on (module docs); the critic
+    /// is saved on its own ([`Discriminator::save`]).
+    pub fn snapshot(&self) -> Snapshot {
+        let mut s = Snapshot::default();
+        self.lqr.snapshot(&mut s);
+        s
+    }
+
+    /// A run that continues exactly where the run whose [`LqrGaifo::snapshot`] is `snap` and
+    /// whose critic is `disc` stood (a checkpoint: `learner train --resume`). The critic must
+    /// have been trained with this run's settings and seed, and the snapshot taken of a run on
+    /// demonstrations of the same horizon with the same settings.
+    pub fn from_snapshot(
         cfg: GaifoConfig,
         demos: Demos,
-        pol: LinGaussPolicy,
+        snap: &Snapshot,
         disc: Discriminator,
-        iteration: usize,
     ) -> Result<Self, ImitationError> {
         let mut run = Self::new(cfg, demos)?;
         let expected = critic_config(&run.cfg.discriminator, run.cfg.seed);
@@ -560,14 +568,12 @@ impl LqrGaifo {
                 run.cfg.seed
             )));
         }
-        if pol.t != run.task.horizon {
-            return Err(ImitationError::Checkpoint(format!(
-                "a controller of T = {} steps, the demonstrations have T = {}: resume with the \
-                 run's own demonstrations",
-                pol.t, run.task.horizon
-            )));
-        }
-        run.lqr.restart_at(pol, iteration);
+        run.lqr.restore(snap).map_err(|e| {
+            ImitationError::Checkpoint(format!(
+                "{e} (a checkpoint of another task horizon or other settings: resume with the \
+                 run's own demonstrations and --config)"
+            ))
+        })?;
         run.cost_ws = CompositeWorkspace::new(&disc).with_psd(run.cfg.psd_hessian);
         run.disc_ws = disc.workspace();
         run.disc = disc;

@@ -8,6 +8,7 @@
 use gps::algorithm::eval_cost::{eval_cost, CostDerivs};
 use gps::algorithm::update::Learner;
 use gps::policy::lin_gauss::LinGaussPolicy;
+use gps::snapshot::Snapshot;
 use ur5_shared::layout::{DU, DX};
 
 use crate::cost::Cost;
@@ -61,10 +62,40 @@ impl LqrIteration {
         self.iteration
     }
 
-    /// Continues from controller `pol` after `iteration` iterations (a checkpoint).
-    pub fn restart_at(&mut self, pol: LinGaussPolicy, iteration: usize) {
+    /// Adds everything the next iteration depends on to `s` (docs/design.md §4.11): the
+    /// iteration count (`lqr.iteration`), the controller executed next (`policy.*`), the
+    /// previous one (`prev_policy.*`, once there is one) and the GPS learner state
+    /// ([`Learner::snapshot`]). The cost expansion and the new-controller buffer are scratch,
+    /// rewritten before they are read.
+    pub fn snapshot(&self, s: &mut Snapshot) {
+        s.put_words("lqr.iteration", &[self.iteration as u64]);
+        s.put_policy("policy", &self.pol);
+        if let Some(prev) = &self.prev_pol {
+            s.put_policy("prev_policy", prev);
+        }
+        self.learner.snapshot(s);
+    }
+
+    /// Restores the state saved by [`LqrIteration::snapshot`] (into an iteration built for the
+    /// same problem size and settings); nothing changes on an error.
+    pub fn restore(&mut self, s: &Snapshot) -> Result<(), ImitationError> {
+        let iteration = s.words("lqr.iteration", 1)?[0];
+        let mut pol = self.pol.clone();
+        s.fill_policy("policy", &mut pol)?;
+        let prev_pol = if s.has("prev_policy.K") {
+            let mut prev = self.pol.clone();
+            s.fill_policy("prev_policy", &mut prev)?;
+            Some(prev)
+        } else {
+            None
+        };
+        self.learner.restore(s)?;
+        self.iteration = usize::try_from(iteration).map_err(|_| {
+            gps::GpsError::Snapshot(format!("lqr.iteration = {iteration}: too large"))
+        })?;
         self.pol = pol;
-        self.iteration = iteration;
+        self.prev_pol = prev_pol;
+        Ok(())
     }
 
     /// Step 2: refits the dynamics p(s'|s,a) (GMM prior + Bayesian linear regression) and x0

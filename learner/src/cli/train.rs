@@ -34,12 +34,13 @@ pub struct TrainArgs {
     /// Iterations; overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
-    /// Continue the LQR+GAIfO run in DIR (its --out) from its latest checkpoint
-    /// (iter_NNN_table.npz + iter_NNN_critic.json) up to --iterations in all, with the run's
+    /// Continue the LQR+GAIfO run in DIR (its --out) from its latest complete checkpoint
+    /// (iter_NNN_critic.json + iter_NNN_state.npz) up to --iterations in all, with the run's
     /// own demonstrations, config and seed: iterations are numbered on from NNN and rows are
-    /// appended to DIR/gaifo_log.csv. The critic resumes exactly (weights, normalisation, Adam
-    /// moments, RNG); the GMM dynamics prior, the previous controller and the step size are not
-    /// checkpointed and start afresh, so the result differs from an uninterrupted run.
+    /// appended to DIR/gaifo_log.csv. The resume is exact: the whole learner state (critic with
+    /// Adam moments, GMM dynamics prior and its data, previous controller, step size, η, every
+    /// RNG position) was checkpointed, so tables and CSV rows (timing columns aside) are those
+    /// of an uninterrupted run, bit for bit, wherever the run was stopped or killed.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
     /// Start a new run in --out even though another run's files are there: they are deleted

@@ -1,13 +1,16 @@
-//! The expert's checkpoint of a served run (`checkpoint.npz`): the controller executed next
-//! (all GPS policy arrays), its iteration and the random-policy cost (docs/design.md §4).
+//! Checkpoints (docs/design.md §4): the expert's of a served run (`checkpoint.npz`: the
+//! controller executed next with all GPS policy arrays, its iteration and the random-policy
+//! cost, §4.5) and LQR+GAIfO's learner state (`iter_NNN_state.npz`: a [`Snapshot`], one array
+//! per entry, §4.11). Both are written atomically (temporary file, fsync, rename).
 
 use std::path::Path;
 
 use gps::linalg::MatSeq;
 use gps::policy::lin_gauss::LinGaussPolicy;
+use gps::snapshot::Snapshot;
 use ur5_shared::layout::{DU, DX};
 
-use super::npz::{NpzFile, NpzWriter};
+use super::npz::{NpzError, NpzFile, NpzWriter};
 
 /// Version of this file layout.
 pub const SCHEMA_VERSION: i64 = 1;
@@ -79,4 +82,57 @@ pub fn load_checkpoint(path: &Path) -> anyhow::Result<(LinGaussPolicy, usize, Op
         iteration,
         cost_random.is_finite().then_some(cost_random),
     ))
+}
+
+/// Version of the learner-state layout (`iter_NNN_state.npz`).
+pub const STATE_SCHEMA_VERSION: i64 = 1;
+
+/// Writes the learner state `snap` to `path`: `schema_version`, then each f64 entry with its
+/// shape and each u64 entry as a 1-d uint64 array, under its own name.
+pub fn save_state(path: &Path, snap: &Snapshot) -> Result<(), NpzError> {
+    let mut w = NpzWriter::create(path)?;
+    w.i64("schema_version", &[], &[STATE_SCHEMA_VERSION])?;
+    for (name, (shape, data)) in &snap.reals {
+        let shape: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
+        w.f64(name, &shape, data)?;
+    }
+    for (name, data) in &snap.words {
+        w.u64(name, &[data.len() as u64], data)?;
+    }
+    w.finish()?;
+    Ok(())
+}
+
+/// Reads a learner state written by [`save_state`]. Whether it fits the run is checked where it
+/// is restored (`imitation::gaifo::LqrGaifo::from_snapshot`).
+pub fn load_state(path: &Path) -> Result<Snapshot, NpzError> {
+    let f = NpzFile::open_schema(path, STATE_SCHEMA_VERSION)?;
+    let mut snap = Snapshot::default();
+    for name in f.names() {
+        if name == "schema_version" {
+            continue;
+        }
+        match f.dtype(&name)?.as_str() {
+            "f8" => {
+                let (shape, data) = f.f64(&name)?;
+                let shape = shape
+                    .iter()
+                    .map(|&d| usize::try_from(d))
+                    .collect::<Result<Vec<_>, _>>()
+                    .map_err(|_| f.bad(&name, format!("shape {shape:?} too large")))?;
+                snap.reals.insert(name, (shape, data));
+            }
+            "u8" => {
+                let (shape, data) = f.u64s(&name)?;
+                if shape.len() != 1 {
+                    return Err(f.bad(&name, format!("shape {shape:?}, expected 1-d")));
+                }
+                snap.words.insert(name, data);
+            }
+            other => {
+                return Err(f.bad(&name, format!("dtype {other}, expected f8 or u8")));
+            }
+        }
+    }
+    Ok(snap)
 }

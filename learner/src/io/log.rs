@@ -113,7 +113,9 @@ pub fn write_csv_row(
 /// starts a new file. `Some(i)`, a run resumed at iteration i, keeps the rows of iterations
 /// before i and appends after them (creating the file if it is missing); rows of iteration i
 /// and later — written after the checkpoint it resumes from, by a run that was stopped before
-/// its next checkpoint — are dropped, as the resumed run writes them again.
+/// its next checkpoint — are dropped, as the resumed run writes them again, and so is a last
+/// row cut short by a kill (fewer columns or no newline). The file is then rewritten
+/// atomically ([`ur5_shared::atomic_file::write`]), so a kill during the rewrite loses nothing.
 pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs::File> {
     use anyhow::Context;
     use std::io::Write;
@@ -125,36 +127,48 @@ pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs
     };
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut lines = text.lines();
+    let mut lines = text.split_inclusive('\n');
     anyhow::ensure!(
-        lines.next() == Some(CSV_HEADER),
+        lines.next().map(|l| l.trim_end_matches('\n')) == Some(CSV_HEADER),
         "{}: not a per-iteration log of this build (its first line is not the header {CSV_HEADER:?})",
         path.display()
     );
+    let columns = CSV_HEADER.split(',').count();
     let mut kept = String::new();
     let mut dropped = 0;
-    for (k, line) in lines.enumerate() {
+    let mut lines = lines.enumerate().peekable();
+    while let Some((k, line)) = lines.next() {
+        let complete = line.ends_with('\n') && line.trim_end().split(',').count() == columns;
+        if !complete && lines.peek().is_none() {
+            dropped += 1; // the row being written when the run was killed
+            continue;
+        }
         let it: usize = line
             .split(',')
             .next()
             .and_then(|c| c.parse().ok())
-            .with_context(|| format!("{} line {}: no iteration number", path.display(), k + 2))?;
+            .filter(|_| complete)
+            .with_context(|| {
+                format!(
+                    "{} line {}: not a complete row ({columns} columns, an iteration number \
+                     first)",
+                    path.display(),
+                    k + 2
+                )
+            })?;
         if it < start {
             kept.push_str(line);
-            kept.push('\n');
         } else {
             dropped += 1;
         }
     }
     if dropped > 0 {
         eprintln!(
-            "{}: dropping {dropped} row(s) of iteration {start} and later, written after the \
-             checkpoint this run resumes from",
+            "{}: dropping {dropped} row(s) of iteration {start} and later or cut short, written \
+             after the checkpoint this run resumes from",
             path.display()
         );
-        let mut f = std::fs::File::create(path)?;
-        write!(f, "{CSV_HEADER}\n{kept}")?;
-        return Ok(f);
+        ur5_shared::atomic_file::write(path, format!("{CSV_HEADER}\n{kept}").as_bytes())?;
     }
     std::fs::OpenOptions::new()
         .append(true)

@@ -145,12 +145,17 @@ fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     };
     for e in entries {
         let e = e.with_context(|| format!("reading {}", dir.display()))?;
-        let name = e.file_name().to_string_lossy().into_owned();
+        let full = e.file_name().to_string_lossy().into_owned();
+        // A write cut short by a kill leaves `<name>.partial` or `<name>.tmp`.
+        let name = full
+            .strip_suffix(".partial")
+            .or_else(|| full.strip_suffix(".tmp"))
+            .unwrap_or(&full);
         let iter_file = name.starts_with("iter_")
-            && (name.ends_with("_table.npz")
-                || name.ends_with("_critic.json")
-                || name.ends_with("_policy.json"));
-        if NAMES.contains(&name.as_str()) || iter_file {
+            && ["_table.npz", "_critic.json", "_policy.json", "_state.npz"]
+                .iter()
+                .any(|s| name.ends_with(s));
+        if NAMES.contains(&name) || iter_file {
             found.push(e.path());
         }
     }
@@ -170,12 +175,6 @@ pub fn read(dir: &Path) -> anyhow::Result<Option<Manifest>> {
     }
 }
 
-/// Writes `bytes` to `path` atomically (a temporary file beside it, then a rename).
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
-}
 
 /// Takes `dir` for the run `m` as `claim` says (module docs); creates `dir` if needed.
 pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
@@ -237,7 +236,8 @@ pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
                 }
             }
             crate::io::create_dir(dir)?;
-            write_atomic(&dir.join(MANIFEST), &serde_json::to_vec_pretty(m)?)
+            ur5_shared::atomic_file::write(&dir.join(MANIFEST), &serde_json::to_vec_pretty(m)?)
+                .context("writing the run manifest")
         }
     }
 }

@@ -1,8 +1,9 @@
 //! `.npz` files (numpy's `np.savez` layout: a zip of `.npy` arrays) for everything that leaves
 //! the program: demonstrations, recorded episodes, gain tables (docs/design.md §4.1).
 //!
-//! Writing goes to `<path>.partial` and is renamed into place by [`NpzWriter::finish`], so a
-//! crash never leaves a truncated file under the final name. Arrays are little-endian, C order.
+//! Writing goes to `<path>.partial`, which [`NpzWriter::finish`] syncs to disk and renames into
+//! place ([`ur5_shared::atomic_file::commit`]), so a crash never leaves a truncated file under
+//! the final name. Arrays are little-endian, C order.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -194,7 +195,7 @@ impl NpzWriter {
             path: partial.clone(),
             source,
         })?;
-        std::fs::rename(&partial, &self.path).map_err(|source| NpzError::Io {
+        ur5_shared::atomic_file::commit(&partial, &self.path).map_err(|source| NpzError::Io {
             path: self.path.clone(),
             source,
         })?;
@@ -225,6 +226,7 @@ impl NpzFile {
             path: path.to_owned(),
             message: e.to_string(),
         };
+        let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
         let mut zip = ZipArchive::new(file).map_err(zerr)?;
         let mut arrays = BTreeMap::new();
         for i in 0..zip.len() {
@@ -236,7 +238,9 @@ impl NpzFile {
             let Some(name) = entry_name.strip_suffix(".npy").map(str::to_owned) else {
                 continue;
             };
-            let mut bytes = Vec::with_capacity(entry.size() as usize);
+            // The size in the zip header is the file's word: never reserve more than the file
+            // holds (a damaged header asked for 26 TB; found by tests/tests/fuzz.rs).
+            let mut bytes = Vec::with_capacity(entry.size().min(file_len) as usize);
             entry
                 .read_to_end(&mut bytes)
                 .map_err(|source| NpzError::Io {
@@ -314,6 +318,33 @@ impl NpzFile {
         }
         .map_err(|e| self.bad(name, e.to_string()))?;
         Ok((shape, values))
+    }
+
+    /// The element type of array `name` as numpy spells it without the byte order (`f8`, `u8`,
+    /// `i8`, `U12`, ...).
+    pub fn dtype(&self, name: &str) -> Result<String, NpzError> {
+        let npy = self.npy(name)?;
+        Ok(npy
+            .dtype()
+            .descr()
+            .trim_matches('\'')
+            .trim_start_matches(['<', '|', '='])
+            .to_owned())
+    }
+
+    /// A uint64 array, read exactly: (shape, values in C order). Other element types are an
+    /// error.
+    pub fn u64s(&self, name: &str) -> Result<(Vec<u64>, Vec<u64>), NpzError> {
+        let dtype = self.dtype(name)?;
+        if dtype != "u8" {
+            return Err(self.bad(name, format!("dtype {dtype}, expected little-endian uint64")));
+        }
+        let npy = self.npy(name)?;
+        let shape = npy.shape().to_vec();
+        let v = npy
+            .into_vec::<u64>()
+            .map_err(|e| self.bad(name, e.to_string()))?;
+        Ok((shape, v))
     }
 
     /// A scalar (0-d) uint64, read exactly (seeds).

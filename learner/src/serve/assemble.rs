@@ -127,6 +127,11 @@ impl Assembler {
                 self.mixed |= s.table_version != last.table_version || s.noise != last.noise;
             }
         }
+        if self.cur.len() >= self.horizon {
+            // More samples of one episode than it has steps (repeated or stray step numbers):
+            // a partial episode, so that a stream of bad samples cannot grow this without bound.
+            out.extend(self.close());
+        }
         if self.cur.is_empty() {
             self.gap = s.t != 0;
         }
@@ -159,5 +164,27 @@ impl Batch {
             return false;
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Samples of one episode that never reach its last step (here step 1 again and again)
+    /// are cut into partial episodes of at most T samples instead of piling up.
+    #[test]
+    fn a_stream_of_repeated_steps_is_cut_into_partial_episodes() {
+        let mut a = Assembler::new(5);
+        let s = StepSample {
+            t: 1,
+            episode: 1,
+            ..Default::default()
+        };
+        let out: Vec<Assembled> = (0..12).flat_map(|_| a.push(&s)).collect();
+        assert_eq!(out.len(), 2, "{out:?}");
+        assert!(out
+            .iter()
+            .all(|o| matches!(o, Assembled::Partial { have: 5, .. })));
     }
 }

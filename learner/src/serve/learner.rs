@@ -76,7 +76,7 @@ impl ServeLearner for LqrGaifo {
     const TASK_SOURCE: &'static str = "the demonstrations";
     const PROGRESS_HEADER: &'static str = GaifoLog::PROGRESS_HEADER;
     fn checkpoint(&self, out: &Path) -> anyhow::Result<()> {
-        Checkpoint::checkpoint(self, out).map(|_| ())
+        Checkpoint::checkpoint(self, out, None).map(|_| ())
     }
     fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File> {
         open_log(

@@ -50,8 +50,8 @@
 //! - `tables/vVERSION.npz`: every table published ([`crate::io::table`]); `latest_table.npz`;
 //! - the checkpoint of the controller to execute next, written before its table is published:
 //!   expert: `checkpoint.npz` (all GPS policy arrays, its iteration, the random-policy cost);
-//!   lqr-gaifo: `iter_NNN_table.npz` + `iter_NNN_critic.json`, as `learner train` writes them
-//!   ([`crate::run::Checkpoint`]);
+//!   lqr-gaifo: `iter_NNN_table.npz`, `iter_NNN_critic.json` and `iter_NNN_state.npz`, as
+//!   `learner train` writes them ([`crate::run::Checkpoint`]);
 //! - the per-iteration CSV: expert: `serve_log.csv` ([`crate::io::log::EXPERT_CSV_HEADER`], appended
 //!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
 //!   `t_execute_s` is the time from the version's first sample to its last needed episode;
@@ -60,11 +60,13 @@
 //! # Peers that die
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
 //! A restarted learner: `--resume DIR` continues from DIR's checkpoint (expert:
-//! `checkpoint.npz`; lqr-gaifo: the latest `iter_NNN_*` pair, [`crate::run::resume`]: also a
-//! `learner train` folder) and publishes that table version again (the controller already runs
-//! it and ignores the duplicate), then waits for N + 1 fresh episodes of it. The GPS learner
-//! state (GMM dynamics prior, step size, previous controller) is not checkpointed and starts
-//! afresh; LQR+GAIfO's critic resumes exactly. Without `--resume` a new learner starts at
+//! `checkpoint.npz`; lqr-gaifo: the latest complete `iter_NNN_*` checkpoint,
+//! [`crate::run::resume`]) and publishes that table version again (the controller already runs
+//! it and ignores the duplicate), then waits for N + 1 fresh episodes of it. LQR+GAIfO's whole
+//! learner state (critic, GMM dynamics prior, step size, previous controller, RNG positions)
+//! resumes exactly, but the fresh episodes carry later noise draws of that version than the
+//! uninterrupted run learned from, so a run resumed over IPC is not bit for bit the
+//! uninterrupted one (`learner train --resume` is). Without `--resume` a new learner starts at
 //! version 1, which a controller running a newer version rejects: the learner then reports the
 //! newer version it sees in the samples and keeps waiting.
 
@@ -83,7 +85,7 @@ use crate::io::table::save_table;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use iceoryx2::port::update_connections::UpdateConnections;
 
-mod assemble;
+pub mod assemble;
 mod learner;
 pub mod policy;
 mod ports;
@@ -279,7 +281,7 @@ pub fn serve_gaifo(
     cfg.validate()?;
     claim_dirs(&opts, "lqr-gaifo", cfg.seed, &cfg)?;
     let run = match &opts.resume {
-        Some(dir) => crate::run::resume(cfg, demos, dir)?,
+        Some(dir) => crate::run::resume(cfg, demos, dir)?.0,
         None => LqrGaifo::new(cfg, demos)?,
     };
     serve_loop(run, opts, progress)

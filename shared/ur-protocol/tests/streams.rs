@@ -108,8 +108,16 @@ fn decode_chunks(chunks: &[&[u8]]) -> Vec<String> {
     out
 }
 
+/// Cases per property: `FUZZ_CASES` (the long fuzz run of the README), else 2000.
+fn cases() -> u32 {
+    std::env::var("FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2000)
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(), ..ProptestConfig::default() })]
 
     #[test]
     fn any_split_or_merge_decodes_identically(

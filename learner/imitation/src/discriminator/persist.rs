@@ -39,8 +39,8 @@ struct CriticFile {
 }
 
 impl Discriminator {
-    /// Writes the critic to `path` (through a temporary file and a rename, so an interrupted
-    /// save leaves the previous file intact). Refuses to write non-finite state.
+    /// Writes the critic to `path` atomically ([`ur5_shared::atomic_file::write`]: temporary
+    /// file, fsync, rename, so an interrupted save leaves the previous file intact). Refuses to write non-finite state.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), DiscriminatorError> {
         let path = path.as_ref();
         let all_finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
@@ -71,10 +71,7 @@ impl Discriminator {
             path: path.to_path_buf(),
             source,
         })?;
-        let mut tmp = path.as_os_str().to_owned();
-        tmp.push(".tmp");
-        std::fs::write(&tmp, text).map_err(io)?;
-        std::fs::rename(&tmp, path).map_err(io)
+        ur5_shared::atomic_file::write(path, text.as_bytes()).map_err(io)
     }
 
     /// Reads a critic saved by [`Self::save`] and checks it against the expected input
