@@ -401,6 +401,20 @@ impl ExpertLearner {
     }
 }
 
+/// The mean task cost of the random (initial) controller of `cfg` on its task over
+/// `cfg.random_episodes` noisy episodes on `arm`: the C_random of normalised performance
+/// (docs/design.md §1.6).
+pub fn random_policy_cost(cfg: &ExpertConfig, arm: &mut dyn Arm) -> Result<f64, ImitationError> {
+    let task = &cfg.task;
+    mean_noisy_cost(
+        arm,
+        task,
+        &init_hold(task, cfg.init_var),
+        cfg.random_episodes,
+        cfg.seed ^ SEED_RANDOM,
+    )
+}
+
 /// Trains the expert in process on `arm` (lockstep, no IPC): the random policy's cost, then
 /// [`crate::learn::iterate`] until [`ExpertLearner::done`]. `progress` receives each
 /// iteration's log (`seconds`: episodes and update) as soon as it is done.
@@ -410,14 +424,7 @@ pub fn train(
     mut progress: impl FnMut(&IterationLog),
 ) -> Result<ExpertRun, ImitationError> {
     cfg.validate()?;
-    let task = &cfg.task;
-    let cost_random = mean_noisy_cost(
-        arm,
-        task,
-        &init_hold(task, cfg.init_var),
-        cfg.random_episodes,
-        cfg.seed ^ SEED_RANDOM,
-    )?;
+    let cost_random = random_policy_cost(cfg, arm)?;
     let mut el = ExpertLearner::new(cfg.clone(), Some(cost_random));
     let mut log = Vec::new();
     while !el.done() {
