@@ -73,7 +73,11 @@ pub fn run_motions(dir: &Path, demos: &Path, count: usize) -> Result<(Vec<Motion
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().into_owned();
-            let n = name.strip_prefix("iter_")?.strip_suffix("_table.npz")?.parse().ok()?;
+            let n = name
+                .strip_prefix("iter_")?
+                .strip_suffix("_table.npz")?
+                .parse()
+                .ok()?;
             Some((n, e.path()))
         })
         .collect();
@@ -140,13 +144,22 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
 }
 
 /// Square axis ranges (m) holding every point of every motion and the goal in `view`.
-fn extent(motions: &[Motion], goal: &[f64; 3], view: View) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
+fn extent(
+    motions: &[Motion],
+    goal: &[f64; 3],
+    view: View,
+) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
     let pts = motions
         .iter()
         .flat_map(|m| m.chain.iter().flatten())
         .chain(std::iter::once(goal))
         .map(|p| view.project(p));
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for (x, y) in pts {
         (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
     }
@@ -219,15 +232,33 @@ fn draw_view<DB: DrawingBackend>(
     Ok(())
 }
 
-/// Steps of the filmstrip: `frames` moments evenly spread over the horizon.
+/// Steps of the filmstrip: `frames` moments from the first step to the last, quadratically
+/// spaced (step (i / (n − 1))² (T − 1)), denser early where the arm moves most.
 fn moments(horizon: usize, frames: usize) -> Vec<usize> {
     let n = frames.clamp(1, horizon);
-    (0..n).map(|i| if n == 1 { horizon - 1 } else { i * (horizon - 1) / (n - 1) }).collect()
+    let mut v: Vec<usize> = (0..n)
+        .map(|i| {
+            if n == 1 {
+                horizon - 1
+            } else {
+                let f = i as f64 / (n - 1) as f64;
+                (f * f * (horizon - 1) as f64).round() as usize
+            }
+        })
+        .collect();
+    v.dedup();
+    v
 }
 
-/// The filmstrip PNG: a column per moment ([`moments`], `frames` of them), side view above,
+/// The filmstrip PNG: a column per moment ([`moments`], up to `frames` of them), side view above,
 /// top view below; 240 px per panel.
-pub fn filmstrip(path: &Path, motions: &[Motion], goal: &[f64; 3], dt: f64, frames: usize) -> Result<()> {
+pub fn filmstrip(
+    path: &Path,
+    motions: &[Motion],
+    goal: &[f64; 3],
+    dt: f64,
+    frames: usize,
+) -> Result<()> {
     register_font()?;
     let horizon = motions.iter().map(|m| m.chain.len()).max().unwrap_or(1);
     let ts = moments(horizon, frames);
@@ -239,8 +270,24 @@ pub fn filmstrip(path: &Path, motions: &[Motion], goal: &[f64; 3], dt: f64, fram
         let cells = root.split_evenly((2, ts.len()));
         for (i, t) in ts.iter().enumerate() {
             let time = format!("t = {:.1} s", *t as f64 * dt);
-            draw_view(&cells[i], motions, goal, View::Side, *t, &format!("{time}, side"), i == 0)?;
-            draw_view(&cells[ts.len() + i], motions, goal, View::Top, *t, &format!("{time}, top"), false)?;
+            draw_view(
+                &cells[i],
+                motions,
+                goal,
+                View::Side,
+                *t,
+                &format!("{time}, side"),
+                i == 0,
+            )?;
+            draw_view(
+                &cells[ts.len() + i],
+                motions,
+                goal,
+                View::Top,
+                *t,
+                &format!("{time}, top"),
+                false,
+            )?;
         }
         root.present().map_err(err)?;
     }
@@ -249,24 +296,43 @@ pub fn filmstrip(path: &Path, motions: &[Motion], goal: &[f64; 3], dt: f64, fram
 
 /// The animated GIF: side and top views side by side, one frame per `stride` steps, `dt`
 /// × `stride` apart (at least 2 cs), the last frame held for a second; 640 × 320 px.
-pub fn animation(path: &Path, motions: &[Motion], goal: &[f64; 3], dt: f64, stride: usize) -> Result<()> {
+pub fn animation(
+    path: &Path,
+    motions: &[Motion],
+    goal: &[f64; 3],
+    dt: f64,
+    stride: usize,
+) -> Result<()> {
     register_font()?;
     let horizon = motions.iter().map(|m| m.chain.len()).max().unwrap_or(1);
     let (w, h) = (640u16, 320u16);
-    let file = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let file =
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut enc = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[]).map_err(err)?;
     enc.set_repeat(gif::Repeat::Infinite).map_err(err)?;
-    let steps: Vec<usize> = (0..horizon).step_by(stride.max(1)).chain(std::iter::once(horizon - 1)).collect();
+    let steps: Vec<usize> = (0..horizon)
+        .step_by(stride.max(1))
+        .chain(std::iter::once(horizon - 1))
+        .collect();
     let delay = ((dt * stride.max(1) as f64 * 100.0).round() as u16).max(2);
     for (i, t) in steps.iter().enumerate() {
         let mut rgb = vec![255u8; w as usize * h as usize * 3];
         {
-            let root = BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
+            let root =
+                BitMapBackend::with_buffer(&mut rgb, (w as u32, h as u32)).into_drawing_area();
             root.fill(&WHITE).map_err(err)?;
             let (l, r) = root.split_horizontally(w as u32 / 2);
             let time = format!("t = {:.1} s", *t as f64 * dt);
             for (area, view, legend) in [(&l, View::Side, true), (&r, View::Top, false)] {
-                draw_view(area, motions, goal, view, *t, &format!("{time}, {}", view.name()), legend)?;
+                draw_view(
+                    area,
+                    motions,
+                    goal,
+                    view,
+                    *t,
+                    &format!("{time}, {}", view.name()),
+                    legend,
+                )?;
             }
             root.present().map_err(err)?;
         }

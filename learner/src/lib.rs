@@ -10,6 +10,7 @@
 //!   [`plot`]: their figures; [`stats`]: medians and quantiles; [`film`]: the arm reaching;
 //! - [`io`]: `.npz` files (demonstrations, gain tables, episodes) and the CSV logs;
 //! - [`process`]: spawned binaries of this build (IPC experiment, cross-process tests);
+//!   [`progress`]: progress bar or plain lines of long commands;
 //! - [`bench`]: `learner bench`, `learner bench-gaifo`;
 //! - [`cli`]: the command line, one module per subcommand.
 
@@ -22,6 +23,7 @@ pub mod film;
 pub mod io;
 pub mod plot;
 pub mod process;
+pub mod progress;
 pub mod run;
 pub mod serve;
 pub mod stats;

@@ -87,7 +87,11 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
                 "{} trajectories of T = {} ({} actions) from {} -> {}",
                 traj.count,
                 traj.horizon,
-                if traj.actions.is_some() { "with" } else { "without" },
+                if traj.actions.is_some() {
+                    "with"
+                } else {
+                    "without"
+                },
                 a.input.display(),
                 a.out.display()
             );

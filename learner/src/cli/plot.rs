@@ -55,7 +55,11 @@ pub fn run(cmd: PlotCmd) -> anyhow::Result<()> {
     eprintln!(
         "{} motions ({}) -> {} and {}",
         motions.len(),
-        motions.iter().map(|m| m.label.as_str()).collect::<Vec<_>>().join(", "),
+        motions
+            .iter()
+            .map(|m| m.label.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
         png.display(),
         gif.display()
     );

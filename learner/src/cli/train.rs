@@ -221,11 +221,18 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
     );
     eprintln!("{}", GaifoLog::PROGRESS_HEADER);
-    let print = |l: &GaifoLog| eprintln!("{}", l.progress_line());
+    let start = match &args.resume {
+        Some(dir) => crate::run::latest_checkpoint(dir).map_or(0, |(n, _, _)| n),
+        None => 0,
+    };
+    let bar =
+        crate::progress::Progress::new(cfg.iterations.saturating_sub(start) as u64, "iterations");
+    let print = |l: &GaifoLog| bar.done_one(&l.progress_line());
     let logs = match &args.resume {
         Some(dir) => train_resumed(&cfg, demos, dir, print)?,
         None => train(&cfg, demos, Some(&out), print)?,
     };
+    drop(bar);
     report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json);
     Ok(())
 }

@@ -1,6 +1,6 @@
-//! Demonstrations in every format `--demos` takes (docs/design.md §4.11): our `.npz`
-//! ([`super::demos`]), a LeRobot v3.0 dataset folder ([`super::lerobot`]) and a CSV file
-//! ([`read_csv`]), and the way back: demonstrations or recorded episodes as
+//! Demonstrations in the formats `--demos` takes beside our `.npz` (docs/design.md §4.11): a
+//! LeRobot v3.0 dataset folder ([`super::lerobot`]) and a CSV file ([`read_csv`]), and the way
+//! back: demonstrations or recorded episodes as
 //! [`Trajectories`] for `learner dataset export`.
 //!
 //! What a state-only source does not say is derived on the arm: the start pose from the first
@@ -32,9 +32,14 @@ pub const CSV_INDEX_COLUMNS: [&str; 2] = ["episode", "time_s"];
 /// per step, the steps of an episode together and in time order, every episode of the same
 /// length, times 0, dt, 2 dt, … (dt from the first episode, the same for all).
 pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
-    let mut r = csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut r =
+        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
     let header: Vec<String> = r.headers()?.iter().map(str::to_string).collect();
-    let expected: Vec<&str> = CSV_INDEX_COLUMNS.iter().chain(STATE_NAMES.iter()).copied().collect();
+    let expected: Vec<&str> = CSV_INDEX_COLUMNS
+        .iter()
+        .chain(STATE_NAMES.iter())
+        .copied()
+        .collect();
     anyhow::ensure!(
         header == expected,
         "{}: header {header:?}, expected {expected:?}",
@@ -45,11 +50,22 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
         let rec = rec.with_context(|| format!("{}: row {}", path.display(), line + 2))?;
         let num = |k: usize| -> anyhow::Result<f64> {
             rec[k].trim().parse::<f64>().with_context(|| {
-                format!("{}: row {}, column {}: `{}`", path.display(), line + 2, expected[k], &rec[k])
+                format!(
+                    "{}: row {}, column {}: `{}`",
+                    path.display(),
+                    line + 2,
+                    expected[k],
+                    &rec[k]
+                )
             })
         };
         let e = rec[0].trim().parse::<u64>().with_context(|| {
-            format!("{}: row {}, column episode: `{}`", path.display(), line + 2, &rec[0])
+            format!(
+                "{}: row {}, column episode: `{}`",
+                path.display(),
+                line + 2,
+                &rec[0]
+            )
         })?;
         let mut s = [0.0; DX];
         for (k, v) in s.iter_mut().enumerate() {
@@ -103,8 +119,13 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
 
 /// Writes `traj`'s states as a demonstrations CSV file ([`read_csv`]'s layout).
 pub fn write_csv(traj: &Trajectories, path: &Path) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
-    let header: Vec<&str> = CSV_INDEX_COLUMNS.iter().chain(STATE_NAMES.iter()).copied().collect();
+    let mut w =
+        csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
+    let header: Vec<&str> = CSV_INDEX_COLUMNS
+        .iter()
+        .chain(STATE_NAMES.iter())
+        .copied()
+        .collect();
     w.write_record(&header)?;
     for (i, s) in traj.states.chunks(DX).enumerate() {
         let (d, t) = (i / traj.horizon, i % traj.horizon);
@@ -148,7 +169,11 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
     } else {
         vec![path.to_path_buf()]
     };
-    anyhow::ensure!(!files.is_empty(), "{}: no .npz episode files", path.display());
+    anyhow::ensure!(
+        !files.is_empty(),
+        "{}: no .npz episode files",
+        path.display()
+    );
     let mut out: Option<(Trajectories, TaskConfig)> = None;
     for f in &files {
         let (ep, origin) =
@@ -253,20 +278,24 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
     })
 }
 
-/// The demonstrations in `path` in any format `--demos` takes: a LeRobot dataset folder, a
-/// `.csv` file, else a `.npz` of `learner expert` ([`super::demos::load`]).
-pub fn load_any(path: &Path, sim: &SimConfig) -> anyhow::Result<Demos> {
+/// Whether `path` is demonstrations in a format of this module (a folder: a LeRobot dataset;
+/// a `.csv` file) rather than a `.npz`.
+pub fn is_foreign(path: &Path) -> bool {
+    path.is_dir()
+        || path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+}
+
+/// The demonstrations in the LeRobot dataset folder or `.csv` file `path` ([`is_foreign`]).
+pub fn load_foreign(path: &Path, sim: &SimConfig) -> anyhow::Result<Demos> {
     if path.is_dir() {
         anyhow::ensure!(
             super::lerobot::is_dataset(path),
             "{} is a folder without meta/info.json: not a LeRobot dataset",
             path.display()
         );
-        let traj = super::lerobot::import(path)?;
-        return to_demos(traj, sim);
+        return to_demos(super::lerobot::import(path)?, sim);
     }
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) {
-        return to_demos(read_csv(path)?, sim);
-    }
-    Ok(super::demos::load(path)?)
+    to_demos(read_csv(path)?, sim)
 }

@@ -21,9 +21,9 @@ use std::sync::Arc;
 
 use parquet::basic::{LogicalType, Repetition, Type as Physical};
 use parquet::data_type::{ByteArray, ByteArrayType, DoubleType, FloatType, Int64Type};
+use parquet::file::metadata::KeyValue;
 use parquet::file::reader::{FileReader, SerializedFileReader};
 use parquet::file::writer::{SerializedColumnWriter, SerializedFileWriter};
-use parquet::file::metadata::KeyValue;
 use parquet::record::Field;
 use parquet::schema::types::Type;
 use serde::{Deserialize, Serialize};
@@ -203,20 +203,15 @@ fn write_table(
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
     }
     let schema = Type::group_type_builder("schema")
-        .with_fields(
-            columns
-                .iter()
-                .map(|(n, c)| Arc::new(c.schema(n)))
-                .collect(),
-        )
+        .with_fields(columns.iter().map(|(n, c)| Arc::new(c.schema(n))).collect())
         .build()
         .map_err(pq_err(path))?;
     let props = parquet::file::properties::WriterProperties::builder()
         .set_key_value_metadata(Some(kv))
         .build();
     let file = File::create(path).map_err(io_err(path))?;
-    let mut w = SerializedFileWriter::new(file, Arc::new(schema), Arc::new(props))
-        .map_err(pq_err(path))?;
+    let mut w =
+        SerializedFileWriter::new(file, Arc::new(schema), Arc::new(props)).map_err(pq_err(path))?;
     let mut rg = w.next_row_group().map_err(pq_err(path))?;
     for (_, c) in columns {
         let mut col = rg
@@ -239,7 +234,9 @@ fn stats(values: &[f64], width: usize) -> serde_json::Value {
     let std: Vec<f64> = (0..width)
         .map(|k| (col(k).map(|v| (v - mean[k]).powi(2)).sum::<f64>() / n as f64).sqrt())
         .collect();
-    let min: Vec<f64> = (0..width).map(|k| col(k).fold(f64::INFINITY, f64::min)).collect();
+    let min: Vec<f64> = (0..width)
+        .map(|k| col(k).fold(f64::INFINITY, f64::min))
+        .collect();
     let max: Vec<f64> = (0..width)
         .map(|k| col(k).fold(f64::NEG_INFINITY, f64::max))
         .collect();
@@ -259,9 +256,8 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
     }
     let (d, t) = (traj.count, traj.horizon);
     let n = d * t;
-    let frame = |f: &dyn Fn(usize, usize) -> i64| -> Vec<i64> {
-        (0..n).map(|i| f(i / t, i % t)).collect()
-    };
+    let frame =
+        |f: &dyn Fn(usize, usize) -> i64| -> Vec<i64> { (0..n).map(|i| f(i / t, i % t)).collect() };
     let mut data = vec![(
         STATE_FEATURE,
         Column::ListF64 {
@@ -456,7 +452,9 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
         }
         for (k, (i, s)) in ep.iter().enumerate() {
             if *i != k as i64 {
-                return Err(at(format!("episode {e}: frame_index {i} where {k} belongs")));
+                return Err(at(format!(
+                    "episode {e}: frame_index {i} where {k} belongs"
+                )));
             }
             states.extend_from_slice(s);
         }
@@ -522,7 +520,9 @@ fn read_frames(
         .with_fields(fields)
         .build()
         .map_err(pq_err(path))?;
-    let rows = reader.get_row_iter(Some(projection)).map_err(pq_err(path))?;
+    let rows = reader
+        .get_row_iter(Some(projection))
+        .map_err(pq_err(path))?;
     for row in rows {
         let row = row.map_err(pq_err(path))?;
         let (mut state, mut episode, mut frame) = (None, None, None);
@@ -560,10 +560,7 @@ fn read_frames(
                         Field::Long(v) => *v,
                         Field::Int(v) => i64::from(*v),
                         other => {
-                            return Err(feature_err(
-                                name,
-                                format!("{other:?} is not an integer"),
-                            ))
+                            return Err(feature_err(name, format!("{other:?} is not an integer")))
                         }
                     };
                     if name == "episode_index" {
