@@ -7,9 +7,10 @@
 //! - [`run`]: in-process runs, their CSV and checkpoints, resuming;
 //! - [`serve`]: `learner serve` over iceoryx2;
 //! - [`experiment`]: `learner experiment` (in process; [`experiment::ipc`] over IPC);
-//!   [`plot`]: their figures; [`stats`]: medians and quantiles;
+//!   [`plot`]: their figures; [`stats`]: medians and quantiles; [`film`]: the arm reaching;
 //! - [`io`]: `.npz` files (demonstrations, gain tables, episodes) and the CSV logs;
 //! - [`process`]: spawned binaries of this build (IPC experiment, cross-process tests);
+//!   [`progress`]: progress bar or plain lines of long commands;
 //! - [`bench`]: `learner bench`, `learner bench-gaifo`;
 //! - [`cli`]: the command line, one module per subcommand.
 
@@ -18,9 +19,11 @@ pub mod bench;
 pub mod cli;
 pub mod error;
 pub mod experiment;
+pub mod film;
 pub mod io;
 pub mod plot;
 pub mod process;
+pub mod progress;
 pub mod run;
 pub mod serve;
 pub mod stats;

@@ -185,7 +185,7 @@ const FONT: &str = "sans-serif";
 static DEJAVU_SANS: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// Registers the bundled DejaVu Sans with plotters' ab_glyph text backend, once per process.
-fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     static REGISTERED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
@@ -197,7 +197,7 @@ fn register_font() -> Result<()> {
 }
 
 /// Matplotlib's "tab10" colours: distinct, and readable by most colour-blind readers.
-const PALETTE: [RGBColor; 10] = [
+pub(crate) const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -507,7 +507,8 @@ fn legend_corner(
         .unwrap_or(SeriesLabelPosition::UpperRight)
 }
 
-fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
+/// Writes the RGB buffer `rgb` (`width` × `height`, 8 bits per channel) as a PNG file.
+pub(crate) fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
     let file =
         File::create(path).with_context(|| format!("cannot create PNG file {}", path.display()))?;
     let mut out = BufWriter::new(file);

@@ -19,8 +19,8 @@ use imitation::ppo::UpdateStats;
 use serde::Serialize;
 
 use crate::arm::SimArm;
-use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::checkpoint::{load_state, save_state};
+use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
@@ -148,7 +148,11 @@ pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)
 /// in-process arm's noise position when the checkpoint holds one. `cfg` and `demos` must be the
 /// run's own: the critic's settings and seed are checked against `cfg`, the state's horizon
 /// against the demonstrations.
-pub fn resume(cfg: GaifoConfig, demos: Demos, dir: &Path) -> anyhow::Result<(LqrGaifo, Option<u128>)> {
+pub fn resume(
+    cfg: GaifoConfig,
+    demos: Demos,
+    dir: &Path,
+) -> anyhow::Result<(LqrGaifo, Option<u128>)> {
     let (iteration, state_path, critic_path) = latest_checkpoint(dir)?;
     let snap = load_state(&state_path)?;
     let at = snap

@@ -1,35 +1,17 @@
 //! `learner experiment` on tiny configurations: the outputs are produced and well formed,
 //! LQR+GAIfO learns, and the results do not depend on the number of worker threads.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
-use learner::experiment::{csv_header, run, ExperimentConfig, ExperimentName};
+use common::rows_without_times;
+use learner::experiment::{run, ExperimentConfig, ExperimentName};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("learner-exp-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     d
-}
-
-/// CSV rows without the wall-clock columns (t_*_s, cpu_learner_s), which differ run to run.
-fn rows_without_times(path: &Path) -> Vec<String> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    assert_eq!(header.join(","), csv_header());
-    let keep: Vec<usize> = header
-        .iter()
-        .enumerate()
-        .filter(|(_, h)| !(h.starts_with("t_") || h.starts_with("cpu_")))
-        .map(|(i, _)| i)
-        .collect();
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            assert_eq!(f.len(), header.len(), "row {l}");
-            keep.iter().map(|&i| f[i]).collect::<Vec<_>>().join(",")
-        })
-        .collect()
 }
 
 fn assert_png(path: &Path) {

@@ -364,7 +364,11 @@ mod resume {
         let e = msg(train_resumed(&cfg(4), demos.clone(), &empty, |_| {}).unwrap_err());
         assert!(e.contains("no checkpoint"), "{e}");
         std::fs::copy(ckpt(&split, 0, "table.npz"), ckpt(&empty, 0, "table.npz")).unwrap();
-        std::fs::copy(ckpt(&split, 0, "critic.json"), ckpt(&empty, 0, "critic.json")).unwrap();
+        std::fs::copy(
+            ckpt(&split, 0, "critic.json"),
+            ckpt(&empty, 0, "critic.json"),
+        )
+        .unwrap();
         let e = msg(train_resumed(&cfg(4), demos.clone(), &empty, |_| {}).unwrap_err());
         assert!(e.contains("before exact resume"), "{e}");
         let e =
@@ -376,7 +380,12 @@ mod resume {
         // The same demonstrations one step longer (the last step repeated).
         let longer = |v: &[f64], w: usize| -> Vec<f64> {
             v.chunks(demos.horizon * w)
-                .flat_map(|d| d.iter().chain(&d[d.len() - w..]).copied().collect::<Vec<_>>())
+                .flat_map(|d| {
+                    d.iter()
+                        .chain(&d[d.len() - w..])
+                        .copied()
+                        .collect::<Vec<_>>()
+                })
                 .collect()
         };
         let longer = imitation::demos::Demos {
@@ -386,7 +395,10 @@ mod resume {
             ..demos.clone()
         };
         let e = msg(train_resumed(&cfg(6), longer, &split, |_| {}).unwrap_err());
-        assert!(e.contains("iter_002_state.npz") && e.contains("policy.K"), "{e}");
+        assert!(
+            e.contains("iter_002_state.npz") && e.contains("policy.K"),
+            "{e}"
+        );
         std::fs::write(ckpt(&split, 2, "critic.json"), "{\"format\": ").unwrap();
         let e = msg(train_resumed(&cfg(6), demos.clone(), &split, |_| {}).unwrap_err());
         assert!(

@@ -2,8 +2,12 @@
 //! S-step, the policy file, a tiny seeded MDGPS run, the evaluation goals and the command
 //! line's errors. All fast (seconds).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+use common::learner;
 
 use imitation::controller::init_hold;
 use imitation::demos::Demos;
@@ -337,17 +341,6 @@ fn evaluation_goals_are_seeded_and_where_they_should_be() {
     }
     let again = eval_goals(c, 0.1, 8, 4, 0.03, 14);
     assert!(g.iter().zip(&again).all(|(a, b)| a.goal == b.goal));
-}
-
-fn learner(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_learner"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 #[test]

@@ -1,6 +1,8 @@
 //! The run directory has one owner (issue 15, items 1, 10, 14; docs/design.md §4.4): the
 //! reproductions of the hostile-user report, through the `learner` binary.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -16,15 +18,8 @@ fn scratch(tag: &str) -> PathBuf {
 /// Demonstrations of a short task (T = 20) from a 3-iteration expert, saved to `path`.
 fn demos(path: &Path, seed: u64) {
     let cfg = ExpertConfig {
-        task: ur5_shared::config::TaskConfig {
-            horizon: 20,
-            ..Default::default()
-        },
-        iterations: 3,
-        random_episodes: 2,
-        demos: 2,
         seed,
-        ..ExpertConfig::default()
+        ..common::short_expert(20, 3)
     };
     let run = learner::run::expert(&cfg, |_| {}).unwrap();
     let d = learner::run::demos(&cfg, &run).unwrap();

@@ -32,7 +32,10 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 /// Renames the complete, synced file `tmp` to `path` and syncs their folder.
 pub fn commit(tmp: &Path, path: &Path) -> std::io::Result<()> {
     std::fs::rename(tmp, path).map_err(|e| {
-        std::io::Error::new(e.kind(), format!("renaming {} to {}: {e}", tmp.display(), path.display()))
+        std::io::Error::new(
+            e.kind(),
+            format!("renaming {} to {}: {e}", tmp.display(), path.display()),
+        )
     })?;
     sync_parent(path)
 }

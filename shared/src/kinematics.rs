@@ -78,6 +78,21 @@ impl Ur5Kinematics {
         [p.x, p.y, p.z]
     }
 
+    /// The points of the chain (m, base frame) at joint angles `q` (rad), for drawing the arm:
+    /// the base, the origin of each joint's frame (shoulder pan to wrist 3) and the
+    /// end-effector point, in that order.
+    pub fn chain_points(&self, q: &Joints6) -> [[f64; 3]; 8] {
+        let f = self.frames(q);
+        let p = f[5] * Point3::from(self.ee_offset);
+        let mut out = [[0.0; 3]; 8];
+        for (o, fj) in out[1..7].iter_mut().zip(&f) {
+            let t = fj.translation.vector;
+            *o = [t.x, t.y, t.z];
+        }
+        out[7] = [p.x, p.y, p.z];
+        out
+    }
+
     /// The end-effector point (m) and its linear velocity (m/s), base frame, at joint angles
     /// `q` (rad) and velocities `qd` (rad/s): v = Σ_j q̇_j z_j × (p − o_j).
     pub fn ee_point_velocity(&self, q: &Joints6, qd: &Joints6) -> ([f64; 3], [f64; 3]) {
@@ -103,6 +118,20 @@ impl Ur5Kinematics {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_chain_starts_at_the_base_and_ends_at_the_end_effector() {
+        let k = Ur5Kinematics::ur5([0.01, -0.02, 0.03]);
+        let q = [0.3, -1.9, 2.2, -1.4, 1.6, 0.2];
+        let c = k.chain_points(&q);
+        assert_eq!(c[0], [0.0; 3]);
+        assert_eq!(
+            c[1],
+            [0.0, 0.0, 0.089159],
+            "shoulder pan origin: the URDF's"
+        );
+        assert_eq!(c[7], k.ee_point(&q));
+    }
 
     #[test]
     fn the_velocity_is_the_derivative_of_the_point() {

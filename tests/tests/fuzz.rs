@@ -75,7 +75,11 @@ fn apply(seed: &[u8], edits: &[Edit]) -> Vec<u8> {
                 let end = (i + 8).min(v.len());
                 let n = end - i;
                 // Little-endian (npy, zip) for even positions, big-endian (UR) for odd ones.
-                let bytes = if i % 2 == 0 { w.to_le_bytes() } else { w.to_be_bytes() };
+                let bytes = if i % 2 == 0 {
+                    w.to_le_bytes()
+                } else {
+                    w.to_be_bytes()
+                };
                 v[i..end].copy_from_slice(&bytes[..n]);
             }
             Edit::Cut(a) => v.truncate(at(a, v.len())),
@@ -162,8 +166,14 @@ fn seeds() -> &'static Seeds {
         let run = learner::run::expert(&ecfg, |_| {}).unwrap();
         let demos = learner::run::demos(&ecfg, &run).unwrap();
         learner::io::demos::save(&demos, &dir.join("demos.npz")).unwrap();
-        learner::io::checkpoint::save_checkpoint(&dir.join("checkpoint.npz"), &run.policy, 3, Some(2.0), 1)
-            .unwrap();
+        learner::io::checkpoint::save_checkpoint(
+            &dir.join("checkpoint.npz"),
+            &run.policy,
+            3,
+            Some(2.0),
+            1,
+        )
+        .unwrap();
         let cfg = imitation::gaifo::GaifoConfig {
             iterations: 1,
             ..Default::default()
@@ -246,9 +256,14 @@ fn fuzz_learner_state_npz() {
         seed_file("run/iter_001_state.npz"),
         via_file("state.npz", |p| {
             let snap = learner::io::checkpoint::load_state(p).map_err(|e| e.to_string())?;
-            imitation::gaifo::LqrGaifo::from_snapshot(cfg.clone(), s.demos.clone(), &snap, disc.clone())
-                .map(|_| ())
-                .map_err(|e| e.to_string())
+            imitation::gaifo::LqrGaifo::from_snapshot(
+                cfg.clone(),
+                s.demos.clone(),
+                &snap,
+                disc.clone(),
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string())
         }),
     );
 }
@@ -258,7 +273,9 @@ fn fuzz_critic_json() {
     fuzz(
         "critic.json",
         seed_file("run/iter_001_critic.json"),
-        via_file("critic.json", |p| imitation::discriminator::Discriminator::load(p, 24)),
+        via_file("critic.json", |p| {
+            imitation::discriminator::Discriminator::load(p, 24)
+        }),
     );
 }
 
@@ -337,11 +354,9 @@ fn bytes_of<T>(v: &T) -> Vec<u8> {
 fn fuzz_wire_gain_table() {
     let bounds = ur5_shared::GainBounds::default();
     let bytes_seed = {
-        let (t, _) = learner::io::table::load_table(
-            &seeds().dir.join("run/iter_001_table.npz"),
-            &bounds,
-        )
-        .unwrap();
+        let (t, _) =
+            learner::io::table::load_table(&seeds().dir.join("run/iter_001_table.npz"), &bounds)
+                .unwrap();
         bytes_of(&*t)
     };
     let mut table = ur5_shared::GainTable::new_boxed();
@@ -349,7 +364,9 @@ fn fuzz_wire_gain_table() {
     fuzz("wire GainTable", bytes_seed, |bytes| {
         let mut t = table.borrow_mut();
         let dst = &mut ***t as *mut ur5_shared::GainTable as *mut u8;
-        let n = bytes.len().min(std::mem::size_of::<ur5_shared::GainTable>());
+        let n = bytes
+            .len()
+            .min(std::mem::size_of::<ur5_shared::GainTable>());
         // SAFETY: GainTable is repr(C) of u64/u32/f64 only (see `pod`).
         unsafe {
             std::ptr::write_bytes(dst, 0, std::mem::size_of::<ur5_shared::GainTable>());
@@ -409,7 +426,9 @@ fn fuzz_ipc_payloads() {
     let state = ArmState::default();
     fuzz("ArmState", bytes_of(&state), |bytes| {
         let s: ArmState = pod(bytes);
-        s.state_vector(&[0.4, 0.1, 0.4]).iter().all(|v| v.is_finite())
+        s.state_vector(&[0.4, 0.1, 0.4])
+            .iter()
+            .all(|v| v.is_finite())
     });
 }
 

@@ -489,11 +489,11 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
             let (mut tables, mut iterations) = (Vec::new(), Vec::new());
             for _ in 0..ITERATIONS {
                 tables.push(to_gain_table(run.policy(), run.version()));
-                run.checkpoint(&ref_out).unwrap();
+                run.checkpoint(&ref_out, None).unwrap();
                 iterations.push(iterate(&mut run, &arm).unwrap());
             }
             tables.push(to_gain_table(run.policy(), run.version()));
-            run.checkpoint(&ref_out).unwrap();
+            run.checkpoint(&ref_out, None).unwrap();
             (tables, iterations)
         })
     };

@@ -39,7 +39,12 @@ fn outcome(case: &Case, dir: &Path) -> (Option<i32>, String) {
     let causes: Vec<String> = lines
         .map(str::trim)
         .filter(|l| !l.is_empty() && *l != "Caused by:" && !l.starts_with("Usage:"))
-        .map(|l| l.split_once(": ").filter(|(n, _)| n.parse::<u32>().is_ok()).map_or(l, |(_, m)| m).to_owned())
+        .map(|l| {
+            l.split_once(": ")
+                .filter(|(n, _)| n.parse::<u32>().is_ok())
+                .map_or(l, |(_, m)| m)
+                .to_owned()
+        })
         .collect();
     let line = match first {
         Some(f) if causes.is_empty() => f,
@@ -48,7 +53,10 @@ fn outcome(case: &Case, dir: &Path) -> (Option<i32>, String) {
     };
     // The run manifest's creation time changes from run to run.
     let line = match line.split_once("Unix time ") {
-        Some((a, b)) => format!("{a}Unix time <t>{}", b.trim_start_matches(|c: char| c.is_ascii_digit())),
+        Some((a, b)) => format!(
+            "{a}Unix time <t>{}",
+            b.trim_start_matches(|c: char| c.is_ascii_digit())
+        ),
         None => line,
     };
     let mut line = line.replace('|', "\\|");
@@ -92,11 +100,23 @@ fn setup(dir: &Path) {
     };
     learner::io::demos::save(&other, &dir.join("other.npz")).unwrap();
     let st = Command::new(bin("learner"))
-        .args(s(&["train", "--demos", "demos.npz", "--iterations", "1", "--out", "run"]))
+        .args(s(&[
+            "train",
+            "--demos",
+            "demos.npz",
+            "--iterations",
+            "1",
+            "--out",
+            "run",
+        ]))
         .current_dir(dir)
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     for r in ["norun", "critic1e300"] {
         let d = dir.join(r);
         std::fs::create_dir_all(&d).unwrap();
@@ -152,11 +172,19 @@ fn cases(dir: &Path) -> Vec<Case> {
         class,
         what,
         bin: "hil-sim",
-        args: [&["inspect"][..], if extra.contains(&"--q") { &[] } else { &["--q", "0,-1,1"][..] }, extra]
-            .concat()
-            .into_iter()
-            .map(str::to_owned)
-            .collect(),
+        args: [
+            &["inspect"][..],
+            if extra.contains(&"--q") {
+                &[]
+            } else {
+                &["--q", "0,-1,1"][..]
+            },
+            extra,
+        ]
+        .concat()
+        .into_iter()
+        .map(str::to_owned)
+        .collect(),
     };
     let nested = format!(
         "<robot name=\"deep\">{}{}</robot>",
@@ -164,34 +192,127 @@ fn cases(dir: &Path) -> Vec<Case> {
         "</link>".repeat(200_000)
     );
     vec![
-        train("`--out` holding another run (seed 5)", "1", &["--out", "run", "--seed", "5", "--iterations", "2"]),
-        config("`samples = 1000000000`", "4", "samples.toml", "samples = 1000000000\n"),
+        train(
+            "`--out` holding another run (seed 5)",
+            "1",
+            &["--out", "run", "--seed", "5", "--iterations", "2"],
+        ),
+        config(
+            "`samples = 1000000000`",
+            "4",
+            "samples.toml",
+            "samples = 1000000000\n",
+        ),
         inspect(
             "URDF with a duplicated link name",
             "4",
-            &["--urdf", &urdf_with(dir, "dup.urdf", |t| t.replacen("name=\"forearm_link\"", "name=\"upper_arm_link\"", 1))],
+            &[
+                "--urdf",
+                &urdf_with(dir, "dup.urdf", |t| {
+                    t.replacen("name=\"forearm_link\"", "name=\"upper_arm_link\"", 1)
+                }),
+            ],
         ),
-        train("`--iterations 1000000000000`", "5", &["--iterations", "1000000000000"]),
-        config("`[discriminator] hidden = [1000000000]`", "5", "hidden.toml", "[discriminator]\nhidden = [1000000000]\n"),
-        inspect("URDF nested 200k elements deep", "5", &["--urdf", &write(dir, "deep.urdf", &nested)]),
-        config("unknown key in `[discriminator]`", "6", "unknown.toml", "[discriminator]\nbogus = 1\n"),
-        config("unknown key in `[discriminator.adam]`", "6", "unknown2.toml", "[discriminator.adam]\nbogus = 1\n"),
-        config("`critic_updates = 1000000000`", "7", "updates.toml", "critic_updates = 1000000000\n"),
-        config("`batch_size = 1000000000`", "7", "batch.toml", "[discriminator]\nbatch_size = 1000000000\n"),
-        config("`kl_step = -1`", "8", "kl.toml", "[algorithm]\nkl_step = -1.0\n"),
-        config("`kl_step = nan`", "8", "klnan.toml", "[algorithm]\nkl_step = nan\n"),
-        config("`init_var = 1e300`", "8", "initvar.toml", "init_var = 1e300\n"),
-        config("`max_eta < min_eta`", "8", "eta.toml", "[traj_opt]\nmax_eta = 1e-9\n"),
-        config("`max_clusters = 0`", "8", "clusters.toml", "[prior]\nmax_clusters = 0\n"),
-        config("`regularization = -1`", "8", "reg.toml", "[fit]\nregularization = -1.0\n"),
-        train("critic checkpoint with every parameter 1e300", "9", &["--resume", "critic1e300", "--iterations", "3"]),
+        train(
+            "`--iterations 1000000000000`",
+            "5",
+            &["--iterations", "1000000000000"],
+        ),
+        config(
+            "`[discriminator] hidden = [1000000000]`",
+            "5",
+            "hidden.toml",
+            "[discriminator]\nhidden = [1000000000]\n",
+        ),
+        inspect(
+            "URDF nested 200k elements deep",
+            "5",
+            &["--urdf", &write(dir, "deep.urdf", &nested)],
+        ),
+        config(
+            "unknown key in `[discriminator]`",
+            "6",
+            "unknown.toml",
+            "[discriminator]\nbogus = 1\n",
+        ),
+        config(
+            "unknown key in `[discriminator.adam]`",
+            "6",
+            "unknown2.toml",
+            "[discriminator.adam]\nbogus = 1\n",
+        ),
+        config(
+            "`critic_updates = 1000000000`",
+            "7",
+            "updates.toml",
+            "critic_updates = 1000000000\n",
+        ),
+        config(
+            "`batch_size = 1000000000`",
+            "7",
+            "batch.toml",
+            "[discriminator]\nbatch_size = 1000000000\n",
+        ),
+        config(
+            "`kl_step = -1`",
+            "8",
+            "kl.toml",
+            "[algorithm]\nkl_step = -1.0\n",
+        ),
+        config(
+            "`kl_step = nan`",
+            "8",
+            "klnan.toml",
+            "[algorithm]\nkl_step = nan\n",
+        ),
+        config(
+            "`init_var = 1e300`",
+            "8",
+            "initvar.toml",
+            "init_var = 1e300\n",
+        ),
+        config(
+            "`max_eta < min_eta`",
+            "8",
+            "eta.toml",
+            "[traj_opt]\nmax_eta = 1e-9\n",
+        ),
+        config(
+            "`max_clusters = 0`",
+            "8",
+            "clusters.toml",
+            "[prior]\nmax_clusters = 0\n",
+        ),
+        config(
+            "`regularization = -1`",
+            "8",
+            "reg.toml",
+            "[fit]\nregularization = -1.0\n",
+        ),
+        train(
+            "critic checkpoint with every parameter 1e300",
+            "9",
+            &["--resume", "critic1e300", "--iterations", "3"],
+        ),
         Case {
             class: "10",
             what: "`--resume` with other demonstrations of the same T",
             bin: "learner",
-            args: s(&["train", "--demos", "other.npz", "--resume", "run", "--iterations", "3"]),
+            args: s(&[
+                "train",
+                "--demos",
+                "other.npz",
+                "--resume",
+                "run",
+                "--iterations",
+                "3",
+            ]),
         },
-        train("`--resume` with another seed", "10", &["--resume", "run", "--seed", "7", "--iterations", "3"]),
+        train(
+            "`--resume` with another seed",
+            "10",
+            &["--resume", "run", "--seed", "7", "--iterations", "3"],
+        ),
         Case {
             class: "11",
             what: "demonstrations × 1e6",
@@ -201,22 +322,44 @@ fn cases(dir: &Path) -> Vec<Case> {
         inspect(
             "URDF with a NaN joint origin",
             "12",
-            &["--urdf", &urdf_with(dir, "nan.urdf", |t| t.replacen("xyz=\"0 0 0.089159\"", "xyz=\"0 0 nan\"", 1))],
+            &[
+                "--urdf",
+                &urdf_with(dir, "nan.urdf", |t| {
+                    t.replacen("xyz=\"0 0 0.089159\"", "xyz=\"0 0 nan\"", 1)
+                }),
+            ],
         ),
         inspect("`--tau 1e300`", "12", &["--tau", "1e300,0,0"]),
         inspect(
             "URDF with a zero joint axis",
             "12",
-            &["--urdf", &urdf_with(dir, "axis.urdf", |t| t.replacen("axis xyz=\"0 0 1\"", "axis xyz=\"0 0 0\"", 1))],
+            &[
+                "--urdf",
+                &urdf_with(dir, "axis.urdf", |t| {
+                    t.replacen("axis xyz=\"0 0 1\"", "axis xyz=\"0 0 0\"", 1)
+                }),
+            ],
         ),
         inspect("`--q` beyond the joint limits", "12", &["--q", "0,-100,1"]),
-        train("`--out` that cannot be made", "13", &["--out", "demos.npz/sub"]),
-        train("`--resume` of a folder without `gaifo_log.csv`", "14", &["--resume", "norun", "--iterations", "3"]),
+        train(
+            "`--out` that cannot be made",
+            "13",
+            &["--out", "demos.npz/sub"],
+        ),
+        train(
+            "`--resume` of a folder without `gaifo_log.csv`",
+            "14",
+            &["--resume", "norun", "--iterations", "3"],
+        ),
         Case {
             class: "3",
             what: "controller config `[bounds] max_abs_k_mat = nan`",
             bin: "rt-controller",
-            args: s(&["run", "--config", &write(dir, "bounds.toml", "[bounds]\nmax_abs_k_mat = nan\n")]),
+            args: s(&[
+                "run",
+                "--config",
+                &write(dir, "bounds.toml", "[bounds]\nmax_abs_k_mat = nan\n"),
+            ]),
         },
     ]
 }
@@ -233,7 +376,10 @@ fn render(rows: &[(Case, (Option<i32>, String))]) -> String {
         } else {
             cmd
         };
-        t.push_str(&format!("| {} | {} | {} | {} | {} |\n", c.class, c.what, cmd, exit, msg));
+        t.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            c.class, c.what, cmd, exit, msg
+        ));
     }
     t
 }

@@ -69,7 +69,11 @@ fn a_learner_killed_at_random_moments_resumes_bit_for_bit() {
 
     let full = root.join("full");
     let t0 = Instant::now();
-    let mut p = train(&root, "full", &[&base[..], &["--out", full.to_str().unwrap()]].concat());
+    let mut p = train(
+        &root,
+        "full",
+        &[&base[..], &["--out", full.to_str().unwrap()]].concat(),
+    );
     let (code, _) = p.wait(Duration::from_secs(300));
     assert_eq!(code, Some(0), "{}", p.log());
     let whole = t0.elapsed();

@@ -187,7 +187,11 @@ impl Snapshot {
         let x0sigma: Vec<f64> = (0..s.nrows())
             .flat_map(|i| (0..s.ncols()).map(move |j| s[(i, j)]))
             .collect();
-        self.put(&format!("{prefix}.x0sigma"), &[s.nrows(), s.ncols()], &x0sigma);
+        self.put(
+            &format!("{prefix}.x0sigma"),
+            &[s.nrows(), s.ncols()],
+            &x0sigma,
+        );
         self.put(&format!("{prefix}.cc"), &[info.cc.len()], &info.cc);
         self.put_seq(&format!("{prefix}.cv"), &info.cv);
         self.put_seq(&format!("{prefix}.cm"), &info.cm);
@@ -206,7 +210,8 @@ impl Snapshot {
         let s = self.real(&format!("{prefix}.x0sigma"), &[r, c])?;
         info.x0sigma = faer::Mat::from_fn(r, c, |i, j| s[i * c + j]);
         let t = info.cc.len();
-        info.cc.copy_from_slice(self.real(&format!("{prefix}.cc"), &[t])?);
+        info.cc
+            .copy_from_slice(self.real(&format!("{prefix}.cc"), &[t])?);
         self.fill_seq(&format!("{prefix}.cv"), &mut info.cv)?;
         self.fill_seq(&format!("{prefix}.cm"), &mut info.cm)
     }
@@ -366,8 +371,13 @@ mod tests {
     #[test]
     fn a_restored_learner_continues_bit_for_bit() {
         let mut data = ChaCha8Rng::seed_from_u64(1);
-        let mut draw = |n: usize| (0..n).map(|_| data.random_range(-1.0..1.0)).collect::<Vec<f64>>();
-        let batches: Vec<(Vec<f64>, Vec<f64>)> = (0..3).map(|_| (draw(3 * 6 * 2), draw(3 * 6))).collect();
+        let mut draw = |n: usize| {
+            (0..n)
+                .map(|_| data.random_range(-1.0..1.0))
+                .collect::<Vec<f64>>()
+        };
+        let batches: Vec<(Vec<f64>, Vec<f64>)> =
+            (0..3).map(|_| (draw(3 * 6 * 2), draw(3 * 6))).collect();
         let mut a = learner(9);
         for (x, u) in &batches[..2] {
             a.update_dynamics(x, u, 3).unwrap();
@@ -387,7 +397,10 @@ mod tests {
         let bits = |l: &Learner| -> Vec<u64> {
             let mut s = Snapshot::default();
             l.snapshot(&mut s);
-            s.reals.values().flat_map(|(_, v)| v.iter().map(|x| x.to_bits())).collect()
+            s.reals
+                .values()
+                .flat_map(|(_, v)| v.iter().map(|x| x.to_bits()))
+                .collect()
         };
         assert_eq!(bits(&a), bits(&b));
 

@@ -407,6 +407,20 @@ impl ExpertLearner {
     }
 }
 
+/// The mean task cost of the random (initial) controller of `cfg` on its task over
+/// `cfg.random_episodes` noisy episodes on arms from `arms`: the C_random of normalised performance
+/// (docs/design.md §1.6).
+pub fn random_policy_cost(cfg: &ExpertConfig, arms: &dyn Arms) -> Result<f64, ImitationError> {
+    let task = &cfg.task;
+    mean_noisy_cost(
+        arms,
+        task,
+        &init_hold(task, cfg.init_var),
+        cfg.random_episodes,
+        cfg.seed ^ SEED_RANDOM,
+    )
+}
+
 /// Trains the expert in process on arms from `arms` (lockstep, no IPC): the random policy's cost, then
 /// [`crate::learn::iterate`] until [`ExpertLearner::done`]. `progress` receives each
 /// iteration's log (`seconds`: episodes and update) as soon as it is done.
@@ -416,14 +430,7 @@ pub fn train(
     mut progress: impl FnMut(&IterationLog),
 ) -> Result<ExpertRun, ImitationError> {
     cfg.validate()?;
-    let task = &cfg.task;
-    let cost_random = mean_noisy_cost(
-        arms,
-        task,
-        &init_hold(task, cfg.init_var),
-        cfg.random_episodes,
-        cfg.seed ^ SEED_RANDOM,
-    )?;
+    let cost_random = random_policy_cost(cfg, arms)?;
     let mut el = ExpertLearner::new(cfg.clone(), Some(cost_random));
     let mut log = Vec::new();
     while !el.done() {

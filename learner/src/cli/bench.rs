@@ -207,8 +207,7 @@ pub fn run_gaifo(args: BenchGaifoArgs) -> anyhow::Result<()> {
     cfg.iterations = args.iterations.max(1);
     cfg.seed = args.common.seed.unwrap_or(0);
     let demos = match &args.demos {
-        Some(p) => crate::io::demos::load(p)
-            .with_context(|| format!("loading demonstrations {}", p.display()))?,
+        Some(p) => crate::io::demos::load_checked(p, &cfg.sim)?,
         None => {
             eprintln!("no --demos: training the default expert first");
             let ecfg = imitation::expert::ExpertConfig::default();

@@ -3,14 +3,24 @@
 use std::path::PathBuf;
 
 use super::CommonArgs;
-use crate::experiment::{ipc, multi_goal, run, ExperimentConfig, ExperimentName};
+use crate::experiment::shard::{self, Shard};
+use crate::experiment::{ipc, multi_goal, run_sharded, ExperimentConfig, ExperimentName};
 
 /// Arguments of `learner experiment`.
 #[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct ExperimentArgs {
+    /// `merge`: join shards.
+    #[command(subcommand)]
+    pub cmd: Option<ExperimentCmd>,
     /// Which experiment.
-    #[arg(value_enum)]
-    pub name: ExperimentName,
+    #[arg(value_enum, required = true)]
+    pub name: Option<ExperimentName>,
+    /// Run only the K-th (1-based) of N disjoint parts of the experiment's jobs (variant ×
+    /// seed: jobs K, K + N, K + 2N, … of its list), noting them in OUT/shard.json; join the
+    /// parts' folders with `learner experiment merge`. Not for sim-vs-physical and multi-goal.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
     /// Seeds per variant; overrides the config.
     #[arg(long)]
     pub seeds: Option<usize>,
@@ -36,9 +46,34 @@ pub struct ExperimentArgs {
     pub common: CommonArgs,
 }
 
+/// `learner experiment merge`.
+#[derive(clap::Subcommand, Debug)]
+pub enum ExperimentCmd {
+    /// Join the output folders of the shards of one experiment (`--shard K/N`, every K once)
+    /// into --out: the CSV, plot and summary of the unsharded run.
+    Merge(MergeArgs),
+}
+
+/// Arguments of `learner experiment merge`.
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// The shards' output folders.
+    #[arg(required = true)]
+    pub dirs: Vec<PathBuf>,
+    /// Output folder of the joined experiment.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print a one-line JSON summary at the end (stdout).
+    #[arg(long)]
+    pub json: bool,
+}
+
 /// The experiment's settings from its defaults, the config file and the command line.
 pub fn config_from_args(args: &ExperimentArgs) -> anyhow::Result<ExperimentConfig> {
-    let base = ExperimentConfig::defaults(args.name);
+    let name = args
+        .name
+        .expect("clap requires a name without a subcommand");
+    let base = ExperimentConfig::defaults(name);
     let mut cfg = match &args.common.config {
         Some(p) => ur5_shared::config::from_toml_file_over(p, base)?,
         None => base,
@@ -60,25 +95,57 @@ pub fn config_from_args(args: &ExperimentArgs) -> anyhow::Result<ExperimentConfi
 
 /// Runs `learner experiment`.
 pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
+    if let Some(ExperimentCmd::Merge(m)) = &args.cmd {
+        let (runs, rows) = shard::merge(&m.dirs, &m.out)?;
+        eprint!("{}", crate::experiment::summary_text(&rows));
+        eprintln!(
+            "{} runs from {} shards -> {}",
+            runs.len(),
+            m.dirs.len(),
+            m.out.display()
+        );
+        if m.json {
+            println!(
+                "{}",
+                serde_json::json!({"command": "experiment merge", "out": m.out, "summary": rows})
+            );
+        }
+        return Ok(());
+    }
     let cfg = config_from_args(&args)?;
+    let name = args
+        .name
+        .expect("clap requires a name without a subcommand");
     let out = args
         .common
         .out
         .clone()
-        .unwrap_or_else(|| PathBuf::from("runs/experiments").join(args.name.as_str()));
-    let rows = match args.name {
+        .unwrap_or_else(|| PathBuf::from("runs/experiments").join(name.as_str()));
+    anyhow::ensure!(
+        args.shard.is_none()
+            || !matches!(
+                name,
+                ExperimentName::SimVsPhysical | ExperimentName::MultiGoal
+            ),
+        "--shard splits the in-process experiments (comparison, generalisation, stability, \
+         ablation), not {}",
+        name.as_str()
+    );
+    let rows = match name {
         ExperimentName::SimVsPhysical => {
             serde_json::to_value(ipc::run(&cfg, &out, args.demos.as_deref())?.1)?
         }
         ExperimentName::MultiGoal => {
             serde_json::to_value(multi_goal::run(&cfg, &out, args.demos.as_deref())?)?
         }
-        name => serde_json::to_value(run(name, &cfg, &out, args.demos.as_deref())?.1)?,
+        name => serde_json::to_value(
+            run_sharded(name, &cfg, &out, args.demos.as_deref(), args.shard)?.1,
+        )?,
     };
     if args.common.json {
         println!(
             "{}",
-            serde_json::json!({"command": "experiment", "name": args.name.as_str(), "out": out, "summary": rows})
+            serde_json::json!({"command": "experiment", "name": name.as_str(), "out": out, "summary": rows})
         );
     }
     Ok(())

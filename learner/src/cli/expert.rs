@@ -10,7 +10,7 @@ use ur5_shared::config::parse_triple;
 use imitation::expert::{square_goals, ExpertConfig, IterationLog};
 
 use super::CommonArgs;
-use crate::run::train_and_record;
+use crate::run::{train_and_record, ExpertSummary};
 
 /// Arguments of `learner expert`.
 #[derive(Args, Debug)]
@@ -35,12 +35,29 @@ pub struct ExpertArgs {
     pub common: CommonArgs,
 }
 
-fn print_header() {
+/// The header of the per-iteration progress lines.
+pub(super) fn print_header() {
     eprintln!("{}", IterationLog::PROGRESS_HEADER);
 }
 
-fn print_line(l: &IterationLog) {
+/// One iteration's progress line.
+pub(super) fn print_line(l: &IterationLog) {
     eprintln!("{}", l.progress_line());
+}
+
+/// The expert's closing line: its best cost, final distance and the `demos` recorded.
+pub(super) fn print_done(s: &ExpertSummary, demos: usize) {
+    eprintln!(
+        "done: best eval cost {:.4} ({:.1} % of the random policy's {:.4}), final distance {:.4} m; \
+         {} demos (mean cost {:.4}) in {}",
+        s.eval_cost,
+        100.0 * s.cost_ratio,
+        s.cost_random,
+        s.final_distance,
+        demos,
+        s.cost_demos,
+        s.demos.display()
+    );
 }
 
 /// Runs `learner expert`.
@@ -96,17 +113,7 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
         print_header();
         let s = train_and_record(c, out, print_line)
             .with_context(|| format!("expert for goal {:?}", c.task.goal))?;
-        eprintln!(
-            "done: best eval cost {:.4} ({:.1} % of the random policy's {:.4}), final distance {:.4} m; \
-             {} demos (mean cost {:.4}) in {}",
-            s.eval_cost,
-            100.0 * s.cost_ratio,
-            s.cost_random,
-            s.final_distance,
-            c.demos,
-            s.cost_demos,
-            s.demos.display()
-        );
+        print_done(&s, c.demos);
         summaries.push(s);
     }
     if args.common.json {

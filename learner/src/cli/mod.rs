@@ -5,8 +5,10 @@ use std::path::PathBuf;
 use clap::{Parser, Subcommand};
 
 pub mod bench;
+pub mod dataset;
 pub mod experiment;
 pub mod expert;
+pub mod plot;
 pub mod policy;
 pub mod serve;
 pub mod train;
@@ -83,6 +85,14 @@ pub enum Cmd {
     /// Time LQR+GAIfO iterations on real demonstrations; prints per-phase medians and the
     /// learner CPU time. --config: a `GaifoConfig`.
     BenchGaifo(bench::BenchGaifoArgs),
+    /// Demonstrations and recorded episodes out as LeRobot v3.0 datasets or CSV
+    /// (`dataset export --format lerobot IN OUT_DIR`); `dataset check` loads and checks
+    /// demonstrations in any format `--demos` takes.
+    #[command(subcommand)]
+    Dataset(dataset::DatasetCmd),
+    /// Pictures: `plot arm RUN_DIR` draws the arm reaching (filmstrip PNG and animated GIF).
+    #[command(subcommand)]
+    Plot(plot::PlotCmd),
     /// Run a saved MDGPS policy: `policy eval --policy FILE --goal x,y,z` in simulation,
     /// `policy serve --policy FILE` on the real-time controller.
     #[command(subcommand)]
@@ -100,5 +110,7 @@ pub fn main() -> anyhow::Result<()> {
         Cmd::BenchGaifo(args) => bench::run_gaifo(args),
         Cmd::Bench(args) => bench::run(args),
         Cmd::Policy(cmd) => policy::run(cmd),
+        Cmd::Dataset(cmd) => dataset::run(cmd),
+        Cmd::Plot(cmd) => plot::run(cmd),
     }
 }

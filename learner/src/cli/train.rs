@@ -1,7 +1,8 @@
 //! `learner train`: imitation from state-only demonstrations.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use anyhow::Context;
 use clap::{Args, ValueEnum};
 
 use imitation::demos::Demos;
@@ -25,9 +26,13 @@ pub enum Algo {
 /// Arguments of `learner train`.
 #[derive(Args, Debug)]
 pub struct TrainArgs {
-    /// Demonstrations (.npz from `learner expert`): state trajectories only are used.
+    /// Demonstrations: a `.npz` from `learner expert`, a LeRobot v3.0 dataset folder or a CSV
+    /// file (docs/design.md §4.2); state trajectories only are used. Without it the default
+    /// expert (`learner expert`'s settings on this run's arm and seed) is trained first and its
+    /// demonstrations are recorded into OUT/expert/ (about 15 s); with --resume DIR, DIR's own
+    /// DIR/expert/demos.npz.
     #[arg(long)]
-    pub demos: PathBuf,
+    pub demos: Option<PathBuf>,
     /// Algorithm.
     #[arg(long, value_enum, default_value = "lqr-gaifo")]
     pub algo: Algo,
@@ -97,6 +102,58 @@ impl TrainArgs {
     }
 }
 
+/// Where the default demonstrations of a run in `out` are recorded: `out/expert/demos.npz`.
+pub fn default_demos_path(out: &Path) -> PathBuf {
+    out.join("expert").join("demos.npz")
+}
+
+/// The demonstrations file of this run and whether the folder was already claimed. With
+/// `--demos`, that file; with `--resume DIR` alone, DIR's [`default_demos_path`]; else `out` is
+/// claimed for the run (`m`, recording no demonstrations yet, so that a folder holding another
+/// run is refused before the expert trains) and the default expert is trained and recorded into
+/// `out/expert/` ([`crate::run::train_and_record`], as `learner expert` does).
+fn demos_file(
+    args: &TrainArgs,
+    seed: u64,
+    sim: &ur5_shared::config::SimConfig,
+    m: &Manifest,
+) -> anyhow::Result<(PathBuf, bool)> {
+    let out = args.out_dir();
+    if let Some(p) = &args.demos {
+        return Ok((p.clone(), false));
+    }
+    if args.resume.is_some() {
+        let p = default_demos_path(&out);
+        anyhow::ensure!(
+            p.is_file(),
+            "--resume {} without --demos uses the run's own {}, which is not there: pass the \
+             run's --demos",
+            out.display(),
+            p.display()
+        );
+        return Ok((p, false));
+    }
+    manifest::claim(&out, m, Claim::New { force: args.force })?;
+    let ecfg = imitation::expert::ExpertConfig {
+        seed,
+        sim: sim.clone(),
+        ..Default::default()
+    };
+    let dir = out.join("expert");
+    eprintln!(
+        "no --demos: training the default expert for goal {:?} m (seed {seed}) and recording {} \
+         demonstrations -> {}",
+        ecfg.task.goal,
+        ecfg.demos,
+        dir.display()
+    );
+    super::expert::print_header();
+    let s = crate::run::train_and_record(&ecfg, &dir, super::expert::print_line)
+        .context("recording the default demonstrations")?;
+    super::expert::print_done(&s, ecfg.demos);
+    Ok((s.demos, true))
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.algo == Algo::GaifoPpo {
@@ -112,9 +169,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             pcfg.seed = s;
         }
         pcfg.validate()?;
-        let demos = crate::io::demos::load_checked(&args.demos, &pcfg.sim)?;
-        let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&args.demos), &pcfg)?;
-        manifest::claim(&args.out_dir(), &m, Claim::New { force: args.force })?;
+        let pre = Manifest::new("train", "gaifo-ppo", pcfg.seed, None, &pcfg)?;
+        let (path, claimed) = demos_file(&args, pcfg.seed, &pcfg.sim, &pre)?;
+        let demos = crate::io::demos::load_checked(&path, &pcfg.sim)?;
+        let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&path), &pcfg)?;
+        // Claimed already: the folder holds only its run.json, replaced now.
+        let force = args.force || claimed;
+        manifest::claim(&args.out_dir(), &m, Claim::New { force })?;
         return run_ppo(&args, demos, &pcfg);
     }
     let mut cfg: GaifoConfig = args.common.settings()?;
@@ -126,7 +187,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     // Every setting, before anything is printed or written (the run checks them again).
     cfg.validate()?;
-    let demos = crate::io::demos::load_checked(&args.demos, &cfg.sim)?;
     let out = args.out_dir();
     if let Some(dir) = &args.resume {
         anyhow::ensure!(
@@ -140,10 +200,16 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             dir.display()
         );
     }
-    let m = Manifest::new("train", "lqr-gaifo", cfg.seed, Some(&args.demos), &cfg)?;
+    let pre = Manifest::new("train", "lqr-gaifo", cfg.seed, None, &cfg)?;
+    let (path, claimed) = demos_file(&args, cfg.seed, &cfg.sim, &pre)?;
+    let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
+    let m = Manifest::new("train", "lqr-gaifo", cfg.seed, Some(&path), &cfg)?;
     let claim = match args.resume {
         Some(_) => Claim::Resume,
-        None => Claim::New { force: args.force },
+        // Claimed already: the folder holds only its run.json, replaced now.
+        None => Claim::New {
+            force: args.force || claimed,
+        },
     };
     manifest::claim(&out, &m, claim)?;
     eprintln!(
@@ -160,11 +226,18 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
     );
     eprintln!("{}", GaifoLog::PROGRESS_HEADER);
-    let print = |l: &GaifoLog| eprintln!("{}", l.progress_line());
+    let start = match &args.resume {
+        Some(dir) => crate::run::latest_checkpoint(dir).map_or(0, |(n, _, _)| n),
+        None => 0,
+    };
+    let bar =
+        crate::progress::Progress::new(cfg.iterations.saturating_sub(start) as u64, "iterations");
+    let print = |l: &GaifoLog| bar.done_one(&l.progress_line());
     let logs = match &args.resume {
         Some(dir) => train_resumed(&cfg, demos, dir, print)?,
         None => train(&cfg, demos, Some(&out), print)?,
     };
+    drop(bar);
     report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json);
     Ok(())
 }

@@ -43,6 +43,7 @@ use crate::run::{arm_for, run_iterations};
 
 pub mod ipc;
 pub mod multi_goal;
+pub mod shard;
 pub mod summary;
 
 pub use summary::{csv_header, summarise, summary_text, write_outputs, SummaryRow};
@@ -444,6 +445,7 @@ pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Ru
     let done = AtomicUsize::new(0);
     let t0 = Instant::now();
     let total = jobs.len();
+    let progress = crate::progress::Progress::new(total as u64, "runs");
     pool.install(|| {
         jobs.par_iter()
             .map(|job| {
@@ -452,7 +454,7 @@ pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Ru
                 })?;
                 let k = done.fetch_add(1, Ordering::Relaxed) + 1;
                 let last = run.logs.last().map(|l| l.performance).unwrap_or(f64::NAN);
-                eprintln!(
+                progress.done_one(&format!(
                     "[{k:>3}/{total}] {:<18} seed {:>3}: {} iterations, final normalised performance {:>6.3} ({:.0} s; {:.0} s elapsed)",
                     run.variant,
                     run.seed,
@@ -460,7 +462,7 @@ pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Ru
                     last,
                     run.wall_s,
                     t0.elapsed().as_secs_f64()
-                );
+                ));
                 Ok(run)
             })
             .collect()
@@ -641,6 +643,18 @@ pub fn run(
     out: &Path,
     demos: Option<&Path>,
 ) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+    run_sharded(name, cfg, out, demos, None)
+}
+
+/// [`run`], of only the jobs of `shard` when given ([`shard::select`]), noting them in
+/// `out/shard.json` for [`shard::merge`].
+pub fn run_sharded(
+    name: ExperimentName,
+    cfg: &ExperimentConfig,
+    out: &Path,
+    demos: Option<&Path>,
+    shard: Option<shard::Shard>,
+) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
     cfg.validate(name)?;
     let pool = pool(cfg.threads)?;
     eprintln!(
@@ -715,8 +729,13 @@ pub fn run(
             anyhow::bail!("multi-goal has its own outputs: learner::experiment::multi_goal::run")
         }
     };
+    let total = jobs.len();
+    let (indices, jobs) = shard::select(shard, jobs);
     let runs = run_jobs(&pool, &jobs)?;
     let rows = write_outputs(name.as_str(), &title, &runs, out)?;
+    if let Some(s) = shard {
+        shard::write_meta(out, name.as_str(), &title, s, total, &indices, &runs)?;
+    }
     eprint!("{}", summary_text(&rows));
     eprintln!(
         "experiment {} done in {:.0} s; {} and {} in {}",

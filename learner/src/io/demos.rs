@@ -119,12 +119,18 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
     Ok(demos)
 }
 
-/// Loads the demonstrations in `path` and checks them against the arm of `sim`
-/// ([`load`], [`check_against_arm`]), each error naming the file: what every run that imitates
-/// a file calls.
+/// Loads the demonstrations in `path` in any format `--demos` takes (`.npz`, LeRobot dataset
+/// folder or CSV: [`super::foreign::load_foreign`]; else [`load`]) and checks them against
+/// the arm of `sim` ([`check_against_arm`]), each error naming the file: what every run that
+/// imitates a file calls.
 pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<Demos> {
     use anyhow::Context;
-    let demos = load(path).with_context(|| format!("loading demonstrations {}", path.display()))?;
+    let demos = if super::foreign::is_foreign(path) {
+        super::foreign::load_foreign(path, sim)
+    } else {
+        load(path).map_err(anyhow::Error::from)
+    }
+    .with_context(|| format!("loading demonstrations {}", path.display()))?;
     check_against_arm(&demos, sim).with_context(|| format!("demonstrations {}", path.display()))?;
     Ok(demos)
 }

@@ -98,6 +98,21 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
     Ok((ep, origin))
 }
 
+/// The task an episode file ran (goal, start pose, control period, T).
+pub fn load_episode_task(path: &Path) -> Result<TaskConfig, NpzError> {
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let (shape, _) = f.f64("states")?;
+    let vec3 = |name: &str| -> Result<[f64; 3], NpzError> {
+        Ok(f.f64_shaped(name, &[3])?.try_into().expect("3"))
+    };
+    Ok(TaskConfig {
+        dt: f.f64_shaped("dt", &[])?[0],
+        horizon: shape.get(1).copied().unwrap_or(0) as usize,
+        start_q: vec3("start_q")?,
+        goal: vec3("goal")?,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

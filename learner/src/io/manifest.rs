@@ -71,10 +71,7 @@ impl Manifest {
         settings: &S,
     ) -> anyhow::Result<Self> {
         let (demos, demos_hash) = match demos {
-            Some(p) => {
-                let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
-                (p.display().to_string(), fnv1a64(&bytes))
-            }
+            Some(p) => (p.display().to_string(), fnv1a64(&content_bytes(p)?)),
             None => ("-".into(), "-".into()),
         };
         let mut v = serde_json::to_value(settings)?;
@@ -122,6 +119,38 @@ impl Manifest {
             self.command, self.algo, self.seed, self.demos, self.created_unix_s
         )
     }
+}
+
+/// The bytes that identify the demonstrations at `path`: a file's bytes; for a folder (a
+/// LeRobot dataset) every file below it in path order, each as its relative path, a zero
+/// byte, then its bytes.
+fn content_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
+    if !path.is_dir() {
+        return std::fs::read(path).with_context(|| format!("reading {}", path.display()));
+    }
+    let mut files = Vec::new();
+    let mut todo = vec![path.to_path_buf()];
+    while let Some(dir) = todo.pop() {
+        for e in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
+            let p = e
+                .with_context(|| format!("reading {}", dir.display()))?
+                .path();
+            if p.is_dir() {
+                todo.push(p);
+            } else {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    let mut bytes = Vec::new();
+    for f in files {
+        let rel = f.strip_prefix(path).unwrap_or(&f);
+        bytes.extend_from_slice(rel.to_string_lossy().as_bytes());
+        bytes.push(0);
+        bytes.extend(std::fs::read(&f).with_context(|| format!("reading {}", f.display()))?);
+    }
+    Ok(bytes)
 }
 
 /// Files and folders a run writes into its directory.
@@ -174,7 +203,6 @@ pub fn read(dir: &Path) -> anyhow::Result<Option<Manifest>> {
         Err(e) => Err(e).with_context(|| format!("reading {}", p.display())),
     }
 }
-
 
 /// Takes `dir` for the run `m` as `claim` says (module docs); creates `dir` if needed.
 pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {

@@ -1,9 +1,11 @@
-//! Files that leave the program (docs/design.md §4): `.npz` containers, demonstrations, gain tables, the
-//! MDGPS policy.
+//! Files that leave the program (docs/design.md §4): `.npz` containers, demonstrations (also
+//! as LeRobot datasets and CSV), gain tables, the MDGPS policy.
 
 pub mod checkpoint;
 pub mod demos;
 pub mod episode;
+pub mod foreign;
+pub mod lerobot;
 pub mod log;
 pub mod manifest;
 pub mod npz;

@@ -337,7 +337,10 @@ impl NpzFile {
     pub fn u64s(&self, name: &str) -> Result<(Vec<u64>, Vec<u64>), NpzError> {
         let dtype = self.dtype(name)?;
         if dtype != "u8" {
-            return Err(self.bad(name, format!("dtype {dtype}, expected little-endian uint64")));
+            return Err(self.bad(
+                name,
+                format!("dtype {dtype}, expected little-endian uint64"),
+            ));
         }
         let npy = self.npy(name)?;
         let shape = npy.shape().to_vec();

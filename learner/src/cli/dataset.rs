@@ -1,0 +1,125 @@
+//! `learner dataset`: demonstrations and recorded episodes out to the formats other tools read
+//! (LeRobot v3.0, CSV), and a check of demonstrations in any format `--demos` takes
+//! (docs/design.md §4.12).
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand, ValueEnum};
+
+use crate::io::foreign;
+use crate::io::lerobot::{self, Trajectories};
+
+/// Output formats of `learner dataset export`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    /// A LeRobot v3.0 dataset folder.
+    Lerobot,
+    /// One CSV file (`episode,time_s,<state names>`).
+    Csv,
+}
+
+/// `learner dataset …`.
+#[derive(Subcommand, Debug)]
+pub enum DatasetCmd {
+    /// Write demonstrations (`demos.npz`) or recorded episodes (one `.npz` of `learner serve`
+    /// or a folder of them, e.g. RUN/episodes) as a LeRobot v3.0 dataset folder or a CSV file.
+    Export(ExportArgs),
+    /// Load demonstrations in any format `--demos` takes (.npz, LeRobot folder, .csv), check
+    /// them against the default arm and print what they hold.
+    Check(CheckArgs),
+}
+
+/// Arguments of `learner dataset export`.
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// Output format.
+    #[arg(long, value_enum, default_value = "lerobot")]
+    pub format: Format,
+    /// Demonstrations `.npz`, an episode `.npz` or a folder of episode files.
+    pub input: PathBuf,
+    /// Output folder (lerobot) or file (csv).
+    pub out: PathBuf,
+}
+
+/// Arguments of `learner dataset check`.
+#[derive(Args, Debug)]
+pub struct CheckArgs {
+    /// Demonstrations: `.npz`, LeRobot dataset folder or `.csv`.
+    pub demos: PathBuf,
+    /// Print a one-line JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The trajectories in `input`: demonstrations, else recorded episodes.
+fn read_input(input: &Path) -> anyhow::Result<Trajectories> {
+    if input.is_file() {
+        match crate::io::demos::load(input) {
+            Ok(d) => return Ok(foreign::from_demos(&d)),
+            Err(demos_err) => {
+                return foreign::from_episodes(input).map_err(|e| {
+                    anyhow::anyhow!(
+                        "{}: neither demonstrations ({demos_err}) nor a recorded episode ({e:#})",
+                        input.display()
+                    )
+                })
+            }
+        }
+    }
+    foreign::from_episodes(input)
+}
+
+/// Runs `learner dataset …`.
+pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
+    match cmd {
+        DatasetCmd::Export(a) => {
+            let traj = read_input(&a.input)?;
+            match a.format {
+                Format::Lerobot => lerobot::export(&traj, &a.out)?,
+                Format::Csv => {
+                    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                        crate::io::create_dir(dir)?;
+                    }
+                    foreign::write_csv(&traj, &a.out)?
+                }
+            }
+            eprintln!(
+                "{} trajectories of T = {} ({} actions) from {} -> {}",
+                traj.count,
+                traj.horizon,
+                if traj.actions.is_some() {
+                    "with"
+                } else {
+                    "without"
+                },
+                a.input.display(),
+                a.out.display()
+            );
+            Ok(())
+        }
+        DatasetCmd::Check(a) => {
+            let sim = ur5_shared::config::SimConfig::default();
+            let d = crate::io::demos::load_checked(&a.demos, &sim)?;
+            let summary = serde_json::json!({"command": "dataset check", "demos": a.demos,
+                "count": d.count, "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal,
+                "start_q_rad": d.start_q, "cost_random": d.cost_random, "cost_expert": d.cost_expert});
+            if a.json {
+                println!("{summary}");
+            } else {
+                eprintln!(
+                    "{}: {} demonstrations of T = {} at dt = {} s, goal {:?} m, start {:?} rad, \
+                     C_random {:.4}, C_expert {:.4}: consistent with the arm",
+                    a.demos.display(),
+                    d.count,
+                    d.horizon,
+                    d.dt,
+                    d.goal,
+                    d.start_q,
+                    d.cost_random,
+                    d.cost_expert
+                );
+            }
+            Ok(())
+        }
+    }
+}

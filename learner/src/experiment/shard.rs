@@ -1,0 +1,217 @@
+//! Sweeps larger than one machine (docs/design.md §4.8): `learner experiment NAME --shard K/N`
+//! runs every N-th job of the experiment's list (variant × seed) starting at the K-th, and
+//! notes which in `shard.json`; `learner experiment merge DIRS… --out DIR` joins the shards'
+//! runs in the list's order and writes the outputs an unsharded run writes. A job's result
+//! depends only on its own seed and settings, so the merged CSV, summary and plot are the
+//! unsharded run's, bar the wall-time figures (the CSV's time columns, the summary's timing
+//! medians).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+
+use super::summary::write_outputs;
+use super::{Job, Run, SummaryRow};
+use crate::io::log::GaifoRow;
+
+/// The K-th (1-based) of N disjoint parts of an experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    /// K, 1 ≤ K ≤ N.
+    pub k: usize,
+    /// N ≥ 1.
+    pub n: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+    /// `K/N`, e.g. `2/8`: K is 1-based (a 0-based array or completion index + 1).
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (k, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("`{s}`: expected K/N, e.g. 1/4"))?;
+        let k: usize = k.trim().parse().map_err(|e| format!("`{s}`: K: {e}"))?;
+        let n: usize = n.trim().parse().map_err(|e| format!("`{s}`: N: {e}"))?;
+        if n == 0 || k == 0 || k > n {
+            return Err(format!("`{s}`: need 1 <= K <= N"));
+        }
+        Ok(Shard { k, n })
+    }
+}
+
+impl Shard {
+    /// Whether job `index` (0-based, in the experiment's list) is this shard's.
+    pub fn has(&self, index: usize) -> bool {
+        index % self.n == self.k - 1
+    }
+}
+
+/// This shard's jobs of `jobs` and their indices in the list (all of them without a shard).
+pub fn select(shard: Option<Shard>, jobs: Vec<Job>) -> (Vec<usize>, Vec<Job>) {
+    jobs.into_iter()
+        .enumerate()
+        .filter(|(i, _)| shard.is_none_or(|s| s.has(*i)))
+        .unzip()
+}
+
+/// What a shard ran, beside its outputs in `shard.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShardMeta {
+    /// Experiment name (the CSV's name).
+    pub experiment: String,
+    /// Plot title.
+    pub title: String,
+    /// This part.
+    pub shard: Shard,
+    /// Jobs in the whole experiment.
+    pub jobs_total: usize,
+    /// Per run of this shard, in its CSV's order.
+    pub runs: Vec<RunMeta>,
+}
+
+/// What the CSV does not hold of a [`Run`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunMeta {
+    /// Index of its job in the experiment's list.
+    pub job: usize,
+    pub variant: String,
+    pub algorithm: String,
+    pub seed: u64,
+    pub episodes_per_iteration: usize,
+    pub horizon: usize,
+    pub wall_s: f64,
+}
+
+/// File name of a shard's notes.
+pub const SHARD_FILE: &str = "shard.json";
+
+/// Writes `out/shard.json` for the runs of `shard` (jobs `indices` of `jobs_total`).
+pub fn write_meta(
+    out: &Path,
+    experiment: &str,
+    title: &str,
+    shard: Shard,
+    jobs_total: usize,
+    indices: &[usize],
+    runs: &[Run],
+) -> anyhow::Result<()> {
+    let meta = ShardMeta {
+        experiment: experiment.into(),
+        title: title.into(),
+        shard,
+        jobs_total,
+        runs: indices
+            .iter()
+            .zip(runs)
+            .map(|(&job, r)| RunMeta {
+                job,
+                variant: r.variant.clone(),
+                algorithm: r.algorithm.clone(),
+                seed: r.seed,
+                episodes_per_iteration: r.episodes_per_iteration,
+                horizon: r.horizon,
+                wall_s: r.wall_s,
+            })
+            .collect(),
+    };
+    let path = out.join(SHARD_FILE);
+    std::fs::write(&path, serde_json::to_vec_pretty(&meta)?)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// The rows of a shard's `<experiment>.csv`: (variant, log row) in file order.
+fn read_rows(path: &Path) -> anyhow::Result<Vec<(String, GaifoRow)>> {
+    let mut r =
+        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+    let header = r.headers()?.clone();
+    anyhow::ensure!(
+        header.len() > 2 && &header[0] == "experiment" && &header[1] == "variant",
+        "{}: not an experiment CSV (header {:?})",
+        path.display(),
+        header
+    );
+    let tail: csv::StringRecord = header.iter().skip(2).collect();
+    let mut rows = Vec::new();
+    for (k, rec) in r.records().enumerate() {
+        let rec = rec.with_context(|| format!("{} row {}", path.display(), k + 2))?;
+        let fields: csv::StringRecord = rec.iter().skip(2).collect();
+        let row: GaifoRow = fields
+            .deserialize(Some(&tail))
+            .with_context(|| format!("{} row {}", path.display(), k + 2))?;
+        rows.push((rec[1].to_string(), row));
+    }
+    Ok(rows)
+}
+
+/// Joins the shards in `dirs` into `out`: checks that they are parts of one experiment that
+/// together hold every job once, puts their runs in the list's order and writes the
+/// experiment's outputs ([`write_outputs`]).
+pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+    anyhow::ensure!(!dirs.is_empty(), "merge: no shard folders given");
+    let mut all: Vec<(usize, Run)> = Vec::new();
+    let mut first: Option<ShardMeta> = None;
+    for dir in dirs {
+        let path = dir.join(SHARD_FILE);
+        let text = std::fs::read(&path).with_context(|| {
+            format!(
+                "{}: not a shard (run `learner experiment NAME --shard K/N`)",
+                path.display()
+            )
+        })?;
+        let meta: ShardMeta =
+            serde_json::from_slice(&text).with_context(|| format!("reading {}", path.display()))?;
+        if let Some(f) = &first {
+            anyhow::ensure!(
+                meta.experiment == f.experiment
+                    && meta.jobs_total == f.jobs_total
+                    && meta.shard.n == f.shard.n
+                    && meta.title == f.title,
+                "{}: shard {}/{} of `{}` ({} jobs), not of the first's `{}` ({} jobs, N = {})",
+                dir.display(),
+                meta.shard.k,
+                meta.shard.n,
+                meta.experiment,
+                meta.jobs_total,
+                f.experiment,
+                f.jobs_total,
+                f.shard.n
+            );
+        }
+        let rows = read_rows(&dir.join(format!("{}.csv", meta.experiment)))?;
+        for m in &meta.runs {
+            let logs = rows
+                .iter()
+                .filter(|(v, r)| *v == m.variant && r.seed == m.seed && r.algorithm == m.algorithm)
+                .map(|(_, r)| r.log())
+                .collect();
+            all.push((
+                m.job,
+                Run {
+                    variant: m.variant.clone(),
+                    algorithm: m.algorithm.clone(),
+                    seed: m.seed,
+                    episodes_per_iteration: m.episodes_per_iteration,
+                    horizon: m.horizon,
+                    logs,
+                    wall_s: m.wall_s,
+                },
+            ));
+        }
+        first.get_or_insert(meta);
+    }
+    let meta = first.expect("at least one shard");
+    all.sort_by_key(|(job, _)| *job);
+    let jobs: Vec<usize> = all.iter().map(|(j, _)| *j).collect();
+    anyhow::ensure!(
+        jobs == (0..meta.jobs_total).collect::<Vec<_>>(),
+        "the shards hold jobs {jobs:?} of 0..{}: each job exactly once is needed (a shard \
+         missing or given twice?)",
+        meta.jobs_total
+    );
+    let runs: Vec<Run> = all.into_iter().map(|(_, r)| r).collect();
+    let rows = write_outputs(&meta.experiment, &meta.title, &runs, out)?;
+    Ok((runs, rows))
+}
