@@ -55,15 +55,13 @@ pub enum Rejection {
 }
 
 impl Rejection {
-    /// A rejection that says the learner and the controller run different tasks or builds
-    /// (horizon, action mode, dimensions): waiting cannot fix it (docs/design.md §3.12).
+    /// A rejection that says the learner and the controller run different tasks (horizon,
+    /// action mode): waiting cannot fix it (docs/design.md §3.12). Wrong dimensions are not
+    /// counted here: a damaged header shows as them before the checksum is looked at.
     pub fn is_task_mismatch(&self) -> bool {
         matches!(
             self,
-            Rejection::HorizonMismatch { .. }
-                | Rejection::ModeMismatch { .. }
-                | Rejection::Invalid(GainTableError::WrongDimensions { .. })
-                | Rejection::InvalidPolicy(PolicyTableError::WrongDimensions { .. })
+            Rejection::HorizonMismatch { .. } | Rejection::ModeMismatch { .. }
         )
     }
 }

@@ -78,8 +78,8 @@ pub enum ExitReason {
     /// protective stop, safety mode not NORMAL, robot not RUNNING, or the robot's program
     /// ended): the arm holds; clear the cause on the robot, then start again.
     ArmStopped,
-    /// The controller rejected the learner's table for a task reason (horizon, action mode,
-    /// dimensions) and told the learner so on `controller/status` (docs/design.md §3.12).
+    /// The controller rejected the learner's table for a task reason (horizon, action mode)
+    /// and told the learner so on `controller/status` (docs/design.md §3.12).
     TaskMismatch,
     /// The learner stopped and said why on `learner/status` (e.g. the episodes are not its
     /// task, or the seed differs).

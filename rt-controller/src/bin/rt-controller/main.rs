@@ -54,7 +54,7 @@ enum Cmd {
     /// 2 setup error, 3 arm lost (stale for safety.give_up_after_s, or its connection closed),
     /// 4 no table (safety.no_table_timeout_s), 5 the arm stopped itself (a UR protective stop,
     /// safety mode not NORMAL, or its program ended), 6 learner and controller disagree (a
-    /// table rejected for its horizon, action mode or dimensions, or the learner stopped and
+    /// table rejected for its horizon or action mode, or the learner stopped and
     /// said why; both print the same message).
     #[command(after_help = UNITS)]
     Run {
