@@ -255,7 +255,8 @@ pub fn train_ppo(
 /// stream where the checkpoint left it) up to `cfg.iterations` iterations in all, appending to
 /// `dir/gaifo_log.csv` ([`open_log`]) and writing the next checkpoints into `dir`. Iterations
 /// are numbered on from the checkpoint; tables and CSV rows are the uninterrupted run's bit
-/// for bit (timing columns aside).
+/// for bit (timing columns aside). A run that already holds `cfg.iterations` iterations is
+/// complete: nothing is run and the result is empty; one that holds more is refused.
 pub fn train_resumed(
     cfg: &GaifoConfig,
     demos: Demos,
@@ -265,12 +266,17 @@ pub fn train_resumed(
     let (mut run, arm_noise) = resume(cfg.clone(), demos, dir)?;
     let start = run.iteration();
     anyhow::ensure!(
-        start < cfg.iterations,
-        "{} already holds {start} iterations, as many as iterations = {} asks for: nothing to \
-         resume (raise --iterations)",
+        start <= cfg.iterations,
+        "{} already holds {start} iterations, more than iterations = {} asks for: a resume \
+         never shortens a run (raise --iterations)",
         dir.display(),
         cfg.iterations
     );
+    if start == cfg.iterations {
+        // The run is complete (a kill after its last checkpoint, or a retried job): resuming
+        // it again is a no-op, not an error, so a scheduler may re-run the same command.
+        return Ok(Vec::new());
+    }
     let mut arm = arm_for(&run)?;
     if let Some(pos) = arm_noise {
         arm.sim_mut().set_noise_position(pos);

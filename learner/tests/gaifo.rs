@@ -344,7 +344,7 @@ mod resume {
         std::fs::remove_dir_all(&root).ok();
     }
 
-    /// What a resume refuses, by name: nothing left to do, no checkpoint (or only tables of a
+    /// What a resume refuses, by name: fewer iterations than done, no checkpoint (or only tables of a
     /// build before exact resume), a missing folder, a malformed critic, another seed, a
     /// learner state of another horizon.
     #[test]
@@ -357,8 +357,14 @@ mod resume {
         assert_eq!((resumed.iteration(), resumed.version()), (2, 3));
         drop(resumed);
         let msg = |e: anyhow::Error| format!("{e:#}");
-        let e = msg(train_resumed(&cfg(2), demos.clone(), &split, |_| {}).unwrap_err());
-        assert!(e.contains("nothing to resume"), "{e}");
+        // A complete run resumes to nothing (a retried job); a shorter one is refused.
+        let again = std::fs::read(split.join("gaifo_log.csv")).unwrap();
+        assert!(train_resumed(&cfg(2), demos.clone(), &split, |_| {})
+            .unwrap()
+            .is_empty());
+        assert_eq!(std::fs::read(split.join("gaifo_log.csv")).unwrap(), again);
+        let e = msg(train_resumed(&cfg(1), demos.clone(), &split, |_| {}).unwrap_err());
+        assert!(e.contains("never shortens"), "{e}");
         let empty = root.join("empty");
         std::fs::create_dir_all(&empty).unwrap();
         let e = msg(train_resumed(&cfg(4), demos.clone(), &empty, |_| {}).unwrap_err());

@@ -238,6 +238,20 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         None => train(&cfg, demos, Some(&out), print)?,
     };
     drop(bar);
+    if logs.is_empty() {
+        eprintln!(
+            "done: {} already holds all {} iterations; nothing to resume",
+            out.display(),
+            cfg.iterations
+        );
+        if args.common.json {
+            println!(
+                "{}",
+                serde_json::json!({"command": "train", "algo": "lqr-gaifo", "iterations": 0,
+                    "seed": cfg.seed, "already_complete": true, "out": out})
+            );
+        }
+    }
     report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json);
     Ok(())
 }
