@@ -24,6 +24,7 @@
 //! - [`noise`]: seeded exploration noise ε, per (run seed, table version, episode).
 //! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
 //! - [`config`]: task and simulator configuration (TOML), arm limits.
+//! - [`kernels`]: dot product, affine map and tanh of every MLP (learner and controller alike).
 //!
 //! Conventions: SI units (rad, rad/s, m, m/s, N·m, s; timestamps in monotonic ns); Cartesian
 //! quantities in the arm base frame; matrices row-major (numpy C order). Nothing the
@@ -35,6 +36,7 @@ pub mod clock;
 pub mod config;
 pub mod cost;
 pub mod gains;
+pub mod kernels;
 pub mod kinematics;
 pub mod law;
 pub mod layout;

@@ -47,6 +47,7 @@ use serde::{Deserialize, Serialize};
 use xxhash_rust::xxh3::Xxh3;
 
 use crate::config::ActionMode;
+use crate::kernels::{affine, dot, tanh_in_place};
 use crate::layout::{DU, DX, Q};
 
 /// Most hidden layers per head.
@@ -75,37 +76,6 @@ pub fn head_len(hidden: &[usize]) -> usize {
 /// Length of θ for heads of hidden widths `hidden` (module docs): `2 dX + dU · head + dU`.
 pub fn flat_len(hidden: &[usize]) -> usize {
     2 * DX + DU * head_len(hidden) + DU
-}
-
-/// `Σ a_i b_i` with four running sums in a fixed order (deterministic; lets the compiler
-/// vectorise). The one dot product of every MLP in the project, so that the learner's forward
-/// pass and [`policy_action`] agree bit for bit.
-#[inline]
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    debug_assert_eq!(a.len(), b.len());
-    let mut s = [0.0f64; 4];
-    let (ca, ra) = a.split_at(a.len() / 4 * 4);
-    let (cb, rb) = b.split_at(ca.len());
-    for (x, y) in ca.chunks_exact(4).zip(cb.chunks_exact(4)) {
-        s[0] += x[0] * y[0];
-        s[1] += x[1] * y[1];
-        s[2] += x[2] * y[2];
-        s[3] += x[3] * y[3];
-    }
-    let mut t = (s[0] + s[1]) + (s[2] + s[3]);
-    for (x, y) in ra.iter().zip(rb) {
-        t += x * y;
-    }
-    t
-}
-
-/// `out = W x + b`, `W` row-major `out.len() × x.len()` (with [`dot`]).
-#[inline]
-pub fn affine(w: &[f64], b: &[f64], x: &[f64], out: &mut [f64]) {
-    let n_in = x.len();
-    for (i, (o, &bi)) in out.iter_mut().zip(b).enumerate() {
-        *o = dot(&w[i * n_in..(i + 1) * n_in], x) + bi;
-    }
 }
 
 /// The weights of a Gaussian MLP policy (module docs), as sent on `controller/policy`.
@@ -602,7 +572,7 @@ impl PolicyTable {
 /// `a` as for gain tables (docs/design.md §2.4).
 ///
 /// Operation order is that of the learner's `GlobalPolicy::mean_action` plus `σ ε` (the same
-/// [`dot`], tanh from `f64::tanh`), so both give the same bits (tested in `imitation`).
+/// [`crate::kernels`]), so both give the same bits (tested in `imitation`).
 pub fn policy_action(
     table: &PolicyTable,
     s: &[f64; DX],
@@ -621,17 +591,16 @@ pub fn policy_action(
     let goal_angles = table.action_mode == 0;
     for j in 0..DU {
         let mut w = &heads[j * head..(j + 1) * head];
-        let PolicyScratch { x, y } = scratch;
+        // The two buffers trade roles by swapping the references, not their 2 KB contents.
+        let (mut x, mut y) = (&mut scratch.x, &mut scratch.y);
         x[..DX].copy_from_slice(&u);
         let mut n_in = DX;
         for h in table.hidden_widths() {
             let (wl, rest) = w.split_at(h * n_in);
             let (bl, rest) = rest.split_at(h);
             affine(wl, bl, &x[..n_in], &mut y[..h]);
-            for v in &mut y[..h] {
-                *v = v.tanh();
-            }
-            core::mem::swap(x, y);
+            tanh_in_place(&mut y[..h]);
+            core::mem::swap(&mut x, &mut y);
             n_in = h;
             w = rest;
         }

@@ -30,9 +30,9 @@
 //!   `ż̄_{k−1} = W_kᵀ ǡ_k`, `z̄_{k−1} = W_kᵀ ā_k` (with `ż_{−1} = ρ`, `z_{−1} = u`).
 
 use rand::Rng;
-// The one dot product and affine map of every MLP (the controller's policy_action uses the
-// same, so learner and controller agree bit for bit).
-use ur5_shared::policy::{affine, dot};
+// The one dot product, affine map and tanh of every MLP (the controller's policy_action uses
+// the same, so learner and controller agree bit for bit).
+use ur5_shared::kernels::{affine, dot, tanh_in_place};
 
 /// A tanh MLP `R^{n_0} → R` with a flat parameter vector (layout in the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -157,9 +157,7 @@ impl Mlp {
             };
             let out = &mut cur[..self.sizes[k + 1]];
             affine(self.w(k), self.b(k), input, out);
-            for v in out.iter_mut() {
-                *v = v.tanh();
-            }
+            tanh_in_place(out);
         }
         dot(self.w(l - 1), &ws.z[self.hidden(l - 2)]) + self.b(l - 1)[0]
     }

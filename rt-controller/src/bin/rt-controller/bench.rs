@@ -117,6 +117,26 @@ pub fn run(episodes: u64, horizon: usize, spin_ns: u64, kind: Kind) -> anyhow::R
     })
 }
 
+/// [`ur5_shared::policy_action`] alone on a warm cache: `calls` calls in a row on one policy
+/// table of hidden widths [`POLICY_HIDDEN`] and a moving state, each timed (ns). The loop's
+/// tick adds the clamp, command and sample to this, and whatever the other threads between two
+/// ticks have pushed out of the cache.
+pub fn policy_action_alone(calls: usize) -> Percentiles {
+    use ur5_shared::policy::{policy_action, PolicyScratch};
+    let table = random_policy_table(1, &POLICY_HIDDEN, 0.05, 0.01, 1);
+    let mut scratch = PolicyScratch::default();
+    let mut h = rt_controller::stats::Histogram::new();
+    let (mut s, mut a) = ([0.1; ur5_shared::DX], [0.0; ur5_shared::DU]);
+    for i in 0..calls {
+        s[i % ur5_shared::DX] += 1e-3;
+        let t0 = ur5_shared::clock::monotonic_ns();
+        policy_action(&table, &s, &ur5_shared::NO_NOISE, &mut scratch, &mut a);
+        h.record(ur5_shared::clock::monotonic_ns() - t0);
+        std::hint::black_box(&a);
+    }
+    h.summary()
+}
+
 /// Publishes table version 1, then a new version whenever an episode starts (seen on
 /// `learner/samples`), so that every boundary swaps.
 fn learner_stand_in(

@@ -348,6 +348,7 @@ fn real_main() -> Result<i32> {
         } => {
             let r = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains)?;
             let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy)?;
+            let alone = bench::policy_action_alone(20_000);
             println!("rt-controller bench: {} + {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc; gain tables, then policy tables (heads 12-{}-1, {} parameters)", r.episodes, p.episodes, horizon,
                 bench::POLICY_HIDDEN.map(|h| h.to_string()).join("-"), ur5_shared::policy::flat_len(&bench::POLICY_HIDDEN));
             print_table(&[
@@ -357,13 +358,14 @@ fn real_main() -> Result<i32> {
                 ("gain table: intake (receive + copy + validate + flip)", r.intake),
                 ("gain table: IPC round trip state → command", r.round_trip),
                 ("policy: tick compute (MLP + clamp + command + sample)", p.compute),
+                ("policy: policy_action alone, warm cache", alone),
                 ("policy: swap (copy used part + flip)", p.swap),
                 ("policy: validation", p.validate),
                 ("policy: intake (receive + copy + validate + flip)", p.intake),
                 ("policy: IPC round trip state → command", p.round_trip),
             ]);
             if json {
-                println!("{}", serde_json::json!({"gains": r, "policy": p}));
+                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone}));
             }
             Ok(0)
         }
