@@ -1277,6 +1277,105 @@ impl Multibody {
         }
     }
 
+    /// **Added for hil-sim (not in upstream rapier 0.36.1; see `vendor/rapier3d/PATCHED.md`).**
+    ///
+    /// Advances this multibody by one time step of `params.dt` exactly as
+    /// `PhysicsPipeline::step` would when it is the only thing in the world that moves and none
+    /// of its joint constraints acts: the same calls to the same routines in the same order
+    /// (effective forces, velocities, mass matrix, free accelerations, velocity increment,
+    /// position integration, forward kinematics, rigid-body poses and world mass properties),
+    /// without the broad and narrow phases, the island manager, CCD and the constraint solver.
+    ///
+    /// Returns `false` and changes nothing when the solver would have work to do: a joint
+    /// coordinate beyond its limit, a motor, dry friction, a DoF coupling, a link with colliders
+    /// or extra solver iterations, non-finite coordinates or velocities, or
+    /// `params.num_solver_iterations == 0`. The caller then runs the pipeline's step. An
+    /// inactive limit makes the solver clamp its impulse to zero, so skipping it changes no
+    /// velocity (up to the sign of an exact zero).
+    pub fn step_alone(
+        &mut self,
+        bodies: &mut RigidBodySet,
+        gravity: Vector,
+        params: &IntegrationParameters,
+    ) -> bool {
+        let num_substeps = params.num_solver_iterations;
+        if num_substeps == 0 || !self.couplings.is_empty() || self.ndofs == 0 {
+            return false;
+        }
+        if !self.velocities.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        for link in self.links.iter() {
+            let data = &link.joint.data;
+            let free = !data.locked_axes.bits();
+            if data.motor_axes.bits() & free != 0 {
+                return false;
+            }
+            let mut dof = 0;
+            for i in 0..SPATIAL_DIM {
+                if free & (1 << i) == 0 {
+                    continue;
+                }
+                let q = link.joint.coords[i];
+                if !q.is_finite() || self.frictions[link.assembly_id + dof] > 0.0 {
+                    return false;
+                }
+                if data.limit_axes.bits() & (1 << i) != 0 {
+                    let limits = &data.limits[i];
+                    if q < limits.min || limits.max < q {
+                        return false;
+                    }
+                }
+                dof += 1;
+            }
+            match bodies.get(link.rigid_body) {
+                Some(rb) if rb.colliders().is_empty() && rb.additional_solver_iterations() == 0 => {}
+                _ => return false,
+            }
+        }
+
+        // The pipeline's fused body traversal: gravity and user forces.
+        for link in self.links.iter() {
+            let rb = bodies.index_mut_internal(link.rigid_body);
+            if rb.is_dynamic() {
+                let mass = rb.mprops.effective_mass();
+                rb.forces.compute_effective_force_and_torque(gravity, mass);
+            }
+        }
+
+        // The staged solver's multibody init and substeps (`init_solver_buffers_and_multibodies`,
+        // the generic velocity increment, `integrate_multibody_positions`).
+        let dt = params.dt / num_substeps as Real;
+        self.update_velocities(bodies);
+        self.update_mass_matrix(dt, bodies);
+        self.update_acceleration(dt, bodies);
+        for substep in 0..num_substeps {
+            let is_last_substep = substep + 1 == num_substeps;
+            for (v, a) in self.velocities.iter_mut().zip(self.accelerations.iter()) {
+                *v += dt * *a;
+            }
+            self.integrate(dt);
+            self.forward_kinematics(bodies, false);
+            self.update_rigid_bodies_internal(bodies, !is_last_substep, true, false);
+            if !is_last_substep {
+                self.update_velocities(bodies);
+                self.update_mass_matrix(dt, bodies);
+                self.update_acceleration(dt, bodies);
+            }
+        }
+
+        // The pipeline's `advance_to_final_positions` for the moving links.
+        for link in self.links.iter() {
+            let rb = bodies.index_mut_internal(link.rigid_body);
+            if rb.is_dynamic() {
+                rb.pos.position = rb.pos.next_position;
+                rb.mprops
+                    .update_world_mass_properties(rb.body_type, &rb.pos.position);
+            }
+        }
+        true
+    }
+
     /// Apply displacements, in generalized coordinates, to this multibody.
     ///
     /// Note this does **not** updates the link poses, only their generalized coordinates.
