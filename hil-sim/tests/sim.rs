@@ -1,7 +1,7 @@
 //! Behaviour of the simulated arm: kinematics against the UR5 DH table, the servo, the
 //! perturbation knobs, and clear errors on bad input.
 
-use hil_sim::{SimError, Ur5Sim};
+use hil_sim::{Observation, SimError, Ur5Sim};
 use nalgebra::{Matrix4, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -473,6 +473,16 @@ fn malformed_urdfs_are_refused_naming_the_problem() {
 /// bits as on a new arm and on a `fresh` copy: reset restarts the physics from the built
 /// world, and `reseed` restarts the perturbation noise (docs/design.md §5 D29). What makes
 /// episodes of one iteration safe to run in parallel.
+/// The bits of q, q̇, end-effector position and velocity, in that order.
+fn observation_bits(o: &Observation) -> Vec<u64> {
+    o.q.iter()
+        .chain(&o.qd)
+        .chain(&o.ee_pos)
+        .chain(&o.ee_vel)
+        .map(|v| v.to_bits())
+        .collect()
+}
+
 #[test]
 fn an_episode_does_not_depend_on_the_arm_history() {
     let task = TaskConfig::default();
@@ -483,14 +493,7 @@ fn an_episode_does_not_depend_on_the_arm_history() {
         bits.extend(o.q.iter().chain(&o.ee_pos).map(|v| v.to_bits()));
         for k in 0..15 {
             let a = [0.1 * k as f64, -1.5 + 0.02 * k as f64, 1.8];
-            let o = sim.step(a);
-            bits.extend(
-                o.q.iter()
-                    .chain(&o.qd)
-                    .chain(&o.ee_pos)
-                    .chain(&o.ee_vel)
-                    .map(|v| v.to_bits()),
-            );
+            bits.extend(observation_bits(&sim.step(a)));
         }
         bits
     };
@@ -584,7 +587,11 @@ fn the_direct_step_equals_the_pipeline_step() {
                 for k in 0..30 {
                     let a = if torque {
                         // Spin the elbow past +π (its limit), everything else held loosely.
-                        [0.0, -60.0 + 5.0 * rng.random::<f64>(), if k < 20 { 40.0 } else { -5.0 }]
+                        [
+                            0.0,
+                            -60.0 + 5.0 * rng.random::<f64>(),
+                            if k < 20 { 40.0 } else { -5.0 },
+                        ]
                     } else {
                         let mut q = random_q(&mut rng);
                         // Every fifth goal at a joint limit.
@@ -593,15 +600,8 @@ fn the_direct_step_equals_the_pipeline_step() {
                         }
                         q
                     };
-                    let o = sim.step(a);
-                    bits.extend(
-                        o.q.iter()
-                            .chain(&o.qd)
-                            .chain(&o.ee_pos)
-                            .chain(&o.ee_vel)
-                            .chain(&sim.last_torque())
-                            .map(|v| v.to_bits()),
-                    );
+                    bits.extend(observation_bits(&sim.step(a)));
+                    bits.extend(sim.last_torque().map(f64::to_bits));
                 }
             }
             (bits, sim.step_counts())
