@@ -139,6 +139,11 @@ pub struct Ur5Sim {
     max_abs_tau: [f64; N_JOINTS],
     goal: [f64; 3],
     time: f64,
+    /// Step through rapier's whole pipeline even when the multibody could step alone
+    /// ([`Ur5Sim::set_pipeline_only`]).
+    pipeline_only: bool,
+    /// Physics steps since the arm was built: (multibody stepped alone, whole pipeline).
+    step_counts: (u64, u64),
 }
 
 impl Ur5Sim {
@@ -317,6 +322,8 @@ impl Ur5Sim {
             max_abs_tau: [0.0; N_JOINTS],
             goal: [0.0; 3],
             time: 0.0,
+            pipeline_only: false,
+            step_counts: (0, 0),
         };
         sim.set_joint_state([0.0; N_JOINTS], [0.0; N_JOINTS]);
         sim.pristine = Arc::new(Pristine::take(&sim.world));
@@ -338,6 +345,7 @@ impl Ur5Sim {
         };
         (sim.pending, sim.current, sim.goal, sim.time) = (None, [0.0; N_JOINTS], [0.0; 3], 0.0);
         (sim.last_tau, sim.max_abs_tau) = ([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        sim.step_counts = (0, 0);
         sim
     }
 
@@ -539,8 +547,39 @@ impl Ur5Sim {
             self.last_tau[j] = tau[j];
             self.max_abs_tau[j] = self.max_abs_tau[j].max(tau[j].abs());
         }
-        self.world.step();
+        self.step_world();
         self.time += self.cfg.physics_dt;
+    }
+
+    /// One physics step of the world: the multibody stepped alone by rapier's own routines
+    /// (`Multibody::step_alone`, vendored rapier3d), or rapier's whole pipeline step when a
+    /// joint constraint acts (a joint beyond its limit, dry friction). Both give the same bits
+    /// (test `the_direct_step_equals_the_pipeline_step`; docs/design.md §5 D30).
+    fn step_world(&mut self) {
+        let w = &mut self.world;
+        let alone = !self.pipeline_only
+            && w.multibody_joints
+                .get_multibody_mut(self.mb)
+                .expect("multibody")
+                .step_alone(&mut w.bodies, w.gravity, &w.integration_parameters);
+        if alone {
+            self.step_counts.0 += 1;
+        } else {
+            w.step();
+            self.step_counts.1 += 1;
+        }
+    }
+
+    /// Physics steps since the arm was built (or copied by [`Ur5Sim::fresh`]): how many the
+    /// multibody took alone, and how many through rapier's whole pipeline.
+    pub fn step_counts(&self) -> (u64, u64) {
+        self.step_counts
+    }
+
+    /// With `true`, every physics step runs rapier's whole pipeline (`PhysicsWorld::step`), as
+    /// before docs/design.md §5 D30: for checking that the direct step gives the same bits.
+    pub fn set_pipeline_only(&mut self, on: bool) {
+        self.pipeline_only = on;
     }
 
     /// World direction of active joint `j`'s axis.

@@ -1,7 +1,7 @@
 //! Behaviour of the simulated arm: kinematics against the UR5 DH table, the servo, the
 //! perturbation knobs, and clear errors on bad input.
 
-use hil_sim::{SimError, Ur5Sim};
+use hil_sim::{Observation, SimError, Ur5Sim};
 use nalgebra::{Matrix4, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -473,6 +473,16 @@ fn malformed_urdfs_are_refused_naming_the_problem() {
 /// bits as on a new arm and on a `fresh` copy: reset restarts the physics from the built
 /// world, and `reseed` restarts the perturbation noise (docs/design.md §5 D29). What makes
 /// episodes of one iteration safe to run in parallel.
+/// The bits of q, q̇, end-effector position and velocity, in that order.
+fn observation_bits(o: &Observation) -> Vec<u64> {
+    o.q.iter()
+        .chain(&o.qd)
+        .chain(&o.ee_pos)
+        .chain(&o.ee_vel)
+        .map(|v| v.to_bits())
+        .collect()
+}
+
 #[test]
 fn an_episode_does_not_depend_on_the_arm_history() {
     let task = TaskConfig::default();
@@ -483,14 +493,7 @@ fn an_episode_does_not_depend_on_the_arm_history() {
         bits.extend(o.q.iter().chain(&o.ee_pos).map(|v| v.to_bits()));
         for k in 0..15 {
             let a = [0.1 * k as f64, -1.5 + 0.02 * k as f64, 1.8];
-            let o = sim.step(a);
-            bits.extend(
-                o.q.iter()
-                    .chain(&o.qd)
-                    .chain(&o.ee_pos)
-                    .chain(&o.ee_vel)
-                    .map(|v| v.to_bits()),
-            );
+            bits.extend(observation_bits(&sim.step(a)));
         }
         bits
     };
@@ -521,6 +524,99 @@ fn an_episode_does_not_depend_on_the_arm_history() {
                 reference[0],
                 "another stream, other noise"
             );
+        }
+    }
+}
+
+/// docs/design.md §5 D30: the multibody stepped alone (vendored rapier's `Multibody::step_alone`)
+/// gives the same bits as rapier's whole pipeline step, on the nominal arm, with damping, mass
+/// scale, noise and latency, with two solver substeps, and across the fallback to the pipeline
+/// when a joint goes beyond its limit (torque mode) or has dry friction (the physical stand-in).
+#[test]
+fn the_direct_step_equals_the_pipeline_step() {
+    let task = TaskConfig::default();
+    let damped = Perturbation {
+        joint_friction: [0.0; 3],
+        ..Perturbation::physical_stand_in(5)
+    };
+    let cases = [
+        ("nominal", SimConfig::default(), true),
+        (
+            "damped, heavier, noisy, late",
+            SimConfig {
+                perturbation: damped,
+                ..SimConfig::default()
+            },
+            true,
+        ),
+        (
+            "two substeps",
+            SimConfig {
+                substeps: 2,
+                ..SimConfig::default()
+            },
+            true,
+        ),
+        (
+            "dry friction",
+            SimConfig {
+                perturbation: Perturbation::physical_stand_in(5),
+                ..SimConfig::default()
+            },
+            false,
+        ),
+        (
+            "torque mode through the elbow limit",
+            SimConfig {
+                mode: ActionMode::Torque,
+                ..SimConfig::default()
+            },
+            true,
+        ),
+    ];
+    for (name, cfg, direct) in cases {
+        let torque = cfg.mode == ActionMode::Torque;
+        let run = |pipeline_only: bool| -> (Vec<u64>, (u64, u64)) {
+            let mut sim = Ur5Sim::new(cfg.clone(), task.dt).unwrap();
+            sim.set_pipeline_only(pipeline_only);
+            let mut rng = ChaCha8Rng::seed_from_u64(11);
+            let mut bits = Vec::new();
+            for episode in 0..2 {
+                sim.reseed(episode);
+                sim.reset(task.start_q, task.goal).unwrap();
+                for k in 0..30 {
+                    let a = if torque {
+                        // Spin the elbow past +π (its limit), everything else held loosely.
+                        [
+                            0.0,
+                            -60.0 + 5.0 * rng.random::<f64>(),
+                            if k < 20 { 40.0 } else { -5.0 },
+                        ]
+                    } else {
+                        let mut q = random_q(&mut rng);
+                        // Every fifth goal at a joint limit.
+                        if k % 5 == 4 {
+                            q[2] = std::f64::consts::PI;
+                        }
+                        q
+                    };
+                    bits.extend(observation_bits(&sim.step(a)));
+                    bits.extend(sim.last_torque().map(f64::to_bits));
+                }
+            }
+            (bits, sim.step_counts())
+        };
+        let (pipeline, (alone, _)) = run(true);
+        assert_eq!(alone, 0, "{name}: pipeline only");
+        let (fast, (alone, through_pipeline)) = run(false);
+        assert_eq!(fast, pipeline, "{name}: the bits differ");
+        if direct {
+            assert!(alone > 0, "{name}: the direct step never ran");
+        } else {
+            assert_eq!(alone, 0, "{name}: dry friction needs the solver");
+        }
+        if torque {
+            assert!(through_pipeline > 0, "{name}: the elbow limit never acted");
         }
     }
 }
