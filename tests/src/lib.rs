@@ -15,6 +15,8 @@
 //! parallel and a crashed test leaves nothing that disturbs the next. No test asserts on a
 //! latency: the machines are shared and stall now and then.
 
+pub mod soak;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 

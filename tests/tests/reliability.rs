@@ -364,6 +364,131 @@ fn cases(dir: &Path) -> Vec<Case> {
     ]
 }
 
+/// The markers of a block generated from a measurement's record in `docs/results/`.
+fn block(name: &str, table: &str) -> (String, String, String) {
+    (
+        format!("<!-- BEGIN GENERATED: {name} -->"),
+        format!("<!-- END GENERATED: {name} -->"),
+        table.to_owned(),
+    )
+}
+
+/// A measurement's record, committed in `docs/results/` (the long fuzz run's output, the
+/// soak's JSON line): the page shows what it says.
+fn measured(name: &str) -> String {
+    let path: PathBuf = [env!("CARGO_MANIFEST_DIR"), "..", "docs", "results", name]
+        .iter()
+        .collect();
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The table of the long fuzz run from its output: one row per `fuzz <decoder>: <n> cases,
+/// <a> accepted, slowest <ms> ms, <s> s in all` line, then the tests' result line.
+fn render_fuzz(log: &str) -> String {
+    let mut t = String::from(
+        "| decoder | cases | accepted | slowest case | time |\n|---|---|---|---|---|\n",
+    );
+    for l in log.lines() {
+        let Some((name, rest)) = l.strip_prefix("fuzz ").and_then(|r| r.split_once(": ")) else {
+            continue;
+        };
+        let f: Vec<&str> = rest.split(", ").collect();
+        let [cases, accepted, slowest, time] = f[..] else {
+            continue;
+        };
+        let num = |s: &str| s.split(' ').next().unwrap_or("").to_owned();
+        let slowest = slowest.trim_start_matches("slowest ");
+        let time = time.trim_end_matches(" in all");
+        t.push_str(&format!(
+            "| {name} | {} | {} | {slowest} | {time} |\n",
+            num(cases),
+            num(accepted)
+        ));
+    }
+    let results: Vec<&str> = log
+        .lines()
+        .filter(|l| l.starts_with("test result:"))
+        .collect();
+    for r in results {
+        t.push_str(&format!("\n{r}\n"));
+    }
+    t
+}
+
+/// The soak's figures from its JSON line.
+fn render_soak(json: &str) -> String {
+    let j: serde_json::Value = serde_json::from_str(json.trim()).expect("the soak's JSON line");
+    let n = |k: &str| j[k].to_string();
+    let p = |p: &str, k: &str| j[p][k].to_string();
+    let rows = [
+        (
+            "minutes, seed, a kill every (s)",
+            format!(
+                "{}, {}, {}–{}",
+                n("minutes"),
+                n("seed"),
+                n("kill_every_s"),
+                2.0 * j["kill_every_s"].as_f64().unwrap_or(0.0)
+            ),
+        ),
+        (
+            "SIGKILLs: arm, controller, learner",
+            format!(
+                "{}, {}, {}",
+                p("sim", "kills"),
+                p("controller", "kills"),
+                p("learner", "kills")
+            ),
+        ),
+        (
+            "exits nobody asked for: arm, controller, learner",
+            format!(
+                "{}, {}, {}",
+                p("sim", "unexpected_exits"),
+                p("controller", "unexpected_exits"),
+                p("learner", "unexpected_exits")
+            ),
+        ),
+        ("episodes completed (controller)", n("episodes_completed")),
+        (
+            "episodes aborted (controller: arm gone mid-episode)",
+            n("episodes_aborted"),
+        ),
+        ("episodes recorded (learner, files)", n("episodes_recorded")),
+        (
+            "episodes discarded by the learner: partial / mixed",
+            format!(
+                "{} / {}",
+                n("episodes_discarded_partial"),
+                n("episodes_discarded_mixed")
+            ),
+        ),
+        ("tables rejected (controller)", n("tables_rejected")),
+        ("table versions published", n("table_versions")),
+        (
+            "files scanned; temporaries left by kills",
+            format!("{}; {}", p("scan", "files"), p("scan", "temporaries")),
+        ),
+        ("**mixed versions** (must be 0)", n("mixed_versions")),
+        ("**corrupted files** (must be 0)", n("corrupted_files")),
+        (
+            "**commands outside the limits** (must be 0)",
+            n("commands_outside_limits"),
+        ),
+        ("hangs: no new episode for 120 s (must be 0)", n("hangs")),
+        (
+            "longest stretch without a new episode (s)",
+            format!("{:.1}", j["longest_stall_s"].as_f64().unwrap_or(0.0)),
+        ),
+        ("processes that never recovered", n("never_recovered")),
+    ];
+    let mut t = String::from("| figure | value |\n|---|---|\n");
+    for (k, v) in rows {
+        t.push_str(&format!("| {k} | {v} |\n"));
+    }
+    t
+}
+
 fn render(rows: &[(Case, (Option<i32>, String))]) -> String {
     let mut t = String::from(
         "| class | bad input or fault | command | exit | what it gets |\n|---|---|---|---|---|\n",
@@ -403,22 +528,27 @@ fn the_reliability_page_is_true() {
             c.what
         );
     }
-    let table = render(&rows);
+    let blocks = [
+        (BEGIN.to_owned(), END.to_owned(), render(&rows)),
+        block("fuzz", &render_fuzz(&measured("fuzz.log"))),
+        block("soak", &render_soak(&measured("soak.json"))),
+    ];
     let page_path: PathBuf = [env!("CARGO_MANIFEST_DIR"), "..", "docs", "reliability.md"]
         .iter()
         .collect();
     let page = std::fs::read_to_string(&page_path).unwrap_or_default();
-    let (Some(b), Some(e)) = (page.find(BEGIN), page.find(END)) else {
-        panic!("{} has no {BEGIN} … {END} block", page_path.display());
-    };
-    let committed = &page[b + BEGIN.len()..e];
-    let fresh = format!("\n{table}");
+    let mut new = page.clone();
+    for (begin, end, table) in &blocks {
+        let (Some(b), Some(e)) = (new.find(begin.as_str()), new.find(end.as_str())) else {
+            panic!("{} has no {begin} … {end} block", page_path.display());
+        };
+        new = format!("{}{begin}\n{table}{}", &new[..b], &new[e..]);
+    }
     if std::env::var_os("RELIABILITY_WRITE").is_some() {
-        let new = format!("{}{BEGIN}{fresh}{}", &page[..b], &page[e..]);
         std::fs::write(&page_path, new).unwrap();
     } else {
         assert_eq!(
-            committed, fresh,
+            page, new,
             "docs/reliability.md is out of date: rerun with RELIABILITY_WRITE=1 and review the diff"
         );
     }

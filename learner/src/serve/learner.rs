@@ -99,7 +99,27 @@ pub(super) struct Run<L> {
     pub(super) learner: L,
     pub(super) opts: ServeOptions,
     pub(super) csv: std::fs::File,
+    /// Episodes recorded in the folder so far, by any run of the learner: the numbering goes
+    /// on across restarts, so a restarted learner never overwrites a recorded episode (the
+    /// controller's episode numbers start again at 0 when it restarts).
     pub(super) arrivals: u64,
+}
+
+/// The highest arrival number `NNNNNN` of the episode files `NNNNNN_e…_v….npz` in `dir` (0 if
+/// none).
+pub(super) fn last_arrival(dir: &Path) -> u64 {
+    std::fs::read_dir(dir).map_or(0, |entries| {
+        entries
+            .flatten()
+            .filter_map(|e| {
+                let name = e.file_name();
+                let name = name.to_str()?;
+                name.ends_with(".npz").then_some(())?;
+                name.split_once('_')?.0.parse::<u64>().ok()
+            })
+            .max()
+            .unwrap_or(0)
+    })
 }
 
 impl<L: ServeLearner> Run<L> {
@@ -142,5 +162,30 @@ impl<L: ServeLearner> Run<L> {
             self.learner.task(),
         )?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::last_arrival;
+
+    #[test]
+    fn a_restarted_learner_numbers_on_from_the_recorded_episodes() {
+        let dir = std::env::temp_dir().join(format!("ur5-last-arrival-{}", std::process::id()));
+        assert_eq!(last_arrival(&dir), 0, "no folder yet");
+        std::fs::create_dir_all(&dir).unwrap();
+        assert_eq!(last_arrival(&dir), 0, "empty folder");
+        // The controller restarted: episode 0 of version 1 again, under a later arrival.
+        for name in [
+            "000001_e000000_v0001.npz",
+            "000012_e000000_v0001.npz",
+            "000007_e000004_v0002.npz",
+            "000099_e000000_v0003.npz.tmp",
+            "notes.txt",
+        ] {
+            std::fs::write(dir.join(name), b"").unwrap();
+        }
+        assert_eq!(last_arrival(&dir), 12);
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

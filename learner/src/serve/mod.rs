@@ -321,7 +321,7 @@ fn serve_loop<L: ServeLearner>(
         learner,
         opts,
         csv,
-        arrivals: 0,
+        arrivals: learner::last_arrival(&out.join("episodes")),
     };
 
     // Setup: every port before anything runs.
