@@ -52,6 +52,11 @@ pub struct TrainArgs {
     /// first (without it such a folder is refused; docs/design.md §4.4).
     #[arg(long)]
     pub force: bool,
+    /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
+    /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
+    /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO only.
+    #[arg(long)]
+    pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
     /// core); results are the same for any number (docs/design.md §5 D29).
     #[arg(long, default_value_t = 0)]
@@ -161,6 +166,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             args.resume.is_none(),
             "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
         );
+        anyhow::ensure!(
+            !args.record_episodes,
+            "--record-episodes is for LQR+GAIfO runs (`learner replay` redoes gain-table \
+             learners only), not --algo gaifo-ppo"
+        );
         let mut pcfg: GaifoPpoConfig = args.common.settings()?;
         if let Some(i) = args.iterations {
             pcfg.iterations = i;
@@ -212,6 +222,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         },
     };
     manifest::claim(&out, &m, claim)?;
+    if args.record_episodes {
+        // `run::train` records into it because it is there.
+        crate::io::create_dir(out.join("episodes"))?;
+    }
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,

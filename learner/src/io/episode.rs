@@ -17,7 +17,7 @@
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use ur5_shared::config::TaskConfig;
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
@@ -64,6 +64,55 @@ pub fn save_episode(
     w.strings("action_names", &ACTION_NAMES)?;
     w.finish()?;
     Ok(())
+}
+
+/// Writes episodes into a folder as they arrive, as `NNNNNN_eEPISODE_vVERSION.npz` (NNNNNN:
+/// arrival number, so that the names sort in arrival order; `learner replay` relies on it).
+/// Used by `learner serve` and `learner train --record-episodes`.
+pub struct EpisodeRecorder {
+    dir: PathBuf,
+    arrivals: u64,
+}
+
+impl EpisodeRecorder {
+    /// A recorder into `dir` (created), numbering on after the highest arrival number of the
+    /// episode files already there (a resumed run).
+    pub fn new(dir: &Path) -> Result<Self, NpzError> {
+        let io = |source| NpzError::Io {
+            path: dir.to_owned(),
+            source,
+        };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let mut arrivals = 0;
+        for e in std::fs::read_dir(dir).map_err(io)? {
+            let name = e.map_err(io)?.file_name();
+            let n = name
+                .to_str()
+                .and_then(|n| n.split('_').next())
+                .and_then(|n| n.parse::<u64>().ok());
+            arrivals = arrivals.max(n.unwrap_or(0));
+        }
+        Ok(Self {
+            dir: dir.to_owned(),
+            arrivals,
+        })
+    }
+
+    /// Writes `ep` ([`save_episode`]) as the next arrival; returns its path.
+    pub fn record(
+        &mut self,
+        ep: &Episode,
+        origin: &EpisodeOrigin,
+        task: &TaskConfig,
+    ) -> Result<PathBuf, NpzError> {
+        self.arrivals += 1;
+        let path = self.dir.join(format!(
+            "{:06}_e{:06}_v{:04}.npz",
+            self.arrivals, origin.episode, origin.table_version
+        ));
+        save_episode(&path, ep, origin, task)?;
+        Ok(path)
+    }
 }
 
 /// Reads an episode written by [`save_episode`] (`eps` is not recorded: left empty).

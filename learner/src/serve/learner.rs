@@ -14,7 +14,7 @@ use ur5_shared::GainTable;
 
 use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
-use crate::io::episode::{save_episode, EpisodeOrigin};
+use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
@@ -99,7 +99,8 @@ pub(super) struct Run<L> {
     pub(super) learner: L,
     pub(super) opts: ServeOptions,
     pub(super) csv: std::fs::File,
-    pub(super) arrivals: u64,
+    /// `None` when `record_episodes` is off.
+    pub(super) recorder: Option<EpisodeRecorder>,
 }
 
 impl<L: ServeLearner> Run<L> {
@@ -125,22 +126,15 @@ impl<L: ServeLearner> Run<L> {
         episode: u64,
         version: u64,
     ) -> anyhow::Result<()> {
-        self.arrivals += 1;
-        if !self.opts.record_episodes {
+        let Some(rec) = self.recorder.as_mut() else {
             return Ok(());
-        }
-        let name = format!("{:06}_e{episode:06}_v{version:04}.npz", self.arrivals);
+        };
         let origin = EpisodeOrigin {
             table_version: version,
             episode,
             seed: self.learner.seed(),
         };
-        save_episode(
-            &self.opts.out.join("episodes").join(name),
-            ep,
-            &origin,
-            self.learner.task(),
-        )?;
+        rec.record(ep, &origin, self.learner.task())?;
         Ok(())
     }
 }

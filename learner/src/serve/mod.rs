@@ -91,11 +91,10 @@ pub mod policy;
 mod ports;
 mod task_check;
 
-pub use assemble::{episode_from_samples, Assembled, Assembler, Counts};
+pub use assemble::{episode_from_samples, Assembled, Assembler, Batch, Counts};
 pub use learner::ServeLearner;
 pub use task_check::motion_per_step;
 
-use assemble::Batch;
 use learner::Run;
 use ports::Ports;
 use task_check::{validate, TaskCheck};
@@ -319,9 +318,13 @@ fn serve_loop<L: ServeLearner>(
     let csv = learner.open_csv(&out, opts.resume.is_some())?;
     let run = Run {
         learner,
-        opts,
         csv,
-        arrivals: 0,
+        recorder: if opts.record_episodes {
+            Some(crate::io::episode::EpisodeRecorder::new(&out.join("episodes"))?)
+        } else {
+            None
+        },
+        opts,
     };
 
     // Setup: every port before anything runs.
