@@ -28,7 +28,7 @@ use imitation::learn::LinGaussLearn;
 use imitation::rollout::Episode;
 use serde::Serialize;
 
-use crate::io::episode::{load_episode, EpisodeOrigin};
+use crate::io::episode::{recorded_episodes, EpisodeOrigin};
 use crate::io::manifest::{self, Manifest};
 use crate::io::table::{load_stored, table_arrays};
 use crate::serve::Batch;
@@ -92,7 +92,7 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
             manifest::MANIFEST
         )
     })?;
-    let episodes = recorded_episodes(dir)?;
+    let episodes = recorded_episodes(&dir.join("episodes"))?;
     anyhow::ensure!(
         !episodes.is_empty(),
         "{} holds no recorded episodes (episodes/*.npz): a replay needs them; `learner serve` \
@@ -153,29 +153,6 @@ fn demos_path(m: &Manifest, demos: Option<&Path>) -> anyhow::Result<PathBuf> {
         m.demos_hash
     );
     Ok(path)
-}
-
-/// The recorded episodes of `dir`, in arrival order (their file names sort so).
-fn recorded_episodes(dir: &Path) -> anyhow::Result<Vec<(PathBuf, Episode, EpisodeOrigin)>> {
-    let folder = dir.join("episodes");
-    let mut files: Vec<PathBuf> = match std::fs::read_dir(&folder) {
-        Ok(entries) => entries
-            .map(|e| e.map(|e| e.path()))
-            .collect::<Result<_, _>>()
-            .with_context(|| format!("reading {}", folder.display()))?,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", folder.display())),
-    };
-    files.retain(|p| p.extension().is_some_and(|x| x == "npz"));
-    files.sort();
-    files
-        .into_iter()
-        .map(|p| {
-            let (ep, origin) =
-                load_episode(&p).with_context(|| format!("reading {}", p.display()))?;
-            Ok((p, ep, origin))
-        })
-        .collect()
 }
 
 /// The replay loop (module docs) of `learner`; `critic` compares what else a checkpoint

@@ -1,6 +1,7 @@
-//! `learner replay` (issue 17, docs/design.md §4.13) through the `learner` binary: a run of
-//! `learner train --record-episodes` replays equal bit for bit, and a changed episode or a
-//! changed table entry is reported at the iteration where it shows.
+//! Recorded runs (issue 17) through the `learner` binary: a run of `learner train
+//! --record-episodes` replays equal bit for bit (`learner replay`, docs/design.md §4.13), a
+//! changed episode or a changed table entry is reported at the iteration where it shows, and
+//! the run exports as an MCAP file that the `mcap` crate's reader reads back (§4.14).
 
 mod common;
 
@@ -150,5 +151,71 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
             .starts_with(&format!("{was:?} ")),
         "{r}"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `learner dataset export --format mcap RUN OUT.mcap`: every channel with a JSON Schema, the
+/// message counts the run implies, log times on one time line, values as recorded.
+#[test]
+fn a_recorded_run_exports_as_mcap_and_reads_back() {
+    let dir = scratch("mcap");
+    let run = recorded_run(&dir);
+    let file = dir.join("out").join("run.mcap");
+    let (ok, err) = learner(&[
+        "dataset",
+        "export",
+        "--format",
+        "mcap",
+        run.to_str().unwrap(),
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let bytes = std::fs::read(&file).unwrap();
+    let (episodes, t_len) = (ITERATIONS * 6, 20);
+    let mut count = std::collections::BTreeMap::<String, usize>::new();
+    let mut last_time = 0;
+    let mut first_state = None;
+    let mut tables = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let ch = &m.channel;
+        assert_eq!(ch.message_encoding, "json");
+        let schema = ch.schema.as_ref().unwrap();
+        assert_eq!(schema.encoding, "jsonschema");
+        serde_json::from_slice::<serde_json::Value>(&schema.data).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        *count.entry(ch.topic.clone()).or_default() += 1;
+        assert!(m.log_time >= last_time, "{} at {}", ch.topic, m.log_time);
+        last_time = m.log_time;
+        match ch.topic.as_str() {
+            "/state" if first_state.is_none() => first_state = Some(v),
+            "/table" => tables.push(v),
+            "/joint_states" => {
+                assert_eq!(schema.name, "sensor_msgs/JointState");
+                assert_eq!(v["name"][2], "elbow_joint");
+                assert_eq!(v["position"].as_array().unwrap().len(), 3);
+            }
+            _ => {}
+        }
+    }
+    for topic in ["/joint_states", "/state", "/action"] {
+        assert_eq!(count[topic], episodes * t_len, "{topic}");
+    }
+    assert_eq!(count["/episode"], episodes);
+    assert_eq!(count["/table"], ITERATIONS + 1);
+    // All episodes laid end to end at dt = 0.1 s; the last table (version 4, which ran no
+    // episode) comes at the end of the last one.
+    let end_ns = ((episodes * t_len) as f64 * 0.1 * 1e9).round() as u64;
+    assert_eq!(last_time, end_ns);
+    assert_eq!(tables.last().unwrap()["version"], ITERATIONS as u64 + 1);
+    // Values as recorded: the first state of the first episode, the first table's checksum.
+    let first = episodes_of(&run, 1)[0].clone();
+    let (ep, _) = load_episode(&first).unwrap();
+    let s = first_state.unwrap();
+    assert_eq!(s["q"][1].as_f64().unwrap(), ep.x[1]);
+    assert_eq!(s["ee_minus_goal"][0].as_f64().unwrap(), ep.x[6]);
+    let t0 = load_stored(&run.join("iter_000_table.npz")).unwrap();
+    assert_eq!(tables[0]["version"], 1);
+    assert_eq!(tables[0]["checksum"], format!("{:#018x}", t0.checksum));
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -152,8 +152,7 @@ fn demos_file(
         ecfg.demos,
         dir.display()
     );
-    super::expert::print_header();
-    let s = crate::run::train_and_record(&ecfg, &dir, super::expert::print_line)
+    let s = super::expert::train_with_progress(&ecfg, &dir)
         .context("recording the default demonstrations")?;
     super::expert::print_done(&s, ecfg.demos);
     Ok((s.demos, true))
@@ -270,8 +269,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_line(l: &GaifoLog, u: &UpdateStats) {
-    eprintln!(
+/// The progress line of a GAIfO (PPO) iteration.
+fn ppo_line(l: &GaifoLog, u: &UpdateStats) -> String {
+    format!(
         "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>9.2e} {:>6.3} {:>7.3} {:>9.3e} {:>7.1} {:>7.1}",
         l.iteration,
         l.task_cost,
@@ -285,7 +285,7 @@ fn print_line(l: &GaifoLog, u: &UpdateStats) {
         u.value_loss,
         1e3 * (l.t_critic + l.t_cost + l.t_lqr),
         1e3 * l.t_execute
-    );
+    )
 }
 
 /// `learner train --algo gaifo-ppo` with `pcfg` (its `--config` layered over
@@ -316,7 +316,11 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
         "lrn_ms",
         "sim_ms"
     );
-    let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), print_line)?;
+    let bar = crate::progress::Progress::new(pcfg.iterations as u64, "iterations");
+    let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), |l, u| {
+        bar.done_one(&ppo_line(l, u))
+    })?;
+    drop(bar);
     report(&logs, "gaifo-ppo", pcfg.seed, &out, args.common.json);
     Ok(())
 }

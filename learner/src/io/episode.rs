@@ -147,6 +147,32 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
     Ok((ep, origin))
 }
 
+/// The episode files (`*.npz`) of `folder` in name order, which for an
+/// [`EpisodeRecorder`]'s folder is arrival order, loaded; none when there is no folder.
+pub fn recorded_episodes(
+    folder: &Path,
+) -> anyhow::Result<Vec<(PathBuf, Episode, EpisodeOrigin)>> {
+    use anyhow::Context;
+    let mut files: Vec<PathBuf> = match std::fs::read_dir(folder) {
+        Ok(entries) => entries
+            .map(|e| e.map(|e| e.path()))
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("reading {}", folder.display()))?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", folder.display())),
+    };
+    files.retain(|p| p.extension().is_some_and(|x| x == "npz"));
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            let (ep, origin) =
+                load_episode(&p).with_context(|| format!("reading {}", p.display()))?;
+            Ok((p, ep, origin))
+        })
+        .collect()
+}
+
 /// The task an episode file ran (goal, start pose, control period, T).
 pub fn load_episode_task(path: &Path) -> Result<TaskConfig, NpzError> {
     let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;

@@ -192,8 +192,9 @@ fn content_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
 
 /// Files and folders a run writes into its directory.
 fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    const NAMES: [&str; 9] = [
+    const NAMES: [&str; 10] = [
         MANIFEST,
+        "run.mcap",
         "gaifo_log.csv",
         "serve_log.csv",
         "checkpoint.npz",

@@ -35,6 +35,8 @@ pub trait ServeLearner: LinGaussLearn<Log: Serialize> {
     fn csv_row(&self, log: &Self::Log) -> anyhow::Result<String>;
     /// The progress line of an iteration.
     fn progress_line(log: &Self::Log) -> String;
+    /// Iterations the settings ask for in all (the progress bar's length).
+    fn planned_iterations(&self) -> usize;
 }
 
 impl ServeLearner for ExpertLearner {
@@ -70,6 +72,9 @@ impl ServeLearner for ExpertLearner {
     fn progress_line(log: &IterationLog) -> String {
         log.progress_line()
     }
+    fn planned_iterations(&self) -> usize {
+        self.config().iterations
+    }
 }
 
 impl ServeLearner for LqrGaifo {
@@ -91,6 +96,9 @@ impl ServeLearner for LqrGaifo {
     }
     fn progress_line(log: &GaifoLog) -> String {
         log.progress_line()
+    }
+    fn planned_iterations(&self) -> usize {
+        self.config().iterations
     }
 }
 

@@ -55,7 +55,9 @@
 //! - the per-iteration CSV: expert: `serve_log.csv` ([`crate::io::log::EXPERT_CSV_HEADER`], appended
 //!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
 //!   `t_execute_s` is the time from the version's first sample to its last needed episode;
-//!   appended across resumes); `best_table.npz` at exit.
+//!   appended across resumes); `best_table.npz` at exit;
+//! - with `--mcap`, `run.mcap` at exit: the run's recorded episodes and tables as one MCAP
+//!   file ([`crate::io::run_mcap`]).
 //!
 //! # Peers that die
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
@@ -132,6 +134,9 @@ pub struct ServeOptions {
     pub force: bool,
     /// Record every complete episode to `out/episodes/`.
     pub record_episodes: bool,
+    /// At exit, write the recorded episodes and the tables as `out/run.mcap`
+    /// ([`crate::io::run_mcap`]; needs `record_episodes`).
+    pub mcap: bool,
     /// While no sample arrives, say so every this many seconds (wall clock).
     pub wait_report_s: f64,
     /// Sleep between polls when idle (µs).
@@ -152,6 +157,7 @@ impl Default for ServeOptions {
             resume: None,
             force: false,
             record_episodes: true,
+            mcap: false,
             wait_report_s: 5.0,
             idle_sleep_us: 500,
             task_tolerance: 0.01,
@@ -377,6 +383,12 @@ fn serve_with_ports<L: ServeLearner>(
     let mut version_started: Option<Instant> = None;
     let mut newer_reported = 0u64;
 
+    let bar = crate::progress::Progress::new(
+        run.learner
+            .planned_iterations()
+            .saturating_sub(run.learner.iteration()) as u64,
+        "iterations",
+    );
     let exit = 'outer: loop {
         let mut got = false;
         while let Some(sample) = ports
@@ -401,15 +413,15 @@ fn serve_with_ports<L: ServeLearner>(
                     } => (episode, version, ep),
                     Assembled::Partial { episode, have } => {
                         counts.partial += 1;
-                        eprintln!(
+                        bar.println(&format!(
                             "learner serve: discarded episode {episode}: {have} of {t_len} steps"
-                        );
+                        ));
                         check.partial(have, &run.learner)?;
                         continue;
                     }
                     Assembled::Mixed { episode } => {
                         counts.mixed += 1;
-                        eprintln!("learner serve: discarded episode {episode}: table version or noise flag changed inside it");
+                        bar.println(&format!("learner serve: discarded episode {episode}: table version or noise flag changed inside it"));
                         continue;
                     }
                 };
@@ -423,10 +435,10 @@ fn serve_with_ports<L: ServeLearner>(
                     counts.newer_version += 1;
                     if version != newer_reported {
                         newer_reported = version;
-                        eprintln!(
+                        bar.println(&format!(
                             "learner serve: the controller runs table version {version}, newer than this learner's {current}: \
                              another learner published it; restart this one with --resume <its out dir> to continue from there"
-                        );
+                        ));
                     }
                 } else if finishing {
                     // The controller took the last table: nothing more to learn.
@@ -452,17 +464,17 @@ fn serve_with_ports<L: ServeLearner>(
                 ports.publish(&table)?;
                 let row = run.learner.csv_row(&entry)?;
                 run.csv.write_all(row.as_bytes())?;
-                eprintln!("{}", L::progress_line(&entry));
+                bar.done_one(&L::progress_line(&entry));
                 progress(&entry);
                 log.push(entry);
                 finishing = run.learner.done();
                 if finishing {
-                    eprintln!(
+                    bar.println(&format!(
                         "learner serve: learning done ({} iterations); published the last table, version {}; \
                          exiting once the controller runs it",
                         run.learner.iteration(),
                         run.learner.version()
-                    );
+                    ));
                 }
             }
         }
@@ -476,26 +488,37 @@ fn serve_with_ports<L: ServeLearner>(
         ports.status.check_controller()?;
         if last_sample.elapsed() >= report && last_report.elapsed() >= report {
             last_report = Instant::now();
-            eprintln!(
+            bar.println(&format!(
                 "learner serve: waiting for episodes of table version {} on prefix `{}`: no sample for {:.0} s \
                  (is rt-controller running with --prefix {}?)",
                 run.learner.version(),
                 run.opts.prefix,
                 last_sample.elapsed().as_secs_f64(),
                 run.opts.prefix
-            );
+            ));
         }
         if ports.node.wait(idle).is_err() {
             break ServeExit::Stopped;
         }
     };
 
+    drop(bar);
     if let Some((pol, _)) = &best {
         save_table(
             &out.join("best_table.npz"),
             &to_gain_table(pol, run.learner.version()),
             run.learner.task().dt,
         )?;
+    }
+    if run.opts.mcap && counts.episodes > 0 {
+        let path = out.join("run.mcap");
+        let c = crate::io::run_mcap::write_run_mcap(&out, &path)?;
+        eprintln!(
+            "learner serve: {} episodes and {} tables -> {}",
+            c.episodes,
+            c.tables,
+            path.display()
+        );
     }
     Ok(ServeSummary {
         command: "serve",
