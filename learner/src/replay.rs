@@ -124,9 +124,13 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
         }
         "expert" => {
             let cfg: ExpertConfig = m.settings_as()?;
-            drive(ExpertLearner::new(cfg, None), dir, &episodes, &mut report, |_, _, _| {
-                Ok(None)
-            })?;
+            drive(
+                ExpertLearner::new(cfg, None),
+                dir,
+                &episodes,
+                &mut report,
+                |_, _, _| Ok(None),
+            )?;
         }
         other => anyhow::bail!(
             "{}: a replay redoes runs whose controller is a gain table (lqr-gaifo, expert), \
@@ -303,8 +307,8 @@ fn critic_difference(
     learner.discriminator().save(&tmp)?;
     let replayed = std::fs::read(&tmp)?;
     std::fs::remove_file(&tmp).ok();
-    let Some(at) = (0..recorded.len().max(replayed.len()))
-        .find(|&j| recorded.get(j) != replayed.get(j))
+    let Some(at) =
+        (0..recorded.len().max(replayed.len())).find(|&j| recorded.get(j) != replayed.get(j))
     else {
         return Ok(None);
     };
@@ -312,5 +316,10 @@ fn critic_difference(
         let lo = at.saturating_sub(20);
         String::from_utf8_lossy(&b[lo.min(b.len())..(at + 40).min(b.len())]).into_owned()
     };
-    Ok(Some((file, at as u64, around(&recorded), around(&replayed))))
+    Ok(Some((
+        file,
+        at as u64,
+        around(&recorded),
+        around(&replayed),
+    )))
 }

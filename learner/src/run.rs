@@ -21,8 +21,8 @@ use serde::Serialize;
 use crate::arm::SimArm;
 use crate::io::checkpoint::{load_state, save_state};
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
-use crate::io::npz::NpzError;
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
+use crate::io::npz::NpzError;
 use crate::io::table::save_table;
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control

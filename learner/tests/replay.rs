@@ -130,7 +130,10 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     let was = table.steps[4].k_vec[1];
     table.steps[4].k_vec[1] = was + 0.5;
     save_table(&table_file, &table, dt).unwrap();
-    assert_eq!(load_stored(&table_file).unwrap().arrays[1].2[4 * 3 + 1], was + 0.5);
+    assert_eq!(
+        load_stored(&table_file).unwrap().arrays[1].2[4 * 3 + 1],
+        was + 0.5
+    );
     let (ok, r, _) = replay(&run);
     assert!(!ok);
     let d = &r["difference"];

@@ -6,7 +6,6 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-
 fn scratch(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("run-dir-{tag}-{}", std::process::id()));
     std::fs::remove_dir_all(&d).ok();

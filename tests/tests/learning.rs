@@ -447,7 +447,10 @@ fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usiz
     let r = json_summary(&stdout, &log);
     assert!(r["difference"].is_null(), "{r}");
     assert_eq!(r["iterations"], iterations as u64, "{r}");
-    assert!(r["tables_checked"].as_u64().unwrap() > iterations as u64, "{r}");
+    assert!(
+        r["tables_checked"].as_u64().unwrap() > iterations as u64,
+        "{r}"
+    );
     assert_eq!(r["critics_checked"], critics as u64, "{r}");
 }
 

@@ -149,9 +149,7 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
 
 /// The episode files (`*.npz`) of `folder` in name order, which for an
 /// [`EpisodeRecorder`]'s folder is arrival order, loaded; none when there is no folder.
-pub fn recorded_episodes(
-    folder: &Path,
-) -> anyhow::Result<Vec<(PathBuf, Episode, EpisodeOrigin)>> {
+pub fn recorded_episodes(folder: &Path) -> anyhow::Result<Vec<(PathBuf, Episode, EpisodeOrigin)>> {
     use anyhow::Context;
     let mut files: Vec<PathBuf> = match std::fs::read_dir(folder) {
         Ok(entries) => entries

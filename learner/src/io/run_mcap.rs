@@ -104,7 +104,9 @@ fn table_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
         let mut f = Vec::new();
         if let Ok(entries) = std::fs::read_dir(dir) {
             for e in entries {
-                let p = e.with_context(|| format!("reading {}", dir.display()))?.path();
+                let p = e
+                    .with_context(|| format!("reading {}", dir.display()))?
+                    .path();
                 if p.file_name().and_then(|n| n.to_str()).is_some_and(keep) {
                     f.push(p);
                 }
@@ -119,7 +121,9 @@ fn table_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
     if !served.is_empty() {
         return Ok(served);
     }
-    list(run, &|n| n.starts_with("iter_") && n.ends_with("_table.npz"))
+    list(run, &|n| {
+        n.starts_with("iter_") && n.ends_with("_table.npz")
+    })
 }
 
 /// Writes the run in `run` (its `episodes/` and tables) to the MCAP file `out` (module docs).
@@ -140,8 +144,7 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         super::create_dir(dir)?;
     }
-    let file =
-        std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
+    let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
     let mut w = mcap::WriteOptions::new()
         .compression(None)
         .profile("")
@@ -155,18 +158,19 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
     }
     let mut counts = McapCounts::default();
     let mut seq = 0u32;
-    let mut put = |w: &mut mcap::Writer<_>, topic: &'static str, ns: u64, msg: serde_json::Value| {
-        seq += 1;
-        *counts.messages.entry(topic.to_owned()).or_default() += 1;
-        let header = mcap::records::MessageHeader {
-            channel_id: ids[topic],
-            sequence: seq,
-            log_time: ns,
-            publish_time: ns,
+    let mut put =
+        |w: &mut mcap::Writer<_>, topic: &'static str, ns: u64, msg: serde_json::Value| {
+            seq += 1;
+            *counts.messages.entry(topic.to_owned()).or_default() += 1;
+            let header = mcap::records::MessageHeader {
+                channel_id: ids[topic],
+                sequence: seq,
+                log_time: ns,
+                publish_time: ns,
+            };
+            w.write_to_known_channel(&header, &serde_json::to_vec(&msg)?)
+                .map_err(anyhow::Error::from)
         };
-        w.write_to_known_channel(&header, &serde_json::to_vec(&msg)?)
-            .map_err(anyhow::Error::from)
-    };
     let table_msg = |(version, checksum, horizon, file): &(u64, u64, u64, PathBuf)| {
         json!({"version": version, "checksum": format!("{checksum:#018x}"),
                "horizon": horizon, "file": file.display().to_string()})
@@ -175,7 +179,8 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
     let mut start = 0.0f64;
     let mut tables_left: Vec<_> = tables.iter().collect();
     for (path, ep, origin) in &episodes {
-        let task = load_episode_task(path).with_context(|| format!("reading {}", path.display()))?;
+        let task =
+            load_episode_task(path).with_context(|| format!("reading {}", path.display()))?;
         let ns = |t: usize| ((start + t as f64 * task.dt) * 1e9).round() as u64;
         let v = origin.table_version;
         // Tables up to this version come into force now.
@@ -187,27 +192,52 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
         for t in 0..ep.horizon() {
             let s = ep.state(t);
             let (sec, nsec) = (ns(t) / 1_000_000_000, ns(t) % 1_000_000_000);
-            put(&mut w, "/joint_states", ns(t), json!({
+            put(
+                &mut w,
+                "/joint_states",
+                ns(t),
+                json!({
                 "header": {"stamp": {"sec": sec, "nsec": nsec}, "frame_id": "base"},
                 "name": ACTIVE_JOINTS, "position": &s[0..3], "velocity": &s[3..6],
-                "effort": [] }))?;
-            put(&mut w, "/state", ns(t), json!({
+                "effort": [] }),
+            )?;
+            put(
+                &mut w,
+                "/state",
+                ns(t),
+                json!({
                 "episode": e, "table_version": v, "noisy": noisy, "t": t,
-                "q": &s[0..3], "qd": &s[3..6], "ee_minus_goal": &s[6..9], "ee_vel": &s[9..DX]}))?;
+                "q": &s[0..3], "qd": &s[3..6], "ee_minus_goal": &s[6..9], "ee_vel": &s[9..DX]}),
+            )?;
             let executed = &ep.u[t * DU..(t + 1) * DU];
             let policy = &ep.u_policy[t * DU..(t + 1) * DU];
-            put(&mut w, "/action", ns(t), json!({
-                "episode": e, "table_version": v, "t": t, "executed": executed, "policy": policy}))?;
+            put(
+                &mut w,
+                "/action",
+                ns(t),
+                json!({
+                "episode": e, "table_version": v, "t": t, "executed": executed, "policy": policy}),
+            )?;
             if executed != policy {
-                put(&mut w, "/fault", ns(t), json!({
+                put(
+                    &mut w,
+                    "/fault",
+                    ns(t),
+                    json!({
                     "episode": e, "table_version": v, "t": t, "kind": "action_clamped",
-                    "executed": executed, "policy": policy}))?;
+                    "executed": executed, "policy": policy}),
+                )?;
             }
         }
         let last = ep.horizon() - 1;
-        put(&mut w, "/episode", ns(last), json!({
+        put(
+            &mut w,
+            "/episode",
+            ns(last),
+            json!({
             "episode": e, "table_version": v, "noisy": noisy, "task_cost": ep.task_cost(),
-            "final_distance_m": ep.final_distance(), "file": path.display().to_string()}))?;
+            "final_distance_m": ep.final_distance(), "file": path.display().to_string()}),
+        )?;
         start += ep.horizon() as f64 * task.dt;
         counts.episodes += 1;
     }

@@ -317,6 +317,10 @@ fn serve_loop<L: ServeLearner>(
     opts: ServeOptions,
     mut progress: impl FnMut(&L::Log),
 ) -> anyhow::Result<ServeSummary<L::Log>> {
+    anyhow::ensure!(
+        !opts.mcap || opts.record_episodes,
+        "mcap = true needs record_episodes = true: run.mcap is written from the recorded episodes"
+    );
     let out = opts.out.clone();
     for d in [out.clone(), out.join("tables"), out.join("episodes")] {
         crate::io::create_dir(&d)?;
@@ -326,7 +330,9 @@ fn serve_loop<L: ServeLearner>(
         learner,
         csv,
         recorder: if opts.record_episodes {
-            Some(crate::io::episode::EpisodeRecorder::new(&out.join("episodes"))?)
+            Some(crate::io::episode::EpisodeRecorder::new(
+                &out.join("episodes"),
+            )?)
         } else {
             None
         },
