@@ -4,7 +4,8 @@
 //! costs, the expert, LQR+GAIfO, GAIfO (PPO)); docs/design.md §1 maps Algorithm 1 onto them.
 //!
 //! - [`arm`]: hil-sim's arm as the learners' `imitation::rollout::Arm`;
-//! - [`run`]: in-process runs, their CSV and checkpoints, resuming;
+//! - [`run`]: in-process runs, their CSV and checkpoints, resuming; [`replay`]: a recorded
+//!   run's learning done again and checked bit for bit;
 //! - [`serve`]: `learner serve` over iceoryx2;
 //! - [`experiment`]: `learner experiment` (in process; [`experiment::ipc`] over IPC);
 //!   [`plot`]: their figures; [`stats`]: medians and quantiles; [`film`]: the arm reaching;
@@ -24,6 +25,7 @@ pub mod io;
 pub mod plot;
 pub mod process;
 pub mod progress;
+pub mod replay;
 pub mod run;
 pub mod serve;
 pub mod stats;

@@ -1,5 +1,5 @@
 //! In-process runs (lockstep on hil-sim, no IPC): every learner driven through the one
-//! [`Learn`] interface, one [`iterate`] per iteration, with its per-iteration CSV and
+//! [`Learn`] interface, one [`imitation::learn::iterate`] per iteration, with its per-iteration CSV and
 //! checkpoints (docs/design.md §4), and resuming an LQR+GAIfO run from them exactly (§4.11).
 
 use std::path::{Path, PathBuf};
@@ -13,14 +13,16 @@ use imitation::expert::{
     record_demos, train as train_expert, ExpertConfig, ExpertRun, IterationLog,
 };
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
-use imitation::learn::{iterate, Learn};
+use imitation::learn::{iterate_observed, Learn};
 use imitation::ppo::gaifo_ppo::GaifoPpo;
 use imitation::ppo::UpdateStats;
 use serde::Serialize;
 
 use crate::arm::SimArm;
 use crate::io::checkpoint::{load_state, save_state};
+use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
+use crate::io::npz::NpzError;
 use crate::io::table::save_table;
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
@@ -201,7 +203,10 @@ pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
     drive(run, arm, iterations, csv, progress)
 }
 
-/// The iterations of [`run_iterations`] and [`train_resumed`]: iterate, report, log, checkpoint.
+/// The iterations of [`run_iterations`] and [`train_resumed`]: iterate, report, log, checkpoint;
+/// when the run folder has an `episodes/` folder (`learner train --record-episodes`, and its
+/// resumes), every episode is recorded there first, as `learner serve` records them
+/// ([`EpisodeRecorder`]), so that `learner replay` can redo the run.
 fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
     run: &mut R,
     arm: &SimArm,
@@ -211,8 +216,31 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
 ) -> anyhow::Result<Vec<GaifoLog>> {
     use std::io::Write;
     let mut logs = Vec::with_capacity(iterations);
+    let mut recorder = match &csv {
+        Some((_, dir)) if dir.join("episodes").is_dir() => {
+            Some(EpisodeRecorder::new(&dir.join("episodes"))?)
+        }
+        _ => None,
+    };
     for _ in 0..iterations {
-        let (log, _) = iterate(run, arm)?;
+        let (version, n) = (run.version(), run.samples() as u64);
+        let (seed, task) = (run.seed(), run.task().clone());
+        let mut recorded: Result<(), NpzError> = Ok(());
+        let (log, _) = iterate_observed(run, arm, &mut |noisy, eval| {
+            let Some(rec) = recorder.as_mut() else { return };
+            // Numbered as a controller started with version 1 numbers its episodes.
+            for (k, ep) in noisy.iter().chain([eval]).enumerate() {
+                let origin = EpisodeOrigin {
+                    table_version: version,
+                    episode: (version - 1) * (n + 1) + k as u64,
+                    seed,
+                };
+                if recorded.is_ok() {
+                    recorded = rec.record(ep, &origin, &task).map(|_| ());
+                }
+            }
+        })?;
+        recorded?;
         progress(&log, run);
         if let Some((f, dir)) = csv.as_mut() {
             write_csv_row(f, &log, run.seed(), R::ALGO)?;

@@ -6,8 +6,6 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use imitation::expert::ExpertConfig;
-
 fn scratch(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("run-dir-{tag}-{}", std::process::id()));
     std::fs::remove_dir_all(&d).ok();
@@ -15,16 +13,7 @@ fn scratch(tag: &str) -> PathBuf {
     d
 }
 
-/// Demonstrations of a short task (T = 20) from a 3-iteration expert, saved to `path`.
-fn demos(path: &Path, seed: u64) {
-    let cfg = ExpertConfig {
-        seed,
-        ..common::short_expert(20, 3)
-    };
-    let run = learner::run::expert(&cfg, |_| {}).unwrap();
-    let d = learner::run::demos(&cfg, &run).unwrap();
-    learner::io::demos::save(&d, path).unwrap();
-}
+use common::save_short_demos as demos;
 
 /// `learner train` with `args`: (success, stderr).
 fn train(args: &[&str]) -> (bool, String) {

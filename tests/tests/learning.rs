@@ -431,7 +431,27 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
         "the controller changed"
     );
     assert!(sim.running());
+    assert_replays_equal(&out, &dir, ITERATIONS, 0);
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `learner replay OUT --json` on a served run: its learning redone from the recorded episodes
+/// (the same `Learn::learn`) gives every published table (and, for LQR+GAIfO, every critic
+/// checkpoint) bit for bit.
+fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usize) {
+    let o = out.display().to_string();
+    let mut p = Proc::spawn("learner", "replay", &["replay", &o, "--json"], dir);
+    let (code, stdout) = p.wait(LONG);
+    let log = p.log();
+    assert_eq!(code, Some(0), "replay log:\n{log}");
+    let r = json_summary(&stdout, &log);
+    assert!(r["difference"].is_null(), "{r}");
+    assert_eq!(r["iterations"], iterations as u64, "{r}");
+    assert!(
+        r["tables_checked"].as_u64().unwrap() > iterations as u64,
+        "{r}"
+    );
+    assert_eq!(r["critics_checked"], critics as u64, "{r}");
 }
 
 /// The columns of a `gaifo_log.csv` row up to `step_mult` (the rest are timings).
@@ -504,7 +524,7 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
         &learner_cfg,
         &prefix,
         &out,
-        &["--demos", &demos_arg],
+        &["--demos", &demos_arg, "--mcap"],
         &dir,
         "learner",
     );
@@ -569,6 +589,10 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     }
     assert!(tables[ITERATIONS].used_steps() != tables[0].used_steps());
     assert!(sim.running());
+    assert_replays_equal(&out, &dir, ITERATIONS, ITERATIONS + 1);
+    // --mcap: the run as one MCAP file (its reading back: learner/tests/replay.rs).
+    let mcap = std::fs::read(out.join("run.mcap")).unwrap();
+    assert!(mcap.starts_with(b"\x89MCAP0\r\n") && mcap.ends_with(b"\x89MCAP0\r\n"));
     std::fs::remove_dir_all(&dir).ok();
 }
 

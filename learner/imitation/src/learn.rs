@@ -86,8 +86,19 @@ pub fn iterate<L: Learn + ?Sized>(
     learner: &mut L,
     arms: &dyn Arms,
 ) -> Result<(L::Log, Episode), ImitationError> {
+    iterate_observed(learner, arms, &mut |_, _| {})
+}
+
+/// [`iterate`], showing `observe` the episodes of step 1 (noisy, noise-free) before steps 2–6
+/// learn from them (`learner train --record-episodes` records them).
+pub fn iterate_observed<L: Learn + ?Sized>(
+    learner: &mut L,
+    arms: &dyn Arms,
+    observe: &mut dyn FnMut(&[Episode], &Episode),
+) -> Result<(L::Log, Episode), ImitationError> {
     let t0 = Instant::now();
     let (episodes, eval) = learner.execute(arms)?;
+    observe(&episodes, &eval);
     let log = learner.learn(&episodes, &eval, t0.elapsed().as_secs_f64())?;
     Ok((log, eval))
 }

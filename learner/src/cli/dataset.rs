@@ -16,13 +16,18 @@ pub enum Format {
     Lerobot,
     /// One CSV file (`episode,time_s,<state names>`).
     Csv,
+    /// One MCAP file of a recorded run (IN: the run folder, with episodes/ and its tables):
+    /// joint states, states, actions, clamp interventions, episodes and tables as JSON
+    /// messages (docs/design.md §4.14).
+    Mcap,
 }
 
 /// `learner dataset …`.
 #[derive(Subcommand, Debug)]
 pub enum DatasetCmd {
     /// Write demonstrations (`demos.npz`) or recorded episodes (one `.npz` of `learner serve`
-    /// or a folder of them, e.g. RUN/episodes) as a LeRobot v3.0 dataset folder or a CSV file.
+    /// or a folder of them, e.g. RUN/episodes) as a LeRobot v3.0 dataset folder or a CSV file;
+    /// or a recorded run (RUN) as one MCAP file.
     Export(ExportArgs),
     /// Load demonstrations in any format `--demos` takes (.npz, LeRobot folder, .csv), check
     /// them against the default arm and print what they hold.
@@ -35,9 +40,10 @@ pub struct ExportArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "lerobot")]
     pub format: Format,
-    /// Demonstrations `.npz`, an episode `.npz` or a folder of episode files.
+    /// Demonstrations `.npz`, an episode `.npz` or a folder of episode files (mcap: a run
+    /// folder of `learner serve` or `learner train --record-episodes`).
     pub input: PathBuf,
-    /// Output folder (lerobot) or file (csv).
+    /// Output folder (lerobot) or file (csv, mcap).
     pub out: PathBuf,
 }
 
@@ -72,10 +78,28 @@ fn read_input(input: &Path) -> anyhow::Result<Trajectories> {
 /// Runs `learner dataset …`.
 pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
     match cmd {
+        DatasetCmd::Export(a) if a.format == Format::Mcap => {
+            let c = crate::io::run_mcap::write_run_mcap(&a.input, &a.out)?;
+            eprintln!(
+                "{} episodes and {} tables of {} -> {} ({} messages: {})",
+                c.episodes,
+                c.tables,
+                a.input.display(),
+                a.out.display(),
+                c.messages.values().sum::<u64>(),
+                c.messages
+                    .iter()
+                    .map(|(t, n)| format!("{t} {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            Ok(())
+        }
         DatasetCmd::Export(a) => {
             let traj = read_input(&a.input)?;
             match a.format {
                 Format::Lerobot => lerobot::export(&traj, &a.out)?,
+                Format::Mcap => unreachable!("handled above"),
                 Format::Csv => {
                     if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
                         crate::io::create_dir(dir)?;

@@ -1,6 +1,6 @@
 //! `learner expert`: command-line front of [`imitation::expert`].
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -35,14 +35,12 @@ pub struct ExpertArgs {
     pub common: CommonArgs,
 }
 
-/// The header of the per-iteration progress lines.
-pub(super) fn print_header() {
+/// Trains and records the expert of `c` into `out` ([`train_and_record`]), one progress line
+/// per iteration under a header, with a bar and ETA over `c.iterations` on a terminal.
+pub(super) fn train_with_progress(c: &ExpertConfig, out: &Path) -> anyhow::Result<ExpertSummary> {
     eprintln!("{}", IterationLog::PROGRESS_HEADER);
-}
-
-/// One iteration's progress line.
-pub(super) fn print_line(l: &IterationLog) {
-    eprintln!("{}", l.progress_line());
+    let bar = crate::progress::Progress::new(c.iterations as u64, "iterations");
+    train_and_record(c, out, |l| bar.done_one(&l.progress_line()))
 }
 
 /// The expert's closing line: its best cost, final distance and the `demos` recorded.
@@ -110,8 +108,7 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
             c.seed,
             out.display()
         );
-        print_header();
-        let s = train_and_record(c, out, print_line)
+        let s = train_with_progress(c, out)
             .with_context(|| format!("expert for goal {:?}", c.task.goal))?;
         print_done(&s, c.demos);
         summaries.push(s);

@@ -10,6 +10,7 @@ pub mod experiment;
 pub mod expert;
 pub mod plot;
 pub mod policy;
+pub mod replay;
 pub mod serve;
 pub mod train;
 
@@ -90,6 +91,10 @@ pub enum Cmd {
     /// demonstrations in any format `--demos` takes.
     #[command(subcommand)]
     Dataset(dataset::DatasetCmd),
+    /// Re-run the learning of a recorded run (`learner serve`, or `learner train
+    /// --record-episodes`) from its recorded episodes and compare every table bit for bit with
+    /// the recorded ones; reports the first difference and exits non-zero if there is one.
+    Replay(replay::ReplayArgs),
     /// Pictures: `plot arm RUN_DIR` draws the arm reaching (filmstrip PNG and animated GIF).
     #[command(subcommand)]
     Plot(plot::PlotCmd),
@@ -112,5 +117,6 @@ pub fn main() -> anyhow::Result<()> {
         Cmd::Policy(cmd) => policy::run(cmd),
         Cmd::Dataset(cmd) => dataset::run(cmd),
         Cmd::Plot(cmd) => plot::run(cmd),
+        Cmd::Replay(args) => replay::run(args),
     }
 }

@@ -17,7 +17,7 @@ pub const HELP_UNITS: &str = "Units: angles rad (actions are goal joint angles),
 times s (task.dt is the control period; progress `sec` (expert) and `sim_ms` (lqr-gaifo) are wall-clock from the \
 version's first sample to its update), task cost C(τ) = d_T + Σ (i/T) d_i in m; init_var rad². Every option lives \
 in the TOML file (an ExpertConfig as for `learner expert --config`, or with --algo lqr-gaifo a GaifoConfig as for \
-`learner train --config`, plus a [serve] table with algo, demos, prefix, out, resume, record_episodes, \
+`learner train --config`, plus a [serve] table with algo, demos, prefix, out, resume, record_episodes, mcap, \
 wait_report_s, idle_sleep_us, task_tolerance); the flags above override it. The controller must run with the \
 same seed, task (lqr-gaifo: the demonstrations' goal, start_q, horizon, dt), noisy_episodes = samples and \
 eval_episodes = 1; the learner checks the task on the sample stream and stops with an error naming the \
@@ -53,6 +53,11 @@ pub struct ServeArgs {
     /// Largest number of iterations (counted from the first, across resumes); overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
+    /// At exit, write the run's recorded episodes and tables as OUT/run.mcap (JSON messages
+    /// for Foxglove or Rerun: /joint_states, /state, /action, /fault, /episode, /table;
+    /// docs/design.md §4.14); the same as `learner dataset export --format mcap OUT F.mcap`.
+    #[arg(long)]
+    pub mcap: bool,
     /// --config: an `ExpertConfig` (as for `learner expert`) or, for lqr-gaifo, a
     /// `GaifoConfig` (as for `learner train`), plus an optional `[serve]` table; --seed must be
     /// the controller's `seed`; --out: episodes, tables, checkpoints, per-iteration CSV.
@@ -107,6 +112,7 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
         opts.resume = args.resume;
     }
     opts.force |= args.force;
+    opts.mcap |= args.mcap;
     match opts.algo {
         ServeAlgo::Expert => {
             anyhow::ensure!(

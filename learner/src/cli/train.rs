@@ -52,6 +52,11 @@ pub struct TrainArgs {
     /// first (without it such a folder is refused; docs/design.md §4.4).
     #[arg(long)]
     pub force: bool,
+    /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
+    /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
+    /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO only.
+    #[arg(long)]
+    pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
     /// core); results are the same for any number (docs/design.md §5 D29).
     #[arg(long, default_value_t = 0)]
@@ -147,8 +152,7 @@ fn demos_file(
         ecfg.demos,
         dir.display()
     );
-    super::expert::print_header();
-    let s = crate::run::train_and_record(&ecfg, &dir, super::expert::print_line)
+    let s = super::expert::train_with_progress(&ecfg, &dir)
         .context("recording the default demonstrations")?;
     super::expert::print_done(&s, ecfg.demos);
     Ok((s.demos, true))
@@ -160,6 +164,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         anyhow::ensure!(
             args.resume.is_none(),
             "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+        );
+        anyhow::ensure!(
+            !args.record_episodes,
+            "--record-episodes is for LQR+GAIfO runs (`learner replay` redoes gain-table \
+             learners only), not --algo gaifo-ppo"
         );
         let mut pcfg: GaifoPpoConfig = args.common.settings()?;
         if let Some(i) = args.iterations {
@@ -212,6 +221,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         },
     };
     manifest::claim(&out, &m, claim)?;
+    if args.record_episodes {
+        // `run::train` records into it because it is there.
+        crate::io::create_dir(out.join("episodes"))?;
+    }
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,
@@ -256,8 +269,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_line(l: &GaifoLog, u: &UpdateStats) {
-    eprintln!(
+/// The progress line of a GAIfO (PPO) iteration.
+fn ppo_line(l: &GaifoLog, u: &UpdateStats) -> String {
+    format!(
         "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>9.2e} {:>6.3} {:>7.3} {:>9.3e} {:>7.1} {:>7.1}",
         l.iteration,
         l.task_cost,
@@ -271,7 +285,7 @@ fn print_line(l: &GaifoLog, u: &UpdateStats) {
         u.value_loss,
         1e3 * (l.t_critic + l.t_cost + l.t_lqr),
         1e3 * l.t_execute
-    );
+    )
 }
 
 /// `learner train --algo gaifo-ppo` with `pcfg` (its `--config` layered over
@@ -302,7 +316,11 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
         "lrn_ms",
         "sim_ms"
     );
-    let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), print_line)?;
+    let bar = crate::progress::Progress::new(pcfg.iterations as u64, "iterations");
+    let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), |l, u| {
+        bar.done_one(&ppo_line(l, u))
+    })?;
+    drop(bar);
     report(&logs, "gaifo-ppo", pcfg.seed, &out, args.common.json);
     Ok(())
 }

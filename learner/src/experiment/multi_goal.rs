@@ -12,6 +12,7 @@
 //! `summary.json`, `experts/` (the demonstrations and evaluation experts), and
 //! `policy_seed<S>.npz` (each seed's trained policy, `learner policy eval` runs it).
 
+use crate::progress::Progress;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
@@ -162,6 +163,7 @@ fn run_mdgps(
     goals: &[EvalGoal],
     experts: &[Demos],
     out: &Path,
+    progress: &Progress,
 ) -> anyhow::Result<MethodRun> {
     let mut c = MdgpsConfig {
         lqr_gaifo: cfg.lqr_gaifo.clone(),
@@ -183,7 +185,7 @@ fn run_mdgps(
         let mut actor = GlobalActor::new(run.policy(), &mut ws);
         evals.push(evaluate(&mut arm, &base, &mut actor, goals, experts)?);
         let log = run.learn(&samples, &own, t_execute)?;
-        eprintln!("[mdgps seed {seed}] {}", log.progress_line());
+        progress.done_one(&format!("[mdgps seed {seed}] {}", log.progress_line()));
         logs.push(log);
     }
     let mut actor = GlobalActor::new(run.policy(), &mut ws);
@@ -214,6 +216,7 @@ fn run_lqr_centre(
     demos: &Demos,
     goals: &[EvalGoal],
     experts: &[Demos],
+    progress: &Progress,
 ) -> anyhow::Result<MethodRun> {
     let mut c = cfg.lqr_gaifo.clone();
     c.seed = seed;
@@ -231,7 +234,10 @@ fn run_lqr_centre(
             experts,
         )?);
         let (log, _) = iterate(&mut run, &arm)?;
-        eprintln!("[lqr-gaifo centre seed {seed}] {}", log.progress_line());
+        progress.done_one(&format!(
+            "[lqr-gaifo centre seed {seed}] {}",
+            log.progress_line()
+        ));
     }
     evals.push(evaluate(
         &mut arm,
@@ -607,19 +613,22 @@ pub fn run(
     let jobs: Vec<(usize, u64)> = (0..2)
         .flat_map(|m| (0..cfg.seeds as u64).map(move |s| (m, s)))
         .collect();
+    // A bar over the iterations of both methods at every seed (plain lines off a terminal).
+    let progress = Progress::new((jobs.len() * cfg.iterations) as u64, "iterations");
     let runs: Vec<MethodRun> = pool.install(|| {
         jobs.par_iter()
             .map(|&(m, s)| {
                 let seed = cfg.first_seed + s;
                 let r = if m == 0 {
-                    run_mdgps(cfg, seed, &square_demos, &goals, &norm, out)
+                    run_mdgps(cfg, seed, &square_demos, &goals, &norm, out, &progress)
                 } else {
-                    run_lqr_centre(cfg, seed, &centre_set, &goals, &norm)
+                    run_lqr_centre(cfg, seed, &centre_set, &goals, &norm, &progress)
                 };
                 r.with_context(|| format!("{} seed {seed}", METHODS[m]))
             })
             .collect::<anyhow::Result<Vec<_>>>()
     })?;
+    drop(progress);
     write_csvs(&runs, &goals, out)?;
     plot(&runs, &goals, out)?;
     let rows = summarise(&runs, &goals);

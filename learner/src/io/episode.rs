@@ -17,7 +17,7 @@
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use ur5_shared::config::TaskConfig;
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
@@ -66,6 +66,57 @@ pub fn save_episode(
     Ok(())
 }
 
+/// Writes episodes into a folder as they arrive, as `NNNNNN_eEPISODE_vVERSION.npz` (NNNNNN:
+/// arrival number, so that the names sort in arrival order; `learner replay` relies on it).
+/// Used by `learner serve` and `learner train --record-episodes`.
+pub struct EpisodeRecorder {
+    dir: PathBuf,
+    arrivals: u64,
+}
+
+impl EpisodeRecorder {
+    /// A recorder into `dir` (created), numbering on after the highest arrival number of the
+    /// episode files already there (a resumed run).
+    pub fn new(dir: &Path) -> Result<Self, NpzError> {
+        let io = |source| NpzError::Io {
+            path: dir.to_owned(),
+            source,
+        };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let mut arrivals = 0;
+        for e in std::fs::read_dir(dir).map_err(io)? {
+            let name = e.map_err(io)?.file_name();
+            // Episode files only (not a `.npz.tmp` a kill left behind).
+            let n = name
+                .to_str()
+                .filter(|n| n.ends_with(".npz"))
+                .and_then(|n| n.split('_').next())
+                .and_then(|n| n.parse::<u64>().ok());
+            arrivals = arrivals.max(n.unwrap_or(0));
+        }
+        Ok(Self {
+            dir: dir.to_owned(),
+            arrivals,
+        })
+    }
+
+    /// Writes `ep` ([`save_episode`]) as the next arrival; returns its path.
+    pub fn record(
+        &mut self,
+        ep: &Episode,
+        origin: &EpisodeOrigin,
+        task: &TaskConfig,
+    ) -> Result<PathBuf, NpzError> {
+        self.arrivals += 1;
+        let path = self.dir.join(format!(
+            "{:06}_e{:06}_v{:04}.npz",
+            self.arrivals, origin.episode, origin.table_version
+        ));
+        save_episode(&path, ep, origin, task)?;
+        Ok(path)
+    }
+}
+
 /// Reads an episode written by [`save_episode`] (`eps` is not recorded: left empty).
 pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
     let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
@@ -96,6 +147,30 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
         seed: f.u64_scalar("seed")?,
     };
     Ok((ep, origin))
+}
+
+/// The episode files (`*.npz`) of `folder` in name order, which for an
+/// [`EpisodeRecorder`]'s folder is arrival order, loaded; none when there is no folder.
+pub fn recorded_episodes(folder: &Path) -> anyhow::Result<Vec<(PathBuf, Episode, EpisodeOrigin)>> {
+    use anyhow::Context;
+    let mut files: Vec<PathBuf> = match std::fs::read_dir(folder) {
+        Ok(entries) => entries
+            .map(|e| e.map(|e| e.path()))
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("reading {}", folder.display()))?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", folder.display())),
+    };
+    files.retain(|p| p.extension().is_some_and(|x| x == "npz"));
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            let (ep, origin) =
+                load_episode(&p).with_context(|| format!("reading {}", p.display()))?;
+            Ok((p, ep, origin))
+        })
+        .collect()
 }
 
 /// The task an episode file ran (goal, start pose, control period, T).
@@ -137,6 +212,36 @@ mod tests {
         save_episode(&path, &ep, &origin, &TaskConfig::default()).unwrap();
         let (back, o) = load_episode(&path).unwrap();
         assert_eq!((back, o), (ep, origin));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+#[cfg(test)]
+mod recorder_tests {
+    use super::EpisodeRecorder;
+
+    /// A restarted learner numbers on from the recorded episodes (the controller's episode
+    /// numbers start again at 0 when it restarts, so only the arrival number keeps names
+    /// apart): the highest arrival of the `.npz` files, nothing else counted.
+    #[test]
+    fn a_restarted_learner_numbers_on_from_the_recorded_episodes() {
+        let dir = std::env::temp_dir().join(format!("ur5-last-arrival-{}", std::process::id()));
+        std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(
+            EpisodeRecorder::new(&dir).unwrap().arrivals,
+            0,
+            "new folder"
+        );
+        for name in [
+            "000001_e000000_v0001.npz",
+            "000012_e000000_v0001.npz",
+            "000007_e000004_v0002.npz",
+            "000099_e000000_v0003.npz.tmp",
+            "notes.txt",
+        ] {
+            std::fs::write(dir.join(name), b"").unwrap();
+        }
+        assert_eq!(EpisodeRecorder::new(&dir).unwrap().arrivals, 12);
         std::fs::remove_dir_all(&dir).ok();
     }
 }

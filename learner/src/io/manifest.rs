@@ -39,6 +39,10 @@ pub struct Manifest {
     pub config_hash: String,
     /// When the run was made (s since the Unix epoch).
     pub created_unix_s: u64,
+    /// The settings in full (iterations included), so that `learner replay` can rebuild the
+    /// learner; absent in manifests written before replay (such runs cannot be replayed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<serde_json::Value>,
 }
 
 /// How a run takes a directory.
@@ -71,20 +75,19 @@ impl Manifest {
         settings: &S,
     ) -> anyhow::Result<Self> {
         let (demos, demos_hash) = match demos {
-            Some(p) => (p.display().to_string(), fnv1a64(&content_bytes(p)?)),
+            Some(p) => (p.display().to_string(), demos_hash(p)?),
             None => ("-".into(), "-".into()),
         };
-        let mut v = serde_json::to_value(settings)?;
-        if let Some(m) = v.as_object_mut() {
-            m.remove("iterations");
-        }
+        let full = serde_json::to_value(settings)?;
+        let config_hash = settings_hash(&full)?;
         Ok(Self {
             command: command.into(),
             algo: algo.into(),
             seed,
             demos,
             demos_hash,
-            config_hash: fnv1a64(serde_json::to_string(&v)?.as_bytes()),
+            config_hash,
+            settings: Some(full),
             created_unix_s: std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_secs())
@@ -113,12 +116,46 @@ impl Manifest {
         d
     }
 
+    /// The run's settings as `C`, checked against [`Manifest::config_hash`] (the settings
+    /// read back must hash as the run's did, so a value that did not survive the JSON round
+    /// trip is found).
+    pub fn settings_as<C: Serialize + serde::de::DeserializeOwned>(&self) -> anyhow::Result<C> {
+        let v = self.settings.clone().ok_or_else(|| {
+            anyhow::anyhow!(
+                "{MANIFEST} records no settings (written by a build before `learner replay`)"
+            )
+        })?;
+        let c: C = serde_json::from_value(v).context("the settings in run.json")?;
+        let hash = settings_hash(&serde_json::to_value(&c)?)?;
+        anyhow::ensure!(
+            hash == self.config_hash,
+            "the settings in {MANIFEST} hash to {hash}, the run's settings to {}: not this \
+             build's settings",
+            self.config_hash
+        );
+        Ok(c)
+    }
+
     fn describe(&self) -> String {
         format!(
             "`learner {}` {} seed {} on {} (made at Unix time {})",
             self.command, self.algo, self.seed, self.demos, self.created_unix_s
         )
     }
+}
+
+/// FNV-1a 64 of settings serialised as JSON without `iterations` ([`Manifest::config_hash`]).
+fn settings_hash(settings: &serde_json::Value) -> anyhow::Result<String> {
+    let mut v = settings.clone();
+    if let Some(m) = v.as_object_mut() {
+        m.remove("iterations");
+    }
+    Ok(fnv1a64(serde_json::to_string(&v)?.as_bytes()))
+}
+
+/// The FNV-1a 64 of the demonstrations at `path` as [`Manifest::demos_hash`] records it.
+pub fn demos_hash(path: &Path) -> anyhow::Result<String> {
+    Ok(fnv1a64(&content_bytes(path)?))
 }
 
 /// The bytes that identify the demonstrations at `path`: a file's bytes; for a folder (a
@@ -155,8 +192,9 @@ fn content_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
 
 /// Files and folders a run writes into its directory.
 fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    const NAMES: [&str; 9] = [
+    const NAMES: [&str; 10] = [
         MANIFEST,
+        "run.mcap",
         "gaifo_log.csv",
         "serve_log.csv",
         "checkpoint.npz",

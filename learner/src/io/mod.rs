@@ -1,5 +1,5 @@
 //! Files that leave the program (docs/design.md §4): `.npz` containers, demonstrations (also
-//! as LeRobot datasets and CSV), gain tables, the MDGPS policy.
+//! as LeRobot datasets and CSV), gain tables, the MDGPS policy, MCAP logs of recorded runs.
 
 pub mod checkpoint;
 pub mod demos;
@@ -10,6 +10,7 @@ pub mod log;
 pub mod manifest;
 pub mod npz;
 pub mod policy;
+pub mod run_mcap;
 pub mod table;
 
 /// Creates the folder `dir` and its parents (an `--out` folder or one inside it); the error

@@ -26,26 +26,36 @@ use super::npz::{NpzError, NpzFile, NpzWriter};
 /// such files are refused by their schema version rather than by a checksum mismatch).
 pub const SCHEMA_VERSION: i64 = 2;
 
-/// Writes `table` (its used steps) with control period `dt` (s).
-pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzError> {
+/// The float arrays of the file layout (module docs) of `table`'s used steps: (name, shape,
+/// row-major values).
+pub fn table_arrays(table: &GainTable) -> Vec<(&'static str, Vec<u64>, Vec<f64>)> {
     let steps = table.used_steps();
     let t = steps.len() as u64;
+    let flat = |f: &dyn Fn(&GainStep) -> Vec<f64>| steps.iter().flat_map(f).collect::<Vec<f64>>();
+    vec![
+        (
+            "K",
+            vec![t, DU as u64, DX as u64],
+            flat(&|s| s.k_mat.iter().flatten().copied().collect()),
+        ),
+        ("k", vec![t, DU as u64], flat(&|s| s.k_vec.to_vec())),
+        ("s_hat", vec![t, DX as u64], flat(&|s| s.s_hat.to_vec())),
+        ("a_hat", vec![t, DU as u64], flat(&|s| s.a_hat.to_vec())),
+        (
+            "L",
+            vec![t, DU as u64, DU as u64],
+            flat(&|s| s.chol.iter().flatten().copied().collect()),
+        ),
+    ]
+}
+
+/// Writes `table` (its used steps) with control period `dt` (s).
+pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzError> {
     let mut w = NpzWriter::create(path)?;
     w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
-    let flat = |f: &dyn Fn(&GainStep) -> Vec<f64>| steps.iter().flat_map(f).collect::<Vec<f64>>();
-    w.f64(
-        "K",
-        &[t, DU as u64, DX as u64],
-        &flat(&|s| s.k_mat.iter().flatten().copied().collect()),
-    )?;
-    w.f64("k", &[t, DU as u64], &flat(&|s| s.k_vec.to_vec()))?;
-    w.f64("s_hat", &[t, DX as u64], &flat(&|s| s.s_hat.to_vec()))?;
-    w.f64("a_hat", &[t, DU as u64], &flat(&|s| s.a_hat.to_vec()))?;
-    w.f64(
-        "L",
-        &[t, DU as u64, DU as u64],
-        &flat(&|s| s.chol.iter().flatten().copied().collect()),
-    )?;
+    for (name, shape, data) in table_arrays(table) {
+        w.f64(name, &shape, &data)?;
+    }
     w.u64("version", &[], &[table.version])?;
     w.u64("checksum", &[], &[table.checksum])?;
     w.f64("dt", &[], &[dt])?;
@@ -53,6 +63,33 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
     w.strings("action_names", &ACTION_NAMES)?;
     w.finish()?;
     Ok(())
+}
+
+/// A table file as stored, without any check beyond its schema: the float arrays of
+/// [`table_arrays`] (same order) and the `version` and `checksum` scalars (`learner replay`
+/// compares them entry by entry).
+pub struct StoredTable {
+    /// (name, shape, values) of `K`, `k`, `s_hat`, `a_hat`, `L`.
+    pub arrays: Vec<(&'static str, Vec<u64>, Vec<f64>)>,
+    /// `version`.
+    pub version: u64,
+    /// `checksum`.
+    pub checksum: u64,
+}
+
+/// Reads a table file as stored ([`StoredTable`]).
+pub fn load_stored(path: &Path) -> Result<StoredTable, NpzError> {
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let mut arrays = Vec::new();
+    for name in ["K", "k", "s_hat", "a_hat", "L"] {
+        let (shape, data) = f.f64(name)?;
+        arrays.push((name, shape, data));
+    }
+    Ok(StoredTable {
+        arrays,
+        version: f.u64_scalar("version")?,
+        checksum: f.u64_scalar("checksum")?,
+    })
 }
 
 /// Reads a table and validates it against `bounds`; returns it with its control period (s).

@@ -143,19 +143,24 @@ impl Assembler {
     }
 }
 
-/// The episodes of one table version an update waits for.
-pub(super) struct Batch {
-    pub(super) noisy: Vec<Episode>,
-    pub(super) eval: Option<Episode>,
+/// The episodes of one table version an update waits for: the first N noisy and the first
+/// noise-free one offered (in arrival order; `learner replay` picks them the same way).
+#[derive(Default)]
+pub struct Batch {
+    /// The noisy episodes (at most N).
+    pub noisy: Vec<Episode>,
+    /// The noise-free episode.
+    pub eval: Option<Episode>,
 }
 
 impl Batch {
-    pub(super) fn full(&self, n: usize) -> bool {
+    /// N noisy and the noise-free episode are in.
+    pub fn full(&self, n: usize) -> bool {
         self.noisy.len() >= n && self.eval.is_some()
     }
 
     /// Takes `ep` if the batch still needs one of its kind.
-    pub(super) fn offer(&mut self, ep: Episode, n: usize) -> bool {
+    pub fn offer(&mut self, ep: Episode, n: usize) -> bool {
         if ep.noisy && self.noisy.len() < n {
             self.noisy.push(ep);
         } else if !ep.noisy && self.eval.is_none() {

@@ -14,7 +14,7 @@ use ur5_shared::GainTable;
 
 use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
-use crate::io::episode::{save_episode, EpisodeOrigin};
+use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
@@ -35,6 +35,8 @@ pub trait ServeLearner: LinGaussLearn<Log: Serialize> {
     fn csv_row(&self, log: &Self::Log) -> anyhow::Result<String>;
     /// The progress line of an iteration.
     fn progress_line(log: &Self::Log) -> String;
+    /// Iterations the settings ask for in all (the progress bar's length).
+    fn planned_iterations(&self) -> usize;
 }
 
 impl ServeLearner for ExpertLearner {
@@ -70,6 +72,9 @@ impl ServeLearner for ExpertLearner {
     fn progress_line(log: &IterationLog) -> String {
         log.progress_line()
     }
+    fn planned_iterations(&self) -> usize {
+        self.config().iterations
+    }
 }
 
 impl ServeLearner for LqrGaifo {
@@ -92,6 +97,9 @@ impl ServeLearner for LqrGaifo {
     fn progress_line(log: &GaifoLog) -> String {
         log.progress_line()
     }
+    fn planned_iterations(&self) -> usize {
+        self.config().iterations
+    }
 }
 
 /// The learner's side of the run: files and the table in force.
@@ -99,27 +107,8 @@ pub(super) struct Run<L> {
     pub(super) learner: L,
     pub(super) opts: ServeOptions,
     pub(super) csv: std::fs::File,
-    /// Episodes recorded in the folder so far, by any run of the learner: the numbering goes
-    /// on across restarts, so a restarted learner never overwrites a recorded episode (the
-    /// controller's episode numbers start again at 0 when it restarts).
-    pub(super) arrivals: u64,
-}
-
-/// The highest arrival number `NNNNNN` of the episode files `NNNNNN_e…_v….npz` in `dir` (0 if
-/// none).
-pub(super) fn last_arrival(dir: &Path) -> u64 {
-    std::fs::read_dir(dir).map_or(0, |entries| {
-        entries
-            .flatten()
-            .filter_map(|e| {
-                let name = e.file_name();
-                let name = name.to_str()?;
-                name.ends_with(".npz").then_some(())?;
-                name.split_once('_')?.0.parse::<u64>().ok()
-            })
-            .max()
-            .unwrap_or(0)
-    })
+    /// `None` when `record_episodes` is off.
+    pub(super) recorder: Option<EpisodeRecorder>,
 }
 
 impl<L: ServeLearner> Run<L> {
@@ -145,47 +134,15 @@ impl<L: ServeLearner> Run<L> {
         episode: u64,
         version: u64,
     ) -> anyhow::Result<()> {
-        self.arrivals += 1;
-        if !self.opts.record_episodes {
+        let Some(rec) = self.recorder.as_mut() else {
             return Ok(());
-        }
-        let name = format!("{:06}_e{episode:06}_v{version:04}.npz", self.arrivals);
+        };
         let origin = EpisodeOrigin {
             table_version: version,
             episode,
             seed: self.learner.seed(),
         };
-        save_episode(
-            &self.opts.out.join("episodes").join(name),
-            ep,
-            &origin,
-            self.learner.task(),
-        )?;
+        rec.record(ep, &origin, self.learner.task())?;
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::last_arrival;
-
-    #[test]
-    fn a_restarted_learner_numbers_on_from_the_recorded_episodes() {
-        let dir = std::env::temp_dir().join(format!("ur5-last-arrival-{}", std::process::id()));
-        assert_eq!(last_arrival(&dir), 0, "no folder yet");
-        std::fs::create_dir_all(&dir).unwrap();
-        assert_eq!(last_arrival(&dir), 0, "empty folder");
-        // The controller restarted: episode 0 of version 1 again, under a later arrival.
-        for name in [
-            "000001_e000000_v0001.npz",
-            "000012_e000000_v0001.npz",
-            "000007_e000004_v0002.npz",
-            "000099_e000000_v0003.npz.tmp",
-            "notes.txt",
-        ] {
-            std::fs::write(dir.join(name), b"").unwrap();
-        }
-        assert_eq!(last_arrival(&dir), 12);
-        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -55,7 +55,9 @@
 //! - the per-iteration CSV: expert: `serve_log.csv` ([`crate::io::log::EXPERT_CSV_HEADER`], appended
 //!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
 //!   `t_execute_s` is the time from the version's first sample to its last needed episode;
-//!   appended across resumes); `best_table.npz` at exit.
+//!   appended across resumes); `best_table.npz` at exit;
+//! - with `--mcap`, `run.mcap` at exit: the run's recorded episodes and tables as one MCAP
+//!   file ([`crate::io::run_mcap`]).
 //!
 //! # Peers that die
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
@@ -91,11 +93,10 @@ pub mod policy;
 mod ports;
 mod task_check;
 
-pub use assemble::{episode_from_samples, Assembled, Assembler, Counts};
+pub use assemble::{episode_from_samples, Assembled, Assembler, Batch, Counts};
 pub use learner::ServeLearner;
 pub use task_check::motion_per_step;
 
-use assemble::Batch;
 use learner::Run;
 use ports::Ports;
 use task_check::{validate, TaskCheck};
@@ -133,6 +134,9 @@ pub struct ServeOptions {
     pub force: bool,
     /// Record every complete episode to `out/episodes/`.
     pub record_episodes: bool,
+    /// At exit, write the recorded episodes and the tables as `out/run.mcap`
+    /// ([`crate::io::run_mcap`]; needs `record_episodes`).
+    pub mcap: bool,
     /// While no sample arrives, say so every this many seconds (wall clock).
     pub wait_report_s: f64,
     /// Sleep between polls when idle (µs).
@@ -153,6 +157,7 @@ impl Default for ServeOptions {
             resume: None,
             force: false,
             record_episodes: true,
+            mcap: false,
             wait_report_s: 5.0,
             idle_sleep_us: 500,
             task_tolerance: 0.01,
@@ -312,6 +317,10 @@ fn serve_loop<L: ServeLearner>(
     opts: ServeOptions,
     mut progress: impl FnMut(&L::Log),
 ) -> anyhow::Result<ServeSummary<L::Log>> {
+    anyhow::ensure!(
+        !opts.mcap || opts.record_episodes,
+        "mcap = true needs record_episodes = true: run.mcap is written from the recorded episodes"
+    );
     let out = opts.out.clone();
     for d in [out.clone(), out.join("tables"), out.join("episodes")] {
         crate::io::create_dir(&d)?;
@@ -319,9 +328,15 @@ fn serve_loop<L: ServeLearner>(
     let csv = learner.open_csv(&out, opts.resume.is_some())?;
     let run = Run {
         learner,
-        opts,
         csv,
-        arrivals: learner::last_arrival(&out.join("episodes")),
+        recorder: if opts.record_episodes {
+            Some(crate::io::episode::EpisodeRecorder::new(
+                &out.join("episodes"),
+            )?)
+        } else {
+            None
+        },
+        opts,
     };
 
     // Setup: every port before anything runs.
@@ -374,6 +389,12 @@ fn serve_with_ports<L: ServeLearner>(
     let mut version_started: Option<Instant> = None;
     let mut newer_reported = 0u64;
 
+    let bar = crate::progress::Progress::new(
+        run.learner
+            .planned_iterations()
+            .saturating_sub(run.learner.iteration()) as u64,
+        "iterations",
+    );
     let exit = 'outer: loop {
         let mut got = false;
         while let Some(sample) = ports
@@ -398,15 +419,15 @@ fn serve_with_ports<L: ServeLearner>(
                     } => (episode, version, ep),
                     Assembled::Partial { episode, have } => {
                         counts.partial += 1;
-                        eprintln!(
+                        bar.println(&format!(
                             "learner serve: discarded episode {episode}: {have} of {t_len} steps"
-                        );
+                        ));
                         check.partial(have, &run.learner)?;
                         continue;
                     }
                     Assembled::Mixed { episode } => {
                         counts.mixed += 1;
-                        eprintln!("learner serve: discarded episode {episode}: table version or noise flag changed inside it");
+                        bar.println(&format!("learner serve: discarded episode {episode}: table version or noise flag changed inside it"));
                         continue;
                     }
                 };
@@ -420,10 +441,10 @@ fn serve_with_ports<L: ServeLearner>(
                     counts.newer_version += 1;
                     if version != newer_reported {
                         newer_reported = version;
-                        eprintln!(
+                        bar.println(&format!(
                             "learner serve: the controller runs table version {version}, newer than this learner's {current}: \
                              another learner published it; restart this one with --resume <its out dir> to continue from there"
-                        );
+                        ));
                     }
                 } else if finishing {
                     // The controller took the last table: nothing more to learn.
@@ -449,17 +470,17 @@ fn serve_with_ports<L: ServeLearner>(
                 ports.publish(&table)?;
                 let row = run.learner.csv_row(&entry)?;
                 run.csv.write_all(row.as_bytes())?;
-                eprintln!("{}", L::progress_line(&entry));
+                bar.done_one(&L::progress_line(&entry));
                 progress(&entry);
                 log.push(entry);
                 finishing = run.learner.done();
                 if finishing {
-                    eprintln!(
+                    bar.println(&format!(
                         "learner serve: learning done ({} iterations); published the last table, version {}; \
                          exiting once the controller runs it",
                         run.learner.iteration(),
                         run.learner.version()
-                    );
+                    ));
                 }
             }
         }
@@ -473,26 +494,37 @@ fn serve_with_ports<L: ServeLearner>(
         ports.status.check_controller()?;
         if last_sample.elapsed() >= report && last_report.elapsed() >= report {
             last_report = Instant::now();
-            eprintln!(
+            bar.println(&format!(
                 "learner serve: waiting for episodes of table version {} on prefix `{}`: no sample for {:.0} s \
                  (is rt-controller running with --prefix {}?)",
                 run.learner.version(),
                 run.opts.prefix,
                 last_sample.elapsed().as_secs_f64(),
                 run.opts.prefix
-            );
+            ));
         }
         if ports.node.wait(idle).is_err() {
             break ServeExit::Stopped;
         }
     };
 
+    drop(bar);
     if let Some((pol, _)) = &best {
         save_table(
             &out.join("best_table.npz"),
             &to_gain_table(pol, run.learner.version()),
             run.learner.task().dt,
         )?;
+    }
+    if run.opts.mcap && counts.episodes > 0 {
+        let path = out.join("run.mcap");
+        let c = crate::io::run_mcap::write_run_mcap(&out, &path)?;
+        eprintln!(
+            "learner serve: {} episodes and {} tables -> {}",
+            c.episodes,
+            c.tables,
+            path.display()
+        );
     }
     Ok(ServeSummary {
         command: "serve",

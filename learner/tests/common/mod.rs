@@ -22,14 +22,33 @@ pub fn short_expert(horizon: usize, iterations: usize) -> ExpertConfig {
 
 /// The `learner` binary of this build with `args`: (success, stderr).
 pub fn learner(args: &[&str]) -> (bool, String) {
+    let (ok, _, err) = learner_output(args);
+    (ok, err)
+}
+
+/// The `learner` binary of this build with `args`: (success, stdout, stderr).
+pub fn learner_output(args: &[&str]) -> (bool, String, String) {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
         .args(args)
         .output()
         .unwrap();
     (
         out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
+}
+
+/// Demonstrations of a short task (T = 20) from a 3-iteration expert ([`short_expert`]) with
+/// `seed`, saved to `path`.
+pub fn save_short_demos(path: &Path, seed: u64) {
+    let cfg = ExpertConfig {
+        seed,
+        ..short_expert(20, 3)
+    };
+    let run = learner::run::expert(&cfg, |_| {}).unwrap();
+    let d = learner::run::demos(&cfg, &run).unwrap();
+    learner::io::demos::save(&d, path).unwrap();
 }
 
 /// An experiment CSV's rows without the wall-clock columns (t_*_s, cpu_learner_s), which
