@@ -23,8 +23,10 @@ same seed, task (lqr-gaifo: the demonstrations' goal, start_q, horizon, dt), noi
 eval_episodes = 1; the learner checks the task on the sample stream and stops with an error naming the \
 setting. Files in --out: episodes/*.npz, tables/v*.npz, latest_table.npz, best_table.npz; expert: \
 checkpoint.npz, serve_log.csv; lqr-gaifo: iter_NNN_table.npz + iter_NNN_critic.json, gaifo_log.csv (the \
-columns of `learner train`). --resume restores the controller (and LQR+GAIfO's critic exactly); the GMM \
-dynamics prior, the step size and the previous controller are not checkpointed and start afresh.";
+columns of `learner train`, and iter_NNN_state.npz). --resume restores LQR+GAIfO's whole learner state (critic \
+with Adam moments, GMM dynamics prior and its data, previous controller, step size, RNG positions), but the \
+episodes it then learns from carry later noise draws than an uninterrupted run's, so over IPC it is not bit \
+for bit; the expert's restores its controller only (its GMM prior starts afresh).";
 
 /// Arguments of `learner serve`.
 #[derive(clap::Args, Debug)]
