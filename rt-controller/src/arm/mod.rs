@@ -50,8 +50,8 @@ pub trait ArmBackend {
     fn send(&mut self, cmd: &ArmCommand) -> Result<(), ArmIoError>;
 
     /// Loop: why the arm is gone for good (its connection closed), if it is; the loop then
-    /// ends with [`crate::ExitReason::ArmLost`] at the first stale wait instead of waiting for
-    /// `safety.give_up_after_s`.
+    /// ends with [`crate::ExitReason::ArmLost`] at its next step (a stale wait, or a fresh one
+    /// after a send that failed) instead of waiting for `safety.give_up_after_s`.
     fn lost(&self) -> Option<&'static str> {
         None
     }

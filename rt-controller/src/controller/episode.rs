@@ -121,7 +121,8 @@ impl<A: ArmBackend> Controller<A> {
 
     /// One loop iteration after the period wait.
     pub(super) fn step(&mut self, freshness: StateFreshness) -> Option<ExitReason> {
-        if freshness == StateFreshness::Stale && (self.give_up() || self.arm.lost().is_some()) {
+        let lost = self.arm.lost().is_some();
+        if freshness == StateFreshness::Stale && (self.give_up() || lost) {
             if self.fault != Some(Fault::StaleState) {
                 self.latch(Fault::StaleState);
             }
@@ -132,6 +133,12 @@ impl<A: ArmBackend> Controller<A> {
             // at the robot can clear that. End the episode, hold, exit.
             self.abort_episode(Fault::ArmFault);
             return Some(ExitReason::ArmStopped);
+        }
+        if lost {
+            // The connection is gone for good, and a wait need not have been stale to see it:
+            // in lockstep a command that could not be sent leaves nothing to wait for, and
+            // the wait counts as fresh (tests/tests/lost_arm.rs).
+            return Some(ExitReason::ArmLost);
         }
         if !matches!(self.phase, Phase::Running { .. }) {
             if let Some(st) = self.ports.learner_status() {

@@ -70,7 +70,8 @@ pub enum ExitReason {
     EpisodesDone,
     /// The stop flag was raised (SIGINT/SIGTERM in the binary).
     Stopped,
-    /// The arm was stale for `safety.give_up_after_s`.
+    /// The arm was stale for `safety.give_up_after_s`, or its backend reports its connection
+    /// gone ([`crate::ArmBackend::lost`]).
     ArmLost,
     /// No valid table arrived within `safety.no_table_timeout_s`.
     NoTable,
