@@ -232,6 +232,7 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
             for (k, ep) in noisy.iter().chain([eval]).enumerate() {
                 let origin = EpisodeOrigin {
                     table_version: version,
+                    table_epoch: 0,
                     episode: (version - 1) * (n + 1) + k as u64,
                     seed,
                 };

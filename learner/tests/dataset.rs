@@ -362,6 +362,7 @@ fn recorded_episodes_export_with_their_actions() {
         states.extend_from_slice(&ep.x);
         let origin = EpisodeOrigin {
             table_version: 1,
+            table_epoch: 0,
             episode: k,
             seed: 7,
         };

@@ -97,6 +97,14 @@ impl Active<'_> {
             Active::Policy(p) => p.version,
         }
     }
+
+    /// The table's publication of its version ([`GainTable::epoch`]; 0 for a policy table).
+    pub fn epoch(&self) -> u32 {
+        match self {
+            Active::Gains(t) => t.epoch,
+            Active::Policy(_) => 0,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -150,13 +158,16 @@ impl TableBuffer {
         self.active().map(|t| t.version())
     }
 
-    /// `Some(Unchanged)` for the active version, `Err` for an older one, `None` to go on.
-    fn check_version(&self, version: u64) -> Option<Result<Offer, Rejection>> {
-        let active = self.active_version()?;
-        if version == active {
-            return Some(Ok(Offer::Unchanged));
+    /// `Some(Unchanged)` for the active version in the same or an earlier publication
+    /// (`epoch`), `Err` for an older version, `None` to go on (a newer version, or the active
+    /// one published again by a resumed learner: docs/design.md §3.3).
+    fn check_version(&self, version: u64, epoch: u32) -> Option<Result<Offer, Rejection>> {
+        let active = self.active()?;
+        let (v, e) = (active.version(), active.epoch());
+        if version == v {
+            return (epoch <= e).then_some(Ok(Offer::Unchanged));
         }
-        (version < active).then_some(Err(Rejection::StaleVersion { version, active }))
+        (version < v).then_some(Err(Rejection::StaleVersion { version, active: v }))
     }
 
     /// The half of `kind` that is not active.
@@ -175,7 +186,7 @@ impl TableBuffer {
         incoming: &PolicyTable,
         now: impl Fn() -> u64,
     ) -> Result<Offer, Rejection> {
-        if let Some(r) = self.check_version(incoming.version) {
+        if let Some(r) = self.check_version(incoming.version, 0) {
             return r;
         }
         let inactive = self.inactive(Kind::Policy);
@@ -202,14 +213,15 @@ impl TableBuffer {
     }
 
     /// Takes the gain table `incoming` if it is valid and newer than the active table of
-    /// either kind: copy into the inactive half, validate the copy, flip. Call only at an
-    /// episode boundary. `now` is a clock for the timings (ns).
+    /// either kind (a higher version, or the active version in a later `epoch`): copy into the
+    /// inactive half, validate the copy, flip. Call only at an episode boundary. `now` is a
+    /// clock for the timings (ns).
     pub fn offer(
         &mut self,
         incoming: &GainTable,
         now: impl Fn() -> u64,
     ) -> Result<Offer, Rejection> {
-        if let Some(r) = self.check_version(incoming.version) {
+        if let Some(r) = self.check_version(incoming.version, incoming.epoch) {
             return r;
         }
         let inactive = self.inactive(Kind::Gains);
@@ -346,6 +358,16 @@ mod tests {
         ));
         assert_eq!(b.active_version(), Some(1));
         assert_eq!(b.offer(&table(1, 100, 0.5), clock), Ok(Offer::Unchanged));
+        // The same version published again by a resumed learner (a later epoch) is taken
+        // again; an earlier or the same epoch is not.
+        let mut again = table(1, 100, 0.5);
+        again.epoch = 2;
+        assert!(matches!(b.offer(&again, clock), Ok(Offer::Swapped { .. })));
+        assert_eq!(b.active().map(|a| a.epoch()), Some(2));
+        again.epoch = 1;
+        assert_eq!(b.offer(&again, clock), Ok(Offer::Unchanged));
+        again.epoch = 2;
+        assert_eq!(b.offer(&again, clock), Ok(Offer::Unchanged));
 
         let mut counts = RejectCounts::default();
         let mut nan = table(2, 100, 0.5);

@@ -28,7 +28,7 @@
 //! bit pattern; all integers and bit patterns little-endian (20 + 504·T bytes). On a
 //! little-endian machine this is exactly the raw bytes of those header fields followed by the raw
 //! bytes of `steps[..T]`, so any other language with an xxHash library can recompute it from the
-//! struct. Steps at t ≥ T, the reserved field and the checksum field itself are not covered. Note
+//! struct. Steps at t ≥ T, the `epoch` field and the checksum field itself are not covered. Note
 //! that 0.0 and −0.0 hash differently. The checksum guards against corruption and half-written
 //! tables, not against an adversary. Tables of wire type `GainTable.v1` (and table files of
 //! schema 1) carried a byte-wise FNV-1a 64 instead; XXH3 reads 8 bytes at a time with SIMD and
@@ -99,8 +99,14 @@ pub struct GainTable {
     pub dx: u32,
     /// Action dimension; must equal [`DU`].
     pub du: u32,
-    /// Keeps the layout free of implicit padding; write 0. Not hashed.
-    pub reserved: u32,
+    /// Publication of this version (docs/design.md §3.6, "Exact resume"): 0 when the learner
+    /// first publishes it; a resumed learner publishes the same version again with a higher
+    /// epoch, and a controller running the version takes it again and restarts the version's
+    /// episode count k (the noise key of `Noise::new(seed, version, k)`), so that the episodes
+    /// after a resume are those the first publication gave. Echoed in
+    /// [`crate::StepSample::table_epoch`]. Not hashed (the contents of a version do not change
+    /// with its publication); tables written before it had 0 here (the old `reserved`).
+    pub epoch: u32,
     /// XXH3-64 checksum (module docs), set by [`GainTable::seal`].
     pub checksum: u64,
     /// Steps t = 0..MAX_HORIZON; only t < `horizon` are meaningful.
@@ -786,10 +792,10 @@ pub(crate) mod tests {
             f(&mut copy);
             assert_ne!(copy.compute_checksum(), base);
         }
-        // Steps past the horizon, `reserved` and `checksum` are not.
+        // Steps past the horizon, `epoch` and `checksum` are not.
         copy.copy_from(&table);
         copy.steps[100].k_vec[0] = 3.0;
-        copy.reserved = 9;
+        copy.epoch = 9;
         copy.checksum = 1;
         assert_eq!(copy.compute_checksum(), base);
     }

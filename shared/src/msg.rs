@@ -23,7 +23,7 @@ use crate::layout::{self, DU, DX, N_JOINTS};
 /// dynamics fit and discriminator (docs/design.md §3.2; the dynamics use a_sent, §5 D18).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
-#[type_name("ur5_shared::StepSample.v1")]
+#[type_name("ur5_shared::StepSample.v2")]
 pub struct StepSample {
     /// Version of the gain table that computed `a`.
     pub table_version: u64,
@@ -33,6 +33,11 @@ pub struct StepSample {
     pub t: u32,
     /// 1 if `a` included exploration noise L_t ε, 0 for the noise-free evaluation run.
     pub noise: u32,
+    /// [`crate::GainTable::epoch`] of the table that computed `a` (0 for a policy table): which
+    /// publication of `table_version` the episode ran (`StepSample.v2`; v1 had no such field).
+    pub table_epoch: u32,
+    /// Keeps the layout free of implicit padding; write 0.
+    pub reserved: u32,
     /// State s_t the action was computed from (layout of [`crate::layout`]).
     pub s: [f64; DX],
     /// Action a_t as computed by [`crate::law::controller_action`], before the controller's
@@ -331,7 +336,7 @@ mod tests {
     fn payloads_have_no_implicit_padding() {
         assert_eq!(
             core::mem::size_of::<StepSample>(),
-            8 * 2 + 4 * 2 + 8 * (DX + 2 * DU) + 8 * 3
+            8 * 2 + 4 * 4 + 8 * (DX + 2 * DU) + 8 * 3
         );
         assert_eq!(core::mem::size_of::<ArmState>(), 8 * 4 + 8 * 12 + 4 * 2);
         assert_eq!(core::mem::size_of::<ArmCommand>(), 8 * 3 + 4 * 2 + 8 * 6);

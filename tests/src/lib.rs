@@ -273,3 +273,32 @@ pub fn write_config(dir: &Path, name: &str, text: &str) -> String {
     std::fs::write(&p, text).expect("write config");
     p.display().to_string()
 }
+
+/// The in-process reference of a served LQR+GAIfO run: `iterations` calls of
+/// [`imitation::learn::iterate`] with `cfg` on `demos` on the simulated arm, checkpointed into
+/// `out` before each and after the last, as `learner serve` checkpoints before each publication.
+/// Returns the tables of versions 1 … iterations + 1 and each iteration's log and noise-free
+/// episode.
+#[allow(clippy::type_complexity)]
+pub fn lqr_gaifo_in_process(
+    cfg: imitation::gaifo::GaifoConfig,
+    demos: imitation::demos::Demos,
+    iterations: usize,
+    out: &Path,
+) -> (
+    Vec<Box<GainTable>>,
+    Vec<(imitation::gaifo::GaifoLog, imitation::rollout::Episode)>,
+) {
+    use learner::run::Checkpoint;
+    let mut run = imitation::gaifo::LqrGaifo::new(cfg, demos).unwrap();
+    let arm = learner::run::arm_for(&run).unwrap();
+    let (mut tables, mut logs) = (Vec::new(), Vec::new());
+    for _ in 0..iterations {
+        tables.push(imitation::controller::to_gain_table(run.policy(), run.version()));
+        run.checkpoint(out, None).unwrap();
+        logs.push(imitation::learn::iterate(&mut run, &arm).unwrap());
+    }
+    tables.push(imitation::controller::to_gain_table(run.policy(), run.version()));
+    run.checkpoint(out, None).unwrap();
+    (tables, logs)
+}

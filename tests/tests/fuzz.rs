@@ -184,6 +184,7 @@ fn seeds() -> &'static Seeds {
         let (noisy, _) = g.execute(&mut arm).unwrap();
         let origin = learner::io::episode::EpisodeOrigin {
             table_version: 1,
+            table_epoch: 0,
             episode: 0,
             seed: 0,
         };

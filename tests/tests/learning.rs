@@ -12,17 +12,17 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use imitation::controller::to_gain_table;
 use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
-use imitation::gaifo::{GaifoLog, LqrGaifo};
-use imitation::learn::iterate;
+use imitation::gaifo::GaifoLog;
 use imitation::rollout::{execute, Episode};
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc,
+    cleanup_dead_nodes, json_summary, lqr_gaifo_in_process, scratch, unique_prefix,
+    write_config, Proc,
 };
 use learner::arm::SimArm;
 use learner::io::episode::load_episode;
 use learner::io::log::{write_csv_row, CSV_HEADER};
 use learner::io::table::load_table;
-use learner::run::{arm_for, demos as record_demos, expert as train, Checkpoint};
+use learner::run::{demos as record_demos, expert as train};
 use learner::serve::{episode_from_samples, load_config, load_gaifo_config};
 use ur5_shared::config::TaskConfig;
 use ur5_shared::services::{self, ServiceNames};
@@ -503,19 +503,7 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     let (cfg, _) = load_gaifo_config(Path::new(&learner_cfg)).unwrap();
     let reference = {
         let (cfg, demos, ref_out) = (cfg.clone(), demos.clone(), ref_out.clone());
-        std::thread::spawn(move || {
-            let mut run = LqrGaifo::new(cfg, demos).unwrap();
-            let arm = arm_for(&run).unwrap();
-            let (mut tables, mut iterations) = (Vec::new(), Vec::new());
-            for _ in 0..ITERATIONS {
-                tables.push(to_gain_table(run.policy(), run.version()));
-                run.checkpoint(&ref_out, None).unwrap();
-                iterations.push(iterate(&mut run, &arm).unwrap());
-            }
-            tables.push(to_gain_table(run.policy(), run.version()));
-            run.checkpoint(&ref_out, None).unwrap();
-            (tables, iterations)
-        })
+        std::thread::spawn(move || lqr_gaifo_in_process(cfg, demos, ITERATIONS, &ref_out))
     };
 
     let mut monitor = SampleMonitor::new(&prefix);
@@ -634,8 +622,8 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
         assert_eq!(v, kept, "episode {e} ran table v{v}: nobody published it");
     }
 
-    // Restart from the checkpoint: the same version is published again (the controller
-    // ignores it), then learning goes on.
+    // Restart from the checkpoint: the same version is published again with epoch 1 (the
+    // controller takes it again and restarts its noise keys), then learning goes on.
     let mut resumed = spawn_learner(
         &learner_cfg,
         &prefix,
@@ -662,7 +650,7 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
     assert_eq!(rj["exit_reason"], "stopped", "{rj}");
     assert!(rj["start_version"].as_u64().unwrap() >= kept, "{rj}");
     assert!(rj["iterations"].as_u64().unwrap() >= 1, "{rj}");
-    assert!(rlog.contains("(resumed)"), "{rlog}");
+    assert!(rlog.contains("(resumed; publication 1 of it)"), "{rlog}");
 
     ctl.signal(libc::SIGTERM);
     let (code, cout) = ctl.wait(LONG);

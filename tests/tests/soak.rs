@@ -58,6 +58,7 @@ fn episode(table: &GainTable, version: u64, k: Option<u64>) -> Episode {
 fn save(dir: &Path, name: &str, ep: &Episode, version: u64) {
     let origin = EpisodeOrigin {
         table_version: version,
+        table_epoch: 0,
         episode: 0,
         seed: SEED,
     };

@@ -8,6 +8,7 @@
 //! | `actions` | (1, T, dU) f64 | actions executed by the arm (after the controller's clamp); the dynamics are fitted on these |
 //! | `actions_policy` | (1, T, dU) f64 | actions the controller law asked for (before the clamp) |
 //! | `table_version` | () u64 | gain-table version that computed the actions |
+//! | `table_epoch` | () u64 | its publication (`GainTable::epoch`), written when not 0; absent: 0 |
 //! | `episode` | () u64 | the controller's episode number |
 //! | `noisy` | () u64 | 1 with exploration noise, 0 for the noise-free evaluation episode |
 //! | `task_cost` | () f64 | C(τ) (`ur5_shared::cost`) |
@@ -33,6 +34,9 @@ pub const SCHEMA_VERSION: i64 = 1;
 pub struct EpisodeOrigin {
     /// Gain-table version that computed the actions.
     pub table_version: u64,
+    /// Its publication ([`ur5_shared::GainTable::epoch`]): a resumed `learner serve`
+    /// publishes its version again with a higher epoch (docs/design.md §3.6).
+    pub table_epoch: u32,
     /// The controller's episode number.
     pub episode: u64,
     /// Run seed.
@@ -53,6 +57,9 @@ pub fn save_episode(
     w.f64("actions", &[1, t, DU as u64], &ep.u)?;
     w.f64("actions_policy", &[1, t, DU as u64], &ep.u_policy)?;
     w.u64("table_version", &[], &[origin.table_version])?;
+    if origin.table_epoch != 0 {
+        w.u64("table_epoch", &[], &[u64::from(origin.table_epoch)])?;
+    }
     w.u64("episode", &[], &[origin.episode])?;
     w.u64("noisy", &[], &[ep.noisy as u64])?;
     w.f64("task_cost", &[], &[ep.task_cost()])?;
@@ -143,6 +150,11 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
     };
     let origin = EpisodeOrigin {
         table_version: f.u64_scalar("table_version")?,
+        table_epoch: match f.optional_u64_scalar("table_epoch")? {
+            None => 0,
+            Some(e) => u32::try_from(e)
+                .map_err(|_| f.bad("table_epoch", format!("{e} is over u32::MAX")))?,
+        },
         episode: f.u64_scalar("episode")?,
         seed: f.u64_scalar("seed")?,
     };
@@ -206,6 +218,7 @@ mod tests {
         };
         let origin = EpisodeOrigin {
             table_version: 3,
+            table_epoch: 2,
             episode: 17,
             seed: 9,
         };

@@ -362,6 +362,16 @@ impl NpzFile {
         Ok(v[0])
     }
 
+    /// [`Self::u64_scalar`] of an array that files written before it was added lack: `None`
+    /// when it is absent.
+    pub fn optional_u64_scalar(&self, name: &str) -> Result<Option<u64>, NpzError> {
+        if self.arrays.contains_key(name) {
+            self.u64_scalar(name).map(Some)
+        } else {
+            Ok(None)
+        }
+    }
+
     /// Opens `path` and checks that it is of layout version `schema` (its `schema_version`):
     /// the one preamble of every project file reader.
     pub fn open_schema(path: &Path, schema: i64) -> Result<Self, NpzError> {

@@ -9,6 +9,7 @@
 //! | `a_hat` | (T, dU) | nominal action |
 //! | `L` | (T, dU, dU) | lower Cholesky factor of the action covariance |
 //! | `version`, `checksum` | () u64 | as in `ur5_shared::GainTable` |
+//! | `epoch` | () u64 | the publication of the version (`GainTable::epoch`), written when not 0; absent: 0 |
 //! | `dt` | () f64 | control period (s) |
 //! | `state_names`, `action_names` | | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
@@ -57,6 +58,9 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
         w.f64(name, &shape, &data)?;
     }
     w.u64("version", &[], &[table.version])?;
+    if table.epoch != 0 {
+        w.u64("epoch", &[], &[u64::from(table.epoch)])?;
+    }
     w.u64("checksum", &[], &[table.checksum])?;
     w.f64("dt", &[], &[dt])?;
     w.strings("state_names", &STATE_NAMES)?;
@@ -119,6 +123,10 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
         .set_horizon(t as usize)
         .map_err(|e| bad("K", e.to_string()))?;
     table.set_version(f.u64_scalar("version")?);
+    table.epoch = match f.optional_u64_scalar("epoch")? {
+        None => 0,
+        Some(e) => u32::try_from(e).map_err(|_| bad("epoch", format!("{e} is over u32::MAX")))?,
+    };
     for ti in 0..t as usize {
         let mut step = GainStep::default();
         for i in 0..DU {

@@ -49,12 +49,14 @@ pub fn episode_from_samples(samples: &[StepSample]) -> Episode {
 /// What the [`Assembler`] made of an episode once it ended.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Assembled {
-    /// All T steps in order, one version, one noise flag.
+    /// All T steps in order, one version (and publication of it), one noise flag.
     Complete {
         /// Controller episode number.
         episode: u64,
         /// Table version.
         version: u64,
+        /// Its publication ([`ur5_shared::GainTable::epoch`]).
+        epoch: u32,
         /// The episode.
         ep: Episode,
     },
@@ -65,7 +67,7 @@ pub enum Assembled {
         /// Samples it had.
         have: usize,
     },
-    /// The version or noise flag changed inside the episode.
+    /// The version (or its publication) or the noise flag changed inside the episode.
     Mixed {
         /// Controller episode number.
         episode: u64,
@@ -106,6 +108,7 @@ impl Assembler {
             Assembled::Complete {
                 episode: first.episode,
                 version: first.table_version,
+                epoch: first.table_epoch,
                 ep: episode_from_samples(&self.cur),
             }
         };
@@ -124,7 +127,9 @@ impl Assembler {
                 out.extend(self.close());
             } else {
                 self.gap |= s.t != last.t + 1;
-                self.mixed |= s.table_version != last.table_version || s.noise != last.noise;
+                self.mixed |= s.table_version != last.table_version
+                    || s.table_epoch != last.table_epoch
+                    || s.noise != last.noise;
             }
         }
         if self.cur.len() >= self.horizon {

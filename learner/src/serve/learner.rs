@@ -109,6 +109,9 @@ pub(super) struct Run<L> {
     pub(super) csv: std::fs::File,
     /// `None` when `record_episodes` is off.
     pub(super) recorder: Option<EpisodeRecorder>,
+    /// The publication of the current version ([`GainTable::epoch`]): 0, or for the version a
+    /// resumed learner starts with, one more than the one recorded (docs/design.md §3.6).
+    pub(super) epoch: u32,
 }
 
 impl<L: ServeLearner> Run<L> {
@@ -116,7 +119,8 @@ impl<L: ServeLearner> Run<L> {
     pub(super) fn save_current(&self) -> anyhow::Result<Box<GainTable>> {
         let out = &self.opts.out;
         let version = self.learner.version();
-        let table = self.learner.table();
+        let mut table = self.learner.table();
+        table.epoch = self.epoch;
         self.learner.checkpoint(out)?;
         let dt = self.learner.task().dt;
         save_table(
@@ -133,12 +137,14 @@ impl<L: ServeLearner> Run<L> {
         ep: &Episode,
         episode: u64,
         version: u64,
+        epoch: u32,
     ) -> anyhow::Result<()> {
         let Some(rec) = self.recorder.as_mut() else {
             return Ok(());
         };
         let origin = EpisodeOrigin {
             table_version: version,
+            table_epoch: epoch,
             episode,
             seed: self.learner.seed(),
         };

@@ -63,14 +63,20 @@
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
 //! A restarted learner: `--resume DIR` continues from DIR's checkpoint (expert:
 //! `checkpoint.npz`; lqr-gaifo: the latest complete `iter_NNN_*` checkpoint,
-//! [`crate::run::resume`]) and publishes that table version again (the controller already runs
-//! it and ignores the duplicate), then waits for N + 1 fresh episodes of it. LQR+GAIfO's whole
-//! learner state (critic, GMM dynamics prior, step size, previous controller, RNG positions)
-//! resumes exactly, but the fresh episodes carry later noise draws of that version than the
-//! uninterrupted run learned from, so a run resumed over IPC is not bit for bit the
-//! uninterrupted one (`learner train --resume` is). Without `--resume` a new learner starts at
-//! version 1, which a controller running a newer version rejects: the learner then reports the
-//! newer version it sees in the samples and keeps waiting.
+//! [`crate::run::resume`]) and publishes that table version again.
+//!
+//! # Exact resume
+//! The resumed learner publishes its version with the next epoch (one more than the epoch
+//! of `DIR/tables/vVERSION.npz`; [`ur5_shared::GainTable::epoch`]). A controller running
+//! that version takes it again at its next boundary and restarts the version's episode count,
+//! so the episodes k = 0 … N of the new publication draw the noise of the first publication's;
+//! samples carry the epoch (`StepSample::table_epoch`) and episodes of an earlier publication
+//! count as an older version. LQR+GAIfO's whole learner state (critic, GMM dynamics prior,
+//! step size, previous controller, RNG positions) resumes exactly, so with an arm whose reset
+//! is exact (`hil-sim serve` in lockstep) a served run killed anywhere and resumed learns what
+//! the uninterrupted run learns, bit for bit (tests/tests/resume_ipc.rs). Without `--resume` a
+//! new learner starts at version 1, which a controller running a newer version rejects: the
+//! learner then reports the newer version it sees in the samples and keeps waiting.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -311,6 +317,30 @@ fn claim_dirs<S: Serialize>(
     claim(&opts.out, &m, Claim::New { force: opts.force })
 }
 
+/// The epoch a resumed learner publishes `version` with: one more than the epoch of the
+/// copy recorded in `dir/tables/` (0 if there is none), so that the controller takes it again
+/// and restarts the version's episode count (module docs, "Exact resume").
+fn republication_epoch(dir: &Path, version: u64) -> anyhow::Result<u32> {
+    let path = dir.join("tables").join(format!("v{version:04}.npz"));
+    let recorded = if path.is_file() {
+        let f = crate::io::npz::NpzFile::open_schema(&path, crate::io::table::SCHEMA_VERSION)?;
+        f.optional_u64_scalar("epoch")?.unwrap_or(0)
+    } else {
+        0
+    };
+    u32::try_from(recorded + 1)
+        .with_context(|| format!("{}: epoch {recorded} cannot be increased", path.display()))
+}
+
+/// `v` or `v (publication e)` for the log.
+fn publication(version: u64, epoch: u32) -> String {
+    if epoch == 0 {
+        version.to_string()
+    } else {
+        format!("{version} (publication {epoch})")
+    }
+}
+
 /// The one serve loop (module docs) around `learner`.
 fn serve_loop<L: ServeLearner>(
     learner: L,
@@ -326,9 +356,14 @@ fn serve_loop<L: ServeLearner>(
         crate::io::create_dir(&d)?;
     }
     let csv = learner.open_csv(&out, opts.resume.is_some())?;
+    let epoch = match &opts.resume {
+        Some(dir) => republication_epoch(dir, learner.version())?,
+        None => 0,
+    };
     let run = Run {
         learner,
         csv,
+        epoch,
         recorder: if opts.record_episodes {
             Some(crate::io::episode::EpisodeRecorder::new(
                 &out.join("episodes"),
@@ -364,7 +399,11 @@ fn serve_with_ports<L: ServeLearner>(
         "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version",
         L::ALGO,
         run.opts.prefix,
-        if run.opts.resume.is_some() { " (resumed)" } else { "" },
+        if run.opts.resume.is_some() {
+            format!(" (resumed; publication {} of it)", run.epoch)
+        } else {
+            String::new()
+        },
     );
     eprintln!("{}", L::PROGRESS_HEADER);
 
@@ -387,7 +426,7 @@ fn serve_with_ports<L: ServeLearner>(
     let mut last_sample = Instant::now();
     let mut last_report = Instant::now();
     let mut version_started: Option<Instant> = None;
-    let mut newer_reported = 0u64;
+    let mut newer_reported = (0u64, 0u32);
 
     let bar = crate::progress::Progress::new(
         run.learner
@@ -407,16 +446,19 @@ fn serve_with_ports<L: ServeLearner>(
             got = true;
             counts.samples += 1;
             check.sample(&s, &run.learner)?;
-            if s.table_version == run.learner.version() && version_started.is_none() {
+            if (s.table_version, s.table_epoch) == (run.learner.version(), run.epoch)
+                && version_started.is_none()
+            {
                 version_started = Some(Instant::now());
             }
             for a in asm.push(&s) {
-                let (episode, version, ep) = match a {
+                let (episode, version, epoch, ep) = match a {
                     Assembled::Complete {
                         episode,
                         version,
+                        epoch,
                         ep,
-                    } => (episode, version, ep),
+                    } => (episode, version, epoch, ep),
                     Assembled::Partial { episode, have } => {
                         counts.partial += 1;
                         bar.println(&format!(
@@ -432,18 +474,22 @@ fn serve_with_ports<L: ServeLearner>(
                     }
                 };
                 counts.episodes += 1;
-                run.record(&ep, episode, version)?;
+                run.record(&ep, episode, version, epoch)?;
                 check.episode(&ep, version, &run.learner, run.opts.task_tolerance)?;
                 let current = run.learner.version();
-                if version < current {
+                // An earlier publication of the current version counts as an older version:
+                // its episodes carry later noise keys than the ones this learner waits for.
+                if (version, epoch) < (current, run.epoch) {
                     counts.old_version += 1;
-                } else if version > current {
+                } else if (version, epoch) > (current, run.epoch) {
                     counts.newer_version += 1;
-                    if version != newer_reported {
-                        newer_reported = version;
+                    if (version, epoch) != newer_reported {
+                        newer_reported = (version, epoch);
                         bar.println(&format!(
-                            "learner serve: the controller runs table version {version}, newer than this learner's {current}: \
-                             another learner published it; restart this one with --resume <its out dir> to continue from there"
+                            "learner serve: the controller runs table version {}, newer than this learner's {}: \
+                             another learner published it; restart this one with --resume <its out dir> to continue from there",
+                            publication(version, epoch),
+                            publication(current, run.epoch)
                         ));
                     }
                 } else if finishing {
@@ -466,10 +512,14 @@ fn serve_with_ports<L: ServeLearner>(
                     .map_or(0.0, |t0| t0.elapsed().as_secs_f64());
                 let entry = run.learner.learn(&batch.noisy, &eval, waited)?;
                 batch.noisy.clear();
-                let table = run.save_current()?;
-                ports.publish(&table)?;
+                // The row before the checkpoint, as `learner train` writes them: a kill between
+                // the two leaves a row that a resume from the previous checkpoint drops and
+                // writes again, never a checkpoint without its row.
                 let row = run.learner.csv_row(&entry)?;
                 run.csv.write_all(row.as_bytes())?;
+                run.epoch = 0;
+                let table = run.save_current()?;
+                ports.publish(&table)?;
                 bar.done_one(&L::progress_line(&entry));
                 progress(&entry);
                 log.push(entry);

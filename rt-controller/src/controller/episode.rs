@@ -348,14 +348,15 @@ impl<A: ArmBackend> Controller<A> {
             NO_NOISE
         };
         let mut a = [0.0; DU];
-        let (ok, version) = match self.tables.active() {
+        let (ok, version, epoch) = match self.tables.active() {
             Some(Active::Gains(table)) => (
                 controller_action(table, t, &s, &eps, &mut a).is_ok(),
                 table.version,
+                table.epoch,
             ),
             Some(Active::Policy(table)) => {
                 policy_action(table, &s, &eps, &mut self.scratch, &mut a);
-                (true, table.version)
+                (true, table.version, 0)
             }
             None => {
                 self.abort_episode(Fault::NoTable);
@@ -386,6 +387,8 @@ impl<A: ArmBackend> Controller<A> {
             episode: self.episode,
             t: t as u32,
             noise: self.noisy as u32,
+            table_epoch: epoch,
+            reserved: 0,
             s,
             a,
             a_sent: sent,
