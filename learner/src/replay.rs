@@ -173,7 +173,7 @@ fn drive<L: LinGaussLearn>(
         let (i, v) = (learner.iteration(), learner.version());
         let files: Vec<PathBuf> = [
             dir.join(format!("iter_{i:03}_table.npz")),
-            dir.join("tables").join(format!("v{v:04}.npz")),
+            crate::io::table::version_path(dir, v),
         ]
         .into_iter()
         .filter(|p| p.is_file())

@@ -294,11 +294,74 @@ pub fn lqr_gaifo_in_process(
     let arm = learner::run::arm_for(&run).unwrap();
     let (mut tables, mut logs) = (Vec::new(), Vec::new());
     for _ in 0..iterations {
-        tables.push(imitation::controller::to_gain_table(run.policy(), run.version()));
+        tables.push(imitation::controller::to_gain_table(
+            run.policy(),
+            run.version(),
+        ));
         run.checkpoint(out, None).unwrap();
         logs.push(imitation::learn::iterate(&mut run, &arm).unwrap());
     }
-    tables.push(imitation::controller::to_gain_table(run.policy(), run.version()));
+    tables.push(imitation::controller::to_gain_table(
+        run.policy(),
+        run.version(),
+    ));
     run.checkpoint(out, None).unwrap();
     (tables, logs)
+}
+
+/// `hil-sim serve` and `rt-controller run --json` with the given config files on `prefix`.
+pub fn spawn_sim_and_controller(
+    sim_cfg: &str,
+    ctl_cfg: &str,
+    prefix: &str,
+    dir: &Path,
+) -> (Proc, Proc) {
+    let sim = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &["serve", "--config", sim_cfg, "--prefix", prefix],
+        dir,
+    );
+    let ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
+        dir,
+    );
+    (sim, ctl)
+}
+
+/// splitmix64: the seeded kill moments of the resume tests.
+pub fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// `dir/iter_NNN_KIND`: a checkpoint file of iteration `i` (`table.npz`, `state.npz`,
+/// `critic.json`).
+pub fn checkpoint_file(dir: &Path, i: usize, kind: &str) -> PathBuf {
+    dir.join(format!("iter_{i:03}_{kind}"))
+}
+
+/// The columns of a `gaifo_log.csv` row up to `step_mult` (the rest are timings).
+pub fn learned_columns(row: &str) -> Vec<String> {
+    row.trim_end()
+        .split(',')
+        .take(11)
+        .map(str::to_owned)
+        .collect()
+}
+
+/// Every number of a learner state file (`iter_NNN_state.npz`) as bits: the real arrays and
+/// the words (RNG positions, counters), by name.
+pub fn state_bits(path: &Path) -> Vec<(String, Vec<u64>)> {
+    let s = learner::io::checkpoint::load_state(path).unwrap();
+    s.reals
+        .iter()
+        .map(|(k, (_, v))| (k.clone(), v.iter().map(|x| x.to_bits()).collect()))
+        .chain(s.words.clone())
+        .collect()
 }

@@ -83,9 +83,7 @@ pub fn scan_run(out: &Path) -> Scan {
     let mut load_version = |v: u64| -> Option<(Box<GainTable>, f64)> {
         tables
             .entry(v)
-            .or_insert_with(|| {
-                load_table(&out.join("tables").join(format!("v{v:04}.npz")), &bounds).ok()
-            })
+            .or_insert_with(|| load_table(&learner::io::table::version_path(out, v), &bounds).ok())
             .clone()
     };
     for path in &files {

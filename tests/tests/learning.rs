@@ -15,8 +15,8 @@ use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::GaifoLog;
 use imitation::rollout::{execute, Episode};
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, lqr_gaifo_in_process, scratch, unique_prefix,
-    write_config, Proc,
+    cleanup_dead_nodes, json_summary, learned_columns, lqr_gaifo_in_process, scratch,
+    spawn_sim_and_controller, unique_prefix, write_config, Proc,
 };
 use learner::arm::SimArm;
 use learner::io::episode::load_episode;
@@ -71,27 +71,6 @@ fn spawn_learner(
     ];
     args.extend_from_slice(extra);
     Proc::spawn("learner", label, &args, dir)
-}
-
-fn spawn_sim_and_controller(
-    sim_cfg: &str,
-    ctl_cfg: &str,
-    prefix: &str,
-    dir: &Path,
-) -> (Proc, Proc) {
-    let sim = Proc::spawn(
-        "hil-sim",
-        "sim",
-        &["serve", "--config", sim_cfg, "--prefix", prefix],
-        dir,
-    );
-    let ctl = Proc::spawn(
-        "rt-controller",
-        "controller",
-        &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
-        dir,
-    );
-    (sim, ctl)
 }
 
 /// A passive second subscriber on `learner/samples`: sees exactly what the learner sees.
@@ -418,7 +397,7 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
     for (i, table) in tables.iter().enumerate() {
         let v = i as u64 + 1;
         let (got, _) = load_table(
-            &out.join("tables").join(format!("v{v:04}.npz")),
+            &learner::io::table::version_path(&out, v),
             &GainBounds::default(),
         )
         .unwrap();
@@ -452,15 +431,6 @@ fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usiz
         "{r}"
     );
     assert_eq!(r["critics_checked"], critics as u64, "{r}");
-}
-
-/// The columns of a `gaifo_log.csv` row up to `step_mult` (the rest are timings).
-fn learned_columns(row: &str) -> Vec<String> {
-    row.trim_end()
-        .split(',')
-        .take(11)
-        .map(str::to_owned)
-        .collect()
 }
 
 /// `learner serve --algo lqr-gaifo`: ITERATIONS iterations of LQR+GAIfO over IPC, on
@@ -560,7 +530,7 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     for (i, table) in tables.iter().enumerate() {
         let v = i as u64 + 1;
         let (got, _) = load_table(
-            &out.join("tables").join(format!("v{v:04}.npz")),
+            &learner::io::table::version_path(&out, v),
             &GainBounds::default(),
         )
         .unwrap();

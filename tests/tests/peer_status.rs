@@ -5,7 +5,9 @@
 
 use std::time::{Duration, Instant};
 
-use integration_tests::{json_summary, scratch, unique_prefix, write_config, Proc};
+use integration_tests::{
+    json_summary, scratch, spawn_sim_and_controller, unique_prefix, write_config, Proc,
+};
 
 /// Waits for both to exit (at most `limit` in all); returns (learner code, controller code,
 /// controller stdout).
@@ -90,18 +92,7 @@ fn a_seed_mismatch_stops_both_sides_with_the_same_message() {
         &format!("seed = 8\nnoisy_episodes = 2\neval_episodes = 1\n[task]\nhorizon = {t}\n"),
     );
     let out = dir.join("out").display().to_string();
-    let sim = Proc::spawn(
-        "hil-sim",
-        "sim",
-        &["serve", "--config", &sim_cfg, "--prefix", &prefix],
-        &dir,
-    );
-    let mut ctl = Proc::spawn(
-        "rt-controller",
-        "controller",
-        &["run", "--config", &ctl_cfg, "--prefix", &prefix, "--json"],
-        &dir,
-    );
+    let (sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
     let mut learner = Proc::spawn(
         "learner",
         "learner",

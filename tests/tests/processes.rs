@@ -5,8 +5,8 @@
 use std::time::Duration;
 
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, reaching_table, scratch, unique_prefix, write_config, Proc,
-    TestLearner,
+    cleanup_dead_nodes, json_summary, reaching_table, scratch, spawn_sim_and_controller,
+    unique_prefix, write_config, Proc, TestLearner,
 };
 use ur5_shared::{controller_action, CommandKind, StepSample, DX, NO_NOISE};
 
@@ -483,18 +483,7 @@ fn real_time_mode_runs_episodes_with_both_pacings() {
         );
         let mut learner = TestLearner::new(&prefix);
         learner.publish(&reaching_table(1, 10, Q_GOAL, 0.02));
-        let _sim = Proc::spawn(
-            "hil-sim",
-            "sim",
-            &["serve", "--config", &sim_cfg, "--prefix", &prefix],
-            &dir,
-        );
-        let mut ctl = Proc::spawn(
-            "rt-controller",
-            "controller",
-            &["run", "--config", &ctl_cfg, "--prefix", &prefix, "--json"],
-            &dir,
-        );
+        let (_sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
         learner.poll_until(&mut ctl, LONG, "2 episodes", |l| l.received.len() >= 20);
         let (code, out) = ctl.wait(LONG);
         let log = ctl.log();

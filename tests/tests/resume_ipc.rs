@@ -8,14 +8,14 @@
 //! a higher epoch, the controller restarts that version's episode count (the noise keys), and
 //! the learner uses only episodes of the new publication (docs/design.md §3.6, "Exact resume").
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, lqr_gaifo_in_process, scratch, unique_prefix,
+    checkpoint_file as file, cleanup_dead_nodes, json_summary, learned_columns,
+    lqr_gaifo_in_process, scratch, spawn_sim_and_controller, splitmix64, state_bits, unique_prefix,
     write_config, Proc,
 };
-use learner::io::checkpoint::load_state;
 use learner::io::log::{write_csv_row, CSV_HEADER};
 use learner::io::table::load_table;
 use learner::serve::load_gaifo_config;
@@ -28,29 +28,6 @@ const ITERATIONS: usize = 10;
 /// Kills before the run may finish.
 const KILLS: usize = 6;
 const LONG: Duration = Duration::from_secs(120);
-
-/// splitmix64: the kill moments, seeded (wall-clock moments: which code a kill interrupts
-/// varies with the machine's load; the assertions hold for any).
-fn next(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-fn file(dir: &Path, i: usize, kind: &str) -> PathBuf {
-    dir.join(format!("iter_{i:03}_{kind}"))
-}
-
-/// The columns of a `gaifo_log.csv` row up to `step_mult` (the rest are timings).
-fn learned_columns(row: &str) -> Vec<String> {
-    row.trim_end()
-        .split(',')
-        .take(11)
-        .map(str::to_owned)
-        .collect()
-}
 
 #[test]
 fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
@@ -93,22 +70,17 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
         std::thread::spawn(move || lqr_gaifo_in_process(cfg, demos, ITERATIONS, &ref_out))
     };
 
-    let mut sim = Proc::spawn(
-        "hil-sim",
-        "sim",
-        &["serve", "--config", &sim_cfg, "--prefix", &prefix],
-        &dir,
-    );
-    let mut ctl = Proc::spawn(
-        "rt-controller",
-        "controller",
-        &["run", "--config", &ctl_cfg, "--prefix", &prefix, "--json"],
-        &dir,
-    );
+    let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
     let o = out.display().to_string();
     let demos_arg = demos_path.display().to_string();
     let base = [
-        "serve", "--config", &learner_cfg, "--prefix", &prefix, "--demos", &demos_arg,
+        "serve",
+        "--config",
+        &learner_cfg,
+        "--prefix",
+        &prefix,
+        "--demos",
+        &demos_arg,
         "--json",
     ];
     let mut seed = 23u64;
@@ -125,7 +97,7 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
         let mut p = Proc::spawn("learner", &format!("learner{kills}"), &args, &dir);
         // The first KILLS runs are killed 50 to 800 ms after their start (a served iteration
         // takes about 0.2 s here, the whole run a few seconds); the next one finishes.
-        let at = Duration::from_millis(50 + next(&mut seed) % 750);
+        let at = Duration::from_millis(50 + splitmix64(&mut seed) % 750);
         let started = Instant::now();
         let mut finished = None;
         while kills >= KILLS || started.elapsed() < at {
@@ -136,7 +108,11 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
                 finished = Some(p.wait(Duration::from_secs(1)));
                 break;
             }
-            assert!(started.elapsed() < LONG, "learner hangs; its log:\n{}", p.log());
+            assert!(
+                started.elapsed() < LONG,
+                "learner hangs; its log:\n{}",
+                p.log()
+            );
             std::thread::sleep(Duration::from_millis(2));
         }
         match finished {
@@ -173,17 +149,11 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
     for (i, table) in tables.iter().enumerate() {
         let (got, _) = load_table(&file(&out, i, "table.npz"), &GainBounds::default()).unwrap();
         assert_eq!(got.checksum, table.checksum, "table of iteration {i}");
-        let (a, b) = (
-            load_state(&file(&out, i, "state.npz")).unwrap(),
-            load_state(&file(&ref_out, i, "state.npz")).unwrap(),
+        assert_eq!(
+            state_bits(&file(&out, i, "state.npz")),
+            state_bits(&file(&ref_out, i, "state.npz")),
+            "learner state of iteration {i}"
         );
-        let bits = |s: &gps::snapshot::Snapshot| -> Vec<(String, Vec<u64>)> {
-            s.reals
-                .iter()
-                .map(|(k, (_, v))| (k.clone(), v.iter().map(|x| x.to_bits()).collect()))
-                .collect()
-        };
-        assert_eq!(bits(&a), bits(&b), "learner state of iteration {i}");
         let name = format!("iter_{i:03}_critic.json");
         assert_eq!(
             std::fs::read(out.join(&name)).unwrap(),

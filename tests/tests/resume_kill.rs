@@ -7,21 +7,12 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use integration_tests::{scratch, Proc};
-use learner::io::checkpoint::load_state;
+use integration_tests::{
+    checkpoint_file as file, learned_columns, scratch, splitmix64, state_bits, Proc,
+};
 use learner::io::table::load_table;
 
 const N: usize = 8;
-
-/// splitmix64: the kill moments, seeded (the moments are wall-clock times, so which code a
-/// kill interrupts still varies with the machine's load; the assertion holds for any).
-fn next(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 /// Short demonstrations (T = 30, a 4-iteration expert), saved for the binaries.
 fn demos(dir: &Path) -> PathBuf {
@@ -46,16 +37,12 @@ fn train(dir: &Path, label: &str, args: &[&str]) -> Proc {
     Proc::spawn("learner", label, args, dir)
 }
 
-fn file(dir: &Path, i: usize, kind: &str) -> PathBuf {
-    dir.join(format!("iter_{i:03}_{kind}"))
-}
-
 /// The CSV rows without the timing columns.
 fn learned_rows(dir: &Path) -> Vec<String> {
     let text = std::fs::read_to_string(dir.join("gaifo_log.csv")).unwrap();
     text.lines()
         .skip(1)
-        .map(|r| r.split(',').take(11).collect::<Vec<_>>().join(","))
+        .map(|r| learned_columns(r).join(","))
         .collect()
 }
 
@@ -92,7 +79,7 @@ fn a_learner_killed_at_random_moments_resumes_bit_for_bit() {
         };
         let mut p = train(&root, &format!("attempt{attempt}"), &args);
         // Kill at a random moment within half an uninterrupted run's time (the first 5 times).
-        let at = whole.mul_f64((next(&mut seed) % 1000) as f64 / 2000.0);
+        let at = whole.mul_f64((splitmix64(&mut seed) % 1000) as f64 / 2000.0);
         let started = Instant::now();
         let mut finished = None;
         while started.elapsed() < at || kills >= 5 {
@@ -130,18 +117,11 @@ fn a_learner_killed_at_random_moments_resumes_bit_for_bit() {
         let (a, _) = load_table(&file(&killed, i, "table.npz"), &bounds).unwrap();
         let (b, _) = load_table(&file(&full, i, "table.npz"), &bounds).unwrap();
         assert_eq!(a.checksum, b.checksum, "table {i}");
-        let (a, b) = (
-            load_state(&file(&killed, i, "state.npz")).unwrap(),
-            load_state(&file(&full, i, "state.npz")).unwrap(),
+        assert_eq!(
+            state_bits(&file(&killed, i, "state.npz")),
+            state_bits(&file(&full, i, "state.npz")),
+            "learner state {i}"
         );
-        let bits = |s: &gps::snapshot::Snapshot| -> Vec<(String, Vec<u64>)> {
-            s.reals
-                .iter()
-                .map(|(k, (_, v))| (k.clone(), v.iter().map(|x| x.to_bits()).collect()))
-                .chain(s.words.clone())
-                .collect()
-        };
-        assert_eq!(bits(&a), bits(&b), "learner state {i}");
         assert!(
             std::fs::read(file(&killed, i, "critic.json")).unwrap()
                 == std::fs::read(file(&full, i, "critic.json")).unwrap(),

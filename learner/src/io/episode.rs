@@ -150,11 +150,7 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
     };
     let origin = EpisodeOrigin {
         table_version: f.u64_scalar("table_version")?,
-        table_epoch: match f.optional_u64_scalar("table_epoch")? {
-            None => 0,
-            Some(e) => u32::try_from(e)
-                .map_err(|_| f.bad("table_epoch", format!("{e} is over u32::MAX")))?,
-        },
+        table_epoch: f.u32_scalar_or_zero("table_epoch")?,
         episode: f.u64_scalar("episode")?,
         seed: f.u64_scalar("seed")?,
     };

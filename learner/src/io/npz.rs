@@ -362,14 +362,14 @@ impl NpzFile {
         Ok(v[0])
     }
 
-    /// [`Self::u64_scalar`] of an array that files written before it was added lack: `None`
-    /// when it is absent.
-    pub fn optional_u64_scalar(&self, name: &str) -> Result<Option<u64>, NpzError> {
-        if self.arrays.contains_key(name) {
-            self.u64_scalar(name).map(Some)
-        } else {
-            Ok(None)
+    /// A scalar uint64 that must fit a u32 (table epochs), 0 when the array is absent (files
+    /// written before it was added, or written without it because it was 0).
+    pub fn u32_scalar_or_zero(&self, name: &str) -> Result<u32, NpzError> {
+        if !self.arrays.contains_key(name) {
+            return Ok(0);
         }
+        let v = self.u64_scalar(name)?;
+        u32::try_from(v).map_err(|_| self.bad(name, format!("{v} is over u32::MAX")))
     }
 
     /// Opens `path` and checks that it is of layout version `schema` (its `schema_version`):

@@ -16,7 +16,7 @@
 //!
 //! Loading rebuilds the table, checks the stored checksum and runs `GainTable::validate`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 use ur5_shared::{GainBounds, GainStep, GainTable};
@@ -48,6 +48,11 @@ pub fn table_arrays(table: &GainTable) -> Vec<(&'static str, Vec<u64>, Vec<f64>)
             flat(&|s| s.chol.iter().flatten().copied().collect()),
         ),
     ]
+}
+
+/// `run_dir/tables/vVERSION.npz`: where `learner serve` records each table it publishes.
+pub fn version_path(run_dir: &Path, version: u64) -> PathBuf {
+    run_dir.join("tables").join(format!("v{version:04}.npz"))
 }
 
 /// Writes `table` (its used steps) with control period `dt` (s).
@@ -123,10 +128,7 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
         .set_horizon(t as usize)
         .map_err(|e| bad("K", e.to_string()))?;
     table.set_version(f.u64_scalar("version")?);
-    table.epoch = match f.optional_u64_scalar("epoch")? {
-        None => 0,
-        Some(e) => u32::try_from(e).map_err(|_| bad("epoch", format!("{e} is over u32::MAX")))?,
-    };
+    table.epoch = f.u32_scalar_or_zero("epoch")?;
     for ti in 0..t as usize {
         let mut step = GainStep::default();
         for i in 0..DU {

@@ -123,11 +123,7 @@ impl<L: ServeLearner> Run<L> {
         table.epoch = self.epoch;
         self.learner.checkpoint(out)?;
         let dt = self.learner.task().dt;
-        save_table(
-            &out.join("tables").join(format!("v{version:04}.npz")),
-            &table,
-            dt,
-        )?;
+        save_table(&crate::io::table::version_path(out, version), &table, dt)?;
         save_table(&out.join("latest_table.npz"), &table, dt)?;
         Ok(table)
     }

@@ -321,14 +321,15 @@ fn claim_dirs<S: Serialize>(
 /// copy recorded in `dir/tables/` (0 if there is none), so that the controller takes it again
 /// and restarts the version's episode count (module docs, "Exact resume").
 fn republication_epoch(dir: &Path, version: u64) -> anyhow::Result<u32> {
-    let path = dir.join("tables").join(format!("v{version:04}.npz"));
+    let path = crate::io::table::version_path(dir, version);
     let recorded = if path.is_file() {
-        let f = crate::io::npz::NpzFile::open_schema(&path, crate::io::table::SCHEMA_VERSION)?;
-        f.optional_u64_scalar("epoch")?.unwrap_or(0)
+        crate::io::npz::NpzFile::open_schema(&path, crate::io::table::SCHEMA_VERSION)?
+            .u32_scalar_or_zero("epoch")?
     } else {
         0
     };
-    u32::try_from(recorded + 1)
+    recorded
+        .checked_add(1)
         .with_context(|| format!("{}: epoch {recorded} cannot be increased", path.display()))
 }
 
