@@ -1,4 +1,5 @@
-//! The numerical kernels of every MLP in the project: the dot product, the affine map and tanh.
+//! The numerical kernels of every MLP in the project: the dot product, the affine map, tanh, and
+//! the element-wise updates of the backward pass (`axpy`, `mat_t_vec`, `outer_acc`).
 //! The learner's networks (critic, PPO policy and value, MDGPS policy) and the controller's
 //! [`crate::policy_action`] call these and nothing else, so a policy acts with the same bits in
 //! the learner and in the real-time loop (docs/design.md §3.11).
@@ -101,6 +102,113 @@ unsafe fn affine_avx(w: &[f64], b: &[f64], x: &[f64], out: &mut [f64]) {
         i += 4;
     }
     affine_rows(&w[i * n..], &b[i..], x, &mut out[i..]);
+}
+
+/// `y += a x`, element by element (`y_i ← y_i + a · x_i`: one multiplication, one addition).
+/// With AVX four elements at a time, the same two operations per element, so the same bits.
+///
+/// # Panics
+/// If `y.len() < x.len()` (only `x.len()` elements of `y` are updated).
+#[inline]
+pub fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
+    let y = &mut y[..x.len()];
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present (checked above).
+        unsafe { axpy_avx(a, x, y) };
+        return;
+    }
+    axpy_lanes(a, x, y);
+}
+
+/// `out[..cols] = Wᵀ y`, `W` row-major `rows × cols`: zero, then [`axpy`]`(y_i, W_i, out)` for
+/// `i = 0..rows` in order (so each `out_j` sums its terms in row order), bit for bit.
+///
+/// # Panics
+/// If `w.len() < rows · cols`, `y.len() < rows` or `out.len() < cols`.
+#[inline]
+pub fn mat_t_vec(w: &[f64], rows: usize, cols: usize, y: &[f64], out: &mut [f64]) {
+    assert!(w.len() >= rows * cols && y.len() >= rows && out.len() >= cols);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present (checked above); the lengths were checked above.
+        unsafe { mat_t_vec_avx(w, rows, cols, y, out) };
+        return;
+    }
+    mat_t_vec_rows(w, rows, cols, y, out);
+}
+
+/// `M += c u vᵀ`, `M` row-major `u.len() × v.len()`: row i is [`axpy`]`(c · u_i, v, M_i)`, bit
+/// for bit.
+///
+/// # Panics
+/// If `m.len() < u.len() · v.len()`.
+#[inline]
+pub fn outer_acc(c: f64, u: &[f64], v: &[f64], m: &mut [f64]) {
+    assert!(m.len() >= u.len() * v.len());
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present (checked above); the length was checked above.
+        unsafe { outer_acc_avx(c, u, v, m) };
+        return;
+    }
+    outer_acc_rows(c, u, v, m);
+}
+
+/// The element loop of [`axpy`] (any CPU; inlined into the AVX versions, where the compiler
+/// vectorises it: no fused multiply-add, per element the same two operations).
+#[inline(always)]
+fn axpy_lanes(a: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+#[inline(always)]
+fn mat_t_vec_rows(w: &[f64], rows: usize, cols: usize, y: &[f64], out: &mut [f64]) {
+    let out = &mut out[..cols];
+    out.fill(0.0);
+    for (i, &yi) in y[..rows].iter().enumerate() {
+        axpy_lanes(yi, &w[i * cols..(i + 1) * cols], out);
+    }
+}
+
+#[inline(always)]
+fn outer_acc_rows(c: f64, u: &[f64], v: &[f64], m: &mut [f64]) {
+    let n = v.len();
+    for (i, &ui) in u.iter().enumerate() {
+        axpy_lanes(c * ui, v, &mut m[i * n..(i + 1) * n]);
+    }
+}
+
+/// [`axpy`] compiled for AVX.
+///
+/// # Safety
+/// The CPU has AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn axpy_avx(a: f64, x: &[f64], y: &mut [f64]) {
+    axpy_lanes(a, x, y);
+}
+
+/// [`mat_t_vec`] compiled for AVX.
+///
+/// # Safety
+/// The CPU has AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn mat_t_vec_avx(w: &[f64], rows: usize, cols: usize, y: &[f64], out: &mut [f64]) {
+    mat_t_vec_rows(w, rows, cols, y, out);
+}
+
+/// [`outer_acc`] compiled for AVX.
+///
+/// # Safety
+/// The CPU has AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn outer_acc_avx(c: f64, u: &[f64], v: &[f64], m: &mut [f64]) {
+    outer_acc_rows(c, u, v, m);
 }
 
 /// ln 2 split in two (the high part has its last 32 bits zero, so `k · LN2_HI` is exact for
@@ -215,6 +323,56 @@ mod tests {
                         (dot(&w[i * n..(i + 1) * n], &x) + b[i]).to_bits()
                     );
                 }
+            }
+        }
+    }
+
+    /// `axpy`, `mat_t_vec` and `outer_acc` (AVX where the CPU has it) equal their
+    /// element-by-element scalar loops bit for bit, for lengths around the four-wide blocks
+    /// and magnitudes over many binades.
+    #[test]
+    fn axpy_kernels_are_the_scalar_loops_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let big = |rng: &mut ChaCha8Rng| {
+            rng.random_range(-1.0..1.0) * 2f64.powi(rng.random_range(-30..30))
+        };
+        for rows in 0..=9 {
+            for n in 0..=19 {
+                let w: Vec<f64> = (0..rows * n).map(|_| big(&mut rng)).collect();
+                let u: Vec<f64> = (0..rows).map(|_| big(&mut rng)).collect();
+                let v: Vec<f64> = (0..n).map(|_| big(&mut rng)).collect();
+                let c = big(&mut rng);
+                // axpy on the first row, the rest of `y` untouched.
+                if rows > 0 {
+                    let mut fast = w.clone();
+                    axpy(c, &v, &mut fast);
+                    let mut slow = w.clone();
+                    for j in 0..n {
+                        slow[j] += c * v[j];
+                    }
+                    assert_eq!(bits(&fast), bits(&slow), "axpy n {n}");
+                }
+                // Wᵀ u.
+                let mut fast = vec![f64::NAN; n + 1];
+                mat_t_vec(&w, rows, n, &u, &mut fast);
+                let mut slow = vec![f64::NAN; n + 1];
+                slow[..n].fill(0.0);
+                for i in 0..rows {
+                    for j in 0..n {
+                        slow[j] += u[i] * w[i * n + j];
+                    }
+                }
+                assert_eq!(bits(&fast), bits(&slow), "mat_t_vec rows {rows}, n {n}");
+                // W += c u vᵀ.
+                let mut fast = w.clone();
+                outer_acc(c, &u, &v, &mut fast);
+                let mut slow = w.clone();
+                for i in 0..rows {
+                    for j in 0..n {
+                        slow[i * n + j] += (c * u[i]) * v[j];
+                    }
+                }
+                assert_eq!(bits(&fast), bits(&slow), "outer_acc rows {rows}, n {n}");
             }
         }
     }

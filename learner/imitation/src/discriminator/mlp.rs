@@ -32,7 +32,7 @@
 use rand::Rng;
 // The one dot product, affine map and tanh of every MLP (the controller's policy_action uses
 // the same, so learner and controller agree bit for bit).
-use ur5_shared::kernels::{affine, dot, tanh_in_place};
+use ur5_shared::kernels::{affine, axpy, dot, mat_t_vec, outer_acc, tanh_in_place};
 
 /// A tanh MLP `R^{n_0} → R` with a flat parameter vector (layout in the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -399,37 +399,10 @@ impl MlpWorkspace {
     }
 }
 
-/// `y += a x`.
-#[inline]
-fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
-    debug_assert_eq!(x.len(), y.len());
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi += a * xi;
-    }
-}
-
 /// `out = W x`, `W` row-major `rows × cols`.
 #[inline]
 fn mat_vec(w: &[f64], rows: usize, cols: usize, x: &[f64], out: &mut [f64]) {
     for i in 0..rows {
         out[i] = dot(&w[i * cols..(i + 1) * cols], x);
-    }
-}
-
-/// `out = Wᵀ y`, `W` row-major `rows × cols`.
-#[inline]
-fn mat_t_vec(w: &[f64], rows: usize, cols: usize, y: &[f64], out: &mut [f64]) {
-    out[..cols].fill(0.0);
-    for i in 0..rows {
-        axpy(y[i], &w[i * cols..(i + 1) * cols], &mut out[..cols]);
-    }
-}
-
-/// `M += c u vᵀ`, `M` row-major `u.len() × v.len()`.
-#[inline]
-fn outer_acc(c: f64, u: &[f64], v: &[f64], m: &mut [f64]) {
-    let n = v.len();
-    for (i, &ui) in u.iter().enumerate() {
-        axpy(c * ui, v, &mut m[i * n..(i + 1) * n]);
     }
 }
