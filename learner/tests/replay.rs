@@ -1,5 +1,6 @@
 //! Recorded runs (issue 17) through the `learner` binary: a run of `learner train
-//! --record-episodes` replays equal bit for bit (`learner replay`, docs/design.md §4.13), a
+//! --record-episodes` (LQR+GAIfO, GAIfO (PPO)) replays equal bit for bit (`learner replay`,
+//! docs/design.md §4.13), a
 //! changed episode or a changed table entry is reported at the iteration where it shows, and
 //! the run exports as an MCAP file that the `mcap` crate's reader reads back (§4.14).
 
@@ -154,6 +155,67 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
             .starts_with(&format!("{was:?} ")),
         "{r}"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// GAIfO (PPO), `learner train --algo gaifo-ppo --record-episodes`: the replay redoes the
+/// critic and PPO updates from the recorded episodes and compares every `iter_NNN_policy.json`
+/// and `iter_NNN_critic.json` byte for byte; a changed episode shows at the update that
+/// learned from it, in the policy file, at a byte offset.
+#[test]
+fn a_recorded_gaifo_ppo_run_replays_bit_for_bit() {
+    let dir = scratch("ppo");
+    let demos = dir.join("d.npz");
+    save_short_demos(&demos, 0);
+    let run = dir.join("run");
+    let (ok, err) = learner(&[
+        "train",
+        "--algo",
+        "gaifo-ppo",
+        "--demos",
+        demos.to_str().unwrap(),
+        "--iterations",
+        &ITERATIONS.to_string(),
+        "--record-episodes",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        std::fs::read_dir(run.join("episodes")).unwrap().count(),
+        ITERATIONS * 6
+    );
+    let (ok, r, err) = replay(&run);
+    assert!(ok, "{err}");
+    assert!(r["difference"].is_null(), "{r}");
+    assert_eq!(r["algorithm"], "gaifo-ppo", "{r}");
+    assert_eq!(r["iterations"], ITERATIONS as u64, "{r}");
+    assert_eq!(r["policies_checked"], ITERATIONS as u64 + 1, "{r}");
+    assert_eq!(r["critics_checked"], ITERATIONS as u64 + 1, "{r}");
+    assert_eq!(r["tables_checked"], 0, "{r}");
+    assert!(err.contains("equal"), "{err}");
+
+    // The second noisy episode of version 3 changed by 1e-9 in one
+    // state value: iterations 1 and 2 still equal, the policy of update 3 differs.
+    let path = episodes_of(&run, 3)[1].clone();
+    let (mut ep, origin) = load_episode(&path).unwrap();
+    let task = load_episode_task(&path).unwrap();
+    assert!(ep.noisy);
+    ep.x[7 * 12 + 2] += 1e-9;
+    save_episode(&path, &ep, &origin, &task).unwrap();
+    let (ok, r, err) = replay(&run);
+    assert!(!ok, "a difference exits non-zero");
+    let d = &r["difference"];
+    assert_eq!(d["iteration"], 3, "{r}");
+    assert_eq!(d["array"], "policy", "{r}");
+    assert!(
+        d["file"].as_str().unwrap().ends_with("iter_003_policy.json"),
+        "{r}"
+    );
+    assert_ne!(d["recorded"], d["replayed"], "{r}");
+    assert!(d["index"][0].as_u64().unwrap() > 0, "{r}");
+    assert!(err.contains("first difference at iteration 3"), "{err}");
+    assert_eq!(r["policies_checked"], ITERATIONS as u64 + 1, "{r}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -15,6 +15,7 @@ use ur5_shared::GainTable;
 use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
+use crate::io::learned::{append_event, LearnedEvent};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
@@ -128,21 +129,31 @@ impl<L: ServeLearner> Run<L> {
         Ok(table)
     }
 
+    /// Records `ep` when `record_episodes` is on; returns its file name in `episodes/`.
     pub(super) fn record(
         &mut self,
         ep: &Episode,
         episode: u64,
         version: u64,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<Option<String>> {
         let Some(rec) = self.recorder.as_mut() else {
-            return Ok(());
+            return Ok(None);
         };
         let origin = EpisodeOrigin {
             table_version: version,
             episode,
             seed: self.learner.seed(),
         };
-        rec.record(ep, &origin, self.learner.task())?;
-        Ok(())
+        let path = rec.record(ep, &origin, self.learner.task())?;
+        Ok(Some(crate::io::learned::file_name(&path)))
+    }
+
+    /// Appends `event` to `episodes/learned.jsonl` ([`crate::io::learned`]) when episodes are
+    /// recorded (without them there is nothing to replay).
+    pub(super) fn note(&self, event: &LearnedEvent) -> anyhow::Result<()> {
+        if self.recorder.is_none() {
+            return Ok(());
+        }
+        append_event(&self.opts.out.join("episodes"), event)
     }
 }

@@ -83,6 +83,7 @@ use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
 use serde::{Deserialize, Serialize};
 
+use crate::io::learned::LearnedEvent;
 use crate::io::table::save_table;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -253,22 +254,27 @@ pub fn serve(
     cfg.validate()?;
     claim_dirs(&opts, "expert", cfg.seed, &cfg)?;
     let el = match &opts.resume {
-        Some(dir) => {
-            let path = dir.join("checkpoint.npz");
-            let (pol, iteration, cost_random) = crate::io::checkpoint::load_checkpoint(&path)
-                .with_context(|| format!("resuming from {}", path.display()))?;
-            anyhow::ensure!(
-                pol.t == cfg.task.horizon,
-                "{} holds a controller of T = {}, the task has T = {}",
-                path.display(),
-                pol.t,
-                cfg.task.horizon
-            );
-            ExpertLearner::resume(cfg, pol, iteration, cost_random)
-        }
+        Some(dir) => expert_from_checkpoint(cfg, dir)?,
         None => ExpertLearner::new(cfg, None),
     };
     serve_loop(el, opts, progress)
+}
+
+/// The expert learner `learner serve --resume DIR` continues with: DIR's `checkpoint.npz`
+/// (controller, iteration, random-policy cost) through [`ExpertLearner::resume`] (also what
+/// `learner replay` does where a served expert run was resumed).
+pub fn expert_from_checkpoint(cfg: ExpertConfig, dir: &Path) -> anyhow::Result<ExpertLearner> {
+    let path = dir.join("checkpoint.npz");
+    let (pol, iteration, cost_random) = crate::io::checkpoint::load_checkpoint(&path)
+        .with_context(|| format!("resuming from {}", path.display()))?;
+    anyhow::ensure!(
+        pol.t == cfg.task.horizon,
+        "{} holds a controller of T = {}, the task has T = {}",
+        path.display(),
+        pol.t,
+        cfg.task.horizon
+    );
+    Ok(ExpertLearner::resume(cfg, pol, iteration, cost_random))
 }
 
 /// Runs the LQR+GAIfO learner end on `demos` (their task) until `cfg.iterations` are done or
@@ -359,6 +365,13 @@ fn serve_with_ports<L: ServeLearner>(
     let start_version = run.learner.version();
     let table = run.save_current()?;
     ports.publish(&table)?;
+    if let Some(from) = &run.opts.resume {
+        let same = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_owned());
+        run.note(&LearnedEvent::Resumed {
+            iteration: run.learner.iteration(),
+            same_folder: same(from) == same(&out),
+        })?;
+    }
     let (n, t_len) = (run.learner.samples(), run.learner.task().horizon);
     eprintln!(
         "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version",
@@ -388,6 +401,9 @@ fn serve_with_ports<L: ServeLearner>(
     let mut last_report = Instant::now();
     let mut version_started: Option<Instant> = None;
     let mut newer_reported = 0u64;
+    // The recorded files of the batch's episodes (`episodes/learned.jsonl`).
+    let mut used_noisy: Vec<String> = Vec::with_capacity(n);
+    let mut used_eval: Option<String> = None;
 
     let bar = crate::progress::Progress::new(
         run.learner
@@ -432,7 +448,7 @@ fn serve_with_ports<L: ServeLearner>(
                     }
                 };
                 counts.episodes += 1;
-                run.record(&ep, episode, version)?;
+                let file = run.record(&ep, episode, version)?;
                 check.episode(&ep, version, &run.learner, run.opts.task_tolerance)?;
                 let current = run.learner.version();
                 if version < current {
@@ -449,10 +465,18 @@ fn serve_with_ports<L: ServeLearner>(
                 } else if finishing {
                     // The controller took the last table: nothing more to learn.
                     break 'outer ServeExit::Done;
-                } else if batch.offer(ep, n) {
-                    counts.used += 1;
                 } else {
-                    counts.surplus += 1;
+                    let noisy = ep.noisy;
+                    if batch.offer(ep, n) {
+                        counts.used += 1;
+                        match (noisy, file) {
+                            (true, Some(f)) => used_noisy.push(f),
+                            (false, f) => used_eval = f,
+                            (true, None) => {}
+                        }
+                    } else {
+                        counts.surplus += 1;
+                    }
                 }
             }
             if batch.full(n) {
@@ -464,6 +488,15 @@ fn serve_with_ports<L: ServeLearner>(
                 let waited = version_started
                     .take()
                     .map_or(0.0, |t0| t0.elapsed().as_secs_f64());
+                // Before the update's checkpoint: the last line of a version counts.
+                if let Some(eval) = used_eval.take() {
+                    run.note(&LearnedEvent::Learned {
+                        iteration: run.learner.iteration() + 1,
+                        version: run.learner.version(),
+                        noisy: std::mem::take(&mut used_noisy),
+                        eval,
+                    })?;
+                }
                 let entry = run.learner.learn(&batch.noisy, &eval, waited)?;
                 batch.noisy.clear();
                 let table = run.save_current()?;
