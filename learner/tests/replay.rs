@@ -79,6 +79,23 @@ fn a_recorded_run_replays_bit_for_bit() {
     assert_eq!(r["critics_checked"], ITERATIONS as u64 + 1, "{r}");
     assert!(err.contains("equal"), "{err}");
 
+    // A run resumed from another folder (`learner serve --resume OTHER --out RUN`, as its
+    // episodes/learned.jsonl says) cannot be replayed from RUN alone: said, not a vague error.
+    learner::io::learned::append_event(
+        &run.join("episodes"),
+        &learner::io::learned::LearnedEvent::Resumed {
+            iteration: 2,
+            same_folder: false,
+        },
+    )
+    .unwrap();
+    let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains("resumed from another folder after 2 iterations"),
+        "{err}"
+    );
+
     // Without recorded episodes there is nothing to replay, and the message says how to get them.
     std::fs::remove_dir_all(run.join("episodes")).unwrap();
     let (ok, err) = learner(&["replay", run.to_str().unwrap()]);

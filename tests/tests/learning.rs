@@ -438,7 +438,12 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
 /// `learner replay OUT --json` on a served run: its learning redone from the recorded episodes
 /// (the same `Learn::learn`) gives every published table (and, for LQR+GAIfO, every critic
 /// checkpoint) bit for bit.
-fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usize) {
+fn assert_replays_equal(
+    out: &Path,
+    dir: &Path,
+    iterations: usize,
+    critics: usize,
+) -> serde_json::Value {
     let o = out.display().to_string();
     let mut p = Proc::spawn("learner", "replay", &["replay", &o, "--json"], dir);
     let (code, stdout) = p.wait(LONG);
@@ -452,6 +457,16 @@ fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usiz
         "{r}"
     );
     assert_eq!(r["critics_checked"], critics as u64, "{r}");
+    r
+}
+
+/// `learner replay OUT --json`: (exit code, report).
+fn replay_report(out: &Path, dir: &Path, label: &str) -> (Option<i32>, serde_json::Value) {
+    let o = out.display().to_string();
+    let mut p = Proc::spawn("learner", label, &["replay", &o, "--json"], dir);
+    let (code, stdout) = p.wait(LONG);
+    let log = p.log();
+    (code, json_summary(&stdout, &log))
 }
 
 /// The columns of a `gaifo_log.csv` row up to `step_mult` (the rest are timings).
@@ -687,8 +702,99 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
         );
     }
     assert!(sim.running());
+    assert_resumed_run_replays(&out, &dir, rj["table_version"].as_u64().unwrap());
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A served run that was killed and resumed replays bit for bit (issue 17): the replay learns
+/// from the episodes each update learned from (`episodes/learned.jsonl`) and redoes the resume
+/// as `--resume` did; a changed episode learned from after the resume is the first
+/// difference, at that update; without the list, the replay takes the first episodes of each
+/// version, which after the resume are not the ones learned from, and says why it differs.
+fn assert_resumed_run_replays(out: &Path, dir: &Path, last_version: u64) {
+    use learner::io::episode::{load_episode, load_episode_task, save_episode};
+    use learner::io::learned::{read_events, LearnedEvent, LEARNED};
+    let r = assert_replays_equal(out, dir, last_version as usize - 1, 0);
+    assert_eq!(r["resumes"], 1, "{r}");
+    assert_eq!(r["selection"], "learned.jsonl", "{r}");
+    let episodes = out.join("episodes");
+    let events = read_events(&episodes).unwrap().unwrap();
+    let resumed = events
+        .iter()
+        .position(|e| {
+            matches!(
+                e,
+                LearnedEvent::Resumed {
+                    same_folder: true,
+                    ..
+                }
+            )
+        })
+        .expect("a resume event");
+    let (iteration, version, noisy, eval) = events[resumed..]
+        .iter()
+        .find_map(|e| match e {
+            LearnedEvent::Learned {
+                iteration,
+                version,
+                noisy,
+                eval,
+            } => Some((*iteration, *version, noisy.clone(), eval.clone())),
+            LearnedEvent::Resumed { .. } => None,
+        })
+        .expect("an update after the resume");
+
+    // Were the episodes learned after the resume the first of their version to arrive?
+    let mut of_version: Vec<String> = std::fs::read_dir(&episodes)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(&format!("_v{version:04}.npz")))
+        .collect();
+    of_version.sort();
+    let mut listed = noisy.clone();
+    listed.push(eval);
+    listed.sort();
+    let first_arrivals = of_version[..listed.len()].to_vec();
+    eprintln!(
+        "resumed at iteration {iteration}: learned from {listed:?}; first arrivals of v{version}: \
+         {first_arrivals:?}"
+    );
+    if first_arrivals != listed {
+        // The case the list is for: without it the replay differs, and the report says why.
+        let list = episodes.join(LEARNED);
+        let kept = std::fs::read(&list).unwrap();
+        std::fs::remove_file(&list).unwrap();
+        let (code, r) = replay_report(out, dir, "replay-no-list");
+        assert_ne!(code, Some(0), "{r}");
+        assert_eq!(r["selection"], "arrival order", "{r}");
+        assert!(r["note"].as_str().unwrap().contains("resumed"), "{r}");
+        assert!(
+            r["difference"]["iteration"].as_u64().unwrap() >= iteration as u64,
+            "{r}"
+        );
+        std::fs::write(&list, kept).unwrap();
+    }
+
+    // Tamper with the first noisy episode learned from after the resume.
+    let path = episodes.join(&noisy[0]);
+    let (mut ep, origin) = load_episode(&path).unwrap();
+    let task = load_episode_task(&path).unwrap();
+    ep.x[4 * 12 + 3] += 1e-7;
+    save_episode(&path, &ep, &origin, &task).unwrap();
+    let (code, r) = replay_report(out, dir, "replay-tampered");
+    assert_ne!(code, Some(0), "{r}");
+    let d = &r["difference"];
+    assert_eq!(d["iteration"], iteration as u64, "{r}");
+    assert_eq!(d["version"], version + 1, "{r}");
+    assert!(
+        d["episodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p.as_str() == path.to_str()),
+        "the changed episode is among those learned from: {r}"
+    );
 }
 
 fn ctl_log(dir: &Path) -> String {
