@@ -360,6 +360,7 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
     let mut files: Vec<PathBuf> = std::fs::read_dir(out.join("episodes"))
         .unwrap()
         .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "npz"))
         .collect();
     files.sort();
     assert_eq!(
