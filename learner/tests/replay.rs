@@ -301,3 +301,89 @@ fn a_recorded_run_exports_as_mcap_and_reads_back() {
     assert_eq!(tables[0]["checksum"], format!("{:#018x}", t0.checksum));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The topics and message counts a streaming reader gets from `bytes` (an MCAP file that may
+/// lack its summary and footer: `IgnoreEndMagic`), and whether it met an error (a cut file).
+fn stream_counts(bytes: &[u8]) -> (std::collections::BTreeMap<String, usize>, bool) {
+    let mut count = std::collections::BTreeMap::<String, usize>::new();
+    let opts = mcap::read::Options::IgnoreEndMagic.into();
+    let Ok(stream) = mcap::MessageStream::new_with_options(bytes, opts) else {
+        return (count, true);
+    };
+    for m in stream {
+        match m {
+            Ok(m) => *count.entry(m.channel.topic.clone()).or_default() += 1,
+            Err(_) => return (count, true),
+        }
+    }
+    (count, false)
+}
+
+/// `learner serve --mcap` writes `run.mcap` episode by episode ([`RunMcap`]): a writer that
+/// dies after k episodes (never finished: no summary, no footer) leaves a file from which a
+/// streaming reader reads exactly those k episodes, whatever part of episode k + 1 was
+/// written when it died; finished, the file is complete and reads as the export does.
+#[test]
+fn a_killed_mcap_writer_leaves_its_complete_episodes_readable() {
+    use learner::io::episode::recorded_episodes;
+    use learner::io::run_mcap::{RunMcap, TableInfo};
+    let dir = scratch("mcap-kill");
+    let run = recorded_run(&dir);
+    let episodes = recorded_episodes(&run.join("episodes")).unwrap();
+    let t_len = episodes[0].1.horizon();
+    let file = dir.join("streamed.mcap");
+    let mut m = RunMcap::create(&file).unwrap();
+    m.table(TableInfo::load(&run.join("iter_000_table.npz")).unwrap());
+    let mut sizes = Vec::new();
+    for (path, ep, origin) in &episodes[..5] {
+        m.episode(path, ep, origin, 0.1).unwrap();
+        sizes.push(std::fs::metadata(&file).unwrap().len());
+    }
+    // The process dies here: nothing more is written (no summary, no footer).
+    std::mem::forget(m);
+    let bytes = std::fs::read(&file).unwrap();
+    assert_eq!(bytes.len() as u64, sizes[4]);
+    assert!(
+        mcap::MessageStream::new(&bytes).map_or(true, |mut s| s.any(|m| m.is_err())),
+        "a reader that needs the end magic reports the file as cut"
+    );
+    // Cut anywhere inside the 5th episode's chunk (a kill while its chunk was being written,
+    // which the writer's buffer makes a short moment): the first four episodes whole; of the
+    // fifth, at most the steps that reached the disk, never its `/episode` message.
+    let (lo, hi) = (sizes[3] as usize, sizes[4] as usize);
+    for cut in [lo, lo + 1, lo + 9, (lo + hi) / 2, hi - 1, hi] {
+        let (count, _) = stream_counts(&bytes[..cut]);
+        let k = count["/episode"];
+        assert_eq!(count["/table"], 1, "cut at {cut}");
+        for topic in ["/state", "/joint_states"] {
+            let n = count[topic];
+            if cut == lo || cut == hi {
+                // Between two episodes: exactly the complete ones.
+                assert_eq!(k, if cut == lo { 4 } else { 5 }, "cut at {cut}");
+                assert_eq!(n, k * t_len, "{topic}, cut at {cut}");
+            } else {
+                // The 5th is there whole (the cut is in the index after its chunk) or not
+                // announced by its `/episode` message.
+                assert!(k == 4 || k == 5, "cut at {cut}: {count:?}");
+                assert!((4 * t_len..=5 * t_len).contains(&n), "{topic}: {n}, cut at {cut}");
+                assert!(k == 4 || n == 5 * t_len, "{topic}: {n}, cut at {cut}");
+            }
+        }
+    }
+
+    // Finished, the streamed file reads as the export's: every message, summary and footer.
+    let mut m = RunMcap::create(&file).unwrap();
+    m.add_run(&run).unwrap();
+    let c = m.finish().unwrap();
+    assert_eq!(c.episodes, episodes.len());
+    let streamed = std::fs::read(&file).unwrap();
+    let exported = dir.join("exported.mcap");
+    learner::io::run_mcap::write_run_mcap(&run, &exported).unwrap();
+    let (a, cut) = stream_counts(&streamed);
+    assert!(!cut);
+    assert_eq!(a, stream_counts(&std::fs::read(&exported).unwrap()).0);
+    assert_eq!(a["/episode"], episodes.len());
+    let n = mcap::MessageStream::new(&streamed).unwrap().count();
+    assert_eq!(n, a.values().sum::<usize>());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -16,6 +16,7 @@ use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::learned::{append_event, LearnedEvent};
+use crate::io::run_mcap::{RunMcap, TableInfo};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
@@ -110,22 +111,29 @@ pub(super) struct Run<L> {
     pub(super) csv: std::fs::File,
     /// `None` when `record_episodes` is off.
     pub(super) recorder: Option<EpisodeRecorder>,
+    /// `run.mcap` as the run goes (`--mcap`).
+    pub(super) mcap: Option<RunMcap>,
 }
 
 impl<L: ServeLearner> Run<L> {
     /// Saves the checkpoint and the table of the controller to execute next; returns the table.
-    pub(super) fn save_current(&self) -> anyhow::Result<Box<GainTable>> {
+    pub(super) fn save_current(&mut self) -> anyhow::Result<Box<GainTable>> {
         let out = &self.opts.out;
         let version = self.learner.version();
         let table = self.learner.table();
         self.learner.checkpoint(out)?;
         let dt = self.learner.task().dt;
-        save_table(
-            &out.join("tables").join(format!("v{version:04}.npz")),
-            &table,
-            dt,
-        )?;
+        let file = out.join("tables").join(format!("v{version:04}.npz"));
+        save_table(&file, &table, dt)?;
         save_table(&out.join("latest_table.npz"), &table, dt)?;
+        if let Some(m) = self.mcap.as_mut() {
+            m.table(TableInfo {
+                version,
+                checksum: table.checksum,
+                horizon: self.learner.task().horizon as u64,
+                file,
+            });
+        }
         Ok(table)
     }
 
@@ -145,6 +153,9 @@ impl<L: ServeLearner> Run<L> {
             seed: self.learner.seed(),
         };
         let path = rec.record(ep, &origin, self.learner.task())?;
+        if let Some(m) = self.mcap.as_mut() {
+            m.episode(&path, ep, &origin, self.learner.task().dt)?;
+        }
         Ok(Some(crate::io::learned::file_name(&path)))
     }
 

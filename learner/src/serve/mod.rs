@@ -56,8 +56,10 @@
 //!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
 //!   `t_execute_s` is the time from the version's first sample to its last needed episode;
 //!   appended across resumes); `best_table.npz` at exit;
-//! - with `--mcap`, `run.mcap` at exit: the run's recorded episodes and tables as one MCAP
-//!   file ([`crate::io::run_mcap`]).
+//! - with `--mcap`, `run.mcap`: the run's recorded episodes and tables as one MCAP file
+//!   ([`crate::io::run_mcap::RunMcap`]), written episode by episode (one chunk each), its
+//!   summary at exit; a killed learner leaves it readable by streaming readers up to its last
+//!   complete episode; a resumed one writes it again from the folder's episodes, then goes on.
 //!
 //! # Peers that die
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
@@ -135,8 +137,8 @@ pub struct ServeOptions {
     pub force: bool,
     /// Record every complete episode to `out/episodes/`.
     pub record_episodes: bool,
-    /// At exit, write the recorded episodes and the tables as `out/run.mcap`
-    /// ([`crate::io::run_mcap`]; needs `record_episodes`).
+    /// Write the recorded episodes and the tables into `out/run.mcap` as they come
+    /// ([`crate::io::run_mcap::RunMcap`]; needs `record_episodes`).
     pub mcap: bool,
     /// While no sample arrives, say so every this many seconds (wall clock).
     pub wait_report_s: f64,
@@ -339,6 +341,14 @@ fn serve_loop<L: ServeLearner>(
             Some(crate::io::episode::EpisodeRecorder::new(
                 &out.join("episodes"),
             )?)
+        } else {
+            None
+        },
+        // The run so far (a resumed run's earlier episodes), then episode by episode.
+        mcap: if opts.mcap {
+            let mut m = crate::io::run_mcap::RunMcap::create(&out.join("run.mcap"))?;
+            m.add_run(&out)?;
+            Some(m)
         } else {
             None
         },
@@ -549,14 +559,13 @@ fn serve_with_ports<L: ServeLearner>(
             run.learner.task().dt,
         )?;
     }
-    if run.opts.mcap && counts.episodes > 0 {
-        let path = out.join("run.mcap");
-        let c = crate::io::run_mcap::write_run_mcap(&out, &path)?;
+    if let Some(m) = run.mcap.take() {
+        let c = m.finish()?;
         eprintln!(
             "learner serve: {} episodes and {} tables -> {}",
             c.episodes,
             c.tables,
-            path.display()
+            out.join("run.mcap").display()
         );
     }
     Ok(ServeSummary {
