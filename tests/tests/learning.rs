@@ -618,7 +618,7 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
     let dir = scratch("learn-b");
     let out = dir.join("out");
     let (learner_cfg, sim_cfg, ctl_cfg) = configs(&dir, 50);
-    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &[], &dir, "learner1");
+    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &["--mcap"], &dir, "learner1");
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
 
     // Two updates, and the controller runs version 3.
@@ -635,6 +635,16 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
     learner.signal(libc::SIGKILL);
     let _ = learner.wait(LONG);
     let killed_at = controller_episodes(&ctl_log(&dir)).len();
+    // run.mcap, streamed episode by episode, without its summary: a streaming reader reads
+    // every recorded episode whole (the last one may have been recorded, not yet written).
+    let recorded = npz_count(&out.join("episodes"));
+    let (count, _) = mcap_topics(&std::fs::read(out.join("run.mcap")).unwrap(), true);
+    let in_mcap = count.get("/episode").copied().unwrap_or(0);
+    assert!(
+        in_mcap + 1 >= recorded && in_mcap <= recorded && in_mcap > 0,
+        "{in_mcap} episodes in run.mcap, {recorded} recorded: {count:?}"
+    );
+    assert_eq!(count["/state"], in_mcap * T, "{count:?}");
     // The controller finishes its episodes and keeps its table.
     wait_for(
         "5 episodes after the kill",
@@ -656,7 +666,7 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
         &learner_cfg,
         &prefix,
         &out,
-        &["--resume", &out.display().to_string()],
+        &["--resume", &out.display().to_string(), "--mcap"],
         &dir,
         "learner2",
     );
@@ -703,6 +713,11 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
         );
     }
     assert!(sim.running());
+    // The resumed learner wrote run.mcap again from the recorded episodes, went on, and
+    // finished it at exit: complete (summary, end magic), every recorded episode in it.
+    let (count, cut) = mcap_topics(&std::fs::read(out.join("run.mcap")).unwrap(), false);
+    assert!(!cut, "{count:?}");
+    assert_eq!(count["/episode"], npz_count(&out.join("episodes")), "{count:?}");
     assert_resumed_run_replays(&out, &dir, rj["table_version"].as_u64().unwrap());
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
@@ -796,6 +811,32 @@ fn assert_resumed_run_replays(out: &Path, dir: &Path, last_version: u64) {
             .any(|p| p.as_str() == path.to_str()),
         "the changed episode is among those learned from: {r}"
     );
+}
+
+/// The `.npz` files in `dir`.
+fn npz_count(dir: &Path) -> usize {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "npz"))
+        .count()
+}
+
+/// Messages per topic of an MCAP file, read as a stream (`cut_ok`: the file may lack its
+/// summary and end magic), and whether the reader met an error.
+fn mcap_topics(bytes: &[u8], cut_ok: bool) -> (std::collections::BTreeMap<String, usize>, bool) {
+    let opts = if cut_ok {
+        mcap::read::Options::IgnoreEndMagic.into()
+    } else {
+        Default::default()
+    };
+    let mut count = std::collections::BTreeMap::new();
+    for m in mcap::MessageStream::new_with_options(bytes, opts).unwrap() {
+        match m {
+            Ok(m) => *count.entry(m.channel.topic.clone()).or_default() += 1,
+            Err(_) => return (count, true),
+        }
+    }
+    (count, false)
 }
 
 fn ctl_log(dir: &Path) -> String {
