@@ -62,6 +62,16 @@ fn episodes_of(run: &Path, version: u64) -> Vec<PathBuf> {
     files
 }
 
+/// Adds `by` to state value `i` (flat index into the (T, dX) states) of the noisy episode
+/// recorded in `path`.
+fn nudge(path: &Path, i: usize, by: f64) {
+    let (mut ep, origin) = load_episode(path).unwrap();
+    let task = load_episode_task(path).unwrap();
+    assert!(ep.noisy);
+    ep.x[i] += by;
+    save_episode(path, &ep, &origin, &task).unwrap();
+}
+
 #[test]
 fn a_recorded_run_replays_bit_for_bit() {
     let dir = scratch("equal");
@@ -112,11 +122,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     // One state value of the first noisy episode of version 2: the tables of versions 1 and
     // 2 still equal, the update of iteration 2 learns another table (version 3).
     let path = episodes_of(&run, 2)[0].clone();
-    let (mut ep, origin) = load_episode(&path).unwrap();
-    let task = load_episode_task(&path).unwrap();
-    assert!(ep.noisy);
-    ep.x[5 * 12 + 6] += 1e-9;
-    save_episode(&path, &ep, &origin, &task).unwrap();
+    nudge(&path, 5 * 12 + 6, 1e-9);
     let (ok, r, err) = replay(&run);
     assert!(!ok, "a difference exits non-zero");
     let d = &r["difference"];
@@ -139,8 +145,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
 
     // Undo it; change one entry of the table of iteration 1 instead (as stored: the file's
     // checksum is left as it was).
-    ep.x[5 * 12 + 6] -= 1e-9;
-    save_episode(&path, &ep, &origin, &task).unwrap();
+    nudge(&path, 5 * 12 + 6, -1e-9);
     assert!(replay(&run).0, "restored");
     let table_file = run.join("iter_001_table.npz");
     let (mut table, dt) =
@@ -212,14 +217,10 @@ fn a_recorded_gaifo_ppo_run_replays_bit_for_bit() {
     assert_eq!(r["tables_checked"], 0, "{r}");
     assert!(err.contains("equal"), "{err}");
 
-    // The second noisy episode of version 3 changed by 1e-9 in one
-    // state value: iterations 1 and 2 still equal, the policy of update 3 differs.
+    // The second noisy episode of version 3 changed by 1e-9 in one state value: iterations 1
+    // and 2 still equal, the policy of update 3 differs.
     let path = episodes_of(&run, 3)[1].clone();
-    let (mut ep, origin) = load_episode(&path).unwrap();
-    let task = load_episode_task(&path).unwrap();
-    assert!(ep.noisy);
-    ep.x[7 * 12 + 2] += 1e-9;
-    save_episode(&path, &ep, &origin, &task).unwrap();
+    nudge(&path, 7 * 12 + 2, 1e-9);
     let (ok, r, err) = replay(&run);
     assert!(!ok, "a difference exits non-zero");
     let d = &r["difference"];
