@@ -46,6 +46,14 @@ impl Progress {
         }
     }
 
+    /// Counts `n` units done without a line (a bar moves; plain output shows nothing: the
+    /// caller's own lines tell the progress there).
+    pub fn inc(&self, n: u64) {
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+    }
+
     /// Prints `line` without counting.
     pub fn println(&self, line: &str) {
         match &self.bar {

@@ -1,37 +1,55 @@
 //! `learner replay RUN_DIR`: the learning of a recorded run done again from its recorded
-//! episodes, every table checked bit for bit against the recorded one (docs/design.md §4.13).
+//! episodes, every recorded checkpoint checked bit for bit against the replayed one
+//! (docs/design.md §4.13).
 //!
 //! The learner is rebuilt from the run's `run.json` (algorithm, seed, the settings in full, the
 //! demonstrations' path and hash; [`crate::io::manifest`]) exactly as the run built it, and
-//! driven through the same [`imitation::learn::Learn::learn`] the serve loop and [`imitation::learn::iterate`]
-//! call: for each table version v, from the first noisy episode on, in arrival order
-//! (`episodes/NNNNNN_eEPISODE_vVERSION.npz`), the first N noisy and the first noise-free
-//! episode of v ([`Batch`], as `learner serve` picks them) are learned from. Before each
-//! update and after the last, the learner's table of version v is compared entry by entry with
-//! every recorded copy of it: `iter_NNN_table.npz` (NNN = v − 1, LQR+GAIfO) and
-//! `tables/vVERSION.npz` (`learner serve`); for LQR+GAIfO also the critic checkpoint
-//! `iter_NNN_critic.json`, byte for byte. The first difference ends the replay.
+//! driven through the same [`imitation::learn::Learn::learn`] the serve loop and
+//! [`imitation::learn::iterate`] call. Which episodes each update learns from:
+//! - a served run (`learner serve`) lists them in `episodes/learned.jsonl`
+//!   ([`crate::io::learned`]): the replay takes the files listed for each table version (the
+//!   last list of a version), and where the list says a learner was resumed (`--resume`) the
+//!   replay resumes too, through the same code: the learner's checkpoint written to a scratch
+//!   folder and read back as `learner serve --resume` reads it (the expert restarts its GPS
+//!   state there, LQR+GAIfO restores its whole state);
+//! - otherwise (`learner train --record-episodes`, served runs of builds before 2026-12-02),
+//!   for each table version v in arrival order (`episodes/NNNNNN_eEPISODE_vVERSION.npz`), the
+//!   first N noisy and the first noise-free episode of v ([`Batch`], as `learner serve`
+//!   picks them). An in-process run executes exactly these (a resumed one executes the same
+//!   bits again); a served run without the list that was resumed learned from later episodes,
+//!   so its replay differs from the resume on, and the report says why.
+//!
+//! Compared before each update and after the last: gain-table learners (expert, LQR+GAIfO) the
+//! table of version v entry by entry against every recorded copy (`iter_NNN_table.npz`, NNN =
+//! v − 1, and `tables/vVERSION.npz`); LQR+GAIfO also `iter_NNN_critic.json`, byte for byte;
+//! GAIfO (PPO) (`learner train --algo gaifo-ppo --record-episodes`) its policy nets
+//! `iter_NNN_policy.json` and critic `iter_NNN_critic.json`, byte for byte (the replayed ones
+//! written by the same [`Checkpoint`] code; JSON numbers are shortest round-trip decimals, so
+//! equal bytes are equal bits). The first difference ends the replay.
 //!
 //! Every random draw of the learners (critic minibatches, gradient-penalty points, GMM
-//! initialisation) comes from RNGs seeded by the run seed and advanced only by the learning
-//! itself, so the same settings, demonstrations and episodes give the same bits. What a
-//! replay cannot redo: a served run that was resumed (`learner serve --resume`) learned after
-//! the resume from fresh episodes of the resumed version, which the replay cannot tell from
-//! the earlier ones of that version; runs of the GAIfO (PPO) baseline (no gain tables).
+//! initialisation, PPO's minibatch order) comes from RNGs seeded by the run seed and advanced
+//! only by the learning itself, so the same settings, demonstrations and episodes give the
+//! same bits. What a replay cannot redo, and says so: a served run resumed from another folder
+//! (`--resume OTHER --out THIS`: the iterations before the resume are in OTHER).
 
+use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use imitation::expert::{ExpertConfig, ExpertLearner};
 use imitation::gaifo::{GaifoConfig, LqrGaifo};
-use imitation::learn::LinGaussLearn;
+use imitation::learn::{Learn, LinGaussLearn};
+use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 use imitation::rollout::Episode;
 use serde::Serialize;
 
 use crate::io::episode::{recorded_episodes, EpisodeOrigin};
+use crate::io::learned::{read_events, LearnedEvent};
 use crate::io::manifest::{self, Manifest};
 use crate::io::table::{load_stored, table_arrays};
-use crate::serve::Batch;
+use crate::run::Checkpoint;
+use crate::serve::{Batch, ServeLearner};
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -42,12 +60,14 @@ pub struct Difference {
     pub version: u64,
     /// The recorded file.
     pub file: PathBuf,
-    /// The array (`K`, `k`, `s_hat`, `a_hat`, `L`, `version`, `checksum`) or `critic`.
+    /// The array (`K`, `k`, `s_hat`, `a_hat`, `L`, `version`, `checksum`), or `critic` or
+    /// `policy` for a JSON file.
     pub array: String,
     /// The entry's index in the array (t, row, column as the array has them; the byte
-    /// offset for the critic file); empty for a scalar.
+    /// offset for a JSON file); empty for a scalar.
     pub index: Vec<u64>,
-    /// The recorded value (f64: shortest round-trip decimal and its bits in hex).
+    /// The recorded value (f64: shortest round-trip decimal and its bits in hex; JSON: the
+    /// text around the offset).
     pub recorded: String,
     /// The replayed value.
     pub replayed: String,
@@ -64,7 +84,7 @@ pub struct ReplayReport {
     pub run: PathBuf,
     /// `learner train` or `learner serve`, as `run.json` says.
     pub run_command: String,
-    /// `lqr-gaifo` or `expert`.
+    /// `lqr-gaifo`, `expert` or `gaifo-ppo`.
     pub algorithm: String,
     /// The run seed.
     pub seed: u64,
@@ -74,12 +94,29 @@ pub struct ReplayReport {
     pub tables_checked: usize,
     /// Recorded critic checkpoints compared.
     pub critics_checked: usize,
+    /// Recorded policy checkpoints (GAIfO (PPO)) compared.
+    pub policies_checked: usize,
     /// Recorded episodes found.
     pub episodes: usize,
     /// Episodes learned from.
     pub episodes_used: usize,
+    /// How the episodes of each update were picked: `learned.jsonl` (the served run's own
+    /// list) or `arrival order` (module docs).
+    pub selection: &'static str,
+    /// Resumes of the recorded run redone.
+    pub resumes: usize,
+    /// Why a difference may be expected where the recorded data does not allow an exact
+    /// replay (a served run without `learned.jsonl`).
+    pub note: Option<String>,
     /// The first difference (`None`: the replay equals the run bit for bit).
     pub difference: Option<Difference>,
+}
+
+impl ReplayReport {
+    /// Recorded files compared in all.
+    pub fn files_checked(&self) -> usize {
+        self.tables_checked + self.critics_checked + self.policies_checked
+    }
 }
 
 /// Replays the run in `dir` (module docs). `demos` replaces the demonstrations' path recorded
@@ -92,13 +129,34 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
             manifest::MANIFEST
         )
     })?;
-    let episodes = recorded_episodes(&dir.join("episodes"))?;
+    let folder = dir.join("episodes");
+    let episodes = recorded_episodes(&folder)?;
     anyhow::ensure!(
         !episodes.is_empty(),
         "{} holds no recorded episodes (episodes/*.npz): a replay needs them; `learner serve` \
          records every episode, `learner train` only with --record-episodes",
         dir.display()
     );
+    let events = read_events(&folder)?;
+    if let Some(LearnedEvent::Resumed { iteration, .. }) = events.iter().flatten().find(|e| {
+        matches!(
+            e,
+            LearnedEvent::Resumed {
+                same_folder: false,
+                ..
+            }
+        )
+    }) {
+        anyhow::bail!(
+            "{} continues a run resumed from another folder after {iteration} iterations \
+             (`learner serve --resume OTHER --out {}`): the iterations before it, and the \
+             learner state it started from, are in that folder, not here, so this folder \
+             alone cannot be replayed; resume into the run's own folder (--resume DIR --out \
+             DIR) to keep a run replayable",
+            dir.display(),
+            dir.display()
+        );
+    }
     let mut report = ReplayReport {
         command: "replay",
         run: dir.to_owned(),
@@ -108,33 +166,66 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
         iterations: 0,
         tables_checked: 0,
         critics_checked: 0,
+        policies_checked: 0,
         episodes: episodes.len(),
         episodes_used: 0,
+        selection: if events.is_some() {
+            "learned.jsonl"
+        } else {
+            "arrival order"
+        },
+        resumes: 0,
+        note: (events.is_none() && m.command == "serve").then(|| {
+            "this served run has no episodes/learned.jsonl (a build before 2026-12-02): the \
+             replay takes the first episodes of each version; if the run was resumed \
+             (--resume), its learner learned after the resume from later episodes, and the \
+             replay differs from there on"
+                .to_string()
+        }),
         difference: None,
     };
+    let picks = Picks::new(&folder, &episodes, events.as_deref());
     match m.algo.as_str() {
         "lqr-gaifo" => {
             let cfg: GaifoConfig = m.settings_as()?;
             let path = demos_path(&m, demos)?;
             let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
-            let learner = LqrGaifo::new(cfg, d)?;
-            drive(learner, dir, &episodes, &mut report, |l, dir, i| {
-                critic_difference(l, dir, i)
+            let learner = LqrGaifo::new(cfg.clone(), d.clone())?;
+            let resume = |tmp: &Path| Ok(crate::run::resume(cfg.clone(), d.clone(), tmp)?.0);
+            drive(learner, dir, &picks, &mut report, Some(&resume), |l, dir, i, r| {
+                match tables(l, dir, i, r)? {
+                    // A table without its critic file (a kill between the two) is compared
+                    // alone.
+                    Checked::Equal => match checkpoint_files(l, dir, i, &["critic.json"], r)? {
+                        Checked::NothingRecorded => Ok(Checked::Equal),
+                        other => Ok(other),
+                    },
+                    other => Ok(other),
+                }
             })?;
         }
         "expert" => {
             let cfg: ExpertConfig = m.settings_as()?;
+            let resume = |tmp: &Path| crate::serve::expert_from_checkpoint(cfg.clone(), tmp);
+            let learner = ExpertLearner::new(cfg.clone(), None);
+            drive(learner, dir, &picks, &mut report, Some(&resume), tables)?;
+        }
+        "gaifo-ppo" => {
+            let cfg: GaifoPpoConfig = m.settings_as()?;
+            let path = demos_path(&m, demos)?;
+            let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
+            // Never resumed (`learner train --algo gaifo-ppo` has no --resume).
             drive(
-                ExpertLearner::new(cfg, None),
+                GaifoPpo::new(cfg, d)?,
                 dir,
-                &episodes,
+                &picks,
                 &mut report,
-                |_, _, _| Ok(None),
+                None,
+                |l, dir, i, r| checkpoint_files(l, dir, i, &["policy.json", "critic.json"], r),
             )?;
         }
         other => anyhow::bail!(
-            "{}: a replay redoes runs whose controller is a gain table (lqr-gaifo, expert), \
-             not {other}",
+            "{}: a replay redoes runs of lqr-gaifo, expert and gaifo-ppo, not {other}",
             dir.display()
         ),
     }
@@ -159,83 +250,224 @@ fn demos_path(m: &Manifest, demos: Option<&Path>) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// The replay loop (module docs) of `learner`; `critic` compares what else a checkpoint
-/// after `i` iterations holds.
-fn drive<L: LinGaussLearn>(
+/// A recorded file that differs: (file, array, index, recorded, replayed).
+type Found = (PathBuf, String, Vec<u64>, String, String);
+
+/// What a comparison after `i` iterations found.
+enum Checked {
+    /// No recorded file of that point: the run ended before it.
+    NothingRecorded,
+    /// Every recorded file equals the replay's.
+    Equal,
+    /// The first difference.
+    Differs(Found),
+}
+
+/// Which episodes each update learns from (module docs).
+struct Picks<'a> {
+    folder: PathBuf,
+    episodes: &'a [(PathBuf, Episode, EpisodeOrigin)],
+    /// `learned.jsonl`, when the run has it.
+    events: Option<&'a [LearnedEvent]>,
+    by_name: HashMap<String, usize>,
+}
+
+/// The episodes of one update: noisy, noise-free, their files in that order.
+type Picked = (Vec<Episode>, Episode, Vec<PathBuf>);
+
+impl<'a> Picks<'a> {
+    fn new(
+        folder: &Path,
+        episodes: &'a [(PathBuf, Episode, EpisodeOrigin)],
+        events: Option<&'a [LearnedEvent]>,
+    ) -> Self {
+        let by_name = episodes
+            .iter()
+            .enumerate()
+            .map(|(k, (p, _, _))| (crate::io::learned::file_name(p), k))
+            .collect();
+        Self {
+            folder: folder.to_owned(),
+            episodes,
+            events,
+            by_name,
+        }
+    }
+
+    /// The iterations after which the recorded run was resumed.
+    fn resumes(&self) -> BTreeSet<usize> {
+        self.events
+            .iter()
+            .flat_map(|e| e.iter())
+            .filter_map(|e| match e {
+                LearnedEvent::Resumed { iteration, .. } => Some(*iteration),
+                LearnedEvent::Learned { .. } => None,
+            })
+            .collect()
+    }
+
+    /// The `n` noisy and the noise-free episode the update of table version `v` learns from;
+    /// `None` when the run has none (it ended before that update).
+    fn pick(&self, v: u64, n: usize) -> anyhow::Result<Option<Picked>> {
+        let Some(events) = self.events else {
+            let mut batch = Batch::default();
+            let mut used = Vec::new();
+            for (path, ep, origin) in self.episodes {
+                if origin.table_version == v && !batch.full(n) && batch.offer(ep.clone(), n) {
+                    used.push(path.clone());
+                }
+            }
+            return Ok(batch
+                .eval
+                .take()
+                .filter(|_| batch.noisy.len() == n)
+                .map(|eval| (batch.noisy, eval, used)));
+        };
+        let Some((noisy, eval)) = events.iter().rev().find_map(|e| match e {
+            LearnedEvent::Learned {
+                version,
+                noisy,
+                eval,
+                ..
+            } if *version == v => Some((noisy, eval)),
+            _ => None,
+        }) else {
+            return Ok(None);
+        };
+        let list = self.folder.join(crate::io::learned::LEARNED);
+        anyhow::ensure!(
+            noisy.len() == n,
+            "{} lists {} noisy episodes for table version {v}, the run's settings ask for {n}",
+            list.display(),
+            noisy.len()
+        );
+        let mut picked = (Vec::with_capacity(n), None, Vec::with_capacity(n + 1));
+        for (name, want_noisy) in noisy.iter().map(|f| (f, true)).chain([(eval, false)]) {
+            let k = *self.by_name.get(name).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{} lists {name} for table version {v}, which is not among the recorded \
+                     episodes in {}",
+                    list.display(),
+                    self.folder.display()
+                )
+            })?;
+            let (path, ep, origin) = &self.episodes[k];
+            anyhow::ensure!(
+                origin.table_version == v && ep.noisy == want_noisy,
+                "{} lists {name} as a {} episode of table version {v}; the file holds a {} \
+                 episode of version {}",
+                list.display(),
+                if want_noisy { "noisy" } else { "noise-free" },
+                if ep.noisy { "noisy" } else { "noise-free" },
+                origin.table_version
+            );
+            if want_noisy {
+                picked.0.push(ep.clone());
+            } else {
+                picked.1 = Some(ep.clone());
+            }
+            picked.2.push(path.clone());
+        }
+        Ok(Some((picked.0, picked.1.expect("the eval file"), picked.2)))
+    }
+}
+
+/// A scratch folder, deleted on drop.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new() -> anyhow::Result<Self> {
+        static K: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let k = K.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let p = std::env::temp_dir().join(format!("learner-replay-{}-{k}", std::process::id()));
+        crate::io::create_dir(&p)?;
+        Ok(Self(p))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        std::fs::remove_dir_all(&self.0).ok();
+    }
+}
+
+/// A resume function: the learner `learner serve --resume DIR` builds from the checkpoint in
+/// DIR.
+type Resume<'a, L> = &'a dyn Fn(&Path) -> anyhow::Result<L>;
+
+/// The replay loop (module docs) of `learner`; `check` compares the recorded files of the
+/// state after `i` iterations; `resume`, where the run was resumed, rebuilds the learner
+/// from its own checkpoint as the resumed run did.
+fn drive<L: Replayable>(
     mut learner: L,
     dir: &Path,
-    episodes: &[(PathBuf, Episode, EpisodeOrigin)],
+    picks: &Picks,
     report: &mut ReplayReport,
-    critic: impl Fn(&L, &Path, usize) -> anyhow::Result<Option<(PathBuf, u64, String, String)>>,
+    resume: Option<Resume<L>>,
+    check: impl Fn(&L, &Path, usize, &mut ReplayReport) -> anyhow::Result<Checked>,
 ) -> anyhow::Result<()> {
     let mut used: Vec<PathBuf> = Vec::new();
+    let mut resumes = picks.resumes();
     loop {
         let (i, v) = (learner.iteration(), learner.version());
-        let files: Vec<PathBuf> = [
-            dir.join(format!("iter_{i:03}_table.npz")),
-            crate::io::table::version_path(dir, v),
-        ]
-        .into_iter()
-        .filter(|p| p.is_file())
-        .collect();
-        if files.is_empty() {
-            break;
-        }
-        let arrays = table_arrays(&learner.table());
-        let table = learner.table();
-        for f in &files {
-            let stored = load_stored(f).with_context(|| format!("reading {}", f.display()))?;
-            report.tables_checked += 1;
-            if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, &table) {
+        match check(&learner, dir, i, report)? {
+            Checked::NothingRecorded => break,
+            Checked::Equal => {}
+            Checked::Differs((file, array, index, recorded, replayed)) => {
                 report.difference = Some(Difference {
                     iteration: i,
                     version: v,
-                    file: f.clone(),
+                    file,
                     array,
                     index,
-                    recorded: rec,
-                    replayed: rep,
+                    recorded,
+                    replayed,
                     episodes: used,
                 });
                 return Ok(());
             }
         }
-        if let Some((file, offset, rec, rep)) = critic(&learner, dir, i)? {
-            report.difference = Some(Difference {
-                iteration: i,
-                version: v,
-                file,
-                array: "critic".into(),
-                index: vec![offset],
-                recorded: rec,
-                replayed: rep,
-                episodes: used,
-            });
-            return Ok(());
-        } else if dir.join(format!("iter_{i:03}_critic.json")).is_file() {
-            report.critics_checked += 1;
+        if resumes.remove(&i) {
+            if let Some(resume) = resume {
+                let tmp = Scratch::new()?;
+                learner.save_checkpoint(&tmp.0)?;
+                learner = resume(&tmp.0)
+                    .with_context(|| format!("redoing the resume after iteration {i}"))?;
+                report.resumes += 1;
+            }
         }
         if learner.done() {
             break;
         }
-        let n = learner.samples();
-        let mut batch = Batch::default();
-        used = Vec::new();
-        for (path, ep, origin) in episodes {
-            if origin.table_version == v && !batch.full(n) && batch.offer(ep.clone(), n) {
-                used.push(path.clone());
-            }
-        }
-        let Some(eval) = batch.eval.take().filter(|_| batch.noisy.len() == n) else {
+        let Some((noisy, eval, files)) = picks.pick(v, learner.samples())? else {
             break;
         };
         learner
-            .learn(&batch.noisy, &eval, 0.0)
+            .learn(&noisy, &eval, 0.0)
             .with_context(|| format!("replaying iteration {}", i + 1))?;
         report.iterations += 1;
-        report.episodes_used += used.len();
+        report.episodes_used += files.len();
+        used = files;
     }
     Ok(())
+}
+
+/// What [`drive`] needs of a learner: [`Learn`] and, for a resumable one, its checkpoint as
+/// `learner serve` writes it ([`ServeLearner::checkpoint`]).
+trait Replayable: Learn {
+    fn save_checkpoint(&self, dir: &Path) -> anyhow::Result<()>;
+}
+
+impl<L: ServeLearner> Replayable for L {
+    fn save_checkpoint(&self, dir: &Path) -> anyhow::Result<()> {
+        self.checkpoint(dir)
+    }
+}
+
+impl Replayable for GaifoPpo {
+    fn save_checkpoint(&self, dir: &Path) -> anyhow::Result<()> {
+        Checkpoint::checkpoint(self, dir, None).map(|_| ())
+    }
 }
 
 /// An f64 as the report shows it: shortest round-trip decimal and its bits.
@@ -286,40 +518,82 @@ fn table_difference(
     None
 }
 
-/// The critic checkpoint `iter_{i:03}_critic.json` in `dir` against the replayed critic, byte
-/// for byte: (file, first differing byte offset, recorded and replayed text there).
-fn critic_difference(
-    learner: &LqrGaifo,
+/// The recorded tables of the state after `i` iterations of a gain-table learner
+/// (`iter_NNN_table.npz`, `tables/vVERSION.npz`) against its table, entry by entry.
+fn tables<L: LinGaussLearn>(
+    learner: &L,
     dir: &Path,
     i: usize,
-) -> anyhow::Result<Option<(PathBuf, u64, String, String)>> {
-    let file = dir.join(format!("iter_{i:03}_critic.json"));
-    if !file.is_file() {
-        return Ok(None);
+    report: &mut ReplayReport,
+) -> anyhow::Result<Checked> {
+    let v = learner.version();
+    let files: Vec<PathBuf> = [
+        dir.join(format!("iter_{i:03}_table.npz")),
+        crate::io::table::version_path(dir, v),
+    ]
+    .into_iter()
+    .filter(|p| p.is_file())
+    .collect();
+    if files.is_empty() {
+        return Ok(Checked::NothingRecorded);
     }
-    let recorded = std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
-    static SAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let k = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = std::env::temp_dir().join(format!(
-        "learner-replay-critic-{}-{k}.json",
-        std::process::id()
-    ));
-    learner.discriminator().save(&tmp)?;
-    let replayed = std::fs::read(&tmp)?;
-    std::fs::remove_file(&tmp).ok();
-    let Some(at) =
-        (0..recorded.len().max(replayed.len())).find(|&j| recorded.get(j) != replayed.get(j))
-    else {
-        return Ok(None);
-    };
-    let around = |b: &[u8]| {
-        let lo = at.saturating_sub(20);
-        String::from_utf8_lossy(&b[lo.min(b.len())..(at + 40).min(b.len())]).into_owned()
-    };
-    Ok(Some((
-        file,
-        at as u64,
-        around(&recorded),
-        around(&replayed),
-    )))
+    let table = learner.table();
+    let arrays = table_arrays(&table);
+    for f in files {
+        let stored = load_stored(&f).with_context(|| format!("reading {}", f.display()))?;
+        report.tables_checked += 1;
+        if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, &table) {
+            return Ok(Checked::Differs((f, array, index, rec, rep)));
+        }
+    }
+    Ok(Checked::Equal)
+}
+
+/// The recorded checkpoint files `iter_NNN_KIND` (NNN = `i`) of each of `kinds`
+/// (`critic.json`, `policy.json`) against the replayed learner's, written by the same
+/// [`Checkpoint`] code into a scratch folder, byte for byte; the difference names the first
+/// differing byte offset and the text around it.
+fn checkpoint_files<L: Checkpoint>(
+    learner: &L,
+    dir: &Path,
+    i: usize,
+    kinds: &[&str],
+    report: &mut ReplayReport,
+) -> anyhow::Result<Checked> {
+    let name = |kind: &str| format!("iter_{i:03}_{kind}");
+    let recorded: Vec<&str> = kinds
+        .iter()
+        .copied()
+        .filter(|k| dir.join(name(k)).is_file())
+        .collect();
+    if recorded.is_empty() {
+        return Ok(Checked::NothingRecorded);
+    }
+    let tmp = Scratch::new()?;
+    learner.checkpoint(&tmp.0, None)?;
+    for kind in recorded {
+        let file = dir.join(name(kind));
+        let rec = std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
+        let rep = std::fs::read(tmp.0.join(name(kind)))?;
+        match kind {
+            "policy.json" => report.policies_checked += 1,
+            _ => report.critics_checked += 1,
+        }
+        let Some(at) = (0..rec.len().max(rep.len())).find(|&j| rec.get(j) != rep.get(j)) else {
+            continue;
+        };
+        let around = |b: &[u8]| {
+            let lo = at.saturating_sub(20);
+            String::from_utf8_lossy(&b[lo.min(b.len())..(at + 40).min(b.len())]).into_owned()
+        };
+        let array = kind.trim_end_matches(".json").to_string();
+        return Ok(Checked::Differs((
+            file,
+            array,
+            vec![at as u64],
+            around(&rec),
+            around(&rep),
+        )));
+    }
+    Ok(Checked::Equal)
 }

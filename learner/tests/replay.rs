@@ -1,5 +1,6 @@
 //! Recorded runs (issue 17) through the `learner` binary: a run of `learner train
-//! --record-episodes` replays equal bit for bit (`learner replay`, docs/design.md §4.13), a
+//! --record-episodes` (LQR+GAIfO, GAIfO (PPO)) replays equal bit for bit (`learner replay`,
+//! docs/design.md §4.13), a
 //! changed episode or a changed table entry is reported at the iteration where it shows, and
 //! the run exports as an MCAP file that the `mcap` crate's reader reads back (§4.14).
 
@@ -61,6 +62,16 @@ fn episodes_of(run: &Path, version: u64) -> Vec<PathBuf> {
     files
 }
 
+/// Adds `by` to state value `i` (flat index into the (T, dX) states) of the noisy episode
+/// recorded in `path`.
+fn nudge(path: &Path, i: usize, by: f64) {
+    let (mut ep, origin) = load_episode(path).unwrap();
+    let task = load_episode_task(path).unwrap();
+    assert!(ep.noisy);
+    ep.x[i] += by;
+    save_episode(path, &ep, &origin, &task).unwrap();
+}
+
 #[test]
 fn a_recorded_run_replays_bit_for_bit() {
     let dir = scratch("equal");
@@ -78,6 +89,23 @@ fn a_recorded_run_replays_bit_for_bit() {
     assert_eq!(r["critics_checked"], ITERATIONS as u64 + 1, "{r}");
     assert!(err.contains("equal"), "{err}");
 
+    // A run resumed from another folder (`learner serve --resume OTHER --out RUN`, as its
+    // episodes/learned.jsonl says) cannot be replayed from RUN alone: said, not a vague error.
+    learner::io::learned::append_event(
+        &run.join("episodes"),
+        &learner::io::learned::LearnedEvent::Resumed {
+            iteration: 2,
+            same_folder: false,
+        },
+    )
+    .unwrap();
+    let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains("resumed from another folder after 2 iterations"),
+        "{err}"
+    );
+
     // Without recorded episodes there is nothing to replay, and the message says how to get them.
     std::fs::remove_dir_all(run.join("episodes")).unwrap();
     let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
@@ -94,11 +122,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     // One state value of the first noisy episode of version 2: the tables of versions 1 and
     // 2 still equal, the update of iteration 2 learns another table (version 3).
     let path = episodes_of(&run, 2)[0].clone();
-    let (mut ep, origin) = load_episode(&path).unwrap();
-    let task = load_episode_task(&path).unwrap();
-    assert!(ep.noisy);
-    ep.x[5 * 12 + 6] += 1e-9;
-    save_episode(&path, &ep, &origin, &task).unwrap();
+    nudge(&path, 5 * 12 + 6, 1e-9);
     let (ok, r, err) = replay(&run);
     assert!(!ok, "a difference exits non-zero");
     let d = &r["difference"];
@@ -121,8 +145,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
 
     // Undo it; change one entry of the table of iteration 1 instead (as stored: the file's
     // checksum is left as it was).
-    ep.x[5 * 12 + 6] -= 1e-9;
-    save_episode(&path, &ep, &origin, &task).unwrap();
+    nudge(&path, 5 * 12 + 6, -1e-9);
     assert!(replay(&run).0, "restored");
     let table_file = run.join("iter_001_table.npz");
     let (mut table, dt) =
@@ -154,6 +177,63 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
             .starts_with(&format!("{was:?} ")),
         "{r}"
     );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// GAIfO (PPO), `learner train --algo gaifo-ppo --record-episodes`: the replay redoes the
+/// critic and PPO updates from the recorded episodes and compares every `iter_NNN_policy.json`
+/// and `iter_NNN_critic.json` byte for byte; a changed episode shows at the update that
+/// learned from it, in the policy file, at a byte offset.
+#[test]
+fn a_recorded_gaifo_ppo_run_replays_bit_for_bit() {
+    let dir = scratch("ppo");
+    let demos = dir.join("d.npz");
+    save_short_demos(&demos, 0);
+    let run = dir.join("run");
+    let (ok, err) = learner(&[
+        "train",
+        "--algo",
+        "gaifo-ppo",
+        "--demos",
+        demos.to_str().unwrap(),
+        "--iterations",
+        &ITERATIONS.to_string(),
+        "--record-episodes",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        std::fs::read_dir(run.join("episodes")).unwrap().count(),
+        ITERATIONS * 6
+    );
+    let (ok, r, err) = replay(&run);
+    assert!(ok, "{err}");
+    assert!(r["difference"].is_null(), "{r}");
+    assert_eq!(r["algorithm"], "gaifo-ppo", "{r}");
+    assert_eq!(r["iterations"], ITERATIONS as u64, "{r}");
+    assert_eq!(r["policies_checked"], ITERATIONS as u64 + 1, "{r}");
+    assert_eq!(r["critics_checked"], ITERATIONS as u64 + 1, "{r}");
+    assert_eq!(r["tables_checked"], 0, "{r}");
+    assert!(err.contains("equal"), "{err}");
+
+    // The second noisy episode of version 3 changed by 1e-9 in one state value: iterations 1
+    // and 2 still equal, the policy of update 3 differs.
+    let path = episodes_of(&run, 3)[1].clone();
+    nudge(&path, 7 * 12 + 2, 1e-9);
+    let (ok, r, err) = replay(&run);
+    assert!(!ok, "a difference exits non-zero");
+    let d = &r["difference"];
+    assert_eq!(d["iteration"], 3, "{r}");
+    assert_eq!(d["array"], "policy", "{r}");
+    assert!(
+        d["file"].as_str().unwrap().ends_with("iter_003_policy.json"),
+        "{r}"
+    );
+    assert_ne!(d["recorded"], d["replayed"], "{r}");
+    assert!(d["index"][0].as_u64().unwrap() > 0, "{r}");
+    assert!(err.contains("first difference at iteration 3"), "{err}");
+    assert_eq!(r["policies_checked"], ITERATIONS as u64 + 1, "{r}");
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -220,5 +300,91 @@ fn a_recorded_run_exports_as_mcap_and_reads_back() {
     let t0 = load_stored(&run.join("iter_000_table.npz")).unwrap();
     assert_eq!(tables[0]["version"], 1);
     assert_eq!(tables[0]["checksum"], format!("{:#018x}", t0.checksum));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The topics and message counts a streaming reader gets from `bytes` (an MCAP file that may
+/// lack its summary and footer: `IgnoreEndMagic`), and whether it met an error (a cut file).
+fn stream_counts(bytes: &[u8]) -> (std::collections::BTreeMap<String, usize>, bool) {
+    let mut count = std::collections::BTreeMap::<String, usize>::new();
+    let opts = mcap::read::Options::IgnoreEndMagic.into();
+    let Ok(stream) = mcap::MessageStream::new_with_options(bytes, opts) else {
+        return (count, true);
+    };
+    for m in stream {
+        match m {
+            Ok(m) => *count.entry(m.channel.topic.clone()).or_default() += 1,
+            Err(_) => return (count, true),
+        }
+    }
+    (count, false)
+}
+
+/// `learner serve --mcap` writes `run.mcap` episode by episode ([`RunMcap`]): a writer that
+/// dies after k episodes (never finished: no summary, no footer) leaves a file from which a
+/// streaming reader reads exactly those k episodes, whatever part of episode k + 1 was
+/// written when it died; finished, the file is complete and reads as the export does.
+#[test]
+fn a_killed_mcap_writer_leaves_its_complete_episodes_readable() {
+    use learner::io::episode::recorded_episodes;
+    use learner::io::run_mcap::{RunMcap, TableInfo};
+    let dir = scratch("mcap-kill");
+    let run = recorded_run(&dir);
+    let episodes = recorded_episodes(&run.join("episodes")).unwrap();
+    let t_len = episodes[0].1.horizon();
+    let file = dir.join("streamed.mcap");
+    let mut m = RunMcap::create(&file).unwrap();
+    m.table(TableInfo::load(&run.join("iter_000_table.npz")).unwrap());
+    let mut sizes = Vec::new();
+    for (path, ep, origin) in &episodes[..5] {
+        m.episode(path, ep, origin, 0.1).unwrap();
+        sizes.push(std::fs::metadata(&file).unwrap().len());
+    }
+    // The process dies here: nothing more is written (no summary, no footer).
+    std::mem::forget(m);
+    let bytes = std::fs::read(&file).unwrap();
+    assert_eq!(bytes.len() as u64, sizes[4]);
+    assert!(
+        mcap::MessageStream::new(&bytes).map_or(true, |mut s| s.any(|m| m.is_err())),
+        "a reader that needs the end magic reports the file as cut"
+    );
+    // Cut anywhere inside the 5th episode's chunk (a kill while its chunk was being written,
+    // which the writer's buffer makes a short moment): the first four episodes whole; of the
+    // fifth, at most the steps that reached the disk, never its `/episode` message.
+    let (lo, hi) = (sizes[3] as usize, sizes[4] as usize);
+    for cut in [lo, lo + 1, lo + 9, (lo + hi) / 2, hi - 1, hi] {
+        let (count, _) = stream_counts(&bytes[..cut]);
+        let k = count["/episode"];
+        assert_eq!(count["/table"], 1, "cut at {cut}");
+        for topic in ["/state", "/joint_states"] {
+            let n = count[topic];
+            if cut == lo || cut == hi {
+                // Between two episodes: exactly the complete ones.
+                assert_eq!(k, if cut == lo { 4 } else { 5 }, "cut at {cut}");
+                assert_eq!(n, k * t_len, "{topic}, cut at {cut}");
+            } else {
+                // The 5th is there whole (the cut is in the index after its chunk) or not
+                // announced by its `/episode` message.
+                assert!(k == 4 || k == 5, "cut at {cut}: {count:?}");
+                assert!((4 * t_len..=5 * t_len).contains(&n), "{topic}: {n}, cut at {cut}");
+                assert!(k == 4 || n == 5 * t_len, "{topic}: {n}, cut at {cut}");
+            }
+        }
+    }
+
+    // Finished, the streamed file reads as the export's: every message, summary and footer.
+    let mut m = RunMcap::create(&file).unwrap();
+    m.add_run(&run).unwrap();
+    let c = m.finish().unwrap();
+    assert_eq!(c.episodes, episodes.len());
+    let streamed = std::fs::read(&file).unwrap();
+    let exported = dir.join("exported.mcap");
+    learner::io::run_mcap::write_run_mcap(&run, &exported).unwrap();
+    let (a, cut) = stream_counts(&streamed);
+    assert!(!cut);
+    assert_eq!(a, stream_counts(&std::fs::read(&exported).unwrap()).0);
+    assert_eq!(a["/episode"], episodes.len());
+    let n = mcap::MessageStream::new(&streamed).unwrap().count();
+    assert_eq!(n, a.values().sum::<usize>());
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -162,6 +162,12 @@ pub fn scan_run(out: &Path) -> Scan {
                 scan.corrupted += 1;
                 scan.problem(format!("{rel}: not JSON"));
             }
+        } else if name == learner::io::learned::LEARNED {
+            // Only its last line may be cut by a kill (read_events leaves that one out).
+            if let Err(e) = learner::io::learned::read_events(path.parent().unwrap_or(path)) {
+                scan.corrupted += 1;
+                scan.problem(format!("{rel}: {e:#}"));
+            }
         } else if name.ends_with(".csv") {
             let (rows, bad) = check_csv(path);
             scan.csv_rows += rows;

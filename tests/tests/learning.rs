@@ -339,6 +339,7 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
     let mut files: Vec<PathBuf> = std::fs::read_dir(out.join("episodes"))
         .unwrap()
         .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "npz"))
         .collect();
     files.sort();
     assert_eq!(
@@ -417,7 +418,12 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
 /// `learner replay OUT --json` on a served run: its learning redone from the recorded episodes
 /// (the same `Learn::learn`) gives every published table (and, for LQR+GAIfO, every critic
 /// checkpoint) bit for bit.
-fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usize) {
+fn assert_replays_equal(
+    out: &Path,
+    dir: &Path,
+    iterations: usize,
+    critics: usize,
+) -> serde_json::Value {
     let o = out.display().to_string();
     let mut p = Proc::spawn("learner", "replay", &["replay", &o, "--json"], dir);
     let (code, stdout) = p.wait(LONG);
@@ -431,6 +437,16 @@ fn assert_replays_equal(out: &Path, dir: &Path, iterations: usize, critics: usiz
         "{r}"
     );
     assert_eq!(r["critics_checked"], critics as u64, "{r}");
+    r
+}
+
+/// `learner replay OUT --json`: (exit code, report).
+fn replay_report(out: &Path, dir: &Path, label: &str) -> (Option<i32>, serde_json::Value) {
+    let o = out.display().to_string();
+    let mut p = Proc::spawn("learner", label, &["replay", &o, "--json"], dir);
+    let (code, stdout) = p.wait(LONG);
+    let log = p.log();
+    (code, json_summary(&stdout, &log))
 }
 
 /// `learner serve --algo lqr-gaifo`: ITERATIONS iterations of LQR+GAIfO over IPC, on
@@ -560,7 +576,7 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
     let dir = scratch("learn-b");
     let out = dir.join("out");
     let (learner_cfg, sim_cfg, ctl_cfg) = configs(&dir, 50);
-    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &[], &dir, "learner1");
+    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, &["--mcap"], &dir, "learner1");
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
 
     // Two updates, and the controller runs version 3.
@@ -577,6 +593,16 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
     learner.signal(libc::SIGKILL);
     let _ = learner.wait(LONG);
     let killed_at = controller_episodes(&ctl_log(&dir)).len();
+    // run.mcap, streamed episode by episode, without its summary: a streaming reader reads
+    // every recorded episode whole (the last one may have been recorded, not yet written).
+    let recorded = npz_count(&out.join("episodes"));
+    let (count, _) = mcap_topics(&std::fs::read(out.join("run.mcap")).unwrap(), true);
+    let in_mcap = count.get("/episode").copied().unwrap_or(0);
+    assert!(
+        in_mcap + 1 >= recorded && in_mcap <= recorded && in_mcap > 0,
+        "{in_mcap} episodes in run.mcap, {recorded} recorded: {count:?}"
+    );
+    assert_eq!(count["/state"], in_mcap * T, "{count:?}");
     // The controller finishes its episodes and keeps its table.
     wait_for(
         "5 episodes after the kill",
@@ -598,7 +624,7 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
         &learner_cfg,
         &prefix,
         &out,
-        &["--resume", &out.display().to_string()],
+        &["--resume", &out.display().to_string(), "--mcap"],
         &dir,
         "learner2",
     );
@@ -645,8 +671,130 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
         );
     }
     assert!(sim.running());
+    // The resumed learner wrote run.mcap again from the recorded episodes, went on, and
+    // finished it at exit: complete (summary, end magic), every recorded episode in it.
+    let (count, cut) = mcap_topics(&std::fs::read(out.join("run.mcap")).unwrap(), false);
+    assert!(!cut, "{count:?}");
+    assert_eq!(count["/episode"], npz_count(&out.join("episodes")), "{count:?}");
+    assert_resumed_run_replays(&out, &dir, rj["table_version"].as_u64().unwrap());
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A served run that was killed and resumed replays bit for bit (issue 17): the replay learns
+/// from the episodes each update learned from (`episodes/learned.jsonl`) and redoes the resume
+/// as `--resume` did; a changed episode learned from after the resume is the first
+/// difference, at that update; without the list, the replay takes the first episodes of each
+/// version, which after the resume are not the ones learned from, and says why it differs.
+fn assert_resumed_run_replays(out: &Path, dir: &Path, last_version: u64) {
+    use learner::io::episode::{load_episode, load_episode_task, save_episode};
+    use learner::io::learned::{read_events, LearnedEvent, LEARNED};
+    let r = assert_replays_equal(out, dir, last_version as usize - 1, 0);
+    assert_eq!(r["resumes"], 1, "{r}");
+    assert_eq!(r["selection"], "learned.jsonl", "{r}");
+    let episodes = out.join("episodes");
+    let events = read_events(&episodes).unwrap().unwrap();
+    let resumed = events
+        .iter()
+        .position(|e| {
+            matches!(
+                e,
+                LearnedEvent::Resumed {
+                    same_folder: true,
+                    ..
+                }
+            )
+        })
+        .expect("a resume event");
+    let (iteration, version, noisy, eval) = events[resumed..]
+        .iter()
+        .find_map(|e| match e {
+            LearnedEvent::Learned {
+                iteration,
+                version,
+                noisy,
+                eval,
+            } => Some((*iteration, *version, noisy.clone(), eval.clone())),
+            LearnedEvent::Resumed { .. } => None,
+        })
+        .expect("an update after the resume");
+
+    // Were the episodes learned after the resume the first of their version to arrive?
+    let mut of_version: Vec<String> = std::fs::read_dir(&episodes)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(&format!("_v{version:04}.npz")))
+        .collect();
+    of_version.sort();
+    let mut listed = noisy.clone();
+    listed.push(eval);
+    listed.sort();
+    let first_arrivals = of_version[..listed.len()].to_vec();
+    eprintln!(
+        "resumed at iteration {iteration}: learned from {listed:?}; first arrivals of v{version}: \
+         {first_arrivals:?}"
+    );
+    if first_arrivals != listed {
+        // The case the list is for: without it the replay differs, and the report says why.
+        let list = episodes.join(LEARNED);
+        let kept = std::fs::read(&list).unwrap();
+        std::fs::remove_file(&list).unwrap();
+        let (code, r) = replay_report(out, dir, "replay-no-list");
+        assert_ne!(code, Some(0), "{r}");
+        assert_eq!(r["selection"], "arrival order", "{r}");
+        assert!(r["note"].as_str().unwrap().contains("resumed"), "{r}");
+        assert!(
+            r["difference"]["iteration"].as_u64().unwrap() >= iteration as u64,
+            "{r}"
+        );
+        std::fs::write(&list, kept).unwrap();
+    }
+
+    // Tamper with the first noisy episode learned from after the resume.
+    let path = episodes.join(&noisy[0]);
+    let (mut ep, origin) = load_episode(&path).unwrap();
+    let task = load_episode_task(&path).unwrap();
+    ep.x[4 * 12 + 3] += 1e-7;
+    save_episode(&path, &ep, &origin, &task).unwrap();
+    let (code, r) = replay_report(out, dir, "replay-tampered");
+    assert_ne!(code, Some(0), "{r}");
+    let d = &r["difference"];
+    assert_eq!(d["iteration"], iteration as u64, "{r}");
+    assert_eq!(d["version"], version + 1, "{r}");
+    assert!(
+        d["episodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p.as_str() == path.to_str()),
+        "the changed episode is among those learned from: {r}"
+    );
+}
+
+/// The `.npz` files in `dir`.
+fn npz_count(dir: &Path) -> usize {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "npz"))
+        .count()
+}
+
+/// Messages per topic of an MCAP file, read as a stream (`cut_ok`: the file may lack its
+/// summary and end magic), and whether the reader met an error.
+fn mcap_topics(bytes: &[u8], cut_ok: bool) -> (std::collections::BTreeMap<String, usize>, bool) {
+    let opts = if cut_ok {
+        mcap::read::Options::IgnoreEndMagic.into()
+    } else {
+        Default::default()
+    };
+    let mut count = std::collections::BTreeMap::new();
+    for m in mcap::MessageStream::new_with_options(bytes, opts).unwrap() {
+        match m {
+            Ok(m) => *count.entry(m.channel.topic.clone()).or_default() += 1,
+            Err(_) => return (count, true),
+        }
+    }
+    (count, false)
 }
 
 fn ctl_log(dir: &Path) -> String {

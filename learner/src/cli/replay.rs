@@ -8,8 +8,8 @@ use clap::Args;
 /// Arguments of `learner replay`.
 #[derive(Args, Debug)]
 pub struct ReplayArgs {
-    /// The `--out` folder of a `learner serve` run, or of a `learner train --record-episodes`
-    /// run.
+    /// The `--out` folder of a `learner serve` run (resumed ones included), or of a
+    /// `learner train --record-episodes` run (LQR+GAIfO or `--algo gaifo-ppo`).
     pub run_dir: PathBuf,
     /// The run's demonstrations, when they are no longer where `run.json` says (their hash
     /// must be the run's).
@@ -27,8 +27,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&r)?);
     }
     eprintln!(
-        "replay of {} (`learner {}` {}, seed {}): {} iterations from {} of {} recorded episodes; \
-         {} table files and {} critic checkpoints compared",
+        "replay of {} (`learner {}` {}, seed {}): {} iterations from {} of {} recorded episodes \
+         (picked by {}{}); {} table files, {} critic and {} policy checkpoints compared",
         r.run.display(),
         r.run_command,
         r.algorithm,
@@ -36,14 +36,23 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         r.iterations,
         r.episodes_used,
         r.episodes,
+        r.selection,
+        match r.resumes {
+            0 => String::new(),
+            k => format!(", {k} resume(s) redone"),
+        },
         r.tables_checked,
-        r.critics_checked
+        r.critics_checked,
+        r.policies_checked
     );
+    if let Some(note) = &r.note {
+        eprintln!("note: {note}");
+    }
     match &r.difference {
         None => {
             anyhow::ensure!(
-                r.tables_checked > 0,
-                "no recorded table to compare in {}",
+                r.files_checked() > 0,
+                "no recorded checkpoint to compare in {}",
                 r.run.display()
             );
             eprintln!("equal: every recorded table is the replay's, bit for bit");

@@ -55,9 +55,11 @@ pub struct ServeArgs {
     /// Largest number of iterations (counted from the first, across resumes); overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
-    /// At exit, write the run's recorded episodes and tables as OUT/run.mcap (JSON messages
-    /// for Foxglove or Rerun: /joint_states, /state, /action, /fault, /episode, /table;
-    /// docs/design.md §4.14); the same as `learner dataset export --format mcap OUT F.mcap`.
+    /// Write the run's recorded episodes and tables into OUT/run.mcap as they come, one chunk
+    /// per episode, the summary at exit (JSON messages for Foxglove or Rerun: /joint_states,
+    /// /state, /action, /fault, /episode, /table; docs/design.md §4.14); the same messages as
+    /// `learner dataset export --format mcap OUT F.mcap`. A killed learner leaves the file
+    /// readable by streaming readers up to its last complete episode.
     #[arg(long)]
     pub mcap: bool,
     /// --config: an `ExpertConfig` (as for `learner expert`) or, for lqr-gaifo, a

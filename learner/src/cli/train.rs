@@ -54,7 +54,8 @@ pub struct TrainArgs {
     pub force: bool,
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
-    /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO only.
+    /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
+    /// --algo gaifo-ppo.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
@@ -165,11 +166,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             args.resume.is_none(),
             "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
         );
-        anyhow::ensure!(
-            !args.record_episodes,
-            "--record-episodes is for LQR+GAIfO runs (`learner replay` redoes gain-table \
-             learners only), not --algo gaifo-ppo"
-        );
         let mut pcfg: GaifoPpoConfig = args.common.settings()?;
         if let Some(i) = args.iterations {
             pcfg.iterations = i;
@@ -185,6 +181,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         // Claimed already: the folder holds only its run.json, replaced now.
         let force = args.force || claimed;
         manifest::claim(&args.out_dir(), &m, Claim::New { force })?;
+        if args.record_episodes {
+            // `run::train_ppo` records into it because it is there.
+            crate::io::create_dir(args.out_dir().join("episodes"))?;
+        }
         return run_ppo(&args, demos, &pcfg);
     }
     let mut cfg: GaifoConfig = args.common.settings()?;

@@ -27,6 +27,7 @@ use super::summary::{summary_text, write_outputs, SummaryRow};
 use super::{expert_demos, pool, ExperimentConfig, ExperimentName, Run};
 use crate::io::log::read_gaifo_csv;
 use crate::process::{sibling, Spawned};
+use crate::progress::Progress;
 use imitation::demos::Demos;
 
 /// Time a process gets to stop on SIGTERM before it is killed.
@@ -47,8 +48,16 @@ struct IpcRun<'a> {
     dir: PathBuf,
 }
 
+/// Rows (iterations) in a `gaifo_log.csv` so far (0 when there is none yet).
+fn csv_rows(path: &Path) -> u64 {
+    std::fs::read(path).map_or(0, |b| {
+        (b.iter().filter(|&&c| c == b'\n').count() as u64).saturating_sub(1)
+    })
+}
+
 impl IpcRun<'_> {
-    fn run(&self) -> anyhow::Result<Run> {
+    /// The run; `progress` counts its iterations as its learner logs them.
+    fn run(&self, progress: &Progress) -> anyhow::Result<Run> {
         let t0 = Instant::now();
         let cfg = self.cfg;
         let dir = &self.dir;
@@ -149,8 +158,13 @@ impl IpcRun<'_> {
         // time, and generous slack for learning and a loaded machine.
         let per_iter = (n + 2) as f64 * task.horizon as f64 * task.dt / c;
         let limit = Duration::from_secs_f64(120.0 + 3.0 * per_iter * cfg.iterations as f64);
+        let (csv, mut logged) = (out.join("gaifo_log.csv"), 0);
         let status = loop {
+            let now = csv_rows(&csv).min(cfg.iterations as u64);
+            progress.inc(now.saturating_sub(logged));
+            logged = logged.max(now);
             if let Some(st) = learner.try_wait()? {
+                progress.inc((cfg.iterations as u64).saturating_sub(logged));
                 break st;
             }
             anyhow::ensure!(
@@ -261,23 +275,26 @@ pub fn run(
     }
     let done = AtomicUsize::new(0);
     let total = jobs.len();
+    // A bar over all runs' iterations (ETA) on a terminal; the run lines either way.
+    let progress = Progress::new((total * cfg.iterations) as u64, "iterations");
     let runs: Vec<Run> = pool.install(|| {
         jobs.par_iter()
             .map(|j| {
-                let r = j.run()?;
+                let r = j.run(&progress)?;
                 let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-                eprintln!(
+                progress.println(&format!(
                     "[{k:>3}/{total}] {:<10} seed {:>3}: {} iterations over IPC, final normalised performance {:>6.3} ({:.0} s)",
                     r.variant,
                     r.seed,
                     r.logs.len(),
                     r.logs.last().map(|l| l.performance).unwrap_or(f64::NAN),
                     r.wall_s
-                );
+                ));
                 Ok(r)
             })
             .collect::<anyhow::Result<Vec<_>>>()
     })?;
+    drop(progress);
     let rows = write_outputs(
         name.as_str(),
         &format!(

@@ -5,6 +5,7 @@ pub mod checkpoint;
 pub mod demos;
 pub mod episode;
 pub mod foreign;
+pub mod learned;
 pub mod lerobot;
 pub mod log;
 pub mod manifest;

@@ -1,7 +1,9 @@
 //! A recorded run as one MCAP file (docs/design.md §4.14), for Foxglove, Rerun and the `mcap`
 //! tools: its recorded episodes (`RUN/episodes/*.npz`, in arrival order) laid end to end on one
 //! time line, and its gain tables (`tables/vNNNN.npz` of `learner serve`, else
-//! `iter_NNN_table.npz` of `learner train`).
+//! `iter_NNN_table.npz` of `learner train`). Written after the fact from a run folder
+//! ([`write_run_mcap`], `learner dataset export --format mcap`) or as the run goes, episode by
+//! episode ([`RunMcap`], `learner serve --mcap`): the same code, the same messages.
 //!
 //! Every message is JSON (`message_encoding` `json`) with a JSON Schema (`encoding`
 //! `jsonschema`), which Foxglove decodes without plug-ins. Log time (= publish time, ns): the
@@ -28,7 +30,9 @@ use anyhow::Context;
 use serde_json::json;
 use ur5_shared::layout::{ACTIVE_JOINTS, DU, DX};
 
-use super::episode::{load_episode_task, recorded_episodes};
+use imitation::rollout::Episode;
+
+use super::episode::{load_episode_task, recorded_episodes, EpisodeOrigin};
 use super::table::load_stored;
 
 /// What [`write_run_mcap`] wrote: messages per topic.
@@ -126,74 +130,146 @@ fn table_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
     })
 }
 
-/// Writes the run in `run` (its `episodes/` and tables) to the MCAP file `out` (module docs).
-pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
-    let episodes = recorded_episodes(&run.join("episodes"))?;
-    anyhow::ensure!(
-        !episodes.is_empty(),
-        "{} holds no recorded episodes (episodes/*.npz; `learner serve` records them, \
-         `learner train` with --record-episodes)",
-        run.display()
-    );
-    let mut tables = Vec::new();
-    for f in table_files(run)? {
-        let t = load_stored(&f).with_context(|| format!("reading {}", f.display()))?;
-        tables.push((t.version, t.checksum, t.arrays[0].1[0], f));
+/// A gain table as `/table` tells it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableInfo {
+    /// Its version.
+    pub version: u64,
+    /// XXH3-64 checksum.
+    pub checksum: u64,
+    /// T.
+    pub horizon: u64,
+    /// Its file.
+    pub file: PathBuf,
+}
+
+impl TableInfo {
+    /// The table stored in `file`.
+    pub fn load(file: &Path) -> anyhow::Result<Self> {
+        let t = load_stored(file).with_context(|| format!("reading {}", file.display()))?;
+        Ok(Self {
+            version: t.version,
+            checksum: t.checksum,
+            horizon: t.arrays[0].1[0],
+            file: file.to_owned(),
+        })
     }
 
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        super::create_dir(dir)?;
+    fn message(&self) -> serde_json::Value {
+        json!({"version": self.version, "checksum": format!("{:#018x}", self.checksum),
+               "horizon": self.horizon, "file": self.file.display().to_string()})
     }
-    let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut w = mcap::WriteOptions::new()
-        .compression(None)
-        .profile("")
-        .library(concat!("learner ", env!("CARGO_PKG_VERSION")))
-        .create(BufWriter::new(file))?;
-    let mut ids = BTreeMap::new();
-    for (topic, name, schema) in channels() {
-        let s = w.add_schema(name, "jsonschema", &serde_json::to_vec(&schema)?)?;
-        let c = w.add_channel(s, topic, "json", &BTreeMap::new())?;
-        ids.insert(topic, c);
+}
+
+/// Bytes [`RunMcap`] buffers: more than the chunk of an episode of T = 500 steps (≈ 0.9 KB of
+/// JSON per step over the four per-step topics; measured ≈ 22 KB for T = 20), so that a chunk
+/// reaches the file in one write when its episode is complete.
+const EPISODE_BUFFER: usize = 1 << 20;
+
+/// An MCAP file written as the run goes (`learner serve --mcap`; module docs): one chunk per
+/// episode, kept in memory and written out (chunk finished, buffer flushed) when the episode
+/// is complete, so a killed process leaves a file whose chunks hold every episode up to the
+/// last complete one; only the summary section and footer, which [`RunMcap::finish`] (or
+/// dropping it) writes, are missing. (A kill during that one write can leave the start of the
+/// next chunk: streaming readers then also return the steps in it, never its `/episode`
+/// message, which is the episode's last.) Readers that stream the file from its start read
+/// such a file up to where it ends (docs/design.md §4.14): the `mcap` crate's `MessageStream`
+/// with `Options::IgnoreEndMagic` (messages, then an error at the cut), the Python reader's
+/// `NonSeekingReader` (messages, then `EndOfFile`); readers that start from the summary (the
+/// Python `SeekingReader` that `make_reader` picks for a file) refuse it.
+pub struct RunMcap {
+    w: mcap::Writer<BufWriter<std::fs::File>>,
+    ids: BTreeMap<&'static str, u16>,
+    seq: u32,
+    /// Where the next episode starts on the time line (s).
+    start: f64,
+    /// Tables announced and not yet in force, by version.
+    pending: Vec<TableInfo>,
+    /// The highest version announced.
+    last_table: u64,
+    counts: McapCounts,
+}
+
+impl RunMcap {
+    /// Creates `out` (and its folder) with the header, the schemas and the channels.
+    pub fn create(out: &Path) -> anyhow::Result<Self> {
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            super::create_dir(dir)?;
+        }
+        let file =
+            std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
+        let mut w = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("")
+            .library(concat!("learner ", env!("CARGO_PKG_VERSION")))
+            // Chunks end where `episode` ends them.
+            .chunk_size(None)
+            // An episode's chunk stays in memory until `episode` writes it out whole.
+            .create(BufWriter::with_capacity(EPISODE_BUFFER, file))?;
+        let mut ids = BTreeMap::new();
+        for (topic, name, schema) in channels() {
+            let s = w.add_schema(name, "jsonschema", &serde_json::to_vec(&schema)?)?;
+            let c = w.add_channel(s, topic, "json", &BTreeMap::new())?;
+            ids.insert(topic, c);
+        }
+        w.flush()?;
+        Ok(Self {
+            w,
+            ids,
+            seq: 0,
+            start: 0.0,
+            pending: Vec::new(),
+            last_table: 0,
+            counts: McapCounts::default(),
+        })
     }
-    let mut counts = McapCounts::default();
-    let mut seq = 0u32;
-    let mut put =
-        |w: &mut mcap::Writer<_>, topic: &'static str, ns: u64, msg: serde_json::Value| {
-            seq += 1;
-            *counts.messages.entry(topic.to_owned()).or_default() += 1;
-            let header = mcap::records::MessageHeader {
-                channel_id: ids[topic],
-                sequence: seq,
-                log_time: ns,
-                publish_time: ns,
-            };
-            w.write_to_known_channel(&header, &serde_json::to_vec(&msg)?)
-                .map_err(anyhow::Error::from)
+
+    fn put(&mut self, topic: &'static str, ns: u64, msg: serde_json::Value) -> anyhow::Result<()> {
+        self.seq += 1;
+        *self.counts.messages.entry(topic.to_owned()).or_default() += 1;
+        let header = mcap::records::MessageHeader {
+            channel_id: self.ids[topic],
+            sequence: self.seq,
+            log_time: ns,
+            publish_time: ns,
         };
-    let table_msg = |(version, checksum, horizon, file): &(u64, u64, u64, PathBuf)| {
-        json!({"version": version, "checksum": format!("{checksum:#018x}"),
-               "horizon": horizon, "file": file.display().to_string()})
-    };
+        self.w
+            .write_to_known_channel(&header, &serde_json::to_vec(&msg)?)
+            .map_err(anyhow::Error::from)
+    }
 
-    let mut start = 0.0f64;
-    let mut tables_left: Vec<_> = tables.iter().collect();
-    for (path, ep, origin) in &episodes {
-        let task =
-            load_episode_task(path).with_context(|| format!("reading {}", path.display()))?;
-        let ns = |t: usize| ((start + t as f64 * task.dt) * 1e9).round() as u64;
+    /// Announces a table: its `/table` message comes when its first episode starts (or at the
+    /// end). A version not above the last one announced is ignored (a resumed learner
+    /// publishes its table again).
+    pub fn table(&mut self, t: TableInfo) {
+        if t.version > self.last_table {
+            self.last_table = t.version;
+            self.counts.tables += 1;
+            self.pending.push(t);
+        }
+    }
+
+    /// Writes the episode recorded as `path` (control period `dt`, s) and ends its chunk.
+    pub fn episode(
+        &mut self,
+        path: &Path,
+        ep: &Episode,
+        origin: &EpisodeOrigin,
+        dt: f64,
+    ) -> anyhow::Result<()> {
+        let start = self.start;
+        let ns = |t: usize| ((start + t as f64 * dt) * 1e9).round() as u64;
         let v = origin.table_version;
         // Tables up to this version come into force now.
-        while let Some(t) = tables_left.first().filter(|t| t.0 <= v) {
-            put(&mut w, "/table", ns(0), table_msg(t))?;
-            tables_left.remove(0);
+        while self.pending.first().is_some_and(|t| t.version <= v) {
+            let t = self.pending.remove(0);
+            self.put("/table", ns(0), t.message())?;
         }
         let (e, noisy) = (origin.episode, ep.noisy);
         for t in 0..ep.horizon() {
             let s = ep.state(t);
             let (sec, nsec) = (ns(t) / 1_000_000_000, ns(t) % 1_000_000_000);
-            put(
-                &mut w,
+            self.put(
                 "/joint_states",
                 ns(t),
                 json!({
@@ -201,8 +277,7 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
                 "name": ACTIVE_JOINTS, "position": &s[0..3], "velocity": &s[3..6],
                 "effort": [] }),
             )?;
-            put(
-                &mut w,
+            self.put(
                 "/state",
                 ns(t),
                 json!({
@@ -211,16 +286,14 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
             )?;
             let executed = &ep.u[t * DU..(t + 1) * DU];
             let policy = &ep.u_policy[t * DU..(t + 1) * DU];
-            put(
-                &mut w,
+            self.put(
                 "/action",
                 ns(t),
                 json!({
                 "episode": e, "table_version": v, "t": t, "executed": executed, "policy": policy}),
             )?;
             if executed != policy {
-                put(
-                    &mut w,
+                self.put(
                     "/fault",
                     ns(t),
                     json!({
@@ -230,22 +303,59 @@ pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
             }
         }
         let last = ep.horizon() - 1;
-        put(
-            &mut w,
+        self.put(
             "/episode",
             ns(last),
             json!({
             "episode": e, "table_version": v, "noisy": noisy, "task_cost": ep.task_cost(),
             "final_distance_m": ep.final_distance(), "file": path.display().to_string()}),
         )?;
-        start += ep.horizon() as f64 * task.dt;
-        counts.episodes += 1;
+        self.start += ep.horizon() as f64 * dt;
+        self.counts.episodes += 1;
+        // The chunk is complete on disk: a kill from here on loses nothing of it.
+        self.w.flush()?;
+        Ok(())
     }
-    let end = (start * 1e9).round() as u64;
-    for t in tables_left {
-        put(&mut w, "/table", end, table_msg(t))?;
+
+    /// Writes what the run folder `run` holds so far: its tables ([`table_files`]) and its
+    /// recorded episodes in arrival order (a whole run exported, or a resumed served run's
+    /// earlier part).
+    pub fn add_run(&mut self, run: &Path) -> anyhow::Result<()> {
+        for f in table_files(run)? {
+            self.table(TableInfo::load(&f)?);
+        }
+        for (path, ep, origin) in recorded_episodes(&run.join("episodes"))? {
+            let task =
+                load_episode_task(&path).with_context(|| format!("reading {}", path.display()))?;
+            self.episode(&path, &ep, &origin, task.dt)?;
+        }
+        Ok(())
     }
-    counts.tables = tables.len();
-    w.finish()?;
-    Ok(counts)
+
+    /// The tables that ran no episode (at the end of the time line), then the summary
+    /// section and footer.
+    pub fn finish(mut self) -> anyhow::Result<McapCounts> {
+        let end = (self.start * 1e9).round() as u64;
+        for t in std::mem::take(&mut self.pending) {
+            self.put("/table", end, t.message())?;
+        }
+        self.w.finish()?;
+        Ok(std::mem::take(&mut self.counts))
+    }
+}
+
+/// Writes the run in `run` (its `episodes/` and tables) to the MCAP file `out` (module docs).
+pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
+    let mut m = RunMcap::create(out)?;
+    m.add_run(run)?;
+    if m.counts.episodes == 0 {
+        drop(m);
+        std::fs::remove_file(out).ok();
+        anyhow::bail!(
+            "{} holds no recorded episodes (episodes/*.npz; `learner serve` records them, \
+             `learner train` with --record-episodes)",
+            run.display()
+        );
+    }
+    m.finish()
 }

@@ -15,6 +15,8 @@ use ur5_shared::GainTable;
 use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
+use crate::io::learned::{append_event, LearnedEvent};
+use crate::io::run_mcap::{RunMcap, TableInfo};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
@@ -112,31 +114,43 @@ pub(super) struct Run<L> {
     /// The publication of the current version ([`GainTable::epoch`]): 0, or for the version a
     /// resumed learner starts with, one more than the one recorded (docs/design.md §3.6).
     pub(super) epoch: u32,
+    /// `run.mcap` as the run goes (`--mcap`).
+    pub(super) mcap: Option<RunMcap>,
 }
 
 impl<L: ServeLearner> Run<L> {
     /// Saves the checkpoint and the table of the controller to execute next; returns the table.
-    pub(super) fn save_current(&self) -> anyhow::Result<Box<GainTable>> {
+    pub(super) fn save_current(&mut self) -> anyhow::Result<Box<GainTable>> {
         let out = &self.opts.out;
         let version = self.learner.version();
         let mut table = self.learner.table();
         table.epoch = self.epoch;
         self.learner.checkpoint(out)?;
         let dt = self.learner.task().dt;
-        save_table(&crate::io::table::version_path(out, version), &table, dt)?;
+        let file = crate::io::table::version_path(out, version);
+        save_table(&file, &table, dt)?;
         save_table(&out.join("latest_table.npz"), &table, dt)?;
+        if let Some(m) = self.mcap.as_mut() {
+            m.table(TableInfo {
+                version,
+                checksum: table.checksum,
+                horizon: self.learner.task().horizon as u64,
+                file,
+            });
+        }
         Ok(table)
     }
 
+    /// Records `ep` when `record_episodes` is on; returns its file name in `episodes/`.
     pub(super) fn record(
         &mut self,
         ep: &Episode,
         episode: u64,
         version: u64,
         epoch: u32,
-    ) -> anyhow::Result<()> {
+    ) -> anyhow::Result<Option<String>> {
         let Some(rec) = self.recorder.as_mut() else {
-            return Ok(());
+            return Ok(None);
         };
         let origin = EpisodeOrigin {
             table_version: version,
@@ -144,7 +158,19 @@ impl<L: ServeLearner> Run<L> {
             episode,
             seed: self.learner.seed(),
         };
-        rec.record(ep, &origin, self.learner.task())?;
-        Ok(())
+        let path = rec.record(ep, &origin, self.learner.task())?;
+        if let Some(m) = self.mcap.as_mut() {
+            m.episode(&path, ep, &origin, self.learner.task().dt)?;
+        }
+        Ok(Some(crate::io::learned::file_name(&path)))
+    }
+
+    /// Appends `event` to `episodes/learned.jsonl` ([`crate::io::learned`]) when episodes are
+    /// recorded (without them there is nothing to replay).
+    pub(super) fn note(&self, event: &LearnedEvent) -> anyhow::Result<()> {
+        if self.recorder.is_none() {
+            return Ok(());
+        }
+        append_event(&self.opts.out.join("episodes"), event)
     }
 }

@@ -56,8 +56,10 @@
 //!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
 //!   `t_execute_s` is the time from the version's first sample to its last needed episode;
 //!   appended across resumes); `best_table.npz` at exit;
-//! - with `--mcap`, `run.mcap` at exit: the run's recorded episodes and tables as one MCAP
-//!   file ([`crate::io::run_mcap`]).
+//! - with `--mcap`, `run.mcap`: the run's recorded episodes and tables as one MCAP file
+//!   ([`crate::io::run_mcap::RunMcap`]), written episode by episode (one chunk each), its
+//!   summary at exit; a killed learner leaves it readable by streaming readers up to its last
+//!   complete episode; a resumed one writes it again from the folder's episodes, then goes on.
 //!
 //! # Peers that die
 //! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
@@ -89,6 +91,7 @@ use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
 use serde::{Deserialize, Serialize};
 
+use crate::io::learned::LearnedEvent;
 use crate::io::table::save_table;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -140,8 +143,8 @@ pub struct ServeOptions {
     pub force: bool,
     /// Record every complete episode to `out/episodes/`.
     pub record_episodes: bool,
-    /// At exit, write the recorded episodes and the tables as `out/run.mcap`
-    /// ([`crate::io::run_mcap`]; needs `record_episodes`).
+    /// Write the recorded episodes and the tables into `out/run.mcap` as they come
+    /// ([`crate::io::run_mcap::RunMcap`]; needs `record_episodes`).
     pub mcap: bool,
     /// While no sample arrives, say so every this many seconds (wall clock).
     pub wait_report_s: f64,
@@ -259,22 +262,27 @@ pub fn serve(
     cfg.validate()?;
     claim_dirs(&opts, "expert", cfg.seed, &cfg)?;
     let el = match &opts.resume {
-        Some(dir) => {
-            let path = dir.join("checkpoint.npz");
-            let (pol, iteration, cost_random) = crate::io::checkpoint::load_checkpoint(&path)
-                .with_context(|| format!("resuming from {}", path.display()))?;
-            anyhow::ensure!(
-                pol.t == cfg.task.horizon,
-                "{} holds a controller of T = {}, the task has T = {}",
-                path.display(),
-                pol.t,
-                cfg.task.horizon
-            );
-            ExpertLearner::resume(cfg, pol, iteration, cost_random)
-        }
+        Some(dir) => expert_from_checkpoint(cfg, dir)?,
         None => ExpertLearner::new(cfg, None),
     };
     serve_loop(el, opts, progress)
+}
+
+/// The expert learner `learner serve --resume DIR` continues with: DIR's `checkpoint.npz`
+/// (controller, iteration, random-policy cost) through [`ExpertLearner::resume`] (also what
+/// `learner replay` does where a served expert run was resumed).
+pub fn expert_from_checkpoint(cfg: ExpertConfig, dir: &Path) -> anyhow::Result<ExpertLearner> {
+    let path = dir.join("checkpoint.npz");
+    let (pol, iteration, cost_random) = crate::io::checkpoint::load_checkpoint(&path)
+        .with_context(|| format!("resuming from {}", path.display()))?;
+    anyhow::ensure!(
+        pol.t == cfg.task.horizon,
+        "{} holds a controller of T = {}, the task has T = {}",
+        path.display(),
+        pol.t,
+        cfg.task.horizon
+    );
+    Ok(ExpertLearner::resume(cfg, pol, iteration, cost_random))
 }
 
 /// Runs the LQR+GAIfO learner end on `demos` (their task) until `cfg.iterations` are done or
@@ -372,6 +380,14 @@ fn serve_loop<L: ServeLearner>(
         } else {
             None
         },
+        // The run so far (a resumed run's earlier episodes), then episode by episode.
+        mcap: if opts.mcap {
+            let mut m = crate::io::run_mcap::RunMcap::create(&out.join("run.mcap"))?;
+            m.add_run(&out)?;
+            Some(m)
+        } else {
+            None
+        },
         opts,
     };
 
@@ -395,6 +411,13 @@ fn serve_with_ports<L: ServeLearner>(
     let start_version = run.learner.version();
     let table = run.save_current()?;
     ports.publish(&table)?;
+    if let Some(from) = &run.opts.resume {
+        let same = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_owned());
+        run.note(&LearnedEvent::Resumed {
+            iteration: run.learner.iteration(),
+            same_folder: same(from) == same(&out),
+        })?;
+    }
     let (n, t_len) = (run.learner.samples(), run.learner.task().horizon);
     eprintln!(
         "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version",
@@ -428,6 +451,9 @@ fn serve_with_ports<L: ServeLearner>(
     let mut last_report = Instant::now();
     let mut version_started: Option<Instant> = None;
     let mut newer_reported = (0u64, 0u32);
+    // The recorded files of the batch's episodes (`episodes/learned.jsonl`).
+    let mut used_noisy: Vec<String> = Vec::with_capacity(n);
+    let mut used_eval: Option<String> = None;
 
     let bar = crate::progress::Progress::new(
         run.learner
@@ -475,7 +501,7 @@ fn serve_with_ports<L: ServeLearner>(
                     }
                 };
                 counts.episodes += 1;
-                run.record(&ep, episode, version, epoch)?;
+                let file = run.record(&ep, episode, version, epoch)?;
                 check.episode(&ep, version, &run.learner, run.opts.task_tolerance)?;
                 let current = run.learner.version();
                 // An earlier publication of the current version counts as an older version:
@@ -496,10 +522,18 @@ fn serve_with_ports<L: ServeLearner>(
                 } else if finishing {
                     // The controller took the last table: nothing more to learn.
                     break 'outer ServeExit::Done;
-                } else if batch.offer(ep, n) {
-                    counts.used += 1;
                 } else {
-                    counts.surplus += 1;
+                    let noisy = ep.noisy;
+                    if batch.offer(ep, n) {
+                        counts.used += 1;
+                        match (noisy, file) {
+                            (true, Some(f)) => used_noisy.push(f),
+                            (false, f) => used_eval = f,
+                            (true, None) => {}
+                        }
+                    } else {
+                        counts.surplus += 1;
+                    }
                 }
             }
             if batch.full(n) {
@@ -511,6 +545,15 @@ fn serve_with_ports<L: ServeLearner>(
                 let waited = version_started
                     .take()
                     .map_or(0.0, |t0| t0.elapsed().as_secs_f64());
+                // Before the update's checkpoint: the last line of a version counts.
+                if let Some(eval) = used_eval.take() {
+                    run.note(&LearnedEvent::Learned {
+                        iteration: run.learner.iteration() + 1,
+                        version: run.learner.version(),
+                        noisy: std::mem::take(&mut used_noisy),
+                        eval,
+                    })?;
+                }
                 let entry = run.learner.learn(&batch.noisy, &eval, waited)?;
                 batch.noisy.clear();
                 // The row before the checkpoint, as `learner train` writes them: a kill between
@@ -567,14 +610,13 @@ fn serve_with_ports<L: ServeLearner>(
             run.learner.task().dt,
         )?;
     }
-    if run.opts.mcap && counts.episodes > 0 {
-        let path = out.join("run.mcap");
-        let c = crate::io::run_mcap::write_run_mcap(&out, &path)?;
+    if let Some(m) = run.mcap.take() {
+        let c = m.finish()?;
         eprintln!(
             "learner serve: {} episodes and {} tables -> {}",
             c.episodes,
             c.tables,
-            path.display()
+            out.join("run.mcap").display()
         );
     }
     Ok(ServeSummary {
