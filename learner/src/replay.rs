@@ -192,17 +192,24 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
             let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
             let learner = LqrGaifo::new(cfg.clone(), d.clone())?;
             let resume = |tmp: &Path| Ok(crate::run::resume(cfg.clone(), d.clone(), tmp)?.0);
-            drive(learner, dir, &picks, &mut report, Some(&resume), |l, dir, i, r| {
-                match tables(l, dir, i, r)? {
-                    // A table without its critic file (a kill between the two) is compared
-                    // alone.
-                    Checked::Equal => match checkpoint_files(l, dir, i, &["critic.json"], r)? {
-                        Checked::NothingRecorded => Ok(Checked::Equal),
+            drive(
+                learner,
+                dir,
+                &picks,
+                &mut report,
+                Some(&resume),
+                |l, dir, i, r| {
+                    match tables(l, dir, i, r)? {
+                        // A table without its critic file (a kill between the two) is compared
+                        // alone.
+                        Checked::Equal => match checkpoint_files(l, dir, i, &["critic.json"], r)? {
+                            Checked::NothingRecorded => Ok(Checked::Equal),
+                            other => Ok(other),
+                        },
                         other => Ok(other),
-                    },
-                    other => Ok(other),
-                }
-            })?;
+                    }
+                },
+            )?;
         }
         "expert" => {
             let cfg: ExpertConfig = m.settings_as()?;

@@ -227,7 +227,10 @@ fn a_recorded_gaifo_ppo_run_replays_bit_for_bit() {
     assert_eq!(d["iteration"], 3, "{r}");
     assert_eq!(d["array"], "policy", "{r}");
     assert!(
-        d["file"].as_str().unwrap().ends_with("iter_003_policy.json"),
+        d["file"]
+            .as_str()
+            .unwrap()
+            .ends_with("iter_003_policy.json"),
         "{r}"
     );
     assert_ne!(d["recorded"], d["replayed"], "{r}");
@@ -366,7 +369,10 @@ fn a_killed_mcap_writer_leaves_its_complete_episodes_readable() {
                 // The 5th is there whole (the cut is in the index after its chunk) or not
                 // announced by its `/episode` message.
                 assert!(k == 4 || k == 5, "cut at {cut}: {count:?}");
-                assert!((4 * t_len..=5 * t_len).contains(&n), "{topic}: {n}, cut at {cut}");
+                assert!(
+                    (4 * t_len..=5 * t_len).contains(&n),
+                    "{topic}: {n}, cut at {cut}"
+                );
                 assert!(k == 4 || n == 5 * t_len, "{topic}: {n}, cut at {cut}");
             }
         }

@@ -675,7 +675,11 @@ fn a_killed_learner_leaves_the_controller_on_its_table_and_a_resumed_one_continu
     // finished it at exit: complete (summary, end magic), every recorded episode in it.
     let (count, cut) = mcap_topics(&std::fs::read(out.join("run.mcap")).unwrap(), false);
     assert!(!cut, "{count:?}");
-    assert_eq!(count["/episode"], npz_count(&out.join("episodes")), "{count:?}");
+    assert_eq!(
+        count["/episode"],
+        npz_count(&out.join("episodes")),
+        "{count:?}"
+    );
     assert_resumed_run_replays(&out, &dir, rj["table_version"].as_u64().unwrap());
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
@@ -775,7 +779,13 @@ fn assert_resumed_run_replays(out: &Path, dir: &Path, last_version: u64) {
 fn npz_count(dir: &Path) -> usize {
     std::fs::read_dir(dir)
         .unwrap()
-        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "npz"))
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "npz")
+        })
         .count()
 }
 

@@ -16,8 +16,8 @@ use super::ServeOptions;
 use crate::io::checkpoint::save_checkpoint;
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::learned::{append_event, LearnedEvent};
-use crate::io::run_mcap::{RunMcap, TableInfo};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
+use crate::io::run_mcap::{RunMcap, TableInfo};
 use crate::io::table::save_table;
 use crate::run::Checkpoint;
 
