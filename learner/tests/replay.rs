@@ -23,11 +23,19 @@ fn scratch(tag: &str) -> PathBuf {
 
 /// A recorded `learner train` run of ITERATIONS iterations in `dir/run` on short demonstrations.
 fn recorded_run(dir: &Path) -> PathBuf {
+    recorded_run_of(dir, "lqr-gaifo")
+}
+
+/// `learner train --algo ALGO --record-episodes` of `ITERATIONS` iterations on short demos in
+/// `dir`; returns the run folder.
+fn recorded_run_of(dir: &Path, algo: &str) -> PathBuf {
     let demos = dir.join("d.npz");
     save_short_demos(&demos, 0);
     let run = dir.join("run");
     let (ok, err) = learner(&[
         "train",
+        "--algo",
+        algo,
         "--demos",
         demos.to_str().unwrap(),
         "--iterations",
@@ -187,22 +195,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
 #[test]
 fn a_recorded_gaifo_ppo_run_replays_bit_for_bit() {
     let dir = scratch("ppo");
-    let demos = dir.join("d.npz");
-    save_short_demos(&demos, 0);
-    let run = dir.join("run");
-    let (ok, err) = learner(&[
-        "train",
-        "--algo",
-        "gaifo-ppo",
-        "--demos",
-        demos.to_str().unwrap(),
-        "--iterations",
-        &ITERATIONS.to_string(),
-        "--record-episodes",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
+    let run = recorded_run_of(&dir, "gaifo-ppo");
     assert_eq!(
         std::fs::read_dir(run.join("episodes")).unwrap().count(),
         ITERATIONS * 6

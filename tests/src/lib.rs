@@ -274,6 +274,24 @@ pub fn write_config(dir: &Path, name: &str, text: &str) -> String {
     p.display().to_string()
 }
 
+/// `DIR/gaifo.toml`, the learner's config of a served LQR+GAIfO run of `iterations` iterations
+/// with `samples` noisy episodes per iteration and `seed`; returns its path.
+pub fn write_served_gaifo_config(
+    dir: &Path,
+    samples: usize,
+    seed: u64,
+    iterations: usize,
+) -> String {
+    write_config(
+        dir,
+        "gaifo.toml",
+        &format!(
+            "samples = {samples}\nseed = {seed}\niterations = {iterations}\n\
+             [serve]\nalgo = \"lqr-gaifo\"\nwait_report_s = 1.0\nidle_sleep_us = 200\n"
+        ),
+    )
+}
+
 /// The in-process reference of a served LQR+GAIfO run: `iterations` calls of
 /// [`imitation::learn::iterate`] with `cfg` on `demos` on the simulated arm, checkpointed into
 /// `out` before each and after the last, as `learner serve` checkpoints before each publication.

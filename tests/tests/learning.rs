@@ -16,7 +16,7 @@ use imitation::gaifo::GaifoLog;
 use imitation::rollout::{execute, Episode};
 use integration_tests::{
     cleanup_dead_nodes, json_summary, learned_columns, lqr_gaifo_in_process, scratch,
-    spawn_sim_and_controller, unique_prefix, write_config, Proc,
+    spawn_sim_and_controller, unique_prefix, write_config, write_served_gaifo_config, Proc,
 };
 use learner::arm::SimArm;
 use learner::io::episode::load_episode;
@@ -477,14 +477,7 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     let demos = record_demos(&ecfg, &expert).unwrap();
     let demos_path = dir.join("demos.npz");
     learner::io::demos::save(&demos, &demos_path).unwrap();
-    let learner_cfg = write_config(
-        &dir,
-        "gaifo.toml",
-        &format!(
-            "samples = {N}\nseed = {SEED}\niterations = {ITERATIONS}\n\
-             [serve]\nalgo = \"lqr-gaifo\"\nwait_report_s = 1.0\nidle_sleep_us = 200\n"
-        ),
-    );
+    let learner_cfg = write_served_gaifo_config(&dir, N, SEED, ITERATIONS);
     let (_, sim_cfg, ctl_cfg) = configs(&dir, ITERATIONS);
     let (cfg, _) = load_gaifo_config(Path::new(&learner_cfg)).unwrap();
     let reference = {

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use integration_tests::{
     checkpoint_file as file, cleanup_dead_nodes, json_summary, learned_columns,
     lqr_gaifo_in_process, scratch, spawn_sim_and_controller, splitmix64, state_bits, unique_prefix,
-    write_config, Proc,
+    write_config, write_served_gaifo_config, Proc,
 };
 use learner::io::log::{write_csv_row, CSV_HEADER};
 use learner::io::table::load_table;
@@ -50,14 +50,7 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
     let demos = learner::run::demos(&ecfg, &expert).unwrap();
     let demos_path = dir.join("demos.npz");
     learner::io::demos::save(&demos, &demos_path).unwrap();
-    let learner_cfg = write_config(
-        &dir,
-        "gaifo.toml",
-        &format!(
-            "samples = {N}\nseed = {SEED}\niterations = {ITERATIONS}\n\
-             [serve]\nalgo = \"lqr-gaifo\"\nwait_report_s = 1.0\nidle_sleep_us = 200\n"
-        ),
-    );
+    let learner_cfg = write_served_gaifo_config(&dir, N, SEED, ITERATIONS);
     let sim_cfg = write_config(&dir, "sim.toml", &format!("[task]\nhorizon = {T}\n"));
     let ctl_cfg = write_config(
         &dir,
