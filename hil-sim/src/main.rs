@@ -202,7 +202,25 @@ struct FileConfig {
     sim: SimConfig,
 }
 
-fn main() -> Result<()> {
+/// A failed command prints one line, `hil-sim: error: ` and the cause chain, without a stack
+/// backtrace even where `RUST_BACKTRACE` is set; `RUST_LIB_BACKTRACE=1` asks for one.
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!(
+                "hil-sim: error: {}",
+                ur5_shared::report::error_line(e.chain())
+            );
+            if std::env::var_os("RUST_LIB_BACKTRACE").is_some_and(|v| v != "0") {
+                eprintln!("{}", e.backtrace());
+            }
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     match Cli::parse().cmd {
         Cmd::Demo {
             config,
@@ -339,7 +357,7 @@ fn inspect(
         ..SimConfig::default()
     };
     let mut sim = Ur5Sim::new(sim_cfg, substep)?;
-    // Every input within the arm's limits, so that every output is a number (issue 15 item 12).
+    // Every input within the arm's limits, so that every output is a number.
     let limits = sim.limits();
     for j in 0..3 {
         let name = &sim.model().active[j].name;

@@ -1,4 +1,4 @@
-//! Where does LQR+GAIfO lose precision near the goal? (issue 12, docs/design.md §5 D25)
+//! Where does LQR+GAIfO lose precision near the goal? (docs/design.md §5 D25)
 //!
 //! Runs LQR+GAIfO in process and prints, per iteration, what the noise-free episode reached
 //! and the quantities that could limit it: the spread of the noisy episodes' final distances,

@@ -77,7 +77,7 @@ fn bad_configs_fail_with_the_key_named() {
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("task.dt") && err.contains("10 Hz"), "{err}");
 
-    // Issue 15 item 3: a NaN bound would reject every table; refused before the run.
+    // A NaN bound would reject every table; refused before the run.
     let nan = scratch_file("nan.toml", "[bounds]\nmax_abs_k_mat = nan\n");
     let out = bin()
         .args(["run", "--config", nan.to_str().unwrap()])
@@ -110,7 +110,7 @@ fn a_missing_arm_is_a_clear_setup_error() {
     );
 }
 
-/// Issue 15 item 2: a second controller on a prefix exits at once naming the running one; the
+/// A second controller on a prefix exits at once naming the running one; the
 /// first is undisturbed.
 #[test]
 fn a_second_controller_on_a_prefix_is_refused() {

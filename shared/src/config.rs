@@ -346,7 +346,7 @@ impl Perturbation {
 pub struct SimConfig {
     /// URDF file; `None` uses the UR5 model bundled with hil-sim.
     pub urdf: Option<PathBuf>,
-    /// Physics step (s), also the servo rate. Issue 2: 1 kHz.
+    /// Physics step (s), also the servo rate: 1 kHz.
     pub physics_dt: f64,
     /// Solver substeps per physics step (rapier's `num_solver_iterations`); accuracy is first
     /// order in physics_dt / substeps (UR5.md: ≈ 2.5e-3 relative at 1 ms, 2.5e-4 at 0.1 ms).

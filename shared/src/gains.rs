@@ -313,7 +313,7 @@ impl Default for GainBounds {
 
 impl GainBounds {
     /// Every bound finite and > 0: a NaN bound would reject every table (`|x| <= NaN` is
-    /// false) and leave the controller holding forever (issue 15 item 3). Returns the name of
+    /// false) and leave the controller holding forever. Returns the name of
     /// the first bad key and its value.
     pub fn validate(&self) -> Result<(), (&'static str, f64)> {
         for (name, v) in [

@@ -43,6 +43,7 @@ pub mod layout;
 pub mod msg;
 pub mod noise;
 pub mod policy;
+pub mod report;
 pub mod safety;
 pub mod services;
 pub mod status;

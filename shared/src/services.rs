@@ -335,7 +335,7 @@ mod tests {
     }
 }
 
-/// One process per role on a prefix (issue 15 item 2; docs/design.md §3.2): the controller,
+/// One process per role on a prefix (docs/design.md §3.2): the controller,
 /// the arm and the learner each hold an exclusive `flock` on
 /// `{temp_dir}/ur5-gaifo-locks/{prefix}.{role}.lock` for their lifetime. The kernel drops the
 /// lock when the process ends, however it ends (kill -9 included), so a restart always gets

@@ -1,5 +1,5 @@
 //! Why a peer stopped: the fatal-status payload the controller and the learner send each other
-//! (docs/design.md §3.12, issue 15 item 3). When one side finds that the two cannot work
+//! (docs/design.md §3.12). When one side finds that the two cannot work
 //! together (the controller rejects the learner's tables for a task reason, or the learner finds
 //! the controller's episodes are not its task), it publishes a [`PeerStatus`] with the reason on
 //! its status service and stops; the other side, which polls its status subscriber while it

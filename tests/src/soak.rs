@@ -1,4 +1,4 @@
-//! The soak's figures (issue 15, `soak` binary): what the three processes' logs say
+//! The soak's figures (`soak` binary): what the three processes' logs say
 //! ([`LogCounts`]) and what the files of a `learner serve` run folder hold ([`scan_run`]).
 //!
 //! The scan reads every file the learner writes (docs/design.md §3.6 "Files") and checks:

@@ -1,5 +1,5 @@
 //! `hil-sim ur-sim`: the simulated UR5 behind the interfaces of a real UR controller
-//! (docs/design.md §3.10, issue 13), so that a UR driver can be tested against the plant.
+//! (docs/design.md §3.10), so that a UR driver can be tested against the plant.
 //!
 //! - **RTDE server** ([`rtde`], default port 30004): protocol v2 and v1, controller version
 //!   (5.x for an e-Series, 3.x for a CB3), output recipes with NOT_FOUND, input recipes with

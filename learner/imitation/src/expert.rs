@@ -44,7 +44,7 @@ pub struct ExpertConfig {
     pub cost: TaskCostConfig,
     /// Noisy episodes per iteration N. Paper §5: 5.
     pub samples: usize,
-    /// Largest number of iterations. Issue 4 asks for the expert within 15 (75 noisy episodes).
+    /// Largest number of iterations. The expert is expected to converge within 15 (75 noisy episodes).
     pub iterations: usize,
     /// Stop after this many iterations without a better noise-free episode.
     pub patience: usize,
@@ -74,9 +74,9 @@ pub struct ExpertConfig {
 }
 
 impl ExpertConfig {
-    /// Refuses settings that cannot work, naming the setting and its range (issue 15 items 7,
-    /// 8): counts in their ranges up to [`crate::gaifo::GaifoConfig::MAX_COUNT`] (samples ≥ 2
-    /// for the dynamics fit), `init_var` in (0, 10] rad², the cost weights finite and ≥ 0 with
+    /// Refuses settings that cannot work, naming the setting and its range
+    /// (docs/reliability.md): counts in their ranges up to
+    /// [`crate::gaifo::GaifoConfig::MAX_COUNT`] (samples ≥ 2 for the dynamics fit), `init_var` in (0, 10] rad², the cost weights finite and ≥ 0 with
     /// α > 0, the square's half side in (0, 1] m, then the task, the arm and GPS's settings.
     pub fn validate(&self) -> Result<(), ImitationError> {
         crate::error::check_counts(

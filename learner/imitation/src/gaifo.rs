@@ -139,7 +139,7 @@ impl GaifoConfig {
     /// for terabytes up front.
     pub const MAX_COUNT: usize = DiscriminatorConfig::MAX_COUNT;
 
-    /// Checks every setting's range before anything is allocated or run (issue 15).
+    /// Checks every setting's range before anything is allocated or run.
     pub fn validate(&self) -> Result<(), ImitationError> {
         let bad = |name: &str, v: &dyn std::fmt::Debug, allowed: &str| {
             Err(ImitationError::Config(format!(

@@ -225,7 +225,7 @@ fn discriminator_rejects_corrupted_or_mismatched_files() {
         "{}",
         msg(&err)
     );
-    // Issue 15 item 9: every weight 1e300 (finite, absurd) is refused, naming the bound.
+    // Every weight 1e300 (finite, absurd) is refused, naming the bound.
     let err = edited("absurd_params.json", &|j| {
         for v in j["params"].as_array_mut().unwrap() {
             *v = serde_json::json!(1e300);

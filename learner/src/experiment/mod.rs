@@ -1,4 +1,4 @@
-//! `learner experiment <name>`: the paper's experiments, one command each (issue 7).
+//! `learner experiment <name>`: the paper's experiments, one command each.
 //!
 //! | name | what | default |
 //! |---|---|---|
@@ -98,7 +98,7 @@ pub struct ExperimentConfig {
     /// `gaifo_ppo.samples` episodes per iteration) and `gaifo-ppo-converged` (the same with
     /// N = `ppo_converged_samples`, a budget at which it converges).
     pub algorithms: Vec<String>,
-    /// Comparison: noisy episodes per iteration of `gaifo-ppo-converged`. Ours: 40 (issue 12:
+    /// Comparison: noisy episodes per iteration of `gaifo-ppo-converged`. Ours: 40 (with it,
     /// one seed reached normalised 0.95 by iteration 55 with it).
     pub ppo_converged_samples: usize,
     /// The expert that records the demonstrations (its `task.goal` is the target; its
@@ -198,7 +198,7 @@ impl Default for ExperimentConfig {
 }
 
 impl ExperimentConfig {
-    /// The defaults of experiment `name` (issue 7: 10 seeds × 100 iterations for the
+    /// The defaults of experiment `name` (10 seeds × 100 iterations for the
     /// comparison; 15 iterations for the generalisation; 50 for sim vs physical).
     pub fn defaults(name: ExperimentName) -> Self {
         let base = Self {

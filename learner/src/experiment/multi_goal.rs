@@ -1,4 +1,4 @@
-//! `learner experiment multi-goal` (issue 14; docs/design.md §6.6): one MDGPS policy trained
+//! `learner experiment multi-goal` (docs/design.md §6.6): one MDGPS policy trained
 //! on the 8 demonstrated square points, evaluated noise-free at goals nobody demonstrated — the
 //! centre, `eval_inside` seeded goals inside the square and `eval_outside` just outside it —
 //! and at the 8 demonstrated points, side by side with the linear-Gaussian controller that
@@ -335,7 +335,7 @@ pub fn summarise(runs: &[MethodRun], goals: &[EvalGoal]) -> Vec<MultiGoalRow> {
     rows
 }
 
-/// The summary as a table, with the issue's goal checked on the goals inside the square.
+/// The summary as a table, with the target checked on the goals inside the square.
 pub fn summary_text(rows: &[MultiGoalRow], iterations: usize) -> String {
     use std::fmt::Write;
     let mut s = format!(
@@ -364,7 +364,7 @@ pub fn summary_text(rows: &[MultiGoalRow], iterations: usize) -> String {
         let met = r.performance_mean >= 0.9 && r.final_distance_m_mean <= 0.02;
         let _ = writeln!(
             s,
-            "issue 14 goal (inside the square: mean normalised performance >= 0.9 and mean final distance <= 2 cm within 20 iterations): {} ({:.3}, {:.2} cm, {iterations} iterations)",
+            "target (inside the square: mean normalised performance >= 0.9 and mean final distance <= 2 cm within 20 iterations): {} ({:.3}, {:.2} cm, {iterations} iterations)",
             if met && iterations <= 20 { "met" } else { "not met" },
             r.performance_mean,
             100.0 * r.final_distance_m_mean

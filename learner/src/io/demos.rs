@@ -144,7 +144,7 @@ pub const CONSISTENCY_TOLERANCE: f64 = 0.01;
 /// (the servo may overshoot it briefly). Ours: 2.
 pub const SPEED_LIMIT_FACTOR: f64 = 2.0;
 
-/// Checks that `demos` could have come from the arm of `sim` (issue 15 item 11; docs/design.md
+/// Checks that `demos` could have come from the arm of `sim` (docs/design.md
 /// §4.2): normalisation costs finite and different; the goal within the
 /// arm's reach; every joint angle within the arm's limits; every joint speed within
 /// [`SPEED_LIMIT_FACTOR`] × its limit; each demonstration starting at `start_q`; and every
@@ -283,7 +283,7 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
-    /// Issue 15 item 11: each kind of impossible demonstration is refused, naming what is wrong.
+    /// Each kind of impossible demonstration is refused, naming what is wrong.
     #[test]
     fn demonstrations_the_arm_could_not_have_made_are_refused() {
         let cfg = imitation::expert::ExpertConfig {

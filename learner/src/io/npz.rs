@@ -239,7 +239,7 @@ impl NpzFile {
                 continue;
             };
             // The size in the zip header is the file's word: never reserve more than the file
-            // holds (a damaged header asked for 26 TB; found by tests/tests/fuzz.rs).
+            // holds (a damaged header asked for 26 TB; found by tests/tests/suite/fuzz.rs).
             let mut bytes = Vec::with_capacity(entry.size().min(file_len) as usize);
             entry
                 .read_to_end(&mut bytes)

@@ -76,7 +76,7 @@
 //! count as an older version. LQR+GAIfO's whole learner state (critic, GMM dynamics prior,
 //! step size, previous controller, RNG positions) resumes exactly, so with an arm whose reset
 //! is exact (`hil-sim serve` in lockstep) a served run killed anywhere and resumed learns what
-//! the uninterrupted run learns, bit for bit (tests/tests/resume_ipc.rs). Without `--resume` a
+//! the uninterrupted run learns, bit for bit (tests/tests/suite/resume_ipc.rs). Without `--resume` a
 //! new learner starts at version 1, which a controller running a newer version rejects: the
 //! learner then reports the newer version it sees in the samples and keeps waiting.
 
@@ -791,7 +791,7 @@ mod tests {
         )
         .unwrap();
         check(&ep).unwrap();
-        // A controller with another seed (issue 15 item 10).
+        // A controller with another seed.
         let mut sim = SimArm::new(SimConfig::default(), cfg.task.dt).unwrap();
         let other_seed = run_episode(
             &mut sim,

@@ -117,7 +117,7 @@ impl TaskCheck {
         Ok(())
     }
 
-    /// The controller draws exploration noise from the learner's seed (issue 15 item 10): the
+    /// The controller draws exploration noise from the learner's seed: the
     /// action it computed at t = 0 of a noisy episode of the learner's table must be the law's
     /// with the noise of one of that version's episodes k = 0…N under the learner's seed
     /// (docs/design.md §3.7). Another seed gives other draws, off by about L_0 (ε − ε′).

@@ -137,7 +137,7 @@ impl<A: ArmBackend> Controller<A> {
         if lost {
             // The connection is gone for good, and a wait need not have been stale to see it:
             // in lockstep a command that could not be sent leaves nothing to wait for, and
-            // the wait counts as fresh (tests/tests/lost_arm.rs).
+            // the wait counts as fresh (tests/tests/suite/lost_arm.rs).
             return Some(ExitReason::ArmLost);
         }
         if !matches!(self.phase, Phase::Running { .. }) {

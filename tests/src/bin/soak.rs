@@ -1,6 +1,6 @@
 //! `soak`: the three processes (`hil-sim serve`, `rt-controller run`, `learner serve`) on one
-//! iceoryx2 prefix for a while, with seeded SIGKILLs and restarts of each, then the figures of
-//! issue 15: episodes completed and discarded, tables rejected, mixed versions, corrupted files
+//! iceoryx2 prefix for a while, with seeded SIGKILLs and restarts of each, then the reliability
+//! figures: episodes completed and discarded, tables rejected, mixed versions, corrupted files
 //! and commands outside the limits (`integration_tests::soak`).
 //!
 //! ```text
@@ -35,7 +35,7 @@ const HANG: Duration = Duration::from_secs(120);
 const SHORT: Duration = Duration::from_secs(20);
 
 #[derive(Parser)]
-#[command(about = "Soak: the three processes with seeded random kills and restarts (issue 15)")]
+#[command(about = "Soak: the three processes with seeded random kills and restarts")]
 struct Args {
     /// How long (minutes).
     #[arg(long, default_value_t = 30.0)]
@@ -106,7 +106,17 @@ struct Report {
     out: PathBuf,
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("soak: error: {}", ur5_shared::report::error_line(e.chain()));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     let args = Args::parse();
     anyhow::ensure!(
         args.minutes > 0.0 && args.minutes.is_finite() && args.kill_every_s > 0.0,

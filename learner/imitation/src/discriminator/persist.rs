@@ -16,7 +16,7 @@ const FORMAT: &str = "ur5-gaifo/discriminator";
 
 /// Largest |θ| a critic file may hold. A trained critic's weights are O(1) (0.74 at most after
 /// 5 iterations of the default run); one beyond 1e6 comes from a corrupt or edited file, and
-/// would give the LQR a cost of absurd scale (issue 15 item 9).
+/// would give the LQR a cost of absurd scale.
 pub const MAX_ABS_PARAM: f64 = 1e6;
 const VERSION: u32 = 1;
 

@@ -1,4 +1,4 @@
-//! The `ur` arm (docs/design.md §3.10; issue 13): [`setup`] (RTDE handshake, recipe, mode
+//! The `ur` arm (docs/design.md §3.10): [`setup`] (RTDE handshake, recipe, mode
 //! checks, the program sent and connected back; allocates, may fail) and [`live`] (the loop
 //! side: [`UrArm`], the [`crate::arm::ArmBackend`] of a Universal Robots controller or
 //! `hil-sim ur-sim`).

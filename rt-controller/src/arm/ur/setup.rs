@@ -1,4 +1,4 @@
-//! The `ur` arm's setup (docs/design.md §3.10; issue 13): RTDE handshake, controller version,
+//! The `ur` arm's setup (docs/design.md §3.10): RTDE handshake, controller version,
 //! output recipe, START and the mode checks, then the project's URScript program sent headless
 //! to the secondary interface and its reverse connection accepted. Allocates, blocks and fails
 //! with [`UrSetupError`]s that say what is wrong and what to do. The loop side is
@@ -20,7 +20,7 @@ use crate::config::{UrConfig, UrSeries};
 /// The project's robot-side program (placeholders filled in by [`script::render`]).
 pub const PROGRAM: &str = include_str!("../../../urscript/external_control.script");
 
-/// The outputs the driver asks for (issue 13: at least these).
+/// The outputs the driver asks for (at least these).
 pub const OUTPUTS: &str =
     "timestamp,actual_q,actual_qd,robot_mode,safety_mode,runtime_state,speed_scaling";
 

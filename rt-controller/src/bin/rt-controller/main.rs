@@ -169,7 +169,14 @@ fn main() {
     match real_main() {
         Ok(code) => std::process::exit(code),
         Err(e) => {
-            eprintln!("rt-controller: error: {e:#}");
+            // One line with the cause chain; a stack backtrace only on RUST_LIB_BACKTRACE=1.
+            eprintln!(
+                "rt-controller: error: {}",
+                ur5_shared::report::error_line(e.chain())
+            );
+            if std::env::var_os("RUST_LIB_BACKTRACE").is_some_and(|v| v != "0") {
+                eprintln!("{}", e.backtrace());
+            }
             std::process::exit(2);
         }
     }

@@ -1,0 +1,591 @@
+//! `hil-sim ur-sim` against a minimal RTDE client built on `ur-protocol`:
+//! handshake, recipes, START, servoj over the reverse interface in lockstep, the program's
+//! receive-timeout stop, a protective stop, refused scripts, and every fault injection.
+//!
+//! Deterministic by construction: motion tests run in lockstep (one package per command) and
+//! assert on event order and on sim values, never on wall-clock timing; waits have generous
+//! deadlines that only bound a hang.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::time::{Duration, Instant};
+
+use hil_sim::ur_sim::{self, Faults, Series, UrSimConfig, UrSimHandle};
+use ur5_shared::config::{SimConfig, TaskConfig};
+use ur_protocol::recipe::{OutputRecipe, RecipeError};
+use ur_protocol::rtde::{Frame, PackageType, Protocol, TextMessage};
+use ur_protocol::script::{self, ScriptParams};
+use ur_protocol::state::runtime_state;
+use ur_protocol::stream::FrameDecoder;
+use ur_protocol::{
+    ClientMessage, ControlMode, ReverseCommand, RobotMessage, RobotState, SafetyMode,
+};
+
+const PROGRAM: &str = include_str!("../../../rt-controller/urscript/external_control.script");
+const NAMES: &str =
+    "timestamp,actual_q,actual_qd,robot_mode,safety_mode,runtime_state,speed_scaling,";
+/// Bounds a hang, never a measurement.
+const DEADLINE: Duration = Duration::from_secs(20);
+
+fn start(lockstep: bool, faults: Faults) -> UrSimHandle {
+    let cfg = UrSimConfig {
+        rtde_port: 0,
+        secondary_port: 0,
+        lockstep,
+        faults,
+        ..UrSimConfig::default()
+    };
+    ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).expect("ur-sim starts")
+}
+
+/// A minimal RTDE client.
+struct Client {
+    s: TcpStream,
+    dec: Box<FrameDecoder<8192>>,
+    protocol: Protocol,
+    texts: Vec<String>,
+}
+
+/// A frame copied out of the decoder.
+struct Owned(PackageType, Vec<u8>);
+
+impl Owned {
+    fn msg(&self, p: Protocol) -> RobotMessage<'_> {
+        RobotMessage::decode(
+            &Frame {
+                kind: self.0,
+                payload: &self.1,
+            },
+            p,
+        )
+        .expect("well-formed package")
+    }
+}
+
+impl Client {
+    fn connect(addr: SocketAddr) -> Self {
+        let s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(DEADLINE)).unwrap();
+        Self {
+            s,
+            dec: Box::default(),
+            protocol: Protocol::V1,
+            texts: Vec::new(),
+        }
+    }
+
+    fn send(&mut self, m: ClientMessage<'_>) {
+        let mut buf = [0u8; 1024];
+        let n = m.encode(&mut buf).unwrap();
+        self.s.write_all(&buf[..n]).unwrap();
+    }
+
+    /// The next frame of any type; `Err` with a clear message on a closed connection.
+    fn next_any(&mut self) -> Result<Owned, String> {
+        loop {
+            if let Some(f) = self.dec.next_frame().map_err(|e| e.to_string())? {
+                return Ok(Owned(f.kind, f.payload.to_vec()));
+            }
+            match self.s.read(self.dec.spare()) {
+                Ok(0) => return Err("connection closed by the controller".into()),
+                Ok(n) => self.dec.commit(n),
+                Err(e) => return Err(format!("read failed: {e}")),
+            }
+        }
+    }
+
+    /// The next frame that is not a text message; text messages are kept in `texts`.
+    fn next(&mut self) -> Result<Owned, String> {
+        loop {
+            let f = self.next_any()?;
+            if f.0 == PackageType::TextMessage {
+                if let RobotMessage::TextMessage(TextMessage::V2 { message, .. }) =
+                    f.msg(self.protocol)
+                {
+                    self.texts.push(message.to_owned());
+                } else {
+                    self.texts.push("(v1 text)".into());
+                }
+                continue;
+            }
+            return Ok(f);
+        }
+    }
+
+    fn negotiate(&mut self, version: u16) -> bool {
+        self.send(ClientMessage::RequestProtocolVersion(version));
+        let f = self.next().unwrap();
+        let RobotMessage::ProtocolVersion { accepted } = f.msg(self.protocol) else {
+            panic!("expected a protocol answer, got {:?}", f.0)
+        };
+        if accepted {
+            self.protocol = Protocol::from_u16(version).unwrap();
+        }
+        accepted
+    }
+
+    fn setup(&mut self, names: &str) -> Result<OutputRecipe, RecipeError> {
+        self.send(ClientMessage::SetupOutputs {
+            frequency: (self.protocol == Protocol::V2).then_some(500.0),
+            names,
+        });
+        let f = self.next().unwrap();
+        let RobotMessage::SetupOutputs { recipe_id, types } = f.msg(self.protocol) else {
+            panic!("expected a SETUP_OUTPUTS answer")
+        };
+        OutputRecipe::from_answer(names, recipe_id, types)
+    }
+
+    fn start(&mut self) -> bool {
+        self.send(ClientMessage::Start);
+        let f = self.next().unwrap();
+        let RobotMessage::Start { accepted } = f.msg(self.protocol) else {
+            panic!("expected a START answer")
+        };
+        accepted
+    }
+
+    /// Handshake v2, the driver's recipe, START.
+    fn ready(addr: SocketAddr) -> (Self, OutputRecipe) {
+        let mut c = Self::connect(addr);
+        assert!(c.negotiate(2));
+        let r = c.setup(NAMES).expect("usable recipe");
+        assert!(c.start());
+        (c, r)
+    }
+
+    fn state(&mut self, recipe: &OutputRecipe) -> Result<RobotState, String> {
+        let f = self.next()?;
+        let mut s = RobotState::default();
+        let m = f.msg(self.protocol);
+        if !s.update(recipe, &m).map_err(|e| e.to_string())? {
+            return Err(format!("expected a data package, got {:?}", f.0));
+        }
+        Ok(s)
+    }
+}
+
+/// Sends the project's program with a reverse listener; returns the accepted reverse socket.
+fn run_program(sim: &UrSimHandle) -> TcpStream {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let params = ScriptParams {
+        reverse_ip: "127.0.0.1".parse().unwrap(),
+        reverse_port: listener.local_addr().unwrap().port(),
+        steptime_s: Series::E.cycle_s(),
+    };
+    let mut sec = TcpStream::connect(sim.secondary_addr).unwrap();
+    sec.write_all(script::render(PROGRAM, &params).as_bytes())
+        .unwrap();
+    drop(sec);
+    listener.set_nonblocking(true).unwrap();
+    let t0 = Instant::now();
+    loop {
+        match listener.accept() {
+            Ok((s, _)) => {
+                s.set_nonblocking(false).unwrap();
+                s.set_nodelay(true).unwrap();
+                return s;
+            }
+            Err(_) if t0.elapsed() < DEADLINE => std::thread::sleep(Duration::from_millis(2)),
+            Err(e) => panic!("the program did not connect back: {e}"),
+        }
+    }
+}
+
+fn servoj(rev: &mut TcpStream, q3: [f64; 3], timeout_ms: i32) {
+    let w = SimConfig::default().wrist_q;
+    let cmd = ReverseCommand {
+        timeout_ms,
+        q: [q3[0], q3[1], q3[2], w[0], w[1], w[2]],
+        mode: ControlMode::Servoj,
+    };
+    rev.write_all(&cmd.encode().unwrap()).unwrap();
+}
+
+fn dist(q: &[f64; 6], t: [f64; 3]) -> f64 {
+    (0..3).map(|j| (q[j] - t[j]).powi(2)).sum::<f64>().sqrt()
+}
+
+#[test]
+fn ur_lockstep_servoj_moves_the_arm_and_a_silent_controller_stops_it() {
+    let sim = start(true, Faults::default());
+    let mut c = Client::connect(sim.rtde_addr);
+    assert!(c.negotiate(2), "v2 accepted");
+    c.send(ClientMessage::GetUrcontrolVersion);
+    let RobotMessage::UrcontrolVersion(v) = c.next().unwrap().msg(c.protocol) else {
+        panic!("expected the controller version")
+    };
+    assert!(v.is_e_series() && v.max_frequency_hz() == 500.0, "{v}");
+    // An unknown name: NOT_FOUND, an error naming it.
+    let e = c.setup("timestamp,no_such_output").unwrap_err();
+    assert!(e.to_string().contains("no_such_output"), "{e}");
+    // The driver's recipe with ur_rtde's trailing comma.
+    let recipe = c.setup(NAMES).expect("usable recipe");
+    assert!(c.start());
+
+    let s0 = c.state(&recipe).unwrap();
+    let start_q = TaskConfig::default().start_q;
+    assert!(dist(&s0.actual_q, start_q) < 1e-5, "{:?}", s0.actual_q);
+    assert_eq!(s0.robot_mode, 7, "RUNNING");
+    assert_eq!(s0.safety_mode, SafetyMode::Normal.code());
+    assert_eq!(s0.runtime_state, runtime_state::STOPPED);
+
+    let mut rev = run_program(&sim);
+    let target = [start_q[0] + 0.3, start_q[1] + 0.2, start_q[2] - 0.2];
+    let d0 = dist(&s0.actual_q, target);
+    let mut last = s0;
+    for i in 1..=500u32 {
+        // A generous timeout while moving: the watchdog must not fire under load.
+        servoj(&mut rev, target, 5_000);
+        let s = c.state(&recipe).unwrap();
+        // Lockstep: exactly one 2 ms arm cycle per command.
+        assert_eq!(s.timestamp, f64::from(i) * 0.002, "package {i}");
+        assert_eq!(s.runtime_state, runtime_state::PLAYING);
+        last = s;
+    }
+    let d1 = dist(&last.actual_q, target);
+    assert!(
+        d1 < 0.05 * d0,
+        "after 1 s the arm is near its target: {d1} of {d0} rad"
+    );
+
+    // The controller goes silent after a command with a 100 ms timeout: the program stops the
+    // arm (stopj) and ends.
+    let moving_to = [start_q[0] - 0.5, start_q[1] - 0.3, start_q[2] + 0.3];
+    for _ in 0..50 {
+        servoj(&mut rev, moving_to, 5_000);
+        c.state(&recipe).unwrap();
+    }
+    servoj(&mut rev, moving_to, 100);
+    last = c.state(&recipe).unwrap();
+    let moving = last.actual_qd.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    assert!(
+        moving > 0.1,
+        "the arm is moving when the controller stops: {moving} rad/s"
+    );
+    let t_silent = last.timestamp;
+    let t0 = Instant::now();
+    while last.runtime_state != runtime_state::STOPPED {
+        assert!(t0.elapsed() < DEADLINE, "the program did not stop");
+        last = c.state(&recipe).unwrap();
+    }
+    // stopj(4.0) from v needs v / 4 s; the servo's exponential approach to the stopping point
+    // takes longer (1.06 s from 3.09 rad/s, design §3.10): at rest within twice the ideal.
+    let stop_s = last.timestamp - t_silent;
+    eprintln!("stopj from {moving:.3} rad/s took {stop_s:.3} s of arm time");
+    assert!(
+        stop_s > 0.0 && stop_s < 2.0 * moving / 4.0,
+        "stop took {stop_s} s"
+    );
+    let still = last.actual_qd.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    assert!(still < 1e-3, "held at rest: {still} rad/s");
+    assert!(
+        dist(&last.actual_q, moving_to) > 0.1,
+        "stopped short of the target"
+    );
+    assert!(
+        c.texts.iter().any(|t| t.contains("receive timeout")),
+        "{:?}",
+        c.texts
+    );
+    // The reverse socket is closed by the ended program.
+    let mut b = [0u8; 1];
+    assert_eq!(rev.read(&mut b).unwrap_or(0), 0);
+    let sum = sim.stop();
+    assert_eq!(sum.receive_timeouts, 1);
+    assert_eq!(sum.programs, 1);
+    assert_eq!(sum.protective_stops, 0);
+}
+
+#[test]
+fn ur_limit_violation_raises_a_protective_stop() {
+    let sim = start(true, Faults::default());
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    c.state(&recipe).unwrap();
+    let mut rev = run_program(&sim);
+    servoj(&mut rev, [0.0, -2.0, 100.0], 5_000);
+    let mut s = c.state(&recipe).unwrap();
+    assert_eq!(s.safety_mode, SafetyMode::ProtectiveStop.code());
+    let t0 = Instant::now();
+    while s.runtime_state != runtime_state::STOPPED {
+        assert!(t0.elapsed() < DEADLINE);
+        s = c.state(&recipe).unwrap();
+    }
+    assert_eq!(s.safety_mode, 3);
+    assert!(
+        c.texts
+            .iter()
+            .any(|t| t.contains("protective stop") && t.contains("elbow")),
+        "{:?}",
+        c.texts
+    );
+    assert_eq!(sim.stop().protective_stops, 1);
+}
+
+#[test]
+fn ur_other_scripts_are_refused_with_a_text_message() {
+    let sim = start(true, Faults::default());
+    let mut c = Client::connect(sim.rtde_addr);
+    assert!(c.negotiate(2));
+    let mut sec = TcpStream::connect(sim.secondary_addr).unwrap();
+    sec.write_all(b"def prog():\n  movej([0,0,0,0,0,0])\nend\n")
+        .unwrap();
+    drop(sec);
+    let f = c.next_any().unwrap();
+    let RobotMessage::TextMessage(TextMessage::V2 { message, .. }) = f.msg(c.protocol) else {
+        panic!("expected a text message")
+    };
+    assert!(message.contains("was not run"), "{message}");
+    // The program template itself (placeholders not filled in) is refused too.
+    let mut sec = TcpStream::connect(sim.secondary_addr).unwrap();
+    sec.write_all(PROGRAM.as_bytes()).unwrap();
+    drop(sec);
+    let f = c.next_any().unwrap();
+    let RobotMessage::TextMessage(TextMessage::V2 { message, .. }) = f.msg(c.protocol) else {
+        panic!("expected a text message")
+    };
+    assert!(message.contains("placeholder"), "{message}");
+    let sum = sim.stop();
+    assert_eq!((sum.refused_scripts, sum.programs), (2, 0));
+}
+
+#[test]
+fn ur_input_registers_taken_by_another_client_are_in_use() {
+    let sim = start(true, Faults::default());
+    let setup_inputs = |c: &mut Client, names: &str| {
+        c.send(ClientMessage::SetupInputs { names });
+        let f = c.next().unwrap();
+        let RobotMessage::SetupInputs { recipe_id, types } = f.msg(c.protocol) else {
+            panic!("expected a SETUP_INPUTS answer")
+        };
+        (recipe_id, types.to_owned())
+    };
+    let mut a = Client::connect(sim.rtde_addr);
+    assert!(a.negotiate(2));
+    let (id, types) = setup_inputs(&mut a, "input_int_register_24,input_double_register_24");
+    assert!(id > 0);
+    assert_eq!(types, "INT32,DOUBLE");
+    let mut b = Client::connect(sim.rtde_addr);
+    assert!(b.negotiate(2));
+    let (_, types) = setup_inputs(&mut b, "input_int_register_24,input_int_register_25,bogus");
+    assert_eq!(types, "IN_USE,INT32,NOT_FOUND");
+    // Released when the first client leaves.
+    drop(a);
+    let t0 = Instant::now();
+    loop {
+        let (_, types) = setup_inputs(&mut b, "input_int_register_24");
+        if types == "INT32" {
+            break;
+        }
+        assert!(t0.elapsed() < DEADLINE, "register not released");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    sim.stop();
+}
+
+#[test]
+fn ur_fault_version_refusals() {
+    let sim = start(
+        true,
+        Faults {
+            refuse_v2: true,
+            ..Faults::default()
+        },
+    );
+    let mut c = Client::connect(sim.rtde_addr);
+    assert!(!c.negotiate(2), "v2 refused");
+    assert!(c.negotiate(1), "v1 fallback accepted");
+    // v1: SETUP_OUTPUTS without frequency.
+    let recipe = c.setup(NAMES).unwrap();
+    assert!(c.start());
+    assert!(c.state(&recipe).is_ok());
+    sim.stop();
+
+    let sim = start(
+        true,
+        Faults {
+            refuse_versions: true,
+            ..Faults::default()
+        },
+    );
+    let mut c = Client::connect(sim.rtde_addr);
+    assert!(!c.negotiate(2));
+    assert!(!c.negotiate(1));
+    sim.stop();
+}
+
+#[test]
+fn ur_fault_text_before_reply_and_refused_start() {
+    let sim = start(
+        true,
+        Faults {
+            text_before_reply: true,
+            refuse_start: true,
+            ..Faults::default()
+        },
+    );
+    let mut c = Client::connect(sim.rtde_addr);
+    assert!(c.negotiate(2));
+    c.setup(NAMES).unwrap();
+    assert!(!c.start(), "START refused");
+    assert_eq!(
+        c.texts.len(),
+        3,
+        "one text before each answer: {:?}",
+        c.texts
+    );
+    sim.stop();
+}
+
+/// Real-time stream with a fault; returns the decoded states (or the error that ended them).
+fn stream_with(faults: Faults, n: usize) -> (Vec<RobotState>, Option<String>) {
+    let sim = start(false, faults);
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    let mut out = Vec::new();
+    let mut err = None;
+    for _ in 0..n {
+        match c.state(&recipe) {
+            Ok(s) => out.push(s),
+            Err(e) => {
+                err = Some(e);
+                break;
+            }
+        }
+    }
+    sim.stop();
+    (out, err)
+}
+
+fn cycles(states: &[RobotState]) -> Vec<i64> {
+    states
+        .iter()
+        .map(|s| (s.timestamp / 0.002).round() as i64)
+        .collect()
+}
+
+#[test]
+fn ur_fault_merged_split_delayed_dropped_and_closed_streams_decode_cleanly() {
+    // Merged (with a repeat of the previous package) and split packages: all decode, in order.
+    let (s, err) = stream_with(
+        Faults {
+            merge_split: true,
+            ..Faults::default()
+        },
+        30,
+    );
+    assert!(err.is_none(), "{err:?}");
+    let c = cycles(&s);
+    assert!(c.windows(2).all(|w| w[1] >= w[0]), "{c:?}");
+    assert!(
+        c.windows(2).any(|w| w[1] == w[0]),
+        "a repeated package is seen: {c:?}"
+    );
+
+    // Every 2nd package dropped: cycles advance by at least 2 after the first.
+    let (s, err) = stream_with(
+        Faults {
+            drop_every: 2,
+            ..Faults::default()
+        },
+        10,
+    );
+    assert!(err.is_none(), "{err:?}");
+    let c = cycles(&s);
+    assert!(c[1..].windows(2).all(|w| w[1] - w[0] >= 2), "{c:?}");
+
+    // Every 3rd package 30 ms late: still in order.
+    let (s, err) = stream_with(
+        Faults {
+            delay_every: 3,
+            delay_ms: 30,
+            ..Faults::default()
+        },
+        10,
+    );
+    assert!(err.is_none(), "{err:?}");
+    assert!(cycles(&s).windows(2).all(|w| w[1] > w[0]));
+
+    // Connection closed after 5 packages: a clear error, no panic.
+    let (s, err) = stream_with(
+        Faults {
+            disconnect_after: 5,
+            ..Faults::default()
+        },
+        10,
+    );
+    assert_eq!(s.len(), 5);
+    assert_eq!(err.as_deref(), Some("connection closed by the controller"));
+}
+
+#[test]
+fn ur_binary_prints_its_ports_and_answers_rtde() {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_hil-sim"))
+        .args([
+            "ur-sim",
+            "--rtde-port",
+            "0",
+            "--secondary-port",
+            "0",
+            "--lockstep",
+            "--series",
+            "cb3",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_str(&line).expect(&line);
+    let addr: SocketAddr = v["rtde"].as_str().unwrap().parse().unwrap();
+    let mut c = Client::connect(addr);
+    assert!(c.negotiate(2));
+    c.send(ClientMessage::GetUrcontrolVersion);
+    let RobotMessage::UrcontrolVersion(ver) = c.next().unwrap().msg(c.protocol) else {
+        panic!()
+    };
+    assert_eq!((ver.major, ver.max_frequency_hz()), (3, 125.0));
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
+
+#[test]
+fn ur_real_time_servoj_and_the_watchdog_stop() {
+    // Real time x5: the arm's own clock, a command per package; only event order is asserted.
+    let cfg = UrSimConfig {
+        rtde_port: 0,
+        secondary_port: 0,
+        time_compression: 5.0,
+        ..UrSimConfig::default()
+    };
+    let sim = ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).unwrap();
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    let s0 = c.state(&recipe).unwrap();
+    let start_q = TaskConfig::default().start_q;
+    let target = [start_q[0] + 0.2, start_q[1], start_q[2]];
+    let mut rev = run_program(&sim);
+    let mut last = s0;
+    let t0 = Instant::now();
+    while dist(&last.actual_q, target) > 0.01 {
+        assert!(
+            t0.elapsed() < DEADLINE,
+            "never reached the target: {:?}",
+            last.actual_q
+        );
+        servoj(&mut rev, target, 5_000);
+        last = c.state(&recipe).unwrap();
+        assert_eq!(last.safety_mode, SafetyMode::Normal.code());
+    }
+    assert!(last.timestamp > s0.timestamp);
+    // Silence after a 20 ms timeout (4 ms of wall time at x5): the program stops and ends.
+    servoj(&mut rev, target, 20);
+    while last.runtime_state != runtime_state::STOPPED {
+        assert!(t0.elapsed() < DEADLINE, "the program did not stop");
+        last = c.state(&recipe).unwrap();
+    }
+    let sum = sim.stop();
+    assert_eq!((sum.receive_timeouts, sum.programs), (1, 1));
+}

@@ -1,0 +1,6 @@
+//! The crate's integration tests as one test binary (linking one binary, not one per file, is
+//! most of the build time saved; docs/dev.md). One module per area.
+
+mod conformance;
+mod learner_loop;
+mod properties;

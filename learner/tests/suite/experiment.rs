@@ -1,0 +1,155 @@
+//! `learner experiment` on tiny configurations: the outputs are produced and well formed,
+//! LQR+GAIfO learns, and the results do not depend on the number of worker threads.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+
+use common::rows_without_times;
+use learner::experiment::{run, ExperimentConfig, ExperimentName};
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("learner-exp-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(
+        bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "{} is not a PNG",
+        path.display()
+    );
+    assert!(bytes.len() > 10_000, "{} looks empty", path.display());
+}
+
+#[test]
+fn comparison_outputs_learning_and_thread_independence() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Comparison);
+    cfg.seeds = 2;
+    cfg.iterations = 4;
+    cfg.threads = 2;
+    // The converged-budget PPO variant with 6 episodes per iteration, to keep the test short.
+    cfg.ppo_converged_samples = 6;
+    let out2 = tmp("cmp2");
+    let (runs, rows) = run(ExperimentName::Comparison, &cfg, &out2, None).unwrap();
+    assert_eq!(runs.len(), 6, "3 algorithms x 2 seeds");
+    let csv = out2.join("comparison.csv");
+    let rows2 = rows_without_times(&csv);
+    assert_eq!(rows2.len(), 3 * 2 * 4);
+    let converged = rows.iter().find(|r| r.variant == "gaifo-ppo-6ep").unwrap();
+    assert_eq!(converged.episodes_per_iteration, 6);
+    assert_eq!(converged.to_performance_0_9.seeds, 2);
+    let text = std::fs::read_to_string(out2.join("summary.txt")).unwrap();
+    assert!(
+        text.contains("to threshold") && text.contains("ratio to lqr-gaifo"),
+        "{text}"
+    );
+    assert_png(&out2.join("comparison.png"));
+    assert!(out2.join("summary.txt").exists() && out2.join("demos.npz").exists());
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out2.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 3);
+    assert_eq!(rows.len(), 3);
+    let lqr = rows.iter().find(|r| r.variant == "lqr-gaifo").unwrap();
+    let (first, last) = (lqr.performance[0].1, lqr.performance.last().unwrap().1);
+    eprintln!("LQR+GAIfO mean normalised performance {first:.3} -> {last:.3}");
+    assert!(
+        last > first + 0.1,
+        "LQR+GAIfO should learn: {first:.3} -> {last:.3}"
+    );
+    for r in &runs {
+        assert!(r
+            .logs
+            .iter()
+            .all(|l| l.task_cost.is_finite() && l.performance.is_finite()));
+    }
+
+    // The same runs on one thread: identical rows (bar wall times), in the same order.
+    cfg.threads = 1;
+    let out1 = tmp("cmp1");
+    run(
+        ExperimentName::Comparison,
+        &cfg,
+        &out1,
+        Some(&out2.join("demos.npz")),
+    )
+    .unwrap();
+    assert_eq!(rows_without_times(&out1.join("comparison.csv")), rows2);
+    let _ = std::fs::remove_dir_all(&out1);
+    let _ = std::fs::remove_dir_all(&out2);
+}
+
+#[test]
+fn generalisation_trains_the_square_experts_and_targets_the_centre() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Generalisation);
+    cfg.seeds = 1;
+    cfg.iterations = 3;
+    cfg.threads = 2;
+    cfg.subset_sizes = vec![2];
+    cfg.demos_per_point = 1;
+    cfg.expert.iterations = 6;
+    let out = tmp("gen");
+    let (runs, rows) = run(ExperimentName::Generalisation, &cfg, &out, None).unwrap();
+    assert_eq!(runs.len(), 1);
+    assert_eq!(rows[0].variant, "2 points");
+    for f in ["centre.npz", "point_0.npz", "point_7.npz"] {
+        assert!(out.join("experts").join(f).exists(), "{f}");
+    }
+    let centre = learner::io::demos::load(&out.join("experts/centre.npz")).unwrap();
+    assert_eq!(centre.goal, cfg.expert.task.goal);
+    assert_eq!(rows_without_times(&out.join("generalisation.csv")).len(), 3);
+    assert_png(&out.join("generalisation.png"));
+    let p: Vec<f64> = runs[0].logs.iter().map(|l| l.performance).collect();
+    eprintln!("generalisation (2 points): {p:?}");
+    assert!(p[2] > p[0], "moves towards the centre: {p:?}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_settings_are_refused_with_a_reason() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Generalisation);
+    cfg.subset_sizes = vec![9];
+    let e = run(ExperimentName::Generalisation, &cfg, &tmp("bad"), None).unwrap_err();
+    assert!(e.to_string().contains("subset_sizes"), "{e}");
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Comparison);
+    cfg.algorithms = vec!["dagger".into()];
+    let e = run(ExperimentName::Comparison, &cfg, &tmp("bad2"), None).unwrap_err();
+    assert!(e.to_string().contains("dagger"), "{e}");
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Ablation);
+    cfg.ablation_variants = vec!["default".into(), "no-critic".into()];
+    let e = run(ExperimentName::Ablation, &cfg, &tmp("bad3"), None).unwrap_err();
+    assert!(e.to_string().contains("no-critic"), "{e}");
+}
+
+#[test]
+fn ablation_runs_each_variant_and_reports_final_distance() {
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Ablation);
+    cfg.seeds = 1;
+    cfg.iterations = 3;
+    cfg.threads = 2;
+    cfg.expert.iterations = 6;
+    let out = tmp("ablation");
+    let (runs, rows) = run(ExperimentName::Ablation, &cfg, &out, None).unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r.variant.as_str()).collect();
+    assert_eq!(
+        names,
+        ["default", "raw-penalty", "constant-critic-lr", "before-d25"]
+    );
+    assert_png(&out.join("ablation.png"));
+    let text = std::fs::read_to_string(out.join("summary.txt")).unwrap();
+    assert!(text.contains("final distance, cm"), "{text}");
+    for r in &rows {
+        assert_eq!(r.final_distance_m.len(), r.performance.len());
+        assert!(r.final_distance_m.iter().all(|d| d.1 > 0.0 && d.1 < 1.0));
+    }
+    // Every variant executes the same initial controller; the critic settings change the
+    // first LQR step, so the second iteration's episode differs from the default's.
+    let log = |v: &str, i: usize| &runs.iter().find(|r| r.variant == v).unwrap().logs[i];
+    for v in ["raw-penalty", "before-d25"] {
+        assert_eq!(log(v, 0).task_cost, log("default", 0).task_cost, "{v}");
+        assert_ne!(log(v, 1).task_cost, log("default", 1).task_cost, "{v}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -1,0 +1,16 @@
+//! The crate's integration tests as one test binary (linking one binary, not one per file, is
+//! most of the build time saved; docs/dev.md). One module per area.
+
+mod common;
+mod dataset;
+mod experiment;
+mod expert;
+mod gaifo;
+mod golden;
+mod mdgps;
+mod pictures;
+mod ppo;
+mod replay;
+mod run_dir;
+mod shard;
+mod structure;

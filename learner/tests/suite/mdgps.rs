@@ -1,0 +1,407 @@
+//! MDGPS (docs/design.md §6): the global policy's Jacobian against finite differences, the
+//! S-step, the policy file, a tiny seeded MDGPS run, the evaluation goals and the command
+//! line's errors. All fast (seconds).
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::learner;
+
+use imitation::controller::init_hold;
+use imitation::demos::Demos;
+use imitation::expert::{record_demos, square_goals, ExpertConfig};
+use imitation::mdgps::policy::{flat_len, GlobalPolicy};
+use imitation::mdgps::s_step::{PolicyOpt, PolicyOptConfig, Targets};
+use imitation::mdgps::{Mdgps, MdgpsConfig};
+use learner::arm::SimArm;
+use learner::experiment::multi_goal::eval_goals;
+use learner::io::policy::{load_policy, save_policy, PolicyFile};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use ur5_shared::config::{ActionMode, TaskConfig};
+use ur5_shared::layout::{DU, DX};
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mdgps-test-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A policy with every parameter random (non-zero output layers, a non-trivial
+/// normalisation), so that every term of the Jacobian is exercised.
+fn random_policy(hidden: &[usize], seed: u64) -> GlobalPolicy {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let flat: Vec<f64> = (0..flat_len(hidden))
+        .map(|i| {
+            if (DX..2 * DX).contains(&i) {
+                rng.random_range(0.2..2.0)
+            } else {
+                rng.random_range(-0.6..0.6)
+            }
+        })
+        .collect();
+    GlobalPolicy::from_flat(hidden, &flat).unwrap()
+}
+
+fn random_state(rng: &mut ChaCha8Rng) -> [f64; DX] {
+    std::array::from_fn(|_| rng.random_range(-1.0..1.0))
+}
+
+#[test]
+fn mean_action_jacobian_matches_central_differences() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for (hidden, mode) in [
+        (vec![16, 8], ActionMode::GoalAngles),
+        (vec![5], ActionMode::Torque),
+        (vec![64, 64], ActionMode::GoalAngles),
+    ] {
+        let pol = random_policy(&hidden, 11);
+        let mut ws = pol.workspace();
+        for _ in 0..5 {
+            let s = random_state(&mut rng);
+            let mut jac = [[0.0; DX]; DU];
+            let a = pol.mean_action_jacobian(&s, mode, &mut ws, &mut jac);
+            assert_eq!(
+                a,
+                pol.mean_action(&s, mode, &mut ws),
+                "same mean either way"
+            );
+            let h = 1e-6;
+            for i in 0..DX {
+                let (mut sp, mut sm) = (s, s);
+                sp[i] += h;
+                sm[i] -= h;
+                let (ap, am) = (
+                    pol.mean_action(&sp, mode, &mut ws),
+                    pol.mean_action(&sm, mode, &mut ws),
+                );
+                for j in 0..DU {
+                    let fd = (ap[j] - am[j]) / (2.0 * h);
+                    let err = (fd - jac[j][i]).abs();
+                    assert!(
+                        err <= 1e-7 * (1.0 + fd.abs()),
+                        "{hidden:?} {mode:?}: ∂a_{j}/∂s_{i} analytic {} vs central difference {fd}",
+                        jac[j][i]
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Targets from a smooth function of the state with random SPD precisions.
+fn synthetic_targets(n: usize, seed: u64) -> Targets {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let a: [[f64; DX]; DU] =
+        std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-0.3..0.3)));
+    let mut t = Targets::default();
+    for _ in 0..n {
+        let s = random_state(&mut rng);
+        t.offsets.push(std::array::from_fn(|j| {
+            (0..DX).map(|i| a[j][i] * s[i]).sum::<f64>() + 0.2 * (2.0 * s[j]).sin()
+        }));
+        // P = B Bᵀ + 0.5 I.
+        let b: [[f64; DU]; DU] =
+            std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0)));
+        t.precisions.push(std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                (0..DU).map(|k| b[i][k] * b[j][k]).sum::<f64>() + if i == j { 0.5 } else { 0.0 }
+            })
+        }));
+        t.states.push(s);
+    }
+    t
+}
+
+#[test]
+fn s_step_reduces_the_weighted_loss_and_is_deterministic_for_a_seed() {
+    let data = synthetic_targets(300, 1);
+    let cfg = PolicyOptConfig {
+        hidden: vec![16, 16],
+        steps: 300,
+        batch_size: 32,
+        ..PolicyOptConfig::default()
+    };
+    let fit = |seed: u64| {
+        let mut pol = GlobalPolicy::new(&cfg.hidden, 0.2, &mut ChaCha8Rng::seed_from_u64(3));
+        let mut opt = PolicyOpt::new(cfg.clone(), &pol, seed);
+        let r1 = opt.update(&mut pol, &data).unwrap();
+        let r2 = opt.update(&mut pol, &data).unwrap();
+        (pol, r1, r2)
+    };
+    let (pol, r1, r2) = fit(5);
+    assert!(
+        r1.loss_after < 0.3 * r1.loss_before && r2.loss_after < r1.loss_after,
+        "loss {} -> {} -> {}",
+        r1.loss_before,
+        r1.loss_after,
+        r2.loss_after
+    );
+    let mut ws = pol.workspace();
+    assert_eq!(PolicyOpt::loss(&pol, &data, &mut ws), r2.loss_after);
+    // σ² = 1 / mean (P)_jj.
+    for j in 0..DU {
+        let m = data.precisions.iter().map(|p| p[j][j]).sum::<f64>() / data.len() as f64;
+        assert!((pol.std()[j] - (1.0 / m).sqrt()).abs() < 1e-12);
+    }
+    let (again, a1, _) = fit(5);
+    assert_eq!(
+        again.flat(),
+        pol.flat(),
+        "same seed, same policy bit for bit"
+    );
+    assert_eq!(a1, r1);
+    let (other, _, _) = fit(6);
+    assert_ne!(other.flat(), pol.flat(), "the seed orders the minibatches");
+}
+
+fn policy_file() -> PolicyFile {
+    PolicyFile {
+        policy: random_policy(&[8, 4], 2),
+        mode: ActionMode::GoalAngles,
+        start_q: [0.0, -2.0, 2.4],
+        dt: 0.1,
+        horizon: 100,
+        seed: u64::MAX - 3,
+        iterations: 20,
+    }
+}
+
+#[test]
+fn policy_file_round_trips_exactly() {
+    let dir = tmp("roundtrip");
+    let p = dir.join("policy.npz");
+    let f = policy_file();
+    save_policy(&f, &p).unwrap();
+    assert_eq!(load_policy(&p).unwrap(), f);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Rewrites `src` with array `name` replaced (`None`: removed) through the npz writer.
+fn edit(src: &Path, dst: &Path, name: &str, new: Option<(&[u64], &[f64])>) {
+    use learner::io::npz::{NpzFile, NpzWriter};
+    let f = NpzFile::open(src).unwrap();
+    let mut w = NpzWriter::create(dst).unwrap();
+    for n in f.names() {
+        if n == name {
+            if let Some((shape, v)) = new {
+                w.f64(&n, shape, v).unwrap();
+            }
+            continue;
+        }
+        match n.as_str() {
+            "state_names" | "action_names" | "action_mode" => {
+                let s = f.strings(&n).unwrap();
+                let r: Vec<&str> = s.iter().map(String::as_str).collect();
+                w.strings(&n, &r).unwrap();
+            }
+            "seed" | "horizon" | "iterations" => {
+                w.u64(&n, &[], &[f.u64_scalar(&n).unwrap()]).unwrap()
+            }
+            _ => {
+                let (shape, v) = f.f64(&n).unwrap();
+                w.f64(&n, &shape, &v).unwrap();
+            }
+        }
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn bad_policy_files_are_refused_naming_file_and_array() {
+    let dir = tmp("bad");
+    let good = dir.join("good.npz");
+    save_policy(&policy_file(), &good).unwrap();
+    let n = flat_len(&[8, 4]) as u64;
+    let mut nan = policy_file().policy.flat();
+    nan[40] = f64::NAN;
+    let mut neg = policy_file().policy.flat();
+    neg[DX + 1] = -1.0;
+    let cases: Vec<(&str, Option<(Vec<u64>, Vec<f64>)>, &str)> = vec![
+        ("params", Some((vec![n - 1], vec![0.1; n as usize - 1]))),
+        ("params", Some((vec![n], nan))),
+        ("params", Some((vec![n], neg))),
+        ("hidden", Some((vec![2], vec![8.0, 0.0]))),
+        ("hidden", Some((vec![1, 2], vec![8.0, 4.0]))),
+        ("schema_version", Some((vec![], vec![2.0]))),
+        ("dt", Some((vec![], vec![0.0]))),
+        ("start_q", Some((vec![2], vec![0.0, 1.0]))),
+        ("params", None),
+    ]
+    .into_iter()
+    .zip([
+        "expected [",
+        "not finite",
+        "r[1]",
+        "width 0",
+        "expected (H,)",
+        "this program reads 1",
+        "must be finite and > 0",
+        "expected [3]",
+        "no array `params`",
+    ])
+    .map(|((a, b), c)| (a, b, c))
+    .collect();
+    for (i, (name, new, why)) in cases.iter().enumerate() {
+        let p = dir.join(format!("bad{i}.npz"));
+        edit(
+            &good,
+            &p,
+            name,
+            new.as_ref().map(|(s, v)| (s.as_slice(), v.as_slice())),
+        );
+        let e = load_policy(&p).unwrap_err().to_string();
+        assert!(
+            e.contains(&p.display().to_string()) && e.contains(name) && e.contains(why),
+            "{name}: {e}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Demonstrations of the initial controller (they need not be good: the run only has to be
+/// reproducible) at `goal`, T = `horizon`.
+fn tiny_demos(goal: [f64; 3], horizon: usize) -> Demos {
+    let cfg = ExpertConfig {
+        task: TaskConfig {
+            horizon,
+            goal,
+            ..TaskConfig::default()
+        },
+        demos: 2,
+        ..ExpertConfig::default()
+    };
+    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+    let mut d = record_demos(&cfg, &arm, &init_hold(&cfg.task, 0.01), 0.0).unwrap();
+    d.cost_random = d.cost_expert + 1.0;
+    d
+}
+
+#[test]
+fn a_tiny_mdgps_run_is_reproducible_bit_for_bit() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let mut cfg = MdgpsConfig::default();
+    cfg.lqr_gaifo.samples = 3;
+    cfg.lqr_gaifo.seed = 9;
+    cfg.lqr_gaifo.discriminator.n_critic = 5;
+    cfg.policy.hidden = vec![8];
+    cfg.policy.steps = 20;
+    let run = |cfg: &MdgpsConfig| {
+        let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+        let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+        let mut logs = Vec::new();
+        for _ in 0..3 {
+            let (samples, evals) = m.execute(&arm).unwrap();
+            let mut l = m.learn(&samples, &evals, 0.0).unwrap();
+            l.t_dynamics = 0.0;
+            l.t_critic = 0.0;
+            l.t_cost = 0.0;
+            l.t_lqr = 0.0;
+            l.t_policy = 0.0;
+            logs.push(format!("{l:?}"));
+        }
+        let ctrl: Vec<_> = (0..m.conditions())
+            .map(|c| m.controller(c).clone())
+            .collect();
+        (m.policy().flat(), ctrl, logs)
+    };
+    let a = run(&cfg);
+    assert!(a.2.iter().all(|l| !l.contains("NaN")), "{:?}", a.2);
+    let b = run(&cfg);
+    assert_eq!(a.0, b.0, "policy");
+    assert_eq!(a.1, b.1, "controllers");
+    assert_eq!(a.2, b.2, "logs");
+    cfg.lqr_gaifo.seed = 10;
+    assert_ne!(run(&cfg).0, a.0, "another seed, another run");
+}
+
+#[test]
+fn evaluation_goals_are_seeded_and_where_they_should_be() {
+    let c = [-0.45, -0.25, 0.25];
+    let g = eval_goals(c, 0.1, 8, 4, 0.03, 14);
+    assert_eq!(g.len(), 1 + 8 + 4 + 8);
+    assert_eq!(g[0].goal, c);
+    let sq = square_goals(c, 0.1);
+    for e in &g {
+        let (dx, dy) = ((e.goal[0] - c[0]).abs(), (e.goal[1] - c[1]).abs());
+        assert_eq!(e.goal[2], c[2]);
+        match e.kind {
+            "inside" => {
+                assert!(dx < 0.1 && dy < 0.1);
+                assert!(sq
+                    .iter()
+                    .all(|p| (p[0] - e.goal[0]).hypot(p[1] - e.goal[1]) >= 0.01));
+            }
+            "outside" => assert!((dx.max(dy) - 0.13).abs() < 1e-12, "{e:?}"),
+            _ => {}
+        }
+    }
+    let again = eval_goals(c, 0.1, 8, 4, 0.03, 14);
+    assert!(g.iter().zip(&again).all(|(a, b)| a.goal == b.goal));
+}
+
+#[test]
+fn command_line_errors_are_clear() {
+    let (ok, e) = learner(&["policy", "eval", "--policy", "p.npz", "--goal", "1,2"]);
+    assert!(!ok && e.contains("--goal"), "{e}");
+    let (ok, e) = learner(&["policy", "eval", "--goal", "1,2,3"]);
+    assert!(!ok && e.contains("--policy"), "{e}");
+    let missing = tmp("cli").join("missing.npz");
+    let (ok, e) = learner(&[
+        "policy",
+        "eval",
+        "--policy",
+        missing.to_str().unwrap(),
+        "--goal",
+        "-0.45,-0.25,0.25",
+    ]);
+    assert!(!ok && e.contains("missing.npz"), "{e}");
+    let no_experts = tmp("cli").join("no-experts");
+    let (ok, e) = learner(&[
+        "experiment",
+        "multi-goal",
+        "--demos",
+        no_experts.to_str().unwrap(),
+        "--out",
+        tmp("cli").join("out").to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && e.contains("no-experts/point_0.npz"),
+        "a missing experts folder is named: {e}"
+    );
+    let (ok, e) = learner(&["experiment", "multi-goal", "--iterations", "0"]);
+    assert!(!ok && e.contains("iterations"), "{e}");
+}
+
+#[test]
+fn policy_eval_runs_a_saved_policy_to_a_goal() {
+    let dir = tmp("eval");
+    let p = dir.join("policy.npz");
+    let mut f = policy_file();
+    f.horizon = 5;
+    // Zero heads: the policy holds the start pose, so the distance is the start's.
+    let mut flat = f.policy.flat();
+    for v in &mut flat[2 * DX..] {
+        *v = 0.0;
+    }
+    f.policy = GlobalPolicy::from_flat(&[8, 4], &flat).unwrap();
+    save_policy(&f, &p).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(["policy", "eval", "--policy", p.to_str().unwrap()])
+        .args(["--goal", "-0.45,-0.25,0.25", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let d = v["result"]["final_distance_m"].as_f64().unwrap();
+    assert!(d > 0.1 && d.is_finite(), "{v}");
+    assert_eq!(v["result"]["steps"], 5);
+    std::fs::remove_dir_all(&dir).ok();
+}

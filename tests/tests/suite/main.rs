@@ -1,0 +1,18 @@
+//! The crate's integration tests as one test binary (linking one binary, not one per file, is
+//! most of the build time saved; docs/dev.md). One module per area.
+
+mod cli_doc;
+mod errors;
+mod experiment_ipc;
+mod fuzz;
+mod learning;
+mod lost_arm;
+mod peer_status;
+mod policy_run;
+mod processes;
+mod reliability;
+mod resume_ipc;
+mod resume_kill;
+mod serve;
+mod soak;
+mod ur_backend;

@@ -1,0 +1,503 @@
+//! rt-controller's `ur` arm against `hil-sim ur-sim`, free ports on 127.0.0.1:
+//! the setup (handshake, recipe, mode check, the program's connection back) in-process, then
+//! the loop: the `rt-controller` and `learner` binaries against an in-process ur-sim, learning
+//! with the same outcome as over iceoryx2, the fault injections, a protective stop, a dead
+//! ur-sim and a frozen controller. Waits are bounded only to catch a hang; nothing asserts on
+//! timing.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use hil_sim::ur_sim::{self, Faults, UrSimConfig, UrSimHandle};
+use integration_tests::{
+    cleanup_dead_nodes, json_summary, reaching_table, scratch, unique_prefix, write_config, Proc,
+    TestLearner,
+};
+use rt_controller::arm::ur::UrRtde;
+use rt_controller::arm::ur::{UrSession, UrSetupError};
+use rt_controller::config::{UrConfig, UrSeries};
+use ur5_shared::config::{SimConfig, TaskConfig};
+use ur_protocol::rtde::Protocol;
+
+const TIMEOUT: Duration = Duration::from_secs(20);
+
+fn sim(cfg: UrSimConfig) -> UrSimHandle {
+    let cfg = UrSimConfig {
+        rtde_port: 0,
+        secondary_port: 0,
+        lockstep: true,
+        ..cfg
+    };
+    ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).expect("ur-sim starts")
+}
+
+fn ur_cfg(sim: &UrSimHandle, series: UrSeries) -> UrConfig {
+    UrConfig {
+        host: "127.0.0.1".into(),
+        rtde_port: sim.rtde_addr.port(),
+        secondary_port: sim.secondary_addr.port(),
+        // A free port: the OS picks it and the rendered program names it.
+        reverse_port: 0,
+        series,
+        ..UrConfig::default()
+    }
+}
+
+#[test]
+fn ur_backend_setup_negotiates_starts_and_the_program_connects_back() {
+    let s = sim(UrSimConfig::default());
+    let u = UrSession::connect(&ur_cfg(&s, UrSeries::Auto), TIMEOUT).expect("setup");
+    assert_eq!(u.protocol, Protocol::V2);
+    assert!(u.version.is_e_series());
+    assert_eq!(u.cycle_s, 0.002);
+    let start_q = TaskConfig::default().start_q;
+    for j in 0..3 {
+        assert!((u.state.actual_q[j] - start_q[j]).abs() < 1e-5);
+    }
+    drop(u);
+    s.stop();
+}
+
+#[test]
+fn ur_backend_setup_falls_back_to_v1_and_names_a_series_mismatch() {
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            refuse_v2: true,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let u = UrSession::connect(&ur_cfg(&s, UrSeries::E), TIMEOUT).expect("setup over v1");
+    assert_eq!(u.protocol, Protocol::V1);
+    drop(u);
+    s.stop();
+
+    let s = sim(UrSimConfig::default());
+    let e = UrSession::connect(&ur_cfg(&s, UrSeries::Cb3), TIMEOUT)
+        .err()
+        .expect("a CB3 configured against an e-Series");
+    assert!(matches!(e, UrSetupError::SeriesMismatch { .. }), "{e}");
+    assert!(e.to_string().contains("arm.ur.series"), "{e}");
+    s.stop();
+}
+
+#[test]
+fn ur_backend_setup_reports_a_refused_start_and_a_missing_robot() {
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            refuse_start: true,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let e = UrSession::connect(&ur_cfg(&s, UrSeries::Auto), TIMEOUT)
+        .err()
+        .expect("START refused");
+    assert!(matches!(e, UrSetupError::StartRefused), "{e}");
+    let cfg = ur_cfg(&s, UrSeries::Auto);
+    s.stop();
+    let e = UrSession::connect(&cfg, TIMEOUT)
+        .err()
+        .expect("nothing listens any more");
+    assert!(e.to_string().contains("arm.ur.host"), "{e}");
+}
+
+#[test]
+fn ur_backend_setup_skips_text_messages_and_reports_refused_versions() {
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            text_before_reply: true,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let u = UrSession::connect(&ur_cfg(&s, UrSeries::Auto), TIMEOUT).expect("setup");
+    assert!(!u.texts.is_empty(), "the texts before each answer are kept");
+    drop(u);
+    s.stop();
+
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            refuse_versions: true,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let e = UrSession::connect(&ur_cfg(&s, UrSeries::Auto), TIMEOUT)
+        .err()
+        .expect("every version refused");
+    assert!(matches!(e, UrSetupError::NoProtocol), "{e}");
+    s.stop();
+}
+
+// ------------------------------------------------------------------------------ the loop
+
+const LONG: Duration = Duration::from_secs(120);
+
+/// The program's receive timeout in these tests (ms): long enough that a test process
+/// descheduled on a loaded machine does not trip the watchdog (20 ms did, one run in seven).
+const WATCHDOG_MS: u32 = 200;
+
+/// The reaching tables' goal (rad).
+const GOAL: [f64; 3] = [0.3, -1.7, 2.0];
+
+/// The RTDE and secondary ports of a ur-sim.
+#[derive(Clone, Copy)]
+struct Ports(u16, u16);
+
+impl From<&UrSimHandle> for Ports {
+    fn from(s: &UrSimHandle) -> Self {
+        Ports(s.rtde_addr.port(), s.secondary_addr.port())
+    }
+}
+
+/// `[arm]` of a controller config for a ur-sim (the reverse port: any free one).
+fn arm_toml(p: Ports, receive_timeout_ms: u32) -> String {
+    format!(
+        "[arm]\nbackend = \"ur\"\n[arm.ur]\nhost = \"127.0.0.1\"\nrtde_port = {}\nsecondary_port = {}\nreverse_port = 0\nreceive_timeout_ms = {receive_timeout_ms}\n",
+        p.0, p.1
+    )
+}
+
+fn learner_toml(dir: &Path) -> String {
+    write_config(
+        dir,
+        "learner.toml",
+        "samples = 5\nseed = 7\niterations = 3\nrandom_episodes = 1\n[task]\nhorizon = 30\n\
+         [serve]\nwait_report_s = 1.0\nidle_sleep_us = 200\n",
+    )
+}
+
+/// The expert learning over IPC (3 iterations, lockstep): the learner's summary.
+fn learn(dir: &Path, prefix: &str, ctl_cfg: &str, label: &str) -> serde_json::Value {
+    let out = dir.join(format!("out-{label}"));
+    let mut learner = Proc::spawn(
+        "learner",
+        &format!("learner-{label}"),
+        &[
+            "serve",
+            "--config",
+            &learner_toml(dir),
+            "--prefix",
+            prefix,
+            "--out",
+            &out.display().to_string(),
+            "--json",
+        ],
+        dir,
+    );
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        &format!("controller-{label}"),
+        &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
+        dir,
+    );
+    let (code, out) = learner.wait(LONG);
+    let log = learner.log();
+    assert_eq!(
+        code,
+        Some(0),
+        "learner ({label}):\n{log}\ncontroller:\n{}",
+        ctl.log()
+    );
+    ctl.signal(libc::SIGTERM);
+    let (code, cout) = ctl.wait(LONG);
+    let clog = ctl.log();
+    assert_eq!(code, Some(0), "controller ({label}):\n{clog}");
+    let c = json_summary(&cout, &clog);
+    assert_eq!(c["episodes_aborted"], 0, "{c}");
+    assert_eq!(c["rejected_total"], 0, "{c}");
+    json_summary(&out, &log)
+}
+
+#[test]
+fn ur_learning_has_the_outcome_of_the_iceoryx2_run_in_lockstep() {
+    let dir = scratch("ur-learn");
+    let common = "seed = 7\nnoisy_episodes = 5\neval_episodes = 1\nmode = \"lockstep\"\n[task]\nhorizon = 30\n";
+    // Over iceoryx2 with hil-sim serve.
+    let prefix = unique_prefix("ur-learn-i");
+    let sim_cfg = write_config(&dir, "sim.toml", "[task]\nhorizon = 30\n");
+    let serve = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &["serve", "--config", &sim_cfg, "--prefix", &prefix],
+        &dir,
+    );
+    let ice = learn(
+        &dir,
+        &prefix,
+        &write_config(&dir, "ctl-ice.toml", common),
+        "iceoryx2",
+    );
+    serve.signal(libc::SIGTERM);
+    // Over RTDE and the reverse interface with ur-sim (lockstep). The program's watchdog is
+    // long so that a descheduled test machine cannot end the program mid-run.
+    let s = sim(UrSimConfig::default());
+    let prefix = unique_prefix("ur-learn-u");
+    let ur = learn(
+        &dir,
+        &prefix,
+        &write_config(
+            &dir,
+            "ctl-ur.toml",
+            &format!("{common}{}", arm_toml(Ports::from(&s), 1000)),
+        ),
+        "ur",
+    );
+    let summary = s.stop();
+    assert_eq!(summary.protective_stops, 0, "{summary:?}");
+    assert_eq!(summary.programs, 1, "{summary:?}");
+    // The same learning, up to the differences of the two arms: ur-sim's reset is a motion
+    // that ends within 2 mrad of the start pose (hil-sim serve places the arm there), and
+    // servoj targets travel rounded to 1 µrad.
+    for i in 0..3 {
+        let (a, b) = (
+            ice["eval_costs"][i].as_f64().unwrap(),
+            ur["eval_costs"][i].as_f64().unwrap(),
+        );
+        let (da, db) = (
+            ice["log"][i]["final_distance_m"].as_f64().unwrap(),
+            ur["log"][i]["final_distance_m"].as_f64().unwrap(),
+        );
+        eprintln!("iteration {i}: cost {a:.5} (iceoryx2) vs {b:.5} (ur); final distance {da:.5} vs {db:.5} m");
+        assert!((a - b).abs() <= 0.01 * a, "iteration {i}: cost {a} vs {b}");
+        assert!(
+            (da - db).abs() <= 1e-3,
+            "iteration {i}: distance {da} vs {db}"
+        );
+    }
+    assert!(
+        ur["eval_costs"][2].as_f64().unwrap() < ur["eval_costs"][0].as_f64().unwrap(),
+        "it learned: {ur}"
+    );
+    cleanup_dead_nodes();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A controller on the ur-sim `s` with a learner stand-in publishing a reaching table; returns
+/// (exit code, summary, log).
+fn run_against(
+    ports: Ports,
+    tag: &str,
+    extra: &str,
+    receive_timeout_ms: u32,
+    episodes: u64,
+    q_goal: [f64; 3],
+) -> (Option<i32>, serde_json::Value, String) {
+    let dir = scratch(tag);
+    let prefix = unique_prefix(tag);
+    let cfg = write_config(
+        &dir,
+        "ctl.toml",
+        &format!(
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n{extra}\n[task]\nhorizon = 10\n[safety]\nstale_state_timeout_s = 2.0\n{}",
+            arm_toml(ports, receive_timeout_ms)
+        ),
+    );
+    let learner = TestLearner::learner_only(&prefix);
+    learner.publish(&reaching_table(1, 10, q_goal, 0.01));
+    let episodes = episodes.to_string();
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &[
+            "run",
+            "--config",
+            &cfg,
+            "--prefix",
+            &prefix,
+            "--json",
+            "--episodes",
+            &episodes,
+        ],
+        &dir,
+    );
+    let t0 = Instant::now();
+    while ctl.running() && t0.elapsed() < LONG {
+        learner.poll_gains_only();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (code, out) = ctl.wait(LONG);
+    let log = ctl.log();
+    let j = json_summary(&out, &log);
+    std::fs::remove_dir_all(&dir).ok();
+    (code, j, log)
+}
+
+#[test]
+fn ur_fault_injections_give_clear_reports_and_no_crash() {
+    let faults = [
+        (
+            "merged and split packages",
+            Faults {
+                merge_split: true,
+                ..Faults::default()
+            },
+        ),
+        (
+            "late packages",
+            Faults {
+                delay_every: 97,
+                // Longer than a keepalive (half the watchdog), shorter than the watchdog.
+                delay_ms: 150,
+                ..Faults::default()
+            },
+        ),
+        (
+            "dropped packages",
+            Faults {
+                drop_every: 101,
+                ..Faults::default()
+            },
+        ),
+    ];
+    for (what, f) in faults {
+        let s = sim(UrSimConfig {
+            faults: f,
+            ..UrSimConfig::default()
+        });
+        let (code, j, log) = run_against(Ports::from(&s), "ur-fault", "", WATCHDOG_MS, 2, GOAL);
+        let summary = s.stop();
+        assert_eq!(code, Some(0), "{what}: {j}\n{log}");
+        assert_eq!(j["episodes_completed"], 2, "{what}: {j}");
+        assert_eq!(j["arm"]["decode_errors"], 0, "{what}: {j}");
+        assert_eq!(summary.protective_stops, 0, "{what}: {summary:?}");
+        if what != "merged and split packages" {
+            // A package that does not come is replaced by a command written after half the
+            // program's receive timeout: the program never times out.
+            assert!(j["arm"]["keepalives"].as_u64().unwrap() >= 1, "{what}: {j}");
+            assert_eq!(summary.receive_timeouts, 0, "{what}: {summary:?}");
+        }
+    }
+    // The robot closes RTDE: the controller ends at once with exit 3 and says why.
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            disconnect_after: 300,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let (code, j, log) = run_against(Ports::from(&s), "ur-fault-d", "", WATCHDOG_MS, 50, GOAL);
+    s.stop();
+    assert_eq!(code, Some(3), "{j}\n{log}");
+    assert_eq!(j["exit_reason"], "arm_lost", "{j}");
+    assert_eq!(j["arm_lost"], "the robot closed the RTDE connection", "{j}");
+    assert!(
+        log.contains("the robot closed the RTDE connection"),
+        "{log}"
+    );
+    cleanup_dead_nodes();
+}
+
+/// A second RTDE client on the ur-sim at `rtde_port` that watches the arm
+/// ([`UrRtde::next_state`]).
+fn observer(rtde_port: u16) -> UrRtde {
+    UrRtde::connect(
+        &UrConfig {
+            host: "127.0.0.1".into(),
+            rtde_port,
+            ..UrConfig::default()
+        },
+        TIMEOUT,
+    )
+    .expect("observer")
+}
+
+#[test]
+fn ur_a_stopped_ur_sim_gives_the_controller_a_clear_exit() {
+    let s = sim(UrSimConfig::default());
+    let (addr, ports) = (s.rtde_addr, Ports::from(&s));
+    let stopper = std::thread::spawn(move || {
+        // Let the controller run an episode or so, then take the robot away.
+        let mut obs = observer(addr.port());
+        while obs.next_state().expect("observer reads").timestamp < 1.0 {}
+        s.stop()
+    });
+    let (code, j, log) = run_against(ports, "ur-dead", "", WATCHDOG_MS, 50, GOAL);
+    let summary = stopper.join().unwrap();
+    assert_eq!(summary.programs, 1, "{summary:?}");
+    assert_eq!(code, Some(3), "{j}\n{log}");
+    assert_eq!(j["exit_reason"], "arm_lost", "{j}");
+    assert!(j["arm_lost"].as_str().unwrap().contains("closed"), "{j}");
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ur_a_protective_stop_ends_the_run_with_its_own_exit_code() {
+    // The controller's limits let the elbow go to 3.5 rad; the arm's (the URDF's) end at π:
+    // the target past the limit raises a protective stop on the robot.
+    let s = sim(UrSimConfig::default());
+    let (code, j, log) = run_against(
+        Ports::from(&s),
+        "ur-pstop",
+        "[limits]\nlower = [-6.28, -6.28, -3.5]\nupper = [6.28, 6.28, 3.5]\nvelocity = [3.14, 3.14, 30.0]\neffort = [150.0, 150.0, 150.0]",
+        WATCHDOG_MS,
+        5,
+        // Past the URDF's elbow limit (π).
+        [0.3, -1.7, 3.3],
+    );
+    let summary = s.stop();
+    assert_eq!(summary.protective_stops, 1, "{summary:?}");
+    assert_eq!(code, Some(5), "exit 5 = the arm stopped itself: {j}\n{log}");
+    assert_eq!(j["exit_reason"], "arm_stopped", "{j}");
+    assert_eq!(j["fault_at_exit"], "arm_fault", "{j}");
+    let why = j["arm"]["robot_stop"].as_str().unwrap();
+    assert!(why.contains("PROTECTIVE_STOP"), "{why}");
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ur_a_frozen_controller_is_stopped_by_the_programs_watchdog() {
+    // Real time: the arm moves toward the table's goal; the controller is frozen (SIGSTOP:
+    // its sockets stay open, nothing more is written) and the program's receive timeout stops
+    // the arm.
+    let s = sim(UrSimConfig {
+        lockstep: false,
+        ..UrSimConfig::default()
+    });
+    let dir = scratch("ur-freeze");
+    let prefix = unique_prefix("ur-freeze");
+    let cfg = write_config(
+        &dir,
+        "ctl.toml",
+        &format!(
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"real_time\"\npacing = \"arm\"\n[task]\nhorizon = 40\n{}",
+            arm_toml(Ports::from(&s), WATCHDOG_MS)
+        ),
+    );
+    let mut learner = TestLearner::learner_only(&prefix);
+    learner.publish(&reaching_table(1, 40, [0.6, -1.5, 1.6], 0.01));
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &["run", "--config", &cfg, "--prefix", &prefix, "--json"],
+        &dir,
+    );
+    learner.poll_until(&mut ctl, LONG, "ticks of episode 0", |l| {
+        l.received.iter().any(|x| x.episode == 0 && x.t >= 3)
+    });
+    let mut obs = observer(s.rtde_addr.port());
+    let moving = obs.next_state().unwrap().actual_qd[..3]
+        .iter()
+        .any(|v| v.abs() > 0.05);
+    assert!(moving, "the arm moves before the freeze");
+    ctl.signal(libc::SIGSTOP);
+    let t0 = Instant::now();
+    let stopped = loop {
+        let r = *obs.next_state().unwrap();
+        let at_rest = r.actual_qd.iter().all(|v| v.abs() < 1e-3);
+        if r.runtime_state == ur_protocol::state::runtime_state::STOPPED && at_rest {
+            break true;
+        }
+        if t0.elapsed() > LONG {
+            break false;
+        }
+    };
+    ctl.signal(libc::SIGKILL);
+    let _ = ctl.wait(LONG);
+    let summary = s.stop();
+    assert!(stopped, "the program did not stop the arm: {summary:?}");
+    assert_eq!(summary.receive_timeouts, 1, "{summary:?}");
+    cleanup_dead_nodes();
+    std::fs::remove_dir_all(&dir).ok();
+}
