@@ -5,6 +5,7 @@ mod cli_doc;
 mod errors;
 mod experiment_ipc;
 mod fuzz;
+mod killed_setup;
 mod learning;
 mod lost_arm;
 mod peer_status;
