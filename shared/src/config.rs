@@ -152,9 +152,15 @@ fn model_defaults(base: &mut toml::Table, file: &toml::Table) -> Result<(), Conf
         let (parent, leaf) = key
             .split_once('.')
             .map_or((None, key), |(p, l)| (Some(p), l));
+        // A key the model's defaults leave out when serialised (`model` of the UR5) is left
+        // out of the base too, so it takes its default.
         let value = match parent {
-            Some(p) => sim[p].as_table().expect("a table")[leaf].clone(),
-            None => sim[leaf].clone(),
+            Some(p) => sim
+                .get(p)
+                .and_then(|t| t.as_table())
+                .and_then(|t| t.get(leaf))
+                .cloned(),
+            None => sim.get(leaf).cloned(),
         };
         let into = match parent {
             Some(p) => match sim_table.get_mut(p) {
@@ -163,7 +169,10 @@ fn model_defaults(base: &mut toml::Table, file: &toml::Table) -> Result<(), Conf
             },
             None => &mut *sim_table,
         };
-        into.insert(leaf.to_string(), value);
+        match value {
+            Some(v) => into.insert(leaf.to_string(), v),
+            None => into.remove(leaf),
+        };
     }
     if nested {
         if let Some(toml::Value::Table(task_table)) = base.get_mut("task") {
@@ -716,6 +725,17 @@ mod tests {
         );
         let s: SimConfig = from_toml_str("model = \"ur20\"").unwrap();
         assert_eq!(s, SimConfig::for_model(UrModel::Ur20));
+        // Back to the UR5 over a base of another model.
+        let over = layered(
+            "[sim]\nmodel = \"ur5\"",
+            "<string>",
+            File {
+                task: TaskConfig::for_model(UrModel::Ur10e),
+                sim: SimConfig::for_model(UrModel::Ur10e),
+            },
+        )
+        .unwrap();
+        assert_eq!(over, File::default());
         let e = from_toml_str::<File>("[sim]\nmodel = \"ur7\"").unwrap_err();
         assert!(
             e.to_string().contains("ur7") && e.to_string().contains("sim.model"),

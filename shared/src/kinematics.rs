@@ -233,6 +233,7 @@ mod tests {
                 let zd = Vector3::new(m[(0, 2)], m[(1, 2)], m[(2, 2)]);
                 assert!((z - zd).norm() < 1e-9, "{model}: tool axis {z:?} vs {zd:?}");
             }
+            eprintln!("{model}: max |flange − DH| = {worst:.2e} m");
             assert!(worst <= 1e-6, "{model}: |flange − DH| = {worst:.3e} m");
         }
     }
