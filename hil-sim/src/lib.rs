@@ -1,7 +1,9 @@
-//! hil-sim: the simulated UR5 of the paper's set-up (docs/design.md §2) as a library and a binary.
+//! hil-sim: the simulated UR arm of the paper's set-up (docs/design.md §2; the UR5 by default,
+//! any UR model with `sim.model`, docs/ur.md) as a library and a binary.
 //!
-//! - [`model`]: the URDF (bundled UR5 or a user file) parsed by `urdf-rs`, checked, wrist joints
-//!   locked;
+//! - [`urdf`]: the bundled URDF of every UR model and the generator that writes them;
+//! - [`model`]: the URDF (the model's bundled one or a user file) parsed by `urdf-rs`, checked,
+//!   wrist joints locked;
 //! - [`sim`]: the rapier3d multibody built by `rapier3d-urdf`, its physics loop, the 12-dim
 //!   state of the task, the perturbation knobs of the stand-in "physical arm";
 //! - [`servo`]: the arm's own joint servo for goal-angle actions;
@@ -14,6 +16,7 @@ pub mod serve;
 pub mod servo;
 pub mod sim;
 pub mod ur_sim;
+pub mod urdf;
 
 use std::path::PathBuf;
 

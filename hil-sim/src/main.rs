@@ -1,4 +1,4 @@
-//! `hil-sim`: the simulated UR5.
+//! `hil-sim`: the simulated UR arm (the UR5 unless `--model` or `[sim] model` names another).
 //!
 //! Subcommands:
 //! - `demo`: moves the arm through a few goal angles and prints the trajectory;
@@ -14,7 +14,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use serde::{Deserialize, Serialize};
-use ur5_shared::config::{from_toml_file, parse_triple as parse3, SimConfig, TaskConfig};
+use ur5_shared::config::{
+    from_toml_file, from_toml_file_over, parse_triple as parse3, SimConfig, TaskConfig,
+};
+use ur5_shared::UrModel;
 
 use hil_sim::Ur5Sim;
 
@@ -22,9 +25,15 @@ use hil_sim::Ur5Sim;
 #[command(
     name = "hil-sim",
     version,
-    about = "Simulated UR5 (rapier3d multibody from a URDF) for LQR+GAIfO."
+    about = "Simulated UR arm (rapier3d multibody from a URDF) for LQR+GAIfO."
 )]
 struct Cli {
+    /// Arm model: ur3, ur5, ur10, ur3e, ur5e, ur10e, ur16e, ur20 or ur30 (default: the
+    /// config's `[sim] model`, else ur5). Brings the model's URDF and its default start pose,
+    /// goal, wrist lock, end-effector offset and servo gains (docs/ur.md); a config file that
+    /// names another model is refused.
+    #[arg(long, global = true)]
+    model: Option<UrModel>,
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -45,8 +54,9 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Print one JSON object: ee_pos (m), ee_vel (m/s), qdd (rad/s², one physics substep under
-    /// raw torques τ, servo bypassed, gravity on), wrist_q (rad), ee_link, urdf.
+    /// Print one JSON object: model, ee_pos (m, the flange's: no end-effector offset unless
+    /// the model's default has one), ee_vel (m/s), qdd (rad/s², one physics substep under raw
+    /// torques τ, servo bypassed, gravity on), wrist_q (rad), ee_link, urdf.
     Inspect {
         /// Joint angles q1,q2,q3 (rad).
         #[arg(long, value_parser = parse3, allow_hyphen_values = true)]
@@ -60,7 +70,7 @@ enum Cmd {
         /// Physics substep (s) for qdd.
         #[arg(long, default_value_t = 1e-4)]
         substep: f64,
-        /// URDF file (default: the bundled UR5).
+        /// URDF file (default: the model's bundled URDF, hil-sim/urdf/<model>.urdf).
         #[arg(long)]
         urdf: Option<PathBuf>,
     },
@@ -221,41 +231,47 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run() -> Result<()> {
-    match Cli::parse().cmd {
+    let cli = Cli::parse();
+    let model = cli.model;
+    match cli.cmd {
         Cmd::Demo {
             config,
             goals,
             json,
-        } => demo(config, &goals, json),
+        } => demo(config, model, &goals, json),
         Cmd::Inspect {
             q,
             qd,
             tau,
             substep,
             urdf,
-        } => inspect(q, qd, tau, substep, urdf),
+        } => inspect(model.unwrap_or_default(), q, qd, tau, substep, urdf),
         Cmd::Bench {
             episodes,
             reps,
             json,
-        } => bench(episodes, reps, json),
+        } => bench(model.unwrap_or_default(), episodes, reps, json),
         Cmd::Serve {
             config,
             prefix,
             mode,
             time_compression,
             json,
-        } => serve(config, prefix, mode, time_compression, json),
+        } => serve(config, model, prefix, mode, time_compression, json),
         Cmd::UrSim(args) => {
             let cfg = args.config()?;
-            ur_sim(args.config, cfg)
+            ur_sim(args.config, model, cfg)
         }
     }
 }
 
-fn ur_sim(config: Option<PathBuf>, cfg: hil_sim::ur_sim::UrSimConfig) -> Result<()> {
+fn ur_sim(
+    config: Option<PathBuf>,
+    model: Option<UrModel>,
+    cfg: hil_sim::ur_sim::UrSimConfig,
+) -> Result<()> {
     use std::io::Write;
-    let file = load(config)?;
+    let file = load(config, model)?;
     let handle = hil_sim::ur_sim::spawn(&file.task, &file.sim, &cfg)?;
     println!(
         "{}",
@@ -278,18 +294,54 @@ fn ur_sim(config: Option<PathBuf>, cfg: hil_sim::ur_sim::UrSimConfig) -> Result<
     Ok(())
 }
 
-fn load(config: Option<PathBuf>) -> Result<FileConfig> {
-    let cfg: FileConfig = match config {
-        Some(p) => from_toml_file(&p)?,
-        None => FileConfig::default(),
+/// A config file of `T` (with `[task]` and `[sim]` tables) for `--model`: without `--model` the
+/// file alone (its `[sim] model` brings that model's defaults); with it, the file layered over
+/// `base(model)` and refused if it names another model.
+fn load_for_model<T>(
+    config: Option<&std::path::Path>,
+    model: Option<UrModel>,
+    base: impl Fn(UrModel) -> T,
+    sim: impl Fn(&T) -> &SimConfig,
+) -> Result<T>
+where
+    T: Serialize + serde::de::DeserializeOwned + Default,
+{
+    let Some(m) = model else {
+        return Ok(match config {
+            Some(p) => from_toml_file(p)?,
+            None => T::default(),
+        });
     };
+    let Some(p) = config else {
+        return Ok(base(m));
+    };
+    let cfg: T = from_toml_file_over(p, base(m))?;
+    anyhow::ensure!(
+        sim(&cfg).model == m,
+        "--model {m} but {} names model {} in [sim]: drop one or make them agree",
+        p.display(),
+        sim(&cfg).model
+    );
+    Ok(cfg)
+}
+
+fn load(config: Option<PathBuf>, model: Option<UrModel>) -> Result<FileConfig> {
+    let cfg: FileConfig = load_for_model(
+        config.as_deref(),
+        model,
+        |m| FileConfig {
+            task: TaskConfig::for_model(m),
+            sim: SimConfig::for_model(m),
+        },
+        |c| &c.sim,
+    )?;
     cfg.task.validate()?;
     cfg.sim.validate()?;
     Ok(cfg)
 }
 
-fn demo(config: Option<PathBuf>, goals: &str, json: bool) -> Result<()> {
-    let cfg = load(config)?;
+fn demo(config: Option<PathBuf>, model: Option<UrModel>, goals: &str, json: bool) -> Result<()> {
+    let cfg = load(config, model)?;
     let goals: Vec<[f64; 3]> = goals
         .split(';')
         .map(parse3)
@@ -344,6 +396,7 @@ fn demo(config: Option<PathBuf>, goals: &str, json: bool) -> Result<()> {
 }
 
 fn inspect(
+    model: UrModel,
     q: [f64; 3],
     qd: [f64; 3],
     tau: [f64; 3],
@@ -354,7 +407,7 @@ fn inspect(
         urdf,
         physics_dt: substep,
         substeps: 1,
-        ..SimConfig::default()
+        ..SimConfig::for_model(model)
     };
     let mut sim = Ur5Sim::new(sim_cfg, substep)?;
     // Every input within the arm's limits, so that every output is a number.
@@ -395,7 +448,7 @@ fn inspect(
     println!(
         "{}",
         serde_json::json!({
-            "ee_pos": obs.ee_pos, "ee_vel": obs.ee_vel, "qdd": qdd, "wrist_q": m.wrist_q,
+            "model": model.name(), "ee_pos": obs.ee_pos, "ee_vel": obs.ee_vel, "qdd": qdd, "wrist_q": m.wrist_q,
             "wrist_joints": m.wrist_joints, "ee_link": m.ee_link, "ee_offset": m.ee_offset,
             "urdf": m.source.display().to_string(),
         })
@@ -403,9 +456,9 @@ fn inspect(
     Ok(())
 }
 
-fn bench(episodes: usize, reps: usize, json: bool) -> Result<()> {
-    let task = TaskConfig::default();
-    let mut sim = Ur5Sim::new(SimConfig::default(), task.dt)?;
+fn bench(model: UrModel, episodes: usize, reps: usize, json: bool) -> Result<()> {
+    let task = TaskConfig::for_model(model);
+    let mut sim = Ur5Sim::new(SimConfig::for_model(model), task.dt)?;
     let physics_dt = sim.config().physics_dt;
     // 10 s of simulated time, servo tracking a moving goal; the same run `reps` times.
     let steps = (10.0 / task.dt).round() as usize;
@@ -455,6 +508,7 @@ fn bench(episodes: usize, reps: usize, json: bool) -> Result<()> {
 
 fn serve(
     config: Option<PathBuf>,
+    model: Option<UrModel>,
     prefix: Option<String>,
     mode: Option<String>,
     time_compression: Option<f64>,
@@ -463,10 +517,16 @@ fn serve(
     use hil_sim::serve::{ServeFile, ServeMode};
     // iceoryx2 warns about running without its config file; IOX2_LOG_LEVEL=Warn shows it.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let mut cfg: ServeFile = match &config {
-        Some(p) => from_toml_file(p)?,
-        None => ServeFile::default(),
-    };
+    let mut cfg: ServeFile = load_for_model(
+        config.as_deref(),
+        model,
+        |m| ServeFile {
+            task: TaskConfig::for_model(m),
+            sim: SimConfig::for_model(m),
+            ..ServeFile::default()
+        },
+        |c| &c.sim,
+    )?;
     if let Some(p) = prefix {
         cfg.serve.prefix = p;
     }

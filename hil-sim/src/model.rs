@@ -14,16 +14,19 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use ur5_shared::layout::{ACTIVE_JOINTS, N_JOINTS};
+use ur5_shared::UrModel;
 use urdf_rs::{JointType, Robot};
 
 use crate::SimError;
 
-/// The UR5 URDF shipped with hil-sim (see the comment at its top for the sources of every number).
+/// The UR5 URDF shipped with hil-sim (see the comment at its top for the sources of every
+/// number); every model's: [`crate::urdf::bundled_urdf`].
 pub const BUNDLED_URDF: &str = include_str!("../urdf/ur5.urdf");
 
-/// Where the bundled URDF lives in the source tree (reported by `hil-sim inspect`).
+/// Where the bundled UR5 URDF lives in the source tree; every model's:
+/// [`crate::urdf::bundled_urdf_path`].
 pub fn bundled_urdf_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("urdf/ur5.urdf")
+    crate::urdf::bundled_urdf_path(UrModel::Ur5)
 }
 
 /// Limits of one active joint, as written in the URDF.
@@ -63,9 +66,10 @@ pub struct ArmModel {
 }
 
 impl ArmModel {
-    /// Loads a URDF file (or the bundled UR5 when `path` is `None`) and checks it.
+    /// Loads a URDF file (or the bundled URDF of `model` when `path` is `None`) and checks it.
     pub fn load(
         path: Option<&Path>,
+        model: UrModel,
         wrist_q: [f64; 3],
         ee_link: &str,
         ee_offset: [f64; 3],
@@ -78,7 +82,10 @@ impl ArmModel {
                 })?,
                 p.to_owned(),
             ),
-            None => (BUNDLED_URDF.to_owned(), bundled_urdf_path()),
+            None => (
+                crate::urdf::bundled_urdf(model).to_owned(),
+                crate::urdf::bundled_urdf_path(model),
+            ),
         };
         Self::from_str(&text, source, wrist_q, ee_link, ee_offset)
     }
@@ -629,7 +636,9 @@ mod tests {
             [-1.5707963267948966, 1.5707963267948966, 0.0],
             [0.3, -0.7, 1.1],
         ] {
-            let model = ArmModel::load(None, wrist_q, "wrist_3_link", [0.0, 0.0, 0.1]).unwrap();
+            let model =
+                ArmModel::load(None, UrModel::Ur5, wrist_q, "wrist_3_link", [0.0, 0.0, 0.1])
+                    .unwrap();
             let merged = model.rigid_robot(1.0);
             let names: Vec<&str> = merged.links.iter().map(|l| l.name.as_str()).collect();
             assert_eq!(

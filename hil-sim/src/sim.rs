@@ -153,6 +153,7 @@ impl Ur5Sim {
         cfg.validate()?;
         let model = ArmModel::load(
             cfg.urdf.as_deref(),
+            cfg.model,
             cfg.wrist_q,
             &cfg.ee_link,
             cfg.ee_offset,

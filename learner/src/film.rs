@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::kinematics::Ur5Kinematics;
+use ur5_shared::kinematics::UrKinematics;
 use ur5_shared::layout::{DX, Q};
 
 use crate::plot::{register_font, write_png, PALETTE};
@@ -29,12 +29,12 @@ pub struct Motion {
 
 /// The chain points of every state in `states` ((T, dX), row-major) on the arm of `sim`.
 pub fn chain_of_states(states: &[f64], sim: &SimConfig) -> Vec<[[f64; 3]; 8]> {
-    let k = Ur5Kinematics::ur5(sim.ee_offset);
+    let k = UrKinematics::new(sim.model, sim.ee_offset);
     states
         .chunks(DX)
         .map(|s| {
             let q: [f64; 3] = s[Q].try_into().expect("3");
-            k.chain_points(&Ur5Kinematics::six(&q, &sim.wrist_q))
+            k.chain_points(&UrKinematics::six(&q, &sim.wrist_q))
         })
         .collect()
 }

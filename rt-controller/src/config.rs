@@ -134,6 +134,12 @@ pub enum UrSeries {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct UrConfig {
+    /// The robot's model (`"ur5"`, `"ur5e"`, …; docs/ur.md, "Arm models"): the forward
+    /// kinematics that turn its joint angles into the end-effector point. Must be the model
+    /// the demonstrations and the learner's `sim.model` were made with. Not serialised when it
+    /// is the UR5 (the default), so UR5 configurations print and hash as before.
+    #[serde(skip_serializing_if = "ur5_shared::UrModel::is_ur5")]
+    pub model: ur5_shared::UrModel,
     /// The robot controller's IPv4 address.
     pub host: String,
     /// RTDE port on the robot.
@@ -181,6 +187,7 @@ pub enum ServoTarget {
 impl Default for UrConfig {
     fn default() -> Self {
         Self {
+            model: ur5_shared::UrModel::Ur5,
             host: "127.0.0.1".into(),
             rtde_port: 30004,
             secondary_port: 30002,

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 use crate::layout::N_JOINTS;
+use crate::model::UrModel;
 
 /// Errors reading a configuration file.
 #[derive(Debug, thiserror::Error)]
@@ -69,6 +70,12 @@ pub fn from_toml_file_over<T: Serialize + DeserializeOwned>(
 /// `toml::from_str` would rebuild the whole table from the field type's own defaults). Tables
 /// merge key by key; any other value (numbers, strings, arrays) replaces the default.
 /// Unknown keys are still errors.
+///
+/// The arm model's defaults: a text that names an arm model other than the defaults' (`[sim]
+/// model = "ur5e"`, or `model = ...` at the top of a bare [`SimConfig`]) gets that model's
+/// defaults for the model-dependent keys it leaves out: [`SimConfig::MODEL_KEYS`] of `[sim]`
+/// from [`SimConfig::for_model`] and [`TaskConfig::MODEL_KEYS`] of `[task]` from
+/// [`TaskConfig::for_model`] (docs/ur.md, "Arm models").
 pub fn from_toml_str<T: Serialize + DeserializeOwned + Default>(
     text: &str,
 ) -> Result<T, ConfigError> {
@@ -90,8 +97,93 @@ fn layered<T: Serialize + DeserializeOwned>(
         // A configuration that does not serialise to a table: the file alone.
         _ => return toml::from_str(text).map_err(parse),
     };
+    model_defaults(&mut merged, &file)?;
     merge_table(&mut merged, file);
     T::deserialize(toml::Value::Table(merged)).map_err(parse)
+}
+
+/// Lays the model-dependent defaults of the model `file` names over `base` (see
+/// [`from_toml_str`]); nothing when the file names no model or the defaults' own.
+fn model_defaults(base: &mut toml::Table, file: &toml::Table) -> Result<(), ConfigError> {
+    let in_sim = file
+        .get("sim")
+        .and_then(|v| v.as_table())
+        .and_then(|t| t.get("model"))
+        .cloned();
+    // A file with a [sim] table over a base with one, or a bare SimConfig (keys at the top).
+    let (named, nested) = match in_sim {
+        Some(m) if base.get("sim").is_some_and(|v| v.is_table()) => (m, true),
+        Some(_) => return Ok(()),
+        None => match file.get("model") {
+            Some(m) if base.contains_key("ee_link") => (m.clone(), false),
+            _ => return Ok(()),
+        },
+    };
+    let model = UrModel::deserialize(named.clone()).map_err(|e| ConfigError::Invalid {
+        key: "sim.model",
+        why: format!("{named}: {e}"),
+    })?;
+    let sim_table: &mut toml::Table = if nested {
+        base.get_mut("sim")
+            .and_then(|v| v.as_table_mut())
+            .expect("checked above")
+    } else {
+        &mut *base
+    };
+    let current = sim_table
+        .get("model")
+        .cloned()
+        .map(UrModel::deserialize)
+        .transpose()
+        .map_err(|e| ConfigError::Invalid {
+            key: "sim.model",
+            why: e.to_string(),
+        })?
+        .unwrap_or_default();
+    if current == model {
+        return Ok(());
+    }
+    let table = |v: toml::Value| match v {
+        toml::Value::Table(t) => t,
+        _ => unreachable!("a config struct serialises to a table"),
+    };
+    let sim = table(toml::Value::try_from(SimConfig::for_model(model)).expect("serialisable"));
+    for key in SimConfig::MODEL_KEYS {
+        let (parent, leaf) = key
+            .split_once('.')
+            .map_or((None, key), |(p, l)| (Some(p), l));
+        // A key the model's defaults leave out when serialised (`model` of the UR5) is left
+        // out of the base too, so it takes its default.
+        let value = match parent {
+            Some(p) => sim
+                .get(p)
+                .and_then(|t| t.as_table())
+                .and_then(|t| t.get(leaf))
+                .cloned(),
+            None => sim.get(leaf).cloned(),
+        };
+        let into = match parent {
+            Some(p) => match sim_table.get_mut(p) {
+                Some(toml::Value::Table(t)) => t,
+                _ => continue,
+            },
+            None => &mut *sim_table,
+        };
+        match value {
+            Some(v) => into.insert(leaf.to_string(), v),
+            None => into.remove(leaf),
+        };
+    }
+    if nested {
+        if let Some(toml::Value::Table(task_table)) = base.get_mut("task") {
+            let task =
+                table(toml::Value::try_from(TaskConfig::for_model(model)).expect("serialisable"));
+            for key in TaskConfig::MODEL_KEYS {
+                task_table.insert(key.to_string(), task[key].clone());
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `base` with `over` laid on top: tables recursively, everything else replaced.
@@ -150,6 +242,19 @@ impl Default for TaskConfig {
 }
 
 impl TaskConfig {
+    /// The keys whose defaults depend on the arm model (see [`from_toml_str`]).
+    pub const MODEL_KEYS: [&'static str; 2] = ["start_q", "goal"];
+
+    /// The default task on `model`: its start pose and goal ([`UrModel::default_start_q`],
+    /// [`UrModel::default_goal`]); `for_model(UrModel::Ur5) == TaskConfig::default()`.
+    pub fn for_model(model: UrModel) -> Self {
+        Self {
+            start_q: model.default_start_q(),
+            goal: model.default_goal(),
+            ..Self::default()
+        }
+    }
+
     /// Checks ranges; the message names the key and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
@@ -223,6 +328,19 @@ impl Default for ArmLimits {
 }
 
 impl ArmLimits {
+    /// Limits of the three active joints (shoulder pan, shoulder lift, elbow) of `model`
+    /// ([`UrModel::joint_limits`]); `for_model(UrModel::Ur5) == ArmLimits::default()`.
+    pub fn for_model(model: UrModel) -> Self {
+        let l = model.joint_limits();
+        let first = |v: [f64; 6]| [v[0], v[1], v[2]];
+        Self {
+            lower: first(l.lower),
+            upper: first(l.upper),
+            velocity: first(l.velocity),
+            effort: first(l.effort),
+        }
+    }
+
     /// Checks ordering and signs.
     pub fn validate(&self) -> Result<(), ConfigError> {
         for j in 0..N_JOINTS {
@@ -256,6 +374,34 @@ pub struct ServoConfig {
     pub velocity_gain: [f64; N_JOINTS],
     /// Joint velocity limit v_max (rad/s) used by the servo. UR5 data sheet: π rad/s (180°/s).
     pub max_velocity: f64,
+}
+
+impl ServoConfig {
+    /// The servo for `model`: the UR5's position gain; velocity gains scaled from the UR5's by
+    /// the ratio of a rough joint inertia at full reach (links as point masses at their
+    /// centres: upper arm at |a2|/2, forearm at |a2| + |a3|/2, the wrists at |a2| + |a3| from
+    /// the shoulder; forearm and wrists about the elbow), so every model's velocity loop has
+    /// the UR5's bandwidth; rounded to two digits (masses: ROS 2 `ur_description`
+    /// `physical_parameters.yaml`). `max_velocity`: the slowest active joint's limit.
+    pub fn for_model(model: UrModel) -> Self {
+        let velocity_gain = match model {
+            UrModel::Ur5 => [150.0, 150.0, 30.0],
+            UrModel::Ur3 => [30.0, 30.0, 6.3],
+            UrModel::Ur10 => [530.0, 530.0, 110.0],
+            UrModel::Ur3e => [31.0, 31.0, 6.3],
+            UrModel::Ur5e => [170.0, 170.0, 35.0],
+            UrModel::Ur10e => [550.0, 550.0, 110.0],
+            UrModel::Ur16e => [300.0, 300.0, 49.0],
+            UrModel::Ur20 => [1700.0, 1700.0, 290.0],
+            UrModel::Ur30 => [880.0, 880.0, 140.0],
+        };
+        let v = ArmLimits::for_model(model).velocity;
+        Self {
+            velocity_gain,
+            max_velocity: v[0].min(v[1]).min(v[2]),
+            ..Self::default()
+        }
+    }
 }
 
 impl Default for ServoConfig {
@@ -340,11 +486,20 @@ impl Perturbation {
     }
 }
 
-/// The simulated UR5 (hil-sim).
+/// The simulated UR arm (hil-sim), also the arm the learner's checks and the `ur` backend's
+/// kinematics assume.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimConfig {
-    /// URDF file; `None` uses the UR5 model bundled with hil-sim.
+    /// The arm model (`"ur5"`, `"ur5e"`, …; docs/ur.md, "Arm models"). Its bundled URDF is
+    /// simulated unless `urdf` names another file; a config file that names a model gets that
+    /// model's defaults for the keys it leaves out ([`SimConfig::MODEL_KEYS`], the task's start
+    /// pose and goal). Default: the CB-series UR5 of the paper. Left out when serialised if it
+    /// is the UR5, so a UR5 configuration serialises (and hashes, in run manifests) as it did
+    /// before arms had a model.
+    #[serde(skip_serializing_if = "UrModel::is_ur5")]
+    pub model: UrModel,
+    /// URDF file; `None` uses the model's URDF bundled with hil-sim (`hil-sim/urdf/<model>.urdf`).
     pub urdf: Option<PathBuf>,
     /// Physics step (s), also the servo rate: 1 kHz.
     pub physics_dt: f64,
@@ -369,6 +524,7 @@ pub struct SimConfig {
 impl Default for SimConfig {
     fn default() -> Self {
         Self {
+            model: UrModel::Ur5,
             urdf: None,
             physics_dt: 1e-3,
             substeps: 1,
@@ -387,6 +543,30 @@ impl Default for SimConfig {
 }
 
 impl SimConfig {
+    /// The keys (dotted below `[sim]`) whose defaults depend on the arm model (see
+    /// [`from_toml_str`]).
+    pub const MODEL_KEYS: [&'static str; 5] = [
+        "model",
+        "wrist_q",
+        "ee_offset",
+        "servo.velocity_gain",
+        "servo.max_velocity",
+    ];
+
+    /// The simulated `model` with its defaults: wrist lock and end-effector offset
+    /// ([`UrModel::default_wrist_q`], [`UrModel::default_ee_offset`]) and servo gains scaled to
+    /// its inertia ([`ServoConfig::for_model`]); `for_model(UrModel::Ur5) ==
+    /// SimConfig::default()`.
+    pub fn for_model(model: UrModel) -> Self {
+        Self {
+            model,
+            wrist_q: model.default_wrist_q(),
+            ee_offset: model.default_ee_offset(),
+            servo: ServoConfig::for_model(model),
+            ..Self::default()
+        }
+    }
+
     /// Checks ranges; the message names the key and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
@@ -506,6 +686,61 @@ mod tests {
         assert!(err.to_string().contains('c'), "{err}");
         assert!(from_toml_str::<Outer>("n = \"x\"").is_err());
         assert!(from_toml_str::<Outer>("n = ").is_err());
+    }
+
+    #[test]
+    fn the_ur5s_defaults_are_todays_and_a_named_model_brings_its_own() {
+        assert_eq!(ArmLimits::for_model(UrModel::Ur5), ArmLimits::default());
+        for m in UrModel::ALL {
+            ArmLimits::for_model(m).validate().unwrap();
+        }
+        let s = SimConfig::default();
+        assert_eq!(UrModel::Ur5.default_wrist_q(), s.wrist_q);
+        assert_eq!(UrModel::Ur5.default_ee_offset(), s.ee_offset);
+        assert_eq!(SimConfig::for_model(UrModel::Ur5), SimConfig::default());
+        assert_eq!(TaskConfig::for_model(UrModel::Ur5), TaskConfig::default());
+        #[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        struct File {
+            task: TaskConfig,
+            sim: SimConfig,
+        }
+        let f: File = from_toml_str("[sim]\nmodel = \"ur5\"").unwrap();
+        assert_eq!(f, File::default());
+        let f: File = from_toml_str("[sim]\nmodel = \"ur10e\"\n[task]\nhorizon = 50").unwrap();
+        assert_eq!(f.sim, SimConfig::for_model(UrModel::Ur10e));
+        assert_eq!(f.task.goal, UrModel::Ur10e.default_goal());
+        assert_eq!(f.task.horizon, 50);
+        // Keys the file gives win over the model's defaults.
+        let f: File =
+            from_toml_str("[sim]\nmodel = \"ur3e\"\nwrist_q = [0.1, 0.2, 0.3]\n[task]\ngoal = [0.1, 0.2, 0.3]\n[sim.servo]\nposition_gain = 5.0")
+                .unwrap();
+        assert_eq!(f.sim.wrist_q, [0.1, 0.2, 0.3]);
+        assert_eq!(f.task.goal, [0.1, 0.2, 0.3]);
+        assert_eq!(f.task.start_q, UrModel::Ur3e.default_start_q());
+        assert_eq!(f.sim.servo.position_gain, 5.0);
+        assert_eq!(
+            f.sim.servo.velocity_gain,
+            ServoConfig::for_model(UrModel::Ur3e).velocity_gain
+        );
+        let s: SimConfig = from_toml_str("model = \"ur20\"").unwrap();
+        assert_eq!(s, SimConfig::for_model(UrModel::Ur20));
+        // Back to the UR5 over a base of another model.
+        let over = layered(
+            "[sim]\nmodel = \"ur5\"",
+            "<string>",
+            File {
+                task: TaskConfig::for_model(UrModel::Ur10e),
+                sim: SimConfig::for_model(UrModel::Ur10e),
+            },
+        )
+        .unwrap();
+        assert_eq!(over, File::default());
+        let e = from_toml_str::<File>("[sim]\nmodel = \"ur7\"").unwrap_err();
+        assert!(
+            e.to_string().contains("ur7") && e.to_string().contains("sim.model"),
+            "{e}"
+        );
     }
 
     #[test]

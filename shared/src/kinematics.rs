@@ -1,58 +1,68 @@
-//! Forward kinematics of the UR5 of `hil-sim/urdf/ur5.urdf` in f64, without the simulator:
-//! the end-effector point and its linear velocity from all six measured joint angles
-//! (docs/design.md §2.1, §3.10). The `ur` arm backend builds the state s from an RTDE package
-//! with it, so the state means the same on a real arm as in hil-sim whatever TCP and base
-//! feature the robot's installation has configured.
+//! Forward kinematics of a UR arm (any [`UrModel`]) in f64, without the simulator: the
+//! end-effector point and its linear velocity from all six measured joint angles
+//! (docs/design.md §2.1, §3.10; docs/ur.md, "Arm models"). The `ur` arm backend builds the
+//! state s from an RTDE package with it, so the state means the same on a real arm as in
+//! hil-sim whatever TCP and base feature the robot's installation has configured.
 //!
-//! The chain is the bundled URDF's: Universal Robots' published UR5 DH parameters laid out with
-//! the joint origins of ROS 2 `ur_description` (base_link = the DH base frame, z up, joint
-//! angles = DH angles). Each joint: a fixed origin transform (xyz, then URDF rpy = Rz·Ry·Rx),
-//! then a rotation q about its z axis. The end-effector point is the origin of `wrist_3_link`
-//! plus `ee_offset` expressed in that link's frame (`sim.ee_offset`). hil-sim's tests check
-//! this chain against the rapier3d multibody built from the URDF, and the velocity against
-//! finite differences of the point.
+//! The chain is the bundled URDFs' (`hil-sim/urdf/<model>.urdf`): the model's DH table
+//! ([`UrModel::dh`]) laid out with the joint origins of ROS 2 `ur_description` (base_link = the
+//! DH base frame, z up, joint angles = DH angles). Each joint: a fixed origin transform (xyz,
+//! then URDF rpy = Rz·Ry·Rx), then a rotation q about its z axis:
+//!
+//! | joint | origin xyz (m) | origin rpy (rad) |
+//! |---|---|---|
+//! | shoulder pan | (0, 0, d1) | 0 |
+//! | shoulder lift | 0 | (π/2, 0, 0) |
+//! | elbow | (a2, 0, 0) | 0 |
+//! | wrist 1 | (a3, 0, d4) | 0 |
+//! | wrist 2 | (0, −d5, 0) | (π/2, 0, 0) |
+//! | wrist 3 | (0, d6, 0) | (π/2, π, π) |
+//!
+//! The frame after each joint differs from the DH frame by a constant rotation only, and the
+//! origin of `wrist_3_link` is the DH flange (frame 6's origin). The end-effector point is that
+//! origin plus `ee_offset` expressed in `wrist_3_link`'s frame (`sim.ee_offset`). hil-sim's
+//! tests check this chain against the rapier3d multibody built from each URDF, and the
+//! velocity against finite differences of the point; this module's tests check it against the
+//! product of UR's DH matrices.
 //!
 //! Nothing here allocates.
+
+use core::f64::consts::{FRAC_PI_2, PI};
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::layout::N_JOINTS;
+use crate::model::UrModel;
 
 /// All six joints of a UR arm, base to wrist 3 (rad or rad/s).
 pub type Joints6 = [f64; 6];
 
-/// Joint origins of the bundled UR5 URDF: (xyz in m, rpy in rad), base to wrist 3.
-const UR5_ORIGINS: [([f64; 3], [f64; 3]); 6] = [
-    ([0.0, 0.0, 0.089159], [0.0, 0.0, 0.0]),
-    ([0.0, 0.0, 0.0], [core::f64::consts::FRAC_PI_2, 0.0, 0.0]),
-    ([-0.425, 0.0, 0.0], [0.0, 0.0, 0.0]),
-    ([-0.39225, 0.0, 0.10915], [0.0, 0.0, 0.0]),
-    (
-        [0.0, -0.09465, 0.0],
-        [core::f64::consts::FRAC_PI_2, 0.0, 0.0],
-    ),
-    (
-        [0.0, 0.0823, 0.0],
-        [
-            core::f64::consts::FRAC_PI_2,
-            core::f64::consts::PI,
-            core::f64::consts::PI,
-        ],
-    ),
-];
+/// Joint origins of the bundled URDF of `model`: (xyz in m, rpy in rad), base to wrist 3
+/// (module docs' table).
+pub fn urdf_origins(model: UrModel) -> [([f64; 3], [f64; 3]); 6] {
+    let t = model.dh();
+    [
+        ([0.0, 0.0, t.d[0]], [0.0, 0.0, 0.0]),
+        ([0.0, 0.0, 0.0], [FRAC_PI_2, 0.0, 0.0]),
+        ([t.a[1], 0.0, 0.0], [0.0, 0.0, 0.0]),
+        ([t.a[2], 0.0, t.d[3]], [0.0, 0.0, 0.0]),
+        ([0.0, -t.d[4], 0.0], [FRAC_PI_2, 0.0, 0.0]),
+        ([0.0, t.d[5], 0.0], [FRAC_PI_2, PI, PI]),
+    ]
+}
 
-/// The UR5's kinematic chain and the end-effector point on its last link.
+/// A UR arm's kinematic chain and the end-effector point on its last link.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Ur5Kinematics {
+pub struct UrKinematics {
     origins: [Isometry3<f64>; 6],
     /// End-effector point in the `wrist_3_link` frame (m).
     pub ee_offset: [f64; 3],
 }
 
-impl Ur5Kinematics {
-    /// The bundled UR5 with the end-effector point `ee_offset` (m, `wrist_3_link` frame).
-    pub fn ur5(ee_offset: [f64; 3]) -> Self {
-        let origins = UR5_ORIGINS.map(|(xyz, rpy)| {
+impl UrKinematics {
+    /// The bundled `model` with the end-effector point `ee_offset` (m, `wrist_3_link` frame).
+    pub fn new(model: UrModel, ee_offset: [f64; 3]) -> Self {
+        let origins = urdf_origins(model).map(|(xyz, rpy)| {
             Isometry3::from_parts(
                 Translation3::new(xyz[0], xyz[1], xyz[2]),
                 UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
@@ -121,7 +131,7 @@ mod tests {
 
     #[test]
     fn the_chain_starts_at_the_base_and_ends_at_the_end_effector() {
-        let k = Ur5Kinematics::ur5([0.01, -0.02, 0.03]);
+        let k = UrKinematics::new(UrModel::Ur5, [0.01, -0.02, 0.03]);
         let q = [0.3, -1.9, 2.2, -1.4, 1.6, 0.2];
         let c = k.chain_points(&q);
         assert_eq!(c[0], [0.0; 3]);
@@ -135,7 +145,7 @@ mod tests {
 
     #[test]
     fn the_velocity_is_the_derivative_of_the_point() {
-        let k = Ur5Kinematics::ur5([0.01, -0.02, 0.03]);
+        let k = UrKinematics::new(UrModel::Ur5, [0.01, -0.02, 0.03]);
         let q = [0.3, -1.9, 2.2, -1.4, 1.6, 0.2];
         let qd = [0.7, -0.4, 1.1, 0.3, -0.2, 0.5];
         let (p, v) = k.ee_point_velocity(&q, &qd);
@@ -151,13 +161,98 @@ mod tests {
 
     #[test]
     fn the_zero_pose_is_the_dh_table_stretched_out() {
-        let k = Ur5Kinematics::ur5([0.0; 3]);
+        let k = UrKinematics::new(UrModel::Ur5, [0.0; 3]);
         let p = k.ee_point(&[0.0; 6]);
         // Closed form of UR's DH forward kinematics at q = 0:
         // x = a2 + a3 = −0.81725, y = −(d4 + d6) = −0.19145, z = d1 − d5 = −0.005491.
         let want = [-0.81725, -0.19145, -0.005491];
         for r in 0..3 {
             assert!((p[r] - want[r]).abs() < 1e-12, "{p:?} vs {want:?}");
+        }
+    }
+
+    /// The joint origins today's UR5 chain was built from (the bundled `ur5.urdf`'s numbers),
+    /// before the chain was derived from the model's DH table.
+    const UR5_URDF_ORIGINS: [([f64; 3], [f64; 3]); 6] = [
+        ([0.0, 0.0, 0.089159], [0.0, 0.0, 0.0]),
+        ([0.0, 0.0, 0.0], [FRAC_PI_2, 0.0, 0.0]),
+        ([-0.425, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        ([-0.39225, 0.0, 0.10915], [0.0, 0.0, 0.0]),
+        ([0.0, -0.09465, 0.0], [FRAC_PI_2, 0.0, 0.0]),
+        ([0.0, 0.0823, 0.0], [FRAC_PI_2, PI, PI]),
+    ];
+
+    #[test]
+    fn the_ur5_chain_is_bit_for_bit_the_bundled_urdfs() {
+        let got = urdf_origins(UrModel::Ur5);
+        for (g, w) in got.iter().zip(&UR5_URDF_ORIGINS) {
+            for k in 0..3 {
+                assert_eq!(g.0[k].to_bits(), w.0[k].to_bits(), "{got:?}");
+                assert_eq!(g.1[k].to_bits(), w.1[k].to_bits(), "{got:?}");
+            }
+        }
+    }
+
+    /// T = Π_i Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i), written out entry by entry from the table.
+    fn dh_product(t: &crate::model::DhTable, q: &Joints6) -> nalgebra::Matrix4<f64> {
+        let mut m = nalgebra::Matrix4::identity();
+        for i in 0..6 {
+            let (st, ct) = q[i].sin_cos();
+            let (sa, ca) = t.alpha[i].sin_cos();
+            #[rustfmt::skip]
+            let ti = nalgebra::Matrix4::new(
+                ct, -st * ca,  st * sa, t.a[i] * ct,
+                st,  ct * ca, -ct * sa, t.a[i] * st,
+                0.0,      sa,       ca,      t.d[i],
+                0.0,     0.0,      0.0,         1.0,
+            );
+            m *= ti;
+        }
+        m
+    }
+
+    #[test]
+    fn every_models_flange_is_the_product_of_its_dh_matrices() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(27);
+        for model in UrModel::ALL {
+            let k = UrKinematics::new(model, [0.0; 3]);
+            let t = model.dh();
+            let mut worst = 0.0f64;
+            for _ in 0..200 {
+                let q: Joints6 = core::array::from_fn(|_| rng.random_range(-PI..PI));
+                let p = k.ee_point(&q);
+                let m = dh_product(&t, &q);
+                let err = (0..3)
+                    .map(|r| (p[r] - m[(r, 3)]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                worst = worst.max(err);
+                // The last frame's z axis (the tool direction) is the DH frame 6's as well.
+                let z = k.frames(&q)[5].rotation * Vector3::z();
+                let zd = Vector3::new(m[(0, 2)], m[(1, 2)], m[(2, 2)]);
+                assert!((z - zd).norm() < 1e-9, "{model}: tool axis {z:?} vs {zd:?}");
+            }
+            eprintln!("{model}: max |flange − DH| = {worst:.2e} m");
+            assert!(worst <= 1e-6, "{model}: |flange − DH| = {worst:.3e} m");
+        }
+    }
+
+    #[test]
+    fn every_default_goal_is_the_ur5_goal_posture_on_that_model() {
+        let q = [0.2934450379808978, -1.3789616300188625, 2.092271110094234];
+        let w = UrModel::Ur5.default_wrist_q();
+        let six = UrKinematics::six(&q, &w);
+        let ur5 = UrKinematics::new(UrModel::Ur5, [0.0; 3]).ee_point(&six);
+        let g = UrModel::Ur5.default_goal();
+        assert!((0..3).all(|r| (ur5[r] - g[r]).abs() < 1e-9), "{ur5:?}");
+        for model in UrModel::ALL {
+            let p = UrKinematics::new(model, [0.0; 3]).ee_point(&six);
+            let g = model.default_goal();
+            assert!(
+                (0..3).all(|r| (p[r] - g[r]).abs() <= 0.005 + 1e-9),
+                "{model}: the goal posture reaches {p:?}, default goal {g:?}"
+            );
         }
     }
 }

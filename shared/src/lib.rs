@@ -18,7 +18,8 @@
 //! - [`atomic_file`]: the one atomic write (temporary file, fsync, rename) of every file a
 //!   restart reads back.
 //! - [`clock`]: the monotonic clock of every timestamp.
-//! - [`kinematics`]: the UR5's end-effector point and velocity from joint angles (f64, no
+//! - [`model`]: the UR arm models ([`UrModel`]): DH tables, joint limits, default tasks.
+//! - [`kinematics`]: a UR arm's end-effector point and velocity from joint angles (f64, no
 //!   simulator), for arms that report joint states only.
 //! - [`cost`]: the task cost C(τ) and normalised performance.
 //! - [`noise`]: seeded exploration noise ε, per (run seed, table version, episode).
@@ -40,6 +41,7 @@ pub mod kernels;
 pub mod kinematics;
 pub mod law;
 pub mod layout;
+pub mod model;
 pub mod msg;
 pub mod noise;
 pub mod policy;
@@ -52,6 +54,7 @@ pub use cost::{normalised_performance, task_cost, task_cost_from_distances, Cost
 pub use gains::{GainBounds, GainEntry, GainField, GainStep, GainTable, GainTableError};
 pub use law::{controller_action, LawError, NO_NOISE};
 pub use layout::{state_vector, DU, DX, MAX_HORIZON};
+pub use model::UrModel;
 pub use msg::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind, StepSample};
 pub use policy::{policy_action, PolicyBounds, PolicyScratch, PolicyTable, PolicyTableError};
 pub use services::ServiceNames;

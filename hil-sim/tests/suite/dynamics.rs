@@ -20,7 +20,7 @@ use ur5_shared::layout::ACTIVE_JOINTS;
 const G: f64 = 9.81;
 
 /// Independent rigid-body model of the serial arm with locked wrists.
-mod reference {
+pub(crate) mod reference {
     use super::*;
 
     /// One link of the serial chain, with the joint that connects it to the previous link.
@@ -71,7 +71,12 @@ mod reference {
     impl Arm {
         /// The bundled UR5 with the wrist joints locked at `wrist_q` (chain order).
         pub fn bundled(wrist_q: [f64; 3]) -> Self {
-            let robot = urdf_rs::read_from_string(BUNDLED_URDF).expect("bundled URDF parses");
+            Self::of(BUNDLED_URDF, wrist_q)
+        }
+
+        /// The arm of URDF `text` with the wrist joints locked at `wrist_q` (chain order).
+        pub fn of(text: &str, wrist_q: [f64; 3]) -> Self {
+            let robot = urdf_rs::read_from_string(text).expect("the URDF parses");
             let root = robot
                 .links
                 .iter()
@@ -290,14 +295,14 @@ mod reference {
     }
 }
 
-use reference::Arm;
+pub(crate) use reference::Arm;
 
 fn default_wrist() -> [f64; 3] {
     SimConfig::default().wrist_q
 }
 
 /// A random joint configuration inside the URDF limits of the active joints.
-fn random_q(rng: &mut ChaCha8Rng, sim: &Ur5Sim) -> [f64; 3] {
+pub(crate) fn random_q(rng: &mut ChaCha8Rng, sim: &Ur5Sim) -> [f64; 3] {
     let a = &sim.model().active;
     [0, 1, 2].map(|j| rng.random_range(a[j].lower..a[j].upper))
 }

@@ -3,5 +3,6 @@
 
 mod dynamics;
 mod inspect_cli;
+mod models;
 mod sim;
 mod ur_sim;

@@ -81,7 +81,7 @@ fn end_effector_matches_ur5_dh_forward_kinematics() {
 /// multibody: the end-effector point and its velocity, with an ee offset and two wrist poses.
 #[test]
 fn shared_kinematics_match_the_simulated_arm() {
-    use ur5_shared::kinematics::Ur5Kinematics;
+    use ur5_shared::kinematics::UrKinematics;
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     for (wrist_q, ee_offset) in [
         (SimConfig::default().wrist_q, [0.0; 3]),
@@ -92,7 +92,7 @@ fn shared_kinematics_match_the_simulated_arm() {
             ee_offset,
             ..SimConfig::default()
         };
-        let kin = Ur5Kinematics::ur5(ee_offset);
+        let kin = UrKinematics::new(ur5_shared::UrModel::Ur5, ee_offset);
         let mut sim = Ur5Sim::new(cfg, 0.1).unwrap();
         let (mut worst_p, mut worst_v) = (0.0f64, 0.0f64);
         for _ in 0..25 {
@@ -105,8 +105,8 @@ fn shared_kinematics_match_the_simulated_arm() {
             sim.set_joint_state(q, qd);
             let o = sim.true_observation();
             let (p, v) = kin.ee_point_velocity(
-                &Ur5Kinematics::six(&o.q, &wrist_q),
-                &Ur5Kinematics::six(&o.qd, &[0.0; 3]),
+                &UrKinematics::six(&o.q, &wrist_q),
+                &UrKinematics::six(&o.qd, &[0.0; 3]),
             );
             worst_p = worst_p.max((Vector3::from(p) - Vector3::from(o.ee_pos)).norm());
             worst_v = worst_v.max((Vector3::from(v) - Vector3::from(o.ee_vel)).norm());

@@ -4,6 +4,7 @@
 
 use ur5_shared::config::TaskConfig;
 use ur5_shared::layout::DX;
+use ur5_shared::UrModel;
 
 use crate::ImitationError;
 
@@ -14,6 +15,9 @@ pub struct Demos {
     pub states: Vec<f64>,
     /// Actions (diagnostics only; imitation never reads them), (D, T, dU) row-major.
     pub actions: Vec<f64>,
+    /// The arm model the demonstrations were made on (docs/ur.md, "Arm models"); files
+    /// without one were made on the UR5.
+    pub model: UrModel,
     /// Number of demonstrations D.
     pub count: usize,
     /// Horizon T.

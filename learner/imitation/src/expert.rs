@@ -479,6 +479,7 @@ pub fn record_demos(
     Ok(Demos {
         states,
         actions,
+        model: cfg.sim.model,
         count: cfg.demos,
         horizon: task.horizon,
         goal: task.goal,

@@ -142,6 +142,7 @@ fn demos_file(
     manifest::claim(&out, m, Claim::New { force: args.force })?;
     let ecfg = imitation::expert::ExpertConfig {
         seed,
+        task: ur5_shared::config::TaskConfig::for_model(sim.model),
         sim: sim.clone(),
         ..Default::default()
     };

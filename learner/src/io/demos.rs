@@ -11,6 +11,7 @@
 //! | `seed` | () u64 | seed of the run that recorded them |
 //! | `cost_random`, `cost_expert` | () f64 | mean task cost of the random policy / of these demos |
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
+//! | `model` | (1,) str | the arm model they were made on (`"ur5e"`; absent: `"ur5"`) |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
 //! Loading checks every shape, the dimensions and layout, and that every number is finite,
@@ -43,6 +44,7 @@ pub fn save(demos: &Demos, path: &Path) -> Result<(), NpzError> {
     w.f64("cost_expert", &[], &[d.cost_expert])?;
     w.strings("state_names", &STATE_NAMES)?;
     w.strings("action_names", &ACTION_NAMES)?;
+    w.string("model", d.model.name())?;
     w.finish()?;
     Ok(())
 }
@@ -82,7 +84,16 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
     let vec3 = |name: &str| -> Result<[f64; 3], NpzError> {
         Ok(f.f64_shaped(name, &[3])?.try_into().expect("3"))
     };
+    // Files written before demonstrations carried a model were all made on the UR5.
+    let model = if f.names().iter().any(|n| n == "model") {
+        let name = f.string("model")?;
+        name.parse::<ur5_shared::UrModel>()
+            .map_err(|e| bad("model", e.to_string()))?
+    } else {
+        ur5_shared::UrModel::Ur5
+    };
     let demos = Demos {
+        model,
         count: d as usize,
         horizon: t as usize,
         goal: vec3("goal")?,
@@ -131,6 +142,16 @@ pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow:
         load(path).map_err(anyhow::Error::from)
     }
     .with_context(|| format!("loading demonstrations {}", path.display()))?;
+    anyhow::ensure!(
+        demos.model == sim.model,
+        "demonstrations {} were made on a {}, the config's arm is a {}: set `model = \"{}\"` in \
+         the config's [sim] table (or give demonstrations made on a {})",
+        path.display(),
+        demos.model,
+        sim.model,
+        demos.model,
+        sim.model
+    );
     check_against_arm(&demos, sim).with_context(|| format!("demonstrations {}", path.display()))?;
     Ok(demos)
 }
@@ -224,6 +245,7 @@ mod tests {
             actions: (0..d * t * DU).map(|i| -(i as f64)).collect(),
             count: d,
             horizon: t,
+            model: ur5_shared::UrModel::Ur5,
             goal: [-0.4, -0.2, 0.3],
             start_q: [0.0, -2.0, 2.4],
             dt: 0.1,
@@ -231,6 +253,65 @@ mod tests {
             cost_random: 20.0,
             cost_expert: 3.0,
         }
+    }
+
+    #[test]
+    fn the_model_is_recorded_old_files_mean_the_ur5_and_another_arm_is_refused() {
+        use ur5_shared::UrModel;
+        let dir = std::env::temp_dir().join(format!("demos-model-{}", std::process::id()));
+        let path = dir.join("demos.npz");
+        let d = Demos {
+            model: UrModel::Ur5e,
+            ..sample()
+        };
+        save(&d, &path).unwrap();
+        assert_eq!(load(&path).unwrap().model, UrModel::Ur5e);
+        let e = format!(
+            "{:#}",
+            load_checked(&path, &Default::default()).unwrap_err()
+        );
+        assert!(
+            e.contains("made on a ur5e") && e.contains("arm is a ur5") && e.contains("[sim]"),
+            "{e}"
+        );
+
+        // A file written before demonstrations carried a model: every array but `model`.
+        let s = sample();
+        let (n, t) = (s.count as u64, s.horizon as u64);
+        let mut w = NpzWriter::create(&path).unwrap();
+        w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
+        w.f64("states", &[n, t, DX as u64], &s.states).unwrap();
+        w.f64("actions_diagnostic", &[n, t, DU as u64], &s.actions)
+            .unwrap();
+        w.f64("goal", &[3], &s.goal).unwrap();
+        w.f64("start_q", &[3], &s.start_q).unwrap();
+        w.f64("dt", &[], &[s.dt]).unwrap();
+        w.u64("seed", &[], &[s.seed]).unwrap();
+        w.f64("cost_random", &[], &[s.cost_random]).unwrap();
+        w.f64("cost_expert", &[], &[s.cost_expert]).unwrap();
+        w.strings("state_names", &STATE_NAMES).unwrap();
+        w.strings("action_names", &ACTION_NAMES).unwrap();
+        w.finish().unwrap();
+        assert_eq!(load(&path).unwrap(), s, "no model: the UR5");
+
+        let mut w = NpzWriter::create(&path).unwrap();
+        w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
+        w.strings("state_names", &STATE_NAMES).unwrap();
+        w.f64("states", &[n, t, DX as u64], &s.states).unwrap();
+        w.f64("actions_diagnostic", &[n, t, DU as u64], &s.actions)
+            .unwrap();
+        w.string("model", "ur7").unwrap();
+        for name in ["goal", "start_q"] {
+            w.f64(name, &[3], &[0.0; 3]).unwrap();
+        }
+        for name in ["dt", "cost_random", "cost_expert"] {
+            w.f64(name, &[], &[1.0]).unwrap();
+        }
+        w.u64("seed", &[], &[1]).unwrap();
+        w.finish().unwrap();
+        let e = load(&path).unwrap_err().to_string();
+        assert!(e.contains("model") && e.contains("ur7"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -267,6 +267,8 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
     Ok(Demos {
         states: traj.states,
         actions,
+        // Checked against this arm by `load_checked`; the formats carry no model.
+        model: sim.model,
         count: traj.count,
         horizon: traj.horizon,
         goal,

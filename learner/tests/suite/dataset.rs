@@ -47,6 +47,7 @@ fn synthetic() -> Demos {
             .map(|i| (i as f64).sqrt() * 0.1 - 0.7)
             .collect(),
         actions: (0..d * t * 3).map(|i| i as f64 * 1e-3).collect(),
+        model: ur5_shared::UrModel::Ur5,
         count: d,
         horizon: t,
         goal: [-0.4, -0.2, 0.3],

@@ -255,6 +255,7 @@ fn fake_demos(task: &TaskConfig) -> Demos {
     Demos {
         states: eps.iter().flat_map(|e| e.x.iter().copied()).collect(),
         actions: eps.iter().flat_map(|e| e.u.iter().copied()).collect(),
+        model: ur5_shared::UrModel::Ur5,
         count: 2,
         horizon: task.horizon,
         goal: task.goal,

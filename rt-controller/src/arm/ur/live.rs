@@ -14,7 +14,7 @@ use ur_protocol::{FrameDecoder, OutputRecipe, RobotMessage, RobotState};
 use serde::Serialize;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ArmLimits;
-use ur5_shared::kinematics::{Joints6, Ur5Kinematics};
+use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind};
 use ur_protocol::state::runtime_state;
@@ -118,7 +118,7 @@ struct Live {
     protocol: Protocol,
     recipe: OutputRecipe,
     robot: RobotState,
-    kin: Ur5Kinematics,
+    kin: UrKinematics,
     /// Arm cycle (s).
     cycle_s: f64,
     /// Control period (s of arm time).
@@ -241,7 +241,7 @@ impl UrArm {
 impl ArmBackend for UrArm {
     fn wait_ready(&mut self, timeout_s: f64) -> Result<ArmState, SetupError> {
         let r = UrRtde::connect(&self.cfg, Duration::from_secs_f64(timeout_s))?;
-        let kin = Ur5Kinematics::ur5(self.cfg.ee_offset);
+        let kin = UrKinematics::new(self.cfg.model, self.cfg.ee_offset);
         let s = state_from(&kin, r.state(), 0, 0, 0, ArmStatus::READY);
         self.rtde = Some(r);
         Ok(s)
@@ -269,7 +269,7 @@ impl ArmBackend for UrArm {
             protocol: session.protocol,
             recipe: session.recipe,
             robot: session.state,
-            kin: Ur5Kinematics::ur5(self.cfg.ee_offset),
+            kin: UrKinematics::new(self.cfg.model, self.cfg.ee_offset),
             cycle_s: session.cycle_s,
             period_s: self.period_s,
             motion: Motion::Servo,
@@ -339,7 +339,7 @@ impl ArmBackend for UrArm {
 /// end-effector point and velocity from all six measured joints (`ur5_shared::kinematics`).
 /// No fault bits: [`Live::emit`] sets `DRIVER` from the modes [`Live::on_package`] checked.
 fn state_from(
-    kin: &Ur5Kinematics,
+    kin: &UrKinematics,
     r: &RobotState,
     seq: u64,
     last_command_seq: u64,
@@ -553,18 +553,18 @@ impl Live {
         self.last_command_seq = cmd.seq;
         self.episode = cmd.episode;
         let here = self.robot.actual_q;
-        let hold_here = Ur5Kinematics::six(&[here[0], here[1], here[2]], &cfg.wrist_q);
+        let hold_here = UrKinematics::six(&[here[0], here[1], here[2]], &cfg.wrist_q);
         let in_limits = |q: &[f64; N_JOINTS]| {
             (0..N_JOINTS)
                 .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
         };
         let (goal, ok) = match cmd.kind() {
             Ok(CommandKind::GoalAngles) if in_limits(&cmd.values) => {
-                (Ur5Kinematics::six(&cmd.values, &cfg.wrist_q), true)
+                (UrKinematics::six(&cmd.values, &cfg.wrist_q), true)
             }
             Ok(CommandKind::Hold) => (hold_here, true),
             Ok(CommandKind::Reset) if in_limits(&cmd.reset_pose) => {
-                let to = Ur5Kinematics::six(&cmd.reset_pose, &cfg.wrist_q);
+                let to = UrKinematics::six(&cmd.reset_pose, &cfg.wrist_q);
                 match &mut self.motion {
                     // The same reset again (the controller's retry): it goes on.
                     Motion::Reset { to: t, seq, .. } if *t == to => *seq = cmd.seq,
