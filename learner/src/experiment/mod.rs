@@ -743,17 +743,7 @@ pub fn run_sharded(
     let total = jobs.len();
     let (indices, jobs) = shard::select(shard, jobs);
     // What makes the runs of one experiment (shards merge only with shards of the same).
-    let settings_hash = {
-        let mut v = serde_json::to_value(cfg)?;
-        if let Some(m) = v.as_object_mut() {
-            m.remove("threads");
-        }
-        let demos_hash = match demos {
-            Some(p) => crate::io::manifest::demos_hash(p)?,
-            None => "-".into(),
-        };
-        crate::io::files::fnv1a64(format!("{v}|{demos_hash}").as_bytes())
-    };
+    let settings_hash = shard::settings_hash(cfg, demos)?;
     if let (Some(s), true) = (shard, jobs.is_empty()) {
         // More shards than jobs: a valid part with nothing to do.
         crate::io::create_dir(out)?;

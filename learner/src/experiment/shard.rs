@@ -97,6 +97,22 @@ pub struct RunMeta {
 /// File name of a shard's notes.
 pub const SHARD_FILE: &str = "shard.json";
 
+/// [`ShardMeta::settings_hash`] of an experiment's settings `cfg` and its demonstrations'
+/// file (`None`: recorded by the experiment itself, from its settings).
+pub fn settings_hash(cfg: &impl Serialize, demos: Option<&Path>) -> anyhow::Result<String> {
+    let mut v = serde_json::to_value(cfg)?;
+    if let Some(m) = v.as_object_mut() {
+        m.remove("threads");
+    }
+    let demos_hash = match demos {
+        Some(p) => crate::io::manifest::demos_hash(p)?,
+        None => "-".into(),
+    };
+    Ok(crate::io::files::fnv1a64(
+        format!("{v}|{demos_hash}").as_bytes(),
+    ))
+}
+
 /// Writes `out/shard.json` for the runs of `shard` (jobs `indices` of `jobs_total`) of the
 /// experiment whose settings hash to `settings_hash` ([`ShardMeta::settings_hash`]).
 #[allow(clippy::too_many_arguments)]
