@@ -84,11 +84,8 @@ impl ServeConfig {
     /// Checks ranges; the message names the key and the allowed range.
     pub fn validate(&self, sim: &SimConfig) -> Result<(), ConfigError> {
         let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
-        if !(self.time_compression.is_finite() && self.time_compression >= 1.0) {
-            return bad(
-                "serve.time_compression",
-                format!("{} must be finite and >= 1", self.time_compression),
-            );
+        if let Err(why) = ur5_shared::config::check_time_compression(self.time_compression) {
+            return bad("serve.time_compression", why);
         }
         let ratio = self.state_period_s / sim.physics_dt;
         if !(self.state_period_s > 0.0

@@ -110,6 +110,13 @@ pub struct ReplayReport {
     pub note: Option<String>,
     /// The first difference (`None`: the replay equals the run bit for bit).
     pub difference: Option<Difference>,
+    /// Files of the run's record (`files.jsonl`, [`crate::io::files`]) found complete and
+    /// unaltered before the replay; `None` for a run of a build without that record (then a
+    /// missing or altered file cannot be told, and only what is there is compared).
+    pub files_verified: Option<usize>,
+    /// The recorded files compared (tables, critics, policies).
+    #[serde(skip)]
+    pub compared: BTreeSet<PathBuf>,
 }
 
 impl ReplayReport {
@@ -129,6 +136,41 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
             manifest::MANIFEST
         )
     })?;
+    if let Some(s) = m.settings.as_ref().and_then(|s| s.get("seed")) {
+        anyhow::ensure!(
+            s.as_u64() == Some(m.seed),
+            "{}: seed {} but settings.seed {s}: the run's manifest was altered (a run has one \
+             seed)",
+            dir.join(manifest::MANIFEST).display(),
+            m.seed
+        );
+    }
+    let record = crate::io::files::verify(dir)?;
+    match (&record, &m.files) {
+        (None, Some(name)) => anyhow::bail!(
+            "{} has no {name}, the record of its files that its {} says the run kept: without \
+             it a replay cannot tell which files are missing or altered; restore it (or the run)",
+            dir.display(),
+            manifest::MANIFEST
+        ),
+        (Some(v), _) if !v.problems.is_empty() => {
+            let shown: Vec<String> = v.problems.iter().take(4).map(|p| p.to_string()).collect();
+            anyhow::bail!(
+                "{}: {} of the run's files are not as its record {} says: {}{}; a replay of \
+                 what is left would check only part of the run: restore the files (or the run)",
+                dir.display(),
+                v.problems.len(),
+                crate::io::files::FILES,
+                shown.join(", "),
+                if v.problems.len() > shown.len() {
+                    format!(" and {} more", v.problems.len() - shown.len())
+                } else {
+                    String::new()
+                }
+            )
+        }
+        _ => {}
+    }
     let folder = dir.join("episodes");
     let episodes = recorded_episodes(&folder)?;
     anyhow::ensure!(
@@ -137,6 +179,28 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
          records every episode, `learner train` only with --record-episodes",
         dir.display()
     );
+    // A non-finite value would surface deep in the dynamics fit (a covariance that is not
+    // positive definite); name the file, step and state instead.
+    for (path, ep, _) in &episodes {
+        let dx = ur5_shared::layout::DX;
+        if let Some(k) = ep.x.iter().position(|v| !v.is_finite()) {
+            anyhow::bail!(
+                "{}: step {}: {} = {}: a recorded episode's states must be finite",
+                path.display(),
+                k / dx,
+                ur5_shared::layout::STATE_NAMES[k % dx],
+                ep.x[k]
+            );
+        }
+        if let Some(k) = ep.u.iter().position(|v| !v.is_finite()) {
+            anyhow::bail!(
+                "{}: action {} = {}: a recorded episode's actions must be finite",
+                path.display(),
+                k,
+                ep.u[k]
+            );
+        }
+    }
     let events = read_events(&folder)?;
     if let Some(LearnedEvent::Resumed { iteration, .. }) = events.iter().flatten().find(|e| {
         matches!(
@@ -183,7 +247,20 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
                 .to_string()
         }),
         difference: None,
+        files_verified: record.as_ref().map(|v| v.files.len()),
+        compared: BTreeSet::new(),
     };
+    if record.is_none() {
+        let old = format!(
+            "this run has no {} (a build before 2026-12-03): a missing or altered file cannot \
+             be told, so only the files found are compared",
+            crate::io::files::FILES
+        );
+        report.note = Some(match report.note.take() {
+            Some(n) => format!("{n}; {old}"),
+            None => old,
+        });
+    }
     let picks = Picks::new(&folder, &episodes, events.as_deref());
     match m.algo.as_str() {
         "lqr-gaifo" => {
@@ -235,6 +312,46 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
             "{}: a replay redoes runs of lqr-gaifo, expert and gaifo-ppo, not {other}",
             dir.display()
         ),
+    }
+    if let (Some(v), None) = (&record, &report.difference) {
+        let compared: BTreeSet<String> = report
+            .compared
+            .iter()
+            .map(|p| {
+                p.strip_prefix(dir)
+                    .unwrap_or(p)
+                    .to_string_lossy()
+                    .replace('\\', "/")
+            })
+            .collect();
+        let missed: Vec<&String> = v
+            .files
+            .iter()
+            .filter(|f| {
+                let checkpoint = f.starts_with("iter_")
+                    && ["_table.npz", "_critic.json", "_policy.json"]
+                        .iter()
+                        .any(|s| f.ends_with(s));
+                (checkpoint || f.starts_with("tables/")) && !compared.contains(*f)
+            })
+            .collect();
+        anyhow::ensure!(
+            missed.is_empty(),
+            "{}: the replay ended after {} iterations, before {} recorded checkpoint file(s) \
+             of the run ({}{}): the episodes it learns from (episodes/, {}) do not carry it \
+             that far",
+            dir.display(),
+            report.iterations,
+            missed.len(),
+            missed
+                .iter()
+                .take(3)
+                .map(|s| s.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            if missed.len() > 3 { ", …" } else { "" },
+            crate::io::learned::LEARNED
+        );
     }
     Ok(report)
 }
@@ -549,6 +666,7 @@ fn tables<L: LinGaussLearn>(
     for f in files {
         let stored = load_stored(&f).with_context(|| format!("reading {}", f.display()))?;
         report.tables_checked += 1;
+        report.compared.insert(f.clone());
         if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, &table) {
             return Ok(Checked::Differs((f, array, index, rec, rep)));
         }
@@ -582,6 +700,7 @@ fn checkpoint_files<L: Checkpoint>(
         let file = dir.join(name(kind));
         let rec = std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
         let rep = std::fs::read(tmp.0.join(name(kind)))?;
+        report.compared.insert(file.clone());
         match kind {
             "policy.json" => report.policies_checked += 1,
             _ => report.critics_checked += 1,

@@ -22,7 +22,6 @@ use crate::arm::SimArm;
 use crate::io::checkpoint::{load_state, save_state};
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
-use crate::io::npz::NpzError;
 use crate::io::table::save_table;
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
@@ -196,6 +195,7 @@ pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
             crate::io::create_dir(dir)?;
             let f = open_log(&dir.join("gaifo_log.csv"), None)?;
             run.checkpoint(dir, Some(arm))?;
+            crate::io::files::note_checkpoint(dir, run.iteration())?;
             Some((f, dir))
         }
         None => None,
@@ -225,7 +225,8 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
     for _ in 0..iterations {
         let (version, n) = (run.version(), run.samples() as u64);
         let (seed, task) = (run.seed(), run.task().clone());
-        let mut recorded: Result<(), NpzError> = Ok(());
+        let mut recorded: anyhow::Result<()> = Ok(());
+        let run_dir = csv.as_ref().map(|(_, d)| d.to_path_buf());
         let (log, _) = iterate_observed(run, arm, &mut |noisy, eval| {
             let Some(rec) = recorder.as_mut() else { return };
             // Numbered as a controller started with version 1 numbers its episodes.
@@ -237,7 +238,13 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
                     seed,
                 };
                 if recorded.is_ok() {
-                    recorded = rec.record(ep, &origin, &task).map(|_| ());
+                    recorded = rec
+                        .record(ep, &origin, &task)
+                        .map_err(anyhow::Error::from)
+                        .and_then(|p| match &run_dir {
+                            Some(d) => crate::io::files::note(d, &[&p]),
+                            None => Ok(()),
+                        });
                 }
             }
         })?;
@@ -247,6 +254,7 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
             write_csv_row(f, &log, run.seed(), R::ALGO)?;
             f.flush()?;
             run.checkpoint(dir, Some(arm))?;
+            crate::io::files::note_checkpoint(dir, run.iteration())?;
         }
         logs.push(log);
     }

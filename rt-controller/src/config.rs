@@ -368,26 +368,17 @@ impl Default for ControllerConfig {
     }
 }
 
-/// Control rates the loop supports (Hz).
-pub const RATE_RANGE_HZ: (f64, f64) = (10.0, 1000.0);
+/// Control rates the loop supports (Hz): the project's ([`ur5_shared::config::RATE_RANGE_HZ`]).
+pub use ur5_shared::config::RATE_RANGE_HZ;
 
 impl ControllerConfig {
     /// Checks ranges; the message names the key and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
+        // The rate bound (task.dt) is the task's own check.
         self.task.validate()?;
-        let rate = 1.0 / self.task.dt;
-        if !(rate >= RATE_RANGE_HZ.0 * (1.0 - 1e-9) && rate <= RATE_RANGE_HZ.1 * (1.0 + 1e-9)) {
-            return bad(
-                "task.dt",
-                format!("{} s is a control rate of {rate} Hz; the loop supports 10 Hz to 1 kHz (dt 0.001 to 0.1 s)", self.task.dt),
-            );
-        }
-        if !(self.time_compression.is_finite() && self.time_compression >= 1.0) {
-            return bad(
-                "time_compression",
-                format!("{} must be finite and >= 1", self.time_compression),
-            );
+        if let Err(why) = ur5_shared::config::check_time_compression(self.time_compression) {
+            return bad("time_compression", why);
         }
         if self.noisy_episodes + self.eval_episodes == 0 {
             return bad(

@@ -241,6 +241,56 @@ impl Default for TaskConfig {
     }
 }
 
+/// Control rates (Hz) the project supports, the controller's loop and the learner alike:
+/// 10 Hz (the paper's 0.1 s period) to 1 kHz (the simulated arm's physics step). A period
+/// outside them is an input error (a time column in ms, an `fps` of 1e-300), refused before it
+/// can ask for hours of simulation or a loop that cannot keep up.
+pub const RATE_RANGE_HZ: (f64, f64) = (10.0, 1000.0);
+
+/// Checks a control period `dt` (s) against [`RATE_RANGE_HZ`] (dt 0.001 to 0.1 s, with a
+/// relative tolerance of 1e-9 for periods written as 1 / rate); the message gives the rate.
+pub fn check_dt(dt: f64) -> Result<(), String> {
+    let rate = 1.0 / dt;
+    if dt.is_finite()
+        && dt > 0.0
+        && rate >= RATE_RANGE_HZ.0 * (1.0 - 1e-9)
+        && rate <= RATE_RANGE_HZ.1 * (1.0 + 1e-9)
+    {
+        Ok(())
+    } else {
+        // Shortest decimals for ordinary values, exponents for absurd ones (1e300, not 301 digits).
+        let show = |x: f64| {
+            if x != 0.0 && (x.abs() >= 1e6 || x.abs() < 1e-6) {
+                format!("{x:e}")
+            } else {
+                format!("{x}")
+            }
+        };
+        Err(format!(
+            "{} s is a control rate of {} Hz; supported are 10 Hz to 1 kHz (dt 0.001 to 0.1 s)",
+            show(dt),
+            show(rate)
+        ))
+    }
+}
+
+/// Real-time speed-ups (`time_compression`) the simulated arms and the controller accept:
+/// 1 (real time) to 1000 (a 2 ms arm cycle every 2 µs of wall time; beyond it the deadlines
+/// are below what the OS can keep, and 1e308 would be a busy loop).
+pub const TIME_COMPRESSION_RANGE: (f64, f64) = (1.0, 1000.0);
+
+/// Checks `time_compression` against [`TIME_COMPRESSION_RANGE`].
+pub fn check_time_compression(c: f64) -> Result<(), String> {
+    if c.is_finite() && c >= TIME_COMPRESSION_RANGE.0 && c <= TIME_COMPRESSION_RANGE.1 {
+        Ok(())
+    } else {
+        Err(format!(
+            "{c} must be in {} to {} (real time to 1000 times faster)",
+            TIME_COMPRESSION_RANGE.0, TIME_COMPRESSION_RANGE.1
+        ))
+    }
+}
+
 impl TaskConfig {
     /// The keys whose defaults depend on the arm model (see [`from_toml_str`]).
     pub const MODEL_KEYS: [&'static str; 2] = ["start_q", "goal"];
@@ -257,12 +307,10 @@ impl TaskConfig {
 
     /// Checks ranges; the message names the key and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(ConfigError::Invalid {
-                key: "task.dt",
-                why: format!("{} s must be finite and > 0", self.dt),
-            });
-        }
+        check_dt(self.dt).map_err(|why| ConfigError::Invalid {
+            key: "task.dt",
+            why,
+        })?;
         if self.horizon == 0 || self.horizon > crate::layout::MAX_HORIZON {
             return Err(ConfigError::Invalid {
                 key: "task.horizon",

@@ -166,8 +166,8 @@ pub enum UrSimError {
     #[error("ur-sim needs sim.mode = \"goal_angles\" (servoj drives the position servo)")]
     TorqueMode,
     /// Bad time compression.
-    #[error("time_compression {0} must be finite and >= 1")]
-    TimeCompression(f64),
+    #[error("time_compression {0}")]
+    TimeCompression(String),
 }
 
 /// What a run did.
@@ -390,9 +390,8 @@ pub fn spawn(
     if sim_cfg.mode != ActionMode::GoalAngles {
         return Err(UrSimError::TorqueMode);
     }
-    if !(cfg.time_compression.is_finite() && cfg.time_compression >= 1.0) {
-        return Err(UrSimError::TimeCompression(cfg.time_compression));
-    }
+    ur5_shared::config::check_time_compression(cfg.time_compression)
+        .map_err(UrSimError::TimeCompression)?;
     let dt = cfg.series.cycle_s();
     let sim = Ur5Sim::new(sim_cfg.clone(), dt)?;
     let arm = Arm::new(sim, task.start_q, task.goal, dt)?;

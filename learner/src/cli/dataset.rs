@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
 
 use crate::io::foreign;
@@ -75,8 +76,69 @@ fn read_input(input: &Path) -> anyhow::Result<Trajectories> {
     foreign::from_episodes(input)
 }
 
+/// `path` made absolute with its symbolic links resolved, also when it does not exist yet
+/// (its nearest existing ancestor resolved, the rest appended).
+fn resolved(path: &Path) -> std::path::PathBuf {
+    let mut rest = Vec::new();
+    let mut p = path.to_path_buf();
+    loop {
+        if let Ok(c) = p.canonicalize() {
+            return rest.into_iter().rev().fold(c, |acc, n| acc.join(n));
+        }
+        match (p.file_name().map(|n| n.to_owned()), p.parent()) {
+            (Some(n), Some(parent)) => {
+                rest.push(n);
+                p = if parent.as_os_str().is_empty() {
+                    std::path::PathBuf::from(".")
+                } else {
+                    parent.to_path_buf()
+                };
+            }
+            _ => return path.to_path_buf(),
+        }
+    }
+}
+
+/// An export never overwrites its input or a file inside it (`dataset export --format csv X X`,
+/// `--format mcap RUN RUN/run.json`), and a LeRobot export goes into a new or empty folder:
+/// data files of an older dataset left beside the new `meta/info.json` would be read back with
+/// it (docs/reliability.md).
+fn check_export_target(input: &Path, out: &Path, format: Format) -> anyhow::Result<()> {
+    let (i, o) = (resolved(input), resolved(out));
+    anyhow::ensure!(
+        !(o == i || (o.starts_with(&i) && o.exists()) || i.starts_with(&o)),
+        "the export {} would overwrite its input {} (or a file in it): write it elsewhere",
+        out.display(),
+        input.display()
+    );
+    if format == Format::Lerobot && out.is_dir() {
+        let mut entries = std::fs::read_dir(out)
+            .with_context(|| format!("reading {}", out.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()));
+        if let Some(first) = entries.next() {
+            anyhow::bail!(
+                "{} already holds files (e.g. {}): a LeRobot export goes into a new or empty \
+                 folder, so that no older data file is read back with the new dataset; delete \
+                 it or choose another folder",
+                out.display(),
+                first.display()
+            );
+        }
+    }
+    anyhow::ensure!(
+        format == Format::Lerobot || !out.is_dir(),
+        "{} is a folder: a {} export is one file",
+        out.display(),
+        if format == Format::Csv { "CSV" } else { "MCAP" }
+    );
+    Ok(())
+}
+
 /// Runs `learner dataset …`.
 pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
+    if let DatasetCmd::Export(a) = &cmd {
+        check_export_target(&a.input, &a.out, a.format)?;
+    }
     match cmd {
         DatasetCmd::Export(a) if a.format == Format::Mcap => {
             let c = crate::io::run_mcap::write_run_mcap(&a.input, &a.out)?;

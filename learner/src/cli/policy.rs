@@ -166,6 +166,12 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
     };
     task.validate()
         .with_context(|| format!("--goal {:?} / --steps {}", args.goal, task.horizon))?;
+    // The task cost sums over steps 1..T (its distance term is normalised by T − 1).
+    anyhow::ensure!(
+        task.horizon >= 2,
+        "--steps {}: an episode needs at least 2 steps (its task cost is undefined for 1)",
+        task.horizon
+    );
     let sim = SimConfig {
         mode: file.mode,
         ..SimConfig::default()
@@ -178,6 +184,13 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
         &mut GlobalActor::new(&file.policy, &mut ws),
         None,
     )?;
+    anyhow::ensure!(
+        ep.task_cost().is_finite() && ep.final_distance().is_finite(),
+        "the episode of {} ended with task cost {} and final distance {} m: not finite",
+        args.policy.display(),
+        ep.task_cost(),
+        ep.final_distance()
+    );
     Ok(EvalSummary {
         policy: args.policy.clone(),
         goal: args.goal,

@@ -55,7 +55,16 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
                 "no recorded checkpoint to compare in {}",
                 r.run.display()
             );
-            eprintln!("equal: every recorded table is the replay's, bit for bit");
+            match r.files_verified {
+                Some(n) => eprintln!(
+                    "equal: every recorded table is the replay's, bit for bit; all {n} files \
+                     of the run's record present and unaltered"
+                ),
+                None => eprintln!(
+                    "equal as far as found: every table found is the replay's, bit for bit \
+                     (no record of the run's files: a missing one cannot be told)"
+                ),
+            }
             Ok(())
         }
         Some(d) => anyhow::bail!(

@@ -222,6 +222,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         },
     };
     manifest::claim(&out, &m, claim)?;
+    if claim == Claim::Resume {
+        crate::io::files::adopt(&out)?;
+    }
     if args.record_episodes {
         // `run::train` records into it because it is there.
         crate::io::create_dir(out.join("episodes"))?;

@@ -434,11 +434,22 @@ impl Job {
 
 /// A rayon pool of `threads` workers (0 = one per core).
 pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
+    anyhow::ensure!(
+        threads <= MAX_THREADS,
+        "--threads {threads}: must be 0 (one per core) to {MAX_THREADS}; this machine has {} \
+         cores",
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .context("building the worker pool")
 }
+
+/// Most worker threads a pool may have (`--threads`, `threads`): far above any core count we
+/// run on, low enough that a typo (100000) is refused at once instead of spawning threads
+/// for minutes.
+pub const MAX_THREADS: usize = 1024;
 
 /// Runs every job on `pool`, printing one line per finished job; results in job order.
 pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Run>> {
@@ -731,10 +742,43 @@ pub fn run_sharded(
     };
     let total = jobs.len();
     let (indices, jobs) = shard::select(shard, jobs);
+    // What makes the runs of one experiment (shards merge only with shards of the same).
+    let settings_hash = shard::settings_hash(cfg, demos)?;
+    if let (Some(s), true) = (shard, jobs.is_empty()) {
+        // More shards than jobs: a valid part with nothing to do.
+        crate::io::create_dir(out)?;
+        shard::write_meta(
+            out,
+            name.as_str(),
+            &title,
+            s,
+            total,
+            &[],
+            &[],
+            settings_hash,
+        )?;
+        eprintln!(
+            "experiment {}: shard {}/{} of {total} jobs holds none of them: nothing to do ({})",
+            name.as_str(),
+            s.k,
+            s.n,
+            out.join(shard::SHARD_FILE).display()
+        );
+        return Ok((Vec::new(), Vec::new()));
+    }
     let runs = run_jobs(&pool, &jobs)?;
     let rows = write_outputs(name.as_str(), &title, &runs, out)?;
     if let Some(s) = shard {
-        shard::write_meta(out, name.as_str(), &title, s, total, &indices, &runs)?;
+        shard::write_meta(
+            out,
+            name.as_str(),
+            &title,
+            s,
+            total,
+            &indices,
+            &runs,
+            settings_hash,
+        )?;
     }
     eprint!("{}", summary_text(&rows));
     eprintln!(

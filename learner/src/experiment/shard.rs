@@ -69,6 +69,11 @@ pub struct ShardMeta {
     pub jobs_total: usize,
     /// Per run of this shard, in its CSV's order.
     pub runs: Vec<RunMeta>,
+    /// FNV-1a 64 of the experiment's settings (seeds, iterations and every learner setting;
+    /// not `threads`) and of its demonstrations' bytes: shards of one experiment run share
+    /// it; absent in shards of builds before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings_hash: Option<String>,
 }
 
 /// What the CSV does not hold of a [`Run`].
@@ -83,12 +88,34 @@ pub struct RunMeta {
     pub episodes_per_iteration: usize,
     pub horizon: usize,
     pub wall_s: f64,
+    /// Rows the run wrote into the shard's CSV (its iterations); absent in shards of builds
+    /// before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
 }
 
 /// File name of a shard's notes.
 pub const SHARD_FILE: &str = "shard.json";
 
-/// Writes `out/shard.json` for the runs of `shard` (jobs `indices` of `jobs_total`).
+/// [`ShardMeta::settings_hash`] of an experiment's settings `cfg` and its demonstrations'
+/// file (`None`: recorded by the experiment itself, from its settings).
+pub fn settings_hash(cfg: &impl Serialize, demos: Option<&Path>) -> anyhow::Result<String> {
+    let mut v = serde_json::to_value(cfg)?;
+    if let Some(m) = v.as_object_mut() {
+        m.remove("threads");
+    }
+    let demos_hash = match demos {
+        Some(p) => crate::io::manifest::demos_hash(p)?,
+        None => "-".into(),
+    };
+    Ok(crate::io::files::fnv1a64(
+        format!("{v}|{demos_hash}").as_bytes(),
+    ))
+}
+
+/// Writes `out/shard.json` for the runs of `shard` (jobs `indices` of `jobs_total`) of the
+/// experiment whose settings hash to `settings_hash` ([`ShardMeta::settings_hash`]).
+#[allow(clippy::too_many_arguments)]
 pub fn write_meta(
     out: &Path,
     experiment: &str,
@@ -97,12 +124,14 @@ pub fn write_meta(
     jobs_total: usize,
     indices: &[usize],
     runs: &[Run],
+    settings_hash: String,
 ) -> anyhow::Result<()> {
     let meta = ShardMeta {
         experiment: experiment.into(),
         title: title.into(),
         shard,
         jobs_total,
+        settings_hash: Some(settings_hash),
         runs: indices
             .iter()
             .zip(runs)
@@ -114,6 +143,7 @@ pub fn write_meta(
                 episodes_per_iteration: r.episodes_per_iteration,
                 horizon: r.horizon,
                 wall_s: r.wall_s,
+                iterations: Some(r.logs.len()),
             })
             .collect(),
     };
@@ -180,13 +210,47 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<Summ
                 f.shard.n
             );
         }
-        let rows = read_rows(&dir.join(format!("{}.csv", meta.experiment)))?;
+        if let (Some(a), Some(b)) = (
+            &meta.settings_hash,
+            first.as_ref().and_then(|f| f.settings_hash.as_ref()),
+        ) {
+            anyhow::ensure!(
+                a == b,
+                "{}: shard {}/{} ran other settings than {} (settings hash {a} there, {b} in the \
+                 first shard): seeds, iterations, demonstrations or settings differ; merge the \
+                 shards of one experiment run",
+                dir.display(),
+                meta.shard.k,
+                meta.shard.n,
+                dirs[0].display()
+            );
+        }
+        // An empty shard (more shards than jobs) has no CSV.
+        let csv = dir.join(format!("{}.csv", meta.experiment));
+        let rows = if meta.runs.is_empty() {
+            Vec::new()
+        } else {
+            read_rows(&csv)?
+        };
         for m in &meta.runs {
-            let logs = rows
+            let logs: Vec<_> = rows
                 .iter()
                 .filter(|(v, r)| *v == m.variant && r.seed == m.seed && r.algorithm == m.algorithm)
                 .map(|(_, r)| r.log())
                 .collect();
+            anyhow::ensure!(
+                !logs.is_empty() && m.iterations.is_none_or(|n| n == logs.len()),
+                "{}: {} rows for {} seed {} ({}), {} says {}: the CSV lost rows; run the shard \
+                 again",
+                csv.display(),
+                logs.len(),
+                m.variant,
+                m.seed,
+                m.algorithm,
+                SHARD_FILE,
+                m.iterations
+                    .map_or("it ran".to_string(), |n| format!("{n} iterations"))
+            );
             all.push((
                 m.job,
                 Run {

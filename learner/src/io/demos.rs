@@ -174,13 +174,17 @@ pub const SPEED_LIMIT_FACTOR: f64 = 2.0;
 /// demonstration, the step and the value.
 pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
     use ur5_shared::layout::{EE_MINUS_GOAL, Q, QD};
+    ur5_shared::config::check_dt(d.dt).map_err(|why| anyhow::anyhow!("dt: {why}"))?;
     anyhow::ensure!(
-        d.cost_random.is_finite() && d.cost_expert.is_finite() && d.cost_expert != d.cost_random,
-        "cost_expert = {} and cost_random = {}: both must be finite and differ, or normalised \
-         performance (C_random − C) / (C_random − C_expert) is undefined",
+        d.cost_random.is_finite() && d.cost_expert.is_finite() && d.cost_expert < d.cost_random,
+        "cost_expert = {} and cost_random = {}: both must be finite and the expert's below the \
+         random policy's, or normalised performance (C_random − C) / (C_random − C_expert) \
+         does not measure imitation (it would exceed 1 for a policy worse than the expert)",
         d.cost_expert,
         d.cost_random
     );
+    check_finite(d)?;
+    check_period(d)?;
     let mut arm = hil_sim::Ur5Sim::new(sim.clone(), d.dt)?;
     arm.check_goal(d.goal)?;
     let limits = arm.limits();
@@ -231,6 +235,74 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyh
             );
         }
     }
+    Ok(())
+}
+
+/// Every state and action value finite; the error names the demonstration, the step and the
+/// state's name ([`ur5_shared::layout::STATE_NAMES`]).
+fn check_finite(d: &Demos) -> anyhow::Result<()> {
+    if let Some(k) = d.states.iter().position(|v| !v.is_finite()) {
+        let (row, c) = (k / DX, k % DX);
+        anyhow::bail!(
+            "states[{}, {}]: {} = {}: every state value must be finite (demonstration {}, step {})",
+            row / d.horizon,
+            row % d.horizon,
+            STATE_NAMES[c],
+            d.states[k],
+            row / d.horizon,
+            row % d.horizon
+        );
+    }
+    if let Some(k) = d.actions.iter().position(|v| !v.is_finite()) {
+        let row = k / DU;
+        anyhow::bail!(
+            "actions[{}, {}, {}] = {}: every action value must be finite",
+            row / d.horizon,
+            row % d.horizon,
+            k % DU,
+            d.actions[k]
+        );
+    }
+    Ok(())
+}
+
+/// Range of Σ|Δq| / (dt Σ|q̇|) over all joints and steps that a demonstration's control period
+/// `dt` may give: the joint angles must move about as far per step as their recorded
+/// velocities say. Our arm's demonstrations give 1.6 (velocities sampled at the control
+/// instants, below the step's mean speed); a period 2 or more times too short (fps 20 for
+/// data at 10 Hz: 3.2, fps 1000: 160) or 3 or more times too long is refused. A period off by
+/// less (fps 5 for 10 Hz: 0.8) is not told apart from the arm's own dynamics this way.
+pub const PERIOD_CONSISTENCY: (f64, f64) = (0.5, 3.0);
+
+/// The control period `dt` consistent with the recorded joint velocities
+/// ([`PERIOD_CONSISTENCY`]); skipped for demonstrations that barely move (Σ|q̇| dt < 1e-3
+/// rad, nothing to tell from).
+fn check_period(d: &Demos) -> anyhow::Result<()> {
+    use ur5_shared::layout::{Q, QD};
+    let (mut moved, mut said) = (0.0, 0.0);
+    for i in 0..d.count {
+        for t in 0..d.horizon.saturating_sub(1) {
+            let s = &d.states[(i * d.horizon + t) * DX..][..2 * DX];
+            for j in 0..3 {
+                moved += (s[DX + Q.start + j] - s[Q.start + j]).abs();
+                said += s[QD.start + j].abs() * d.dt;
+            }
+        }
+    }
+    if said < 1e-3 {
+        return Ok(());
+    }
+    let ratio = moved / said;
+    anyhow::ensure!(
+        ratio >= PERIOD_CONSISTENCY.0 && ratio <= PERIOD_CONSISTENCY.1,
+        "dt = {} s ({} fps) disagrees with the joint velocities: the joints move {moved:.4} rad \
+         in all, the velocities × dt say {said:.4} rad (ratio {ratio:.3}, expected {} to {}); \
+         is the dataset's fps (or time column) right?",
+        d.dt,
+        1.0 / d.dt,
+        PERIOD_CONSISTENCY.0,
+        PERIOD_CONSISTENCY.1
+    );
     Ok(())
 }
 
@@ -372,7 +444,8 @@ mod tests {
                 horizon: 10,
                 ..Default::default()
             },
-            iterations: 1,
+            // After 1 iteration this expert is still worse than the random policy.
+            iterations: 3,
             random_episodes: 2,
             demos: 2,
             ..Default::default()
@@ -402,6 +475,23 @@ mod tests {
             ),
             ("reach", Box::new(|d| d.goal[0] += 10.0)),
             ("cost_expert", Box::new(|d| d.cost_expert = d.cost_random)),
+            (
+                "the expert's below the random policy's",
+                Box::new(|d| std::mem::swap(&mut d.cost_expert, &mut d.cost_random)),
+            ),
+            (
+                "states[1, 7]: ee_vel_y = NaN: every state value must be finite",
+                Box::new(|d| d.states[idx(1, 7, 10)] = f64::NAN),
+            ),
+            (
+                "actions[0, 2, 1] = inf",
+                Box::new(|d| d.actions[(2 * DU) + 1] = f64::INFINITY),
+            ),
+            (
+                "disagrees with the joint velocities",
+                Box::new(|d| d.dt = 0.02),
+            ),
+            ("0.01 Hz", Box::new(|d| d.dt = 100.0)),
         ];
         for (what, edit) in cases {
             let mut d = good.clone();

@@ -88,8 +88,18 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
     );
     let dt = rows[1].1 - rows[0].1;
     let mut states = Vec::with_capacity(rows.len() * DX);
+    let mut seen = std::collections::BTreeSet::new();
     for (i, (e, time, s)) in rows.iter().enumerate() {
         let (d, t) = (i / horizon, i % horizon);
+        // An episode's rows together, each label once: a reused or interleaved label would
+        // otherwise join steps of two episodes into one.
+        anyhow::ensure!(
+            t != 0 || seen.insert(*e),
+            "{}: row {}: episode {e} again, after other episodes: the rows of an episode must \
+             be consecutive and every episode label used once",
+            path.display(),
+            i + 2
+        );
         anyhow::ensure!(
             *e == rows[d * horizon].0 && (t == 0 || rows[i - 1].0 == *e),
             "{}: row {}: episode {e} where episode {} has {horizon} steps (every episode must be \
@@ -216,6 +226,12 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
 /// Trajectories from any source as demonstrations for the arm of `sim`, the missing task and
 /// costs derived (module docs).
 pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
+    // Before anything simulates at that period (1e300 s would be 1e303 physics steps).
+    ur5_shared::config::check_dt(traj.dt).map_err(|why| {
+        anyhow::anyhow!(
+            "time step dt of the trajectories (1 / fps, or the step of the time column): {why}"
+        )
+    })?;
     let seed = DERIVED_SEED;
     let s0 = &traj.states[..DX];
     let mut arm = hil_sim::Ur5Sim::new(sim.clone(), traj.dt)?;

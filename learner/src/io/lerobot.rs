@@ -556,12 +556,24 @@ fn read_frames(
                     ))
                 }
                 (name @ ("episode_index" | "frame_index"), f) => {
+                    // Any integer type a writer may choose (pandas and pyarrow write int64,
+                    // others uint64 or narrower).
                     let v = match f {
-                        Field::Long(v) => *v,
-                        Field::Int(v) => i64::from(*v),
-                        other => {
-                            return Err(feature_err(name, format!("{other:?} is not an integer")))
-                        }
+                        Field::Long(v) => Some(*v),
+                        Field::Int(v) => Some(i64::from(*v)),
+                        Field::Short(v) => Some(i64::from(*v)),
+                        Field::Byte(v) => Some(i64::from(*v)),
+                        Field::ULong(v) => i64::try_from(*v).ok(),
+                        Field::UInt(v) => Some(i64::from(*v)),
+                        Field::UShort(v) => Some(i64::from(*v)),
+                        Field::UByte(v) => Some(i64::from(*v)),
+                        _ => None,
+                    };
+                    let Some(v) = v else {
+                        return Err(feature_err(
+                            name,
+                            format!("{f:?}: not an integer of at most 63 bits"),
+                        ));
                     };
                     if name == "episode_index" {
                         episode = Some(v);

@@ -43,6 +43,10 @@ pub struct Manifest {
     /// learner; absent in manifests written before replay (such runs cannot be replayed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settings: Option<serde_json::Value>,
+    /// The record of the run's files ([`crate::io::files::FILES`]), kept as the run goes so
+    /// that `learner replay` checks every file; absent in runs of builds before that record.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub files: Option<String>,
 }
 
 /// How a run takes a directory.
@@ -54,15 +58,7 @@ pub enum Claim {
     Resume,
 }
 
-/// FNV-1a 64 of `bytes`, as 16 hex digits.
-pub fn fnv1a64(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("{h:016x}")
-}
+pub use crate::io::files::fnv1a64;
 
 impl Manifest {
     /// The manifest of a run of `command`/`algo` with `seed` on the demonstrations in `demos`
@@ -88,6 +84,7 @@ impl Manifest {
             demos_hash,
             config_hash,
             settings: Some(full),
+            files: Some(crate::io::files::FILES.into()),
             created_unix_s: std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_secs())
@@ -192,8 +189,9 @@ fn content_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
 
 /// Files and folders a run writes into its directory.
 fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    const NAMES: [&str; 10] = [
+    const NAMES: [&str; 11] = [
         MANIFEST,
+        crate::io::files::FILES,
         "run.mcap",
         "gaifo_log.csv",
         "serve_log.csv",
@@ -303,7 +301,8 @@ pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
             }
             crate::io::create_dir(dir)?;
             ur5_shared::atomic_file::write(&dir.join(MANIFEST), &serde_json::to_vec_pretty(m)?)
-                .context("writing the run manifest")
+                .context("writing the run manifest")?;
+            crate::io::files::start(dir)
         }
     }
 }

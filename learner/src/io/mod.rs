@@ -4,6 +4,7 @@
 pub mod checkpoint;
 pub mod demos;
 pub mod episode;
+pub mod files;
 pub mod foreign;
 pub mod learned;
 pub mod lerobot;

@@ -78,7 +78,20 @@ pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
 
 /// Reads and checks a policy file.
 pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
-    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let f = NpzFile::open(path)?;
+    // A gain table is the file most often passed by mistake; say so rather than compare
+    // schema versions of two different layouts.
+    let has = |n: &str| f.names().iter().any(|x| x == n);
+    if has("K") && has("s_hat") && !has("params") {
+        return Err(f.bad(
+            "K",
+            "this is a gain table (K, k, s_hat: what `learner train` and `learner serve` \
+             write and the controller executes), not a policy file (params, hidden: `learner \
+             experiment multi-goal` writes them as policy_seedN.npz)"
+                .into(),
+        ));
+    }
+    f.check_schema(SCHEMA_VERSION)?;
     let bad = |name: &str, why: String| f.bad(name, why);
     for (name, want) in [
         ("state_names", &STATE_NAMES[..]),
@@ -129,8 +142,8 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
         return Err(bad("start_q", format!("{start_q:?} is not finite")));
     }
     let dt = f.f64_shaped("dt", &[])?[0];
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(bad("dt", format!("{dt}: must be finite and > 0 s")));
+    if let Err(why) = ur5_shared::config::check_dt(dt) {
+        return Err(bad("dt", why));
     }
     let horizon = f.u64_scalar("horizon")?;
     if horizon < 2 {

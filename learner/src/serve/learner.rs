@@ -129,6 +129,8 @@ impl<L: ServeLearner> Run<L> {
         let dt = self.learner.task().dt;
         let file = crate::io::table::version_path(out, version);
         save_table(&file, &table, dt)?;
+        crate::io::files::note_checkpoint(out, self.learner.iteration())?;
+        crate::io::files::note(out, &[&file])?;
         save_table(&out.join("latest_table.npz"), &table, dt)?;
         if let Some(m) = self.mcap.as_mut() {
             m.table(TableInfo {
@@ -159,6 +161,7 @@ impl<L: ServeLearner> Run<L> {
             seed: self.learner.seed(),
         };
         let path = rec.record(ep, &origin, self.learner.task())?;
+        crate::io::files::note(&self.opts.out, &[&path])?;
         if let Some(m) = self.mcap.as_mut() {
             m.episode(&path, ep, &origin, self.learner.task().dt)?;
         }
@@ -171,6 +174,10 @@ impl<L: ServeLearner> Run<L> {
         if self.recorder.is_none() {
             return Ok(());
         }
-        append_event(&self.opts.out.join("episodes"), event)
+        let episodes = self.opts.out.join("episodes");
+        let list = episodes.join(crate::io::learned::LEARNED);
+        let from = crate::io::files::len(&list);
+        append_event(&episodes, event)?;
+        crate::io::files::note_appended(&self.opts.out, &list, from)
     }
 }

@@ -319,7 +319,7 @@ fn claim_dirs<S: Serialize>(
     if let Some(dir) = &opts.resume {
         claim(dir, &m, Claim::Resume)?;
         if *dir == opts.out {
-            return Ok(());
+            return crate::io::files::adopt(dir);
         }
     }
     claim(&opts.out, &m, Claim::New { force: opts.force })

@@ -14,8 +14,8 @@ use imitation::expert::ExpertConfig;
 use imitation::gaifo::GaifoConfig;
 use learner::io::foreign;
 use learner::io::lerobot;
-use parquet::basic::{Compression, LogicalType, Repetition, Type as Physical};
-use parquet::data_type::{FloatType, Int64Type};
+use parquet::basic::{Compression, ConvertedType, LogicalType, Repetition, Type as Physical};
+use parquet::data_type::{FloatType, Int32Type, Int64Type};
 use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::Type;
 use ur5_shared::config::SimConfig;
@@ -28,12 +28,14 @@ fn scratch(tag: &str) -> PathBuf {
     d
 }
 
-/// Demonstrations of a short task (T = 10) from a 1-iteration expert: real states of the arm.
-/// Its C_random is measured with the default settings and seed, as a derived one is.
+/// Demonstrations of a short task (T = 10) from a 3-iteration expert: real states of the arm
+/// (after 1 iteration its cost is still above the random policy's, demonstrations the
+/// arm's checks refuse). Its C_random is measured with the default settings and seed, as a
+/// derived one is.
 fn recorded_demos() -> Demos {
     let cfg = ExpertConfig {
         random_episodes: ExpertConfig::default().random_episodes,
-        ..short_expert(10, 1)
+        ..short_expert(10, 3)
     };
     let run = learner::run::expert(&cfg, |_| {}).unwrap();
     learner::run::demos(&cfg, &run).unwrap()
@@ -144,12 +146,31 @@ fn a_missing_or_wrong_sized_state_is_an_error_naming_the_feature() {
 /// `width`-wide optional lists, snappy-compressed, the index columns first, two row groups;
 /// and a minimal `meta/info.json` without our `ur5_task`.
 fn write_foreign(dir: &Path, states: &[f64], horizon: usize, width: usize) {
+    write_foreign_indexed(dir, states, horizon, width, Index::I64);
+}
+
+/// The integer type of the index columns (`episode_index`, `frame_index`).
+#[derive(Clone, Copy, Debug)]
+enum Index {
+    I64,
+    U64,
+    I8,
+}
+
+/// [`write_foreign`] with index columns of type `index`.
+fn write_foreign_indexed(dir: &Path, states: &[f64], horizon: usize, width: usize, index: Index) {
     let path = dir.join("data/chunk-000/file-000.parquet");
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
     let int = |n: &str| {
+        let (physical, converted) = match index {
+            Index::I64 => (Physical::INT64, ConvertedType::NONE),
+            Index::U64 => (Physical::INT64, ConvertedType::UINT_64),
+            Index::I8 => (Physical::INT32, ConvertedType::INT_8),
+        };
         Arc::new(
-            Type::primitive_type_builder(n, Physical::INT64)
+            Type::primitive_type_builder(n, physical)
                 .with_repetition(Repetition::OPTIONAL)
+                .with_converted_type(converted)
                 .build()
                 .unwrap(),
         )
@@ -196,9 +217,19 @@ fn write_foreign(dir: &Path, states: &[f64], horizon: usize, width: usize) {
         let k: Vec<i64> = range.clone().map(|i| (i % horizon) as i64).collect();
         for v in [&e, &k] {
             let mut c = rg.next_column().unwrap().unwrap();
-            c.typed::<Int64Type>()
-                .write_batch(v, Some(&ones), None)
-                .unwrap();
+            match index {
+                Index::I64 | Index::U64 => {
+                    c.typed::<Int64Type>()
+                        .write_batch(v, Some(&ones), None)
+                        .unwrap();
+                }
+                Index::I8 => {
+                    let v32: Vec<i32> = v.iter().map(|&x| x as i32).collect();
+                    c.typed::<Int32Type>()
+                        .write_batch(&v32, Some(&ones), None)
+                        .unwrap();
+                }
+            }
             c.close().unwrap();
         }
         let vals: Vec<f32> = range
@@ -382,5 +413,156 @@ fn recorded_episodes_export_with_their_actions() {
     let m = back.task.unwrap();
     assert_eq!((m.goal, m.start_q, m.seed), (task.goal, task.start_q, 7));
     assert_eq!(m.cost_random, None, "episodes do not know C_random");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Imported demonstrations get the checks of our own (docs/reliability.md): any integer type of
+/// `episode_index`, non-finite values named with the file, demonstration, step and state
+/// name, an `fps` that the joint velocities contradict, `cost_random` not above
+/// `cost_expert`, and a CSV episode label used twice.
+#[test]
+fn imported_demonstrations_are_checked_like_our_own() {
+    let dir = scratch("checked");
+    let demos = recorded_demos();
+    let sim = SimConfig::default();
+    let info = |fps: f64| {
+        serde_json::json!({
+            "codebase_version": "v3.0", "robot_type": null, "fps": fps,
+            "features": {"observation.state": {"dtype": "float32", "shape": [12], "names": null}}
+        })
+        .to_string()
+    };
+    let foreign = |tag: &str, states: &[f64], index: Index, fps: f64| {
+        let d = dir.join(tag);
+        write_foreign_indexed(&d, states, demos.horizon, DX, index);
+        std::fs::create_dir_all(d.join("meta")).unwrap();
+        std::fs::write(d.join("meta/info.json"), info(fps)).unwrap();
+        d
+    };
+    for (tag, index) in [("u64", Index::U64), ("i8", Index::I8)] {
+        let d = foreign(tag, &demos.states, index, 10.0);
+        let got = learner::io::demos::load_checked(&d, &sim)
+            .unwrap_or_else(|e| panic!("{index:?}: {e:#}"));
+        assert_eq!(got.count, demos.count, "{index:?}");
+    }
+    // Data at 10 Hz said to be at 1 kHz or 20 Hz.
+    for fps in [1000.0, 20.0] {
+        let d = foreign(&format!("fps{fps}"), &demos.states, Index::I64, fps);
+        let e = format!(
+            "{:#}",
+            learner::io::demos::load_checked(&d, &sim).unwrap_err()
+        );
+        assert!(
+            e.contains("disagrees with the joint velocities"),
+            "{fps}: {e}"
+        );
+    }
+    // NaN and inf in an end-effector velocity (demonstration 1, step 3).
+    let ee_vel_x = STATE_NAMES.iter().position(|n| *n == "ee_vel_x").unwrap();
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut states = demos.states.clone();
+        states[(demos.horizon + 3) * DX + ee_vel_x] = bad;
+        let d = foreign("nan", &states, Index::I64, 10.0);
+        let e = format!(
+            "{:#}",
+            learner::io::demos::load_checked(&d, &sim).unwrap_err()
+        );
+        let want = format!(
+            "states[1, 3]: ee_vel_x = {}: every state value must be finite",
+            bad as f32 as f64
+        );
+        assert!(e.contains(&want), "want {want:?}, got {e}");
+        assert!(e.contains(d.to_str().unwrap()), "names the file: {e}");
+    }
+    // cost_random below cost_expert (our own file layout).
+    let npz = dir.join("d.npz");
+    let swapped = Demos {
+        cost_random: demos.cost_expert,
+        cost_expert: demos.cost_random,
+        ..demos.clone()
+    };
+    learner::io::demos::save(&swapped, &npz).unwrap();
+    let e = format!(
+        "{:#}",
+        learner::io::demos::load_checked(&npz, &sim).unwrap_err()
+    );
+    assert!(e.contains("the expert's below the random policy's"), "{e}");
+
+    // A CSV whose first episode's label comes back after the second.
+    learner::io::demos::save(&demos, &npz).unwrap();
+    let csv = dir.join("d.csv");
+    let (ok, err) = learner(&[
+        "dataset",
+        "export",
+        "--format",
+        "csv",
+        npz.to_str().unwrap(),
+        csv.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let first: Vec<&str> = text.lines().skip(1).take(demos.horizon).collect();
+    let again = format!("{text}{}\n", first.join("\n"));
+    std::fs::write(&csv, again).unwrap();
+    let e = format!(
+        "{:#}",
+        learner::io::demos::load_checked(&csv, &sim).unwrap_err()
+    );
+    let want = format!(
+        "row {}: episode 0 again, after other episodes",
+        2 * demos.horizon + 2
+    );
+    assert!(e.contains(&want), "want {want:?}, got {e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Exports never mix or overwrite: a LeRobot export into a folder holding files, a CSV export
+/// onto its input and an MCAP export onto a file of its run are refused, the files untouched.
+#[test]
+fn exports_never_mix_with_older_files_or_overwrite_their_input() {
+    let dir = scratch("exports");
+    let npz = dir.join("d.npz");
+    common::save_short_demos(&npz, 0);
+    let p = |x: &Path| x.to_str().unwrap().to_owned();
+    let export = |fmt: &str, input: &Path, out: &Path| {
+        learner(&["dataset", "export", "--format", fmt, &p(input), &p(out)])
+    };
+    let lr = dir.join("lr");
+    let (ok, err) = export("lerobot", &npz, &lr);
+    assert!(ok, "{err}");
+    let info = std::fs::read(lr.join("meta/info.json")).unwrap();
+    let (ok, err) = export("lerobot", &npz, &lr);
+    assert!(!ok);
+    assert!(err.contains("already holds files"), "{err}");
+    assert_eq!(std::fs::read(lr.join("meta/info.json")).unwrap(), info);
+
+    let csv = dir.join("d.csv");
+    let (ok, err) = export("csv", &npz, &csv);
+    assert!(ok, "{err}");
+    let text = std::fs::read(&csv).unwrap();
+    let (ok, err) = export("csv", &csv, &csv);
+    assert!(!ok);
+    assert!(err.contains("would overwrite its input"), "{err}");
+    assert_eq!(std::fs::read(&csv).unwrap(), text);
+
+    let run = dir.join("run");
+    let (ok, err) = learner(&[
+        "train",
+        "--demos",
+        &p(&npz),
+        "--iterations",
+        "1",
+        "--record-episodes",
+        "--out",
+        &p(&run),
+    ]);
+    assert!(ok, "{err}");
+    let manifest = std::fs::read(run.join("run.json")).unwrap();
+    let (ok, err) = export("mcap", &run, &run.join("run.json"));
+    assert!(!ok);
+    assert!(err.contains("would overwrite its input"), "{err}");
+    assert_eq!(std::fs::read(run.join("run.json")).unwrap(), manifest);
+    let (ok, err) = export("mcap", &run, &dir.join("run.mcap"));
+    assert!(ok, "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -227,6 +227,7 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
         ("hidden", Some((vec![1, 2], vec![8.0, 4.0]))),
         ("schema_version", Some((vec![], vec![2.0]))),
         ("dt", Some((vec![], vec![0.0]))),
+        ("dt", Some((vec![], vec![100.0]))),
         ("start_q", Some((vec![2], vec![0.0, 1.0]))),
         ("params", None),
     ]
@@ -238,7 +239,8 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
         "width 0",
         "expected (H,)",
         "this program reads 1",
-        "must be finite and > 0",
+        "supported are 10 Hz to 1 kHz",
+        "100 s is a control rate of 0.01 Hz",
         "expected [3]",
         "no array `params`",
     ])
@@ -403,5 +405,23 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
     let d = v["result"]["final_distance_m"].as_f64().unwrap();
     assert!(d > 0.1 && d.is_finite(), "{v}");
     assert_eq!(v["result"]["steps"], 5);
+
+    // Errors name their cause: one step (no task cost).
+    let eval = |policy: &std::path::Path, extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_learner"))
+            .args(["policy", "eval", "--policy", policy.to_str().unwrap()])
+            .args(["--goal", "-0.45,-0.25,0.25"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = eval(&p, &["--steps", "1"]);
+    assert!(
+        e.contains("--steps 1: an episode needs at least 2 steps"),
+        "{e}"
+    );
+    // (A gain table passed as a policy: learner/tests/suite/replay.rs.)
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -70,6 +70,22 @@ fn episodes_of(run: &Path, version: u64) -> Vec<PathBuf> {
     files
 }
 
+/// Records `path` as the run's own file in the run's record of its files, as the run does when
+/// it writes one: an edit made so is the replay's comparison to find.
+fn rerecord(run: &Path, path: &Path) {
+    learner::io::files::note(run, &[path]).unwrap();
+}
+
+/// Makes `run` look like a run of a build without the record of its files.
+fn forget_record(run: &Path) {
+    std::fs::remove_file(run.join(learner::io::files::FILES)).unwrap();
+    let manifest = run.join("run.json");
+    let mut m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    m.as_object_mut().unwrap().remove("files");
+    std::fs::write(&manifest, serde_json::to_vec(&m).unwrap()).unwrap();
+}
+
 /// Adds `by` to state value `i` (flat index into the (T, dX) states) of the noisy episode
 /// recorded in `path`.
 fn nudge(path: &Path, i: usize, by: f64) {
@@ -99,6 +115,8 @@ fn a_recorded_run_replays_bit_for_bit() {
 
     // A run resumed from another folder (`learner serve --resume OTHER --out RUN`, as its
     // episodes/learned.jsonl says) cannot be replayed from RUN alone: said, not a vague error.
+    let list = run.join("episodes").join(learner::io::learned::LEARNED);
+    let from = learner::io::files::len(&list);
     learner::io::learned::append_event(
         &run.join("episodes"),
         &learner::io::learned::LearnedEvent::Resumed {
@@ -107,6 +125,7 @@ fn a_recorded_run_replays_bit_for_bit() {
         },
     )
     .unwrap();
+    learner::io::files::note_appended(&run, &list, from).unwrap();
     let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
     assert!(!ok);
     assert!(
@@ -114,8 +133,20 @@ fn a_recorded_run_replays_bit_for_bit() {
         "{err}"
     );
 
-    // Without recorded episodes there is nothing to replay, and the message says how to get them.
+    // Recorded episodes deleted: named as missing.
     std::fs::remove_dir_all(run.join("episodes")).unwrap();
+    let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains(
+            "19 of the run's files are not as its record files.jsonl says: \
+                      episodes/000001_e000000_v0001.npz missing"
+        ),
+        "{err}"
+    );
+    // Without recorded episodes (and no record saying there were) there is nothing to
+    // replay, and the message says how to get them.
+    forget_record(&run);
     let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
     assert!(!ok);
     assert!(err.contains("--record-episodes"), "{err}");
@@ -131,6 +162,16 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     // 2 still equal, the update of iteration 2 learns another table (version 3).
     let path = episodes_of(&run, 2)[0].clone();
     nudge(&path, 5 * 12 + 6, 1e-9);
+    // Against the run's record of its files, the edit is found before any learning.
+    let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
+    assert!(!ok);
+    let name = path.file_name().unwrap().to_str().unwrap();
+    assert!(
+        err.contains(&format!("episodes/{name} altered (bytes 0..")),
+        "{err}"
+    );
+    // As the run's own file, it is the comparison's to find.
+    rerecord(&run, &path);
     let (ok, r, err) = replay(&run);
     assert!(!ok, "a difference exits non-zero");
     let d = &r["difference"];
@@ -154,6 +195,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     // Undo it; change one entry of the table of iteration 1 instead (as stored: the file's
     // checksum is left as it was).
     nudge(&path, 5 * 12 + 6, -1e-9);
+    rerecord(&run, &path);
     assert!(replay(&run).0, "restored");
     let table_file = run.join("iter_001_table.npz");
     let (mut table, dt) =
@@ -161,6 +203,7 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     let was = table.steps[4].k_vec[1];
     table.steps[4].k_vec[1] = was + 0.5;
     save_table(&table_file, &table, dt).unwrap();
+    rerecord(&run, &table_file);
     assert_eq!(
         load_stored(&table_file).unwrap().arrays[1].2[4 * 3 + 1],
         was + 0.5
@@ -214,6 +257,7 @@ fn a_recorded_gaifo_ppo_run_replays_bit_for_bit() {
     // and 2 still equal, the policy of update 3 differs.
     let path = episodes_of(&run, 3)[1].clone();
     nudge(&path, 7 * 12 + 2, 1e-9);
+    rerecord(&run, &path);
     let (ok, r, err) = replay(&run);
     assert!(!ok, "a difference exits non-zero");
     let d = &r["difference"];
@@ -385,5 +429,194 @@ fn a_killed_mcap_writer_leaves_its_complete_episodes_readable() {
     assert_eq!(a["/episode"], episodes.len());
     let n = mcap::MessageStream::new(&streamed).unwrap().count();
     assert_eq!(n, a.values().sum::<usize>());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Copies the run folder `from` (files and one level of folders) to `to`.
+fn copy_run(from: &Path, to: &Path) {
+    std::fs::remove_dir_all(to).ok();
+    for e in walk(from) {
+        let dest = to.join(e.strip_prefix(from).unwrap());
+        std::fs::create_dir_all(dest.parent().unwrap()).unwrap();
+        std::fs::copy(&e, &dest).unwrap();
+    }
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// A replay checks the whole run or fails naming what is missing or altered: the run's record
+/// of its files (`files.jsonl`, written as the run goes) against the folder, then every
+/// recorded checkpoint reached by the replay; a run of a build without the record is replayed
+/// as far as its files go and says so.
+#[test]
+fn a_replay_accounts_for_every_recorded_file() {
+    use learner::io::learned::{append_event, LearnedEvent, LEARNED};
+    let dir = scratch("record");
+    let pristine = recorded_run(&dir);
+    let (ok, r, err) = replay(&pristine);
+    assert!(ok, "{err}");
+    // 4 tables, 4 critics, 4 learner states, 18 episodes.
+    assert_eq!(r["files_verified"], 30, "{r}");
+    assert!(err.contains("all 30 files of the run's record"), "{err}");
+
+    let run = dir.join("edited");
+    let fails_with = |edit: &dyn Fn(&Path), want: &str| {
+        copy_run(&pristine, &run);
+        edit(&run);
+        let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
+        assert!(!ok, "{want}: accepted\n{err}");
+        assert!(err.contains(want), "want {want:?}, got\n{err}");
+    };
+    let v2 = |run: &Path| episodes_of(run, 2)[1].clone();
+    fails_with(
+        &|r| std::fs::remove_file(v2(r)).unwrap(),
+        "1 of the run's files are not as its record files.jsonl says: \
+         episodes/000008_e000007_v0002.npz missing",
+    );
+    fails_with(
+        &|r| std::fs::remove_file(r.join("iter_002_table.npz")).unwrap(),
+        "iter_002_table.npz missing",
+    );
+    // One byte of one episode (its noisy flag, table version or a state: any byte).
+    fails_with(
+        &|r| {
+            let p = v2(r);
+            let mut b = std::fs::read(&p).unwrap();
+            let k = b.len() / 2;
+            b[k] ^= 1;
+            std::fs::write(&p, b).unwrap();
+        },
+        "episodes/000008_e000007_v0002.npz altered (bytes 0..",
+    );
+    fails_with(
+        &|r| std::fs::write(r.join("iter_004_table.npz"), b"x").unwrap(),
+        "iter_004_table.npz not in files.jsonl",
+    );
+    fails_with(
+        &|r| {
+            let p = r.join(learner::io::files::FILES);
+            let t = std::fs::read_to_string(&p).unwrap();
+            let cut: String = t.lines().take(5).map(|l| format!("{l}\n")).collect();
+            std::fs::write(&p, cut).unwrap();
+        },
+        "25 of the run's files are not as its record files.jsonl says",
+    );
+    fails_with(
+        &|r| std::fs::remove_file(r.join(learner::io::files::FILES)).unwrap(),
+        "has no files.jsonl, the record of its files that its run.json says the run kept",
+    );
+    fails_with(
+        &|r| {
+            let p = r.join("run.json");
+            let mut m: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+            m["seed"] = 4.into();
+            std::fs::write(&p, serde_json::to_vec(&m).unwrap()).unwrap();
+        },
+        "seed 4 but settings.seed 0: the run's manifest was altered",
+    );
+
+    // An appended list of what was learned (as `learner serve` keeps it), then cut.
+    let learned_v1 = |r: &Path| {
+        let names: Vec<String> = episodes_of(r, 1)
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        let list = r.join("episodes").join(LEARNED);
+        let from = learner::io::files::len(&list);
+        append_event(
+            &r.join("episodes"),
+            &LearnedEvent::Learned {
+                iteration: 1,
+                version: 1,
+                noisy: names[..5].to_vec(),
+                eval: names[5].clone(),
+            },
+        )
+        .unwrap();
+        learner::io::files::note_appended(r, &list, from).unwrap();
+    };
+    fails_with(
+        &|r| {
+            learned_v1(r);
+            std::fs::write(r.join("episodes").join(LEARNED), b"").unwrap();
+        },
+        "episodes/learned.jsonl altered (0 bytes, the record says",
+    );
+    // A list that stops after version 1: the replay cannot reach the later checkpoints.
+    fails_with(
+        &learned_v1,
+        "the replay ended after 1 iterations, before 4 recorded checkpoint file(s) of the run \
+         (iter_002_critic.json, iter_002_table.npz, iter_003_critic.json, …)",
+    );
+    // A published table's copy (`tables/vVERSION.npz`, as `learner serve` writes them):
+    // compared when there, missing when deleted.
+    let table_copy = |r: &Path| {
+        std::fs::create_dir_all(r.join("tables")).unwrap();
+        let t = r.join("tables/v0003.npz");
+        std::fs::copy(r.join("iter_002_table.npz"), &t).unwrap();
+        rerecord(r, &t);
+    };
+    copy_run(&pristine, &run);
+    table_copy(&run);
+    let (ok, r, err) = replay(&run);
+    assert!(ok, "{err}");
+    assert_eq!(r["tables_checked"], 5, "{r}");
+    fails_with(
+        &|r| {
+            table_copy(r);
+            std::fs::remove_file(r.join("tables/v0003.npz")).unwrap();
+        },
+        "tables/v0003.npz missing",
+    );
+
+    // A NaN in a recorded episode (the file rewritten as the run's own): named with the file,
+    // step and state, not as a covariance that is not positive definite.
+    copy_run(&pristine, &run);
+    let p = v2(&run);
+    nudge(&p, 3 * 12 + 10, f64::NAN);
+    rerecord(&run, &p);
+    let (ok, err) = learner(&["replay", run.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains("000008_e000007_v0002.npz: step 3: ee_vel_y = NaN"),
+        "{err}"
+    );
+    // A gain table passed as a policy file says what it is.
+    let (ok, err) = learner(&[
+        "policy",
+        "eval",
+        "--policy",
+        run.join("iter_001_table.npz").to_str().unwrap(),
+        "--goal",
+        "-0.45,-0.25,0.25",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("this is a gain table"), "{err}");
+    assert!(!err.contains("schema_version"), "{err}");
+
+    // A run of a build without the record: replayed as far as its files go, and said so.
+    copy_run(&pristine, &run);
+    forget_record(&run);
+    std::fs::remove_file(v2(&run)).unwrap();
+    let (ok, r, err) = replay(&run);
+    assert!(ok, "{err}");
+    assert!(r["files_verified"].is_null(), "{r}");
+    assert!(
+        r["note"].as_str().unwrap().contains("has no files.jsonl"),
+        "{r}"
+    );
+    assert!(err.contains("equal as far as found"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -67,6 +67,46 @@ fn shards_merged_equal_the_unsharded_run() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("each job exactly once"), "{e}");
+    // Merge refuses what does not belong together: a part run with other settings (here
+    // one more iteration), a part whose CSV lost a row.
+    let mut other = cfg.clone();
+    other.iterations = 3;
+    let odd = dir.join("part4-other");
+    let four: Shard = "4/4".parse().unwrap();
+    run_sharded(
+        ExperimentName::Comparison,
+        &other,
+        &odd,
+        Some(&demos),
+        Some(four),
+    )
+    .unwrap();
+    let mixed = [parts[0].clone(), parts[1].clone(), parts[2].clone(), odd];
+    let e = merge(&mixed, &dir.join("bad")).unwrap_err().to_string();
+    assert!(e.contains("shard 4/4 ran other settings than"), "{e}");
+    let csv = parts[3].join("comparison.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let cut: Vec<&str> = text.lines().collect();
+    std::fs::write(&csv, format!("{}\n", cut[..cut.len() - 1].join("\n"))).unwrap();
+    let e = merge(&parts, &dir.join("bad")).unwrap_err().to_string();
+    assert!(e.contains("the CSV lost rows"), "{e}");
+    assert!(e.contains("1 rows for"), "{e}");
+    // More shards than jobs: the empty one succeeds with nothing to do.
+    let seven: Shard = "7/7".parse().unwrap();
+    let empty = dir.join("part7of7");
+    let (r, rows) = run_sharded(
+        ExperimentName::Comparison,
+        &cfg,
+        &empty,
+        Some(&demos),
+        Some(seven),
+    )
+    .unwrap();
+    assert!(r.is_empty() && rows.is_empty());
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(empty.join("shard.json")).unwrap()).unwrap();
+    assert_eq!(meta["runs"], serde_json::json!([]), "{meta}");
+    assert_eq!(meta["jobs_total"], 6, "{meta}");
     for bad in ["0/4", "5/4", "1", "a/b"] {
         assert!(bad.parse::<Shard>().is_err(), "{bad}");
     }

@@ -132,6 +132,90 @@ fn setup(dir: &Path) {
         *p = serde_json::json!(1e300);
     }
     std::fs::write(&critic, serde_json::to_vec(&j).unwrap()).unwrap();
+
+    // Second round: a recorded run with one episode deleted, one without its record of files,
+    // one whose run.json seed was edited; demonstrations with dt = 100 s, a NaN end-effector
+    // velocity, the costs swapped; a LeRobot export (fps edited to 1e-300) and a CSV export.
+    let st = Command::new(bin("learner"))
+        .args(s(&[
+            "train",
+            "--demos",
+            "demos.npz",
+            "--iterations",
+            "2",
+            "--record-episodes",
+            "--out",
+            "rec",
+        ]))
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for r in ["rec-lost", "rec-norecord", "rec-seed"] {
+        copy_tree(&dir.join("rec"), &dir.join(r));
+    }
+    let mut eps: Vec<PathBuf> = std::fs::read_dir(dir.join("rec-lost/episodes"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    eps.sort();
+    std::fs::remove_file(&eps[7]).unwrap();
+    std::fs::remove_file(dir.join("rec-norecord/files.jsonl")).unwrap();
+    let mpath = dir.join("rec-seed/run.json");
+    let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(&mpath).unwrap()).unwrap();
+    m["seed"] = 4.into();
+    std::fs::write(&mpath, serde_json::to_vec(&m).unwrap()).unwrap();
+    let edited = |name: &str, edit: &dyn Fn(&mut imitation::demos::Demos)| {
+        let mut d = demos.clone();
+        edit(&mut d);
+        learner::io::demos::save(&d, &dir.join(name)).unwrap();
+    };
+    edited("slow.npz", &|d| d.dt = 100.0);
+    edited("swapped.npz", &|d| {
+        std::mem::swap(&mut d.cost_expert, &mut d.cost_random)
+    });
+    for (fmt, out) in [("lerobot", "lr"), ("lerobot", "lr-fps"), ("csv", "d.csv")] {
+        let st = Command::new(bin("learner"))
+            .args(s(&["dataset", "export", "--format", fmt, "demos.npz", out]))
+            .current_dir(dir)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+    }
+    // The CSV with a NaN end-effector velocity (demonstration 1, step 4, column ee_vel_x).
+    let text = std::fs::read_to_string(dir.join("d.csv")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let col = lines[0].split(',').position(|c| c == "ee_vel_x").unwrap();
+    let mut f: Vec<String> = lines[1 + 30 + 4].split(',').map(str::to_owned).collect();
+    f[col] = "NaN".into();
+    lines[1 + 30 + 4] = f.join(",");
+    std::fs::write(dir.join("nan.csv"), lines.join("\n") + "\n").unwrap();
+    let ipath = dir.join("lr-fps/meta/info.json");
+    let mut info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&ipath).unwrap()).unwrap();
+    info["fps"] = 1e-300.into();
+    std::fs::write(&ipath, serde_json::to_vec(&info).unwrap()).unwrap();
+}
+
+/// Copies a folder tree.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            copy_tree(&p, &to.join(e.file_name()));
+        } else {
+            std::fs::copy(&p, to.join(e.file_name())).unwrap();
+        }
+    }
 }
 
 fn urdf_with(dir: &Path, name: &str, edit: impl Fn(String) -> String) -> String {
@@ -351,6 +435,92 @@ fn cases(dir: &Path) -> Vec<Case> {
             "14",
             &["--resume", "norun", "--iterations", "3"],
         ),
+        Case {
+            class: "B1",
+            what: "`learner replay` of a run with one recorded episode deleted",
+            bin: "learner",
+            args: s(&["replay", "rec-lost"]),
+        },
+        Case {
+            class: "B1",
+            what: "`learner replay` of a run without its `files.jsonl`",
+            bin: "learner",
+            args: s(&["replay", "rec-norecord"]),
+        },
+        Case {
+            class: "B1",
+            what: "`learner replay` of a run whose `run.json` seed was edited",
+            bin: "learner",
+            args: s(&["replay", "rec-seed"]),
+        },
+        Case {
+            class: "B3",
+            what: "demonstrations with dt = 100 s",
+            bin: "learner",
+            args: s(&["dataset", "check", "slow.npz"]),
+        },
+        Case {
+            class: "B3",
+            what: "LeRobot `fps` 1e-300",
+            bin: "learner",
+            args: s(&["dataset", "check", "lr-fps"]),
+        },
+        Case {
+            class: "B3",
+            what: "`learner expert --threads 100000`",
+            bin: "learner",
+            args: s(&["expert", "--threads", "100000", "--out", "e"]),
+        },
+        Case {
+            class: "B3",
+            what: "`ur-sim --time-compression 1e308`",
+            bin: "hil-sim",
+            args: s(&["ur-sim", "--time-compression", "1e308"]),
+        },
+        Case {
+            class: "B4",
+            what: "NaN in an `ee_vel_x` of a demonstrations CSV",
+            bin: "learner",
+            args: s(&["dataset", "check", "nan.csv"]),
+        },
+        Case {
+            class: "B4",
+            what: "`cost_random` below `cost_expert`",
+            bin: "learner",
+            args: s(&["dataset", "check", "swapped.npz"]),
+        },
+        Case {
+            class: "B5",
+            what: "LeRobot export into a folder holding a dataset",
+            bin: "learner",
+            args: s(&[
+                "dataset",
+                "export",
+                "--format",
+                "lerobot",
+                "demos.npz",
+                "lr",
+            ]),
+        },
+        Case {
+            class: "B5",
+            what: "`dataset export --format csv X X`",
+            bin: "learner",
+            args: s(&["dataset", "export", "--format", "csv", "d.csv", "d.csv"]),
+        },
+        Case {
+            class: "B5",
+            what: "`dataset export --format mcap RUN RUN/run.json`",
+            bin: "learner",
+            args: s(&[
+                "dataset",
+                "export",
+                "--format",
+                "mcap",
+                "rec",
+                "rec/run.json",
+            ]),
+        },
         Case {
             class: "3",
             what: "controller config `[bounds] max_abs_k_mat = nan`",
