@@ -172,6 +172,9 @@ struct UrSimArgs {
     /// Fault: close the RTDE connection after N data packages.
     #[arg(long, default_value_t = 0)]
     fault_disconnect_after: u64,
+    /// Fault: a protective stop (as on a detected collision) after N arm cycles.
+    #[arg(long, default_value_t = 0)]
+    fault_protective_stop_after: u64,
 }
 
 impl UrSimArgs {
@@ -199,6 +202,7 @@ impl UrSimArgs {
                 delay_ms: self.fault_delay_ms,
                 drop_every: self.fault_drop_every,
                 disconnect_after: self.fault_disconnect_after,
+                protective_stop_after: self.fault_protective_stop_after,
             },
         })
     }

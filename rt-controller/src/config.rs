@@ -387,6 +387,27 @@ impl ControllerConfig {
             );
         }
         let l = &self.limits;
+        // The clamp may be tighter than the robot's own limits, never looser (docs/ur.md, "Arm
+        // models"): the defaults are the UR5's, which exceed e.g. a UR10e's joint speeds.
+        let model = self.arm.ur.model;
+        let own = ArmLimits::for_model(model);
+        for j in 0..N_JOINTS {
+            if l.lower[j] < own.lower[j]
+                || l.upper[j] > own.upper[j]
+                || l.velocity[j] > own.velocity[j]
+                || l.effort[j] > own.effort[j]
+            {
+                return bad(
+                    "limits",
+                    format!(
+                        "joint {j}: [limits] allow more than the {model}'s own limits \
+                         (lower {:?}, upper {:?}, velocity {:?} rad/s, effort {:?} N·m): \
+                         write these (or tighter) in [limits]",
+                        own.lower, own.upper, own.velocity, own.effort
+                    ),
+                );
+            }
+        }
         for j in 0..N_JOINTS {
             let ok = l.lower[j].is_finite()
                 && l.upper[j].is_finite()
@@ -501,6 +522,19 @@ mod tests {
         let back: ControllerConfig = toml::from_str(&text).unwrap();
         assert_eq!(back, c);
         assert_eq!(c.wall_period_ns(), 100_000_000);
+    }
+
+    #[test]
+    fn limits_looser_than_the_models_own_are_refused() {
+        let mut c: ControllerConfig = toml::from_str("[arm.ur]\nmodel = \"ur10e\"").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("limits") && e.contains("ur10e"), "{e}");
+        c.limits = ArmLimits::for_model(ur5_shared::UrModel::Ur10e);
+        c.validate().unwrap();
+        c.limits.velocity[0] *= 0.5;
+        c.validate().unwrap();
+        c.limits.velocity[0] = 10.0;
+        assert!(c.validate().is_err());
     }
 
     #[test]

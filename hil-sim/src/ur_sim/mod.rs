@@ -105,6 +105,9 @@ pub struct Faults {
     pub drop_every: u64,
     /// Close the RTDE connection after this many data packages (0 = never).
     pub disconnect_after: u64,
+    /// Raise a protective stop after this many arm cycles (0 = never): the robot stopping
+    /// itself for a reason of its own, as on a detected collision.
+    pub protective_stop_after: u64,
 }
 
 /// Options of `hil-sim ur-sim`.
@@ -252,6 +255,12 @@ impl Ctx {
             if step {
                 let stepped = arm.step();
                 v = v.or(stepped);
+                let after = self.cfg.faults.protective_stop_after;
+                if after > 0 && arm.cycle >= after {
+                    v = v.or(Some(Violation(format!(
+                        "a collision was detected (injected fault, after {after} arm cycles)"
+                    ))));
+                }
             }
             if v.is_some() && arm.safety == ur_protocol::SafetyMode::Normal {
                 arm.protective_stop();

@@ -424,17 +424,24 @@ fn ur_a_stopped_ur_sim_gives_the_controller_a_clear_exit() {
 
 #[test]
 fn ur_a_protective_stop_ends_the_run_with_its_own_exit_code() {
-    // The controller's limits let the elbow go to 3.5 rad; the arm's (the URDF's) end at π:
-    // the target past the limit raises a protective stop on the robot.
-    let s = sim(UrSimConfig::default());
+    // The robot stops itself mid-run (as on a detected collision; the controller's own limits
+    // may never be looser than the arm's, so it cannot drive the arm past them). In lockstep the
+    // first reset of this task takes about 496 arm cycles and episode 0's 10 ticks follow, so
+    // cycle 503 falls in that episode (a stop during a reset ends the run as ArmLost).
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            protective_stop_after: 503,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
     let (code, j, log) = run_against(
         Ports::from(&s),
         "ur-pstop",
-        "[limits]\nlower = [-6.28, -6.28, -3.5]\nupper = [6.28, 6.28, 3.5]\nvelocity = [3.14, 3.14, 30.0]\neffort = [150.0, 150.0, 150.0]",
+        "",
         WATCHDOG_MS,
         5,
-        // Past the URDF's elbow limit (π).
-        [0.3, -1.7, 3.3],
+        [0.3, -1.7, 1.6],
     );
     let summary = s.stop();
     assert_eq!(summary.protective_stops, 1, "{summary:?}");
