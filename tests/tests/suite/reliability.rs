@@ -99,8 +99,9 @@ fn setup(dir: &Path) {
         ..demos.clone()
     };
     learner::io::demos::save(&other, &dir.join("other.npz")).unwrap();
-    let st = Command::new(bin("learner"))
-        .args(s(&[
+    learner_ok(
+        dir,
+        &[
             "train",
             "--demos",
             "demos.npz",
@@ -108,21 +109,10 @@ fn setup(dir: &Path) {
             "1",
             "--out",
             "run",
-        ]))
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+        ],
     );
     for r in ["norun", "critic1e300"] {
-        let d = dir.join(r);
-        std::fs::create_dir_all(&d).unwrap();
-        for f in std::fs::read_dir(dir.join("run")).unwrap().flatten() {
-            std::fs::copy(f.path(), d.join(f.file_name())).unwrap();
-        }
+        copy_tree(&dir.join("run"), &dir.join(r));
     }
     std::fs::remove_file(dir.join("norun/gaifo_log.csv")).unwrap();
     let critic = dir.join("critic1e300/iter_001_critic.json");
@@ -136,8 +126,9 @@ fn setup(dir: &Path) {
     // Second round: a recorded run with one episode deleted, one without its record of files,
     // one whose run.json seed was edited; demonstrations with dt = 100 s, a NaN end-effector
     // velocity, the costs swapped; a LeRobot export (fps edited to 1e-300) and a CSV export.
-    let st = Command::new(bin("learner"))
-        .args(s(&[
+    learner_ok(
+        dir,
+        &[
             "train",
             "--demos",
             "demos.npz",
@@ -146,14 +137,7 @@ fn setup(dir: &Path) {
             "--record-episodes",
             "--out",
             "rec",
-        ]))
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+        ],
     );
     for r in ["rec-lost", "rec-norecord", "rec-seed"] {
         copy_tree(&dir.join("rec"), &dir.join(r));
@@ -179,15 +163,9 @@ fn setup(dir: &Path) {
         std::mem::swap(&mut d.cost_expert, &mut d.cost_random)
     });
     for (fmt, out) in [("lerobot", "lr"), ("lerobot", "lr-fps"), ("csv", "d.csv")] {
-        let st = Command::new(bin("learner"))
-            .args(s(&["dataset", "export", "--format", fmt, "demos.npz", out]))
-            .current_dir(dir)
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
+        learner_ok(
+            dir,
+            &["dataset", "export", "--format", fmt, "demos.npz", out],
         );
     }
     // The CSV with a NaN end-effector velocity (demonstration 1, step 4, column ee_vel_x).
@@ -206,6 +184,20 @@ fn setup(dir: &Path) {
 }
 
 /// Copies a folder tree.
+/// Runs `learner ARGS` in `dir` for the cases' setup; panics with its stderr if it fails.
+fn learner_ok(dir: &Path, args: &[&str]) {
+    let st = Command::new(bin("learner"))
+        .args(s(args))
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+}
+
 fn copy_tree(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for e in std::fs::read_dir(from).unwrap().flatten() {
