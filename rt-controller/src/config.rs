@@ -308,6 +308,14 @@ pub struct ControllerConfig {
     pub noisy_episodes: u64,
     /// Noise-free (evaluation) episodes per cycle.
     pub eval_episodes: u64,
+    /// Cycles (`noisy_episodes + eval_episodes` episodes) to run with one table version, after
+    /// which the controller holds until a newer table (or a new publication of it) arrives;
+    /// 0 = keep running the version until then. With an arm whose reset is a motion (the `ur`
+    /// backend), 1 makes a lockstep run independent of how long the learner takes: no episode
+    /// of an old version moves the arm between the versions (docs/ur.md, "Lockstep"). The
+    /// learner must then need one cycle per version (`samples` ≤ `noisy_episodes`); a cycle
+    /// with an aborted episode is run again.
+    pub cycles_per_table: u64,
     /// Meaning of actions (must match the arm's).
     pub action_mode: ActionMode,
     /// The arm backend and, for `ur`, the robot's address and ports.
@@ -351,6 +359,7 @@ impl Default for ControllerConfig {
             seed: 0,
             noisy_episodes: 5,
             eval_episodes: 1,
+            cycles_per_table: 0,
             action_mode: ActionMode::GoalAngles,
             arm: ArmConfig::default(),
             task: TaskConfig::default(),

@@ -243,6 +243,19 @@ fn command_loop(ctx: &Ctx, generation: u64, mut s: TcpStream) -> End {
         ) {
             return End::Stopped;
         }
+        // Lockstep: an IDLE command (the driver's keepalive while it has nothing to command)
+        // is not a cycle: no time passes, so nothing moves and no package follows.
+        if ctx.cfg.lockstep
+            && matches!(
+                cmd,
+                Some(ReverseCommand {
+                    mode: ControlMode::Idle,
+                    ..
+                })
+            )
+        {
+            continue;
+        }
         let mut end = None;
         let mut wrist_off = None;
         ctx.advance(ctx.cfg.lockstep, |arm| {

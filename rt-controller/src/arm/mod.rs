@@ -49,6 +49,11 @@ pub trait ArmBackend {
     /// Loop: sends one command.
     fn send(&mut self, cmd: &ArmCommand) -> Result<(), ArmIoError>;
 
+    /// Loop, lockstep: the controller has nothing to command until further notice (it waits
+    /// for a table); the next [`Self::send`] ends that. An arm that needs traffic to stay
+    /// alive keeps it up without moving the arm (the `ur` arm: IDLE keepalives).
+    fn idle(&mut self) {}
+
     /// Loop: why the arm is gone for good (its connection closed), if it is; the loop then
     /// ends with [`crate::ExitReason::ArmLost`] at its next step (a stale wait, or a fresh one
     /// after a send that failed) instead of waiting for `safety.give_up_after_s`.

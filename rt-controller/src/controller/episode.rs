@@ -82,6 +82,9 @@ impl<A: ArmBackend> Controller<A> {
 
     fn abort_episode(&mut self, fault: Fault) {
         self.latch(fault);
+        if matches!(self.phase, Phase::Running { .. } | Phase::Resetting { .. }) {
+            self.aborted_with_version += 1;
+        }
         if let Phase::Running { t } = self.phase {
             self.stats.episodes_aborted += 1;
             self.report_episode(t, true);
@@ -226,12 +229,23 @@ impl<A: ArmBackend> Controller<A> {
             if self.phase != Phase::NeedTable {
                 self.latch(Fault::NoTable);
                 self.phase = Phase::NeedTable;
-                self.send_hold();
+                // Lockstep: nothing moves without a command, and the run must not depend on
+                // whether the first table came before the first boundary (docs/ur.md,
+                // "Lockstep over RTDE").
+                if self.cfg.mode == Mode::RealTime {
+                    self.send_hold();
+                }
             }
             return None;
         };
         let cycle = self.cfg.noisy_episodes + self.cfg.eval_episodes;
         let k = self.episodes_with_version;
+        if self.cfg.cycles_per_table > 0
+            && self.aborted_with_version == 0
+            && k >= cycle * self.cfg.cycles_per_table
+        {
+            return self.hold_for_newer_table();
+        }
         self.noisy = k % cycle < self.cfg.noisy_episodes;
         self.noise.reseed(self.cfg.seed, version, k);
         self.episodes_with_version += 1;
@@ -241,6 +255,24 @@ impl<A: ArmBackend> Controller<A> {
             seq,
             sent_ns: monotonic_ns(),
         };
+        None
+    }
+
+    /// The version's cycles are done (`cycles_per_table`): hold until the learner's next
+    /// table; in lockstep nothing is commanded (the arm does not move), in real time a hold
+    /// every period. `safety.no_table_timeout_s` bounds the wait as it bounds NeedTable.
+    fn hold_for_newer_table(&mut self) -> Option<ExitReason> {
+        if !self.waiting_newer {
+            self.waiting_newer = true;
+            self.no_table_since_ns = monotonic_ns();
+        }
+        let t = self.cfg.safety.no_table_timeout_s;
+        if t > 0.0 && (monotonic_ns() - self.no_table_since_ns) as f64 * 1e-9 >= t {
+            return Some(ExitReason::NoTable);
+        }
+        if self.cfg.mode == Mode::RealTime {
+            self.send_hold();
+        }
         None
     }
 
@@ -299,6 +331,8 @@ impl<A: ArmBackend> Controller<A> {
                 self.stats.intake.record(monotonic_ns() - t0);
                 self.stats.swaps += 1;
                 self.episodes_with_version = 0;
+                self.aborted_with_version = 0;
+                self.waiting_newer = false;
                 if self.cfg.episode_report {
                     let _ = writeln!(
                         std::io::stderr(),

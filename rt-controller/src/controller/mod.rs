@@ -183,6 +183,11 @@ pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     episode: u64,
     episodes_started: u64,
     episodes_with_version: u64,
+    /// Episodes of the active version aborted (in reset or running): its cycle runs again
+    /// (`cycles_per_table`).
+    aborted_with_version: u64,
+    /// Holding at a boundary for a table newer than the active one (`cycles_per_table`).
+    waiting_newer: bool,
     noisy: bool,
     latest: ArmState,
     have_state: bool,
@@ -291,6 +296,8 @@ impl<A: ArmBackend> Controller<A> {
             episode: 0,
             episodes_started: 0,
             episodes_with_version: 0,
+            aborted_with_version: 0,
+            waiting_newer: false,
             noisy: false,
             last_safe_q: latest.q,
             have_state: true,

@@ -78,6 +78,7 @@ impl<A: ArmBackend> Controller<A> {
                 Some(seq) => self.poll_until(|s| s.last_command_seq >= seq),
                 None => {
                     // Nothing outstanding (waiting for a table): idle while the arm holds.
+                    self.arm.idle();
                     sleep_until_ns(monotonic_ns() + self.period_ns.clamp(1_000_000, 10_000_000));
                     self.drain_states();
                     StateFreshness::Fresh

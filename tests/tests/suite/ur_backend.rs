@@ -168,8 +168,18 @@ fn learner_toml(dir: &Path) -> String {
     )
 }
 
-/// The expert learning over IPC (3 iterations, lockstep): the learner's summary.
-fn learn(dir: &Path, prefix: &str, ctl_cfg: &str, label: &str) -> serde_json::Value {
+/// The expert learning over IPC (3 iterations, lockstep): the learner's summary and the
+/// controller's. With `pause` (the ur-sim the controller drives), the learner is stopped
+/// (SIGSTOP) once its second table is written, until the arm has sent no package for 1.5 s:
+/// the controller ran that table's cycle and then idled for three keepalive intervals of a
+/// 1000 ms receive timeout.
+fn learn(
+    dir: &Path,
+    prefix: &str,
+    ctl_cfg: &str,
+    label: &str,
+    pause: Option<&UrSimHandle>,
+) -> (serde_json::Value, serde_json::Value) {
     let out = dir.join(format!("out-{label}"));
     let mut learner = Proc::spawn(
         "learner",
@@ -192,6 +202,30 @@ fn learn(dir: &Path, prefix: &str, ctl_cfg: &str, label: &str) -> serde_json::Va
         &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
         dir,
     );
+    if let Some(arm) = pause {
+        use std::time::{Duration, Instant};
+        let second = out.join("tables").join("v0002.npz");
+        let t0 = Instant::now();
+        while !second.exists() {
+            assert!(
+                t0.elapsed() < LONG,
+                "no second table within {LONG:?}:\n{}",
+                learner.log()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        learner.signal(libc::SIGSTOP);
+        let (mut packages, mut since) = (arm.summary().packages, Instant::now());
+        while since.elapsed() < Duration::from_millis(1500) {
+            assert!(t0.elapsed() < LONG, "the arm never went quiet");
+            std::thread::sleep(Duration::from_millis(20));
+            let now = arm.summary().packages;
+            if now != packages {
+                (packages, since) = (now, Instant::now());
+            }
+        }
+        learner.signal(libc::SIGCONT);
+    }
     let (code, out) = learner.wait(LONG);
     let log = learner.log();
     assert_eq!(
@@ -207,13 +241,15 @@ fn learn(dir: &Path, prefix: &str, ctl_cfg: &str, label: &str) -> serde_json::Va
     let c = json_summary(&cout, &clog);
     assert_eq!(c["episodes_aborted"], 0, "{c}");
     assert_eq!(c["rejected_total"], 0, "{c}");
-    json_summary(&out, &log)
+    (json_summary(&out, &log), c)
 }
 
 #[test]
 fn ur_learning_has_the_outcome_of_the_iceoryx2_run_in_lockstep() {
     let dir = scratch("ur-learn");
-    let common = "seed = 7\nnoisy_episodes = 5\neval_episodes = 1\nmode = \"lockstep\"\n[task]\nhorizon = 30\n";
+    // One cycle per table: no episode of an old table moves the arm while the learner works
+    // (docs/ur.md, "Lockstep over RTDE").
+    let common = "seed = 7\nnoisy_episodes = 5\neval_episodes = 1\ncycles_per_table = 1\nmode = \"lockstep\"\n[task]\nhorizon = 30\n";
     // Over iceoryx2 with hil-sim serve.
     let prefix = unique_prefix("ur-learn-i");
     let sim_cfg = write_config(&dir, "sim.toml", "[task]\nhorizon = 30\n");
@@ -223,30 +259,62 @@ fn ur_learning_has_the_outcome_of_the_iceoryx2_run_in_lockstep() {
         &["serve", "--config", &sim_cfg, "--prefix", &prefix],
         &dir,
     );
-    let ice = learn(
+    let (ice, _) = learn(
         &dir,
         &prefix,
         &write_config(&dir, "ctl-ice.toml", common),
         "iceoryx2",
+        None,
     );
     serve.signal(libc::SIGTERM);
     // Over RTDE and the reverse interface with ur-sim (lockstep). The program's watchdog is
     // long so that a descheduled test machine cannot end the program mid-run.
-    let s = sim(UrSimConfig::default());
-    let prefix = unique_prefix("ur-learn-u");
-    let ur = learn(
-        &dir,
-        &prefix,
-        &write_config(
+    // Twice: the second time the learner is paused, so the controller idles (IDLE keepalives)
+    // for longer than the learner's updates take; the run must not change by a bit.
+    let mut runs = Vec::new();
+    for (label, pause) in [("ur", false), ("ur-paused", true)] {
+        let s = sim(UrSimConfig::default());
+        let prefix = unique_prefix("ur-learn-u");
+        let (ur, c) = learn(
             &dir,
-            "ctl-ur.toml",
-            &format!("{common}{}", arm_toml(Ports::from(&s), 1000)),
-        ),
-        "ur",
-    );
-    let summary = s.stop();
-    assert_eq!(summary.protective_stops, 0, "{summary:?}");
-    assert_eq!(summary.programs, 1, "{summary:?}");
+            &prefix,
+            &write_config(
+                &dir,
+                &format!("ctl-{label}.toml"),
+                &format!("{common}{}", arm_toml(Ports::from(&s), 1000)),
+            ),
+            label,
+            pause.then_some(&s),
+        );
+        let summary = s.stop();
+        assert_eq!(summary.protective_stops, 0, "{summary:?}");
+        assert_eq!(summary.programs, 1, "{summary:?}");
+        assert_eq!(ur["counts"]["old_version"], 0, "one cycle per table: {ur}");
+        if pause {
+            assert!(
+                c["arm"]["keepalives"].as_u64().unwrap() >= 1,
+                "the pause made the controller idle: {c}"
+            );
+        }
+        runs.push(ur);
+    }
+    let (ur, paused) = (&runs[0], &runs[1]);
+    for key in ["eval_costs", "log"] {
+        let strip = |v: &serde_json::Value| {
+            let mut v = v[key].clone();
+            for row in v.as_array_mut().unwrap() {
+                if let Some(o) = row.as_object_mut() {
+                    o.remove("seconds");
+                }
+            }
+            v
+        };
+        assert_eq!(
+            strip(ur),
+            strip(paused),
+            "{key}: a paused learner changed the run"
+        );
+    }
     // The same learning, up to the differences of the two arms: ur-sim's reset is a motion
     // that ends within 2 mrad of the start pose (hil-sim serve places the arm there), and
     // servoj targets travel rounded to 1 µrad.

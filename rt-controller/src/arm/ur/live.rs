@@ -133,6 +133,10 @@ struct Live {
     next_emit_ts: f64,
     /// An emitted state the controller has not answered yet (the write for its package waits).
     awaiting_answer: bool,
+    /// The controller has nothing to command ([`ArmBackend::idle`]): writes are IDLE
+    /// keepalives, which the program answers by holding and a lockstep ur-sim by not stepping
+    /// (docs/ur.md, "Lockstep"); the next command ends it.
+    idle: bool,
     state_seq: u64,
     last_command_seq: u64,
     episode: u64,
@@ -278,6 +282,7 @@ impl ArmBackend for UrArm {
             goal_ts: ts,
             next_emit_ts: ts + self.period_s,
             awaiting_answer: false,
+            idle: false,
             state_seq: 0,
             last_command_seq: 0,
             episode: 0,
@@ -318,11 +323,18 @@ impl ArmBackend for UrArm {
         };
         let ok = l.take_command(cmd, &self.limits, &self.cfg);
         l.awaiting_answer = false;
+        l.idle = false;
         let written = l.write(&self.cfg);
         if ok {
             written
         } else {
             Err(ArmIoError::Send)
+        }
+    }
+
+    fn idle(&mut self) {
+        if let Some(l) = self.live.as_mut() {
+            l.idle = true;
         }
     }
 
@@ -628,7 +640,11 @@ impl Live {
         let cmd = ReverseCommand {
             timeout_ms: cfg.receive_timeout_ms as i32,
             q,
-            mode: ControlMode::Servoj,
+            mode: if self.idle {
+                ControlMode::Idle
+            } else {
+                ControlMode::Servoj
+            },
         };
         let bytes = cmd.encode().map_err(|_| ArmIoError::Send)?;
         self.last_write_ns = monotonic_ns();
