@@ -308,6 +308,19 @@ impl ExpertLearner {
         }
     }
 
+    /// Restores the best controller executed before a resume, its noise-free episode and the
+    /// iterations since (`patience` counts on from there), as a checkpoint recorded them.
+    pub fn with_best(mut self, best: Option<(LinGaussPolicy, Episode)>, since_best: usize) -> Self {
+        self.best = best;
+        self.since_best = since_best;
+        self
+    }
+
+    /// Iterations in a row without a better noise-free episode than the best one.
+    pub fn since_best(&self) -> usize {
+        self.since_best
+    }
+
     /// The configuration.
     pub fn config(&self) -> &ExpertConfig {
         &self.cfg

@@ -1,6 +1,6 @@
 //! Checkpoints (docs/design.md §4): the expert's of a served run (`checkpoint.npz`: the
-//! controller executed next with all GPS policy arrays, its iteration and the random-policy
-//! cost, §4.5) and LQR+GAIfO's learner state (`iter_NNN_state.npz`: a [`Snapshot`], one array
+//! controller executed next with all GPS policy arrays, its iteration, the random-policy
+//! cost and the best controller so far with its noise-free episode and the patience count, §4.5) and LQR+GAIfO's learner state (`iter_NNN_state.npz`: a [`Snapshot`], one array
 //! per entry, §4.11). Both are written atomically (temporary file, fsync, rename).
 
 use std::path::Path;
@@ -8,6 +8,7 @@ use std::path::Path;
 use gps::linalg::MatSeq;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::snapshot::Snapshot;
+use imitation::rollout::Episode;
 use ur5_shared::layout::{DU, DX};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
@@ -15,48 +16,76 @@ use super::npz::{NpzError, NpzFile, NpzWriter};
 /// Version of this file layout.
 pub const SCHEMA_VERSION: i64 = 1;
 
+/// What a served expert run's `checkpoint.npz` holds (see the module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExpertCheckpoint {
+    /// The controller to execute next.
+    pub pol: LinGaussPolicy,
+    /// Iterations done.
+    pub iteration: usize,
+    /// The random policy's cost of the progress proxy, once known.
+    pub cost_random: Option<f64>,
+    /// The best controller executed so far and its noise-free episode (`best_*` arrays;
+    /// absent in checkpoints written before they were added: then `None`).
+    pub best: Option<(LinGaussPolicy, Episode)>,
+    /// Iterations since the best one (the `patience` count).
+    pub since_best: usize,
+}
+
 /// Writes the controller to execute next and where it stands (see the module docs).
-pub fn save_checkpoint(
-    path: &Path,
-    pol: &LinGaussPolicy,
-    iteration: usize,
-    cost_random: Option<f64>,
-    seed: u64,
-) -> anyhow::Result<()> {
-    let (t, dx, du) = (pol.t as u64, pol.dx as u64, pol.du as u64);
+pub fn save_checkpoint(path: &Path, c: &ExpertCheckpoint, seed: u64) -> anyhow::Result<()> {
     let mut w = NpzWriter::create(path)?;
     w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
-    w.f64("K", &[t, du, dx], &pol.gain.data)?;
-    w.f64("k", &[t, du], &pol.k.data)?;
-    w.f64("pol_covar", &[t, du, du], &pol.pol_covar.data)?;
-    w.f64("chol_pol_covar", &[t, du, du], &pol.chol_pol_covar.data)?;
-    w.f64("inv_pol_covar", &[t, du, du], &pol.inv_pol_covar.data)?;
-    w.u64("iteration", &[], &[iteration as u64])?;
-    w.u64("table_version", &[], &[iteration as u64 + 1])?;
-    w.f64("cost_random", &[], &[cost_random.unwrap_or(f64::NAN)])?;
+    write_policy(&mut w, "", &c.pol)?;
+    w.u64("iteration", &[], &[c.iteration as u64])?;
+    w.u64("table_version", &[], &[c.iteration as u64 + 1])?;
+    w.f64("cost_random", &[], &[c.cost_random.unwrap_or(f64::NAN)])?;
     w.u64("seed", &[], &[seed])?;
+    if let Some((pol, ep)) = &c.best {
+        write_policy(&mut w, "best_", pol)?;
+        let (t, du) = (ep.horizon() as u64, DU as u64);
+        w.f64("best_x", &[t, DX as u64], &ep.x)?;
+        w.f64("best_u", &[t, du], &ep.u)?;
+        w.f64("best_u_policy", &[t, du], &ep.u_policy)?;
+        // Episodes assembled from the controller's samples carry no noise (empty).
+        w.f64("best_eps", &[(ep.eps.len() / DU) as u64, du], &ep.eps)?;
+        w.u64("best_noisy", &[], &[u64::from(ep.noisy)])?;
+        w.u64("since_best", &[], &[c.since_best as u64])?;
+    }
     w.finish()?;
     Ok(())
 }
 
-/// Reads a checkpoint: (controller, iteration, random-policy cost).
-pub fn load_checkpoint(path: &Path) -> anyhow::Result<(LinGaussPolicy, usize, Option<f64>)> {
-    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
-    let (shape, gain) = f.f64("K")?;
+fn write_policy(w: &mut NpzWriter, prefix: &str, pol: &LinGaussPolicy) -> anyhow::Result<()> {
+    let (t, dx, du) = (pol.t as u64, pol.dx as u64, pol.du as u64);
+    w.f64(&format!("{prefix}K"), &[t, du, dx], &pol.gain.data)?;
+    w.f64(&format!("{prefix}k"), &[t, du], &pol.k.data)?;
+    for (name, m) in [
+        ("pol_covar", &pol.pol_covar),
+        ("chol_pol_covar", &pol.chol_pol_covar),
+        ("inv_pol_covar", &pol.inv_pol_covar),
+    ] {
+        w.f64(&format!("{prefix}{name}"), &[t, du, du], &m.data)?;
+    }
+    Ok(())
+}
+
+fn read_policy(f: &NpzFile, path: &Path, prefix: &str) -> anyhow::Result<LinGaussPolicy> {
+    let (shape, gain) = f.f64(&format!("{prefix}K"))?;
     let [t, du, dx] = shape[..] else {
         anyhow::bail!(
-            "{}: K has shape {shape:?}, expected (T, dU, dX)",
+            "{}: {prefix}K has shape {shape:?}, expected (T, dU, dX)",
             path.display()
         );
     };
     anyhow::ensure!(
         (du, dx) == (DU as u64, DX as u64),
-        "{}: K has shape {shape:?}, expected (T, {DU}, {DX})",
+        "{}: {prefix}K has shape {shape:?}, expected (T, {DU}, {DX})",
         path.display()
     );
     let (tn, dun) = (t as usize, du as usize);
     let seq = |name: &str, cols: u64| -> anyhow::Result<MatSeq> {
-        let data = f.f64_shaped(name, &[t, du, cols])?;
+        let data = f.f64_shaped(&format!("{prefix}{name}"), &[t, du, cols])?;
         Ok(MatSeq::from_vec(tn, dun, cols as usize, data))
     };
     let pol = LinGaussPolicy {
@@ -64,7 +93,7 @@ pub fn load_checkpoint(path: &Path) -> anyhow::Result<(LinGaussPolicy, usize, Op
         dx: DX,
         du: DU,
         gain: MatSeq::from_vec(tn, dun, DX, gain),
-        k: MatSeq::from_vec(tn, dun, 1, f.f64_shaped("k", &[t, du])?),
+        k: MatSeq::from_vec(tn, dun, 1, f.f64_shaped(&format!("{prefix}k"), &[t, du])?),
         pol_covar: seq("pol_covar", du)?,
         chol_pol_covar: seq("chol_pol_covar", du)?,
         inv_pol_covar: seq("inv_pol_covar", du)?,
@@ -72,16 +101,50 @@ pub fn load_checkpoint(path: &Path) -> anyhow::Result<(LinGaussPolicy, usize, Op
     let all = [&pol.gain, &pol.k, &pol.pol_covar, &pol.chol_pol_covar];
     anyhow::ensure!(
         all.iter().all(|m| m.data.iter().all(|v| v.is_finite())),
-        "{}: non-finite controller values",
+        "{}: non-finite controller values ({prefix}K …)",
         path.display()
     );
+    Ok(pol)
+}
+
+/// Reads a checkpoint written by [`save_checkpoint`].
+pub fn load_checkpoint(path: &Path) -> anyhow::Result<ExpertCheckpoint> {
+    let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
+    let pol = read_policy(&f, path, "")?;
     let iteration = f.u64_scalar("iteration")? as usize;
     let cost_random = f.f64_shaped("cost_random", &[])?[0];
-    Ok((
+    let (best, since_best) = if f.names().iter().any(|n| n == "best_K") {
+        let best = read_policy(&f, path, "best_")?;
+        let (t, du) = (best.t as u64, DU as u64);
+        let ep = Episode {
+            x: f.f64_shaped("best_x", &[t, DX as u64])?,
+            u: f.f64_shaped("best_u", &[t, du])?,
+            u_policy: f.f64_shaped("best_u_policy", &[t, du])?,
+            eps: match f.f64("best_eps")? {
+                (s, v) if s == [t, du] || s == [0, du] => v,
+                (s, _) => anyhow::bail!(
+                    "{}: best_eps has shape {s:?}, expected ({t}, {du}) or (0, {du})",
+                    path.display()
+                ),
+            },
+            noisy: f.u64_scalar("best_noisy")? != 0,
+        };
+        anyhow::ensure!(
+            ep.x.iter().chain(&ep.u).all(|v| v.is_finite()),
+            "{}: non-finite values in the best controller's episode",
+            path.display()
+        );
+        (Some((best, ep)), f.u64_scalar("since_best")? as usize)
+    } else {
+        (None, 0)
+    };
+    Ok(ExpertCheckpoint {
         pol,
         iteration,
-        cost_random.is_finite().then_some(cost_random),
-    ))
+        cost_random: cost_random.is_finite().then_some(cost_random),
+        best,
+        since_best,
+    })
 }
 
 /// Version of the learner-state layout (`iter_NNN_state.npz`).

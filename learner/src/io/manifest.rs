@@ -8,7 +8,8 @@
 //!   deleted first.
 //! - A resume ([`Claim::Resume`]) needs the directory's `run.json` and its `gaifo_log.csv` or
 //!   `serve_log.csv`, and the same command, algorithm, seed, demonstrations and settings
-//!   (the number of iterations may differ: a resume extends the run).
+//!   (the number of iterations may differ: a resume extends the run); it deletes what writes
+//!   cut short by a kill left there (`*.partial`, `*.tmp`).
 //!
 //! The hashes are FNV-1a 64 (identity, not security): of the demonstrations file's bytes, and
 //! of the settings serialised as JSON with `iterations` removed.
@@ -228,6 +229,31 @@ fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(found)
 }
 
+/// Deletes what writes cut short by a kill left in a run folder and its `tables/` and
+/// `episodes/`: `*.partial` (an [`crate::io::npz::NpzWriter`] before its rename) and `*.tmp`
+/// (an atomic file before its rename). Neither is ever a complete file, and the run's record
+/// (`files.jsonl`) lists none of them.
+fn remove_cut_writes(dir: &Path) -> anyhow::Result<()> {
+    for d in [dir.to_path_buf(), dir.join("tables"), dir.join("episodes")] {
+        let entries = match std::fs::read_dir(&d) {
+            Ok(e) => e,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => return Err(e).with_context(|| format!("reading {}", d.display())),
+        };
+        for e in entries {
+            let p = e
+                .with_context(|| format!("reading {}", d.display()))?
+                .path();
+            let name = p.file_name().unwrap_or_default().to_string_lossy();
+            if p.is_file() && (name.ends_with(".partial") || name.ends_with(".tmp")) {
+                std::fs::remove_file(&p)
+                    .with_context(|| format!("deleting the cut write {}", p.display()))?;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Reads `dir`'s manifest, if any.
 pub fn read(dir: &Path) -> anyhow::Result<Option<Manifest>> {
     let p = dir.join(MANIFEST);
@@ -271,7 +297,7 @@ pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
                  write rows with a gap; restore the file or start a new run",
                 dir.display()
             );
-            Ok(())
+            remove_cut_writes(dir)
         }
         Claim::New { force } => {
             let files = run_files(dir)?;
@@ -366,9 +392,31 @@ mod tests {
             .to_string();
         assert!(e.contains("no gaifo_log.csv"), "{e}");
         std::fs::write(dir.join("gaifo_log.csv"), "x").unwrap();
+        // Writes a kill cut short: deleted by the resume, nothing else.
+        std::fs::create_dir_all(dir.join("episodes")).unwrap();
+        let cut = [
+            dir.join("iter_003_table.npz.partial"),
+            dir.join("episodes")
+                .join("000004_e000003_v0001.npz.partial"),
+            dir.join("best_table.npz.tmp"),
+        ];
+        for f in &cut {
+            std::fs::write(f, "cut").unwrap();
+        }
+        std::fs::write(
+            dir.join("episodes").join("000001_e000000_v0001.npz"),
+            "kept",
+        )
+        .unwrap();
         // More iterations: the same run.
         let more = serde_json::json!({"iterations": 40, "kl": 1.0});
         claim(&dir, &manifest(0, &more), Claim::Resume).unwrap();
+        assert!(cut.iter().all(|f| !f.exists()), "cut writes deleted");
+        assert!(dir
+            .join("episodes")
+            .join("000001_e000000_v0001.npz")
+            .exists());
+        assert!(dir.join("gaifo_log.csv").exists());
         let e = claim(&dir, &manifest(1, &s), Claim::Resume)
             .unwrap_err()
             .to_string();

@@ -16,8 +16,8 @@
 //! | `/state` | `ur5.State` | step | `episode`, `table_version`, `noisy`, `t`, `q`, `qd` (rad, rad/s), `ee_minus_goal` (m), `ee_vel` (m/s) |
 //! | `/action` | `ur5.Action` | step | `episode`, `table_version`, `t`, `executed` (after the clamp; the arm ran it), `policy` (the controller law's) |
 //! | `/fault` | `ur5.Fault` | step where the clamp changed the action | `episode`, `table_version`, `t`, `kind` (`action_clamped`), `policy`, `executed` |
-//! | `/episode` | `ur5.Episode` | episode, at its last step | `episode`, `table_version`, `noisy`, `task_cost`, `final_distance_m`, `file` |
-//! | `/table` | `ur5.GainTable` | table version, when its first episode starts (at the end if it ran none) | `version`, `checksum` (XXH3-64, hex), `horizon`, `file` |
+//! | `/episode` | `ur5.Episode` | episode, at its last step | `episode`, `table_version`, `table_epoch`, `noisy`, `task_cost`, `final_distance_m`, `file` |
+//! | `/table` | `ur5.GainTable` | table publication, when its first episode starts (at the end if it ran none) | `version`, `epoch` (the publication: a resumed learner publishes its version again with the next), `checksum` (XXH3-64, hex), `horizon`, `file` |
 //!
 //! Faults the controller reports (aborted episodes, safety holds) are not in a run folder
 //! (incomplete episodes are not recorded), so `/fault` holds only the clamp's interventions.
@@ -89,14 +89,14 @@ fn channels() -> Vec<(&'static str, &'static str, serde_json::Value)> {
             "/episode",
             "ur5.Episode",
             json!({"type": "object", "properties": {
-                "episode": int, "table_version": int, "noisy": {"type": "boolean"},
-                "task_cost": num, "final_distance_m": num, "file": {"type": "string"}}}),
+                "episode": int, "table_version": int, "table_epoch": int,
+                "noisy": {"type": "boolean"}, "task_cost": num, "final_distance_m": num, "file": {"type": "string"}}}),
         ),
         (
             "/table",
             "ur5.GainTable",
             json!({"type": "object", "properties": {
-                "version": int, "checksum": {"type": "string"}, "horizon": int,
+                "version": int, "epoch": int, "checksum": {"type": "string"}, "horizon": int,
                 "file": {"type": "string"}}}),
         ),
     ]
@@ -135,6 +135,9 @@ fn table_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
 pub struct TableInfo {
     /// Its version.
     pub version: u64,
+    /// Its publication ([`ur5_shared::GainTable::epoch`]: a resumed `learner serve` publishes
+    /// its version again with the next epoch).
+    pub epoch: u32,
     /// XXH3-64 checksum.
     pub checksum: u64,
     /// T.
@@ -149,6 +152,7 @@ impl TableInfo {
         let t = load_stored(file).with_context(|| format!("reading {}", file.display()))?;
         Ok(Self {
             version: t.version,
+            epoch: t.epoch,
             checksum: t.checksum,
             horizon: t.arrays[0].1[0],
             file: file.to_owned(),
@@ -156,7 +160,8 @@ impl TableInfo {
     }
 
     fn message(&self) -> serde_json::Value {
-        json!({"version": self.version, "checksum": format!("{:#018x}", self.checksum),
+        json!({"version": self.version, "epoch": self.epoch,
+               "checksum": format!("{:#018x}", self.checksum),
                "horizon": self.horizon, "file": self.file.display().to_string()})
     }
 }
@@ -185,8 +190,8 @@ pub struct RunMcap {
     start: f64,
     /// Tables announced and not yet in force, by version.
     pending: Vec<TableInfo>,
-    /// The highest version announced.
-    last_table: u64,
+    /// The newest publication announced: (version, epoch).
+    last_table: (u64, u32),
     counts: McapCounts,
 }
 
@@ -219,7 +224,7 @@ impl RunMcap {
             seq: 0,
             start: 0.0,
             pending: Vec::new(),
-            last_table: 0,
+            last_table: (0, 0),
             counts: McapCounts::default(),
         })
     }
@@ -239,11 +244,11 @@ impl RunMcap {
     }
 
     /// Announces a table: its `/table` message comes when its first episode starts (or at the
-    /// end). A version not above the last one announced is ignored (a resumed learner
-    /// publishes its table again).
+    /// end). A publication not newer than the last one announced, by (version, epoch), is
+    /// ignored; a resumed learner's new publication of its version is announced.
     pub fn table(&mut self, t: TableInfo) {
-        if t.version > self.last_table {
-            self.last_table = t.version;
+        if (t.version, t.epoch) > self.last_table {
+            self.last_table = (t.version, t.epoch);
             self.counts.tables += 1;
             self.pending.push(t);
         }
@@ -260,8 +265,13 @@ impl RunMcap {
         let start = self.start;
         let ns = |t: usize| ((start + t as f64 * dt) * 1e9).round() as u64;
         let v = origin.table_version;
-        // Tables up to this version come into force now.
-        while self.pending.first().is_some_and(|t| t.version <= v) {
+        // Publications up to this episode's come into force now.
+        let pubn = (v, origin.table_epoch);
+        while self
+            .pending
+            .first()
+            .is_some_and(|t| (t.version, t.epoch) <= pubn)
+        {
             let t = self.pending.remove(0);
             self.put("/table", ns(0), t.message())?;
         }
@@ -307,7 +317,8 @@ impl RunMcap {
             "/episode",
             ns(last),
             json!({
-            "episode": e, "table_version": v, "noisy": noisy, "task_cost": ep.task_cost(),
+            "episode": e, "table_version": v, "table_epoch": origin.table_epoch,
+            "noisy": noisy, "task_cost": ep.task_cost(),
             "final_distance_m": ep.final_distance(), "file": path.display().to_string()}),
         )?;
         self.start += ep.horizon() as f64 * dt;

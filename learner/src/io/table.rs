@@ -75,7 +75,7 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
 }
 
 /// A table file as stored, without any check beyond its schema: the float arrays of
-/// [`table_arrays`] (same order) and the `version` and `checksum` scalars (`learner replay`
+/// [`table_arrays`] (same order) and the `version`, `checksum` and `epoch` scalars (`learner replay`
 /// compares them entry by entry).
 pub struct StoredTable {
     /// (name, shape, values) of `K`, `k`, `s_hat`, `a_hat`, `L`.
@@ -84,6 +84,8 @@ pub struct StoredTable {
     pub version: u64,
     /// `checksum`.
     pub checksum: u64,
+    /// `epoch` (0 when absent).
+    pub epoch: u32,
 }
 
 /// Reads a table file as stored ([`StoredTable`]).
@@ -98,6 +100,7 @@ pub fn load_stored(path: &Path) -> Result<StoredTable, NpzError> {
         arrays,
         version: f.u64_scalar("version")?,
         checksum: f.u64_scalar("checksum")?,
+        epoch: f.u32_scalar_or_zero("epoch")?,
     })
 }
 

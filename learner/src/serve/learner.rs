@@ -13,7 +13,7 @@ use serde::Serialize;
 use ur5_shared::GainTable;
 
 use super::ServeOptions;
-use crate::io::checkpoint::save_checkpoint;
+use crate::io::checkpoint::{save_checkpoint, ExpertCheckpoint};
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::learned::{append_event, LearnedEvent};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
@@ -45,13 +45,14 @@ impl ServeLearner for ExpertLearner {
     const TASK_SOURCE: &'static str = "this learner's config ([task])";
     const PROGRESS_HEADER: &'static str = IterationLog::PROGRESS_HEADER;
     fn checkpoint(&self, out: &Path) -> anyhow::Result<()> {
-        save_checkpoint(
-            &out.join("checkpoint.npz"),
-            self.policy(),
-            self.iteration(),
-            self.cost_random(),
-            self.config().seed,
-        )
+        let c = ExpertCheckpoint {
+            pol: self.policy().clone(),
+            iteration: self.iteration(),
+            cost_random: self.cost_random(),
+            best: self.best().map(|(p, e)| (p.clone(), e.clone())),
+            since_best: self.since_best(),
+        };
+        save_checkpoint(&out.join("checkpoint.npz"), &c, self.config().seed)
     }
     fn open_csv(&self, out: &Path, _resumed: bool) -> anyhow::Result<std::fs::File> {
         let path = out.join("serve_log.csv");
@@ -135,6 +136,7 @@ impl<L: ServeLearner> Run<L> {
         if let Some(m) = self.mcap.as_mut() {
             m.table(TableInfo {
                 version,
+                epoch: table.epoch,
                 checksum: table.checksum,
                 horizon: self.learner.task().horizon as u64,
                 file,

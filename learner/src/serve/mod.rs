@@ -49,7 +49,8 @@
 //!   ([`crate::io::episode`]);
 //! - `tables/vVERSION.npz`: every table published ([`crate::io::table`]); `latest_table.npz`;
 //! - the checkpoint of the controller to execute next, written before its table is published:
-//!   expert: `checkpoint.npz` (all GPS policy arrays, its iteration, the random-policy cost);
+//!   expert: `checkpoint.npz` (all GPS policy arrays, its iteration, the random-policy cost,
+//!   the best controller so far with its noise-free episode and the patience count);
 //!   lqr-gaifo: `iter_NNN_table.npz`, `iter_NNN_critic.json` and `iter_NNN_state.npz`, as
 //!   `learner train` writes them ([`crate::run::Checkpoint`]);
 //! - the per-iteration CSV: expert: `serve_log.csv` ([`crate::io::log::EXPERT_CSV_HEADER`], appended
@@ -269,20 +270,26 @@ pub fn serve(
 }
 
 /// The expert learner `learner serve --resume DIR` continues with: DIR's `checkpoint.npz`
-/// (controller, iteration, random-policy cost) through [`ExpertLearner::resume`] (also what
+/// (controller, iteration, random-policy cost, best controller and patience count) through
+/// [`ExpertLearner::resume`] and [`ExpertLearner::with_best`] (also what
 /// `learner replay` does where a served expert run was resumed).
 pub fn expert_from_checkpoint(cfg: ExpertConfig, dir: &Path) -> anyhow::Result<ExpertLearner> {
     let path = dir.join("checkpoint.npz");
-    let (pol, iteration, cost_random) = crate::io::checkpoint::load_checkpoint(&path)
+    let c = crate::io::checkpoint::load_checkpoint(&path)
         .with_context(|| format!("resuming from {}", path.display()))?;
+    let best_t = c.best.as_ref().map(|(p, e)| (p.t, e.horizon()));
     anyhow::ensure!(
-        pol.t == cfg.task.horizon,
-        "{} holds a controller of T = {}, the task has T = {}",
+        c.pol.t == cfg.task.horizon
+            && best_t.is_none_or(|(p, e)| p == cfg.task.horizon && e == cfg.task.horizon),
+        "{} holds a controller of T = {} (best: {best_t:?}), the task has T = {}",
         path.display(),
-        pol.t,
+        c.pol.t,
         cfg.task.horizon
     );
-    Ok(ExpertLearner::resume(cfg, pol, iteration, cost_random))
+    Ok(
+        ExpertLearner::resume(cfg, c.pol, c.iteration, c.cost_random)
+            .with_best(c.best, c.since_best),
+    )
 }
 
 /// Runs the LQR+GAIfO learner end on `demos` (their task) until `cfg.iterations` are done or
@@ -638,7 +645,7 @@ fn serve_with_ports<L: ServeLearner>(
 mod tests {
     use super::*;
     use crate::arm::SimArm;
-    use crate::io::checkpoint::{load_checkpoint, save_checkpoint};
+    use crate::io::checkpoint::{load_checkpoint, save_checkpoint, ExpertCheckpoint};
     use imitation::rollout::{run_episode, Episode};
     use ur5_shared::config::{SimConfig, TaskConfig};
     use ur5_shared::layout::{DU, DX};
@@ -716,9 +723,29 @@ mod tests {
         let mut pol = imitation::controller::init_hold(&task, 0.05);
         pol.gain.data[7] = 0.25;
         let path = dir.join("checkpoint.npz");
-        save_checkpoint(&path, &pol, 4, Some(2.5), 3).unwrap();
-        let (back, it, cr) = load_checkpoint(&path).unwrap();
-        assert_eq!((back, it, cr), (pol, 4, Some(2.5)));
+        let mut c = ExpertCheckpoint {
+            pol: pol.clone(),
+            iteration: 4,
+            cost_random: Some(2.5),
+            best: None,
+            since_best: 0,
+        };
+        save_checkpoint(&path, &c, 3).unwrap();
+        assert_eq!(load_checkpoint(&path).unwrap(), c);
+        // With the best controller so far: restored with its episode and patience count.
+        let mut best = pol.clone();
+        best.k.data[2] = -0.5;
+        let ep = imitation::rollout::Episode {
+            x: (0..5 * DX).map(|i| i as f64 * 0.01).collect(),
+            u: vec![0.5; 5 * DU],
+            u_policy: vec![0.25; 5 * DU],
+            eps: Vec::new(),
+            noisy: false,
+        };
+        c.best = Some((best, ep));
+        c.since_best = 2;
+        save_checkpoint(&path, &c, 3).unwrap();
+        assert_eq!(load_checkpoint(&path).unwrap(), c);
 
         let cfg = dir.join("serve.toml");
         std::fs::write(

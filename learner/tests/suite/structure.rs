@@ -7,13 +7,15 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The crates of the workspace, relative to the workspace root.
-const CRATES: [&str; 6] = [
+const CRATES: [&str; 8] = [
     "shared",
+    "shared/ur-protocol",
     "hil-sim",
     "rt-controller",
     "learner/gps",
     "learner/imitation",
     "learner",
+    "tests",
 ];
 
 fn root() -> PathBuf {

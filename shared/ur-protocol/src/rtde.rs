@@ -371,7 +371,7 @@ impl<'a> ClientMessage<'a> {
 
     /// Encodes this package into `buf`; returns its length.
     pub fn encode(&self, buf: &mut [u8]) -> Result<usize, EncodeError> {
-        let mut w = Writer::package(buf)?;
+        let mut w = Writer::after_header(buf, HEADER_LEN)?;
         let kind = match *self {
             ClientMessage::RequestProtocolVersion(v) => {
                 w.u16(v)?;
@@ -456,7 +456,7 @@ impl<'a> RobotMessage<'a> {
 
     /// Encodes this package into `buf`; returns its length.
     pub fn encode(&self, buf: &mut [u8]) -> Result<usize, EncodeError> {
-        let mut w = Writer::package(buf)?;
+        let mut w = Writer::after_header(buf, HEADER_LEN)?;
         let kind = match *self {
             RobotMessage::ProtocolVersion { accepted } => {
                 w.u8(accepted.into())?;

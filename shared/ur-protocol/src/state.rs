@@ -6,7 +6,7 @@
 //! so a decode followed by an encode with the same recipe reproduces the bytes.
 
 use crate::recipe::{Input, InputRecipe, Output, OutputRecipe, N_REGISTERS};
-use crate::rtde::RobotMessage;
+use crate::rtde::{RobotMessage, HEADER_LEN};
 use crate::wire::{Reader, Writer};
 use crate::{DecodeError, EncodeError};
 
@@ -247,7 +247,7 @@ impl RobotState {
         recipe: &OutputRecipe,
         buf: &mut [u8],
     ) -> Result<usize, EncodeError> {
-        let mut w = Writer::package(buf)?;
+        let mut w = Writer::after_header(buf, HEADER_LEN)?;
         w.u8(recipe.id)?;
         // The slots borrow mutably; encode from a copy (plain data, no allocation).
         let mut s = *self;

@@ -94,17 +94,18 @@ pub(crate) struct Writer<'a> {
 }
 
 impl<'a> Writer<'a> {
-    /// A writer for one RTDE package: the payload starts after the 3-byte header.
-    pub(crate) fn package(buf: &'a mut [u8]) -> Result<Self, EncodeError> {
-        if buf.len() < crate::rtde::HEADER_LEN {
+    /// A writer for one framed package: the payload starts after a header of `header_len`
+    /// bytes, which the caller fills in last (RTDE: `rtde::HEADER_LEN`, 3 bytes).
+    pub(crate) fn after_header(buf: &'a mut [u8], header_len: usize) -> Result<Self, EncodeError> {
+        if buf.len() < header_len {
             return Err(EncodeError::BufferTooSmall {
-                needed: crate::rtde::HEADER_LEN,
+                needed: header_len,
                 capacity: buf.len(),
             });
         }
         Ok(Self {
             buf,
-            pos: crate::rtde::HEADER_LEN,
+            pos: header_len,
         })
     }
 

@@ -166,14 +166,6 @@ fn seeds() -> &'static Seeds {
         let run = learner::run::expert(&ecfg, |_| {}).unwrap();
         let demos = learner::run::demos(&ecfg, &run).unwrap();
         learner::io::demos::save(&demos, &dir.join("demos.npz")).unwrap();
-        learner::io::checkpoint::save_checkpoint(
-            &dir.join("checkpoint.npz"),
-            &run.policy,
-            3,
-            Some(2.0),
-            1,
-        )
-        .unwrap();
         let cfg = imitation::gaifo::GaifoConfig {
             iterations: 1,
             ..Default::default()
@@ -190,6 +182,15 @@ fn seeds() -> &'static Seeds {
         };
         learner::io::episode::save_episode(&dir.join("episode.npz"), &noisy[0], &origin, g.task())
             .unwrap();
+        // A checkpoint with a best controller, so that its `best_*` arrays are fuzzed too.
+        let c = learner::io::checkpoint::ExpertCheckpoint {
+            pol: run.policy.clone(),
+            iteration: 3,
+            cost_random: Some(2.0),
+            best: Some((run.policy.clone(), noisy[0].clone())),
+            since_best: 1,
+        };
+        learner::io::checkpoint::save_checkpoint(&dir.join("checkpoint.npz"), &c, 1).unwrap();
         Seeds { dir, demos }
     })
 }
