@@ -21,7 +21,7 @@
 //!   cycles back to back; clients may then see only the newest of them.
 //! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject.
 //! - **Playback** ([`playback`], `--playback FILE.csv`): the arm moved as by hand in freedrive
-//!   through a file's joint angles, in arm time; real time only (in lockstep nothing would
+//!   through a file's joint angles, in arm time from the first RTDE connection; real time only (in lockstep nothing would
 //!   advance the arm without a program's commands), so `time_compression` plays it faster.
 //!
 //! Only loopback addresses are used: the listeners and the reverse connection refuse others.
@@ -259,6 +259,8 @@ impl Ctx {
             .unwrap_or_else(|e| e.into_inner())
             .push(Arc::downgrade(o));
         Stats::add(&self.stats.rtde_connections);
+        // A playback starts with the first client: the person teaches once someone listens.
+        self.plant.lock().start_playback();
         self.next_conn.fetch_add(1, Ordering::Relaxed)
     }
 

@@ -219,6 +219,14 @@ impl Arm {
         self.refresh();
     }
 
+    /// Starts a loaded playback now, if it has not started.
+    pub fn start_playback(&mut self) {
+        let time = self.cycle as f64 * self.dt;
+        if let Some(p) = self.playback.as_mut() {
+            p.start(time);
+        }
+    }
+
     /// Once, when a loaded playback has passed its last row: the message that says so.
     pub fn playback_end_message(&mut self) -> Option<String> {
         let time = self.cycle as f64 * self.dt;

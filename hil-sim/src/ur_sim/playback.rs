@@ -9,8 +9,10 @@
 //! [`MAX_ROW_STEP_S`] apart, angles outside the model's joint limits, and joint speeds between
 //! rows above the model's velocity limits.
 //!
+//! The file starts (its t = 0) when the first RTDE client connects, as a person starts
+//! teaching once the recorder listens; until then the arm rests at the first row's pose.
 //! While it plays ([`Player`]), the arm is where the file says at each arm cycle: the joint
-//! angles linearly interpolated at t = cycle × arm cycle, the joint velocities the slope of
+//! angles linearly interpolated at the file time t, the joint velocities the slope of
 //! the row interval containing t (what a person's hand does to the arm; the physics is not
 //! stepped, as in freedrive the controller only follows). RTDE reports them as `actual_q`,
 //! `actual_qd` and `target_q`, and the end-effector point of all six joints (shared forward
@@ -256,13 +258,15 @@ impl Playback {
     }
 }
 
-/// A playback loaded into the arm: the file, the kinematics of the end-effector point, and
-/// whether the end was announced.
+/// A playback loaded into the arm: the file, the kinematics of the end-effector point, when
+/// it started, and whether the end was announced.
 pub struct Player {
     playback: Playback,
     kin: UrKinematics,
     /// The file's name, for messages.
     pub name: String,
+    /// Arm time (s) of the file's t = 0, once started ([`Player::start`]).
+    started_at: Option<f64>,
     ended: bool,
 }
 
@@ -286,8 +290,20 @@ impl Player {
             playback,
             kin: UrKinematics::new(model, ee_offset),
             name,
+            started_at: None,
             ended: false,
         }
+    }
+
+    /// Starts the file at arm time `time` (s), if not started yet: until then the arm rests at
+    /// the first row's pose.
+    pub fn start(&mut self, time: f64) {
+        self.started_at.get_or_insert(time);
+    }
+
+    /// File time (s) at arm time `time`: before the start, before the first row.
+    fn file_time(&self, time: f64) -> f64 {
+        self.started_at.map_or(f64::NEG_INFINITY, |t0| time - t0)
     }
 
     /// The first row's active joints (rad): where the arm starts.
@@ -298,14 +314,14 @@ impl Player {
 
     /// The arm at arm time `time` (s).
     pub fn state(&self, time: f64) -> PlayedState {
-        let (q, qd) = self.playback.at(time);
+        let (q, qd) = self.playback.at(self.file_time(time));
         let (ee, ee_vel) = self.kin.ee_point_velocity(&q, &qd);
         PlayedState { q, qd, ee, ee_vel }
     }
 
     /// Once, at the first arm time `time` (s) past the last row: the message that says so.
     pub fn end_message(&mut self, time: f64) -> Option<String> {
-        if self.ended || time < self.playback.duration() {
+        if self.ended || self.file_time(time) < self.playback.duration() {
             return None;
         }
         self.ended = true;
@@ -582,12 +598,24 @@ mod tests {
         assert!((qd[0] - 1.0).abs() < 1e-12 && (qd[5] - 2.0).abs() < 1e-12);
         assert_eq!(p.at(5.0), (p.q[1], [0.0; 6]));
         let mut player = Player::new(p, UrModel::Ur5, [0.0; 3], "f".into());
-        assert_eq!(player.end_message(0.05), None);
+        assert_eq!(
+            player.state(3.0).q,
+            player.playback.q[0],
+            "waits for its start"
+        );
+        assert_eq!(player.end_message(3.0), None);
+        player.start(1.0);
+        player.start(2.0);
+        assert!(
+            (player.state(1.05).q[0] - 0.05).abs() < 1e-12,
+            "started once, at 1 s"
+        );
+        assert_eq!(player.end_message(1.05), None);
         assert!(player
-            .end_message(0.1)
+            .end_message(1.125)
             .unwrap()
             .contains("holds its last pose"));
-        assert_eq!(player.end_message(0.2), None, "said once");
+        assert_eq!(player.end_message(1.25), None, "said once");
     }
 
     #[test]
