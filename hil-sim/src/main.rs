@@ -117,6 +117,13 @@ enum Cmd {
     /// (rt-controller/urscript/external_control.script) and refuses other scripts. Prints one
     /// JSON line with the bound addresses on stdout, then serves until killed.
     UrSim(UrSimArgs),
+    /// Write a playback file for `ur-sim --playback` of human-like reaches: per reach a rest
+    /// of at least 1 s at the start pose, a minimum-jerk reach of seeded duration (1.2–2 s)
+    /// into the goal region (joint goal by IK of the model's kinematics) overshooting it by
+    /// 2–6 %, a corrective submovement, a rest of at least 1 s there, a return to (within
+    /// 2 mrad of) the start pose; a final rest. Tremor (8–12 Hz, 0.2 mrad) rides on the
+    /// motions. Prints one JSON line: rows, duration, motions.
+    PlaybackGen(PlaybackGenArgs),
 }
 
 /// Options of `hil-sim ur-sim` (see `hil_sim::ur_sim`).
@@ -175,6 +182,37 @@ struct UrSimArgs {
     /// Fault: a protective stop (as on a detected collision) after N arm cycles.
     #[arg(long, default_value_t = 0)]
     fault_protective_stop_after: u64,
+    /// Move the arm as by hand (freedrive) through the motions of a CSV file with the header
+    /// `t,q0,q1,q2,q3,q4,q5` (arm time s from 0, six joint angles rad; docs/data.md): RTDE
+    /// reports the file's joint angles and velocities, a program's servo targets are ignored,
+    /// and after the last row the arm holds the last pose. Real time only (not --lockstep);
+    /// --time-compression plays it faster.
+    #[arg(long, value_name = "FILE.csv")]
+    playback: Option<PathBuf>,
+}
+
+/// Options of `hil-sim playback-gen`.
+#[derive(clap::Args)]
+struct PlaybackGenArgs {
+    /// TOML file with optional [task] and [sim] tables: the start pose (task.start_q), the
+    /// goal region's centre (task.goal), the wrist lock and end-effector offset of [sim].
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Reaches.
+    #[arg(long, default_value_t = 5)]
+    motions: usize,
+    /// Seed: the same seed and settings give the same file, bit for bit.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Half side of the cubic goal region around task.goal (m) each reach aims into.
+    #[arg(long, default_value_t = 0.005)]
+    goal_half_side: f64,
+    /// Rows per second of the file (Hz, 10 to 1000).
+    #[arg(long, default_value_t = 100.0)]
+    rate: f64,
+    /// Output file.
+    #[arg(long, value_name = "FILE.csv")]
+    out: PathBuf,
 }
 
 impl UrSimArgs {
@@ -204,6 +242,7 @@ impl UrSimArgs {
                 disconnect_after: self.fault_disconnect_after,
                 protective_stop_after: self.fault_protective_stop_after,
             },
+            playback: self.playback.clone(),
         })
     }
 }
@@ -266,7 +305,33 @@ fn run() -> Result<()> {
             let cfg = args.config()?;
             ur_sim(args.config, model, cfg)
         }
+        Cmd::PlaybackGen(args) => playback_gen(args, model),
     }
+}
+
+fn playback_gen(args: PlaybackGenArgs, model: Option<UrModel>) -> Result<()> {
+    use hil_sim::ur_sim::playback::{generate, GenConfig};
+    let file = load(args.config.clone(), model)?;
+    let cfg = GenConfig {
+        model: file.sim.model,
+        start_q: file.task.start_q,
+        wrist_q: file.sim.wrist_q,
+        ee_offset: file.sim.ee_offset,
+        goal: file.task.goal,
+        goal_half_side: args.goal_half_side,
+        motions: args.motions,
+        rate_hz: args.rate,
+        seed: args.seed,
+    };
+    let p = generate(&cfg)?;
+    ur5_shared::atomic_file::write(&args.out, p.to_csv().as_bytes())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "{}",
+        serde_json::json!({"command": "playback-gen", "model": cfg.model, "rows": p.t.len(),
+            "duration_s": p.duration(), "motions": cfg.motions, "seed": cfg.seed, "out": args.out})
+    );
+    Ok(())
 }
 
 fn ur_sim(

@@ -25,6 +25,7 @@ pub mod io;
 pub mod plot;
 pub mod process;
 pub mod progress;
+pub mod record;
 pub mod replay;
 pub mod run;
 pub mod serve;

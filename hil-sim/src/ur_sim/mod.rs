@@ -20,10 +20,14 @@
 //!   in real time): it is the watchdog for a dead controller. A `stopj` in lockstep runs its
 //!   cycles back to back; clients may then see only the newest of them.
 //! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject.
+//! - **Playback** ([`playback`], `--playback FILE.csv`): the arm moved as by hand in freedrive
+//!   through a file's joint angles, in arm time from the first RTDE connection; real time only (in lockstep nothing would
+//!   advance the arm without a program's commands), so `time_compression` plays it faster.
 //!
 //! Only loopback addresses are used: the listeners and the reverse connection refuse others.
 
 pub mod plant;
+pub mod playback;
 pub mod program;
 pub mod rtde;
 
@@ -127,6 +131,8 @@ pub struct UrSimConfig {
     pub time_compression: f64,
     /// Misbehaviour to inject.
     pub faults: Faults,
+    /// A playback file moving the arm as by hand (freedrive; [`playback`]); real time only.
+    pub playback: Option<std::path::PathBuf>,
 }
 
 impl Default for UrSimConfig {
@@ -139,6 +145,7 @@ impl Default for UrSimConfig {
             lockstep: false,
             time_compression: 1.0,
             faults: Faults::default(),
+            playback: None,
         }
     }
 }
@@ -171,6 +178,15 @@ pub enum UrSimError {
     /// Bad time compression.
     #[error("time_compression {0}")]
     TimeCompression(String),
+    /// A playback file that cannot be played.
+    #[error(transparent)]
+    Playback(#[from] playback::PlaybackError),
+    /// A playback in lockstep.
+    #[error(
+        "--playback needs the real-time clock: in lockstep the arm moves only on a program's \
+         commands; drop --lockstep (use --time-compression to play faster)"
+    )]
+    PlaybackLockstep,
 }
 
 /// What a run did.
@@ -243,12 +259,15 @@ impl Ctx {
             .unwrap_or_else(|e| e.into_inner())
             .push(Arc::downgrade(o));
         Stats::add(&self.stats.rtde_connections);
+        // A playback starts with the first client: the person teaches once someone listens.
+        self.plant.lock().start_playback();
         self.next_conn.fetch_add(1, Ordering::Relaxed)
     }
 
     /// Under the arm's lock: applies `f`, then (if `step`) advances one arm cycle; a limit
     /// violation from either raises a protective stop. Then wakes the RTDE writers and reports.
     pub fn advance(&self, step: bool, f: impl FnOnce(&mut Arm) -> Result<(), Violation>) {
+        let mut ended = None;
         let violation = {
             let mut arm = self.plant.lock();
             let mut v = f(&mut arm).err();
@@ -262,6 +281,9 @@ impl Ctx {
                     ))));
                 }
             }
+            if let Some(m) = arm.playback_end_message() {
+                ended = Some(m);
+            }
             if v.is_some() && arm.safety == ur_protocol::SafetyMode::Normal {
                 arm.protective_stop();
                 Stats::add(&self.stats.protective_stops);
@@ -271,6 +293,9 @@ impl Ctx {
             v
         };
         self.plant.notify();
+        if let Some(m) = ended {
+            self.broadcast(&m, level::INFO);
+        }
         if let Some(Violation(why)) = violation {
             self.broadcast(
                 &format!("protective stop: {why}; the program stops the arm and ends (restart ur-sim to clear it)"),
@@ -402,8 +427,24 @@ pub fn spawn(
     ur5_shared::config::check_time_compression(cfg.time_compression)
         .map_err(UrSimError::TimeCompression)?;
     let dt = cfg.series.cycle_s();
+    let player = match &cfg.playback {
+        Some(_) if cfg.lockstep => return Err(UrSimError::PlaybackLockstep),
+        Some(path) => Some(playback::Player::new(
+            playback::Playback::load(path, sim_cfg.model)?,
+            sim_cfg.model,
+            sim_cfg.ee_offset,
+            path.display().to_string(),
+        )),
+        None => None,
+    };
     let sim = Ur5Sim::new(sim_cfg.clone(), dt)?;
-    let arm = Arm::new(sim, task.start_q, task.goal, dt)?;
+    let start_q = player
+        .as_ref()
+        .map_or(task.start_q, playback::Player::start_active);
+    let mut arm = Arm::new(sim, start_q, task.goal, dt)?;
+    if let Some(p) = player {
+        arm.load_playback(p);
+    }
     let rtde_l = bind(cfg.host, cfg.rtde_port, "RTDE")?;
     let sec_l = bind(cfg.host, cfg.secondary_port, "the secondary interface")?;
     let rtde_addr = rtde_l.local_addr().map_err(|source| UrSimError::Bind {

@@ -46,6 +46,8 @@ pub struct Arm {
     pub safety: SafetyMode,
     /// What RTDE connections send.
     pub snapshot: RobotState,
+    /// A playback moving the arm by hand (`--playback`), if loaded.
+    pub playback: Option<super::playback::Player>,
 }
 
 /// A limit violation that triggers a protective stop.
@@ -70,6 +72,7 @@ impl Arm {
             program: 0,
             safety: SafetyMode::Normal,
             snapshot: RobotState::default(),
+            playback: None,
         };
         arm.refresh();
         Ok(arm)
@@ -127,6 +130,12 @@ impl Arm {
     /// Advances one arm cycle under the goal and refreshes the snapshot. Returns a violation
     /// if the arm ended outside its joint limits (the caller raises a protective stop).
     pub fn step(&mut self) -> Option<Violation> {
+        if self.playback.is_some() {
+            // Freedrive: the hand moves the arm; the physics and the servo goal stand still.
+            self.cycle += 1;
+            self.refresh();
+            return None;
+        }
         self.sim.step(self.goal);
         self.cycle += 1;
         let (q, qd) = self.sim.joint_state();
@@ -186,6 +195,42 @@ impl Arm {
         s.speed_scaling = 1.0;
         s.target_speed_fraction = 1.0;
         s.actual_execution_time = 0.1;
+        if let Some(p) = &self.playback {
+            let played = p.state(s.timestamp);
+            s.actual_q = played.q;
+            s.actual_qd = played.qd;
+            s.target_q = played.q;
+            s.actual_tcp_pose = [played.ee[0], played.ee[1], played.ee[2], 0.0, 0.0, 0.0];
+            s.actual_tcp_speed = [
+                played.ee_vel[0],
+                played.ee_vel[1],
+                played.ee_vel[2],
+                0.0,
+                0.0,
+                0.0,
+            ];
+            s.target_tcp_pose = s.actual_tcp_pose;
+        }
+    }
+
+    /// Loads a playback: from now on the arm is where it says ([`super::playback`]).
+    pub fn load_playback(&mut self, player: super::playback::Player) {
+        self.playback = Some(player);
+        self.refresh();
+    }
+
+    /// Starts a loaded playback now, if it has not started.
+    pub fn start_playback(&mut self) {
+        let time = self.cycle as f64 * self.dt;
+        if let Some(p) = self.playback.as_mut() {
+            p.start(time);
+        }
+    }
+
+    /// Once, when a loaded playback has passed its last row: the message that says so.
+    pub fn playback_end_message(&mut self) -> Option<String> {
+        let time = self.cycle as f64 * self.dt;
+        self.playback.as_mut()?.end_message(time)
     }
 }
 

@@ -10,6 +10,7 @@ pub mod experiment;
 pub mod expert;
 pub mod plot;
 pub mod policy;
+pub mod record;
 pub mod replay;
 pub mod serve;
 pub mod train;
@@ -98,6 +99,15 @@ pub enum Cmd {
     /// Pictures: `plot arm RUN_DIR` draws the arm reaching (filmstrip PNG and animated GIF).
     #[command(subcommand)]
     Plot(plot::PlotCmd),
+    /// Record demonstrations taught by hand from a UR's RTDE stream (a person guiding the arm
+    /// in freedrive, or `hil-sim ur-sim --playback`): joint states at the arm's rate (500 Hz
+    /// e-Series, 125 Hz CB3) resampled to task.dt, cut by rests (rest ≥ 1 s at the start pose,
+    /// move, rest ≥ 1 s elsewhere: one demonstration; docs/data.md), T = task.horizon steps
+    /// from the motion's onset padded with the final rest; start pose and goal (the mean end
+    /// point, spread reported) from the recording; C_expert and C_random derived as for
+    /// imported demonstrations; checked and written as OUT/demos.npz (or a LeRobot dataset).
+    /// Progress: one line per demonstration.
+    Record(record::RecordArgs),
     /// Run a saved MDGPS policy: `policy eval --policy FILE --goal x,y,z` in simulation,
     /// `policy serve --policy FILE` on the real-time controller.
     #[command(subcommand)]
@@ -118,5 +128,6 @@ pub fn main() -> anyhow::Result<()> {
         Cmd::Dataset(cmd) => dataset::run(cmd),
         Cmd::Plot(cmd) => plot::run(cmd),
         Cmd::Replay(args) => replay::run(args),
+        Cmd::Record(args) => record::run(args),
     }
 }

@@ -16,4 +16,5 @@ mod resume_ipc;
 mod resume_kill;
 mod serve;
 mod soak;
+mod teach;
 mod ur_backend;

@@ -1,0 +1,237 @@
+//! Teaching by hand, end to end on a UR5e (docs/ur.md, "Teaching by hand"): `hil-sim
+//! playback-gen` writes 5 human-like reaches, an in-process ur-sim plays them as freedrive
+//! (real time, compressed), `learner record` cuts them from the RTDE stream into
+//! demonstrations, `learner train` runs LQR+GAIfO on them on the UR5e model, and the learned
+//! table runs over RTDE on a second ur-sim (lockstep) under `rt-controller`: its noise-free
+//! episode ends within 1 cm of the demonstrations' goal. The recording runs in compressed
+//! real time, so which packages the recorder sees varies from run to run; the demonstrations
+//! are resampled by the packages' timestamps and the assertions are on outcomes, not on
+//! timing or bits. Waits are bounded only to catch a hang.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use hil_sim::ur_sim::{self, UrSimConfig};
+use integration_tests::{
+    cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc, TestLearner,
+};
+use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::UrModel;
+
+const LONG: Duration = Duration::from_secs(120);
+
+/// Horizon of the demonstrations (steps of 0.1 s): a reach takes at most 2.5 s.
+const T: usize = 50;
+
+/// LQR+GAIfO iterations (the arm-model measurements' count).
+const ITERATIONS: usize = 20;
+
+fn run_ok(name: &str, label: &str, args: &[&str], dir: &Path) -> serde_json::Value {
+    let mut p = Proc::spawn(name, label, args, dir);
+    let (code, out) = p.wait(LONG);
+    let log = p.log();
+    assert_eq!(code, Some(0), "{label}:\n{log}");
+    eprintln!("{label}:\n{log}");
+    json_summary(&out, &log)
+}
+
+#[test]
+fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
+    let m = UrModel::Ur5e;
+    let dir = scratch("teach");
+    let d = |p: &str| dir.join(p).display().to_string();
+    let gen = run_ok(
+        "hil-sim",
+        "playback-gen",
+        &[
+            "--model",
+            "ur5e",
+            "playback-gen",
+            "--motions",
+            "5",
+            "--seed",
+            "1",
+            "--out",
+            &d("reaches.csv"),
+        ],
+        &dir,
+    );
+    assert_eq!(gen["motions"], 5);
+
+    // Playback at 10 times real time; the recorder reads every package it is sent.
+    let sim = ur_sim::spawn(
+        &TaskConfig::for_model(m),
+        &SimConfig::for_model(m),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            time_compression: 10.0,
+            playback: Some(dir.join("reaches.csv")),
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim plays");
+    let port = sim.rtde_addr.port().to_string();
+    let rec_cfg = write_config(
+        &dir,
+        "record.toml",
+        &format!("[task]\nhorizon = {T}\n[sim]\nmodel = \"ur5e\"\n"),
+    );
+    let rec = run_ok(
+        "learner",
+        "record",
+        &[
+            "record",
+            "--ur",
+            "127.0.0.1",
+            "--rtde-port",
+            &port,
+            "--episodes",
+            "5",
+            "--config",
+            &rec_cfg,
+            "--out",
+            &d("rec"),
+            "--max-time-s",
+            "100",
+            "--json",
+        ],
+        &dir,
+    );
+    sim.stop();
+    let r = &rec["report"];
+    assert_eq!(r["episodes"], 5, "{rec}");
+    let spread = r["goal_spread_max_m"].as_f64().unwrap();
+    // The goal region is a cube of half side 5 mm: the ends lie within its diagonal.
+    assert!(spread < 0.01, "{rec}");
+    let demos = learner::io::demos::load(&dir.join("rec/demos.npz")).unwrap();
+    assert_eq!((demos.count, demos.horizon, demos.model), (5, T, m));
+    let dg = (0..3)
+        .map(|k| (demos.goal[k] - m.default_goal()[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        dg < 0.01,
+        "the recorded goal {:?} is the taught region's",
+        demos.goal
+    );
+    assert!(demos.cost_expert < demos.cost_random, "{rec}");
+
+    // LQR+GAIfO on the UR5e model, in process.
+    let train_cfg = write_config(&dir, "gaifo.toml", "seed = 1\n[sim]\nmodel = \"ur5e\"\n");
+    let its = ITERATIONS.to_string();
+    let train = run_ok(
+        "learner",
+        "train",
+        &[
+            "train",
+            "--demos",
+            &d("rec/demos.npz"),
+            "--config",
+            &train_cfg,
+            "--iterations",
+            &its,
+            "--out",
+            &d("train"),
+            "--json",
+        ],
+        &dir,
+    );
+    assert_eq!(train["iterations"], ITERATIONS);
+    // The learner's pick: the table of the iteration whose noise-free episode (in the
+    // learner's sim) ended closest to the goal; row i ran `iter_{i}_table.npz`.
+    let log = std::fs::read_to_string(dir.join("train/gaifo_log.csv")).unwrap();
+    let col = log
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == "final_distance_m")
+        .unwrap();
+    let (best, sim_distance) = log
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(col).unwrap().parse::<f64>().unwrap())
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    let (table, _) = learner::io::table::load_table(
+        &dir.join(format!("train/iter_{best:03}_table.npz")),
+        &ur5_shared::GainBounds::default(),
+    )
+    .unwrap();
+
+    // The learned table over RTDE on a UR5e ur-sim (lockstep), the demonstrations' task.
+    let run_sim = ur_sim::spawn(
+        &TaskConfig::for_model(m),
+        &SimConfig::for_model(m),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            lockstep: true,
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim");
+    let f = |v: [f64; 3]| format!("[{}, {}, {}]", v[0], v[1], v[2]);
+    let ctl_cfg = write_config(
+        &dir,
+        "ctl.toml",
+        &format!(
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n\
+             [task]\nhorizon = {T}\ndt = {}\nstart_q = {}\ngoal = {}\n\
+             [arm]\nbackend = \"ur\"\n[arm.ur]\nmodel = \"ur5e\"\nhost = \"127.0.0.1\"\n\
+             rtde_port = {}\nsecondary_port = {}\nreverse_port = 0\nreceive_timeout_ms = 1000\n",
+            demos.dt,
+            f(demos.start_q),
+            f(demos.goal),
+            run_sim.rtde_addr.port(),
+            run_sim.secondary_addr.port()
+        ),
+    );
+    let prefix = unique_prefix("teach");
+    let mut learner = TestLearner::learner_only(&prefix);
+    learner.publish(&table);
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &[
+            "run",
+            "--config",
+            &ctl_cfg,
+            "--prefix",
+            &prefix,
+            "--json",
+            "--episodes",
+            "2",
+        ],
+        &dir,
+    );
+    let t0 = Instant::now();
+    while ctl.running() && t0.elapsed() < LONG {
+        learner.poll();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (code, _) = ctl.wait(LONG);
+    learner.poll();
+    assert_eq!(code, Some(0), "controller:\n{}", ctl.log());
+    let summary = run_sim.stop();
+    assert_eq!(summary.protective_stops, 0, "{summary:?}");
+    let last = learner
+        .received
+        .iter()
+        .filter(|s| s.noise == 0)
+        .max_by_key(|s| s.t)
+        .expect("the noise-free episode's samples");
+    assert_eq!(last.t as usize, T - 1);
+    let e = &last.s[ur5_shared::layout::EE_MINUS_GOAL];
+    let dist = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+    eprintln!(
+        "teach: recorded goal spread {spread:.4} m; the table of iteration {best} (of \
+         {ITERATIONS}) ends {sim_distance:.4} m from the goal in the learner's sim, {dist:.4} m \
+         over RTDE"
+    );
+    assert!(dist <= 0.01, "final distance over RTDE {dist} m");
+    cleanup_dead_nodes();
+    std::fs::remove_dir_all(&dir).ok();
+}
