@@ -648,6 +648,35 @@ mod tests {
     }
 
     #[test]
+    fn the_dashboard_and_servoj_keys_print_only_when_set() {
+        // Unset, they are not serialised: older configurations print and hash as before.
+        let text = toml::to_string(&ControllerConfig::default()).unwrap();
+        for key in [
+            "dashboard_port",
+            "check_model",
+            "bring_up",
+            "recover_protective_stop",
+            "servoj_",
+        ] {
+            assert!(!text.contains(key), "{key} in\n{text}");
+        }
+        let c: ControllerConfig = toml::from_str(
+            "[arm.ur]\ncheck_model = false\nbring_up = true\nservoj_gain = 1000.0\nservoj_lookahead_time_s = 0.05",
+        )
+        .unwrap();
+        let text = toml::to_string(&c).unwrap();
+        for key in [
+            "check_model = false",
+            "bring_up = true",
+            "servoj_gain = 1000.0",
+            "servoj_lookahead_time_s = 0.05",
+        ] {
+            assert!(text.contains(key), "{key} in\n{text}");
+        }
+        assert_eq!(toml::from_str::<ControllerConfig>(&text).unwrap(), c);
+    }
+
+    #[test]
     fn arm_backend_defaults_to_iceoryx2_and_ur_settings_are_checked() {
         assert_eq!(ControllerConfig::default().arm.backend, ArmKind::Iceoryx2);
         let c: ControllerConfig =

@@ -310,3 +310,36 @@ impl Plant {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_servoj_filter_smooths_over_the_lookahead_and_tracks_at_the_gain() {
+        let dt = 0.002;
+        // Smoothing alone (a gain so high the tracking is immediate): 1 − 1/e of a step after
+        // one lookahead time.
+        let mut f = ServojFilter::new(0.1, 1e9, dt, [0.0; N_JOINTS]);
+        let mut y = [0.0; N_JOINTS];
+        for _ in 0..50 {
+            y = f.step(&[1.0, 2.0, -1.0]);
+        }
+        let e = 1.0 - (-1.0f64).exp();
+        assert!(
+            (y[0] - e).abs() < 1e-9 && (y[1] - 2.0 * e).abs() < 1e-9,
+            "{y:?}"
+        );
+        // Each setting converges to the target and stays between start and target.
+        for (l, g) in [(0.03, 100.0), (0.2, 2000.0), (0.03, 2000.0)] {
+            let mut f = ServojFilter::new(l, g, 0.008, [0.0; N_JOINTS]);
+            let mut last = 0.0;
+            for _ in 0..1000 {
+                let y = f.step(&[1.0; N_JOINTS])[0];
+                assert!(y >= last && y <= 1.0, "monotone: {l} {g}");
+                last = y;
+            }
+            assert!((last - 1.0).abs() < 1e-9, "{l} {g}: {last}");
+        }
+    }
+}

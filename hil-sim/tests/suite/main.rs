@@ -5,5 +5,6 @@ mod dashboard;
 mod dynamics;
 mod inspect_cli;
 mod models;
+mod servoj;
 mod sim;
 mod ur_sim;

@@ -180,12 +180,18 @@ impl Client {
 
 /// Sends the project's program with a reverse listener; returns the accepted reverse socket.
 pub(super) fn run_program(sim: &UrSimHandle) -> TcpStream {
+    run_program_with(sim, |_| {})
+}
+
+/// [`run_program`] with the parameters changed by `edit` (servoj's lookahead and gain).
+pub(super) fn run_program_with(sim: &UrSimHandle, edit: impl Fn(&mut ScriptParams)) -> TcpStream {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let params = ScriptParams::new(
+    let mut params = ScriptParams::new(
         "127.0.0.1".parse().unwrap(),
         listener.local_addr().unwrap().port(),
         Series::E.cycle_s(),
     );
+    edit(&mut params);
     let mut sec = TcpStream::connect(sim.secondary_addr).unwrap();
     sec.write_all(script::render(PROGRAM, &params).as_bytes())
         .unwrap();
