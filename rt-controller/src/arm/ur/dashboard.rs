@@ -12,7 +12,7 @@ use ur5_shared::UrModel;
 
 use crate::config::UrConfig;
 
-use super::setup::UrSetupError;
+use crate::error::UrSetupError;
 
 /// Pause between two polls of a mode (wall time).
 const POLL: Duration = Duration::from_millis(20);
