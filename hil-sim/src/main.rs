@@ -141,9 +141,22 @@ struct UrSimArgs {
     /// Secondary-interface port (0: any free port).
     #[arg(long, default_value_t = 30002)]
     secondary_port: u16,
-    /// Controller generation: e (e-Series, 500 Hz, 5.x) or cb3 (125 Hz, 3.x).
-    #[arg(long, default_value = "e")]
-    series: String,
+    /// Dashboard-server port (0: any free port).
+    #[arg(long, default_value_t = 29999)]
+    dashboard_port: u16,
+    /// Start with the robot powered off (robot mode POWER_OFF) until the dashboard's
+    /// `power on` and `brake release` (to test a driver's bring-up).
+    #[arg(long)]
+    start_powered_off: bool,
+    /// Controller generation: e (e-Series, 500 Hz, 5.x) or cb3 (125 Hz, 3.x). Default: the
+    /// model's own (cb3 for ur3, ur5 and ur10, e for the others).
+    #[arg(long)]
+    series: Option<String>,
+    /// servoj's tracking: ideal (the target is the servo's goal at once; lookahead_time and
+    /// gain change nothing) or tracking (smoothing over lookahead_time, then proportional
+    /// tracking at gain; docs/ur.md, "servoj").
+    #[arg(long, default_value = "ideal")]
+    servoj: String,
     /// Lockstep: each reverse command advances one arm cycle, then that cycle's data
     /// package is sent (deterministic tests).
     #[arg(long)]
@@ -216,19 +229,31 @@ struct PlaybackGenArgs {
 }
 
 impl UrSimArgs {
-    fn config(&self) -> Result<hil_sim::ur_sim::UrSimConfig> {
+    /// The options for an arm of `model`.
+    fn config(&self, model: UrModel) -> Result<hil_sim::ur_sim::UrSimConfig> {
         use hil_sim::ur_sim::{Faults, Series, UrSimConfig};
-        let series = match self.series.as_str() {
-            "e" | "e-series" => Series::E,
-            "cb3" => Series::Cb3,
-            other => anyhow::bail!("--series {other}: expected e or cb3"),
+        let series = match self.series.as_deref() {
+            None if model.is_e_series() => Series::E,
+            None => Series::Cb3,
+            Some("e" | "e-series") => Series::E,
+            Some("cb3") => Series::Cb3,
+            Some(other) => anyhow::bail!("--series {other}: expected e or cb3"),
+        };
+        let servoj = match self.servoj.as_str() {
+            "ideal" => hil_sim::ur_sim::plant::ServojModel::Ideal,
+            "tracking" => hil_sim::ur_sim::plant::ServojModel::Tracking,
+            other => anyhow::bail!("--servoj {other}: expected ideal or tracking"),
         };
         Ok(UrSimConfig {
             host: self.host,
             rtde_port: self.rtde_port,
             secondary_port: self.secondary_port,
+            dashboard_port: Some(self.dashboard_port),
+            start_powered_off: self.start_powered_off,
+            servoj,
             series,
             lockstep: self.lockstep,
+            stopped_clock: true,
             time_compression: self.time_compression,
             faults: Faults {
                 refuse_v2: self.fault_refuse_v2,
@@ -301,10 +326,7 @@ fn run() -> Result<()> {
             time_compression,
             json,
         } => serve(config, model, prefix, mode, time_compression, json),
-        Cmd::UrSim(args) => {
-            let cfg = args.config()?;
-            ur_sim(args.config, model, cfg)
-        }
+        Cmd::UrSim(args) => ur_sim(args, model),
         Cmd::PlaybackGen(args) => playback_gen(args, model),
     }
 }
@@ -334,25 +356,26 @@ fn playback_gen(args: PlaybackGenArgs, model: Option<UrModel>) -> Result<()> {
     Ok(())
 }
 
-fn ur_sim(
-    config: Option<PathBuf>,
-    model: Option<UrModel>,
-    cfg: hil_sim::ur_sim::UrSimConfig,
-) -> Result<()> {
+fn ur_sim(args: UrSimArgs, model: Option<UrModel>) -> Result<()> {
     use std::io::Write;
-    let file = load(config, model)?;
+    let file = load(args.config.clone(), model)?;
+    let cfg = args.config(file.sim.model)?;
     let handle = hil_sim::ur_sim::spawn(&file.task, &file.sim, &cfg)?;
+    let dashboard = handle.dashboard_addr.map(|a| a.to_string());
     println!(
         "{}",
         serde_json::json!({"rtde": handle.rtde_addr.to_string(), "secondary": handle.secondary_addr.to_string(),
+            "dashboard": dashboard, "model": file.sim.model.name(),
             "series": cfg.series, "lockstep": cfg.lockstep, "time_compression": cfg.time_compression})
     );
     std::io::stdout().flush()?;
     eprintln!(
-        "hil-sim ur-sim: {:?} controller, RTDE on {}, secondary interface on {}, {}",
+        "hil-sim ur-sim: {} on a {:?} controller, RTDE on {}, secondary interface on {}, dashboard on {}, {}",
+        file.sim.model,
         cfg.series,
         handle.rtde_addr,
         handle.secondary_addr,
+        dashboard.as_deref().unwrap_or("-"),
         if cfg.lockstep {
             "lockstep".to_string()
         } else {

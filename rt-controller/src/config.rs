@@ -170,6 +170,64 @@ pub struct UrConfig {
     /// Peak joint speed of the reset motion to `task.start_q` (rad/s): a smooth (quintic)
     /// joint-space move; keep it low on a real arm.
     pub reset_speed_rad_s: f64,
+    /// The robot's dashboard-server port (Universal Robots': 29999): the model check, the
+    /// bring-up and the protective-stop recovery speak to it.
+    #[serde(skip_serializing_if = "is_dashboard_default")]
+    pub dashboard_port: u16,
+    /// Ask the robot its model over the dashboard (`get robot model`, `PolyscopeVersion`) at
+    /// setup and refuse to drive another model than `model` (docs/ur.md, "The dashboard").
+    /// `false` skips the check (and the dashboard, unless `bring_up` or
+    /// `recover_protective_stop` need it).
+    #[serde(skip_serializing_if = "is_true")]
+    pub check_model: bool,
+    /// At setup, power the arm on and release its brakes over the dashboard if it is not
+    /// RUNNING, then wait for RUNNING (at most `setup_timeout_s` per step).
+    #[serde(skip_serializing_if = "is_false")]
+    pub bring_up: bool,
+    /// After a protective stop: wait until 5 s of arm time have passed since it, `unlock
+    /// protective stop` over the dashboard, send the program again and go on with the next
+    /// episode (the stopped one counts as aborted). Otherwise the run ends (exit code 5). Clear
+    /// the cause first: a protective stop means the arm hit something or was driven past a
+    /// limit.
+    #[serde(skip_serializing_if = "is_false")]
+    pub recover_protective_stop: bool,
+    /// servoj's `lookahead_time` (s, 0.03–0.2): the robot smooths the target trajectory over
+    /// this horizon; longer is smoother and lags more.
+    #[serde(skip_serializing_if = "is_lookahead_default")]
+    pub servoj_lookahead_time_s: f64,
+    /// servoj's `gain` (100–2000): the proportional gain on the position error; higher
+    /// tracks tighter and may overshoot or vibrate.
+    #[serde(skip_serializing_if = "is_gain_default")]
+    pub servoj_gain: f64,
+}
+
+/// Universal Robots' dashboard-server port.
+pub const UR_DASHBOARD_PORT: u16 = 29999;
+/// servoj's `lookahead_time` range (s), as URScript accepts it.
+pub const UR_LOOKAHEAD_RANGE_S: (f64, f64) = (0.03, 0.2);
+/// servoj's `gain` range, as URScript accepts it.
+pub const UR_GAIN_RANGE: (f64, f64) = (100.0, 2000.0);
+/// The driver's servoj `lookahead_time` (s) unless configured (URCL's default).
+pub const UR_DEFAULT_LOOKAHEAD_S: f64 = 0.1;
+/// The driver's servoj `gain` unless configured (URCL's default).
+pub const UR_DEFAULT_GAIN: f64 = 300.0;
+
+// Defaults are not serialised, so that configurations without the newer keys print and hash
+// as before.
+fn is_dashboard_default(p: &u16) -> bool {
+    *p == UR_DASHBOARD_PORT
+}
+fn is_true(b: &bool) -> bool {
+    *b
+}
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+fn is_lookahead_default(v: &f64) -> bool {
+    *v == UR_DEFAULT_LOOKAHEAD_S
+}
+fn is_gain_default(v: &f64) -> bool {
+    *v == UR_DEFAULT_GAIN
 }
 
 /// What the `ur` arm's program servos to between two controller goals.
@@ -198,6 +256,12 @@ impl Default for UrConfig {
             wrist_q: ur5_shared::config::SimConfig::default().wrist_q,
             ee_offset: [0.0; 3],
             reset_speed_rad_s: 0.5,
+            dashboard_port: UR_DASHBOARD_PORT,
+            check_model: true,
+            bring_up: false,
+            recover_protective_stop: false,
+            servoj_lookahead_time_s: UR_DEFAULT_LOOKAHEAD_S,
+            servoj_gain: UR_DEFAULT_GAIN,
         }
     }
 }
@@ -237,6 +301,12 @@ impl ArmConfig {
                 return bad(key, "0 is not a port on the robot; the defaults are 30004 (RTDE) and 30002 (secondary)".into());
             }
         }
+        if u.dashboard_port == 0 {
+            return bad(
+                "arm.ur.dashboard_port",
+                "0 is not a port on the robot; the dashboard server listens on 29999".into(),
+            );
+        }
         if u.rtde_port == u.secondary_port {
             return bad(
                 "arm.ur.secondary_port",
@@ -264,6 +334,26 @@ impl ArmConfig {
                 format!(
                     "{:?} / {:?} must be finite, within ±7 (rad, m)",
                     u.wrist_q, u.ee_offset
+                ),
+            );
+        }
+        let (lo, hi) = UR_LOOKAHEAD_RANGE_S;
+        if !(u.servoj_lookahead_time_s >= lo && u.servoj_lookahead_time_s <= hi) {
+            return bad(
+                "arm.ur.servoj_lookahead_time_s",
+                format!(
+                    "{} must be in [{lo}, {hi}] s, the range servoj accepts (default {UR_DEFAULT_LOOKAHEAD_S})",
+                    u.servoj_lookahead_time_s
+                ),
+            );
+        }
+        let (lo, hi) = UR_GAIN_RANGE;
+        if !(u.servoj_gain >= lo && u.servoj_gain <= hi) {
+            return bad(
+                "arm.ur.servoj_gain",
+                format!(
+                    "{} must be in [{lo}, {hi}], the range servoj accepts (default {UR_DEFAULT_GAIN})",
+                    u.servoj_gain
                 ),
             );
         }
@@ -567,6 +657,35 @@ mod tests {
     }
 
     #[test]
+    fn the_dashboard_and_servoj_keys_print_only_when_set() {
+        // Unset, they are not serialised: older configurations print and hash as before.
+        let text = toml::to_string(&ControllerConfig::default()).unwrap();
+        for key in [
+            "dashboard_port",
+            "check_model",
+            "bring_up",
+            "recover_protective_stop",
+            "servoj_",
+        ] {
+            assert!(!text.contains(key), "{key} in\n{text}");
+        }
+        let c: ControllerConfig = toml::from_str(
+            "[arm.ur]\ncheck_model = false\nbring_up = true\nservoj_gain = 1000.0\nservoj_lookahead_time_s = 0.05",
+        )
+        .unwrap();
+        let text = toml::to_string(&c).unwrap();
+        for key in [
+            "check_model = false",
+            "bring_up = true",
+            "servoj_gain = 1000.0",
+            "servoj_lookahead_time_s = 0.05",
+        ] {
+            assert!(text.contains(key), "{key} in\n{text}");
+        }
+        assert_eq!(toml::from_str::<ControllerConfig>(&text).unwrap(), c);
+    }
+
+    #[test]
     fn arm_backend_defaults_to_iceoryx2_and_ur_settings_are_checked() {
         assert_eq!(ControllerConfig::default().arm.backend, ArmKind::Iceoryx2);
         let c: ControllerConfig =
@@ -598,6 +717,26 @@ mod tests {
             (
                 "action_mode = \"torque\"\n[arm]\nbackend = \"ur\"",
                 "action_mode",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nservoj_lookahead_time_s = 0.01",
+                "arm.ur.servoj_lookahead_time_s",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nservoj_lookahead_time_s = 0.25",
+                "arm.ur.servoj_lookahead_time_s",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nservoj_gain = 50.0",
+                "arm.ur.servoj_gain",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\nservoj_gain = 2500.0",
+                "arm.ur.servoj_gain",
+            ),
+            (
+                "[arm]\nbackend = \"ur\"\n[arm.ur]\ndashboard_port = 0",
+                "arm.ur.dashboard_port",
             ),
         ] {
             let c: ControllerConfig = toml::from_str(text).unwrap();

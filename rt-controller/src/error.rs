@@ -161,6 +161,51 @@ pub enum UrSetupError {
     /// Sending the program failed.
     #[error("cannot send the program to the secondary interface: {0}")]
     SendProgram(std::io::Error),
+    /// The dashboard server cannot be reached.
+    #[error("cannot reach the robot's dashboard server at {addr}: {why}; is arm.ur.dashboard_port right (29999 on a UR)? The model check needs it: set arm.ur.check_model = false to skip the check")]
+    Dashboard {
+        /// Where.
+        addr: SocketAddr,
+        /// The OS error (a read timeout included).
+        why: std::io::Error,
+    },
+    /// A dashboard reply that is not the expected one.
+    #[error("the dashboard server answered `{command}` with \"{reply}\", expected {expected}")]
+    DashboardReply {
+        /// The command sent.
+        command: &'static str,
+        /// What came back.
+        reply: String,
+        /// What was expected.
+        expected: &'static str,
+    },
+    /// The robot is another model than `arm.ur.model`.
+    #[error("arm.ur.model = \"{configured}\" but the robot says it is a {robot} on {polyscope}, that is {}; set arm.ur.model (and the learner's sim.model) to the robot's model, or arm.ur.check_model = false to drive it anyway", robot_model.map_or("a model this project does not know".to_string(), |m| format!("a {m}")))]
+    ModelMismatch {
+        /// The configured model.
+        configured: ur5_shared::UrModel,
+        /// `get robot model`'s reply.
+        robot: String,
+        /// `PolyscopeVersion`'s reply.
+        polyscope: String,
+        /// The model both replies name, if this project knows it.
+        robot_model: Option<ur5_shared::UrModel>,
+    },
+    /// The bring-up did not reach RUNNING.
+    #[error("bring-up: after `{step}` the robot mode was still {mode} after {timeout_s} s (expected {expected}); check the teach pendant (e-Series: remote control, no popup), or raise setup_timeout_s")]
+    BringUp {
+        /// The dashboard command sent.
+        step: &'static str,
+        /// The last robot mode seen.
+        mode: String,
+        /// What was awaited.
+        expected: &'static str,
+        /// Waited (s).
+        timeout_s: f64,
+    },
+    /// The protective stop could not be cleared.
+    #[error("protective-stop recovery: {0}")]
+    Recovery(String),
     /// The program did not connect back.
     #[error("the program did not connect back to {addr} within {timeout_s} s: can the robot reach this PC on that port (firewall, route)? Is the robot in remote control (e-Series)? The robot's text messages so far: {texts:?}")]
     NoCallback {

@@ -120,6 +120,12 @@ impl UrModel {
         *self == UrModel::Ur5
     }
 
+    /// Whether the model is of the e-Series generation (PolyScope 5, 500 Hz): every model but
+    /// the CB-era UR3, UR5 and UR10 (the UR20 and UR30 run the e-Series controller).
+    pub fn is_e_series(self) -> bool {
+        !matches!(self, UrModel::Ur3 | UrModel::Ur5 | UrModel::Ur10)
+    }
+
     /// The lower-case name (`"ur5e"`), as in configuration files and on command lines.
     pub fn name(self) -> &'static str {
         match self {

@@ -410,6 +410,8 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
                 rtde_port: sim.rtde_addr.port(),
                 secondary_port: sim.secondary_addr.port(),
                 reverse_port: 0,
+                // ur-sim's library default (a UR5 on an e-Series controller) has no dashboard.
+                check_model: false,
                 // Long: a descheduled test thread must not end the program.
                 receive_timeout_ms: 1000,
                 ..UrConfig::default()

@@ -19,6 +19,14 @@
 //!   The program's receive timeout counts wall time in both modes (divided by the compression
 //!   in real time): it is the watchdog for a dead controller. A `stopj` in lockstep runs its
 //!   cycles back to back; clients may then see only the newest of them.
+//! - **Dashboard server** ([`dashboard`], default port 29999 from the command line; none in the
+//!   library unless [`UrSimConfig::dashboard_port`] asks): the model, serial number and
+//!   version, the robot, safety and program state, and power on / off, brake release, unlock
+//!   protective stop, stop, play and load, as a real controller answers them. With
+//!   [`UrSimConfig::start_powered_off`] the arm starts in POWER_OFF, for a driver's bring-up.
+//!   In lockstep, an arm in a protective stop with no program running follows a real-time clock
+//!   (arm time passes, the arm holds, packages flow), so that the 5 s before a protective stop
+//!   can be unlocked pass; nothing else moves the lockstep clock.
 //! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject.
 //! - **Playback** ([`playback`], `--playback FILE.csv`): the arm moved as by hand in freedrive
 //!   through a file's joint angles, in arm time from the first RTDE connection; real time only (in lockstep nothing would
@@ -26,6 +34,7 @@
 //!
 //! Only loopback addresses are used: the listeners and the reverse connection refuse others.
 
+pub mod dashboard;
 pub mod plant;
 pub mod playback;
 pub mod program;
@@ -123,10 +132,22 @@ pub struct UrSimConfig {
     pub rtde_port: u16,
     /// Secondary-interface port (0: any free port).
     pub secondary_port: u16,
+    /// Dashboard-server port (0: any free port; `None`: no dashboard server, the library's
+    /// default so that tests do not compete for 29999; the command line's default is 29999).
+    pub dashboard_port: Option<u16>,
+    /// Start with the robot powered off (robot mode POWER_OFF): programs are refused until the
+    /// dashboard's `power on` and `brake release`.
+    pub start_powered_off: bool,
     /// Controller generation.
     pub series: Series,
+    /// How servoj tracks its targets ([`plant::ServojModel`]).
+    pub servoj: plant::ServojModel,
     /// Lockstep clock (see the module docs).
     pub lockstep: bool,
+    /// Lockstep: the arm's clock runs (one cycle per `cycle / time_compression` of wall time)
+    /// while it stands in a protective stop with no program, so that the 5 s before an unlock
+    /// pass. `false` freezes it there too (a test of the refusal).
+    pub stopped_clock: bool,
     /// Real time runs this many times faster than wall time (≥ 1).
     pub time_compression: f64,
     /// Misbehaviour to inject.
@@ -141,8 +162,12 @@ impl Default for UrSimConfig {
             host: Ipv4Addr::LOCALHOST,
             rtde_port: 30004,
             secondary_port: 30002,
+            dashboard_port: None,
+            start_powered_off: false,
             series: Series::E,
+            servoj: plant::ServojModel::Ideal,
             lockstep: false,
+            stopped_clock: true,
             time_compression: 1.0,
             faults: Faults::default(),
             playback: None,
@@ -229,10 +254,22 @@ impl Stats {
     }
 }
 
+/// The program the dashboard's `load` and `play` act on.
+#[derive(Default)]
+pub(crate) struct ProgramStore {
+    /// The last external_control program sent to the secondary interface.
+    pub script: Option<String>,
+    /// The name `load` gave it.
+    pub loaded: Option<String>,
+}
+
 /// Everything the threads share.
 pub(crate) struct Ctx {
     pub plant: Plant,
     pub cfg: UrSimConfig,
+    /// The simulated arm's model (the dashboard reports it).
+    pub model: ur5_shared::UrModel,
+    programs: Mutex<ProgramStore>,
     pub stop: AtomicBool,
     pub stats: Stats,
     /// Live RTDE connections, for text messages to all.
@@ -251,6 +288,11 @@ impl Ctx {
         for o in outlets.iter().filter_map(Weak::upgrade) {
             o.text(message, lvl);
         }
+    }
+
+    /// The dashboard's program (locked).
+    pub fn program_store(&self) -> std::sync::MutexGuard<'_, ProgramStore> {
+        self.programs.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     fn register(&self, o: &Arc<Outlet>) -> u64 {
@@ -275,7 +317,7 @@ impl Ctx {
                 let stepped = arm.step();
                 v = v.or(stepped);
                 let after = self.cfg.faults.protective_stop_after;
-                if after > 0 && arm.cycle >= after {
+                if after > 0 && arm.cycle == after {
                     v = v.or(Some(Violation(format!(
                         "a collision was detected (injected fault, after {after} arm cycles)"
                     ))));
@@ -298,7 +340,7 @@ impl Ctx {
         }
         if let Some(Violation(why)) = violation {
             self.broadcast(
-                &format!("protective stop: {why}; the program stops the arm and ends (restart ur-sim to clear it)"),
+                &format!("protective stop: {why}; the program stops the arm and ends (clear it on the dashboard, 5 s after the stop: `unlock protective stop`)"),
                 level::ERROR,
             );
         }
@@ -329,6 +371,8 @@ pub struct UrSimHandle {
     pub rtde_addr: SocketAddr,
     /// Where the secondary interface listens.
     pub secondary_addr: SocketAddr,
+    /// Where the dashboard server listens, if there is one.
+    pub dashboard_addr: Option<SocketAddr>,
 }
 
 impl UrSimHandle {
@@ -410,6 +454,22 @@ fn clock(ctx: Arc<Ctx>) {
     }
 }
 
+/// Lockstep: while the arm stands in a protective stop with no program running, one arm
+/// cycle per `cycle / time_compression` of wall time (the arm holds; see the module docs).
+fn stopped_clock(ctx: Arc<Ctx>) {
+    let period = Duration::from_secs_f64(ctx.cfg.series.cycle_s() / ctx.cfg.time_compression);
+    while !ctx.stop.load(Ordering::Relaxed) {
+        std::thread::sleep(period);
+        let standing = {
+            let arm = ctx.plant.lock();
+            arm.phase == plant::Phase::Idle && arm.safety == ur_protocol::SafetyMode::ProtectiveStop
+        };
+        if standing {
+            ctx.advance(true, |_| Ok(()));
+        }
+    }
+}
+
 /// Builds the arm at rest at `task.start_q`, binds the ports and starts serving.
 pub fn spawn(
     task: &TaskConfig,
@@ -445,6 +505,24 @@ pub fn spawn(
     if let Some(p) = player {
         arm.load_playback(p);
     }
+    if cfg.start_powered_off {
+        arm.robot_mode = ur_protocol::RobotMode::PowerOff;
+        arm.refresh();
+    }
+    let dash_l = cfg
+        .dashboard_port
+        .map(|p| bind(cfg.host, p, "the dashboard server"))
+        .transpose()?;
+    let dashboard_addr = dash_l
+        .as_ref()
+        .map(|l| {
+            l.local_addr().map_err(|source| UrSimError::Bind {
+                what: "the dashboard server",
+                addr: SocketAddr::from((cfg.host, cfg.dashboard_port.unwrap_or(0))),
+                source,
+            })
+        })
+        .transpose()?;
     let rtde_l = bind(cfg.host, cfg.rtde_port, "RTDE")?;
     let sec_l = bind(cfg.host, cfg.secondary_port, "the secondary interface")?;
     let rtde_addr = rtde_l.local_addr().map_err(|source| UrSimError::Bind {
@@ -460,6 +538,8 @@ pub fn spawn(
     let ctx = Arc::new(Ctx {
         plant: Plant::new(arm),
         cfg: cfg.clone(),
+        model: sim_cfg.model,
+        programs: Mutex::new(ProgramStore::default()),
         stop: AtomicBool::new(false),
         stats: Stats::default(),
         outlets: Mutex::new(Vec::new()),
@@ -475,8 +555,18 @@ pub fn spawn(
     threads.push(std::thread::spawn(move || {
         accept_loop(c, sec_l, program::serve_secondary)
     }));
-    if !cfg.lockstep {
+    if let Some(l) = dash_l {
         let c = Arc::clone(&ctx);
+        threads.push(std::thread::spawn(move || {
+            accept_loop(c, l, dashboard::serve_dashboard)
+        }));
+    }
+    let c = Arc::clone(&ctx);
+    if cfg.lockstep {
+        if cfg.stopped_clock {
+            threads.push(std::thread::spawn(move || stopped_clock(c)));
+        }
+    } else {
         threads.push(std::thread::spawn(move || clock(c)));
     }
     Ok(UrSimHandle {
@@ -484,5 +574,6 @@ pub fn spawn(
         threads,
         rtde_addr,
         secondary_addr,
+        dashboard_addr,
     })
 }

@@ -29,6 +29,57 @@ pub enum Phase {
     Stopping,
 }
 
+/// How `ur-sim` turns the program's servoj targets into the sim's position-servo goal.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ServojModel {
+    /// The target is the goal at once; `lookahead_time` and `gain` change nothing (the
+    /// default: the arm of `hil-sim serve`, whose results the RTDE path reproduces).
+    #[default]
+    Ideal,
+    /// [`ServojFilter`]: smoothing over `lookahead_time`, then proportional tracking at `gain`.
+    Tracking,
+}
+
+/// servoj's tracking as `ur-sim` models it (docs/ur.md, "servoj"): the target is smoothed by
+/// a first-order low-pass of time constant `lookahead_time` (URScript: "smoothens the
+/// trajectory with this lookahead time"; the lag of a first-order filter equals its time
+/// constant, the lag users report), and the commanded position follows the smoothed target at
+/// a rate of `gain` per second times the error (URScript: "proportional gain for following
+/// target position"), so 1/gain (0.5–10 ms) is the tracking time constant. Both are
+/// discretised exactly per arm cycle, `x += (1 − exp(−dt/τ))·(target − x)`, stable for
+/// every setting.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServojFilter {
+    /// Per-cycle factor of the smoothing.
+    a_smooth: f64,
+    /// Per-cycle factor of the tracking.
+    a_track: f64,
+    smoothed: [f64; N_JOINTS],
+    commanded: [f64; N_JOINTS],
+}
+
+impl ServojFilter {
+    /// At rest at `q` (rad), for `lookahead_time_s` (s), `gain` (1/s) and arm cycle `dt` (s).
+    pub fn new(lookahead_time_s: f64, gain: f64, dt: f64, q: [f64; N_JOINTS]) -> Self {
+        Self {
+            a_smooth: 1.0 - (-dt / lookahead_time_s).exp(),
+            a_track: 1.0 - (-dt * gain).exp(),
+            smoothed: q,
+            commanded: q,
+        }
+    }
+
+    /// One arm cycle toward `target` (rad): the position servo's goal.
+    pub fn step(&mut self, target: &[f64; N_JOINTS]) -> [f64; N_JOINTS] {
+        for j in 0..N_JOINTS {
+            self.smoothed[j] += self.a_smooth * (target[j] - self.smoothed[j]);
+            self.commanded[j] += self.a_track * (self.smoothed[j] - self.commanded[j]);
+        }
+        self.commanded
+    }
+}
+
 /// The arm and the modes the controller reports.
 pub struct Arm {
     sim: Ur5Sim,
@@ -44,10 +95,17 @@ pub struct Arm {
     pub program: u64,
     /// Safety mode (NORMAL, or PROTECTIVE_STOP after a limit violation).
     pub safety: SafetyMode,
+    /// Arm cycle of the newest protective stop (the dashboard's 5 s unlock rule counts from it).
+    pub stop_cycle: Option<u64>,
+    /// Robot mode: POWER_OFF, IDLE (powered, brakes on) or RUNNING (brakes released); the
+    /// dashboard's `power on`, `brake release` and `power off` change it.
+    pub robot_mode: RobotMode,
     /// What RTDE connections send.
     pub snapshot: RobotState,
     /// A playback moving the arm by hand (`--playback`), if loaded.
     pub playback: Option<super::playback::Player>,
+    /// The running program's servoj tracking ([`ServojModel::Tracking`]); `None`: ideal.
+    pub servoj: Option<ServojFilter>,
 }
 
 /// A limit violation that triggers a protective stop.
@@ -71,8 +129,11 @@ impl Arm {
             phase: Phase::Idle,
             program: 0,
             safety: SafetyMode::Normal,
+            stop_cycle: None,
+            robot_mode: RobotMode::Running,
             snapshot: RobotState::default(),
             playback: None,
+            servoj: None,
         };
         arm.refresh();
         Ok(arm)
@@ -106,6 +167,11 @@ impl Arm {
         self.goal = self.sim.joint_state().0;
     }
 
+    /// Where the active joints are (rad).
+    pub fn q(&self) -> [f64; N_JOINTS] {
+        self.sim.joint_state().0
+    }
+
     /// Starts `stopj`: the goal becomes the point where a deceleration of
     /// [`STOPJ_DECELERATION`] would bring each joint to rest; the servo decelerates toward it.
     pub fn begin_stop(&mut self) {
@@ -120,6 +186,7 @@ impl Arm {
     /// A protective stop: the program stops the arm and ends, safety reports PROTECTIVE_STOP.
     pub fn protective_stop(&mut self) {
         self.safety = SafetyMode::ProtectiveStop;
+        self.stop_cycle = Some(self.cycle);
         self.begin_stop();
         if self.phase == Phase::Idle {
             self.hold_here();
@@ -136,7 +203,10 @@ impl Arm {
             self.refresh();
             return None;
         }
-        self.sim.step(self.goal);
+        match (self.phase, self.servoj.as_mut()) {
+            (Phase::Running, Some(f)) => self.sim.step(f.step(&self.goal)),
+            _ => self.sim.step(self.goal),
+        };
         self.cycle += 1;
         let (q, qd) = self.sim.joint_state();
         if self.phase == Phase::Stopping && qd.iter().all(|v| v.abs() < AT_REST) {
@@ -161,7 +231,15 @@ impl Arm {
             })
     }
 
-    fn refresh(&mut self) {
+    /// Arm time (s) since the newest protective stop, if the arm is in one.
+    pub fn since_stop_s(&self) -> Option<f64> {
+        (self.safety == SafetyMode::ProtectiveStop)
+            .then(|| self.stop_cycle.map(|c| (self.cycle - c) as f64 * self.dt))
+            .flatten()
+    }
+
+    /// Recomputes the snapshot after a change of modes (the dashboard's commands).
+    pub fn refresh(&mut self) {
         let obs = self.sim.true_observation();
         let w = self.sim.model().wrist_q;
         let six =
@@ -183,7 +261,7 @@ impl Arm {
         s.actual_main_voltage = 48.0;
         s.actual_robot_voltage = 48.0;
         s.actual_joint_voltage = [48.0; 6];
-        s.robot_mode = RobotMode::Running.code();
+        s.robot_mode = self.robot_mode.code();
         s.safety_mode = self.safety.code();
         s.safety_status = self.safety.code();
         // 253: the joints' RUNNING mode.
@@ -274,6 +352,39 @@ impl Plant {
         {
             Ok((g, _)) => g,
             Err(e) => e.into_inner().0,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_servoj_filter_smooths_over_the_lookahead_and_tracks_at_the_gain() {
+        let dt = 0.002;
+        // Smoothing alone (a gain so high the tracking is immediate): 1 − 1/e of a step after
+        // one lookahead time.
+        let mut f = ServojFilter::new(0.1, 1e9, dt, [0.0; N_JOINTS]);
+        let mut y = [0.0; N_JOINTS];
+        for _ in 0..50 {
+            y = f.step(&[1.0, 2.0, -1.0]);
+        }
+        let e = 1.0 - (-1.0f64).exp();
+        assert!(
+            (y[0] - e).abs() < 1e-9 && (y[1] - 2.0 * e).abs() < 1e-9,
+            "{y:?}"
+        );
+        // Each setting converges to the target and stays between start and target.
+        for (l, g) in [(0.03, 100.0), (0.2, 2000.0), (0.03, 2000.0)] {
+            let mut f = ServojFilter::new(l, g, 0.008, [0.0; N_JOINTS]);
+            let mut last = 0.0;
+            for _ in 0..1000 {
+                let y = f.step(&[1.0; N_JOINTS])[0];
+                assert!(y >= last && y <= 1.0, "monotone: {l} {g}");
+                last = y;
+            }
+            assert!((last - 1.0).abs() < 1e-9, "{l} {g}: {last}");
         }
     }
 }

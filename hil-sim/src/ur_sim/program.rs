@@ -23,9 +23,9 @@ use std::time::Duration;
 use ur_protocol::reverse::COMMAND_LEN;
 use ur_protocol::rtde::level;
 use ur_protocol::script::{self, ScriptError, ScriptParams};
-use ur_protocol::{ControlMode, ReverseCommand, SafetyMode};
+use ur_protocol::{ControlMode, ReverseCommand, RobotMode, SafetyMode};
 
-use super::plant::{Phase, Violation};
+use super::plant::{Phase, ServojFilter, ServojModel, Violation};
 use super::{Ctx, Stats};
 
 /// A pause this long after some script text ends the script.
@@ -79,11 +79,12 @@ pub(crate) fn serve_secondary(ctx: Arc<Ctx>, mut stream: TcpStream) {
     }
 }
 
-/// Starts the project's program, or says why a script is not run.
-pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) {
+/// Starts the project's program (true), or says why a script is not run (false).
+pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) -> bool {
     let refuse = |why: String| {
         Stats::add(&ctx.stats.refused_scripts);
         ctx.broadcast(&why, level::ERROR);
+        false
     };
     let params = match script::parse(text) {
         Ok(p) => p,
@@ -95,6 +96,8 @@ pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) {
         }
         Err(e) => return refuse(format!("script not run: {e}")),
     };
+    // The dashboard's `play` runs it again.
+    ctx.program_store().script = Some(text.to_string());
     if !params.reverse_ip.is_loopback() {
         return refuse(format!(
             "script not run: reverse address {} is not a loopback address (ur-sim connects to loopback only)",
@@ -117,12 +120,21 @@ pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) {
             let safety = arm.safety;
             drop(arm);
             return refuse(format!(
-                "program not started: safety mode is {safety} (unlocking a protective stop is not simulated; restart ur-sim)"
+                "program not started: safety mode is {safety} (unlock it on the dashboard: `unlock protective stop`, 5 s after the stop)"
+            ));
+        }
+        if arm.robot_mode != RobotMode::Running {
+            let mode = arm.robot_mode;
+            drop(arm);
+            return refuse(format!(
+                "program not started: robot mode is {mode}, not RUNNING (on the dashboard: `power on`, then `brake release`)"
             ));
         }
         arm.program += 1;
         arm.phase = Phase::Running;
         arm.hold_here();
+        arm.servoj = (ctx.cfg.servoj == ServojModel::Tracking)
+            .then(|| ServojFilter::new(params.lookahead_time_s, params.gain, arm.dt, arm.q()));
         arm.program
     };
     Stats::add(&ctx.stats.programs);
@@ -132,6 +144,7 @@ pub(crate) fn run_script(ctx: &Arc<Ctx>, text: &str) {
     );
     let ctx = Arc::clone(ctx);
     std::thread::spawn(move || program(&ctx, generation, params));
+    true
 }
 
 /// How the program ended.

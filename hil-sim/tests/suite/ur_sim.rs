@@ -21,11 +21,12 @@ use ur_protocol::{
     ClientMessage, ControlMode, ReverseCommand, RobotMessage, RobotState, SafetyMode,
 };
 
-const PROGRAM: &str = include_str!("../../../rt-controller/urscript/external_control.script");
+pub(super) const PROGRAM: &str =
+    include_str!("../../../rt-controller/urscript/external_control.script");
 const NAMES: &str =
     "timestamp,actual_q,actual_qd,robot_mode,safety_mode,runtime_state,speed_scaling,";
 /// Bounds a hang, never a measurement.
-const DEADLINE: Duration = Duration::from_secs(20);
+pub(super) const DEADLINE: Duration = Duration::from_secs(20);
 
 fn start(lockstep: bool, faults: Faults) -> UrSimHandle {
     let cfg = UrSimConfig {
@@ -39,11 +40,11 @@ fn start(lockstep: bool, faults: Faults) -> UrSimHandle {
 }
 
 /// A minimal RTDE client.
-struct Client {
+pub(super) struct Client {
     s: TcpStream,
     dec: Box<FrameDecoder<8192>>,
     protocol: Protocol,
-    texts: Vec<String>,
+    pub(super) texts: Vec<String>,
 }
 
 /// A frame copied out of the decoder.
@@ -112,6 +113,18 @@ impl Client {
         }
     }
 
+    /// Reads frames until a text message; keeps it in `texts` and returns it.
+    pub(super) fn next_text(&mut self) -> Result<String, String> {
+        loop {
+            let f = self.next_any()?;
+            if let RobotMessage::TextMessage(TextMessage::V2 { message, .. }) = f.msg(self.protocol)
+            {
+                self.texts.push(message.to_owned());
+                return Ok(message.to_owned());
+            }
+        }
+    }
+
     fn negotiate(&mut self, version: u16) -> bool {
         self.send(ClientMessage::RequestProtocolVersion(version));
         let f = self.next().unwrap();
@@ -146,7 +159,7 @@ impl Client {
     }
 
     /// Handshake v2, the driver's recipe, START.
-    fn ready(addr: SocketAddr) -> (Self, OutputRecipe) {
+    pub(super) fn ready(addr: SocketAddr) -> (Self, OutputRecipe) {
         let mut c = Self::connect(addr);
         assert!(c.negotiate(2));
         let r = c.setup(NAMES).expect("usable recipe");
@@ -154,7 +167,7 @@ impl Client {
         (c, r)
     }
 
-    fn state(&mut self, recipe: &OutputRecipe) -> Result<RobotState, String> {
+    pub(super) fn state(&mut self, recipe: &OutputRecipe) -> Result<RobotState, String> {
         let f = self.next()?;
         let mut s = RobotState::default();
         let m = f.msg(self.protocol);
@@ -166,13 +179,19 @@ impl Client {
 }
 
 /// Sends the project's program with a reverse listener; returns the accepted reverse socket.
-fn run_program(sim: &UrSimHandle) -> TcpStream {
+pub(super) fn run_program(sim: &UrSimHandle) -> TcpStream {
+    run_program_with(sim, |_| {})
+}
+
+/// [`run_program`] with the parameters changed by `edit` (servoj's lookahead and gain).
+pub(super) fn run_program_with(sim: &UrSimHandle, edit: impl Fn(&mut ScriptParams)) -> TcpStream {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let params = ScriptParams {
-        reverse_ip: "127.0.0.1".parse().unwrap(),
-        reverse_port: listener.local_addr().unwrap().port(),
-        steptime_s: Series::E.cycle_s(),
-    };
+    let mut params = ScriptParams::new(
+        "127.0.0.1".parse().unwrap(),
+        listener.local_addr().unwrap().port(),
+        Series::E.cycle_s(),
+    );
+    edit(&mut params);
     let mut sec = TcpStream::connect(sim.secondary_addr).unwrap();
     sec.write_all(script::render(PROGRAM, &params).as_bytes())
         .unwrap();
@@ -192,7 +211,7 @@ fn run_program(sim: &UrSimHandle) -> TcpStream {
     }
 }
 
-fn servoj(rev: &mut TcpStream, q3: [f64; 3], timeout_ms: i32) {
+pub(super) fn servoj(rev: &mut TcpStream, q3: [f64; 3], timeout_ms: i32) {
     let w = SimConfig::default().wrist_q;
     let cmd = ReverseCommand {
         timeout_ms,
@@ -526,6 +545,8 @@ fn ur_binary_prints_its_ports_and_answers_rtde() {
             "--rtde-port",
             "0",
             "--secondary-port",
+            "0",
+            "--dashboard-port",
             "0",
             "--lockstep",
             "--series",

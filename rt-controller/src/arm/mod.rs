@@ -61,6 +61,14 @@ pub trait ArmBackend {
         None
     }
 
+    /// Outside the tick, a setup-like step (may allocate, block and fail): after the arm
+    /// reported a stop (`ArmFaults::DRIVER`), clear it and make the arm ready for the next
+    /// episode if the backend can and its configuration allows; `Ok(false)`: it cannot (the
+    /// run ends with [`crate::ExitReason::ArmStopped`]).
+    fn recover(&mut self) -> Result<bool, SetupError> {
+        Ok(false)
+    }
+
     /// After the loop (may allocate): what the backend has to add to the summary.
     fn report(&self) -> Option<ArmReport> {
         None

@@ -122,6 +122,32 @@ impl<A: ArmBackend> Controller<A> {
         }
     }
 
+    /// After a stop the arm reported: the backend's recovery, then the next episode from the
+    /// boundary (`None`), or [`ExitReason::ArmStopped`]. Blocks and may allocate (a failure's
+    /// message), as setup does; the period clock restarts afterwards.
+    #[cold]
+    fn recover_arm(&mut self) -> Option<ExitReason> {
+        match self.arm.recover() {
+            Ok(true) => {
+                self.fault = None;
+                self.latest.faults = ArmFaults::default();
+                self.phase = Phase::Boundary;
+                self.awaiting = None;
+                self.stale_since_ns = None;
+                self.next_deadline_ns = monotonic_ns() + self.period_ns;
+                None
+            }
+            Ok(false) => Some(ExitReason::ArmStopped),
+            Err(e) => {
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "rt-controller: error: the arm stopped and could not be recovered: {e}"
+                );
+                Some(ExitReason::ArmStopped)
+            }
+        }
+    }
+
     /// One loop iteration after the period wait.
     pub(super) fn step(&mut self, freshness: StateFreshness) -> Option<ExitReason> {
         let lost = self.arm.lost().is_some();
@@ -132,10 +158,12 @@ impl<A: ArmBackend> Controller<A> {
             return Some(ExitReason::ArmLost);
         }
         if freshness == StateFreshness::Fresh && self.latest.faults.contains(ArmFaults::DRIVER) {
-            // The robot stopped (protective stop, safety mode, program ended): only a person
-            // at the robot can clear that. End the episode, hold, exit.
+            // The robot stopped (protective stop, safety mode, program ended): end the
+            // episode and hold; then the backend may clear the stop (a setup-like step outside
+            // the tick, `ArmBackend::recover`) and the next episode starts with a reset, or
+            // only a person at the robot can clear it and the run ends.
             self.abort_episode(Fault::ArmFault);
-            return Some(ExitReason::ArmStopped);
+            return self.recover_arm();
         }
         if lost {
             // The connection is gone for good, and a wait need not have been stale to see it:

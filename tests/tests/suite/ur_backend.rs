@@ -1,14 +1,17 @@
 //! rt-controller's `ur` arm against `hil-sim ur-sim`, free ports on 127.0.0.1:
 //! the setup (handshake, recipe, mode check, the program's connection back) in-process, then
 //! the loop: the `rt-controller` and `learner` binaries against an in-process ur-sim, learning
-//! with the same outcome as over iceoryx2, the fault injections, a protective stop, a dead
-//! ur-sim and a frozen controller. Waits are bounded only to catch a hang; nothing asserts on
-//! timing.
+//! with the same outcome as over iceoryx2, the fault injections, a protective stop (ending the
+//! run, or recovered over the dashboard), a dead ur-sim and a frozen controller; the dashboard's
+//! model check and bring-up. Waits are bounded only to catch a hang; nothing asserts on timing.
+//!
+//! ur-sim's library default pairs the UR5 model with an e-Series controller, a combination no
+//! robot has: the tests that use it do not check the model (`check_model = false`).
 
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use hil_sim::ur_sim::{self, Faults, UrSimConfig, UrSimHandle};
+use hil_sim::ur_sim::{self, Faults, Series, UrSimConfig, UrSimHandle};
 use integration_tests::{
     cleanup_dead_nodes, json_summary, reaching_table, scratch, unique_prefix, write_config, Proc,
     TestLearner,
@@ -17,6 +20,7 @@ use rt_controller::arm::ur::UrRtde;
 use rt_controller::arm::ur::{UrSession, UrSetupError};
 use rt_controller::config::{UrConfig, UrSeries};
 use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::UrModel;
 use ur_protocol::rtde::Protocol;
 
 const TIMEOUT: Duration = Duration::from_secs(20);
@@ -25,6 +29,7 @@ fn sim(cfg: UrSimConfig) -> UrSimHandle {
     let cfg = UrSimConfig {
         rtde_port: 0,
         secondary_port: 0,
+        dashboard_port: Some(0),
         lockstep: true,
         ..cfg
     };
@@ -38,6 +43,8 @@ fn ur_cfg(sim: &UrSimHandle, series: UrSeries) -> UrConfig {
         secondary_port: sim.secondary_addr.port(),
         // A free port: the OS picks it and the rendered program names it.
         reverse_port: 0,
+        dashboard_port: sim.dashboard_addr.unwrap().port(),
+        check_model: false,
         series,
         ..UrConfig::default()
     }
@@ -141,21 +148,26 @@ const WATCHDOG_MS: u32 = 200;
 /// The reaching tables' goal (rad).
 const GOAL: [f64; 3] = [0.3, -1.7, 2.0];
 
-/// The RTDE and secondary ports of a ur-sim.
+/// The RTDE, secondary and dashboard ports of a ur-sim.
 #[derive(Clone, Copy)]
-struct Ports(u16, u16);
+struct Ports(u16, u16, u16);
 
 impl From<&UrSimHandle> for Ports {
     fn from(s: &UrSimHandle) -> Self {
-        Ports(s.rtde_addr.port(), s.secondary_addr.port())
+        Ports(
+            s.rtde_addr.port(),
+            s.secondary_addr.port(),
+            s.dashboard_addr.unwrap().port(),
+        )
     }
 }
 
-/// `[arm]` of a controller config for a ur-sim (the reverse port: any free one).
+/// `[arm]` of a controller config for a ur-sim (the reverse port: any free one; the model not
+/// checked).
 fn arm_toml(p: Ports, receive_timeout_ms: u32) -> String {
     format!(
-        "[arm]\nbackend = \"ur\"\n[arm.ur]\nhost = \"127.0.0.1\"\nrtde_port = {}\nsecondary_port = {}\nreverse_port = 0\nreceive_timeout_ms = {receive_timeout_ms}\n",
-        p.0, p.1
+        "[arm]\nbackend = \"ur\"\n[arm.ur]\nhost = \"127.0.0.1\"\nrtde_port = {}\nsecondary_port = {}\ndashboard_port = {}\ncheck_model = false\nreverse_port = 0\nreceive_timeout_ms = {receive_timeout_ms}\n",
+        p.0, p.1, p.2
     )
 }
 
@@ -352,13 +364,26 @@ fn run_against(
     episodes: u64,
     q_goal: [f64; 3],
 ) -> (Option<i32>, serde_json::Value, String) {
+    run_against_with(ports, tag, extra, "", receive_timeout_ms, episodes, q_goal)
+}
+
+/// [`run_against`] with `ur_extra` lines appended to `[arm.ur]`.
+fn run_against_with(
+    ports: Ports,
+    tag: &str,
+    extra: &str,
+    ur_extra: &str,
+    receive_timeout_ms: u32,
+    episodes: u64,
+    q_goal: [f64; 3],
+) -> (Option<i32>, serde_json::Value, String) {
     let dir = scratch(tag);
     let prefix = unique_prefix(tag);
     let cfg = write_config(
         &dir,
         "ctl.toml",
         &format!(
-            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n{extra}\n[task]\nhorizon = 10\n[safety]\nstale_state_timeout_s = 2.0\n{}",
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n{extra}\n[task]\nhorizon = 10\n[safety]\nstale_state_timeout_s = 2.0\n{}{ur_extra}",
             arm_toml(ports, receive_timeout_ms)
         ),
     );
@@ -519,6 +544,149 @@ fn ur_a_protective_stop_ends_the_run_with_its_own_exit_code() {
     let why = j["arm"]["robot_stop"].as_str().unwrap();
     assert!(why.contains("PROTECTIVE_STOP"), "{why}");
     cleanup_dead_nodes();
+}
+
+#[test]
+fn ur_a_protective_stop_is_unlocked_and_the_run_goes_on_when_the_config_allows() {
+    // As above, with recover_protective_stop: the controller waits until the robot's clock is
+    // 5 s past the stop (ur-sim's clock runs while the arm stands in the stop, here 10x
+    // faster than wall time), unlocks it on the dashboard, sends the program again and runs
+    // the remaining episodes; the stopped one counts as aborted.
+    let s = sim(UrSimConfig {
+        time_compression: 10.0,
+        faults: Faults {
+            protective_stop_after: 503,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let (code, j, log) = run_against_with(
+        Ports::from(&s),
+        "ur-pstop-r",
+        "",
+        "recover_protective_stop = true\n",
+        WATCHDOG_MS,
+        5,
+        [0.3, -1.7, 1.6],
+    );
+    let summary = s.stop();
+    assert_eq!(summary.protective_stops, 1, "{summary:?}");
+    assert_eq!(summary.programs, 2, "{summary:?}");
+    assert_eq!(code, Some(0), "{j}\n{log}");
+    assert_eq!(j["exit_reason"], "episodes_done", "{j}");
+    assert_eq!(j["episodes_aborted"], 1, "{j}");
+    assert_eq!(j["episodes_completed"], 4, "{j}");
+    assert_eq!(j["arm"]["protective_stops_recovered"], 1, "{j}");
+    assert!(log.contains("protective stop unlocked"), "{log}");
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ur_backend_checks_the_robots_model_over_the_dashboard() {
+    // A CB3 UR5 (ur-sim's UR5 on a CB3 controller): the UR5 config is accepted.
+    let cb3 = UrSimConfig {
+        series: Series::Cb3,
+        ..UrSimConfig::default()
+    };
+    let s = sim(cb3.clone());
+    let ok = UrConfig {
+        check_model: true,
+        ..ur_cfg(&s, UrSeries::Auto)
+    };
+    drop(UrSession::connect(&ok, TIMEOUT).expect("a UR5 config on a UR5"));
+    // A UR10 config on it is refused, naming both models.
+    let e = UrSession::connect(
+        &UrConfig {
+            model: UrModel::Ur10,
+            ..ok.clone()
+        },
+        TIMEOUT,
+    )
+    .err()
+    .expect("a UR10 config on a UR5");
+    assert!(matches!(e, UrSetupError::ModelMismatch { .. }), "{e}");
+    let m = e.to_string();
+    assert!(
+        m.contains("\"ur10\"") && m.contains("UR5") && m.contains("a ur5;"),
+        "{m}"
+    );
+    s.stop();
+    // The same "UR5" on an e-Series controller is a UR5e: the UR5 config is refused.
+    let s = sim(UrSimConfig::default());
+    let e = UrSession::connect(
+        &UrConfig {
+            check_model: true,
+            ..ur_cfg(&s, UrSeries::Auto)
+        },
+        TIMEOUT,
+    )
+    .err()
+    .expect("a UR5 config on a UR5e");
+    let m = e.to_string();
+    assert!(m.contains("a ur5e") && m.contains("URSoftware 5."), "{m}");
+    // No dashboard server: said so, with the way to skip the check.
+    let s2 = ur_sim::spawn(
+        &TaskConfig::default(),
+        &SimConfig::default(),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            dashboard_port: None,
+            lockstep: true,
+            ..cb3
+        },
+    )
+    .unwrap();
+    let free = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let closed_port = free.local_addr().unwrap().port();
+    drop(free);
+    let e = UrSession::connect(
+        &UrConfig {
+            check_model: true,
+            dashboard_port: closed_port,
+            ..ur_cfg(&s, UrSeries::Auto)
+        },
+        TIMEOUT,
+    )
+    .err()
+    .expect("no dashboard");
+    assert!(matches!(e, UrSetupError::Dashboard { .. }), "{e}");
+    assert!(e.to_string().contains("check_model = false"), "{e}");
+    s.stop();
+    s2.stop();
+}
+
+#[test]
+fn ur_backend_brings_up_a_powered_off_arm_when_asked() {
+    let s = sim(UrSimConfig {
+        series: Series::Cb3,
+        start_powered_off: true,
+        ..UrSimConfig::default()
+    });
+    let cfg = UrConfig {
+        check_model: true,
+        ..ur_cfg(&s, UrSeries::Auto)
+    };
+    // Without bring-up: refused, with what to do.
+    let e = UrSession::connect(&cfg, TIMEOUT)
+        .err()
+        .expect("a powered-off arm");
+    assert!(matches!(e, UrSetupError::NotRunning { .. }), "{e}");
+    assert!(e.to_string().contains("POWER_OFF"), "{e}");
+    // With it: power on, brake release, RUNNING, the program connects back.
+    let u = UrSession::connect(
+        &UrConfig {
+            bring_up: true,
+            ..cfg.clone()
+        },
+        TIMEOUT,
+    )
+    .expect("bring-up");
+    assert_eq!(u.state.robot_mode, ur_protocol::RobotMode::Running.code());
+    assert_eq!(u.cycle_s, 0.008);
+    drop(u);
+    let summary = s.stop();
+    assert_eq!(summary.programs, 1, "{summary:?}");
 }
 
 #[test]

@@ -26,6 +26,12 @@ use crate::error::SetupError;
 use crate::stats::{Histogram, Percentiles};
 
 use super::setup::{check_modes, UrRtde, UrSetupError};
+
+mod recover;
+
+/// [`UrReport::lost`] when the program's reverse connection closed (the program ended).
+const REVERSE_LOST: &str =
+    "the robot's program closed the reverse connection (it stopped: see the robot's log)";
 // ------------------------------------------------------------------------------ the loop side
 
 /// A reset to the start pose counts as done when every joint is this close (rad) …
@@ -81,6 +87,8 @@ pub struct UrReport {
     pub decode_errors: u64,
     /// Why the robot stopped the run, if it did: the robot, safety and runtime modes.
     pub robot_stop: Option<String>,
+    /// Protective stops unlocked and the program restarted (`recover_protective_stop`).
+    pub protective_stops_recovered: u64,
     /// Why the arm is gone, if it is (connection closed).
     pub lost: Option<&'static str>,
     /// Per package: decode + state build (FK) + reverse write, ns.
@@ -107,6 +115,7 @@ struct Counts {
     unsettled: u64,
     texts: u64,
     decode_errors: u64,
+    recoveries: u64,
 }
 
 /// The `ur` arm in the loop: RTDE packages in (non-blocking), one reverse command out per
@@ -145,6 +154,9 @@ struct Live {
     robot_stop: Option<(i32, i32, u32)>,
     /// The program has been seen running (runtime state PLAYING).
     program_seen: bool,
+    /// The program was sent again after a protective stop: until it is seen running, the
+    /// packages from before it (still in the stop) are not a new stop.
+    restarted: bool,
     lost: Option<&'static str>,
     counts: Counts,
     cycle_ns: Histogram,
@@ -235,6 +247,7 @@ impl UrArm {
                     }
                 )
             }),
+            protective_stops_recovered: c.recoveries,
             lost: l.lost,
             cycle: l.cycle_ns.summary(),
             lateness: l.lateness.as_ref().map(|x| x.hist.summary()),
@@ -244,6 +257,7 @@ impl UrArm {
 
 impl ArmBackend for UrArm {
     fn wait_ready(&mut self, timeout_s: f64) -> Result<ArmState, SetupError> {
+        super::dashboard::prepare(&self.cfg, Duration::from_secs_f64(timeout_s))?;
         let r = UrRtde::connect(&self.cfg, Duration::from_secs_f64(timeout_s))?;
         let kin = UrKinematics::new(self.cfg.model, self.cfg.ee_offset);
         let s = state_from(&kin, r.state(), 0, 0, 0, ArmStatus::READY);
@@ -290,6 +304,7 @@ impl ArmBackend for UrArm {
             last_text: heapless::String::new(),
             robot_stop: None,
             program_seen: false,
+            restarted: false,
             lost: None,
             counts: Counts::default(),
             cycle_ns: Histogram::new(),
@@ -340,6 +355,10 @@ impl ArmBackend for UrArm {
 
     fn lost(&self) -> Option<&'static str> {
         self.live.as_ref().and_then(|l| l.lost)
+    }
+
+    fn recover(&mut self) -> Result<bool, SetupError> {
+        Ok(self.recover_protective_stop()?)
     }
 
     fn report(&self) -> Option<crate::arm::ArmReport> {
@@ -495,7 +514,9 @@ impl Live {
         // queued before it started say STOPPED).
         let playing = r.runtime_state == runtime_state::PLAYING;
         self.program_seen |= playing;
-        let stopped = check_modes(r).is_err() || (self.program_seen && !playing);
+        let before_restart = self.restarted && !self.program_seen;
+        let stopped =
+            !before_restart && (check_modes(r).is_err() || (self.program_seen && !playing));
         if stopped && self.robot_stop.is_none() {
             self.robot_stop = Some((r.robot_mode, r.safety_mode, r.runtime_state));
             // The controller hears of it at once, not at the next control period.
@@ -654,7 +675,7 @@ impl Live {
                 Ok(())
             }
             Err(_) => {
-                self.lost = Some("the robot's program closed the reverse connection (it stopped: see the robot's log)");
+                self.lost = Some(REVERSE_LOST);
                 Err(ArmIoError::Send)
             }
         }

@@ -140,9 +140,11 @@ pub struct UrRtde {
 }
 
 impl UrSession {
-    /// Setup of the `ur` arm, in the order of docs/design.md §3.10: [`UrRtde::connect`], then
+    /// Setup of the `ur` arm, in the order of docs/design.md §3.10: the dashboard's model
+    /// check and bring-up ([`super::dashboard::prepare`]), [`UrRtde::connect`], then
     /// [`UrRtde::start_program`]. Each wait is bounded by `timeout`.
     pub fn connect(cfg: &UrConfig, timeout: Duration) -> Result<Self, UrSetupError> {
+        super::dashboard::prepare(cfg, timeout)?;
         UrRtde::connect(cfg, timeout)?.start_program(cfg, timeout)
     }
 }
@@ -263,59 +265,7 @@ impl UrRtde {
         self.catch_up()?;
         check_modes(&self.state)?;
         let c = &mut self.c;
-        let host: Ipv4Addr = cfg
-            .host
-            .parse()
-            .expect("validated by ControllerConfig::validate");
-        // The program connects back to the address this PC has toward the robot.
-        let local = c.s.local_addr().map_err(io("setup"))?;
-        let IpAddr::V4(reverse_ip) = local.ip() else {
-            return Err(UrSetupError::NotIpv4(local.ip()));
-        };
-        let reverse_addr = SocketAddr::from((reverse_ip, cfg.reverse_port));
-        let listener = TcpListener::bind(reverse_addr).map_err(|why| UrSetupError::Listen {
-            addr: reverse_addr,
-            why,
-        })?;
-        let bound = listener.local_addr().map_err(io("setup"))?;
-        let program = script::render(
-            PROGRAM,
-            &ScriptParams {
-                reverse_ip,
-                reverse_port: bound.port(),
-                steptime_s: 1.0 / self.rate_hz,
-            },
-        );
-        let sec_addr = SocketAddr::from((host, cfg.secondary_port));
-        let mut sec = TcpStream::connect_timeout(&sec_addr, timeout).map_err(|why| {
-            UrSetupError::Connect {
-                what: "secondary interface",
-                addr: sec_addr,
-                why,
-            }
-        })?;
-        sec.write_all(program.as_bytes())
-            .map_err(UrSetupError::SendProgram)?;
-        drop(sec);
-        listener.set_nonblocking(true).map_err(io("setup"))?;
-        let t0 = Instant::now();
-        let reverse = loop {
-            match listener.accept() {
-                Ok((r, _)) => break r,
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock && t0.elapsed() < timeout => {
-                    std::thread::sleep(Duration::from_millis(2))
-                }
-                Err(_) => {
-                    return Err(UrSetupError::NoCallback {
-                        addr: bound,
-                        timeout_s: timeout.as_secs_f64(),
-                        texts: std::mem::take(&mut c.texts),
-                    })
-                }
-            }
-        };
-        reverse.set_nonblocking(false).map_err(io("setup"))?;
-        reverse.set_nodelay(true).map_err(io("setup"))?;
+        let reverse = send_program(cfg, &c.s, 1.0 / self.rate_hz, timeout, &mut c.texts)?;
         let Self {
             c,
             version,
@@ -365,6 +315,74 @@ impl UrRtde {
         self.c.s.set_nonblocking(false).map_err(io(during))?;
         result
     }
+}
+
+/// A listener on `reverse_port` at the RTDE socket's local address, the program rendered with
+/// it (and `arm.ur`'s servoj settings) and sent to the secondary port, its connection back
+/// (blocking, no delay). `texts`: the robot's text messages so far, named if the program does
+/// not connect back (they are taken then). Setup and recovery alike.
+pub(crate) fn send_program(
+    cfg: &UrConfig,
+    rtde: &TcpStream,
+    steptime_s: f64,
+    timeout: Duration,
+    texts: &mut Vec<String>,
+) -> Result<TcpStream, UrSetupError> {
+    let host: Ipv4Addr = cfg
+        .host
+        .parse()
+        .expect("validated by ControllerConfig::validate");
+    // The program connects back to the address this PC has toward the robot.
+    let local = rtde.local_addr().map_err(io("setup"))?;
+    let IpAddr::V4(reverse_ip) = local.ip() else {
+        return Err(UrSetupError::NotIpv4(local.ip()));
+    };
+    let reverse_addr = SocketAddr::from((reverse_ip, cfg.reverse_port));
+    let listener = TcpListener::bind(reverse_addr).map_err(|why| UrSetupError::Listen {
+        addr: reverse_addr,
+        why,
+    })?;
+    let bound = listener.local_addr().map_err(io("setup"))?;
+    let program = script::render(
+        PROGRAM,
+        &ScriptParams {
+            reverse_ip,
+            reverse_port: bound.port(),
+            steptime_s,
+            lookahead_time_s: cfg.servoj_lookahead_time_s,
+            gain: cfg.servoj_gain,
+        },
+    );
+    let sec_addr = SocketAddr::from((host, cfg.secondary_port));
+    let mut sec =
+        TcpStream::connect_timeout(&sec_addr, timeout).map_err(|why| UrSetupError::Connect {
+            what: "secondary interface",
+            addr: sec_addr,
+            why,
+        })?;
+    sec.write_all(program.as_bytes())
+        .map_err(UrSetupError::SendProgram)?;
+    drop(sec);
+    listener.set_nonblocking(true).map_err(io("setup"))?;
+    let t0 = Instant::now();
+    let reverse = loop {
+        match listener.accept() {
+            Ok((r, _)) => break r,
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock && t0.elapsed() < timeout => {
+                std::thread::sleep(Duration::from_millis(2))
+            }
+            Err(_) => {
+                return Err(UrSetupError::NoCallback {
+                    addr: bound,
+                    timeout_s: timeout.as_secs_f64(),
+                    texts: std::mem::take(texts),
+                })
+            }
+        }
+    };
+    reverse.set_nonblocking(false).map_err(io("setup"))?;
+    reverse.set_nodelay(true).map_err(io("setup"))?;
+    Ok(reverse)
 }
 
 fn io(during: &'static str) -> impl Fn(std::io::Error) -> UrSetupError {

@@ -1,0 +1,317 @@
+//! `hil-sim ur-sim`'s dashboard server: the replies of a real controller (e-Series and CB3),
+//! the refusals, and the state they read and change (power, brakes, program, protective stop),
+//! seen over RTDE as well. Lockstep; where arm time matters the test reads it from ur-sim, so
+//! nothing depends on how fast the machine is.
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::time::Instant;
+
+use hil_sim::ur_sim::{self, Series, UrSimConfig, UrSimHandle};
+use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::UrModel;
+use ur_protocol::state::runtime_state;
+use ur_protocol::{RobotMode, SafetyMode};
+
+use super::ur_sim::{run_program, servoj, Client, DEADLINE};
+
+fn start(cfg: UrSimConfig, model: UrModel) -> UrSimHandle {
+    let cfg = UrSimConfig {
+        rtde_port: 0,
+        secondary_port: 0,
+        dashboard_port: Some(0),
+        lockstep: true,
+        ..cfg
+    };
+    ur_sim::spawn(
+        &TaskConfig::for_model(model),
+        &SimConfig::for_model(model),
+        &cfg,
+    )
+    .expect("ur-sim starts")
+}
+
+/// A dashboard client: one line out, one line back.
+struct Dash {
+    r: BufReader<TcpStream>,
+    w: TcpStream,
+}
+
+impl Dash {
+    fn connect(addr: SocketAddr) -> Self {
+        let s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(DEADLINE)).unwrap();
+        let w = s.try_clone().unwrap();
+        let mut d = Self {
+            r: BufReader::new(s),
+            w,
+        };
+        assert_eq!(d.line(), "Connected: Universal Robots Dashboard Server");
+        d
+    }
+
+    fn line(&mut self) -> String {
+        let mut l = String::new();
+        self.r.read_line(&mut l).unwrap();
+        assert!(l.ends_with('\n'), "one reply per line: {l:?}");
+        l.trim_end().to_string()
+    }
+
+    fn ask(&mut self, cmd: &str) -> String {
+        writeln!(self.w, "{cmd}").unwrap();
+        self.line()
+    }
+}
+
+fn dash(sim: &UrSimHandle) -> Dash {
+    Dash::connect(sim.dashboard_addr.expect("a dashboard server"))
+}
+
+/// The robot mode a new RTDE client sees in its first package.
+fn rtde_robot_mode(sim: &UrSimHandle) -> i32 {
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    c.state(&recipe).unwrap().robot_mode
+}
+
+#[test]
+fn dashboard_replies_as_an_e_series_controller() {
+    let sim = start(UrSimConfig::default(), UrModel::Ur5e);
+    let mut d = dash(&sim);
+    // An e-Series UR5e answers "UR5"; its PolyScope version (5.x) tells it from a CB3 UR5.
+    assert_eq!(d.ask("get robot model"), "UR5");
+    let serial = d.ask("get serial number");
+    assert!(
+        serial.starts_with("20") && serial.chars().all(|c| c.is_ascii_digit()),
+        "{serial}"
+    );
+    assert!(
+        d.ask("PolyscopeVersion").starts_with("URSoftware 5.12.0"),
+        "e-Series"
+    );
+    assert_eq!(d.ask("robotmode"), "Robotmode: RUNNING");
+    assert_eq!(d.ask("safetystatus"), "Safetystatus: NORMAL");
+    assert_eq!(d.ask("safetymode"), "Safetymode: NORMAL");
+    assert_eq!(d.ask("is in remote control"), "true");
+    assert_eq!(d.ask("programState"), "STOPPED <unnamed>");
+    assert_eq!(d.ask("running"), "Program running: false");
+    assert_eq!(d.ask("close safety popup"), "closing safety popup");
+    // Refusals: nothing to stop, nothing loaded to play, no such file, an unknown command.
+    assert_eq!(d.ask("stop"), "Failed to execute: stop");
+    assert_eq!(d.ask("play"), "Failed to execute: play");
+    assert_eq!(
+        d.ask("load /programs/x.urp"),
+        "File not found: /programs/x.urp"
+    );
+    assert_eq!(d.ask("get loaded program"), "No program loaded");
+    assert_eq!(d.ask("fly away"), "could not understand: 'fly away'");
+    // Not protective-stopped: unlocking changes nothing.
+    assert_eq!(d.ask("unlock protective stop"), "Protective stop releasing");
+    assert_eq!(d.ask("quit"), "Disconnected");
+    let mut rest = String::new();
+    assert_eq!(d.r.read_line(&mut rest).unwrap(), 0, "closed after quit");
+    let sum = sim.stop();
+    assert_eq!(sum.programs, 0);
+}
+
+#[test]
+fn dashboard_replies_as_a_cb3_controller() {
+    let sim = start(
+        UrSimConfig {
+            series: Series::Cb3,
+            ..UrSimConfig::default()
+        },
+        UrModel::Ur10,
+    );
+    let mut d = dash(&sim);
+    assert_eq!(d.ask("get robot model"), "UR10");
+    assert!(d.ask("PolyscopeVersion").starts_with("URSoftware 3.15.8"));
+    assert_eq!(d.ask("safetymode"), "Safetymode: NORMAL");
+    // Newer than 3.15: a CB3 does not know them.
+    assert_eq!(
+        d.ask("safetystatus"),
+        "could not understand: 'safetystatus'"
+    );
+    assert_eq!(
+        d.ask("is in remote control"),
+        "could not understand: 'is in remote control'"
+    );
+    sim.stop();
+}
+
+#[test]
+fn dashboard_power_and_brakes_change_the_robot_mode_and_gate_the_program() {
+    let sim = start(
+        UrSimConfig {
+            start_powered_off: true,
+            ..UrSimConfig::default()
+        },
+        UrModel::Ur5,
+    );
+    let mut d = dash(&sim);
+    assert_eq!(d.ask("robotmode"), "Robotmode: POWER_OFF");
+    assert_eq!(rtde_robot_mode(&sim), RobotMode::PowerOff.code());
+    // Brakes cannot be released unpowered; a program is refused.
+    assert_eq!(d.ask("brake release"), "Brake releasing");
+    assert_eq!(d.ask("robotmode"), "Robotmode: POWER_OFF");
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    c.state(&recipe).unwrap();
+    send_program_refused(&sim, &mut c, "robot mode is POWER_OFF");
+    assert_eq!(d.ask("power on"), "Powering on");
+    assert_eq!(d.ask("robotmode"), "Robotmode: IDLE");
+    assert_eq!(rtde_robot_mode(&sim), RobotMode::Idle.code());
+    send_program_refused(&sim, &mut c, "robot mode is IDLE");
+    assert_eq!(d.ask("brake release"), "Brake releasing");
+    assert_eq!(d.ask("robotmode"), "Robotmode: RUNNING");
+    assert_eq!(rtde_robot_mode(&sim), RobotMode::Running.code());
+    // Now the program runs; `stop` stops it (stopj), `power off` ends it.
+    let mut rev = run_program(&sim);
+    let start_q = TaskConfig::default().start_q;
+    servoj(&mut rev, start_q, 5_000);
+    let s = c.state(&recipe).unwrap();
+    assert_eq!(s.runtime_state, runtime_state::PLAYING);
+    assert_eq!(d.ask("programState"), "PLAYING <unnamed>");
+    assert_eq!(d.ask("running"), "Program running: true");
+    assert_eq!(d.ask("stop"), "Stopped");
+    servoj(&mut rev, start_q, 5_000);
+    let t0 = Instant::now();
+    while c.state(&recipe).unwrap().runtime_state != runtime_state::STOPPED {
+        assert!(t0.elapsed() < DEADLINE, "the program did not stop");
+    }
+    assert_eq!(d.ask("running"), "Program running: false");
+    // `load` names the last program sent; `play` runs it again.
+    assert_eq!(
+        d.ask("load /programs/external_control.urp"),
+        "Loading program: /programs/external_control.urp"
+    );
+    assert_eq!(
+        d.ask("get loaded program"),
+        "Loaded program: /programs/external_control.urp"
+    );
+    let listener_gone = d.ask("play");
+    // The program connects back to the listener of the first run, which is gone: it starts
+    // and ends at once, as on a robot whose PC is not listening.
+    assert_eq!(listener_gone, "Starting program");
+    assert_eq!(d.ask("power off"), "Powering off");
+    assert_eq!(d.ask("robotmode"), "Robotmode: POWER_OFF");
+    assert_eq!(rtde_robot_mode(&sim), RobotMode::PowerOff.code());
+    assert_eq!(d.ask("play"), "Failed to execute: play");
+    assert_eq!(d.ask("running"), "Program running: false");
+    let sum = sim.stop();
+    assert_eq!(sum.programs, 2, "{sum:?}");
+    assert_eq!(sum.refused_scripts, 2, "{sum:?}");
+}
+
+/// Sends the program; ur-sim refuses it with a text message containing `why`.
+fn send_program_refused(sim: &UrSimHandle, c: &mut Client, why: &str) {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let p = ur_protocol::script::ScriptParams::new(
+        "127.0.0.1".parse().unwrap(),
+        listener.local_addr().unwrap().port(),
+        Series::E.cycle_s(),
+    );
+    let mut sec = TcpStream::connect(sim.secondary_addr).unwrap();
+    sec.write_all(ur_protocol::script::render(super::ur_sim::PROGRAM, &p).as_bytes())
+        .unwrap();
+    drop(sec);
+    let t = c.next_text().expect("a text message");
+    assert!(t.contains("program not started") && t.contains(why), "{t}");
+}
+
+/// A protective stop raised by a servoj target outside the limits; returns the RTDE client and
+/// the stop's arm cycle.
+fn protective_stop(sim: &UrSimHandle) -> (Client, ur_protocol::OutputRecipe, TcpStream, u64) {
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    c.state(&recipe).unwrap();
+    let mut rev = run_program(sim);
+    servoj(&mut rev, [0.0, -2.0, 100.0], 5_000);
+    let s = c.state(&recipe).unwrap();
+    assert_eq!(s.safety_mode, SafetyMode::ProtectiveStop.code());
+    let stop_cycle = (s.timestamp / Series::E.cycle_s()).round() as u64;
+    (c, recipe, rev, stop_cycle)
+}
+
+#[test]
+fn dashboard_refuses_to_unlock_a_protective_stop_within_5_s() {
+    // The arm's clock frozen in the stop: no arm time passes, every unlock is refused.
+    let sim = start(
+        UrSimConfig {
+            stopped_clock: false,
+            ..UrSimConfig::default()
+        },
+        UrModel::Ur5,
+    );
+    let (_c, _recipe, _rev, _) = protective_stop(&sim);
+    let mut d = dash(&sim);
+    for _ in 0..3 {
+        assert_eq!(
+            d.ask("unlock protective stop"),
+            ur_sim::dashboard::UNLOCK_TOO_EARLY
+        );
+    }
+    assert_eq!(d.ask("safetystatus"), "Safetystatus: PROTECTIVE_STOP");
+    // A program is refused in the stop.
+    assert_eq!(
+        d.ask("load external_control.urp"),
+        "Loading program: external_control.urp"
+    );
+    assert_eq!(d.ask("play"), "Failed to execute: play");
+    sim.stop();
+}
+
+#[test]
+fn dashboard_unlocks_a_protective_stop_5_s_of_arm_time_after_it() {
+    // Lockstep; the arm's clock runs while it stands in the stop (10x faster than wall time
+    // here). Each unlock is judged against the arm time ur-sim reports just before and after it.
+    let sim = start(
+        UrSimConfig {
+            time_compression: 10.0,
+            ..UrSimConfig::default()
+        },
+        UrModel::Ur5,
+    );
+    let dt = Series::E.cycle_s();
+    let (mut c, recipe, _rev, stop_cycle) = protective_stop(&sim);
+    let mut d = dash(&sim);
+    assert_eq!(d.ask("safetystatus"), "Safetystatus: PROTECTIVE_STOP");
+    assert_eq!(d.ask("safetymode"), "Safetymode: PROTECTIVE_STOP");
+    let (mut refused, t0) = (0, Instant::now());
+    loop {
+        assert!(t0.elapsed() < DEADLINE, "never unlocked");
+        let before = sim.summary().cycles;
+        let reply = d.ask("unlock protective stop");
+        let after = sim.summary().cycles;
+        let since = |c: u64| (c - stop_cycle) as f64 * dt;
+        if reply == "Protective stop releasing" {
+            assert!(
+                since(after) >= 5.0,
+                "unlocked {} s after the stop",
+                since(after)
+            );
+            break;
+        }
+        assert_eq!(reply, ur_sim::dashboard::UNLOCK_TOO_EARLY);
+        assert!(
+            since(before) < 5.0,
+            "refused {} s after the stop",
+            since(before)
+        );
+        refused += 1;
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    eprintln!("{refused} unlocks refused before 5 s of arm time had passed");
+    assert_eq!(d.ask("safetystatus"), "Safetystatus: NORMAL");
+    // Unlocked, the program can run again.
+    let mut rev = run_program(&sim);
+    servoj(&mut rev, TaskConfig::default().start_q, 5_000);
+    let t0 = Instant::now();
+    loop {
+        assert!(t0.elapsed() < DEADLINE);
+        let s = c.state(&recipe).unwrap();
+        if s.runtime_state == runtime_state::PLAYING {
+            assert_eq!(s.safety_mode, SafetyMode::Normal.code());
+            break;
+        }
+    }
+    let sum = sim.stop();
+    assert_eq!((sum.protective_stops, sum.programs), (1, 2), "{sum:?}");
+}
