@@ -19,7 +19,9 @@
 //!   The program's receive timeout counts wall time in both modes (divided by the compression
 //!   in real time): it is the watchdog for a dead controller. A `stopj` in lockstep runs its
 //!   cycles back to back; clients may then see only the newest of them.
-//! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject.
+//! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject, and a
+//!   broken robot's stream (a frozen or backwards clock, NaN or impossible joint angles, a
+//!   robot that only sends text messages).
 //!
 //! Only loopback addresses are used: the listeners and the reverse connection refuse others.
 
@@ -108,6 +110,20 @@ pub struct Faults {
     /// Raise a protective stop after this many arm cycles (0 = never): the robot stopping
     /// itself for a reason of its own, as on a detected collision.
     pub protective_stop_after: u64,
+    /// From this data package of a connection on (1 = the first; 0 = off), `timestamp` stays
+    /// at that package's value: a frozen arm clock.
+    pub frozen_clock_after: u64,
+    /// From this data package of a connection on (0 = off), `timestamp` goes back one arm
+    /// cycle per package: a clock running backwards.
+    pub backwards_clock_after: u64,
+    /// From this data package of a connection on (0 = off), the base joint's `actual_q` is NaN.
+    pub nan_q_after: u64,
+    /// From this data package of a connection on (0 = off), the base joint's `actual_q` reads
+    /// 100 rad: a measured state outside every joint limit.
+    pub q_out_of_limits_after: u64,
+    /// The RTDE server talks but never sets up: every request is answered by a text message
+    /// only, and a text message follows at least every 50 ms (arm cycles or not).
+    pub text_only: bool,
 }
 
 /// Options of `hil-sim ur-sim`.
@@ -356,6 +372,8 @@ fn accept_loop(ctx: Arc<Ctx>, listener: TcpListener, serve: fn(Arc<Ctx>, std::ne
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
                 std::thread::sleep(Duration::from_millis(5))
             }
+            // SIGSTOP/SIGCONT of ur-sim: accept again.
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(e) => {
                 eprintln!("hil-sim ur-sim: accept failed: {e}");
                 std::thread::sleep(Duration::from_millis(50));
