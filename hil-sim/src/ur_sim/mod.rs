@@ -122,7 +122,7 @@ pub struct Faults {
     /// 100 rad: a measured state outside every joint limit.
     pub q_out_of_limits_after: u64,
     /// The RTDE server talks but never sets up: every request is answered by a text message
-    /// only, and a text message follows at least every 50 ms (arm cycles or not).
+    /// only, and 8 text messages follow at least every 50 ms (arm cycles or not).
     pub text_only: bool,
 }
 

@@ -453,13 +453,15 @@ fn write_packages(ctx: &Ctx, outlet: &Outlet, session: &Session) {
             (arm.snapshot, arm.cycle)
         };
         if faults.text_only {
-            // Talks, never streams.
+            // Talks, never streams: a burst of texts per wake (at least 20 wakes a second).
             if last_text.elapsed() >= Duration::from_millis(10) {
                 last_text = std::time::Instant::now();
-                outlet.text(
-                    "hil-sim fault injection: a robot that only sends text messages",
-                    level::INFO,
-                );
+                for _ in 0..8 {
+                    outlet.text(
+                        "hil-sim fault injection: a robot that only sends text messages",
+                        level::INFO,
+                    );
+                }
             }
             continue;
         }

@@ -154,6 +154,9 @@ struct Live {
     /// The program's reverse connection failed: no more writes; the queued packages are read
     /// for the robot's own report (its program ended, a stop) before the arm counts as lost.
     reverse_closed: bool,
+    /// When it was found closed: wall time (ns) and arm time (s).
+    reverse_closed_ns: u64,
+    reverse_closed_ts: f64,
     /// The controller's joint limits (measured states are checked against them).
     limits: ArmLimits,
     /// The previous package's `timestamp` (s) and how many packages in a row repeated it.
@@ -315,6 +318,8 @@ impl ArmBackend for UrArm {
             program_seen: false,
             lost: None,
             reverse_closed: false,
+            reverse_closed_ns: 0,
+            reverse_closed_ts: 0.0,
             limits: self.limits.clone(),
             prev_ts: ts,
             same_ts: 0,
@@ -370,6 +375,14 @@ impl ArmBackend for UrArm {
 
 /// Why the arm is lost when its program's reverse connection closed and the robot reported no
 /// stop.
+/// After the reverse connection closed, the robot has this long (s of its clock) to report its
+/// program ended (or a stop) before the arm counts as lost: the program's `stopj` runs first
+/// (about 1 s from full speed).
+const REVERSE_CLOSED_GRACE_S: f64 = 3.0;
+/// … and, with no package queued, at least this long (ns of wall time; else the program's
+/// receive timeout): the report may be a cycle behind the close.
+const REVERSE_CLOSED_WAIT_NS: u64 = 50_000_000;
+
 const REVERSE_CLOSED: &str =
     "the robot's program closed the reverse connection (it stopped: see the robot's log)";
 
@@ -471,9 +484,15 @@ impl Live {
                         return Err(ArmIoError::Receive);
                     }
                     Err(e) if e.kind() == std::io::ErrorKind::WouldBlock && self.reverse_closed => {
-                        // Everything queued is read and the robot reported no stop.
-                        self.lost = Some(REVERSE_CLOSED);
-                        return Err(ArmIoError::Receive);
+                        // Everything queued is read; the robot's report of the ended program
+                        // may still be a cycle behind: lost after the program's own receive
+                        // timeout without one.
+                        let waited = now.saturating_sub(self.reverse_closed_ns);
+                        if waited >= (2 * Self::keepalive_ns(cfg)).max(REVERSE_CLOSED_WAIT_NS) {
+                            self.lost = Some(REVERSE_CLOSED);
+                            return Err(ArmIoError::Receive);
+                        }
+                        return Ok(None);
                     }
                     Ok(n) => {
                         self.dec.commit(n);
@@ -536,6 +555,14 @@ impl Live {
                 l.record(self.counts.packages, t_frame, self.robot.timestamp);
             }
             let emitted = self.on_package();
+            if self.reverse_closed
+                && self.robot_stop.is_none()
+                && self.robot.timestamp - self.reverse_closed_ts > REVERSE_CLOSED_GRACE_S
+            {
+                // The robot streams on and reports no stop: its program is gone all the same.
+                self.lost = Some(REVERSE_CLOSED);
+                return Err(ArmIoError::Receive);
+            }
             if emitted.is_none() || !self.awaiting_answer {
                 self.write_on(cfg)?;
                 self.cycle_ns.record(monotonic_ns() - t_frame);
@@ -746,8 +773,10 @@ impl Live {
                 Ok(())
             }
             Err(_) => {
-                // Lost once the queued packages are read without a stop report (pump).
+                // Lost once the robot's stream goes on without a stop report (pump).
                 self.reverse_closed = true;
+                self.reverse_closed_ns = monotonic_ns();
+                self.reverse_closed_ts = self.robot.timestamp;
                 Err(ArmIoError::Send)
             }
         }

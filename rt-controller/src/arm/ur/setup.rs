@@ -108,6 +108,12 @@ impl Rtde {
                         payload: &payload,
                     };
                     let text = match RobotMessage::decode(&f, self.protocol) {
+                        Ok(RobotMessage::TextMessage(ur_protocol::TextMessage::V1(b))) => {
+                            // v1 (before negotiation): a level byte, then the text.
+                            String::from_utf8_lossy(b)
+                                .trim_start_matches(|c: char| c.is_control())
+                                .to_owned()
+                        }
                         Ok(RobotMessage::TextMessage(t)) => format!("{t:?}"),
                         _ => "(undecodable text message)".into(),
                     };
