@@ -195,6 +195,21 @@ struct UrSimArgs {
     /// Fault: a protective stop (as on a detected collision) after N arm cycles.
     #[arg(long, default_value_t = 0)]
     fault_protective_stop_after: u64,
+    /// Fault: from the N-th data package on, the RTDE timestamp stops advancing.
+    #[arg(long, default_value_t = 0)]
+    fault_frozen_clock_after: u64,
+    /// Fault: from the N-th data package on, the RTDE timestamp goes back one cycle per package.
+    #[arg(long, default_value_t = 0)]
+    fault_backwards_clock_after: u64,
+    /// Fault: from the N-th data package on, the base joint's actual_q is NaN.
+    #[arg(long, default_value_t = 0)]
+    fault_nan_q_after: u64,
+    /// Fault: from the N-th data package on, the base joint's actual_q reads 100 rad.
+    #[arg(long, default_value_t = 0)]
+    fault_q_out_of_limits_after: u64,
+    /// Fault: answer every RTDE request with a text message only (and keep sending texts).
+    #[arg(long)]
+    fault_text_only: bool,
     /// Move the arm as by hand (freedrive) through the motions of a CSV file with the header
     /// `t,q0,q1,q2,q3,q4,q5` (arm time s from 0, six joint angles rad; docs/data.md): RTDE
     /// reports the file's joint angles and velocities, a program's servo targets are ignored,
@@ -266,6 +281,11 @@ impl UrSimArgs {
                 drop_every: self.fault_drop_every,
                 disconnect_after: self.fault_disconnect_after,
                 protective_stop_after: self.fault_protective_stop_after,
+                frozen_clock_after: self.fault_frozen_clock_after,
+                backwards_clock_after: self.fault_backwards_clock_after,
+                nan_q_after: self.fault_nan_q_after,
+                q_out_of_limits_after: self.fault_q_out_of_limits_after,
+                text_only: self.fault_text_only,
             },
             playback: self.playback.clone(),
         })

@@ -357,7 +357,7 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
 }
 
 /// The demonstrations of run `m`: `demos` or the recorded path, with the run's hash.
-fn demos_path(m: &Manifest, demos: Option<&Path>) -> anyhow::Result<PathBuf> {
+pub(crate) fn demos_path(m: &Manifest, demos: Option<&Path>) -> anyhow::Result<PathBuf> {
     let path = demos.map_or_else(|| PathBuf::from(&m.demos), Path::to_owned);
     let hash = manifest::demos_hash(&path).with_context(|| {
         format!(

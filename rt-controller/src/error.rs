@@ -66,6 +66,67 @@ pub(crate) fn port_err(kind: &'static str, name: &str, e: &dyn core::fmt::Debug)
     }
 }
 
+/// Why the robot's RTDE stream cannot be trusted: a measured state or the arm's clock that no
+/// network fault produces (TCP delivers the robot's bytes as sent), a fault of the robot or of
+/// its controller. In setup it is a [`UrSetupError::Stream`]; in the loop the arm is no longer
+/// driven (the program's receive timeout stops it), the run ends as arm lost (exit 3) with
+/// [`StreamFault::reason`], and the summary's `arm.stream_fault` gives this message.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum StreamFault {
+    /// `actual_q` or `actual_qd` not finite.
+    #[error("the robot measured a non-finite joint state: joint {joint} actual_q = {q} rad, actual_qd = {qd} rad/s; a fault of the robot or its controller (not of the network): see the robot's log")]
+    NonFinite {
+        /// Joint index 0..6.
+        joint: usize,
+        /// Its angle (rad).
+        q: f64,
+        /// Its speed (rad/s).
+        qd: f64,
+    },
+    /// An active joint's `actual_q` outside `[limits]` by more than the margin.
+    #[error("the robot measured joint {joint} at {q} rad, outside [limits] {lower} ..= {upper} rad (by more than {margin} rad); the arm is not driven there: move it inside the limits (freedrive or the teach pendant) or check [limits] against the robot, then start again")]
+    OutsideLimits {
+        /// Joint index 0..3.
+        joint: usize,
+        /// Its angle (rad).
+        q: f64,
+        /// Lower limit (rad).
+        lower: f64,
+        /// Upper limit (rad).
+        upper: f64,
+        /// Tolerance (rad).
+        margin: f64,
+    },
+    /// `timestamp` decreased.
+    #[error("the robot's clock went backwards: RTDE timestamp {ts} s after {prev} s; its packages cannot be trusted (restart the robot's controller)")]
+    ClockBackwards {
+        /// The new timestamp (s).
+        ts: f64,
+        /// The one before (s).
+        prev: f64,
+    },
+    /// `timestamp` did not advance over many packages.
+    #[error("the robot's clock is frozen: RTDE timestamp {ts} s in {packages} packages in a row; its packages cannot be trusted (restart the robot's controller)")]
+    ClockFrozen {
+        /// The timestamp (s).
+        ts: f64,
+        /// Packages with it.
+        packages: u64,
+    },
+}
+
+impl StreamFault {
+    /// The reason without numbers (the summary's `arm_lost`; no allocation in the loop).
+    pub const fn reason(&self) -> &'static str {
+        match self {
+            StreamFault::NonFinite { .. } => "the robot measured a non-finite joint angle or speed (a fault of the robot, not of the network; see arm.stream_fault)",
+            StreamFault::OutsideLimits { .. } => "the robot measured a joint angle outside [limits] (see arm.stream_fault)",
+            StreamFault::ClockBackwards { .. } => "the robot's clock (RTDE timestamp) went backwards (see arm.stream_fault)",
+            StreamFault::ClockFrozen { .. } => "the robot's clock (RTDE timestamp) is frozen (see arm.stream_fault)",
+        }
+    }
+}
+
 /// Why the `ur` arm could not be set up.
 #[derive(Debug, thiserror::Error)]
 pub enum UrSetupError {
@@ -206,6 +267,47 @@ pub enum UrSetupError {
     /// The protective stop could not be cleared.
     #[error("protective-stop recovery: {0}")]
     Recovery(String),
+    /// The robot's stream cannot be trusted (see [`StreamFault`]).
+    #[error("RTDE {during}: {fault}")]
+    Stream {
+        /// The step.
+        during: &'static str,
+        /// What is wrong.
+        fault: StreamFault,
+    },
+    /// The setup's deadline (`setup_timeout_s`, over the whole RTDE setup, not per read)
+    /// passed.
+    #[error("RTDE {during}: no answer within setup_timeout_s = {timeout_s} s (a deadline over the whole setup); the robot sent {texts_total} text messages meanwhile{}{texts:?}; check the robot, or raise setup_timeout_s", if *texts_total > 0 { ", the newest: " } else { "" })]
+    Deadline {
+        /// The step.
+        during: &'static str,
+        /// The timeout (s).
+        timeout_s: f64,
+        /// Text messages received, all of them counted.
+        texts_total: u64,
+        /// The newest of them (at most [`crate::arm::ur::setup::KEPT_TEXTS`]).
+        texts: Vec<String>,
+    },
+    /// The RTDE port does not answer RTDE, the secondary port does: swapped.
+    #[error("arm.ur.rtde_port = {rtde_port} does not answer RTDE within {timeout_s} s, but arm.ur.secondary_port = {secondary_port} does: the two ports are swapped; set rtde_port = {secondary_port} and secondary_port = {rtde_port} (on a UR, RTDE is 30004, the secondary interface 30002)")]
+    PortsSwapped {
+        /// Configured RTDE port.
+        rtde_port: u16,
+        /// Configured secondary port.
+        secondary_port: u16,
+        /// Waited (s).
+        timeout_s: f64,
+    },
+    /// Something answers on the RTDE port, but not RTDE (or nothing answers).
+    #[error("{addr} (arm.ur.rtde_port) is not an RTDE interface: {what}; on a UR, RTDE is port 30004 and the secondary interface (arm.ur.secondary_port = {secondary_port}) 30002: check both ports and arm.ur.host")]
+    NotRtde {
+        /// Where.
+        addr: SocketAddr,
+        /// The configured secondary port.
+        secondary_port: u16,
+        /// What came instead.
+        what: String,
+    },
     /// The program did not connect back.
     #[error("the program did not connect back to {addr} within {timeout_s} s: can the robot reach this PC on that port (firewall, route)? Is the robot in remote control (e-Series)? The robot's text messages so far: {texts:?}")]
     NoCallback {

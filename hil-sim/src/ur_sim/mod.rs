@@ -27,7 +27,9 @@
 //!   In lockstep, an arm in a protective stop with no program running follows a real-time clock
 //!   (arm time passes, the arm holds, packages flow), so that the 5 s before a protective stop
 //!   can be unlocked pass; nothing else moves the lockstep clock.
-//! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject.
+//! - **Fault injection** ([`Faults`]): what Universal Robots' own client tests inject, and a
+//!   broken robot's stream (a frozen or backwards clock, NaN or impossible joint angles, a
+//!   robot that only sends text messages).
 //! - **Playback** ([`playback`], `--playback FILE.csv`): the arm moved as by hand in freedrive
 //!   through a file's joint angles, in arm time from the first RTDE connection; real time only (in lockstep nothing would
 //!   advance the arm without a program's commands), so `time_compression` plays it faster.
@@ -121,6 +123,20 @@ pub struct Faults {
     /// Raise a protective stop after this many arm cycles (0 = never): the robot stopping
     /// itself for a reason of its own, as on a detected collision.
     pub protective_stop_after: u64,
+    /// From this data package of a connection on (1 = the first; 0 = off), `timestamp` stays
+    /// at that package's value: a frozen arm clock.
+    pub frozen_clock_after: u64,
+    /// From this data package of a connection on (0 = off), `timestamp` goes back one arm
+    /// cycle per package: a clock running backwards.
+    pub backwards_clock_after: u64,
+    /// From this data package of a connection on (0 = off), the base joint's `actual_q` is NaN.
+    pub nan_q_after: u64,
+    /// From this data package of a connection on (0 = off), the base joint's `actual_q` reads
+    /// 100 rad: a measured state outside every joint limit.
+    pub q_out_of_limits_after: u64,
+    /// The RTDE server talks but never sets up: every request is answered by a text message
+    /// only, and 8 text messages follow at least every 50 ms (arm cycles or not).
+    pub text_only: bool,
 }
 
 /// Options of `hil-sim ur-sim`.
@@ -425,6 +441,8 @@ fn accept_loop(ctx: Arc<Ctx>, listener: TcpListener, serve: fn(Arc<Ctx>, std::ne
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
                 std::thread::sleep(Duration::from_millis(5))
             }
+            // SIGSTOP/SIGCONT of ur-sim: accept again.
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(e) => {
                 eprintln!("hil-sim ur-sim: accept failed: {e}");
                 std::thread::sleep(Duration::from_millis(50));

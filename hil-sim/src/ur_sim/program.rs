@@ -60,6 +60,8 @@ pub(crate) fn serve_secondary(ctx: Arc<Ctx>, mut stream: TcpStream) {
                 Stats::add(&ctx.stats.refused_scripts);
                 return;
             }
+            // EINTR (a SIGSTOP/SIGCONT of ur-sim): read on.
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             Err(e)
                 if matches!(
                     e.kind(),

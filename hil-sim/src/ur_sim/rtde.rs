@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use ur_protocol::recipe::{answer_types, Answered, InputRecipe, OutputRecipe};
+use ur_protocol::recipe::{answer_types, Answered, InputRecipe, OutputRecipe, MAX_FIELDS};
 use ur_protocol::rtde::{level, Protocol, TextMessage};
 use ur_protocol::state::InputRegisters;
 use ur_protocol::stream::FrameDecoder;
@@ -18,6 +18,9 @@ use super::{Ctx, Stats};
 
 /// Largest frame accepted from a client (long recipes of registers fit).
 const RX_CAPACITY: usize = 16 * 1024;
+
+/// Largest answer or text frame sent (bytes).
+const TX_CAPACITY: usize = 2048;
 
 /// A client whose socket takes no bytes for this long is dropped.
 const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
@@ -54,7 +57,7 @@ impl Outlet {
 
     /// Sends a robot package.
     fn send_msg(&self, m: &RobotMessage<'_>) -> std::io::Result<()> {
-        let mut buf = [0u8; 2048];
+        let mut buf = [0u8; TX_CAPACITY];
         let n = m
             .encode(&mut buf)
             .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
@@ -162,10 +165,14 @@ impl Reader<'_> {
             match stream.read(dec.spare()) {
                 Ok(0) => return Ok(()),
                 Ok(n) => dec.commit(n),
+                // A read timeout, or EINTR (a SIGSTOP/SIGCONT of ur-sim interrupts a read
+                // with a timeout even without a signal handler): read again.
                 Err(e)
                     if matches!(
                         e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
                     ) =>
                 {
                     continue
@@ -208,6 +215,13 @@ impl Reader<'_> {
 
     fn handle(&mut self, msg: ClientMessage<'_>) -> std::io::Result<()> {
         let faults = &self.ctx.cfg.faults;
+        if faults.text_only && !matches!(msg, ClientMessage::TextMessage(_)) {
+            self.outlet.text(
+                "hil-sim fault injection: a text message instead of the answer",
+                level::INFO,
+            );
+            return Ok(());
+        }
         match msg {
             ClientMessage::RequestProtocolVersion(v) => {
                 let refused = faults.refuse_versions || (faults.refuse_v2 && v == 2);
@@ -283,6 +297,9 @@ impl Reader<'_> {
             &mut types,
         )
         .unwrap_or(false);
+        let refusal = recipe_refusal("SETUP_OUTPUTS", names);
+        let usable = usable && refusal.is_none();
+        fit_answer(&mut types);
         let started = self.session.started.load(Ordering::Relaxed);
         let mut recipe = self
             .session
@@ -300,16 +317,23 @@ impl Reader<'_> {
                 );
                 rate
             };
-            let fields = ur_protocol::recipe::names(names)
-                .filter_map(Output::from_name)
-                .collect();
+            let mut fields = heapless::Vec::new();
+            for o in ur_protocol::recipe::names(names).filter_map(Output::from_name) {
+                // At most MAX_FIELDS names (refused above): every push fits.
+                if fields.push(o).is_err() {
+                    break;
+                }
+            }
             *recipe = Some((
                 OutputRecipe { id: 1, fields },
                 ((rate / f).round() as u64).max(1),
             ));
             1
         } else {
-            if started {
+            if let Some(why) = &refusal {
+                eprintln!("hil-sim ur-sim: RTDE client {}: {why}", self.id);
+                self.outlet.text(why, level::ERROR);
+            } else if started {
                 self.outlet.text(
                     "SETUP_OUTPUTS refused while started: PAUSE first",
                     level::ERROR,
@@ -341,11 +365,16 @@ impl Reader<'_> {
             &mut types,
         )
         .unwrap_or(false);
-        let id = if usable && self.inputs.len() < 200 {
-            let fields: heapless::Vec<Input, { ur_protocol::recipe::MAX_FIELDS }> =
-                ur_protocol::recipe::names(names)
-                    .filter_map(Input::from_name)
-                    .collect();
+        let refusal = recipe_refusal("SETUP_INPUTS", names);
+        fit_answer(&mut types);
+        let id = if usable && refusal.is_none() && self.inputs.len() < 200 {
+            let mut fields: heapless::Vec<Input, MAX_FIELDS> = heapless::Vec::new();
+            for i in ur_protocol::recipe::names(names).filter_map(Input::from_name) {
+                // At most MAX_FIELDS names (refused above): every push fits.
+                if fields.push(i).is_err() {
+                    break;
+                }
+            }
             for f in &fields {
                 in_use.push((*f, self.id));
             }
@@ -353,6 +382,15 @@ impl Reader<'_> {
             self.inputs.push(InputRecipe { id, fields });
             id
         } else {
+            if let Some(why) = &refusal {
+                eprintln!("hil-sim ur-sim: RTDE client {}: {why}", self.id);
+                self.outlet.text(why, level::ERROR);
+            } else if usable {
+                self.outlet.text(
+                    "SETUP_INPUTS refused: 200 input recipes on this connection",
+                    level::ERROR,
+                );
+            }
             0
         };
         drop(in_use);
@@ -360,6 +398,30 @@ impl Reader<'_> {
             recipe_id: id,
             types: &types,
         })
+    }
+}
+
+/// Why a SETUP request cannot be set up whatever its names are, as a controller refuses it
+/// (recipe id 0 and a text message): no variable at all, or more than [`MAX_FIELDS`].
+fn recipe_refusal(what: &str, names: &str) -> Option<String> {
+    let n = ur_protocol::recipe::names(names).count();
+    if n == 0 {
+        Some(format!("{what} refused: the recipe names no variable"))
+    } else if n > MAX_FIELDS {
+        Some(format!(
+            "{what} refused: the recipe names {n} variables, this controller sets up at most {MAX_FIELDS}"
+        ))
+    } else {
+        None
+    }
+}
+
+/// An answer's type list longer than a [`TX_CAPACITY`] frame (clients' receive buffers are a
+/// few KB: URCL's and ur_rtde's 4096 bytes) is answered empty; only a recipe refused for its
+/// size has one (64 names answer at most 64 × 14 bytes).
+fn fit_answer(types: &mut String) {
+    if types.len() + 4 > TX_CAPACITY {
+        types.clear();
     }
 }
 
@@ -373,11 +435,14 @@ fn write_packages(ctx: &Ctx, outlet: &Outlet, session: &Session) {
     let mut prev = [0u8; 4096];
     let mut prev_len = 0usize;
     let mut buf = [0u8; 4096];
+    let mut frozen_ts: Option<f64> = None;
+    let mut backwards_from: Option<f64> = None;
+    let mut last_text = std::time::Instant::now();
     loop {
         if ctx.stop.load(Ordering::Relaxed) || session.closed.load(Ordering::Relaxed) {
             return;
         }
-        let (state, cycle) = {
+        let (mut state, cycle) = {
             let arm = ctx
                 .plant
                 .wait_cycle(last_cycle, Duration::from_millis(50), || {
@@ -387,6 +452,19 @@ fn write_packages(ctx: &Ctx, outlet: &Outlet, session: &Session) {
                 });
             (arm.snapshot, arm.cycle)
         };
+        if faults.text_only {
+            // Talks, never streams: a burst of texts per wake (at least 20 wakes a second).
+            if last_text.elapsed() >= Duration::from_millis(10) {
+                last_text = std::time::Instant::now();
+                for _ in 0..8 {
+                    outlet.text(
+                        "hil-sim fault injection: a robot that only sends text messages",
+                        level::INFO,
+                    );
+                }
+            }
+            continue;
+        }
         let now = session.send_now.swap(false, Ordering::Relaxed);
         if !now && cycle == last_cycle {
             continue;
@@ -405,6 +483,22 @@ fn write_packages(ctx: &Ctx, outlet: &Outlet, session: &Session) {
         };
         if !now && cycle % decimation != 0 {
             continue;
+        }
+        let k = count + 1;
+        let at = |after: u64| after > 0 && k >= after;
+        if at(faults.frozen_clock_after) {
+            state.timestamp = *frozen_ts.get_or_insert(state.timestamp);
+        }
+        if at(faults.backwards_clock_after) {
+            let base = *backwards_from.get_or_insert(state.timestamp);
+            let back = (k - faults.backwards_clock_after) as f64 * ctx.cfg.series.cycle_s();
+            state.timestamp = base - back;
+        }
+        if at(faults.nan_q_after) {
+            state.actual_q[0] = f64::NAN;
+        }
+        if at(faults.q_out_of_limits_after) {
+            state.actual_q[0] = 100.0;
         }
         let Ok(n) = state.encode_package(&recipe, &mut buf) else {
             continue;

@@ -610,3 +610,163 @@ fn ur_real_time_servoj_and_the_watchdog_stop() {
     let sum = sim.stop();
     assert_eq!((sum.receive_timeouts, sum.programs), (1, 1));
 }
+
+impl Client {
+    /// Sends a package of any size (a long recipe).
+    fn send_big(&mut self, m: ClientMessage<'_>) {
+        let mut buf = vec![0u8; usize::from(u16::MAX)];
+        let n = m.encode(&mut buf).unwrap();
+        self.s.write_all(&buf[..n]).unwrap();
+    }
+
+    /// SETUP_OUTPUTS with any names: (recipe id, types).
+    fn setup_raw(&mut self, names: &str) -> (u8, String) {
+        self.send_big(ClientMessage::SetupOutputs {
+            frequency: Some(500.0),
+            names,
+        });
+        let f = self.next().expect("an answer, not a closed connection");
+        let RobotMessage::SetupOutputs { recipe_id, types } = f.msg(self.protocol) else {
+            panic!("expected a SETUP_OUTPUTS answer, got {:?}", f.0)
+        };
+        (recipe_id, types.to_owned())
+    }
+
+    /// SETUP_INPUTS with any names: (recipe id, types).
+    fn setup_inputs_raw(&mut self, names: &str) -> (u8, String) {
+        self.send_big(ClientMessage::SetupInputs { names });
+        let f = self.next().expect("an answer, not a closed connection");
+        let RobotMessage::SetupInputs { recipe_id, types } = f.msg(self.protocol) else {
+            panic!("expected a SETUP_INPUTS answer, got {:?}", f.0)
+        };
+        (recipe_id, types.to_owned())
+    }
+}
+
+#[test]
+fn ur_recipes_it_cannot_set_up_are_refused_and_the_server_serves_on() {
+    let sim = start(true, Faults::default());
+    let mut c = Client::connect(sim.rtde_addr);
+    assert!(c.negotiate(2));
+    // 65 known names (a panic of the connection thread before): recipe id 0, a text saying why.
+    let many: Vec<String> = (0..65)
+        .map(|i| format!("output_int_register_{}", i % 48))
+        .collect();
+    let (id, types) = c.setup_raw(&many.join(","));
+    assert_eq!(id, 0, "{types}");
+    assert_eq!(types.split(',').count(), 65, "one type per name: {types}");
+    // 64 names that are all there, answered with recipe id 0: the client names the refusal.
+    assert_eq!(
+        OutputRecipe::from_answer(
+            &many[..64].join(","),
+            0,
+            &types[..types.rfind(',').unwrap()]
+        ),
+        Err(RecipeError::Refused)
+    );
+    assert!(
+        c.texts
+            .iter()
+            .any(|t| t.contains("65 variables") && t.contains("at most 64")),
+        "{:?}",
+        c.texts
+    );
+    // 64 is the most: accepted.
+    let (id, _) = c.setup_raw(&many[..64].join(","));
+    assert!(id > 0);
+    // 5000 unknown names: their answer (50 kB) would not fit a client's buffer; refused with an
+    // empty list.
+    let huge = vec!["x"; 5000].join(",");
+    assert_eq!(c.setup_raw(&huge), (0, String::new()));
+    // Inputs: 65 names refused, and the registers stay free.
+    let inputs: Vec<String> = (0..65)
+        .map(|i| format!("input_double_register_{}", i % 48))
+        .collect();
+    let (id, _) = c.setup_inputs_raw(&inputs.join(","));
+    assert_eq!(id, 0);
+    // Empty recipes (nothing, or only ur_rtde's empty names): refused as a controller does.
+    for empty in ["", ",", ",,"] {
+        c.texts.clear();
+        assert_eq!(c.setup_raw(empty), (0, String::new()), "{empty:?}");
+        assert!(
+            c.texts.iter().any(|t| t.contains("names no variable")),
+            "{empty:?}: {:?}",
+            c.texts
+        );
+        assert_eq!(c.setup_inputs_raw(empty).0, 0, "{empty:?}");
+    }
+    assert_eq!(
+        c.setup("").unwrap_err(),
+        RecipeError::Refused,
+        "the client names the refusal"
+    );
+    // The client's own text messages (RTDE v2 TEXT_MESSAGE from a client) are accepted.
+    let mut buf = [0u8; 256];
+    let n = ClientMessage::TextMessage(TextMessage::V2 {
+        message: "hello from the client",
+        source: "test",
+        level: 3,
+    })
+    .encode(&mut buf)
+    .unwrap();
+    c.s.write_all(&buf[..n]).unwrap();
+    let recipe = c.setup(NAMES).expect("the same connection still serves");
+    let (id, types) = c.setup_inputs_raw("input_double_register_0");
+    assert!(id > 0, "{types}");
+    assert!(c.start());
+    c.state(&recipe).expect("packages after all that");
+    // Another client is served too.
+    let (mut d, r) = Client::ready(sim.rtde_addr);
+    d.state(&r).expect("a second client gets packages");
+    sim.stop();
+}
+
+#[test]
+fn ur_a_stopped_and_continued_ur_sim_keeps_its_rtde_clients() {
+    use std::io::BufRead;
+    // Real time: SIGSTOP/SIGCONT interrupts the connection thread's read (EINTR, even without
+    // a signal handler, for a socket with a read timeout); the client must keep its stream.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_hil-sim"))
+        .args(["ur-sim", "--rtde-port", "0", "--secondary-port", "0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_str(&line).expect(&line);
+    let addr: SocketAddr = v["rtde"].as_str().unwrap().parse().unwrap();
+    let (mut c, recipe) = Client::ready(addr);
+    let mut last = c.state(&recipe).unwrap().timestamp;
+    let signal = |sig: &str| {
+        let ok = std::process::Command::new("kill")
+            .args([sig, &child.id().to_string()])
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "kill {sig}");
+    };
+    for round in 0..3 {
+        signal("-STOP");
+        // A pause long enough for a few of the server's 50 ms read timeouts to be due.
+        std::thread::sleep(Duration::from_millis(120));
+        signal("-CONT");
+        // The stream goes on: 50 more packages, the arm's clock advancing.
+        for _ in 0..50 {
+            let s = c
+                .state(&recipe)
+                .unwrap_or_else(|e| panic!("round {round}: the stream ended: {e}"));
+            assert!(s.timestamp >= last, "round {round}");
+            last = s.timestamp;
+        }
+    }
+    // A new client is served as well.
+    let (mut d, r) = Client::ready(addr);
+    d.state(&r).expect("a new client after SIGCONT");
+    child.kill().unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("Interrupted"), "{err}");
+}

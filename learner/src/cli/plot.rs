@@ -21,7 +21,8 @@ pub struct ArmArgs {
     /// The `--out` folder of a `learner train` run.
     pub run_dir: PathBuf,
     /// The run's demonstrations (the task and, beside them, `expert_table.npz`)
-    /// [default: RUN_DIR/expert/demos.npz].
+    /// [default: those RUN_DIR/run.json names, checked against its hash; without run.json,
+    /// RUN_DIR/expert/demos.npz].
     #[arg(long)]
     pub demos: Option<PathBuf>,
     /// Imitator iterations to draw (evenly spread from the first to the last checkpoint).
@@ -38,13 +39,22 @@ pub struct ArmArgs {
     pub out: Option<PathBuf>,
 }
 
+/// The demonstrations to draw: those the run's `run.json` names (or `--demos`, their new
+/// place), with the run's hash; a folder without `run.json` (or an expert run, which has none)
+/// uses `--demos` or RUN_DIR/expert/demos.npz.
+fn run_demos(a: &ArmArgs) -> anyhow::Result<PathBuf> {
+    let m = crate::io::manifest::read(&a.run_dir)?;
+    Ok(match (m, &a.demos) {
+        (Some(m), d) if m.demos_hash != "-" => crate::replay::demos_path(&m, d.as_deref())?,
+        (_, Some(d)) => d.clone(),
+        (_, None) => super::train::default_demos_path(&a.run_dir),
+    })
+}
+
 /// Runs `learner plot …`.
 pub fn run(cmd: PlotCmd) -> anyhow::Result<()> {
     let PlotCmd::Arm(a) = cmd;
-    let demos = a
-        .demos
-        .clone()
-        .unwrap_or_else(|| super::train::default_demos_path(&a.run_dir));
+    let demos = run_demos(&a)?;
     let (motions, goal, dt) = crate::film::run_motions(&a.run_dir, &demos, a.iterations)?;
     let out = a.out.clone().unwrap_or_else(|| a.run_dir.clone());
     crate::io::create_dir(&out)?;

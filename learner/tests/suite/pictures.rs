@@ -68,3 +68,59 @@ fn filmstrip_png_and_gif_of_a_run_are_produced_and_decode() {
     assert_eq!(frames, 4 + 1, "steps 0, 5, 10, 15 and the last");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn plot_arm_draws_the_demonstrations_the_run_names() {
+    // A run trained on demonstrations outside its folder: `plot arm RUN` finds them through
+    // run.json (it looked for RUN/expert/demos.npz only), and refuses other ones.
+    let dir = std::env::temp_dir().join(format!("learner-plot-demos-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let demos = dir.join("mine").join("demos.npz");
+    std::fs::create_dir_all(demos.parent().unwrap()).unwrap();
+    common::save_short_demos(&demos, 5);
+    let run = dir.join("run");
+    let (ok, err) = common::learner(&[
+        "train",
+        "--demos",
+        demos.to_str().unwrap(),
+        "--iterations",
+        "1",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(!run.join("expert").join("demos.npz").exists());
+    let (ok, err) = common::learner(&["plot", "arm", run.to_str().unwrap(), "--frames", "2"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("expert, imitator, 0 iterations"), "{err}");
+    assert!(run.join("arm_filmstrip.png").is_file() && run.join("arm.gif").is_file());
+    // Other demonstrations are not the run's: named, not drawn.
+    let other = dir.join("other.npz");
+    common::save_short_demos(&other, 6);
+    let (ok, err) = common::learner(&[
+        "plot",
+        "arm",
+        run.to_str().unwrap(),
+        "--demos",
+        other.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(err.contains("not the run's demonstrations"), "{err}");
+    // Moved demonstrations: the error says where the run's were and how to pass them.
+    std::fs::rename(&demos, dir.join("moved.npz")).unwrap();
+    let (ok, err) = common::learner(&["plot", "arm", run.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains("demos.npz") && err.contains("--demos"),
+        "{err}"
+    );
+    let (ok, err) = common::learner(&[
+        "plot",
+        "arm",
+        run.to_str().unwrap(),
+        "--demos",
+        dir.join("moved.npz").to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -4,7 +4,7 @@
 //! state is fresh.
 
 use ur5_shared::clock::{monotonic_ns, sleep_until_ns};
-use ur5_shared::ArmState;
+use ur5_shared::{ArmFaults, ArmState};
 
 use super::Controller;
 use crate::arm::ArmBackend;
@@ -75,7 +75,11 @@ impl<A: ArmBackend> Controller<A> {
         };
         let freshness = match (self.cfg.mode, self.cfg.pacing) {
             (Mode::Lockstep, _) => match self.awaiting {
-                Some(seq) => self.poll_until(|s| s.last_command_seq >= seq),
+                // A robot stop (`DRIVER`) answers every outstanding command: during a reset
+                // its acknowledgement would never come.
+                Some(seq) => self.poll_until(|s| {
+                    s.last_command_seq >= seq || s.faults.contains(ArmFaults::DRIVER)
+                }),
                 None => {
                     // Nothing outstanding (waiting for a table): idle while the arm holds.
                     self.arm.idle();

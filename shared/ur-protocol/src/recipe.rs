@@ -399,6 +399,10 @@ pub enum RecipeError {
     /// More variables than [`MAX_FIELDS`].
     #[error("a recipe holds at most {MAX_FIELDS} variables")]
     TooMany,
+    /// Recipe id 0: the controller refused the recipe (its text messages say why; a real
+    /// controller also answers 0 while streaming, or for a recipe it cannot set up).
+    #[error("the controller refused the recipe (recipe id 0; its text messages say why)")]
+    Refused,
 }
 
 fn short<const N: usize>(s: &str) -> heapless::String<N> {
@@ -422,8 +426,8 @@ pub struct OutputRecipe {
 
 impl OutputRecipe {
     /// Client side: the recipe for the names asked (`requested`, comma list) and the robot's
-    /// answer (`id`, comma list of types). Fails on NOT_FOUND, IN_USE, a count mismatch or a
-    /// type different from this project's table.
+    /// answer (`id`, comma list of types). Fails on NOT_FOUND, IN_USE, a count mismatch, a
+    /// type different from this project's table, or recipe id 0 (refused).
     pub fn from_answer(requested: &str, id: u8, types: &str) -> Result<Self, RecipeError> {
         let asked = names(requested).count();
         let got = names(types).count();
@@ -450,6 +454,9 @@ impl OutputRecipe {
                 });
             }
             fields.push(o).map_err(|_| RecipeError::TooMany)?;
+        }
+        if id == 0 {
+            return Err(RecipeError::Refused);
         }
         Ok(Self { id, fields })
     }

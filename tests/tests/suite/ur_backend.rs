@@ -16,6 +16,7 @@ use integration_tests::{
     cleanup_dead_nodes, json_summary, reaching_table, scratch, unique_prefix, write_config, Proc,
     TestLearner,
 };
+use rt_controller::arm::ur::setup::KEPT_TEXTS;
 use rt_controller::arm::ur::UrRtde;
 use rt_controller::arm::ur::{UrSession, UrSetupError};
 use rt_controller::config::{UrConfig, UrSeries};
@@ -134,6 +135,86 @@ fn ur_backend_setup_skips_text_messages_and_reports_refused_versions() {
         .err()
         .expect("every version refused");
     assert!(matches!(e, UrSetupError::NoProtocol), "{e}");
+    s.stop();
+}
+
+#[test]
+fn ur_backend_setup_timeout_is_a_deadline_over_a_robot_that_only_talks() {
+    // The robot answers every request with a text message and keeps sending them: a timeout
+    // per read never fires (the setup hung, keeping every text). A deadline over the setup does.
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            text_only: true,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let cfg = ur_cfg(&s, UrSeries::Auto);
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(UrSession::connect(&cfg, Duration::from_secs(2)).err());
+    });
+    // Bounds a hang only.
+    let e = rx
+        .recv_timeout(LONG)
+        .expect("the setup returns")
+        .expect("no setup against a robot that only talks");
+    let UrSetupError::Deadline {
+        texts_total,
+        texts,
+        during,
+        ..
+    } = &e
+    else {
+        panic!("expected the setup deadline, got: {e}")
+    };
+    assert_eq!(*during, "protocol negotiation", "{e}");
+    // At least 8 texts per 50 ms for 2 s: more than are kept.
+    assert!(*texts_total > KEPT_TEXTS as u64, "{e}");
+    assert_eq!(texts.len(), KEPT_TEXTS, "the newest texts only: {e}");
+    assert!(texts[0].starts_with("hil-sim fault injection"), "{e}");
+    let m = e.to_string();
+    assert!(
+        m.contains("setup_timeout_s = 2 s") && m.contains("text messages"),
+        "{m}"
+    );
+    s.stop();
+}
+
+#[test]
+fn ur_backend_setup_names_swapped_ports() {
+    let s = sim(UrSimConfig::default());
+    let swapped = UrConfig {
+        rtde_port: s.secondary_addr.port(),
+        secondary_port: s.rtde_addr.port(),
+        ..ur_cfg(&s, UrSeries::Auto)
+    };
+    let e = UrSession::connect(&swapped, Duration::from_secs(1))
+        .err()
+        .expect("no RTDE on the secondary port");
+    assert!(matches!(e, UrSetupError::PortsSwapped { .. }), "{e}");
+    let m = e.to_string();
+    let (r, sec) = (s.rtde_addr.port(), s.secondary_addr.port());
+    assert!(
+        m.contains("swapped")
+            && m.contains(&format!("set rtde_port = {r} and secondary_port = {sec}")),
+        "{m}"
+    );
+    // Nothing RTDE on either: both ports named, and what to check.
+    let neither = UrConfig {
+        rtde_port: sec,
+        secondary_port: sec,
+        ..ur_cfg(&s, UrSeries::Auto)
+    };
+    let e = UrSession::connect(&neither, Duration::from_secs(1))
+        .err()
+        .expect("no RTDE at all");
+    assert!(matches!(e, UrSetupError::NotRtde { .. }), "{e}");
+    let m = e.to_string();
+    assert!(
+        m.contains("arm.ur.rtde_port") && m.contains("secondary_port") && m.contains("no answer"),
+        "{m}"
+    );
     s.stop();
 }
 
@@ -355,20 +436,8 @@ fn ur_learning_has_the_outcome_of_the_iceoryx2_run_in_lockstep() {
 }
 
 /// A controller on the ur-sim `s` with a learner stand-in publishing a reaching table; returns
-/// (exit code, summary, log).
-fn run_against(
-    ports: Ports,
-    tag: &str,
-    extra: &str,
-    receive_timeout_ms: u32,
-    episodes: u64,
-    q_goal: [f64; 3],
-) -> (Option<i32>, serde_json::Value, String) {
-    run_against_with(ports, tag, extra, "", receive_timeout_ms, episodes, q_goal)
-}
-
-/// [`run_against`] with `ur_extra` lines appended to `[arm.ur]`.
-fn run_against_with(
+/// (exit code, stdout, log).
+fn run_against_raw(
     ports: Ports,
     tag: &str,
     extra: &str,
@@ -376,7 +445,7 @@ fn run_against_with(
     receive_timeout_ms: u32,
     episodes: u64,
     q_goal: [f64; 3],
-) -> (Option<i32>, serde_json::Value, String) {
+) -> (Option<i32>, String, String) {
     let dir = scratch(tag);
     let prefix = unique_prefix(tag);
     let cfg = write_config(
@@ -412,9 +481,42 @@ fn run_against_with(
     }
     let (code, out) = ctl.wait(LONG);
     let log = ctl.log();
-    let j = json_summary(&out, &log);
     std::fs::remove_dir_all(&dir).ok();
-    (code, j, log)
+    (code, out, log)
+}
+
+/// [`run_against_raw`] with its `--json` summary.
+fn run_against(
+    ports: Ports,
+    tag: &str,
+    extra: &str,
+    receive_timeout_ms: u32,
+    episodes: u64,
+    q_goal: [f64; 3],
+) -> (Option<i32>, serde_json::Value, String) {
+    run_against_with(ports, tag, extra, "", receive_timeout_ms, episodes, q_goal)
+}
+
+/// [`run_against`] with `ur_extra` lines appended to `[arm.ur]`.
+fn run_against_with(
+    ports: Ports,
+    tag: &str,
+    extra: &str,
+    ur_extra: &str,
+    receive_timeout_ms: u32,
+    episodes: u64,
+    q_goal: [f64; 3],
+) -> (Option<i32>, serde_json::Value, String) {
+    let (code, out, log) = run_against_raw(
+        ports,
+        tag,
+        extra,
+        ur_extra,
+        receive_timeout_ms,
+        episodes,
+        q_goal,
+    );
+    (code, json_summary(&out, &log), log)
 }
 
 #[test]
@@ -690,12 +792,118 @@ fn ur_backend_brings_up_a_powered_off_arm_when_asked() {
 }
 
 #[test]
+fn ur_a_robot_stream_that_cannot_be_trusted_ends_the_run_naming_why() {
+    // From the 100th package (in the first reset): a frozen clock (it ticked 0 times and never
+    // said why), a clock going backwards, a NaN joint angle (reported as a network problem), a
+    // joint angle of 100 rad (servoj targets toward it were streamed). Each ends the run as arm
+    // lost (exit 3), nothing written after it (no protective stop: no target reached the arm).
+    let cases: [(&str, Faults, &str); 4] = [
+        (
+            "frozen clock",
+            Faults {
+                frozen_clock_after: 100,
+                ..Faults::default()
+            },
+            "is frozen",
+        ),
+        (
+            "backwards clock",
+            Faults {
+                backwards_clock_after: 100,
+                ..Faults::default()
+            },
+            "went backwards",
+        ),
+        (
+            "NaN q",
+            Faults {
+                nan_q_after: 100,
+                ..Faults::default()
+            },
+            "non-finite joint state: joint 0 actual_q = NaN",
+        ),
+        (
+            "q outside the limits",
+            Faults {
+                q_out_of_limits_after: 100,
+                ..Faults::default()
+            },
+            "joint 0 at 100 rad, outside [limits]",
+        ),
+    ];
+    for (what, faults, says) in cases {
+        let s = sim(UrSimConfig {
+            faults,
+            ..UrSimConfig::default()
+        });
+        let (code, j, log) = run_against(Ports::from(&s), "ur-stream", "", WATCHDOG_MS, 2, GOAL);
+        let summary = s.stop();
+        assert_eq!(code, Some(3), "{what}: {j}\n{log}");
+        assert_eq!(j["exit_reason"], "arm_lost", "{what}: {j}");
+        let fault = j["arm"]["stream_fault"].as_str().unwrap_or_default();
+        assert!(fault.contains(says), "{what}: {fault}\n{j}");
+        assert!(
+            j["arm_lost"]
+                .as_str()
+                .unwrap()
+                .contains("see arm.stream_fault"),
+            "{what}: {j}"
+        );
+        assert!(!j["arm_lost"].as_str().unwrap().contains("network problem"));
+        assert_eq!(summary.protective_stops, 0, "{what}: {summary:?}");
+    }
+    // Outside the limits from the first package: refused in setup (exit 2), naming it.
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            q_out_of_limits_after: 1,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let (code, _, log) =
+        run_against_raw(Ports::from(&s), "ur-stream-0", "", "", WATCHDOG_MS, 2, GOAL);
+    let summary = s.stop();
+    assert_eq!(code, Some(2), "{log}");
+    assert!(
+        log.contains("joint 0 at 100 rad, outside [limits]"),
+        "{log}"
+    );
+    assert_eq!(summary.programs, 0, "no program started: {summary:?}");
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ur_a_protective_stop_during_a_reset_ends_the_run_as_arm_stopped() {
+    // Cycle 100 falls in the first reset (about 496 cycles): the reset's acknowledgement never
+    // comes, and the run ended as arm lost (exit 3) when the program closed its connection.
+    let s = sim(UrSimConfig {
+        faults: Faults {
+            protective_stop_after: 100,
+            ..Faults::default()
+        },
+        ..UrSimConfig::default()
+    });
+    let (code, j, log) = run_against(Ports::from(&s), "ur-pstop-reset", "", WATCHDOG_MS, 5, GOAL);
+    let summary = s.stop();
+    assert_eq!(summary.protective_stops, 1, "{summary:?}");
+    assert_eq!(code, Some(5), "{j}\n{log}");
+    assert_eq!(j["exit_reason"], "arm_stopped", "{j}");
+    assert_eq!(j["episodes_completed"], 0, "{j}");
+    let why = j["arm"]["robot_stop"].as_str().unwrap();
+    assert!(why.contains("PROTECTIVE_STOP"), "{why}");
+    cleanup_dead_nodes();
+}
+
+#[test]
 fn ur_a_frozen_controller_is_stopped_by_the_programs_watchdog() {
     // Real time: the arm moves toward the table's goal; the controller is frozen (SIGSTOP:
     // its sockets stay open, nothing more is written) and the program's receive timeout stops
-    // the arm.
+    // the arm. A CB3 (125 Hz, 16 kB/s of packages): the frozen controller's socket buffers hold
+    // seconds of its stream, so ur-sim does not drop it as a client that does not read (at
+    // 500 Hz they filled in about a second under load; the robot closing RTDE is then exit 3).
     let s = sim(UrSimConfig {
         lockstep: false,
+        series: Series::Cb3,
         ..UrSimConfig::default()
     });
     let dir = scratch("ur-freeze");
@@ -736,11 +944,19 @@ fn ur_a_frozen_controller_is_stopped_by_the_programs_watchdog() {
             break false;
         }
     };
-    ctl.signal(libc::SIGKILL);
-    let _ = ctl.wait(LONG);
+    // Thawed, the controller finds the program ended: the arm stopped itself (exit 5, as the
+    // exit-code table says; it exited 3, arm lost, on the closed reverse connection).
+    ctl.signal(libc::SIGCONT);
+    let (code, out) = ctl.wait(LONG);
+    let log = ctl.log();
     let summary = s.stop();
     assert!(stopped, "the program did not stop the arm: {summary:?}");
     assert_eq!(summary.receive_timeouts, 1, "{summary:?}");
+    let j = json_summary(&out, &log);
+    assert_eq!(code, Some(5), "{j}\n{log}");
+    assert_eq!(j["exit_reason"], "arm_stopped", "{j}");
+    let why = j["arm"]["robot_stop"].as_str().unwrap();
+    assert!(why.contains("program not running"), "{why}");
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -25,13 +25,10 @@ use crate::config::{ServoTarget, UrConfig};
 use crate::error::SetupError;
 use crate::stats::{Histogram, Percentiles};
 
-use super::setup::{check_modes, UrRtde, UrSetupError};
+use super::setup::{check_modes, StreamFault, UrRtde, UrSetupError};
 
 mod recover;
 
-/// [`UrReport::lost`] when the program's reverse connection closed (the program ended).
-const REVERSE_LOST: &str =
-    "the robot's program closed the reverse connection (it stopped: see the robot's log)";
 // ------------------------------------------------------------------------------ the loop side
 
 /// A reset to the start pose counts as done when every joint is this close (rad) …
@@ -43,6 +40,13 @@ pub const RESET_TOL_QD: f64 = 1e-2;
 pub const RESET_SETTLE_MAX_S: f64 = 3.0;
 /// Shortest reset motion (s).
 const RESET_MIN_S: f64 = 0.5;
+/// A measured active joint may be this far (rad) outside `[limits]` (a servo's overshoot at a
+/// limit) before the state counts as a fault ([`StreamFault::OutsideLimits`]).
+pub const MEASURED_LIMIT_MARGIN_RAD: f64 = 0.05;
+/// This many packages in a row with the same `timestamp` are a frozen arm clock
+/// ([`StreamFault::ClockFrozen`]; 0.1 s of an e-Series, 0.4 s of a CB3). One repeat is normal
+/// (a package sent twice).
+pub const FROZEN_CLOCK_PACKAGES: u64 = 50;
 
 /// What the program is servoing to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -89,8 +93,10 @@ pub struct UrReport {
     pub robot_stop: Option<String>,
     /// Protective stops unlocked and the program restarted (`recover_protective_stop`).
     pub protective_stops_recovered: u64,
-    /// Why the arm is gone, if it is (connection closed).
+    /// Why the arm is gone, if it is (connection closed, or its stream not to be trusted).
     pub lost: Option<&'static str>,
+    /// What made the robot's stream untrustworthy, if anything did ([`StreamFault`]).
+    pub stream_fault: Option<String>,
     /// Per package: decode + state build (FK) + reverse write, ns.
     pub cycle: Percentiles,
     /// Real time only: when a package was handled, against the arm's clock (its timestamps),
@@ -158,6 +164,18 @@ struct Live {
     /// packages from before it (still in the stop) are not a new stop.
     restarted: bool,
     lost: Option<&'static str>,
+    /// The program's reverse connection failed: no more writes; the queued packages are read
+    /// for the robot's own report (its program ended, a stop) before the arm counts as lost.
+    reverse_closed: bool,
+    /// When it was found closed: wall time (ns) and arm time (s).
+    reverse_closed_ns: u64,
+    reverse_closed_ts: f64,
+    /// The controller's joint limits (measured states are checked against them).
+    limits: ArmLimits,
+    /// The previous package's `timestamp` (s) and how many packages in a row repeated it.
+    prev_ts: f64,
+    same_ts: u64,
+    stream_fault: Option<StreamFault>,
     counts: Counts,
     cycle_ns: Histogram,
     /// Real time: the time compression, the first package's (wall ns, arm s), the baseline
@@ -249,6 +267,7 @@ impl UrArm {
             }),
             protective_stops_recovered: c.recoveries,
             lost: l.lost,
+            stream_fault: l.stream_fault.map(|f| f.to_string()),
             cycle: l.cycle_ns.summary(),
             lateness: l.lateness.as_ref().map(|x| x.hist.summary()),
         }
@@ -259,6 +278,10 @@ impl ArmBackend for UrArm {
     fn wait_ready(&mut self, timeout_s: f64) -> Result<ArmState, SetupError> {
         super::dashboard::prepare(&self.cfg, Duration::from_secs_f64(timeout_s))?;
         let r = UrRtde::connect(&self.cfg, Duration::from_secs_f64(timeout_s))?;
+        check_measured(r.state(), &self.limits).map_err(|fault| UrSetupError::Stream {
+            during: "first data package",
+            fault,
+        })?;
         let kin = UrKinematics::new(self.cfg.model, self.cfg.ee_offset);
         let s = state_from(&kin, r.state(), 0, 0, 0, ArmStatus::READY);
         self.rtde = Some(r);
@@ -271,6 +294,11 @@ impl ArmBackend for UrArm {
             .take()
             .expect("wait_ready succeeded before connect");
         let session = r.start_program(&self.cfg, self.timeout)?;
+        // The first command holds where the arm is: never where it cannot be.
+        check_measured(&session.state, &self.limits).map_err(|fault| UrSetupError::Stream {
+            during: "reading the queued packages",
+            fault,
+        })?;
         let setup = |why| {
             SetupError::Ur(UrSetupError::Io {
                 during: "setup",
@@ -306,6 +334,13 @@ impl ArmBackend for UrArm {
             program_seen: false,
             restarted: false,
             lost: None,
+            reverse_closed: false,
+            reverse_closed_ns: 0,
+            reverse_closed_ts: 0.0,
+            limits: self.limits.clone(),
+            prev_ts: ts,
+            same_ts: 0,
+            stream_fault: None,
             counts: Counts::default(),
             cycle_ns: Histogram::new(),
             lateness: self.real_time.map(|compression| Lateness {
@@ -366,6 +401,44 @@ impl ArmBackend for UrArm {
     }
 }
 
+/// Why the arm is lost when its program's reverse connection closed and the robot reported no
+/// stop.
+/// After the reverse connection closed, the robot has this long (s of its clock) to report its
+/// program ended (or a stop) before the arm counts as lost: the program's `stopj` runs first
+/// (about 1 s from full speed).
+const REVERSE_CLOSED_GRACE_S: f64 = 3.0;
+/// … and, with no package queued, at least this long (ns of wall time; else the program's
+/// receive timeout): the report may be a cycle behind the close.
+const REVERSE_CLOSED_WAIT_NS: u64 = 50_000_000;
+
+const REVERSE_CLOSED: &str =
+    "the robot's program closed the reverse connection (it stopped: see the robot's log)";
+
+/// A measured state the controller may act on: all six joints' `actual_q` and `actual_qd`
+/// finite, the three active joints within `limits` (± [`MEASURED_LIMIT_MARGIN_RAD`]).
+pub fn check_measured(r: &RobotState, limits: &ArmLimits) -> Result<(), StreamFault> {
+    for j in 0..6 {
+        let (q, qd) = (r.actual_q[j], r.actual_qd[j]);
+        if !q.is_finite() || !qd.is_finite() {
+            return Err(StreamFault::NonFinite { joint: j, q, qd });
+        }
+    }
+    for j in 0..N_JOINTS {
+        let (q, lower, upper) = (r.actual_q[j], limits.lower[j], limits.upper[j]);
+        let m = MEASURED_LIMIT_MARGIN_RAD;
+        if q < lower - m || q > upper + m {
+            return Err(StreamFault::OutsideLimits {
+                joint: j,
+                q,
+                lower,
+                upper,
+                margin: m,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// The controller's [`ArmState`] from an RTDE state: the three active joints, the
 /// end-effector point and velocity from all six measured joints (`ur5_shared::kinematics`).
 /// No fault bits: [`Live::emit`] sets `DRIVER` from the modes [`Live::on_package`] checked.
@@ -421,7 +494,7 @@ impl Live {
             // The controller did not answer: hold the goal in force.
             self.awaiting_answer = false;
             self.counts.keepalives += 1;
-            self.write(cfg)?;
+            self.write_on(cfg)?;
         }
         loop {
             let frame = match self.dec.next_frame() {
@@ -438,6 +511,17 @@ impl Live {
                         self.lost = Some("the robot closed the RTDE connection");
                         return Err(ArmIoError::Receive);
                     }
+                    Err(e) if e.kind() == std::io::ErrorKind::WouldBlock && self.reverse_closed => {
+                        // Everything queued is read; the robot's report of the ended program
+                        // may still be a cycle behind: lost after the program's own receive
+                        // timeout without one.
+                        let waited = now.saturating_sub(self.reverse_closed_ns);
+                        if waited >= (2 * Self::keepalive_ns(cfg)).max(REVERSE_CLOSED_WAIT_NS) {
+                            self.lost = Some(REVERSE_CLOSED);
+                            return Err(ArmIoError::Receive);
+                        }
+                        return Ok(None);
+                    }
                     Ok(n) => {
                         self.dec.commit(n);
                         continue;
@@ -445,7 +529,7 @@ impl Live {
                     Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
                         if now.saturating_sub(self.last_write_ns) >= Self::keepalive_ns(cfg) {
                             self.counts.keepalives += 1;
-                            self.write(cfg)?;
+                            self.write_on(cfg)?;
                         }
                         return Ok(None);
                     }
@@ -489,18 +573,63 @@ impl Live {
                 continue;
             }
             self.counts.packages += 1;
+            if let Err(f) = self.check_stream() {
+                // Nothing more is written: the program's receive timeout stops the arm.
+                self.stream_fault = Some(f);
+                self.lost = Some(f.reason());
+                return Err(ArmIoError::Receive);
+            }
             if let Some(l) = self.lateness.as_mut() {
                 l.record(self.counts.packages, t_frame, self.robot.timestamp);
             }
             let emitted = self.on_package();
+            if self.reverse_closed
+                && self.robot_stop.is_none()
+                && self.robot.timestamp - self.reverse_closed_ts > REVERSE_CLOSED_GRACE_S
+            {
+                // The robot streams on and reports no stop: its program is gone all the same.
+                self.lost = Some(REVERSE_CLOSED);
+                return Err(ArmIoError::Receive);
+            }
             if emitted.is_none() || !self.awaiting_answer {
-                self.write(cfg)?;
+                self.write_on(cfg)?;
                 self.cycle_ns.record(monotonic_ns() - t_frame);
             }
             if let Some(s) = emitted {
                 self.counts.states += 1;
                 return Ok(Some(s));
             }
+        }
+    }
+
+    /// The newest package against the limits and the previous package's clock.
+    fn check_stream(&mut self) -> Result<(), StreamFault> {
+        check_measured(&self.robot, &self.limits)?;
+        let (ts, prev) = (self.robot.timestamp, self.prev_ts);
+        if ts < prev {
+            return Err(StreamFault::ClockBackwards { ts, prev });
+        }
+        if ts == prev {
+            self.same_ts += 1;
+            if self.same_ts >= FROZEN_CLOCK_PACKAGES {
+                return Err(StreamFault::ClockFrozen {
+                    ts,
+                    packages: self.same_ts + 1,
+                });
+            }
+        } else {
+            self.same_ts = 0;
+        }
+        self.prev_ts = ts;
+        Ok(())
+    }
+
+    /// [`Self::write`] inside the pump: a closed reverse connection does not end the read of
+    /// what RTDE still delivers (the robot's stop report comes there, after the close).
+    fn write_on(&mut self, cfg: &UrConfig) -> Result<(), ArmIoError> {
+        match self.write(cfg) {
+            Err(_) if self.reverse_closed => Ok(()),
+            r => r,
         }
     }
 
@@ -657,6 +786,9 @@ impl Live {
 
     /// Writes the servo target for the next cycle on the reverse socket.
     fn write(&mut self, cfg: &UrConfig) -> Result<(), ArmIoError> {
+        if self.reverse_closed {
+            return Err(ArmIoError::Send);
+        }
         let q = self.target(cfg, self.robot.timestamp);
         let cmd = ReverseCommand {
             timeout_ms: cfg.receive_timeout_ms as i32,
@@ -675,7 +807,10 @@ impl Live {
                 Ok(())
             }
             Err(_) => {
-                self.lost = Some(REVERSE_LOST);
+                // Lost once the robot's stream goes on without a stop report (pump).
+                self.reverse_closed = true;
+                self.reverse_closed_ns = monotonic_ns();
+                self.reverse_closed_ts = self.robot.timestamp;
                 Err(ArmIoError::Send)
             }
         }

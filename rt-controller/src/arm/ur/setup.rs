@@ -24,7 +24,11 @@ pub const PROGRAM: &str = include_str!("../../../urscript/external_control.scrip
 pub const OUTPUTS: &str =
     "timestamp,actual_q,actual_qd,robot_mode,safety_mode,runtime_state,speed_scaling";
 
-pub use crate::error::UrSetupError;
+pub use crate::error::{StreamFault, UrSetupError};
+
+/// Text messages the setup keeps (the newest; all are counted): a robot that only talks
+/// cannot grow them without bound.
+pub const KEPT_TEXTS: usize = 16;
 
 /// A UR controller after setup: RTDE streaming the recipe, the program connected back.
 pub struct UrSession {
@@ -52,7 +56,13 @@ struct Rtde {
     s: TcpStream,
     dec: Box<FrameDecoder<8192>>,
     protocol: Protocol,
+    /// The newest [`KEPT_TEXTS`] text messages.
     texts: Vec<String>,
+    /// Text messages received in all.
+    texts_total: u64,
+    /// Every read of this setup step ends by then (`setup_timeout_s` from its start).
+    deadline: Instant,
+    timeout: Duration,
 }
 
 /// A frame copied out of the decoder (setup only).
@@ -98,19 +108,54 @@ impl Rtde {
                         payload: &payload,
                     };
                     let text = match RobotMessage::decode(&f, self.protocol) {
+                        Ok(RobotMessage::TextMessage(ur_protocol::TextMessage::V1(b))) => {
+                            // v1 (before negotiation): a level byte, then the text.
+                            String::from_utf8_lossy(b)
+                                .trim_start_matches(|c: char| c.is_control())
+                                .to_owned()
+                        }
                         Ok(RobotMessage::TextMessage(t)) => format!("{t:?}"),
                         _ => "(undecodable text message)".into(),
                     };
+                    if self.texts.len() >= KEPT_TEXTS {
+                        self.texts.remove(0);
+                    }
                     self.texts.push(text);
+                    self.texts_total += 1;
                     continue;
                 }
                 return Ok(Owned(kind, payload));
             }
+            // The timeout bounds the whole step, not each read: a robot that keeps sending
+            // text messages (and never the answer) does not hold the setup for ever.
+            let left = self.deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(self.deadline_passed(during));
+            }
+            self.s.set_read_timeout(Some(left)).map_err(io(during))?;
             match self.s.read(self.dec.spare()) {
                 Ok(0) => return Err(UrSetupError::Closed(during)),
                 Ok(n) => self.dec.commit(n),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) =>
+                {
+                    return Err(self.deadline_passed(during))
+                }
                 Err(why) => return Err(UrSetupError::Io { during, why }),
             }
+        }
+    }
+
+    fn deadline_passed(&self, during: &'static str) -> UrSetupError {
+        UrSetupError::Deadline {
+            during,
+            timeout_s: self.timeout.as_secs_f64(),
+            texts_total: self.texts_total,
+            texts: self.texts.clone(),
         }
     }
 
@@ -172,17 +217,22 @@ impl UrRtde {
             dec: Box::default(),
             protocol: Protocol::V1,
             texts: Vec::new(),
+            texts_total: 0,
+            deadline: Instant::now() + timeout,
+            timeout,
         };
         let mut negotiated = None;
         for (v, p) in [(2u16, Protocol::V2), (1, Protocol::V1)] {
-            let accepted = c.ask(
-                ClientMessage::RequestProtocolVersion(v),
-                "protocol negotiation",
-                |m| match m {
-                    RobotMessage::ProtocolVersion { accepted } => Some(accepted),
-                    _ => None,
-                },
-            )?;
+            let accepted = c
+                .ask(
+                    ClientMessage::RequestProtocolVersion(v),
+                    "protocol negotiation",
+                    |m| match m {
+                        RobotMessage::ProtocolVersion { accepted } => Some(accepted),
+                        _ => None,
+                    },
+                )
+                .map_err(|e| not_rtde(cfg, rtde_addr, timeout, e))?;
             if accepted {
                 negotiated = Some(p);
                 break;
@@ -250,6 +300,7 @@ impl UrRtde {
     /// Blocks for the next data package (bounded by the setup timeout) and returns its state:
     /// an observer's read (tests watch the arm through a second RTDE connection with it).
     pub fn next_state(&mut self) -> Result<&RobotState, UrSetupError> {
+        self.c.deadline = Instant::now() + self.c.timeout;
         self.state = self.c.state(&self.recipe)?;
         Ok(&self.state)
     }
@@ -265,6 +316,8 @@ impl UrRtde {
         self.catch_up()?;
         check_modes(&self.state)?;
         let c = &mut self.c;
+        c.deadline = Instant::now() + timeout;
+        c.timeout = timeout;
         let reverse = send_program(cfg, &c.s, 1.0 / self.rate_hz, timeout, &mut c.texts)?;
         let Self {
             c,
@@ -383,6 +436,59 @@ pub(crate) fn send_program(
     reverse.set_nonblocking(false).map_err(io("setup"))?;
     reverse.set_nodelay(true).map_err(io("setup"))?;
     Ok(reverse)
+}
+
+/// The first request found no RTDE interface at `addr`: says what answered instead, and
+/// whether the configured secondary port answers RTDE (the ports swapped). Other errors pass.
+fn not_rtde(cfg: &UrConfig, addr: SocketAddr, timeout: Duration, e: UrSetupError) -> UrSetupError {
+    let what = match &e {
+        UrSetupError::Deadline { texts_total: 0, .. } => format!(
+            "no answer to the protocol request within {} s",
+            timeout.as_secs_f64()
+        ),
+        UrSetupError::Frame { why, .. } => format!(
+            "it sends bytes that are not RTDE frames ({why}; a UR's primary and secondary interfaces stream robot-state packages)"
+        ),
+        _ => return e,
+    };
+    let secondary = SocketAddr::from((addr.ip(), cfg.secondary_port));
+    if secondary != addr && answers_rtde(secondary, timeout) {
+        return UrSetupError::PortsSwapped {
+            rtde_port: cfg.rtde_port,
+            secondary_port: cfg.secondary_port,
+            timeout_s: timeout.as_secs_f64(),
+        };
+    }
+    UrSetupError::NotRtde {
+        addr,
+        secondary_port: cfg.secondary_port,
+        what,
+    }
+}
+
+/// Whether `addr` answers an RTDE protocol request within `timeout`.
+fn answers_rtde(addr: SocketAddr, timeout: Duration) -> bool {
+    let Ok(s) = TcpStream::connect_timeout(&addr, timeout) else {
+        return false;
+    };
+    let mut c = Rtde {
+        s,
+        dec: Box::default(),
+        protocol: Protocol::V1,
+        texts: Vec::new(),
+        texts_total: 0,
+        deadline: Instant::now() + timeout,
+        timeout,
+    };
+    c.ask(
+        ClientMessage::RequestProtocolVersion(2),
+        "probe",
+        |m| match m {
+            RobotMessage::ProtocolVersion { .. } => Some(()),
+            _ => None,
+        },
+    )
+    .is_ok()
 }
 
 fn io(during: &'static str) -> impl Fn(std::io::Error) -> UrSetupError {

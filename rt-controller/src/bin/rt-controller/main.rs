@@ -51,8 +51,9 @@ enum Cmd {
     /// task.horizon ticks of task.dt s, publish every step on learner/samples, take a new table
     /// only at the episode boundary. The arm is `hil-sim serve` over iceoryx2 or a UR robot
     /// (`[arm] backend = "ur"`, `[arm.ur]`). Exit codes: 0 done or stopped (SIGINT/SIGTERM),
-    /// 2 setup error, 3 arm lost (stale for safety.give_up_after_s, or its connection closed),
-    /// 4 no table (safety.no_table_timeout_s), 5 the arm stopped itself (a UR protective stop,
+    /// 2 setup error, 3 arm lost (stale for safety.give_up_after_s, its connection closed, or
+    /// its stream not to be trusted: a frozen or backwards RTDE clock, a measured joint not
+    /// finite or outside [limits]; arm.stream_fault says which), 4 no table (safety.no_table_timeout_s), 5 the arm stopped itself (a UR protective stop,
     /// safety mode not NORMAL, or its program ended), 6 learner and controller disagree (a
     /// table rejected for its horizon or action mode, or the learner stopped and
     /// said why; both print the same message).

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use ur_protocol::{RobotMessage, SafetyMode};
 
-use super::{Live, Motion, UrArm, REVERSE_LOST};
+use super::{Live, Motion, UrArm, REVERSE_CLOSED};
 use crate::arm::ur::dashboard::Dashboard;
 use crate::arm::ur::setup::{send_program, UrSetupError};
 use ur5_shared::kinematics::UrKinematics;
@@ -40,7 +40,8 @@ impl UrArm {
         let Some((_, safety, _)) = l.robot_stop else {
             return Ok(false);
         };
-        if safety != SafetyMode::ProtectiveStop.code() || l.lost.is_some_and(|m| m != REVERSE_LOST)
+        if safety != SafetyMode::ProtectiveStop.code()
+            || l.lost.is_some_and(|m| m != REVERSE_CLOSED)
         {
             return Ok(false);
         }
@@ -65,6 +66,7 @@ impl UrArm {
         l.reverse = reverse;
         l.robot_stop = None;
         l.lost = None;
+        l.reverse_closed = false;
         l.program_seen = false;
         l.restarted = true;
         l.motion = Motion::Servo;
