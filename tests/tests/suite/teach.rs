@@ -168,11 +168,14 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
         &UrSimConfig {
             rtde_port: 0,
             secondary_port: 0,
+            // The controller asks the robot's model there (a UR5e: "UR5" on PolyScope 5).
+            dashboard_port: Some(0),
             lockstep: true,
             ..UrSimConfig::default()
         },
     )
     .expect("ur-sim");
+    let dashboard = run_sim.dashboard_addr.expect("dashboard").port();
     let f = |v: [f64; 3]| format!("[{}, {}, {}]", v[0], v[1], v[2]);
     let ctl_cfg = write_config(
         &dir,
@@ -181,7 +184,8 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
             "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n\
              [task]\nhorizon = {T}\ndt = {}\nstart_q = {}\ngoal = {}\n\
              [arm]\nbackend = \"ur\"\n[arm.ur]\nmodel = \"ur5e\"\nhost = \"127.0.0.1\"\n\
-             rtde_port = {}\nsecondary_port = {}\nreverse_port = 0\nreceive_timeout_ms = 1000\n",
+             rtde_port = {}\nsecondary_port = {}\ndashboard_port = {dashboard}\nreverse_port = 0\n\
+             receive_timeout_ms = 1000\n",
             demos.dt,
             f(demos.start_q),
             f(demos.goal),
