@@ -27,7 +27,10 @@ use crate::stats::{Histogram, Percentiles};
 
 use super::setup::{check_modes, StreamFault, UrRtde, UrSetupError};
 
+mod lateness;
 mod recover;
+
+use lateness::Lateness;
 
 // ------------------------------------------------------------------------------ the loop side
 
@@ -181,30 +184,6 @@ struct Live {
     /// Real time: the time compression, the first package's (wall ns, arm s), the baseline
     /// offset (ns) and the histogram.
     lateness: Option<Lateness>,
-}
-
-/// The lateness measurement of [`UrReport::lateness`].
-struct Lateness {
-    compression: f64,
-    first: Option<(u64, f64)>,
-    baseline_ns: i64,
-    hist: Histogram,
-}
-
-impl Lateness {
-    fn record(&mut self, package: u64, wall_ns: u64, ts: f64) {
-        let (w0, t0) = *self.first.get_or_insert((wall_ns, ts));
-        let offset = (wall_ns - w0) as i64 - ((ts - t0) * 1e9 / self.compression) as i64;
-        if package <= LATENESS_BASELINE {
-            self.baseline_ns = if package == 1 {
-                offset
-            } else {
-                self.baseline_ns.min(offset)
-            };
-        } else {
-            self.hist.record((offset - self.baseline_ns).max(0) as u64);
-        }
-    }
 }
 
 /// The `ur` arm backend: [`UrRtde::connect`] in [`ArmBackend::wait_ready`], the program
