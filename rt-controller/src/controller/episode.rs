@@ -190,14 +190,7 @@ impl<A: ArmBackend> Controller<A> {
                     self.phase = Phase::Boundary;
                     return self.boundary();
                 }
-                let t = self.cfg.safety.no_table_timeout_s;
-                if t > 0.0 && (monotonic_ns() - self.no_table_since_ns) as f64 * 1e-9 >= t {
-                    return Some(ExitReason::NoTable);
-                }
-                if self.cfg.mode == Mode::RealTime {
-                    self.send_hold();
-                }
-                None
+                self.wait_for_table()
             }
             Phase::Resetting { seq, sent_ns } => {
                 if freshness == StateFreshness::Fresh && self.latest.last_command_seq >= seq {
@@ -294,6 +287,13 @@ impl<A: ArmBackend> Controller<A> {
             self.waiting_newer = true;
             self.no_table_since_ns = monotonic_ns();
         }
+        self.wait_for_table()
+    }
+
+    /// One period of waiting for a table (NeedTable, or a newer one): `NoTable` once
+    /// `safety.no_table_timeout_s` passed since `no_table_since_ns`; else a hold in real time,
+    /// nothing in lockstep.
+    fn wait_for_table(&mut self) -> Option<ExitReason> {
         let t = self.cfg.safety.no_table_timeout_s;
         if t > 0.0 && (monotonic_ns() - self.no_table_since_ns) as f64 * 1e-9 >= t {
             return Some(ExitReason::NoTable);

@@ -83,6 +83,20 @@ impl Owned {
 }
 
 impl Rtde {
+    /// A client on the connected socket `s`, protocol v1 until negotiated, its deadline
+    /// `timeout` from now.
+    fn new(s: TcpStream, timeout: Duration) -> Self {
+        Self {
+            s,
+            dec: Box::default(),
+            protocol: Protocol::V1,
+            texts: Vec::new(),
+            texts_total: 0,
+            deadline: Instant::now() + timeout,
+            timeout,
+        }
+    }
+
     fn send(&mut self, m: ClientMessage<'_>, during: &'static str) -> Result<(), UrSetupError> {
         let mut buf = [0u8; 1024];
         let n = m
@@ -212,15 +226,7 @@ impl UrRtde {
         })?;
         s.set_read_timeout(Some(timeout)).map_err(io("setup"))?;
         s.set_nodelay(true).map_err(io("setup"))?;
-        let mut c = Rtde {
-            s,
-            dec: Box::default(),
-            protocol: Protocol::V1,
-            texts: Vec::new(),
-            texts_total: 0,
-            deadline: Instant::now() + timeout,
-            timeout,
-        };
+        let mut c = Rtde::new(s, timeout);
         let mut negotiated = None;
         for (v, p) in [(2u16, Protocol::V2), (1, Protocol::V1)] {
             let accepted = c
@@ -471,15 +477,7 @@ fn answers_rtde(addr: SocketAddr, timeout: Duration) -> bool {
     let Ok(s) = TcpStream::connect_timeout(&addr, timeout) else {
         return false;
     };
-    let mut c = Rtde {
-        s,
-        dec: Box::default(),
-        protocol: Protocol::V1,
-        texts: Vec::new(),
-        texts_total: 0,
-        deadline: Instant::now() + timeout,
-        timeout,
-    };
+    let mut c = Rtde::new(s, timeout);
     c.ask(
         ClientMessage::RequestProtocolVersion(2),
         "probe",
