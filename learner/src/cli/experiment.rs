@@ -44,6 +44,41 @@ pub struct ExperimentArgs {
     /// runs/experiments/<name>].
     #[command(flatten)]
     pub common: CommonArgs,
+    /// Train only the experiment's expert and write OUT/demos.npz (the first job of a
+    /// `--slurm` or `--k8s` sweep; the shards take it with `--demos`).
+    #[arg(long)]
+    pub expert_only: bool,
+    /// Write a Slurm sweep into DIR: expert.sbatch (trains the expert once; left out with
+    /// --demos), shards.sbatch (an array of --shards tasks after it), merge.sbatch (after the
+    /// array, `afterok`, into DIR/merged/) and submit.sh; prints the `sbatch` lines.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "k8s", "expert_only"])]
+    pub slurm: Option<PathBuf>,
+    /// Write a Kubernetes sweep into DIR/sweep.yaml: an expert Job, an Indexed Job of --shards
+    /// completions (`JOB_COMPLETION_INDEX`) and a merge Job, on the volume claim --claim
+    /// mounted at DIR.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "expert_only"])]
+    pub k8s: Option<PathBuf>,
+    /// Shards of a --slurm or --k8s sweep.
+    #[arg(long, default_value_t = 4)]
+    pub shards: usize,
+    /// Shards running at once (--slurm, --k8s).
+    #[arg(long, default_value_t = 1)]
+    pub parallel: usize,
+    /// Slurm partition of every job (--slurm).
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Slurm time limit of every job, HH:MM:SS (--slurm).
+    #[arg(long, value_name = "HH:MM:SS")]
+    pub time: Option<String>,
+    /// Submit the --slurm sweep with `sbatch` and print its job ids.
+    #[arg(long, requires = "slurm")]
+    pub submit: bool,
+    /// Container image holding `learner` at this executable's path (--k8s).
+    #[arg(long, default_value = "learner:latest")]
+    pub image: String,
+    /// PersistentVolumeClaim shared by the Jobs (--k8s).
+    #[arg(long, default_value = "sweep")]
+    pub claim: String,
 }
 
 /// `learner experiment merge`.
@@ -116,6 +151,17 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
     let name = args
         .name
         .expect("clap requires a name without a subcommand");
+    if args.slurm.is_some() || args.k8s.is_some() {
+        return super::sweep::write(&args, name);
+    }
+    if args.expert_only {
+        let out = args.common.out.clone().unwrap_or_else(|| PathBuf::from("."));
+        let d = crate::experiment::expert_demos(&cfg.expert)?;
+        crate::io::create_dir(&out)?;
+        crate::io::demos::save(&d, &out.join("demos.npz"))?;
+        eprintln!("expert: {} demonstrations -> {}", d.count, out.join("demos.npz").display());
+        return Ok(());
+    }
     let out = args
         .common
         .out

@@ -13,6 +13,7 @@ pub mod policy;
 pub mod record;
 pub mod replay;
 pub mod serve;
+pub mod sweep;
 pub mod train;
 
 /// The options every run-producing subcommand shares.

@@ -43,6 +43,7 @@ use crate::run::{arm_for, run_iterations};
 
 pub mod ipc;
 pub mod multi_goal;
+pub mod scheduler;
 pub mod shard;
 pub mod summary;
 
