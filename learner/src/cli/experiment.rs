@@ -45,8 +45,9 @@ pub struct ExperimentArgs {
     #[command(flatten)]
     pub common: CommonArgs,
     /// Train only the experiment's expert and write OUT/demos.npz (the first job of a
-    /// `--slurm` or `--k8s` sweep; the shards take it with `--demos`).
-    #[arg(long)]
+    /// `--slurm` or `--k8s` sweep; the shards take it with `--demos`). Comparison, stability
+    /// and ablation.
+    #[arg(long, conflicts_with_all = ["shard", "demos"])]
     pub expert_only: bool,
     /// Write a Slurm sweep into DIR: expert.sbatch (trains the expert once; left out with
     /// --demos), shards.sbatch (an array of --shards tasks after it), merge.sbatch (after the
@@ -152,14 +153,28 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
         .name
         .expect("clap requires a name without a subcommand");
     if args.slurm.is_some() || args.k8s.is_some() {
-        return super::sweep::write(&args, name);
+        return super::sweep::write(&args, name, &cfg);
     }
     if args.expert_only {
-        let out = args.common.out.clone().unwrap_or_else(|| PathBuf::from("."));
+        anyhow::ensure!(
+            name.trains_one_expert(),
+            "--expert-only: {} does not train one expert (comparison, stability and ablation do)",
+            name.as_str()
+        );
+        cfg.validate(name)?;
+        let out = args
+            .common
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("."));
         let d = crate::experiment::expert_demos(&cfg.expert)?;
         crate::io::create_dir(&out)?;
         crate::io::demos::save(&d, &out.join("demos.npz"))?;
-        eprintln!("expert: {} demonstrations -> {}", d.count, out.join("demos.npz").display());
+        eprintln!(
+            "expert: {} demonstrations -> {}",
+            d.count,
+            out.join("demos.npz").display()
+        );
         return Ok(());
     }
     let out = args

@@ -8,7 +8,7 @@ use anyhow::Context;
 
 use super::experiment::ExperimentArgs;
 use crate::experiment::scheduler::SweepPlan;
-use crate::experiment::ExperimentName;
+use crate::experiment::{ExperimentConfig, ExperimentName};
 
 fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
     Ok(if p.is_absolute() {
@@ -19,16 +19,24 @@ fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
 }
 
 /// Writes the sweep's scripts; submits them with `--submit`.
-pub fn write(args: &ExperimentArgs, name: ExperimentName) -> anyhow::Result<()> {
+/// `cfg` is the experiment's settings, checked here so that a bad config fails before any job
+/// is queued.
+pub fn write(
+    args: &ExperimentArgs,
+    name: ExperimentName,
+    cfg: &ExperimentConfig,
+) -> anyhow::Result<()> {
     anyhow::ensure!(
-        matches!(
-            name,
-            ExperimentName::Comparison | ExperimentName::Stability | ExperimentName::Ablation
-        ),
+        name.trains_one_expert(),
         "--slurm/--k8s sweep the experiments that train one expert (comparison, stability, \
          ablation), not {}",
         name.as_str()
     );
+    cfg.validate(name)?;
+    if let Some(d) = &args.demos {
+        crate::io::demos::load_checked(d, &cfg.lqr_gaifo.sim)
+            .with_context(|| format!("--demos {}", d.display()))?;
+    }
     let mut fwd: Vec<String> = Vec::new();
     if let Some(s) = args.seeds {
         fwd.extend(["--seeds".into(), s.to_string()]);
@@ -77,7 +85,12 @@ pub fn write(args: &ExperimentArgs, name: ExperimentName) -> anyhow::Result<()> 
         .output()
         .with_context(|| format!("running {} (is sbatch on PATH?)", submit.display()))?;
     eprint!("{}", String::from_utf8_lossy(&out.stderr));
-    anyhow::ensure!(out.status.success(), "{} failed: {}", submit.display(), out.status);
+    anyhow::ensure!(
+        out.status.success(),
+        "{} failed: {}",
+        submit.display(),
+        out.status
+    );
     print!("{}", String::from_utf8_lossy(&out.stdout));
     Ok(())
 }

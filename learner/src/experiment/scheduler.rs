@@ -144,7 +144,11 @@ impl SweepPlan {
         let mut s = String::from("#!/bin/bash\n");
         let _ = writeln!(s, "#SBATCH --job-name={}", quote(name)?);
         let _ = writeln!(s, "#SBATCH --cpus-per-task={}", self.cpus);
-        let _ = writeln!(s, "#SBATCH --output={}", quote(path_str(&self.dir.join(log))?)?);
+        let _ = writeln!(
+            s,
+            "#SBATCH --output={}",
+            quote(path_str(&self.dir.join(log))?)?
+        );
         if let Some(p) = &self.partition {
             let _ = writeln!(s, "#SBATCH --partition={}", quote(p)?);
         }
@@ -176,13 +180,18 @@ impl SweepPlan {
         Ok(format!(
             "K={k}\n\
              N={n}\n\
+             OUT={dir}/shard_${{K}}\n\
              # Into a temporary folder, renamed at the end: a retried or twice-run task leaves\n\
-             # one whole shard_K (the same files), a killed one none.\n\
-             TMP={dir}/.shard_${{K}}.$$.$(hostname)\n\
+             # one whole shard_K (the same files, wall times aside), a killed one none.\n\
+             TMP={dir}/.shard_${{K}}.$$.${{HOSTNAME:-host}}\n\
              rm -rf \"$TMP\"\n\
              {cmd} --demos {demos} --shard \"$K/$N\" --out \"$TMP\"\n\
-             rm -rf {dir}/shard_${{K}}\n\
-             mv \"$TMP\" {dir}/shard_${{K}}\n",
+             rm -rf \"$OUT\"\n\
+             if ! mv -T \"$TMP\" \"$OUT\" 2>/dev/null; then\n\
+             \x20 # A concurrent run of this task renamed its whole shard first.\n\
+             \x20 test -f \"$OUT/shard.json\"\n\
+             \x20 rm -rf \"$TMP\"\n\
+             fi\n",
             n = self.shards,
             cmd = self.base_cmd()?,
         ))
@@ -196,7 +205,10 @@ impl SweepPlan {
         )?;
         s = s.replacen(
             "set -euo",
-            &format!("#SBATCH --array=1-{}%{}\nset -euo", self.shards, self.parallel),
+            &format!(
+                "#SBATCH --array=1-{}%{}\nset -euo",
+                self.shards, self.parallel
+            ),
             1,
         );
         s.push_str(&self.shard_body("$SLURM_ARRAY_TASK_ID")?);
@@ -227,7 +239,11 @@ impl SweepPlan {
         let d = |f: &str| quote(path_str(&self.dir.join(f)).unwrap_or(f)).unwrap_or_default();
         let mut s = String::from("#!/bin/bash\nset -euo pipefail\n");
         let dep = if self.demos.is_none() {
-            let _ = writeln!(s, "EXPERT=$(sbatch --parsable {} | cut -d';' -f1)", d("expert.sbatch"));
+            let _ = writeln!(
+                s,
+                "EXPERT=$(sbatch --parsable {} | cut -d';' -f1)",
+                d("expert.sbatch")
+            );
             s.push_str("echo \"expert job $EXPERT\"\n");
             "--dependency=afterok:$EXPERT "
         } else {
@@ -305,7 +321,10 @@ impl SweepPlan {
 
     /// Writes `DIR/sweep.yaml` ([`SweepPlan::k8s_manifest`]); returns the path.
     pub fn write_k8s(&self, image: &str, claim: &str) -> std::io::Result<Vec<PathBuf>> {
-        write_all(&self.dir, &[("sweep.yaml", self.k8s_manifest(image, claim))])
+        write_all(
+            &self.dir,
+            &[("sweep.yaml", self.k8s_manifest(image, claim))],
+        )
     }
 }
 
@@ -347,7 +366,12 @@ mod tests {
             dir: "/shared/sweep one".into(),
             shards: 4,
             parallel: 1,
-            args: vec!["--seeds".into(), "4".into(), "--iterations".into(), "5".into()],
+            args: vec![
+                "--seeds".into(),
+                "4".into(),
+                "--iterations".into(),
+                "5".into(),
+            ],
             demos: None,
             partition: Some("cpu".into()),
             time: Some("00:30:00".into()),
@@ -360,22 +384,36 @@ mod tests {
         let p = plan();
         p.validate().unwrap();
         let e = p.slurm_expert().unwrap();
-        assert!(e.contains("--expert-only --out '/shared/sweep one/expert'"), "{e}");
-        assert!(e.contains("#SBATCH --partition=cpu\n#SBATCH --time=00:30:00\n"), "{e}");
+        assert!(
+            e.contains("--expert-only --out '/shared/sweep one/expert'"),
+            "{e}"
+        );
+        assert!(
+            e.contains("#SBATCH --partition=cpu\n#SBATCH --time=00:30:00\n"),
+            "{e}"
+        );
         let s = p.slurm_shards().unwrap();
         assert!(s.contains("#SBATCH --array=1-4%1\n"), "{s}");
         assert!(s.contains("K=$SLURM_ARRAY_TASK_ID\nN=4\n"), "{s}");
         assert!(
-            s.contains("/opt/learner experiment comparison --seeds 4 --iterations 5 --threads 1 \
-                        --demos '/shared/sweep one/expert/demos.npz' --shard \"$K/$N\""),
+            s.contains(
+                "/opt/learner experiment comparison --seeds 4 --iterations 5 --threads 1 \
+                        --demos '/shared/sweep one/expert/demos.npz' --shard \"$K/$N\""
+            ),
             "{s}"
         );
-        assert!(s.contains("mv \"$TMP\" '/shared/sweep one'/shard_${K}\n"), "{s}");
+        assert!(s.contains("OUT='/shared/sweep one'/shard_${K}\n"), "{s}");
+        assert!(
+            s.contains("if ! mv -T \"$TMP\" \"$OUT\" 2>/dev/null; then\n"),
+            "{s}"
+        );
         let m = p.slurm_merge().unwrap();
         assert!(
-            m.contains("merge '/shared/sweep one/shard_1' '/shared/sweep one/shard_2' \
+            m.contains(
+                "merge '/shared/sweep one/shard_1' '/shared/sweep one/shard_2' \
                         '/shared/sweep one/shard_3' '/shared/sweep one/shard_4' --out \
-                        '/shared/sweep one/merged'"),
+                        '/shared/sweep one/merged'"
+            ),
             "{m}"
         );
         let sub = p.slurm_submit().unwrap();
@@ -389,7 +427,10 @@ mod tests {
         p.demos = Some("/data/demos.npz".into());
         let sub = p.slurm_submit().unwrap();
         assert!(!sub.contains("EXPERT"), "{sub}");
-        assert!(p.slurm_shards().unwrap().contains("--demos /data/demos.npz"));
+        assert!(p
+            .slurm_shards()
+            .unwrap()
+            .contains("--demos /data/demos.npz"));
         let k = p.k8s_manifest("reg/learner:1", "sweep").unwrap();
         assert!(!k.contains("--expert-only"), "{k}");
     }
@@ -421,6 +462,58 @@ mod tests {
         for t in ["00:30:00", "120:00:00"] {
             check_time(t).unwrap();
         }
+    }
+
+    /// The array task's script, run twice with a stand-in `learner` (and once after a killed
+    /// run left its temporary folder), leaves one whole `shard_K` and no temporaries.
+    #[cfg(unix)]
+    #[test]
+    fn a_shard_task_run_twice_leaves_one_whole_shard() {
+        let dir = std::env::temp_dir().join(format!("scheduler-twice-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let stub = dir.join("learner");
+        std::fs::write(
+            &stub,
+            "#!/bin/bash\nwhile [ $# -gt 0 ]; do case $1 in --out) o=$2;; --shard) k=$2;; esac; \
+             shift; done\nmkdir -p \"$o\"\necho \"$k\" > \"$o/shard.json\"\necho x >> \"$o/runs\"\n",
+        )
+        .unwrap();
+        let mut p = plan();
+        p.learner = stub.clone();
+        p.dir = dir.join("sweep dir");
+        p.demos = Some("/data/demos.npz".into());
+        p.write_slurm().unwrap();
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&stub, std::fs::Permissions::from_mode(0o755)).unwrap();
+        std::fs::create_dir_all(p.dir.join(".shard_2.1.gone")).unwrap();
+        for _ in 0..2 {
+            let st = std::process::Command::new("bash")
+                .arg(p.dir.join("shards.sbatch"))
+                .env("SLURM_ARRAY_TASK_ID", "2")
+                .status()
+                .unwrap();
+            assert!(st.success());
+        }
+        let shard = p.dir.join("shard_2");
+        let mut files: Vec<String> = std::fs::read_dir(&shard)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        files.sort();
+        assert_eq!(files, ["runs", "shard.json"]);
+        assert_eq!(std::fs::read_to_string(shard.join("runs")).unwrap(), "x\n");
+        assert_eq!(
+            std::fs::read_to_string(shard.join("shard.json")).unwrap(),
+            "2/4\n"
+        );
+        let temps: Vec<String> = std::fs::read_dir(&p.dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(".shard_") && n != ".shard_2.1.gone")
+            .collect();
+        assert!(temps.is_empty(), "{temps:?}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

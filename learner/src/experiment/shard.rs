@@ -176,6 +176,50 @@ fn read_rows(path: &Path) -> anyhow::Result<Vec<(String, GaifoRow)>> {
     Ok(rows)
 }
 
+/// Checks that the shards `parts` ((K, folder) in the order given) are each of 1..=`n` once,
+/// naming every missing K and every K given more than once (with its folders).
+pub fn check_parts(parts: &[(usize, &Path)], n: usize) -> anyhow::Result<()> {
+    let mut by_k: Vec<Vec<&Path>> = vec![Vec::new(); n];
+    for &(k, dir) in parts {
+        anyhow::ensure!(
+            (1..=n).contains(&k),
+            "{}: shard {k}/{n} is no part of {n} (need 1 <= K <= N)",
+            dir.display()
+        );
+        by_k[k - 1].push(dir);
+    }
+    let missing: Vec<String> = (1..=n)
+        .filter(|k| by_k[k - 1].is_empty())
+        .map(|k| format!("{k}/{n}"))
+        .collect();
+    let twice: Vec<String> = (1..=n)
+        .filter(|k| by_k[k - 1].len() > 1)
+        .map(|k| {
+            let dirs: Vec<String> = by_k[k - 1]
+                .iter()
+                .map(|d| d.display().to_string())
+                .collect();
+            format!("{k}/{n} ({})", dirs.join(", "))
+        })
+        .collect();
+    let mut problems = Vec::new();
+    if !missing.is_empty() {
+        problems.push(format!("missing shard(s) {}", missing.join(", ")));
+    }
+    if !twice.is_empty() {
+        problems.push(format!(
+            "shard(s) given more than once: {}",
+            twice.join("; ")
+        ));
+    }
+    anyhow::ensure!(
+        problems.is_empty(),
+        "merge needs every shard 1/{n} … {n}/{n} once: {} (run the missing shards; give each          shard's folder once)",
+        problems.join("; ")
+    );
+    Ok(())
+}
+
 /// Joins the shards in `dirs` into `out`: checks that they are parts of one experiment that
 /// together hold every job once, puts their runs in the list's order and writes the
 /// experiment's outputs ([`write_outputs`]).
@@ -183,6 +227,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<Summ
     anyhow::ensure!(!dirs.is_empty(), "merge: no shard folders given");
     let mut all: Vec<(usize, Run)> = Vec::new();
     let mut first: Option<ShardMeta> = None;
+    let mut parts: Vec<(usize, &Path)> = Vec::new();
     for dir in dirs {
         let path = dir.join(SHARD_FILE);
         let text = std::fs::read(&path).with_context(|| {
@@ -225,6 +270,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<Summ
                 dirs[0].display()
             );
         }
+        parts.push((meta.shard.k, dir));
         // An empty shard (more shards than jobs) has no CSV.
         let csv = dir.join(format!("{}.csv", meta.experiment));
         let rows = if meta.runs.is_empty() {
@@ -267,6 +313,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<Summ
         first.get_or_insert(meta);
     }
     let meta = first.expect("at least one shard");
+    check_parts(&parts, meta.shard.n)?;
     all.sort_by_key(|(job, _)| *job);
     let jobs: Vec<usize> = all.iter().map(|(j, _)| *j).collect();
     anyhow::ensure!(

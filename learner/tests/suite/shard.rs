@@ -62,11 +62,28 @@ fn shards_merged_equal_the_unsharded_run() {
         v
     };
     assert_eq!(untimed(&mrows), untimed(&rows));
-    // A missing part is refused, naming the jobs found.
+    // A missing part is refused, naming it; so is a part given twice, with its folders.
     let e = merge(&parts[..3], &dir.join("bad"))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("each job exactly once"), "{e}");
+    assert!(e.contains("missing shard(s) 4/4 ("), "{e}");
+    let twice = [
+        parts[0].clone(),
+        parts[2].clone(),
+        parts[0].clone(),
+        parts[2].clone(),
+    ];
+    let e = merge(&twice, &dir.join("bad")).unwrap_err().to_string();
+    assert!(e.contains("missing shard(s) 2/4, 4/4;"), "{e}");
+    let p1 = parts[0].display();
+    let p3 = parts[2].display();
+    assert!(
+        e.contains(&format!(
+            "given more than once: 1/4 ({p1}, {p1}); 3/4 ({p3}, {p3})"
+        )),
+        "{e}"
+    );
+    assert!(!dir.join("bad").exists(), "a refused merge writes nothing");
     // Merge refuses what does not belong together: a part run with other settings (here
     // one more iteration), a part whose CSV lost a row.
     let mut other = cfg.clone();
@@ -109,6 +126,63 @@ fn shards_merged_equal_the_unsharded_run() {
     assert_eq!(meta["jobs_total"], 6, "{meta}");
     for bad in ["0/4", "5/4", "1", "a/b"] {
         assert!(bad.parse::<Shard>().is_err(), "{bad}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A shard task that is retried, or runs twice, writes the same files (bar the wall times):
+/// its jobs depend only on their seeds, settings and demonstrations.
+#[test]
+fn a_shard_run_twice_writes_the_same_files() {
+    let dir = tmp("twice");
+    std::fs::create_dir_all(&dir).unwrap();
+    let demos = dir.join("demos.npz");
+    let ecfg = short_expert(20, 3);
+    let er = learner::run::expert(&ecfg, |_| {}).unwrap();
+    learner::io::demos::save(&learner::run::demos(&ecfg, &er).unwrap(), &demos).unwrap();
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Ablation);
+    cfg.seeds = 2;
+    cfg.iterations = 2;
+    cfg.threads = 1;
+    let two: Shard = "2/3".parse().unwrap();
+    let runs: Vec<PathBuf> = (0..2).map(|i| dir.join(format!("run{i}"))).collect();
+    for r in &runs {
+        run_sharded(ExperimentName::Ablation, &cfg, r, Some(&demos), Some(two)).unwrap();
+    }
+    let names = |d: &PathBuf| {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(names(&runs[0]), names(&runs[1]));
+    assert_eq!(
+        rows_without_times(&runs[0].join("ablation.csv")),
+        rows_without_times(&runs[1].join("ablation.csv"))
+    );
+    let meta = |d: &PathBuf| {
+        let mut v: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(d.join("shard.json")).unwrap()).unwrap();
+        for r in v["runs"].as_array_mut().unwrap() {
+            assert!(r.as_object_mut().unwrap().remove("wall_s").is_some());
+        }
+        v
+    };
+    let m = meta(&runs[0]);
+    assert!(!m["runs"].as_array().unwrap().is_empty(), "{m}");
+    assert_eq!(m, meta(&runs[1]));
+    // Every other file bit for bit.
+    for f in names(&runs[0]) {
+        if f == "ablation.csv" || f == "shard.json" || f.starts_with("summary.") {
+            continue;
+        }
+        assert_eq!(
+            std::fs::read(runs[0].join(&f)).unwrap(),
+            std::fs::read(runs[1].join(&f)).unwrap(),
+            "{f}"
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }
