@@ -5,7 +5,9 @@
 # `learner experiment comparison --slurm DIR --submit` (2 variants x 4 seeds x 5 iterations,
 # 4 shards, one at a time), waits for its merge job and checks that the merged CSV equals the
 # unsharded run's bit for bit bar the timing columns (t_*, cpu_*), and that the expert job's
-# demonstrations are the unsharded run's. Stops the daemons it started at the end.
+# demonstrations are the unsharded run's. Then runs one shard task a second time (as a retry
+# would), merges again and checks the same CSV, and checks that a merge without one shard
+# names it. Stops the daemons it started at the end.
 #
 # Needs root (apt-get, the daemons) and a built learner (cargo build --release -p learner or
 # the workspace's tests). Settings by environment:
@@ -27,7 +29,8 @@ TIMEOUT=${TIMEOUT:-1800}
 [ "$(id -u)" = 0 ] || { echo "run as root (installs packages, starts daemons)" >&2; exit 2; }
 
 if ! command -v slurmctld >/dev/null || ! command -v slurmd >/dev/null \
-    || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null; then
+    || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null \
+    || ! command -v munge >/dev/null; then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq slurm-wlm munge
 fi
@@ -73,18 +76,19 @@ stop() {
 }
 trap stop EXIT
 
-if ! pgrep -x munged >/dev/null; then
+# A munged that already runs (a credential encodes) is used as it is.
+if ! munge -n </dev/null >/dev/null 2>&1; then
     [ -f /etc/munge/munge.key ] || mungekey --create
     mkdir -p /run/munge && chown munge:munge /run/munge
-    runuser -u munge -- munged -F &
+    runuser -u munge -- munged -F >"$WORK/munged.out" 2>&1 &
     PIDS+=($!)
 fi
 for _ in $(seq 50); do munge -n </dev/null >/dev/null 2>&1 && break; sleep 0.2; done
 munge -n </dev/null | unmunge >/dev/null
 
-slurmctld -D -f "$SLURM_CONF" &
+slurmctld -D -f "$SLURM_CONF" >"$WORK/slurmctld.out" 2>&1 &
 PIDS+=($!)
-slurmd -D -N "$NODE" -f "$SLURM_CONF" &
+slurmd -D -N "$NODE" -f "$SLURM_CONF" >"$WORK/slurmd.out" 2>&1 &
 PIDS+=($!)
 for _ in $(seq 100); do
     sinfo -h -o %T 2>/dev/null | grep -qx idle && break
@@ -104,26 +108,29 @@ T0=$(date +%s.%N)
 MERGE=$(awk '/^merge job/ {print $3}' "$WORK/submitted")
 [ -n "$MERGE" ] || { echo "no merge job id printed" >&2; exit 1; }
 state() { scontrol show job "$1" 2>/dev/null | grep -o 'JobState=[A-Z_]*' | cut -d= -f2; }
-DEADLINE=$(($(date +%s) + TIMEOUT))
-while :; do
-    S=$(state "$MERGE")
-    case "$S" in
-    COMPLETED) break ;;
-    FAILED | CANCELLED | TIMEOUT | NODE_FAIL | OUT_OF_MEMORY | "")
-        echo "merge job $MERGE: ${S:-gone}" >&2
-        tail -n 20 "$WORK"/sweep/logs/*.out >&2 || true
-        exit 1
-        ;;
-    esac
-    # A dependency that can never be met (a failed expert or shard) leaves the merge pending.
-    if scontrol show job "$MERGE" | grep -q 'Reason=DependencyNeverSatisfied'; then
-        echo "merge job $MERGE: a job it depends on failed" >&2
-        tail -n 20 "$WORK"/sweep/logs/*.out >&2 || true
-        exit 1
-    fi
-    [ "$(date +%s)" -lt "$DEADLINE" ] || { echo "timed out after ${TIMEOUT}s" >&2; exit 1; }
-    sleep 1
-done
+# Waits for job $1 to complete; fails on its failure or a dependency it can never meet.
+wait_job() {
+    local deadline=$(($(date +%s) + TIMEOUT)) s
+    while :; do
+        s=$(state "$1")
+        case "$s" in
+        COMPLETED) return 0 ;;
+        FAILED | CANCELLED | TIMEOUT | NODE_FAIL | OUT_OF_MEMORY | "")
+            echo "job $1: ${s:-gone}" >&2
+            tail -n 20 "$WORK"/sweep/logs/*.out >&2 || true
+            exit 1
+            ;;
+        esac
+        if scontrol show job "$1" | grep -q 'Reason=DependencyNeverSatisfied'; then
+            echo "job $1: a job it depends on failed" >&2
+            tail -n 20 "$WORK"/sweep/logs/*.out >&2 || true
+            exit 1
+        fi
+        [ "$(date +%s)" -lt "$deadline" ] || { echo "job $1: timed out after ${TIMEOUT}s" >&2; exit 1; }
+        sleep 1
+    done
+}
+wait_job "$MERGE"
 T1=$(date +%s.%N)
 WALL=$(awk -v a="$T0" -v b="$T1" 'BEGIN {printf "%.0f", b - a}')
 echo "sweep under slurm: ${WALL} s from submit to merged ($SHARDS shards, $PARALLEL at once)"
@@ -151,6 +158,31 @@ if diff <(untimed "$WORK/sweep/merged/comparison.csv") <(untimed "$WORK/whole/co
     echo "ok: merged comparison.csv equals the unsharded run's ($(($(wc -l <"$WORK/whole/comparison.csv") - 1)) rows, timing columns aside)"
 else
     echo "DIFFERENT: merged vs unsharded comparison.csv (see $WORK/csv.diff)" >&2
+    FAIL=1
+fi
+
+# Shard 2 again, as a retried task would run it, then the merge again: the same CSV.
+cp "$WORK/sweep/merged/comparison.csv" "$WORK/merged-first.csv"
+AGAIN=$(sbatch --parsable --array=2 "$WORK/sweep/shards.sbatch" | cut -d';' -f1)
+MERGE2=$(sbatch --parsable --dependency=afterok:"$AGAIN" "$WORK/sweep/merge.sbatch" | cut -d';' -f1)
+wait_job "$MERGE2"
+if diff <(untimed "$WORK/merged-first.csv") <(untimed "$WORK/sweep/merged/comparison.csv") >/dev/null \
+    && [ -z "$(find "$WORK/sweep" -maxdepth 1 -name '.shard_*')" ]; then
+    echo "ok: shard 2 run twice (job $AGAIN), merged again (job $MERGE2): the same CSV, no temporaries"
+else
+    echo "DIFFERENT: the merge after shard 2 ran twice, or a temporary folder left" >&2
+    FAIL=1
+fi
+# A merge without shard 3 names it and writes nothing.
+S=$WORK/sweep
+if "$LEARNER" experiment merge "$S/shard_1" "$S/shard_2" "$S/shard_4" --out "$WORK/no3" \
+    2>"$WORK/no3.err"; then
+    echo "WRONG: a merge without shard 3 succeeded" >&2
+    FAIL=1
+elif grep -q "missing shard(s) 3/$SHARDS" "$WORK/no3.err" && [ ! -e "$WORK/no3" ]; then
+    echo "ok: a merge without shard 3 is refused: $(tail -n 1 "$WORK/no3.err")"
+else
+    echo "WRONG: a merge without shard 3 failed otherwise: $(cat "$WORK/no3.err")" >&2
     FAIL=1
 fi
 echo "logs and outputs: $WORK"

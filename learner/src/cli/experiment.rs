@@ -54,9 +54,10 @@ pub struct ExperimentArgs {
     /// array, `afterok`, into DIR/merged/) and submit.sh; prints the `sbatch` lines.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "k8s", "expert_only"])]
     pub slurm: Option<PathBuf>,
-    /// Write a Kubernetes sweep into DIR/sweep.yaml: an expert Job, an Indexed Job of --shards
-    /// completions (`JOB_COMPLETION_INDEX`) and a merge Job, on the volume claim --claim
-    /// mounted at DIR.
+    /// Write a Kubernetes sweep into DIR: k8s-expert.yaml (a Job training the expert once; left
+    /// out with --demos), k8s-shards.yaml (an Indexed Job of --shards completions,
+    /// `JOB_COMPLETION_INDEX`), k8s-merge.yaml (into DIR/merged/), all on the volume claim
+    /// --claim mounted at DIR, and submit-k8s.sh (applies each once the one before completed).
     #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "expert_only"])]
     pub k8s: Option<PathBuf>,
     /// Shards of a --slurm or --k8s sweep.
@@ -74,7 +75,7 @@ pub struct ExperimentArgs {
     /// Submit the --slurm sweep with `sbatch` and print its job ids.
     #[arg(long, requires = "slurm")]
     pub submit: bool,
-    /// Container image holding `learner` at this executable's path (--k8s).
+    /// Container image with `learner` on its PATH (--k8s).
     #[arg(long, default_value = "learner:latest")]
     pub image: String,
     /// PersistentVolumeClaim shared by the Jobs (--k8s).
@@ -169,12 +170,11 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| PathBuf::from("."));
         let d = crate::experiment::expert_demos(&cfg.expert)?;
         crate::io::create_dir(&out)?;
-        crate::io::demos::save(&d, &out.join("demos.npz"))?;
-        eprintln!(
-            "expert: {} demonstrations -> {}",
-            d.count,
-            out.join("demos.npz").display()
-        );
+        // Renamed into place: a retried expert job never leaves half a file for the shards.
+        let (tmp, path) = (out.join(".demos.npz.partial"), out.join("demos.npz"));
+        crate::io::demos::save(&d, &tmp)?;
+        std::fs::rename(&tmp, &path)?;
+        eprintln!("expert: {} demonstrations -> {}", d.count, path.display());
         return Ok(());
     }
     let out = args

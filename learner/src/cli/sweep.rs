@@ -66,9 +66,9 @@ pub fn write(
     plan.validate()?;
     if args.k8s.is_some() {
         for p in plan.write_k8s(&args.image, &args.claim)? {
-            println!("wrote {}", p.display());
+            eprintln!("wrote {}", p.display());
         }
-        println!("kubectl apply -f {}", plan.dir.join("sweep.yaml").display());
+        println!("bash {}", plan.dir.join("submit-k8s.sh").display());
         return Ok(());
     }
     let files = plan.write_slurm()?;

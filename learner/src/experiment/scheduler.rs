@@ -261,12 +261,18 @@ impl SweepPlan {
         Ok(s)
     }
 
-    /// The Kubernetes manifest: a Job that trains the expert, an Indexed Job of N completions
-    /// (completion index I runs shard I+1/N), and a merge Job; `image` holds `learner` at
-    /// [`SweepPlan::learner`] and `DIR` is a shared volume (claim `claim`) mounted at `DIR`.
-    /// Kubernetes has no dependencies between Jobs: `kubectl wait` between the applies
-    /// (DIR/submit-k8s.sh) orders them.
-    pub fn k8s_manifest(&self, image: &str, claim: &str) -> Result<String, PlanError> {
+    /// The Kubernetes Jobs, in their order, as (file name, manifest): `k8s-expert.yaml`
+    /// trains the expert (none with [`SweepPlan::demos`]), `k8s-shards.yaml` is an Indexed
+    /// Job of N completions (completion index I runs shard I+1/N, the same rename as a Slurm
+    /// task) and `k8s-merge.yaml` joins them. `image` has `learner` on its `PATH`; `DIR` is a
+    /// shared volume (PersistentVolumeClaim `claim`) mounted at `DIR` in every pod. Jobs have
+    /// no dependencies in Kubernetes: [`SweepPlan::k8s_submit`] applies each after the last.
+    pub fn k8s_jobs(&self, image: &str, claim: &str) -> Result<Vec<(String, String)>, PlanError> {
+        // Inside the image, `learner` is on the PATH.
+        let p = SweepPlan {
+            learner: "learner".into(),
+            ..self.clone()
+        };
         let dir = path_str(&self.dir)?;
         let job = |name: &str, extra: &str, script: &str| {
             let script: String = script.lines().map(|l| format!("          {l}\n")).collect();
@@ -274,35 +280,75 @@ impl SweepPlan {
                 "apiVersion: batch/v1\nkind: Job\nmetadata:\n  name: {name}\nspec:\n{extra}  \
                  backoffLimit: 3\n  template:\n    spec:\n      restartPolicy: Never\n      \
                  containers:\n      - name: learner\n        image: {image}\n        \
-                 resources: {{requests: {{cpu: \"{cpus}\"}}}}\n        command: [\"/bin/bash\", \"-c\"]\n        \
+                 resources: {{requests: {{cpu: \"{cpus}\"}}}}\n        \
+                 command: [\"/bin/bash\", \"-c\"]\n        \
                  args:\n        - |\n          set -euo pipefail\n{script}        \
                  volumeMounts: [{{name: sweep, mountPath: {dir}}}]\n      \
                  volumes: [{{name: sweep, persistentVolumeClaim: {{claimName: {claim}}}}}]\n",
+                image = quote(image).unwrap_or_default(),
+                claim = quote(claim).unwrap_or_default(),
                 cpus = self.cpus,
             )
         };
         let e = &self.experiment;
-        let mut s = String::new();
+        let mut jobs = Vec::new();
         if self.demos.is_none() {
             let cmd = format!(
                 "{} --expert-only --out {}",
-                self.base_cmd()?,
+                p.base_cmd()?,
                 quote(path_str(&self.dir.join("expert"))?)?
             );
-            s.push_str(&job(&format!("{e}-expert"), "", &cmd));
-            s.push_str("---\n");
+            jobs.push((
+                "k8s-expert.yaml".into(),
+                job(&format!("{e}-expert"), "", &cmd),
+            ));
         }
         let extra = format!(
             "  completionMode: Indexed\n  completions: {}\n  parallelism: {}\n",
             self.shards, self.parallel
         );
-        s.push_str(&job(
-            &format!("{e}-shards"),
-            &extra,
-            &self.shard_body("$((JOB_COMPLETION_INDEX + 1))")?,
+        let body = p.shard_body("$((JOB_COMPLETION_INDEX + 1))")?;
+        jobs.push((
+            "k8s-shards.yaml".into(),
+            job(&format!("{e}-shards"), &extra, &body),
         ));
-        s.push_str("---\n");
-        s.push_str(&job(&format!("{e}-merge"), "", &self.merge_cmd()?));
+        jobs.push((
+            "k8s-merge.yaml".into(),
+            job(&format!("{e}-merge"), "", &p.merge_cmd()?),
+        ));
+        Ok(jobs)
+    }
+
+    /// `submit-k8s.sh`: `kubectl apply` of each Job of [`SweepPlan::k8s_jobs`] once the one
+    /// before it completed; stops when one fails (its `backoffLimit` spent).
+    pub fn k8s_submit(&self, files: &[String]) -> Result<String, PlanError> {
+        let mut s = String::from(
+            "#!/bin/bash\nset -euo pipefail\n\
+             # Waits for Job $1 to complete; exits when it failed.\n\
+             wait_job() {\n  \
+               while :; do\n    \
+                 c=$(kubectl get job \"$1\" -o \
+             jsonpath='{.status.conditions[?(@.status==\"True\")].type}')\n    \
+                 case \" $c \" in\n    \
+                 *\" Complete \"*) echo \"job $1 complete\"; return 0 ;;\n    \
+                 *\" Failed \"*) echo \"job $1 failed: kubectl logs job/$1\" >&2; exit 1 ;;\n    \
+                 esac\n    \
+                 sleep 10\n  \
+               done\n\
+             }\n",
+        );
+        for f in files {
+            let name = format!(
+                "{}-{}",
+                self.experiment,
+                f.trim_start_matches("k8s-").trim_end_matches(".yaml")
+            );
+            let _ = writeln!(
+                s,
+                "kubectl apply -f {}\nwait_job {name}",
+                quote(path_str(&self.dir.join(f))?)?
+            );
+        }
         Ok(s)
     }
 
@@ -319,12 +365,18 @@ impl SweepPlan {
         write_all(&self.dir, &files)
     }
 
-    /// Writes `DIR/sweep.yaml` ([`SweepPlan::k8s_manifest`]); returns the path.
+    /// Writes the Kubernetes Jobs and `submit-k8s.sh` into `DIR`; returns the paths written.
     pub fn write_k8s(&self, image: &str, claim: &str) -> std::io::Result<Vec<PathBuf>> {
-        write_all(
-            &self.dir,
-            &[("sweep.yaml", self.k8s_manifest(image, claim))],
-        )
+        let invalid =
+            |e: PlanError| std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string());
+        let jobs = self.k8s_jobs(image, claim).map_err(invalid)?;
+        let names: Vec<String> = jobs.iter().map(|(f, _)| f.clone()).collect();
+        let mut files: Vec<(&str, Result<String, PlanError>)> = jobs
+            .iter()
+            .map(|(f, t)| (f.as_str(), Ok(t.clone())))
+            .collect();
+        files.push(("submit-k8s.sh", self.k8s_submit(&names)));
+        write_all(&self.dir, &files)
     }
 }
 
@@ -431,18 +483,61 @@ mod tests {
             .slurm_shards()
             .unwrap()
             .contains("--demos /data/demos.npz"));
-        let k = p.k8s_manifest("reg/learner:1", "sweep").unwrap();
-        assert!(!k.contains("--expert-only"), "{k}");
+        let k = p.k8s_jobs("reg/learner:1", "sweep").unwrap();
+        let files: Vec<&str> = k.iter().map(|(f, _)| f.as_str()).collect();
+        assert_eq!(files, ["k8s-shards.yaml", "k8s-merge.yaml"]);
     }
 
     #[test]
-    fn k8s_manifest_is_an_indexed_job() {
-        let k = plan().k8s_manifest("reg/learner:1", "sweep-pvc").unwrap();
-        assert_eq!(k.matches("kind: Job").count(), 3, "{k}");
-        assert!(k.contains("completionMode: Indexed\n  completions: 4\n  parallelism: 1\n"));
-        assert!(k.contains("K=$((JOB_COMPLETION_INDEX + 1))"), "{k}");
-        assert!(k.contains("image: reg/learner:1"), "{k}");
-        assert!(k.contains("claimName: sweep-pvc"), "{k}");
+    fn k8s_jobs_are_an_expert_an_indexed_job_and_a_merge_applied_in_turn() {
+        let p = plan();
+        let jobs = p.k8s_jobs("reg/learner:1", "sweep-pvc").unwrap();
+        let files: Vec<String> = jobs.iter().map(|(f, _)| f.clone()).collect();
+        assert_eq!(
+            files,
+            ["k8s-expert.yaml", "k8s-shards.yaml", "k8s-merge.yaml"]
+        );
+        for (_, k) in &jobs {
+            assert_eq!(k.matches("kind: Job").count(), 1, "{k}");
+            assert!(k.contains("image: reg/learner:1\n"), "{k}");
+            assert!(k.contains("claimName: sweep-pvc}"), "{k}");
+            assert!(k.contains("mountPath: /shared/sweep one}"), "{k}");
+            assert!(
+                !k.contains("/opt/learner"),
+                "learner from the image's PATH: {k}"
+            );
+        }
+        assert!(jobs[0].1.contains("name: comparison-expert\n"));
+        assert!(jobs[0].1.contains(
+            "learner experiment comparison --seeds 4 --iterations 5 \
+                                    --threads 1 --expert-only --out '/shared/sweep one/expert'"
+        ));
+        let s = &jobs[1].1;
+        assert!(
+            s.contains("completionMode: Indexed\n  completions: 4\n  parallelism: 1\n"),
+            "{s}"
+        );
+        assert!(s.contains("K=$((JOB_COMPLETION_INDEX + 1))"), "{s}");
+        assert!(s.contains("--demos '/shared/sweep one/expert/demos.npz' --shard \"$K/$N\""));
+        assert!(jobs[2]
+            .1
+            .contains("learner experiment merge '/shared/sweep one/shard_1'"));
+        let sub = p.k8s_submit(&files).unwrap();
+        let order: Vec<&str> = sub
+            .lines()
+            .filter(|l| l.starts_with("kubectl apply") || l.starts_with("wait_job "))
+            .collect();
+        assert_eq!(
+            order,
+            [
+                "kubectl apply -f '/shared/sweep one/k8s-expert.yaml'",
+                "wait_job comparison-expert",
+                "kubectl apply -f '/shared/sweep one/k8s-shards.yaml'",
+                "wait_job comparison-shards",
+                "kubectl apply -f '/shared/sweep one/k8s-merge.yaml'",
+                "wait_job comparison-merge",
+            ]
+        );
     }
 
     #[test]

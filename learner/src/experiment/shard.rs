@@ -214,7 +214,8 @@ pub fn check_parts(parts: &[(usize, &Path)], n: usize) -> anyhow::Result<()> {
     }
     anyhow::ensure!(
         problems.is_empty(),
-        "merge needs every shard 1/{n} … {n}/{n} once: {} (run the missing shards; give each          shard's folder once)",
+        "merge needs every shard 1/{n} … {n}/{n} once: {} (run the missing shards; give each \
+         shard's folder once)",
         problems.join("; ")
     );
     Ok(())

@@ -186,3 +186,142 @@ fn a_shard_run_twice_writes_the_same_files() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `learner experiment … --slurm DIR --submit` end to end with a stand-in `sbatch` that runs
+/// each script at once (array tasks in turn) and prints an id: the merged CSV is the unsharded
+/// run's (bar the timing columns); with `--demos` there is no expert job; the shards depend on
+/// nothing, the merge on the shards' job.
+#[cfg(unix)]
+#[test]
+fn a_submitted_slurm_sweep_merges_into_the_unsharded_run() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tmp("slurm");
+    let bin = dir.join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let sbatch = bin.join("sbatch");
+    std::fs::write(
+        &sbatch,
+        r#"#!/bin/bash
+script=${@: -1}
+calls=$(dirname "$script")/sbatch.calls
+echo "$*" >> "$calls"
+range=$(sed -n 's/^#SBATCH --array=\([0-9]*\)-\([0-9]*\).*/\1 \2/p' "$script")
+if [ -n "$range" ]; then
+  for k in $(seq $range); do SLURM_ARRAY_TASK_ID=$k bash "$script" >&2 || exit 1; done
+else
+  bash "$script" >&2 || exit 1
+fi
+echo "$(( $(wc -l < "$calls") + 100 ));local"
+"#,
+    )
+    .unwrap();
+    std::fs::set_permissions(&sbatch, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let demos = dir.join("demos.npz");
+    common::save_short_demos(&demos, 3);
+    let config = dir.join("two.toml");
+    std::fs::write(&config, "algorithms = [\"lqr-gaifo\", \"gaifo-ppo\"]\n").unwrap();
+    let sweep = dir.join("sweep");
+    let (c, d, s) = (
+        config.to_str().unwrap(),
+        demos.to_str().unwrap(),
+        sweep.to_str().unwrap(),
+    );
+    let exp = [
+        "experiment",
+        "comparison",
+        "--config",
+        c,
+        "--seeds",
+        "2",
+        "--iterations",
+        "2",
+        "--demos",
+        d,
+    ];
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap());
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(exp)
+        .args(["--slurm", s, "--shards", "3", "--submit"])
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stdout, "shards job 101\nmerge job 102\n");
+    let calls = std::fs::read_to_string(sweep.join("sbatch.calls")).unwrap();
+    let calls: Vec<&str> = calls.lines().collect();
+    assert_eq!(
+        calls,
+        [
+            format!("--parsable {s}/shards.sbatch"),
+            format!("--parsable --dependency=afterok:101 {s}/merge.sbatch"),
+        ]
+    );
+    assert!(!sweep.join("expert.sbatch").exists());
+    let whole = dir.join("whole");
+    let (ok, err) = common::learner(
+        &[
+            &exp[..],
+            &["--threads", "1", "--out", whole.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(ok, "{err}");
+    let merged = rows_without_times(&sweep.join("merged/comparison.csv"));
+    assert_eq!(
+        merged.len(),
+        2 * 2 * 2,
+        "2 variants x 2 seeds x 2 iterations"
+    );
+    assert_eq!(merged, rows_without_times(&whole.join("comparison.csv")));
+    // Without --submit: the sbatch lines, nothing run.
+    let again = dir.join("printed");
+    let (ok, printed, err) =
+        common::learner_output(&[&exp[..8], &["--slurm", again.to_str().unwrap()]].concat());
+    assert!(ok, "{err}");
+    assert!(printed.contains("EXPERT=$(sbatch --parsable "), "{printed}");
+    assert!(
+        printed.contains("--dependency=afterok:$EXPERT "),
+        "{printed}"
+    );
+    assert!(again.join("expert.sbatch").exists() && !again.join("shard_1").exists());
+    // Refused before anything is written.
+    for (bad, why) in [
+        (
+            vec!["experiment", "generalisation", "--slurm", "/tmp/x-never"],
+            "not generalisation",
+        ),
+        (
+            vec![
+                "experiment",
+                "comparison",
+                "--slurm",
+                "/tmp/x-never",
+                "--time",
+                "1:00",
+            ],
+            "HH:MM:SS",
+        ),
+        (
+            vec![
+                "experiment",
+                "comparison",
+                "--slurm",
+                "/tmp/x-never",
+                "--shards",
+                "0",
+            ],
+            "at least 1",
+        ),
+        (vec!["experiment", "comparison", "--submit"], "--slurm"),
+    ] {
+        let (ok, err) = common::learner(&bad);
+        assert!(!ok && err.contains(why), "{bad:?}: {err}");
+    }
+    assert!(!std::path::Path::new("/tmp/x-never").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
