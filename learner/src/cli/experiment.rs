@@ -49,38 +49,9 @@ pub struct ExperimentArgs {
     /// and ablation.
     #[arg(long, conflicts_with_all = ["shard", "demos"])]
     pub expert_only: bool,
-    /// Write a Slurm sweep into DIR: expert.sbatch (trains the expert once; left out with
-    /// --demos), shards.sbatch (an array of --shards tasks after it), merge.sbatch (after the
-    /// array, `afterok`, into DIR/merged/) and submit.sh; prints the `sbatch` lines.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "k8s", "expert_only"])]
-    pub slurm: Option<PathBuf>,
-    /// Write a Kubernetes sweep into DIR: k8s-expert.yaml (a Job training the expert once; left
-    /// out with --demos), k8s-shards.yaml (an Indexed Job of --shards completions,
-    /// `JOB_COMPLETION_INDEX`), k8s-merge.yaml (into DIR/merged/), all on the volume claim
-    /// --claim mounted at DIR, and submit-k8s.sh (applies each once the one before completed).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "expert_only"])]
-    pub k8s: Option<PathBuf>,
-    /// Shards of a --slurm or --k8s sweep.
-    #[arg(long, default_value_t = 4)]
-    pub shards: usize,
-    /// Shards running at once (--slurm, --k8s).
-    #[arg(long, default_value_t = 1)]
-    pub parallel: usize,
-    /// Slurm partition of every job (--slurm).
-    #[arg(long)]
-    pub partition: Option<String>,
-    /// Slurm time limit of every job, HH:MM:SS (--slurm).
-    #[arg(long, value_name = "HH:MM:SS")]
-    pub time: Option<String>,
-    /// Submit the --slurm sweep with `sbatch` and print its job ids.
-    #[arg(long, requires = "slurm")]
-    pub submit: bool,
-    /// Container image with `learner` on its PATH (--k8s).
-    #[arg(long, default_value = "learner:latest")]
-    pub image: String,
-    /// PersistentVolumeClaim shared by the Jobs (--k8s).
-    #[arg(long, default_value = "sweep")]
-    pub claim: String,
+    /// The --slurm and --k8s sweeps.
+    #[command(flatten)]
+    pub sweep: super::sweep::SweepArgs,
 }
 
 /// `learner experiment merge`.
@@ -153,12 +124,20 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
     let name = args
         .name
         .expect("clap requires a name without a subcommand");
-    if args.slurm.is_some() || args.k8s.is_some() {
-        return super::sweep::write(&args, name, &cfg);
+    if args.sweep.slurm.is_some() || args.sweep.k8s.is_some() {
+        let jobs_get = super::sweep::JobArgs {
+            seeds: args.seeds,
+            iterations: args.iterations,
+            seed: args.common.seed,
+            config: args.common.config.as_deref(),
+            demos: args.demos.as_deref(),
+            threads: args.threads,
+        };
+        return super::sweep::write(&args.sweep, &jobs_get, name, &cfg);
     }
     if args.expert_only {
         anyhow::ensure!(
-            name.trains_one_expert(),
+            crate::experiment::scheduler::trains_one_expert(name),
             "--expert-only: {} does not train one expert (comparison, stability and ablation do)",
             name.as_str()
         );

@@ -6,9 +6,62 @@ use std::process::Command;
 
 use anyhow::Context;
 
-use super::experiment::ExperimentArgs;
-use crate::experiment::scheduler::SweepPlan;
+use crate::experiment::scheduler::{trains_one_expert, SweepPlan};
 use crate::experiment::{ExperimentConfig, ExperimentName};
+
+/// The flags of `learner experiment NAME` that write a sweep instead of running it.
+#[derive(clap::Args, Debug)]
+pub struct SweepArgs {
+    /// Write a Slurm sweep into DIR: expert.sbatch (trains the expert once; left out with
+    /// --demos), shards.sbatch (an array of --shards tasks after it), merge.sbatch (after the
+    /// array, `afterok`, into DIR/merged/) and submit.sh; prints the `sbatch` lines.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "k8s", "expert_only"])]
+    pub slurm: Option<PathBuf>,
+    /// Write a Kubernetes sweep into DIR: k8s-expert.yaml (a Job training the expert once; left
+    /// out with --demos), k8s-shards.yaml (an Indexed Job of --shards completions,
+    /// `JOB_COMPLETION_INDEX`), k8s-merge.yaml (into DIR/merged/), all on the volume claim
+    /// --claim mounted at DIR, and submit-k8s.sh (applies each once the one before completed).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["shard", "expert_only"])]
+    pub k8s: Option<PathBuf>,
+    /// Shards of a --slurm or --k8s sweep.
+    #[arg(long, default_value_t = 4)]
+    pub shards: usize,
+    /// Shards running at once (--slurm, --k8s).
+    #[arg(long, default_value_t = 1)]
+    pub parallel: usize,
+    /// Slurm partition of every job (--slurm).
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Slurm time limit of every job, HH:MM:SS (--slurm).
+    #[arg(long, value_name = "HH:MM:SS")]
+    pub time: Option<String>,
+    /// Submit the --slurm sweep with `sbatch` and print its job ids.
+    #[arg(long, requires = "slurm")]
+    pub submit: bool,
+    /// Container image with `learner` on its PATH (--k8s).
+    #[arg(long, default_value = "learner:latest")]
+    pub image: String,
+    /// PersistentVolumeClaim shared by the Jobs (--k8s).
+    #[arg(long, default_value = "sweep")]
+    pub claim: String,
+}
+
+/// What every job of a sweep is given of the experiment's command line.
+#[derive(Debug)]
+pub struct JobArgs<'a> {
+    /// `--seeds`, seeds per variant.
+    pub seeds: Option<usize>,
+    /// `--iterations`, per run.
+    pub iterations: Option<usize>,
+    /// `--seed`, the first seed.
+    pub seed: Option<u64>,
+    /// `--config`, the experiment's settings file.
+    pub config: Option<&'a Path>,
+    /// Demonstrations instead of the expert job.
+    pub demos: Option<&'a Path>,
+    /// Worker threads per job (also `--cpus-per-task`); 1 without.
+    pub threads: Option<usize>,
+}
 
 fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
     Ok(if p.is_absolute() {
@@ -22,32 +75,33 @@ fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
 /// `cfg` is the experiment's settings, checked here so that a bad config fails before any job
 /// is queued.
 pub fn write(
-    args: &ExperimentArgs,
+    args: &SweepArgs,
+    job: &JobArgs,
     name: ExperimentName,
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<()> {
     anyhow::ensure!(
-        name.trains_one_expert(),
+        trains_one_expert(name),
         "--slurm/--k8s sweep the experiments that train one expert (comparison, stability, \
          ablation), not {}",
         name.as_str()
     );
     cfg.validate(name)?;
-    if let Some(d) = &args.demos {
+    if let Some(d) = job.demos {
         crate::io::demos::load_checked(d, &cfg.lqr_gaifo.sim)
             .with_context(|| format!("--demos {}", d.display()))?;
     }
     let mut fwd: Vec<String> = Vec::new();
-    if let Some(s) = args.seeds {
+    if let Some(s) = job.seeds {
         fwd.extend(["--seeds".into(), s.to_string()]);
     }
-    if let Some(i) = args.iterations {
+    if let Some(i) = job.iterations {
         fwd.extend(["--iterations".into(), i.to_string()]);
     }
-    if let Some(s) = args.common.seed {
+    if let Some(s) = job.seed {
         fwd.extend(["--seed".into(), s.to_string()]);
     }
-    if let Some(c) = &args.common.config {
+    if let Some(c) = job.config {
         fwd.extend(["--config".into(), absolute(c)?.display().to_string()]);
     }
     let dir = absolute(args.slurm.as_ref().or(args.k8s.as_ref()).expect("checked"))?;
@@ -58,10 +112,10 @@ pub fn write(
         shards: args.shards,
         parallel: args.parallel,
         args: fwd,
-        demos: args.demos.as_deref().map(absolute).transpose()?,
+        demos: job.demos.map(absolute).transpose()?,
         partition: args.partition.clone(),
         time: args.time.clone(),
-        cpus: args.threads.unwrap_or(1).max(1),
+        cpus: job.threads.unwrap_or(1).max(1),
     };
     plan.validate()?;
     if args.k8s.is_some() {

@@ -79,12 +79,6 @@ impl ExperimentName {
             Self::MultiGoal => "multi-goal",
         }
     }
-
-    /// Whether every job learns from one expert's demonstrations (`--demos`, `--expert-only`,
-    /// a `--slurm` or `--k8s` sweep): comparison, stability, ablation.
-    pub fn trains_one_expert(self) -> bool {
-        matches!(self, Self::Comparison | Self::Stability | Self::Ablation)
-    }
 }
 
 /// Settings of an experiment (TOML: `learner experiment <name> --config FILE`, layered over

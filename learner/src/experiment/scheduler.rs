@@ -15,6 +15,17 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use super::ExperimentName;
+
+/// Whether every job of `name` learns from one expert's demonstrations, so that a sweep can
+/// train it once (`--expert-only`, `--slurm`, `--k8s`): comparison, stability, ablation.
+pub fn trains_one_expert(name: ExperimentName) -> bool {
+    matches!(
+        name,
+        ExperimentName::Comparison | ExperimentName::Stability | ExperimentName::Ablation
+    )
+}
+
 /// Everything the scripts need.
 #[derive(Clone, Debug)]
 pub struct SweepPlan {
@@ -53,6 +64,8 @@ pub enum PlanError {
     Relative(PathBuf),
     #[error("`{0}`: a character the scripts cannot quote (newline or NUL)")]
     Unquotable(String),
+    #[error("`{0}`: not an image or claim name (letters, digits and - . _ / : @)")]
+    K8sName(String),
 }
 
 /// Checks an `HH:MM:SS` time limit (hours any number of digits; minutes and seconds < 60).
@@ -236,13 +249,13 @@ impl SweepPlan {
 
     /// `submit.sh`: the `sbatch` lines with their dependencies, printing the job ids.
     pub fn slurm_submit(&self) -> Result<String, PlanError> {
-        let d = |f: &str| quote(path_str(&self.dir.join(f)).unwrap_or(f)).unwrap_or_default();
+        let d = |f: &str| -> Result<String, PlanError> { quote(path_str(&self.dir.join(f))?) };
         let mut s = String::from("#!/bin/bash\nset -euo pipefail\n");
         let dep = if self.demos.is_none() {
             let _ = writeln!(
                 s,
                 "EXPERT=$(sbatch --parsable {} | cut -d';' -f1)",
-                d("expert.sbatch")
+                d("expert.sbatch")?
             );
             s.push_str("echo \"expert job $EXPERT\"\n");
             "--dependency=afterok:$EXPERT "
@@ -255,8 +268,8 @@ impl SweepPlan {
              echo \"shards job $SHARDS\"\n\
              MERGE=$(sbatch --parsable --dependency=afterok:$SHARDS {} | cut -d';' -f1)\n\
              echo \"merge job $MERGE\"",
-            d("shards.sbatch"),
-            d("merge.sbatch")
+            d("shards.sbatch")?,
+            d("merge.sbatch")?
         );
         Ok(s)
     }
@@ -273,7 +286,16 @@ impl SweepPlan {
             learner: "learner".into(),
             ..self.clone()
         };
-        let dir = path_str(&self.dir)?;
+        for v in [image, claim] {
+            let ok = !v.is_empty()
+                && v.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-._/:@".contains(c));
+            if !ok {
+                return Err(PlanError::K8sName(v.into()));
+            }
+        }
+        // A JSON string is a YAML double-quoted scalar.
+        let dir = serde_json::to_string(path_str(&self.dir)?).expect("a string serialises");
         let job = |name: &str, extra: &str, script: &str| {
             let script: String = script.lines().map(|l| format!("          {l}\n")).collect();
             format!(
@@ -285,8 +307,6 @@ impl SweepPlan {
                  args:\n        - |\n          set -euo pipefail\n{script}        \
                  volumeMounts: [{{name: sweep, mountPath: {dir}}}]\n      \
                  volumes: [{{name: sweep, persistentVolumeClaim: {{claimName: {claim}}}}}]\n",
-                image = quote(image).unwrap_or_default(),
-                claim = quote(claim).unwrap_or_default(),
                 cpus = self.cpus,
             )
         };
@@ -501,7 +521,7 @@ mod tests {
             assert_eq!(k.matches("kind: Job").count(), 1, "{k}");
             assert!(k.contains("image: reg/learner:1\n"), "{k}");
             assert!(k.contains("claimName: sweep-pvc}"), "{k}");
-            assert!(k.contains("mountPath: /shared/sweep one}"), "{k}");
+            assert!(k.contains("mountPath: \"/shared/sweep one\"}"), "{k}");
             assert!(
                 !k.contains("/opt/learner"),
                 "learner from the image's PATH: {k}"
@@ -522,6 +542,13 @@ mod tests {
         assert!(jobs[2]
             .1
             .contains("learner experiment merge '/shared/sweep one/shard_1'"));
+        for bad in ["", "a b", "x\"y", "{}"] {
+            assert_eq!(
+                p.k8s_jobs(bad, "c").unwrap_err(),
+                PlanError::K8sName(bad.into())
+            );
+            assert!(p.k8s_jobs("i", bad).is_err());
+        }
         let sub = p.k8s_submit(&files).unwrap();
         let order: Vec<&str> = sub
             .lines()
