@@ -47,7 +47,7 @@ fn fresh_critic(
     eval: &Episode,
     steps: usize,
 ) -> anyhow::Result<()> {
-    use imitation::gaifo::{episode_transitions, expert_transitions, refit_critic};
+    use imitation::critic::{episode_transitions, expert_transitions, refit_critic};
     let expert = expert_transitions(run.demos());
     let ctrl = episode_transitions(noisy);
     let mut dcfg = run.discriminator().config().clone();

@@ -36,11 +36,12 @@ use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 
 use crate::controller::init_hold;
-use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
+use crate::cost::composite::{CompositeCost, CompositeWorkspace};
 use crate::cpu::thread_cpu_s;
+use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{
-    AdamConfig, Discriminator, DiscriminatorConfig, Normalizer, PenaltySpace, TrainStats,
+    AdamConfig, Discriminator, DiscriminatorConfig, PenaltySpace, TrainStats,
 };
 use crate::iteration::LqrIteration;
 use crate::learn::{Learn, LinGaussLearn};
@@ -277,109 +278,14 @@ impl GaifoLog {
     }
 }
 
-/// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row.
-pub fn expert_transitions(demos: &Demos) -> Mat<f64> {
-    let rows = demos.count * (demos.horizon - 1);
-    Mat::from_fn(rows, D_IN, |r, c| {
-        let (d, t) = (r / (demos.horizon - 1), r % (demos.horizon - 1));
-        if c < DX {
-            demos.state(d, t)[c]
-        } else {
-            demos.state(d, t + 1)[c - DX]
-        }
-    })
-}
-
-/// Controller transitions of the given episodes, one per row.
-pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
-    let t_len = episodes[0].horizon();
-    let rows = episodes.len() * (t_len - 1);
-    Mat::from_fn(rows, D_IN, |r, c| {
-        let (i, t) = (r / (t_len - 1), r % (t_len - 1));
-        let ep = &episodes[i];
-        if c < DX {
-            ep.x[t * DX + c]
-        } else {
-            ep.x[(t + 1) * DX + c - DX]
-        }
-    })
-}
-
-/// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
-/// that runs with different seeds get different critics. Shared with the PPO baseline.
-pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
-    let mut dcfg = dcfg.clone();
-    dcfg.seed = seed ^ dcfg.seed ^ 0x4352_4954; // "CRIT"
-    dcfg
-}
-
-/// The run's first critic: input normalisation fitted on the expert transitions `expert`,
-/// `dcfg` seeded from the run seed `seed` ([`critic_config`]); LQR+GAIfO, MDGPS and the PPO
-/// baseline start from it (docs/design.md §5 D2, D23).
-pub fn initial_critic(
-    expert: &Mat<f64>,
-    dcfg: &DiscriminatorConfig,
-    seed: u64,
-) -> Result<Discriminator, ImitationError> {
-    let norm = Normalizer::from_data(expert.as_ref())?;
-    Ok(Discriminator::new(D_IN, critic_config(dcfg, seed), norm)?)
-}
-
-/// A fresh critic (`dcfg`, weights drawn again from its seed) whose input normalisation is
-/// fitted on expert ∪ `controller` transitions; LQR+GAIfO and the PPO baseline call it once,
-/// on the first iteration's samples (docs/design.md §5 D2).
-pub fn refit_critic(
-    expert: &Mat<f64>,
-    controller: &Mat<f64>,
-    dcfg: &DiscriminatorConfig,
-) -> Result<Discriminator, ImitationError> {
-    let (ne, nc) = (expert.nrows(), controller.nrows());
-    let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
-        if r < ne {
-            expert[(r, c)]
-        } else {
-            controller[(r - ne, c)]
-        }
-    });
-    let norm = Normalizer::from_data(both.as_ref())?;
-    Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
-}
-
-/// Step 3 of Algorithm 1 (docs/design.md §1.3) at iteration `iteration`: `updates` (at least
-/// one) WGAN-GP calls on expert vs `controller` transitions at the learning rate
-/// `disc.config().adam.lr · 2^(−iteration / half_life)` (constant for `half_life` = 0;
-/// docs/design.md §5 D25); returns the last call's statistics. Shared with the PPO baseline.
-#[allow(clippy::too_many_arguments)]
-pub fn train_critic(
-    disc: &mut Discriminator,
-    ws: &mut crate::discriminator::Workspace,
-    expert: &Mat<f64>,
-    controller: &Mat<f64>,
-    updates: usize,
-    iteration: usize,
-    half_life: f64,
-) -> Result<TrainStats, ImitationError> {
-    if half_life > 0.0 {
-        let lr = disc.config().adam.lr * (-(iteration as f64) / half_life).exp2();
-        disc.set_learning_rate(lr)?;
-    }
-    let mut stats = None;
-    for _ in 0..updates.max(1) {
-        stats = Some(disc.train(expert.as_ref(), controller.as_ref(), ws)?);
-    }
-    Ok(stats.expect("at least one update"))
-}
-
 /// The state of an LQR+GAIfO run; [`LqrGaifo::learn`] runs steps 2–6 of Algorithm 1.
 pub struct LqrGaifo {
     cfg: GaifoConfig,
     task: TaskConfig,
     demos: Demos,
-    expert: Mat<f64>,
     lqr: LqrIteration,
-    disc: Discriminator,
+    critic: Critic,
     cost_ws: CompositeWorkspace,
-    disc_ws: crate::discriminator::Workspace,
 }
 
 impl LqrGaifo {
@@ -387,8 +293,8 @@ impl LqrGaifo {
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let expert = expert_transitions(&demos);
-        let disc = initial_critic(&expert, &cfg.discriminator, cfg.seed)?;
+        let critic = Critic::new(expert_transitions(&demos), &cfg.discriminator, cfg.seed)?
+            .with_schedule(cfg.critic_updates, cfg.critic_lr_half_life);
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),
@@ -402,14 +308,12 @@ impl LqrGaifo {
         );
         let pol = init_hold(&task, cfg.init_var);
         Ok(Self {
-            cost_ws: CompositeWorkspace::new(&disc).with_psd(cfg.psd_hessian),
-            disc_ws: disc.workspace(),
+            cost_ws: CompositeWorkspace::new(critic.discriminator()).with_psd(cfg.psd_hessian),
             lqr: LqrIteration::new(learner, pol, 0),
             cfg,
             task,
             demos,
-            expert,
-            disc,
+            critic,
         })
     }
 
@@ -420,7 +324,12 @@ impl LqrGaifo {
 
     /// The critic.
     pub fn discriminator(&self) -> &Discriminator {
-        &self.disc
+        self.critic.discriminator()
+    }
+
+    /// The critic with its expert transitions and schedule (its checkpoint: [`Critic::save`]).
+    pub fn critic(&self) -> &Critic {
+        &self.critic
     }
 
     /// The task being imitated.
@@ -453,28 +362,14 @@ impl LqrGaifo {
         self.iteration() >= self.cfg.iterations
     }
 
-    /// Rebuilds the critic with its input normalisation fitted on expert ∪ `controller`
-    /// transitions, once, on the first iteration's samples (docs/design.md §5 D2).
-    fn refit_normalizer(&mut self, controller: &Mat<f64>) -> Result<(), ImitationError> {
-        self.disc = refit_critic(&self.expert, controller, self.disc.config())?;
-        self.cost_ws = CompositeWorkspace::new(&self.disc).with_psd(self.cfg.psd_hessian);
-        Ok(())
-    }
-
-    /// Step 3 of Algorithm 1 (docs/design.md §1.3): `critic_updates` WGAN-GP calls on expert vs these transitions.
+    /// Step 3 of Algorithm 1 (docs/design.md §1.3): the critic's update on expert vs these
+    /// controller transitions ([`Critic::update`]: refitted at iteration 0, then
+    /// `critic_updates` WGAN-GP calls).
     pub fn update_discriminator(
         &mut self,
         controller: &Mat<f64>,
     ) -> Result<TrainStats, ImitationError> {
-        train_critic(
-            &mut self.disc,
-            &mut self.disc_ws,
-            &self.expert,
-            controller,
-            self.cfg.critic_updates,
-            self.lqr.iteration(),
-            self.cfg.critic_lr_half_life,
-        )
+        self.critic.update(controller, self.lqr.iteration())
     }
 
     /// Steps 2–6 of Algorithm 1 (docs/design.md §1.3) on the `episodes` (`cfg.samples` noisy ones) and the noise-free
@@ -509,14 +404,11 @@ impl LqrGaifo {
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
         let controller = episode_transitions(episodes);
-        if iteration == 0 {
-            self.refit_normalizer(&controller)?;
-        }
         let critic = self.update_discriminator(&controller)?;
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) and its second-order expansion.
         let t3 = Instant::now();
         let mut cost = CompositeCost {
-            disc: &self.disc,
+            disc: self.critic.discriminator(),
             ws: &mut self.cost_ws,
         };
         self.lqr.expand(&mut cost, episodes);
@@ -560,23 +452,13 @@ impl LqrGaifo {
         disc: Discriminator,
     ) -> Result<Self, ImitationError> {
         let mut run = Self::new(cfg, demos)?;
-        let expected = critic_config(&run.cfg.discriminator, run.cfg.seed);
-        if *disc.config() != expected {
-            return Err(ImitationError::Checkpoint(format!(
-                "the critic was trained with other [discriminator] settings or another seed than \
-                 this run's (seed {}): resume with the run's own --config and --seed",
-                run.cfg.seed
-            )));
-        }
+        run.critic.restore(disc)?;
         run.lqr.restore(snap).map_err(|e| {
             ImitationError::Checkpoint(format!(
                 "{e} (a checkpoint of another task horizon or other settings: resume with the \
                  run's own demonstrations and --config)"
             ))
         })?;
-        run.cost_ws = CompositeWorkspace::new(&disc).with_psd(run.cfg.psd_hessian);
-        run.disc_ws = disc.workspace();
-        run.disc = disc;
         Ok(run)
     }
 }

@@ -5,6 +5,8 @@
 //! - [`rollout`]: step 1, the one episode loop over an [`rollout::Arm`] and a
 //!   [`rollout::Policy`]; [`rollout::Episode`] and GPS's [`rollout::SampleList`];
 //! - [`discriminator`]: the WGAN-GP critic D(s, s') (MLP, Adam, persistence), step 3;
+//! - [`critic`]: its one trainer (refit at iteration 0, the per-iteration update, checkpoint),
+//!   owned by each of LQR+GAIfO, MDGPS and GAIfO (PPO);
 //! - [`cost`]: the true task cost ([`cost::task`], the expert's) and the composite cost
 //!   C_t(s, a) = D(s, F_t [s; a] + f_t) with its expansion ([`cost::composite`]), steps 4–5;
 //! - [`iteration`]: step 6 shared by both LQR learners (cost averaging, step size, KL-bounded
@@ -22,6 +24,7 @@
 pub mod controller;
 pub mod cost;
 pub mod cpu;
+pub mod critic;
 pub mod demos;
 pub mod discriminator;
 pub mod error;

@@ -40,12 +40,10 @@ use ur5_shared::noise::Noise;
 
 use crate::controller::{init_hold, to_gain_table};
 use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
+use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
-use crate::discriminator::{Discriminator, Normalizer, TrainStats};
-use crate::gaifo::{
-    episode_transitions, expert_transitions, initial_critic, refit_critic, train_critic,
-    GaifoConfig,
-};
+use crate::discriminator::{Normalizer, TrainStats};
+use crate::gaifo::GaifoConfig;
 use crate::iteration::LqrIteration;
 use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
 use crate::ImitationError;
@@ -176,10 +174,8 @@ struct Condition {
 pub struct Mdgps {
     cfg: MdgpsConfig,
     conds: Vec<Condition>,
-    expert: Mat<f64>,
-    disc: Discriminator,
+    critic: Critic,
     cost_ws: CompositeWorkspace,
-    disc_ws: crate::discriminator::Workspace,
     policy: GlobalPolicy,
     opt: PolicyOpt,
     iteration: usize,
@@ -205,7 +201,8 @@ impl Mdgps {
         }
         let g = &cfg.lqr_gaifo;
         let expert = stack(&demos.iter().map(expert_transitions).collect::<Vec<_>>());
-        let disc = initial_critic(&expert, &g.discriminator, g.seed)?;
+        let critic = Critic::new(expert, &g.discriminator, g.seed)?
+            .with_schedule(g.critic_updates, g.critic_lr_half_life);
         let mut conds = Vec::with_capacity(demos.len());
         for (m, d) in demos.into_iter().enumerate() {
             let task = d.task()?;
@@ -237,12 +234,10 @@ impl Mdgps {
         );
         Ok(Self {
             opt: PolicyOpt::new(cfg.policy.clone(), &policy, g.seed ^ SEED_SSTEP),
-            cost_ws: CompositeWorkspace::new(&disc).with_psd(g.psd_hessian),
-            disc_ws: disc.workspace(),
+            cost_ws: CompositeWorkspace::new(critic.discriminator()).with_psd(g.psd_hessian),
             cfg,
             conds,
-            expert,
-            disc,
+            critic,
             policy,
             iteration: 0,
         })
@@ -271,6 +266,11 @@ impl Mdgps {
     /// The controller condition `m` executes next.
     pub fn controller(&self, m: usize) -> &LinGaussPolicy {
         self.conds[m].lqr.policy()
+    }
+
+    /// The one critic of every condition (its checkpoint: [`Critic::save`]).
+    pub fn critic(&self) -> &Critic {
+        &self.critic
     }
 
     /// The global policy.
@@ -419,28 +419,14 @@ impl Mdgps {
         samples: &[Vec<Episode>],
     ) -> Result<TrainStats, ImitationError> {
         let controller = episode_transitions(&samples.concat());
-        if self.iteration == 0 {
-            self.disc = refit_critic(&self.expert, &controller, self.disc.config())?;
-            self.cost_ws =
-                CompositeWorkspace::new(&self.disc).with_psd(self.cfg.lqr_gaifo.psd_hessian);
-        }
-        let g = &self.cfg.lqr_gaifo;
-        train_critic(
-            &mut self.disc,
-            &mut self.disc_ws,
-            &self.expert,
-            &controller,
-            g.critic_updates,
-            self.iteration,
-            g.critic_lr_half_life,
-        )
+        self.critic.update(&controller, self.iteration)
     }
 
     /// Steps 4–5: each condition's composite cost expanded around its samples.
     fn expand_costs(&mut self, samples: &[Vec<Episode>]) {
         for (c, eps) in self.conds.iter_mut().zip(samples) {
             let mut cost = CompositeCost {
-                disc: &self.disc,
+                disc: self.critic.discriminator(),
                 ws: &mut self.cost_ws,
             };
             c.lqr.expand(&mut cost, eps);
