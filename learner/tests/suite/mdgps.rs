@@ -425,3 +425,105 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
     // (A gain table passed as a policy: learner/tests/suite/replay.rs.)
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The tiny run of `a_tiny_mdgps_run_is_reproducible_bit_for_bit`, 4 iterations; with
+/// `stop = Some(i)` it is checkpointed after i iterations (learner state file and critic
+/// file, as `learner train` writes them), dropped, and continued from the files.
+fn tiny_run_resumed(
+    cfg: &MdgpsConfig,
+    demos: &[Demos],
+    stop: Option<usize>,
+) -> (Vec<f64>, Vec<String>, Vec<String>) {
+    let mut m = Mdgps::new(cfg.clone(), demos.to_vec()).unwrap();
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let mut logs = Vec::new();
+    for i in 0..4 {
+        if stop == Some(i) {
+            let dir = tmp(&format!("resume-{i}"));
+            let (state, critic) = (dir.join("state.npz"), dir.join("critic.json"));
+            learner::io::checkpoint::save_state(&state, &m.snapshot()).unwrap();
+            m.critic().save(&critic).unwrap();
+            drop(m);
+            let snap = learner::io::checkpoint::load_state(&state).unwrap();
+            let disc = imitation::discriminator::Discriminator::load(&critic, 24).unwrap();
+            m = Mdgps::from_snapshot(cfg.clone(), demos.to_vec(), &snap, disc).unwrap();
+            assert_eq!(m.iteration(), i);
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
+        let (samples, evals) = m.execute(&arm).unwrap();
+        let mut l = m.learn(&samples, &evals, 0.0).unwrap();
+        (l.t_dynamics, l.t_critic, l.t_cost, l.t_lqr, l.t_policy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        logs.push(format!("{l:?}"));
+    }
+    let ctrl = (0..m.conditions())
+        .map(|c| format!("{:?}", m.controller(c)))
+        .collect();
+    (m.policy().flat(), ctrl, logs)
+}
+
+fn tiny_config() -> MdgpsConfig {
+    let mut cfg = MdgpsConfig::default();
+    cfg.lqr_gaifo.samples = 3;
+    cfg.lqr_gaifo.seed = 9;
+    cfg.lqr_gaifo.discriminator.n_critic = 5;
+    cfg.policy.hidden = vec![8];
+    cfg.policy.steps = 20;
+    cfg
+}
+
+#[test]
+fn a_tiny_mdgps_run_resumed_at_any_iteration_boundary_is_the_same_bit_for_bit() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let whole = tiny_run_resumed(&cfg, &demos, None);
+    for stop in 0..4 {
+        let resumed = tiny_run_resumed(&cfg, &demos, Some(stop));
+        assert_eq!(
+            resumed.0, whole.0,
+            "policy, resumed after {stop} iterations"
+        );
+        assert_eq!(resumed.1, whole.1, "controllers, resumed after {stop}");
+        assert_eq!(resumed.2, whole.2, "logs, resumed after {stop}");
+    }
+}
+
+#[test]
+fn an_mdgps_resume_that_cannot_be_exact_is_refused() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let (samples, evals) = m.execute(&arm).unwrap();
+    m.learn(&samples, &evals, 0.0).unwrap();
+    let (snap, disc) = (m.snapshot(), m.critic().discriminator().clone());
+    let refuse = |cfg: &MdgpsConfig, demos: &[Demos], snap: &gps::snapshot::Snapshot| {
+        match Mdgps::from_snapshot(cfg.clone(), demos.to_vec(), snap, disc.clone()) {
+            Ok(_) => panic!("resumed"),
+            Err(e) => e.to_string(),
+        }
+    };
+    // One goal fewer than the checkpoint's.
+    let e = refuse(&cfg, &demos[..1], &snap);
+    assert!(e.contains("more conditions"), "{e}");
+    // Another policy size.
+    let mut other = cfg.clone();
+    other.policy.hidden = vec![9];
+    let e = refuse(&other, &demos, &snap);
+    assert!(e.contains("mdgps.policy"), "{e}");
+    // Another horizon.
+    let short = vec![tiny_demos(goals[0], 10), tiny_demos(goals[4], 10)];
+    let e = refuse(&cfg, &short, &snap);
+    assert!(e.contains("condition 0"), "{e}");
+    // Another seed: the critic is refused.
+    let mut seed = cfg.clone();
+    seed.lqr_gaifo.seed = 10;
+    let e = refuse(&seed, &demos, &snap);
+    assert!(e.contains("seed 10"), "{e}");
+    // A damaged state: the S-step's RNG missing.
+    let mut damaged = snap.clone();
+    damaged.words.remove("s_step.rng");
+    let e = refuse(&cfg, &demos, &damaged);
+    assert!(e.contains("s_step.rng"), "{e}");
+}

@@ -26,6 +26,7 @@
 //! seed gives the same run bit for bit.
 
 pub mod policy;
+mod resume;
 pub mod s_step;
 
 use std::time::Instant;
