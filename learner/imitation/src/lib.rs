@@ -12,7 +12,8 @@
 //! - [`iteration`]: step 6 shared by both LQR learners (cost averaging, step size, KL-bounded
 //!   LQR);
 //! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
-//! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`];
+//! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`]; its log row
+//!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
@@ -31,6 +32,7 @@ pub mod error;
 pub mod expert;
 pub mod gaifo;
 pub mod iteration;
+pub mod iteration_log;
 pub mod learn;
 pub mod mdgps;
 pub mod ppo;

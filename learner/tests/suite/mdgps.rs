@@ -285,12 +285,7 @@ fn tiny_demos(goal: [f64; 3], horizon: usize) -> Demos {
 fn a_tiny_mdgps_run_is_reproducible_bit_for_bit() {
     let goals = square_goals(TaskConfig::default().goal, 0.1);
     let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
-    let mut cfg = MdgpsConfig::default();
-    cfg.lqr_gaifo.samples = 3;
-    cfg.lqr_gaifo.seed = 9;
-    cfg.lqr_gaifo.discriminator.n_critic = 5;
-    cfg.policy.hidden = vec![8];
-    cfg.policy.steps = 20;
+    let mut cfg = tiny_config();
     let run = |cfg: &MdgpsConfig| {
         let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
         let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
@@ -461,6 +456,8 @@ fn tiny_run_resumed(
     (m.policy().flat(), ctrl, logs)
 }
 
+/// The tiny run's settings: 2 goals, N = 3, a critic of 5 steps, a policy of one hidden
+/// layer of 8 and 20 S-step steps.
 fn tiny_config() -> MdgpsConfig {
     let mut cfg = MdgpsConfig::default();
     cfg.lqr_gaifo.samples = 3;
