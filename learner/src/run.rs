@@ -227,10 +227,10 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
         let (seed, task) = (run.seed(), run.task().clone());
         let mut recorded: anyhow::Result<()> = Ok(());
         let run_dir = csv.as_ref().map(|(_, d)| d.to_path_buf());
-        let (log, _) = iterate_observed(run, arm, &mut |noisy, eval| {
+        let (log, _) = iterate_observed(run, arm, &mut |noisy, evals| {
             let Some(rec) = recorder.as_mut() else { return };
             // Numbered as a controller started with version 1 numbers its episodes.
-            for (k, ep) in noisy.iter().chain([eval]).enumerate() {
+            for (k, ep) in noisy.iter().chain(evals).enumerate() {
                 let origin = EpisodeOrigin {
                     table_version: version,
                     table_epoch: 0,

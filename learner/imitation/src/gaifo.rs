@@ -391,16 +391,16 @@ impl Learn for LqrGaifo {
     fn done(&self) -> bool {
         LqrGaifo::done(self)
     }
-    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         crate::learn::execute_table(self, arms)
     }
-    fn learn(
+    fn learn_goals(
         &mut self,
         noisy: &[Episode],
-        eval: &Episode,
+        evals: &[Episode],
         t_execute: f64,
     ) -> Result<GaifoLog, ImitationError> {
-        LqrGaifo::learn(self, noisy, eval, t_execute)
+        LqrGaifo::learn(self, noisy, crate::learn::single_eval(evals)?, t_execute)
     }
     fn eval_cost(log: &GaifoLog) -> f64 {
         log.task_cost

@@ -14,7 +14,7 @@ use imitation::demos::Demos;
 use imitation::expert::{record_demos, square_goals, ExpertConfig};
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use imitation::mdgps::s_step::{PolicyOpt, PolicyOptConfig, Targets};
-use imitation::mdgps::{Mdgps, MdgpsConfig};
+use imitation::mdgps::{Mdgps, MdgpsConfig, MdgpsLog};
 use learner::arm::SimArm;
 use learner::experiment::multi_goal::eval_goals;
 use learner::io::policy::{load_policy, save_policy, PolicyFile};
@@ -422,6 +422,58 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
 }
 
 /// The tiny run of `a_tiny_mdgps_run_is_reproducible_bit_for_bit`, 4 iterations; with
+/// MDGPS through the one driver interface ([`imitation::learn::iterate`]: `Learn::execute`,
+/// its noisy episodes condition after condition, and `Learn::learn_goals`) is its own
+/// `execute` and `learn` bit for bit; its goals are the conditions', and episodes of another
+/// count are refused.
+#[test]
+fn mdgps_through_learn_is_its_own_execute_and_learn() {
+    use imitation::learn::{iterate, Learn};
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let mut cfg = tiny_config();
+    cfg.lqr_gaifo.iterations = 2;
+    let untimed = |mut l: MdgpsLog| {
+        (l.t_execute, l.t_dynamics, l.t_critic) = (0.0, 0.0, 0.0);
+        (l.t_cost, l.t_lqr, l.t_policy) = (0.0, 0.0, 0.0);
+        format!("{l:?}")
+    };
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let mut a = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let mut b = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let tasks: Vec<[f64; 3]> = a.goal_tasks().iter().map(|t| t.goal).collect();
+    assert_eq!(tasks, vec![goals[0], goals[4]]);
+    while !Learn::done(&a) {
+        let (la, ea) = iterate(&mut a, &arm).unwrap();
+        let (samples, evals) = b.execute(&arm).unwrap();
+        let lb = b.learn(&samples, &evals, 0.0).unwrap();
+        assert_eq!(ea, evals);
+        let mean = la.task_cost.iter().sum::<f64>() / 2.0;
+        assert_eq!(Mdgps::eval_cost(&la).to_bits(), mean.to_bits());
+        assert_eq!(untimed(la), untimed(lb));
+    }
+    assert_eq!((Learn::iteration(&a), Learn::version(&a)), (2, 3));
+    assert_eq!(a.policy().flat(), b.policy().flat());
+    for m in 0..2 {
+        assert_eq!(a.controller(m), b.controller(m));
+    }
+    let (noisy, evals) = Learn::execute(&mut a, &arm).unwrap();
+    assert_eq!((noisy.len(), evals.len()), (6, 2));
+    let e = a.learn_goals(&noisy, &evals[..1], 0.0).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("one evaluation episode per condition"),
+        "{e}"
+    );
+    let e = a.learn_goals(&noisy[..5], &evals, 0.0).unwrap_err();
+    assert!(e.to_string().contains("3 noisy episodes"), "{e}");
+    assert_eq!(
+        Learn::iteration(&a),
+        2,
+        "a refused iteration changes nothing"
+    );
+}
+
 /// `stop = Some(i)` it is checkpointed after i iterations (learner state file and critic
 /// file, as `learner train` writes them), dropped, and continued from the files.
 fn tiny_run_resumed(

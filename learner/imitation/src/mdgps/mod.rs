@@ -35,7 +35,7 @@ use faer::Mat;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use ur5_shared::config::{ActionMode, TaskConfig};
+use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 use ur5_shared::noise::Noise;
 
@@ -46,6 +46,7 @@ use crate::demos::Demos;
 use crate::discriminator::{Normalizer, TrainStats};
 use crate::gaifo::GaifoConfig;
 use crate::iteration::LqrIteration;
+use crate::learn::Learn;
 use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
@@ -563,6 +564,56 @@ impl Mdgps {
             s_loss_after: s.loss_after,
             ..MdgpsLog::default()
         }
+    }
+}
+
+/// MDGPS through the one driver interface: its goals are the conditions, its noisy episodes
+/// the controllers' (condition-major), its evaluations the global policy's, one per condition.
+impl Learn for Mdgps {
+    type Log = MdgpsLog;
+    const ALGO: &'static str = "mdgps";
+
+    /// Condition 0's task (every condition shares its start pose, T and dt).
+    fn task(&self) -> &TaskConfig {
+        &self.conds[0].task
+    }
+    fn goal_tasks(&self) -> Vec<&TaskConfig> {
+        self.conds.iter().map(|c| &c.task).collect()
+    }
+    fn sim_config(&self) -> &SimConfig {
+        &self.cfg.lqr_gaifo.sim
+    }
+    fn samples(&self) -> usize {
+        self.cfg.lqr_gaifo.samples
+    }
+    fn seed(&self) -> u64 {
+        self.cfg.lqr_gaifo.seed
+    }
+    fn iteration(&self) -> usize {
+        self.iteration
+    }
+    fn done(&self) -> bool {
+        self.iteration >= self.cfg.lqr_gaifo.iterations
+    }
+    /// [`Mdgps::execute`], its noisy episodes concatenated in condition order.
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
+        let (samples, evals) = Mdgps::execute(self, arms)?;
+        Ok((samples.into_iter().flatten().collect(), evals))
+    }
+    /// [`Mdgps::learn`] on the noisy episodes split into the conditions' (N each).
+    fn learn_goals(
+        &mut self,
+        noisy: &[Episode],
+        evals: &[Episode],
+        t_execute: f64,
+    ) -> Result<MdgpsLog, ImitationError> {
+        let n = self.cfg.lqr_gaifo.samples.max(1);
+        let samples: Vec<Vec<Episode>> = noisy.chunks(n).map(<[Episode]>::to_vec).collect();
+        Mdgps::learn(self, &samples, evals, t_execute)
+    }
+    /// Mean task cost of the policy's evaluations.
+    fn eval_cost(log: &MdgpsLog) -> f64 {
+        mean(&log.task_cost)
     }
 }
 

@@ -225,19 +225,21 @@ impl Learn for GaifoPpo {
     }
 
     /// Step 1: the MLP policy with noise, and its mean for the evaluation.
-    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         let (version, seed, n) = (self.version(), self.cfg.seed, self.cfg.samples);
         let (pol, _) = self.ppo.policy_and_workspace();
-        execute_mlp(arms, &self.task, pol, version, seed, n)
+        let (noisy, eval) = execute_mlp(arms, &self.task, pol, version, seed, n)?;
+        Ok((noisy, vec![eval]))
     }
 
     /// Steps 3, 4 and 6 of the module docs on the episodes of the current policy.
-    fn learn(
+    fn learn_goals(
         &mut self,
         episodes: &[Episode],
-        eval: &Episode,
+        evals: &[Episode],
         t_execute: f64,
     ) -> Result<GaifoLog, ImitationError> {
+        let eval = crate::learn::single_eval(evals)?;
         // 3. Update the critic on (s, s') of the policy vs the expert.
         let t1 = Instant::now();
         let c1 = crate::cpu::thread_cpu_s();
