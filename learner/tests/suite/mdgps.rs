@@ -508,6 +508,79 @@ fn tiny_run_resumed(
     (m.policy().flat(), ctrl, logs)
 }
 
+/// A tiny run of 4 iterations as the app runs it: `learner::run`'s checkpoint files
+/// (`iter_NNN_critic.json`, then `iter_NNN_state.npz`) written into `dir` before every
+/// iteration and after the last. With `kill = Some(i)` the process is taken as killed after
+/// checkpoint i and the critic file of checkpoint i + 1 (a kill between its two files), and the
+/// run continued from `dir` by `learner::run::resume_mdgps`.
+fn app_run(
+    cfg: &MdgpsConfig,
+    demos: &[Demos],
+    dir: &Path,
+    kill: Option<usize>,
+) -> (Vec<f64>, Vec<String>, Vec<String>) {
+    use imitation::learn::iterate;
+    use learner::run::Checkpoint;
+    let _ = std::fs::remove_dir_all(dir);
+    let mut m = Mdgps::new(cfg.clone(), demos.to_vec()).unwrap();
+    let mut arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let mut logs = Vec::new();
+    for i in 0..=4 {
+        m.checkpoint(dir, Some(&arm)).unwrap();
+        if kill == Some(i) {
+            m.critic()
+                .save(&dir.join(format!("iter_{:03}_critic.json", i + 1)))
+                .unwrap();
+            drop(m);
+            let (resumed, noise) =
+                learner::run::resume_mdgps(cfg.clone(), demos.to_vec(), dir).unwrap();
+            m = resumed;
+            assert_eq!(m.iteration(), i, "the latest complete checkpoint");
+            arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+            arm.sim_mut()
+                .set_noise_position(noise.expect("the arm's noise position"));
+        }
+        if i == 4 {
+            break;
+        }
+        let (mut l, _) = iterate(&mut m, &arm).unwrap();
+        (l.t_execute, l.t_dynamics, l.t_critic) = (0.0, 0.0, 0.0);
+        (l.t_cost, l.t_lqr, l.t_policy) = (0.0, 0.0, 0.0);
+        logs.push(format!("{l:?}"));
+    }
+    let ctrl = (0..m.conditions())
+        .map(|c| format!("{:?}", m.controller(c)))
+        .collect();
+    (m.policy().flat(), ctrl, logs)
+}
+
+#[test]
+fn an_mdgps_run_killed_at_any_checkpoint_and_resumed_by_the_app_is_the_same_bit_for_bit() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let dir = tmp("app-resume");
+    let whole = app_run(&cfg, &demos, &dir, None);
+    assert_eq!(whole.2.len(), 4);
+    assert!(dir.join("iter_004_state.npz").is_file());
+    for kill in 0..4 {
+        let resumed = app_run(&cfg, &demos, &dir, Some(kill));
+        assert_eq!(resumed.0, whole.0, "policy, killed after checkpoint {kill}");
+        assert_eq!(
+            resumed.1, whole.1,
+            "controllers, killed after checkpoint {kill}"
+        );
+        assert_eq!(resumed.2, whole.2, "logs, killed after checkpoint {kill}");
+    }
+    let mut other = cfg.clone();
+    other.lqr_gaifo.seed += 1;
+    let e = learner::run::resume_mdgps(other, demos.clone(), &dir)
+        .err()
+        .expect("another seed refused");
+    assert!(format!("{e:#}").contains("iter_004_state.npz"), "{e:#}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The tiny run's settings: 2 goals, N = 3, a critic of 5 steps, a policy of one hidden
 /// layer of 8 and 20 S-step steps.
 fn tiny_config() -> MdgpsConfig {
