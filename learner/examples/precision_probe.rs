@@ -47,7 +47,7 @@ fn fresh_critic(
     eval: &Episode,
     steps: usize,
 ) -> anyhow::Result<()> {
-    use imitation::gaifo::{episode_transitions, expert_transitions, refit_critic};
+    use imitation::critic::{episode_transitions, expert_transitions, refit_critic};
     let expert = expert_transitions(run.demos());
     let ctrl = episode_transitions(noisy);
     let mut dcfg = run.discriminator().config().clone();
@@ -117,7 +117,8 @@ fn main() -> anyhow::Result<()> {
     let arm = arm_for(&run)?;
     println!("it  eval_mm  noisy_mm(mean sd)  sd_end_mrad  D(eval)-D(demo)  dD/dr(eval)  dD/dr(demo)  W1     eta");
     for _ in 0..iters {
-        let (noisy, eval) = run.execute(&arm)?;
+        let (noisy, evals) = run.execute(&arm)?;
+        let eval = &evals[0];
         let pol = run.policy();
         let sd_end = {
             let c = pol.pol_covar.slice(t_len - 2);
@@ -126,13 +127,13 @@ fn main() -> anyhow::Result<()> {
         let fd: Vec<f64> = noisy.iter().map(Episode::final_distance).collect();
         let m = fd.iter().sum::<f64>() / fd.len() as f64;
         let sd = (fd.iter().map(|d| (d - m) * (d - m)).sum::<f64>() / fd.len() as f64).sqrt();
-        let log = run.learn(&noisy, &eval, 0.0)?;
+        let log = run.learn(&noisy, eval, 0.0)?;
         if log.iteration + 1 == iters {
             if let Some(steps) = std::env::var("PROBE_FRESH")
                 .ok()
                 .and_then(|v| v.parse::<usize>().ok())
             {
-                fresh_critic(&run, &noisy, &eval, steps)?;
+                fresh_critic(&run, &noisy, eval, steps)?;
             }
         }
         let end = eval.state(t_len - 1);

@@ -14,6 +14,7 @@ use imitation::expert::{
 };
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
 use imitation::learn::{iterate_observed, Learn};
+use imitation::mdgps::{Mdgps, MdgpsConfig};
 use imitation::ppo::gaifo_ppo::GaifoPpo;
 use imitation::ppo::UpdateStats;
 use serde::Serialize;
@@ -64,14 +65,39 @@ impl Checkpoint for LqrGaifo {
         )?;
         let critic = checkpoint_file(dir, i, "critic.json");
         self.discriminator().save(&critic)?;
-        let mut snap = self.snapshot();
-        if let Some(arm) = arm {
-            let pos = arm.sim().noise_position();
-            snap.put_words(ARM_NOISE, &[pos as u64, (pos >> 64) as u64]);
-        }
-        save_state(&checkpoint_file(dir, i, "state.npz"), &snap)?;
+        save_state(
+            &checkpoint_file(dir, i, "state.npz"),
+            &with_arm_noise(self.snapshot(), arm),
+        )?;
         Ok((table, critic))
     }
+}
+
+impl Checkpoint for Mdgps {
+    /// `iter_NNN_critic.json` (the one critic) and, last, `iter_NNN_state.npz` (the rest of the
+    /// learner state, [`Mdgps::snapshot`]: the policy, its S-step and every condition's LQR
+    /// state, and the arm's noise position), NNN = iterations done; each written atomically.
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
+        crate::io::create_dir(dir)?;
+        let i = self.iteration();
+        let critic = checkpoint_file(dir, i, "critic.json");
+        self.critic().save(&critic)?;
+        let state = checkpoint_file(dir, i, "state.npz");
+        save_state(&state, &with_arm_noise(self.snapshot(), arm))?;
+        Ok((state, critic))
+    }
+}
+
+/// `snap` with the in-process `arm`'s noise position (entry [`ARM_NOISE`]) when there is one.
+fn with_arm_noise(
+    mut snap: gps::snapshot::Snapshot,
+    arm: Option<&SimArm>,
+) -> gps::snapshot::Snapshot {
+    if let Some(arm) = arm {
+        let pos = arm.sim().noise_position();
+        snap.put_words(ARM_NOISE, &[pos as u64, (pos >> 64) as u64]);
+    }
+    snap
 }
 
 impl Checkpoint for GaifoPpo {
@@ -154,10 +180,44 @@ pub fn resume(
     demos: Demos,
     dir: &Path,
 ) -> anyhow::Result<(LqrGaifo, Option<u128>)> {
+    let (snap, disc, arm, state_path) = load_checkpoint(dir, "lqr.iteration")?;
+    let run = LqrGaifo::from_snapshot(cfg, demos, &snap, disc)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?;
+    Ok((run, arm))
+}
+
+/// Continues an MDGPS run exactly from the latest checkpoint in `dir` ([`latest_checkpoint`],
+/// written by [`Checkpoint::checkpoint`] of [`Mdgps`]): [`Mdgps::from_snapshot`] on the state
+/// and critic files; also returns the in-process arm's noise position when the checkpoint holds
+/// one. `cfg` and `demos` must be the run's own (goals, policy size, horizon and seed are
+/// checked).
+pub fn resume_mdgps(
+    cfg: MdgpsConfig,
+    demos: Vec<Demos>,
+    dir: &Path,
+) -> anyhow::Result<(Mdgps, Option<u128>)> {
+    let (snap, disc, arm, state_path) = load_checkpoint(dir, "mdgps.iteration")?;
+    let run = Mdgps::from_snapshot(cfg, demos, &snap, disc)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?;
+    Ok((run, arm))
+}
+
+/// The latest checkpoint in `dir`: its learner state (whose iteration, entry `iteration_key`,
+/// must be the one its name says), critic, the arm's noise position when it holds one, and the
+/// state file's path.
+fn load_checkpoint(
+    dir: &Path,
+    iteration_key: &str,
+) -> anyhow::Result<(
+    gps::snapshot::Snapshot,
+    Discriminator,
+    Option<u128>,
+    PathBuf,
+)> {
     let (iteration, state_path, critic_path) = latest_checkpoint(dir)?;
     let snap = load_state(&state_path)?;
     let at = snap
-        .words("lqr.iteration", 1)
+        .words(iteration_key, 1)
         .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?[0];
     anyhow::ensure!(
         at == iteration as u64,
@@ -175,9 +235,7 @@ pub fn resume(
     };
     let disc = Discriminator::load(&critic_path, D_IN)
         .with_context(|| format!("resuming from {}", critic_path.display()))?;
-    let run = LqrGaifo::from_snapshot(cfg, demos, &snap, disc)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?;
-    Ok((run, arm))
+    Ok((snap, disc, arm, state_path))
 }
 
 /// Runs `iterations` iterations of `run` on `arm`, calling `progress` after each, writing
@@ -227,10 +285,10 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
         let (seed, task) = (run.seed(), run.task().clone());
         let mut recorded: anyhow::Result<()> = Ok(());
         let run_dir = csv.as_ref().map(|(_, d)| d.to_path_buf());
-        let (log, _) = iterate_observed(run, arm, &mut |noisy, eval| {
+        let (log, _) = iterate_observed(run, arm, &mut |noisy, evals| {
             let Some(rec) = recorder.as_mut() else { return };
             // Numbered as a controller started with version 1 numbers its episodes.
-            for (k, ep) in noisy.iter().chain([eval]).enumerate() {
+            for (k, ep) in noisy.iter().chain(evals).enumerate() {
                 let origin = EpisodeOrigin {
                     table_version: version,
                     table_epoch: 0,

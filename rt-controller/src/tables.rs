@@ -98,11 +98,11 @@ impl Active<'_> {
         }
     }
 
-    /// The table's publication of its version ([`GainTable::epoch`]; 0 for a policy table).
+    /// The table's publication of its version ([`GainTable::epoch`], [`PolicyTable::epoch`]).
     pub fn epoch(&self) -> u32 {
         match self {
             Active::Gains(t) => t.epoch,
-            Active::Policy(_) => 0,
+            Active::Policy(p) => p.epoch,
         }
     }
 }
@@ -186,7 +186,7 @@ impl TableBuffer {
         incoming: &PolicyTable,
         now: impl Fn() -> u64,
     ) -> Result<Offer, Rejection> {
-        if let Some(r) = self.check_version(incoming.version, 0) {
+        if let Some(r) = self.check_version(incoming.version, incoming.epoch) {
             return r;
         }
         let inactive = self.inactive(Kind::Policy);
@@ -297,6 +297,19 @@ mod tests {
             b.offer_policy(&policy(2, 0.25), clock),
             Ok(Offer::Unchanged)
         );
+        // The same policy version published again by a resumed learner (a later epoch) is
+        // taken again, as a gain table's is; an earlier or the same epoch is not.
+        let mut again = policy(2, 0.25);
+        again.epoch = 3;
+        assert!(matches!(
+            b.offer_policy(&again, clock),
+            Ok(Offer::Swapped { .. })
+        ));
+        assert_eq!(b.active().map(|a| a.epoch()), Some(3));
+        again.epoch = 2;
+        assert_eq!(b.offer_policy(&again, clock), Ok(Offer::Unchanged));
+        again.epoch = 3;
+        assert_eq!(b.offer_policy(&again, clock), Ok(Offer::Unchanged));
         assert!(matches!(
             b.offer(&table(1, 100, 0.5), clock),
             Err(Rejection::StaleVersion {

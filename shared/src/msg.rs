@@ -33,8 +33,9 @@ pub struct StepSample {
     pub t: u32,
     /// 1 if `a` included exploration noise L_t ε, 0 for the noise-free evaluation run.
     pub noise: u32,
-    /// [`crate::GainTable::epoch`] of the table that computed `a` (0 for a policy table): which
-    /// publication of `table_version` the episode ran (`StepSample.v2`; v1 had no such field).
+    /// [`crate::GainTable::epoch`] or [`crate::PolicyTable::epoch`] of the table that computed
+    /// `a`: which publication of `table_version` the episode ran (`StepSample.v2`; v1 had no
+    /// such field).
     pub table_epoch: u32,
     /// Keeps the layout free of implicit padding; write 0.
     pub reserved: u32,

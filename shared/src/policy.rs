@@ -28,7 +28,7 @@
 //!
 //! XXH3-64 (seed 0) of `version` (u64), `dx`, `du`, `action_mode`, `n_hidden`, `hidden[0..4]`,
 //! `n_params` (u32 each), then `params[..n_params]` as IEEE-754 bit patterns, all little-endian
-//! (52 + 8·P bytes): on a little-endian machine the raw bytes of those fields. The reserved
+//! (52 + 8·P bytes): on a little-endian machine the raw bytes of those fields. The `epoch`
 //! field, the checksum itself and `params[n_params..]` are not covered.
 //!
 //! # Size
@@ -98,8 +98,12 @@ pub struct PolicyTable {
     pub hidden: [u32; MAX_HIDDEN_LAYERS],
     /// Length of θ; must equal [`flat_len`] of the hidden widths.
     pub n_params: u32,
-    /// Write 0. Not hashed.
-    pub reserved: u32,
+    /// Publication of this version, as [`crate::GainTable::epoch`]: 0 when the learner first
+    /// publishes it; a resumed learner publishes the same version again with a higher epoch,
+    /// and a controller running the version takes it again and restarts the version's episode
+    /// count k. Echoed in [`crate::StepSample::table_epoch`]. Not hashed; tables written before
+    /// it had 0 here (the old `reserved`).
+    pub epoch: u32,
     /// XXH3-64 checksum (module docs), set by [`PolicyTable::seal`].
     pub checksum: u64,
     /// θ in `params[..n_params]` (module docs); the rest is unused.
@@ -381,7 +385,7 @@ impl PolicyTable {
             *w = h as u32;
         }
         self.n_params = expected as u32;
-        self.reserved = 0;
+        self.epoch = 0;
         self.params[..expected].copy_from_slice(theta);
         self.params[expected..].fill(0.0);
         self.seal();
@@ -398,7 +402,7 @@ impl PolicyTable {
         self.n_hidden = src.n_hidden;
         self.hidden = src.hidden;
         self.n_params = src.n_params;
-        self.reserved = src.reserved;
+        self.epoch = src.epoch;
         self.checksum = src.checksum;
         self.params[..n].copy_from_slice(&src.params[..n]);
     }
@@ -660,6 +664,15 @@ pub(crate) mod tests {
         copy.copy_from(&p);
         assert_eq!(copy.theta(), p.theta());
         copy.validate(&PolicyBounds::default()).unwrap();
+        // `epoch` is copied and not hashed: a republication of a version keeps its checksum.
+        assert_eq!(copy.epoch, 0);
+        copy.epoch = 7;
+        assert_eq!(copy.compute_checksum(), p.checksum);
+        copy.validate(&PolicyBounds::default()).unwrap();
+        let mut again = PolicyTable::new_boxed();
+        again.copy_from(&copy);
+        assert_eq!(again.epoch, 7);
+        again.validate(&PolicyBounds::default()).unwrap();
     }
 
     #[test]

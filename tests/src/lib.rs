@@ -317,7 +317,8 @@ pub fn lqr_gaifo_in_process(
             run.version(),
         ));
         run.checkpoint(out, None).unwrap();
-        logs.push(imitation::learn::iterate(&mut run, &arm).unwrap());
+        let (log, mut evals) = imitation::learn::iterate(&mut run, &arm).unwrap();
+        logs.push((log, evals.remove(0)));
     }
     tables.push(imitation::controller::to_gain_table(
         run.policy(),

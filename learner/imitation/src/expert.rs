@@ -544,17 +544,17 @@ impl Learn for ExpertLearner {
     fn done(&self) -> bool {
         ExpertLearner::done(self)
     }
-    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         crate::learn::execute_table(self, arms)
     }
     /// [`ExpertLearner::update`]; `seconds` counts `t_execute` too.
-    fn learn(
+    fn learn_goals(
         &mut self,
         noisy: &[Episode],
-        eval: &Episode,
+        evals: &[Episode],
         t_execute: f64,
     ) -> Result<IterationLog, ImitationError> {
-        let (mut entry, _) = self.update(noisy, eval)?;
+        let (mut entry, _) = self.update(noisy, crate::learn::single_eval(evals)?)?;
         entry.seconds += t_execute;
         Ok(entry)
     }

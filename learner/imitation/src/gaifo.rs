@@ -36,13 +36,15 @@ use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 
 use crate::controller::init_hold;
-use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
+use crate::cost::composite::{CompositeCost, CompositeWorkspace};
 use crate::cpu::thread_cpu_s;
+use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{
-    AdamConfig, Discriminator, DiscriminatorConfig, Normalizer, PenaltySpace, TrainStats,
+    AdamConfig, Discriminator, DiscriminatorConfig, PenaltySpace, TrainStats,
 };
 use crate::iteration::LqrIteration;
+pub use crate::iteration_log::GaifoLog;
 use crate::learn::{Learn, LinGaussLearn};
 use crate::rollout::{Arms, Episode, SampleList};
 use crate::ImitationError;
@@ -182,204 +184,14 @@ impl GaifoConfig {
     }
 }
 
-/// Per-iteration log (progress line and CSV row).
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct GaifoLog {
-    /// Iteration (0-based).
-    pub iteration: usize,
-    /// True task cost C(τ) of the noise-free episode.
-    pub task_cost: f64,
-    /// Its normalised performance (C_random − C) / (C_random − C_expert).
-    pub performance: f64,
-    /// Final end-effector distance of the noise-free episode (m).
-    pub final_distance: f64,
-    /// Mean critic loss of this iteration's critic steps.
-    pub critic_loss: f64,
-    /// Critic's Wasserstein-1 estimate E_controller[D] − E_expert[D] after the update.
-    pub wasserstein: f64,
-    /// KL of the LQR step.
-    pub kl: f64,
-    /// η after the search.
-    pub eta: f64,
-    /// Step multiplier.
-    pub step_mult: f64,
-    /// Seconds per phase: executing episodes (simulator).
-    pub t_execute: f64,
-    /// Dynamics fit (GMM prior + regression).
-    pub t_dynamics: f64,
-    /// Discriminator update.
-    pub t_critic: f64,
-    /// Composite cost and its expansion (Hessians).
-    pub t_cost: f64,
-    /// KL-bounded LQR (cost averaging, step size, η search).
-    pub t_lqr: f64,
-    /// Thread CPU seconds of the learner phases (dynamics, critic, cost, LQR): the learner
-    /// time of one iteration on one core, unaffected by waiting for a core on a busy machine.
-    pub cpu_learner: f64,
-}
-
-impl GaifoLog {
-    /// The log of iteration `iteration` with the evaluation of its noise-free episode `eval`
-    /// (task cost, normalised performance against `demos`, final distance) and the critic's
-    /// statistics filled in; the step (`kl`, `eta`, `step_mult`) NaN and the times 0, for the
-    /// algorithm to set. Shared by LQR+GAIfO and the PPO baseline.
-    pub fn evaluated(iteration: usize, eval: &Episode, demos: &Demos, critic: &TrainStats) -> Self {
-        let c = eval.task_cost();
-        Self {
-            iteration,
-            task_cost: c,
-            performance: ur5_shared::normalised_performance(
-                c,
-                demos.cost_random,
-                demos.cost_expert,
-            )
-            .unwrap_or(f64::NAN),
-            final_distance: eval.final_distance(),
-            critic_loss: critic.critic_loss,
-            wasserstein: critic.wasserstein,
-            kl: f64::NAN,
-            eta: f64::NAN,
-            step_mult: f64::NAN,
-            t_execute: 0.0,
-            t_dynamics: 0.0,
-            t_critic: 0.0,
-            t_cost: 0.0,
-            t_lqr: 0.0,
-            cpu_learner: 0.0,
-        }
-    }
-
-    /// Learner time (everything but executing episodes), s.
-    pub fn learner_seconds(&self) -> f64 {
-        self.t_dynamics + self.t_critic + self.t_cost + self.t_lqr
-    }
-
-    /// Column names of [`GaifoLog::progress_line`].
-    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
-
-    /// The progress line of this iteration (`learner train`, `learner serve --algo lqr-gaifo`;
-    /// `sim_ms` is [`GaifoLog::t_execute`]).
-    pub fn progress_line(&self) -> String {
-        format!(
-            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
-            self.iteration,
-            self.task_cost,
-            self.performance,
-            self.final_distance,
-            self.critic_loss,
-            self.wasserstein,
-            self.kl,
-            self.eta,
-            self.step_mult,
-            1e3 * self.learner_seconds(),
-            1e3 * self.t_execute
-        )
-    }
-}
-
-/// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row.
-pub fn expert_transitions(demos: &Demos) -> Mat<f64> {
-    let rows = demos.count * (demos.horizon - 1);
-    Mat::from_fn(rows, D_IN, |r, c| {
-        let (d, t) = (r / (demos.horizon - 1), r % (demos.horizon - 1));
-        if c < DX {
-            demos.state(d, t)[c]
-        } else {
-            demos.state(d, t + 1)[c - DX]
-        }
-    })
-}
-
-/// Controller transitions of the given episodes, one per row.
-pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
-    let t_len = episodes[0].horizon();
-    let rows = episodes.len() * (t_len - 1);
-    Mat::from_fn(rows, D_IN, |r, c| {
-        let (i, t) = (r / (t_len - 1), r % (t_len - 1));
-        let ep = &episodes[i];
-        if c < DX {
-            ep.x[t * DX + c]
-        } else {
-            ep.x[(t + 1) * DX + c - DX]
-        }
-    })
-}
-
-/// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
-/// that runs with different seeds get different critics. Shared with the PPO baseline.
-pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
-    let mut dcfg = dcfg.clone();
-    dcfg.seed = seed ^ dcfg.seed ^ 0x4352_4954; // "CRIT"
-    dcfg
-}
-
-/// The run's first critic: input normalisation fitted on the expert transitions `expert`,
-/// `dcfg` seeded from the run seed `seed` ([`critic_config`]); LQR+GAIfO, MDGPS and the PPO
-/// baseline start from it (docs/design.md §5 D2, D23).
-pub fn initial_critic(
-    expert: &Mat<f64>,
-    dcfg: &DiscriminatorConfig,
-    seed: u64,
-) -> Result<Discriminator, ImitationError> {
-    let norm = Normalizer::from_data(expert.as_ref())?;
-    Ok(Discriminator::new(D_IN, critic_config(dcfg, seed), norm)?)
-}
-
-/// A fresh critic (`dcfg`, weights drawn again from its seed) whose input normalisation is
-/// fitted on expert ∪ `controller` transitions; LQR+GAIfO and the PPO baseline call it once,
-/// on the first iteration's samples (docs/design.md §5 D2).
-pub fn refit_critic(
-    expert: &Mat<f64>,
-    controller: &Mat<f64>,
-    dcfg: &DiscriminatorConfig,
-) -> Result<Discriminator, ImitationError> {
-    let (ne, nc) = (expert.nrows(), controller.nrows());
-    let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
-        if r < ne {
-            expert[(r, c)]
-        } else {
-            controller[(r - ne, c)]
-        }
-    });
-    let norm = Normalizer::from_data(both.as_ref())?;
-    Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
-}
-
-/// Step 3 of Algorithm 1 (docs/design.md §1.3) at iteration `iteration`: `updates` (at least
-/// one) WGAN-GP calls on expert vs `controller` transitions at the learning rate
-/// `disc.config().adam.lr · 2^(−iteration / half_life)` (constant for `half_life` = 0;
-/// docs/design.md §5 D25); returns the last call's statistics. Shared with the PPO baseline.
-#[allow(clippy::too_many_arguments)]
-pub fn train_critic(
-    disc: &mut Discriminator,
-    ws: &mut crate::discriminator::Workspace,
-    expert: &Mat<f64>,
-    controller: &Mat<f64>,
-    updates: usize,
-    iteration: usize,
-    half_life: f64,
-) -> Result<TrainStats, ImitationError> {
-    if half_life > 0.0 {
-        let lr = disc.config().adam.lr * (-(iteration as f64) / half_life).exp2();
-        disc.set_learning_rate(lr)?;
-    }
-    let mut stats = None;
-    for _ in 0..updates.max(1) {
-        stats = Some(disc.train(expert.as_ref(), controller.as_ref(), ws)?);
-    }
-    Ok(stats.expect("at least one update"))
-}
-
 /// The state of an LQR+GAIfO run; [`LqrGaifo::learn`] runs steps 2–6 of Algorithm 1.
 pub struct LqrGaifo {
     cfg: GaifoConfig,
     task: TaskConfig,
     demos: Demos,
-    expert: Mat<f64>,
     lqr: LqrIteration,
-    disc: Discriminator,
+    critic: Critic,
     cost_ws: CompositeWorkspace,
-    disc_ws: crate::discriminator::Workspace,
 }
 
 impl LqrGaifo {
@@ -387,8 +199,8 @@ impl LqrGaifo {
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let expert = expert_transitions(&demos);
-        let disc = initial_critic(&expert, &cfg.discriminator, cfg.seed)?;
+        let critic = Critic::new(expert_transitions(&demos), &cfg.discriminator, cfg.seed)?
+            .with_schedule(cfg.critic_updates, cfg.critic_lr_half_life);
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),
@@ -402,14 +214,12 @@ impl LqrGaifo {
         );
         let pol = init_hold(&task, cfg.init_var);
         Ok(Self {
-            cost_ws: CompositeWorkspace::new(&disc).with_psd(cfg.psd_hessian),
-            disc_ws: disc.workspace(),
+            cost_ws: CompositeWorkspace::new(critic.discriminator()).with_psd(cfg.psd_hessian),
             lqr: LqrIteration::new(learner, pol, 0),
             cfg,
             task,
             demos,
-            expert,
-            disc,
+            critic,
         })
     }
 
@@ -420,7 +230,12 @@ impl LqrGaifo {
 
     /// The critic.
     pub fn discriminator(&self) -> &Discriminator {
-        &self.disc
+        self.critic.discriminator()
+    }
+
+    /// The critic with its expert transitions and schedule (its checkpoint: [`Critic::save`]).
+    pub fn critic(&self) -> &Critic {
+        &self.critic
     }
 
     /// The task being imitated.
@@ -453,28 +268,14 @@ impl LqrGaifo {
         self.iteration() >= self.cfg.iterations
     }
 
-    /// Rebuilds the critic with its input normalisation fitted on expert ∪ `controller`
-    /// transitions, once, on the first iteration's samples (docs/design.md §5 D2).
-    fn refit_normalizer(&mut self, controller: &Mat<f64>) -> Result<(), ImitationError> {
-        self.disc = refit_critic(&self.expert, controller, self.disc.config())?;
-        self.cost_ws = CompositeWorkspace::new(&self.disc).with_psd(self.cfg.psd_hessian);
-        Ok(())
-    }
-
-    /// Step 3 of Algorithm 1 (docs/design.md §1.3): `critic_updates` WGAN-GP calls on expert vs these transitions.
+    /// Step 3 of Algorithm 1 (docs/design.md §1.3): the critic's update on expert vs these
+    /// controller transitions ([`Critic::update`]: refitted at iteration 0, then
+    /// `critic_updates` WGAN-GP calls).
     pub fn update_discriminator(
         &mut self,
         controller: &Mat<f64>,
     ) -> Result<TrainStats, ImitationError> {
-        train_critic(
-            &mut self.disc,
-            &mut self.disc_ws,
-            &self.expert,
-            controller,
-            self.cfg.critic_updates,
-            self.lqr.iteration(),
-            self.cfg.critic_lr_half_life,
-        )
+        self.critic.update(controller, self.lqr.iteration())
     }
 
     /// Steps 2–6 of Algorithm 1 (docs/design.md §1.3) on the `episodes` (`cfg.samples` noisy ones) and the noise-free
@@ -509,14 +310,11 @@ impl LqrGaifo {
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
         let controller = episode_transitions(episodes);
-        if iteration == 0 {
-            self.refit_normalizer(&controller)?;
-        }
         let critic = self.update_discriminator(&controller)?;
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) and its second-order expansion.
         let t3 = Instant::now();
         let mut cost = CompositeCost {
-            disc: &self.disc,
+            disc: self.critic.discriminator(),
             ws: &mut self.cost_ws,
         };
         self.lqr.expand(&mut cost, episodes);
@@ -560,23 +358,13 @@ impl LqrGaifo {
         disc: Discriminator,
     ) -> Result<Self, ImitationError> {
         let mut run = Self::new(cfg, demos)?;
-        let expected = critic_config(&run.cfg.discriminator, run.cfg.seed);
-        if *disc.config() != expected {
-            return Err(ImitationError::Checkpoint(format!(
-                "the critic was trained with other [discriminator] settings or another seed than \
-                 this run's (seed {}): resume with the run's own --config and --seed",
-                run.cfg.seed
-            )));
-        }
+        run.critic.restore(disc)?;
         run.lqr.restore(snap).map_err(|e| {
             ImitationError::Checkpoint(format!(
                 "{e} (a checkpoint of another task horizon or other settings: resume with the \
                  run's own demonstrations and --config)"
             ))
         })?;
-        run.cost_ws = CompositeWorkspace::new(&disc).with_psd(run.cfg.psd_hessian);
-        run.disc_ws = disc.workspace();
-        run.disc = disc;
         Ok(run)
     }
 }
@@ -603,16 +391,16 @@ impl Learn for LqrGaifo {
     fn done(&self) -> bool {
         LqrGaifo::done(self)
     }
-    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         crate::learn::execute_table(self, arms)
     }
-    fn learn(
+    fn learn_goals(
         &mut self,
         noisy: &[Episode],
-        eval: &Episode,
+        evals: &[Episode],
         t_execute: f64,
     ) -> Result<GaifoLog, ImitationError> {
-        LqrGaifo::learn(self, noisy, eval, t_execute)
+        LqrGaifo::learn(self, noisy, crate::learn::single_eval(evals)?, t_execute)
     }
     fn eval_cost(log: &GaifoLog) -> f64 {
         log.task_cost

@@ -1,10 +1,12 @@
 //! The one driver interface of the learners (docs/design.md §1): an iterative learner is run one
 //! iteration of Algorithm 1 at a time, step 1 executed either in process ([`iterate`], its
 //! episodes in parallel on arms from an [`Arms`] source) or by the real-time loop over IPC
-//! (`learner serve` collects the episodes and calls [`Learn::learn`]). The expert, LQR+GAIfO
-//! and the GAIfO (PPO) baseline implement it; the two whose policy is a linear-Gaussian
+//! (`learner serve` collects the episodes and calls [`Learn::learn`]). The expert, LQR+GAIfO,
+//! the GAIfO (PPO) baseline and MDGPS implement it; the two whose policy is a linear-Gaussian
 //! controller also implement [`LinGaussLearn`], which is what a served run publishes as gain
-//! tables.
+//! tables. A learner has one or more goals ([`Learn::goal_tasks`]; MDGPS one per condition, the
+//! others one): step 1 runs N noisy episodes at each goal, goal after goal, and one noise-free
+//! episode per goal (the evaluations, a slice in goal order).
 
 use std::time::Instant;
 
@@ -22,11 +24,17 @@ pub trait Learn {
     type Log;
     /// Name in messages, file names and the CSV's `algorithm` column.
     const ALGO: &'static str;
-    /// The task the episodes must run (goal, start pose, T, dt).
+    /// The task the episodes must run (goal, start pose, T, dt); with several goals, the first
+    /// goal's (every goal shares its start pose, T and dt).
     fn task(&self) -> &TaskConfig;
+    /// The task of every goal, in goal order: [`Learn::task`] alone unless the learner has
+    /// several goals.
+    fn goal_tasks(&self) -> Vec<&TaskConfig> {
+        vec![self.task()]
+    }
     /// The learner's model of the arm (an in-process run builds its arm from it).
     fn sim_config(&self) -> &SimConfig;
-    /// Noisy episodes per iteration N.
+    /// Noisy episodes per iteration and goal N.
     fn samples(&self) -> usize;
     /// Run seed (exploration noise, every random draw).
     fn seed(&self) -> u64;
@@ -38,19 +46,33 @@ pub trait Learn {
     }
     /// Nothing more to learn.
     fn done(&self) -> bool;
-    /// Step 1 in process: N noisy episodes and one noise-free episode of the current policy,
-    /// in parallel, each on its own arm from `arms` (`rollout::execute`).
-    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError>;
-    /// Steps 2–6 on the `noisy` episodes and the noise-free `eval` episode of the current
-    /// policy (version [`Learn::version`]), then the switch to the new policy. `t_execute` (s)
+    /// Step 1 in process: at every goal N noisy episodes and one noise-free episode of the
+    /// current policy, in parallel, each on its own arm from `arms` (`rollout::execute`).
+    /// Returns the noisy episodes (goal-major: goal m's are `m N .. (m + 1) N`) and the
+    /// noise-free ones (one per goal).
+    #[allow(clippy::type_complexity)]
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError>;
+    /// Steps 2–6 on the `noisy` episodes of every goal (goal-major, as [`Learn::execute`]
+    /// returns them) and the noise-free `evals` of the current policy (version
+    /// [`Learn::version`]; one per goal), then the switch to the new policy. `t_execute` (s)
     /// is logged as the time step 1 took.
+    fn learn_goals(
+        &mut self,
+        noisy: &[Episode],
+        evals: &[Episode],
+        t_execute: f64,
+    ) -> Result<Self::Log, ImitationError>;
+    /// [`Learn::learn_goals`] of a learner with one goal and its one noise-free episode `eval`
+    /// (what `learner serve` streams).
     fn learn(
         &mut self,
         noisy: &[Episode],
         eval: &Episode,
         t_execute: f64,
-    ) -> Result<Self::Log, ImitationError>;
-    /// Task cost of an iteration's noise-free episode.
+    ) -> Result<Self::Log, ImitationError> {
+        self.learn_goals(noisy, std::slice::from_ref(eval), t_execute)
+    }
+    /// Task cost of an iteration's noise-free episode (with several goals, their mean).
     fn eval_cost(log: &Self::Log) -> f64;
 }
 
@@ -68,24 +90,37 @@ pub trait LinGaussLearn: Learn {
 pub fn execute_table<L: LinGaussLearn + ?Sized>(
     learner: &L,
     arms: &dyn Arms,
-) -> Result<(Vec<Episode>, Episode), ImitationError> {
+) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
     let table = learner.table();
-    execute(
+    let (noisy, eval) = execute(
         arms,
         learner.task(),
         &*table,
         learner.version(),
         learner.seed(),
         learner.samples(),
-    )
+    )?;
+    Ok((noisy, vec![eval]))
+}
+
+/// The one noise-free episode of a learner with one goal ([`Learn::learn_goals`]); an error
+/// for any other number.
+pub fn single_eval(evals: &[Episode]) -> Result<&Episode, ImitationError> {
+    match evals {
+        [eval] => Ok(eval),
+        _ => Err(ImitationError::Episodes(format!(
+            "a learner with one goal learns from one noise-free episode, got {}",
+            evals.len()
+        ))),
+    }
 }
 
 /// One in-process iteration: step 1 on arms from `arms`, then steps 2–6. Returns the log and
-/// the noise-free episode.
+/// the noise-free episodes (one per goal).
 pub fn iterate<L: Learn + ?Sized>(
     learner: &mut L,
     arms: &dyn Arms,
-) -> Result<(L::Log, Episode), ImitationError> {
+) -> Result<(L::Log, Vec<Episode>), ImitationError> {
     iterate_observed(learner, arms, &mut |_, _| {})
 }
 
@@ -94,11 +129,11 @@ pub fn iterate<L: Learn + ?Sized>(
 pub fn iterate_observed<L: Learn + ?Sized>(
     learner: &mut L,
     arms: &dyn Arms,
-    observe: &mut dyn FnMut(&[Episode], &Episode),
-) -> Result<(L::Log, Episode), ImitationError> {
+    observe: &mut dyn FnMut(&[Episode], &[Episode]),
+) -> Result<(L::Log, Vec<Episode>), ImitationError> {
     let t0 = Instant::now();
-    let (episodes, eval) = learner.execute(arms)?;
-    observe(&episodes, &eval);
-    let log = learner.learn(&episodes, &eval, t0.elapsed().as_secs_f64())?;
-    Ok((log, eval))
+    let (episodes, evals) = learner.execute(arms)?;
+    observe(&episodes, &evals);
+    let log = learner.learn_goals(&episodes, &evals, t0.elapsed().as_secs_f64())?;
+    Ok((log, evals))
 }

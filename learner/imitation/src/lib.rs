@@ -5,12 +5,15 @@
 //! - [`rollout`]: step 1, the one episode loop over an [`rollout::Arm`] and a
 //!   [`rollout::Policy`]; [`rollout::Episode`] and GPS's [`rollout::SampleList`];
 //! - [`discriminator`]: the WGAN-GP critic D(s, s') (MLP, Adam, persistence), step 3;
+//! - [`critic`]: its one trainer (refit at iteration 0, the per-iteration update, checkpoint),
+//!   owned by each of LQR+GAIfO, MDGPS and GAIfO (PPO);
 //! - [`cost`]: the true task cost ([`cost::task`], the expert's) and the composite cost
 //!   C_t(s, a) = D(s, F_t [s; a] + f_t) with its expansion ([`cost::composite`]), steps 4–5;
 //! - [`iteration`]: step 6 shared by both LQR learners (cost averaging, step size, KL-bounded
 //!   LQR);
 //! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
-//! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`];
+//! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`]; its log row
+//!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
@@ -22,12 +25,14 @@
 pub mod controller;
 pub mod cost;
 pub mod cpu;
+pub mod critic;
 pub mod demos;
 pub mod discriminator;
 pub mod error;
 pub mod expert;
 pub mod gaifo;
 pub mod iteration;
+pub mod iteration_log;
 pub mod learn;
 pub mod mdgps;
 pub mod ppo;

@@ -179,12 +179,11 @@ fn run_mdgps(
     let mut evals = Vec::with_capacity(cfg.iterations + 1);
     let mut logs = Vec::with_capacity(cfg.iterations);
     for _ in 0..cfg.iterations {
-        let t0 = Instant::now();
-        let (samples, own) = run.execute(&arm)?;
-        let t_execute = t0.elapsed().as_secs_f64();
+        // The policy at every evaluation goal before the iteration: on `arm` itself, while
+        // step 1's episodes run on fresh arms of their own, so the order does not matter.
         let mut actor = GlobalActor::new(run.policy(), &mut ws);
         evals.push(evaluate(&mut arm, &base, &mut actor, goals, experts)?);
-        let log = run.learn(&samples, &own, t_execute)?;
+        let (log, _) = iterate(&mut run, &arm)?;
         progress.done_one(&format!("[mdgps seed {seed}] {}", log.progress_line()));
         logs.push(log);
     }

@@ -81,7 +81,7 @@ fn learning_on_executed_episodes_equals_iterate() {
         let (la, ea) = iterate(&mut a, &arm_a).unwrap();
         let task = b.task().clone();
         let (noisy, eval) = execute(&sim, &task, &*b.table(), b.version(), 5, 5).unwrap();
-        assert_eq!(ea, eval);
+        assert_eq!(ea, [eval.clone()]);
         let lb = b.learn(&noisy, &eval, 0.0).unwrap();
         let key = |l: &imitation::gaifo::GaifoLog| {
             [l.task_cost, l.critic_loss, l.wasserstein, l.kl, l.eta].map(f64::to_bits)
@@ -90,7 +90,7 @@ fn learning_on_executed_episodes_equals_iterate() {
         assert_eq!(a.policy(), b.policy());
     }
     let e = b
-        .learn(&[], &iterate(&mut a, &arm_a).unwrap().1, 0.0)
+        .learn(&[], &iterate(&mut a, &arm_a).unwrap().1[0], 0.0)
         .unwrap_err();
     assert!(e.to_string().contains("needs 5 noisy episodes"), "{e}");
 }
@@ -134,7 +134,7 @@ fn results_do_not_depend_on_the_thread_count() {
             for _ in 0..3 {
                 let (log, eval) = iterate(&mut lqr, &arm).unwrap();
                 out.push(key(&log).to_vec());
-                out.push(bits(&eval.x));
+                out.push(bits(&eval[0].x));
             }
             out.push(vec![lqr.table().compute_checksum()]);
             let cfg = GaifoPpoConfig {
@@ -146,7 +146,7 @@ fn results_do_not_depend_on_the_thread_count() {
             for _ in 0..2 {
                 let (log, eval) = iterate(&mut ppo, &arm).unwrap();
                 out.push(key(&log).to_vec());
-                out.push(bits(&eval.x));
+                out.push(bits(&eval[0].x));
             }
             out
         })

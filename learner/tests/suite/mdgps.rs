@@ -14,7 +14,7 @@ use imitation::demos::Demos;
 use imitation::expert::{record_demos, square_goals, ExpertConfig};
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use imitation::mdgps::s_step::{PolicyOpt, PolicyOptConfig, Targets};
-use imitation::mdgps::{Mdgps, MdgpsConfig};
+use imitation::mdgps::{Mdgps, MdgpsConfig, MdgpsLog};
 use learner::arm::SimArm;
 use learner::experiment::multi_goal::eval_goals;
 use learner::io::policy::{load_policy, save_policy, PolicyFile};
@@ -285,12 +285,7 @@ fn tiny_demos(goal: [f64; 3], horizon: usize) -> Demos {
 fn a_tiny_mdgps_run_is_reproducible_bit_for_bit() {
     let goals = square_goals(TaskConfig::default().goal, 0.1);
     let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
-    let mut cfg = MdgpsConfig::default();
-    cfg.lqr_gaifo.samples = 3;
-    cfg.lqr_gaifo.seed = 9;
-    cfg.lqr_gaifo.discriminator.n_critic = 5;
-    cfg.policy.hidden = vec![8];
-    cfg.policy.steps = 20;
+    let mut cfg = tiny_config();
     let run = |cfg: &MdgpsConfig| {
         let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
         let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
@@ -424,4 +419,233 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
     );
     // (A gain table passed as a policy: learner/tests/suite/replay.rs.)
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The tiny run of `a_tiny_mdgps_run_is_reproducible_bit_for_bit`, 4 iterations; with
+/// MDGPS through the one driver interface ([`imitation::learn::iterate`]: `Learn::execute`,
+/// its noisy episodes condition after condition, and `Learn::learn_goals`) is its own
+/// `execute` and `learn` bit for bit; its goals are the conditions', and episodes of another
+/// count are refused.
+#[test]
+fn mdgps_through_learn_is_its_own_execute_and_learn() {
+    use imitation::learn::{iterate, Learn};
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let mut cfg = tiny_config();
+    cfg.lqr_gaifo.iterations = 2;
+    let untimed = |mut l: MdgpsLog| {
+        (l.t_execute, l.t_dynamics, l.t_critic) = (0.0, 0.0, 0.0);
+        (l.t_cost, l.t_lqr, l.t_policy) = (0.0, 0.0, 0.0);
+        format!("{l:?}")
+    };
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let mut a = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let mut b = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let tasks: Vec<[f64; 3]> = a.goal_tasks().iter().map(|t| t.goal).collect();
+    assert_eq!(tasks, vec![goals[0], goals[4]]);
+    while !Learn::done(&a) {
+        let (la, ea) = iterate(&mut a, &arm).unwrap();
+        let (samples, evals) = b.execute(&arm).unwrap();
+        let lb = b.learn(&samples, &evals, 0.0).unwrap();
+        assert_eq!(ea, evals);
+        let mean = la.task_cost.iter().sum::<f64>() / 2.0;
+        assert_eq!(Mdgps::eval_cost(&la).to_bits(), mean.to_bits());
+        assert_eq!(untimed(la), untimed(lb));
+    }
+    assert_eq!((Learn::iteration(&a), Learn::version(&a)), (2, 3));
+    assert_eq!(a.policy().flat(), b.policy().flat());
+    for m in 0..2 {
+        assert_eq!(a.controller(m), b.controller(m));
+    }
+    let (noisy, evals) = Learn::execute(&mut a, &arm).unwrap();
+    assert_eq!((noisy.len(), evals.len()), (6, 2));
+    let e = a.learn_goals(&noisy, &evals[..1], 0.0).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("one evaluation episode per condition"),
+        "{e}"
+    );
+    let e = a.learn_goals(&noisy[..5], &evals, 0.0).unwrap_err();
+    assert!(e.to_string().contains("3 noisy episodes"), "{e}");
+    assert_eq!(
+        Learn::iteration(&a),
+        2,
+        "a refused iteration changes nothing"
+    );
+}
+
+/// `stop = Some(i)` it is checkpointed after i iterations (learner state file and critic
+/// file, as `learner train` writes them), dropped, and continued from the files.
+fn tiny_run_resumed(
+    cfg: &MdgpsConfig,
+    demos: &[Demos],
+    stop: Option<usize>,
+) -> (Vec<f64>, Vec<String>, Vec<String>) {
+    let mut m = Mdgps::new(cfg.clone(), demos.to_vec()).unwrap();
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let mut logs = Vec::new();
+    for i in 0..4 {
+        if stop == Some(i) {
+            let dir = tmp(&format!("resume-{i}"));
+            let (state, critic) = (dir.join("state.npz"), dir.join("critic.json"));
+            learner::io::checkpoint::save_state(&state, &m.snapshot()).unwrap();
+            m.critic().save(&critic).unwrap();
+            drop(m);
+            let snap = learner::io::checkpoint::load_state(&state).unwrap();
+            let disc = imitation::discriminator::Discriminator::load(&critic, 24).unwrap();
+            m = Mdgps::from_snapshot(cfg.clone(), demos.to_vec(), &snap, disc).unwrap();
+            assert_eq!(m.iteration(), i);
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
+        let (samples, evals) = m.execute(&arm).unwrap();
+        let mut l = m.learn(&samples, &evals, 0.0).unwrap();
+        (l.t_dynamics, l.t_critic, l.t_cost, l.t_lqr, l.t_policy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        logs.push(format!("{l:?}"));
+    }
+    let ctrl = (0..m.conditions())
+        .map(|c| format!("{:?}", m.controller(c)))
+        .collect();
+    (m.policy().flat(), ctrl, logs)
+}
+
+/// A tiny run of 4 iterations as the app runs it: `learner::run`'s checkpoint files
+/// (`iter_NNN_critic.json`, then `iter_NNN_state.npz`) written into `dir` before every
+/// iteration and after the last. With `kill = Some(i)` the process is taken as killed after
+/// checkpoint i and the critic file of checkpoint i + 1 (a kill between its two files), and the
+/// run continued from `dir` by `learner::run::resume_mdgps`.
+fn app_run(
+    cfg: &MdgpsConfig,
+    demos: &[Demos],
+    dir: &Path,
+    kill: Option<usize>,
+) -> (Vec<f64>, Vec<String>, Vec<String>) {
+    use imitation::learn::iterate;
+    use learner::run::Checkpoint;
+    let _ = std::fs::remove_dir_all(dir);
+    let mut m = Mdgps::new(cfg.clone(), demos.to_vec()).unwrap();
+    let mut arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let mut logs = Vec::new();
+    for i in 0..=4 {
+        m.checkpoint(dir, Some(&arm)).unwrap();
+        if kill == Some(i) {
+            m.critic()
+                .save(&dir.join(format!("iter_{:03}_critic.json", i + 1)))
+                .unwrap();
+            drop(m);
+            let (resumed, noise) =
+                learner::run::resume_mdgps(cfg.clone(), demos.to_vec(), dir).unwrap();
+            m = resumed;
+            assert_eq!(m.iteration(), i, "the latest complete checkpoint");
+            arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+            arm.sim_mut()
+                .set_noise_position(noise.expect("the arm's noise position"));
+        }
+        if i == 4 {
+            break;
+        }
+        let (mut l, _) = iterate(&mut m, &arm).unwrap();
+        (l.t_execute, l.t_dynamics, l.t_critic) = (0.0, 0.0, 0.0);
+        (l.t_cost, l.t_lqr, l.t_policy) = (0.0, 0.0, 0.0);
+        logs.push(format!("{l:?}"));
+    }
+    let ctrl = (0..m.conditions())
+        .map(|c| format!("{:?}", m.controller(c)))
+        .collect();
+    (m.policy().flat(), ctrl, logs)
+}
+
+#[test]
+fn an_mdgps_run_killed_at_any_checkpoint_and_resumed_by_the_app_is_the_same_bit_for_bit() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let dir = tmp("app-resume");
+    let whole = app_run(&cfg, &demos, &dir, None);
+    assert_eq!(whole.2.len(), 4);
+    assert!(dir.join("iter_004_state.npz").is_file());
+    for kill in 0..4 {
+        let resumed = app_run(&cfg, &demos, &dir, Some(kill));
+        assert_eq!(resumed.0, whole.0, "policy, killed after checkpoint {kill}");
+        assert_eq!(
+            resumed.1, whole.1,
+            "controllers, killed after checkpoint {kill}"
+        );
+        assert_eq!(resumed.2, whole.2, "logs, killed after checkpoint {kill}");
+    }
+    let mut other = cfg.clone();
+    other.lqr_gaifo.seed += 1;
+    let e = learner::run::resume_mdgps(other, demos.clone(), &dir)
+        .err()
+        .expect("another seed refused");
+    assert!(format!("{e:#}").contains("iter_004_state.npz"), "{e:#}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The tiny run's settings: 2 goals, N = 3, a critic of 5 steps, a policy of one hidden
+/// layer of 8 and 20 S-step steps.
+fn tiny_config() -> MdgpsConfig {
+    let mut cfg = MdgpsConfig::default();
+    cfg.lqr_gaifo.samples = 3;
+    cfg.lqr_gaifo.seed = 9;
+    cfg.lqr_gaifo.discriminator.n_critic = 5;
+    cfg.policy.hidden = vec![8];
+    cfg.policy.steps = 20;
+    cfg
+}
+
+#[test]
+fn a_tiny_mdgps_run_resumed_at_any_iteration_boundary_is_the_same_bit_for_bit() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let whole = tiny_run_resumed(&cfg, &demos, None);
+    for stop in 0..4 {
+        let resumed = tiny_run_resumed(&cfg, &demos, Some(stop));
+        assert_eq!(
+            resumed.0, whole.0,
+            "policy, resumed after {stop} iterations"
+        );
+        assert_eq!(resumed.1, whole.1, "controllers, resumed after {stop}");
+        assert_eq!(resumed.2, whole.2, "logs, resumed after {stop}");
+    }
+}
+
+#[test]
+fn an_mdgps_resume_that_cannot_be_exact_is_refused() {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    let (samples, evals) = m.execute(&arm).unwrap();
+    m.learn(&samples, &evals, 0.0).unwrap();
+    let (snap, disc) = (m.snapshot(), m.critic().discriminator().clone());
+    let refuse = |cfg: &MdgpsConfig, demos: &[Demos], snap: &gps::snapshot::Snapshot| {
+        match Mdgps::from_snapshot(cfg.clone(), demos.to_vec(), snap, disc.clone()) {
+            Ok(_) => panic!("resumed"),
+            Err(e) => e.to_string(),
+        }
+    };
+    // One goal fewer than the checkpoint's.
+    let e = refuse(&cfg, &demos[..1], &snap);
+    assert!(e.contains("more conditions"), "{e}");
+    // Another policy size.
+    let mut other = cfg.clone();
+    other.policy.hidden = vec![9];
+    let e = refuse(&other, &demos, &snap);
+    assert!(e.contains("mdgps.policy"), "{e}");
+    // Another horizon.
+    let short = vec![tiny_demos(goals[0], 10), tiny_demos(goals[4], 10)];
+    let e = refuse(&cfg, &short, &snap);
+    assert!(e.contains("condition 0"), "{e}");
+    // Another seed: the critic is refused.
+    let mut seed = cfg.clone();
+    seed.lqr_gaifo.seed = 10;
+    let e = refuse(&seed, &demos, &snap);
+    assert!(e.contains("seed 10"), "{e}");
+    // A damaged state: the S-step's RNG missing.
+    let mut damaged = snap.clone();
+    damaged.words.remove("s_step.rng");
+    let e = refuse(&cfg, &demos, &damaged);
+    assert!(e.contains("s_step.rng"), "{e}");
 }

@@ -418,7 +418,7 @@ impl<A: ArmBackend> Controller<A> {
             ),
             Some(Active::Policy(table)) => {
                 policy_action(table, &s, &eps, &mut self.scratch, &mut a);
-                (true, table.version, 0)
+                (true, table.version, table.epoch)
             }
             None => {
                 self.abort_episode(Fault::NoTable);

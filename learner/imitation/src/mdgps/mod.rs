@@ -26,6 +26,7 @@
 //! seed gives the same run bit for bit.
 
 pub mod policy;
+mod resume;
 pub mod s_step;
 
 use std::time::Instant;
@@ -34,19 +35,18 @@ use faer::Mat;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use ur5_shared::config::{ActionMode, TaskConfig};
+use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 use ur5_shared::noise::Noise;
 
 use crate::controller::{init_hold, to_gain_table};
 use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
+use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
-use crate::discriminator::{Discriminator, Normalizer, TrainStats};
-use crate::gaifo::{
-    episode_transitions, expert_transitions, initial_critic, refit_critic, train_critic,
-    GaifoConfig,
-};
+use crate::discriminator::{Normalizer, TrainStats};
+use crate::gaifo::GaifoConfig;
 use crate::iteration::LqrIteration;
+use crate::learn::Learn;
 use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
@@ -176,10 +176,8 @@ struct Condition {
 pub struct Mdgps {
     cfg: MdgpsConfig,
     conds: Vec<Condition>,
-    expert: Mat<f64>,
-    disc: Discriminator,
+    critic: Critic,
     cost_ws: CompositeWorkspace,
-    disc_ws: crate::discriminator::Workspace,
     policy: GlobalPolicy,
     opt: PolicyOpt,
     iteration: usize,
@@ -205,7 +203,8 @@ impl Mdgps {
         }
         let g = &cfg.lqr_gaifo;
         let expert = stack(&demos.iter().map(expert_transitions).collect::<Vec<_>>());
-        let disc = initial_critic(&expert, &g.discriminator, g.seed)?;
+        let critic = Critic::new(expert, &g.discriminator, g.seed)?
+            .with_schedule(g.critic_updates, g.critic_lr_half_life);
         let mut conds = Vec::with_capacity(demos.len());
         for (m, d) in demos.into_iter().enumerate() {
             let task = d.task()?;
@@ -237,12 +236,10 @@ impl Mdgps {
         );
         Ok(Self {
             opt: PolicyOpt::new(cfg.policy.clone(), &policy, g.seed ^ SEED_SSTEP),
-            cost_ws: CompositeWorkspace::new(&disc).with_psd(g.psd_hessian),
-            disc_ws: disc.workspace(),
+            cost_ws: CompositeWorkspace::new(critic.discriminator()).with_psd(g.psd_hessian),
             cfg,
             conds,
-            expert,
-            disc,
+            critic,
             policy,
             iteration: 0,
         })
@@ -271,6 +268,11 @@ impl Mdgps {
     /// The controller condition `m` executes next.
     pub fn controller(&self, m: usize) -> &LinGaussPolicy {
         self.conds[m].lqr.policy()
+    }
+
+    /// The one critic of every condition (its checkpoint: [`Critic::save`]).
+    pub fn critic(&self) -> &Critic {
+        &self.critic
     }
 
     /// The global policy.
@@ -419,28 +421,14 @@ impl Mdgps {
         samples: &[Vec<Episode>],
     ) -> Result<TrainStats, ImitationError> {
         let controller = episode_transitions(&samples.concat());
-        if self.iteration == 0 {
-            self.disc = refit_critic(&self.expert, &controller, self.disc.config())?;
-            self.cost_ws =
-                CompositeWorkspace::new(&self.disc).with_psd(self.cfg.lqr_gaifo.psd_hessian);
-        }
-        let g = &self.cfg.lqr_gaifo;
-        train_critic(
-            &mut self.disc,
-            &mut self.disc_ws,
-            &self.expert,
-            &controller,
-            g.critic_updates,
-            self.iteration,
-            g.critic_lr_half_life,
-        )
+        self.critic.update(&controller, self.iteration)
     }
 
     /// Steps 4–5: each condition's composite cost expanded around its samples.
     fn expand_costs(&mut self, samples: &[Vec<Episode>]) {
         for (c, eps) in self.conds.iter_mut().zip(samples) {
             let mut cost = CompositeCost {
-                disc: &self.disc,
+                disc: self.critic.discriminator(),
                 ws: &mut self.cost_ws,
             };
             c.lqr.expand(&mut cost, eps);
@@ -576,6 +564,56 @@ impl Mdgps {
             s_loss_after: s.loss_after,
             ..MdgpsLog::default()
         }
+    }
+}
+
+/// MDGPS through the one driver interface: its goals are the conditions, its noisy episodes
+/// the controllers' (condition-major), its evaluations the global policy's, one per condition.
+impl Learn for Mdgps {
+    type Log = MdgpsLog;
+    const ALGO: &'static str = "mdgps";
+
+    /// Condition 0's task (every condition shares its start pose, T and dt).
+    fn task(&self) -> &TaskConfig {
+        &self.conds[0].task
+    }
+    fn goal_tasks(&self) -> Vec<&TaskConfig> {
+        self.conds.iter().map(|c| &c.task).collect()
+    }
+    fn sim_config(&self) -> &SimConfig {
+        &self.cfg.lqr_gaifo.sim
+    }
+    fn samples(&self) -> usize {
+        self.cfg.lqr_gaifo.samples
+    }
+    fn seed(&self) -> u64 {
+        self.cfg.lqr_gaifo.seed
+    }
+    fn iteration(&self) -> usize {
+        self.iteration
+    }
+    fn done(&self) -> bool {
+        self.iteration >= self.cfg.lqr_gaifo.iterations
+    }
+    /// [`Mdgps::execute`], its noisy episodes concatenated in condition order.
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
+        let (samples, evals) = Mdgps::execute(self, arms)?;
+        Ok((samples.into_iter().flatten().collect(), evals))
+    }
+    /// [`Mdgps::learn`] on the noisy episodes split into the conditions' (N each).
+    fn learn_goals(
+        &mut self,
+        noisy: &[Episode],
+        evals: &[Episode],
+        t_execute: f64,
+    ) -> Result<MdgpsLog, ImitationError> {
+        let n = self.cfg.lqr_gaifo.samples.max(1);
+        let samples: Vec<Vec<Episode>> = noisy.chunks(n).map(<[Episode]>::to_vec).collect();
+        Mdgps::learn(self, &samples, evals, t_execute)
+    }
+    /// Mean task cost of the policy's evaluations.
+    fn eval_cost(log: &MdgpsLog) -> f64 {
+        mean(&log.task_cost)
     }
 }
 

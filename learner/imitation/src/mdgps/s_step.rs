@@ -18,6 +18,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::layout::{DU, DX};
 
+use gps::snapshot::Snapshot;
+use gps::GpsError;
+
 use super::policy::{GlobalPolicy, GlobalPolicyWorkspace};
 use crate::discriminator::{Adam, AdamConfig};
 use crate::ImitationError;
@@ -126,6 +129,12 @@ pub struct PolicyOpt {
     order: Vec<usize>,
 }
 
+/// Snapshot arrays of the S-step's optimiser.
+const ADAM_T: &str = "s_step.adam.t";
+const ADAM_M: &str = "s_step.adam.m";
+const ADAM_V: &str = "s_step.adam.v";
+const RNG: &str = "s_step.rng";
+
 impl PolicyOpt {
     /// The optimiser for `pol`, its minibatch order seeded with `seed`.
     pub fn new(cfg: PolicyOptConfig, pol: &GlobalPolicy, seed: u64) -> Self {
@@ -138,6 +147,31 @@ impl PolicyOpt {
             order: Vec::new(),
             cfg,
         }
+    }
+
+    /// Adds the optimiser's state to `s`: Adam's step count and moments, the minibatch RNG
+    /// position (the minibatch order is drawn again at the start of every S-step, so it is not
+    /// state).
+    pub fn snapshot(&self, s: &mut Snapshot) {
+        s.put_words(ADAM_T, &[self.adam.t]);
+        s.put(ADAM_M, &[self.adam.m.len()], &self.adam.m);
+        s.put(ADAM_V, &[self.adam.v.len()], &self.adam.v);
+        s.put_rng(RNG, &self.rng);
+    }
+
+    /// Restores the state saved by [`PolicyOpt::snapshot`] (into an optimiser of a policy of
+    /// the same size); nothing changes on an error.
+    pub fn restore(&mut self, s: &Snapshot) -> Result<(), GpsError> {
+        let n = self.adam.m.len();
+        let t = s.words(ADAM_T, 1)?[0];
+        let m = s.real(ADAM_M, &[n])?.to_vec();
+        let v = s.real(ADAM_V, &[n])?.to_vec();
+        let rng = s.rng(RNG)?;
+        self.adam.t = t;
+        self.adam.m = m;
+        self.adam.v = v;
+        self.rng = rng;
+        Ok(())
     }
 
     /// L(θ) of `pol` on `data` (module docs).

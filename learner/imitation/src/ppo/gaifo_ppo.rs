@@ -5,7 +5,7 @@
 //!    evaluation ([`super::rollout::execute_mlp`], [`Learn::execute`]);
 //! 2. (no dynamics model);
 //! 3. update the critic on expert vs policy transitions (s, s') exactly as LQR+GAIfO does:
-//!    [`crate::gaifo::refit_critic`] on the first iteration, [`crate::gaifo::train_critic`];
+//!    the same [`Critic`] (refitted on the first iteration, then trained);
 //! 4. reward `r_t = −D(s_t, s_{t+1})` (D is low on expert transitions, so the reward is high
 //!    there);
 //! 5. (no expansion);
@@ -18,20 +18,17 @@
 
 use std::time::Instant;
 
-use faer::Mat;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::DX;
 
 use super::rollout::execute_mlp;
 use super::{Ppo, PpoConfig, UpdateStats};
-use crate::cost::composite::D_IN;
+use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, DiscriminatorConfig};
-use crate::gaifo::{
-    episode_transitions, expert_transitions, initial_critic, refit_critic, train_critic,
-    GaifoConfig, GaifoLog,
-};
+use crate::gaifo::GaifoConfig;
+use crate::iteration_log::GaifoLog;
 use crate::learn::Learn;
 use crate::rollout::{Arms, Episode};
 use crate::ImitationError;
@@ -156,34 +153,11 @@ pub struct GaifoPpo {
     cfg: GaifoPpoConfig,
     task: TaskConfig,
     demos: Demos,
-    expert: Mat<f64>,
-    disc: Discriminator,
-    disc_ws: crate::discriminator::Workspace,
+    critic: Critic,
     ppo: Ppo,
     iteration: usize,
     /// Statistics of the last PPO update.
     pub last_update: UpdateStats,
-}
-
-/// Rewards `r_t = −D(s_t, s_{t+1})` of every transition of every episode.
-pub fn critic_rewards(
-    disc: &Discriminator,
-    ws: &mut crate::discriminator::Workspace,
-    episodes: &[Episode],
-) -> Vec<Vec<f64>> {
-    let mut x = [0.0; D_IN];
-    episodes
-        .iter()
-        .map(|ep| {
-            (0..ep.horizon() - 1)
-                .map(|t| {
-                    x[..DX].copy_from_slice(&ep.x[t * DX..(t + 1) * DX]);
-                    x[DX..].copy_from_slice(&ep.x[(t + 1) * DX..(t + 2) * DX]);
-                    -disc.value(&x, ws)
-                })
-                .collect()
-        })
-        .collect()
 }
 
 impl GaifoPpo {
@@ -191,19 +165,17 @@ impl GaifoPpo {
     pub fn new(cfg: GaifoPpoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let expert = expert_transitions(&demos);
-        let disc = initial_critic(&expert, &cfg.discriminator, cfg.seed)?;
+        let critic = Critic::new(expert_transitions(&demos), &cfg.discriminator, cfg.seed)?
+            .with_schedule(cfg.critic_updates, cfg.critic_lr_half_life);
         let ppo = Ppo::new(cfg.ppo.clone(), cfg.sim.mode, cfg.seed ^ 0x5050_4f00) // "PPO"
             .map_err(ImitationError::Ppo)?;
         Ok(Self {
-            disc_ws: disc.workspace(),
             iteration: 0,
             last_update: UpdateStats::default(),
             cfg,
             task,
             demos,
-            expert,
-            disc,
+            critic,
             ppo,
         })
     }
@@ -215,7 +187,7 @@ impl GaifoPpo {
 
     /// The critic.
     pub fn discriminator(&self) -> &Discriminator {
-        &self.disc
+        self.critic.discriminator()
     }
 
     /// The task being imitated.
@@ -253,40 +225,30 @@ impl Learn for GaifoPpo {
     }
 
     /// Step 1: the MLP policy with noise, and its mean for the evaluation.
-    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Episode), ImitationError> {
+    fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         let (version, seed, n) = (self.version(), self.cfg.seed, self.cfg.samples);
         let (pol, _) = self.ppo.policy_and_workspace();
-        execute_mlp(arms, &self.task, pol, version, seed, n)
+        let (noisy, eval) = execute_mlp(arms, &self.task, pol, version, seed, n)?;
+        Ok((noisy, vec![eval]))
     }
 
     /// Steps 3, 4 and 6 of the module docs on the episodes of the current policy.
-    fn learn(
+    fn learn_goals(
         &mut self,
         episodes: &[Episode],
-        eval: &Episode,
+        evals: &[Episode],
         t_execute: f64,
     ) -> Result<GaifoLog, ImitationError> {
+        let eval = crate::learn::single_eval(evals)?;
         // 3. Update the critic on (s, s') of the policy vs the expert.
         let t1 = Instant::now();
         let c1 = crate::cpu::thread_cpu_s();
         let controller = episode_transitions(episodes);
-        if self.iteration == 0 {
-            self.disc = refit_critic(&self.expert, &controller, self.disc.config())?;
-            self.disc_ws = self.disc.workspace();
-        }
-        let critic = train_critic(
-            &mut self.disc,
-            &mut self.disc_ws,
-            &self.expert,
-            &controller,
-            self.cfg.critic_updates,
-            self.iteration,
-            self.cfg.critic_lr_half_life,
-        )?;
+        let critic = self.critic.update(&controller, self.iteration)?;
         // 4. Reward from the critic.
         let t2 = Instant::now();
         let rewards = match self.cfg.reward {
-            PpoReward::Critic => critic_rewards(&self.disc, &mut self.disc_ws, episodes),
+            PpoReward::Critic => self.critic.rewards(episodes),
             PpoReward::TaskCost => task_rewards(episodes),
         };
         // 6. PPO update.
