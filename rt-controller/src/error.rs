@@ -3,6 +3,7 @@
 
 use std::net::{IpAddr, SocketAddr};
 
+use ur_protocol::client::ClientError;
 use ur_protocol::recipe::RecipeError;
 use ur_protocol::rtde::{ControllerVersion, FrameError, PackageType};
 use ur_protocol::DecodeError;
@@ -167,6 +168,14 @@ pub enum UrSetupError {
         /// The decoder's error.
         why: DecodeError,
     },
+    /// A request that does not encode.
+    #[error("RTDE {during}: {why}")]
+    Encode {
+        /// The step.
+        during: &'static str,
+        /// The encoder's error.
+        why: ur_protocol::EncodeError,
+    },
     /// An answer of the wrong type.
     #[error("RTDE {during}: expected its answer, got a {got:?} package")]
     Unexpected {
@@ -285,7 +294,7 @@ pub enum UrSetupError {
         timeout_s: f64,
         /// Text messages received, all of them counted.
         texts_total: u64,
-        /// The newest of them (at most [`crate::arm::ur::setup::KEPT_TEXTS`]).
+        /// The newest of them (at most [`ur_protocol::client::KEPT_TEXTS`]).
         texts: Vec<String>,
     },
     /// The RTDE port does not answer RTDE, the secondary port does: swapped.
@@ -318,4 +327,40 @@ pub enum UrSetupError {
         /// Text messages the robot sent on RTDE.
         texts: Vec<String>,
     },
+}
+
+impl From<ClientError> for UrSetupError {
+    /// The shared RTDE client's failures as the setup's (their messages name the setup's
+    /// configuration keys).
+    fn from(e: ClientError) -> Self {
+        match e {
+            ClientError::Connect { addr, why } => Self::Connect {
+                what: "RTDE interface",
+                addr,
+                why,
+            },
+            ClientError::Io { during, why } => Self::Io { during, why },
+            ClientError::Closed(during) => Self::Closed(during),
+            ClientError::Frame { during, why } => Self::Frame { during, why },
+            ClientError::Decode { during, why } => Self::Decode { during, why },
+            ClientError::Encode { during, why } => Self::Encode { during, why },
+            ClientError::Unexpected { during, got } => Self::Unexpected { during, got },
+            ClientError::Deadline {
+                during,
+                timeout_s,
+                texts_total,
+                texts,
+            } => Self::Deadline {
+                during,
+                timeout_s,
+                texts_total,
+                texts,
+            },
+            ClientError::NoProtocol => Self::NoProtocol,
+            ClientError::Recipe(e) => Self::Recipe(e),
+            ClientError::StartRefused => Self::StartRefused,
+            ClientError::NotRunning { name, code } => Self::NotRunning { name, code },
+            ClientError::NotNormal { name, code } => Self::NotNormal { name, code },
+        }
+    }
 }
