@@ -8,7 +8,7 @@ use std::io::Write;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream};
 use std::time::{Duration, Instant};
 
-use ur_protocol::client::{self, Client};
+use ur_protocol::client::{self, Client, ClientError};
 use ur_protocol::rtde::{ControllerVersion, Protocol};
 use ur_protocol::script::{self, ScriptParams};
 use ur_protocol::{FrameDecoder, OutputRecipe, RobotState};
@@ -239,7 +239,7 @@ fn not_rtde(cfg: &UrConfig, addr: SocketAddr, timeout: Duration, e: UrSetupError
             "no answer to the protocol request within {} s",
             timeout.as_secs_f64()
         ),
-        UrSetupError::Frame { why, .. } => format!(
+        UrSetupError::Rtde(ClientError::Frame { why, .. }) => format!(
             "it sends bytes that are not RTDE frames ({why}; a UR's primary and secondary interfaces stream robot-state packages)"
         ),
         _ => return e,
