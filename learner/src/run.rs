@@ -31,11 +31,12 @@ pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> anyhow::Result<SimArm> {
         .context("building the simulated arm")
 }
 
-/// What an imitation run saves before every iteration so that it can be resumed.
+/// What a run saves before every iteration so that it can be resumed (in process, `learner
+/// train`, and over IPC, `learner serve`) or its learning checked (`learner replay`).
 pub trait Checkpoint {
-    /// Saves the policy executed next and the critic into `dir` (with the in-process `arm`'s
-    /// noise position when there is one); returns both paths.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)>;
+    /// Saves the controller executed next and the rest of the learner state into `dir` (with
+    /// the in-process `arm`'s noise position when there is one; `None` over IPC).
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()>;
 }
 
 /// The name of checkpoint file `kind` (`table.npz`, `critic.json`, `state.npz`, ...) after `i`
@@ -53,7 +54,7 @@ impl Checkpoint for LqrGaifo {
     /// `iter_NNN_critic.json` and, last, `iter_NNN_state.npz` (the rest of the learner state,
     /// [`LqrGaifo::snapshot`], and the arm's noise position), NNN = iterations done; each file
     /// written atomically, so that a state file marks a complete checkpoint.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let table = checkpoint_file(dir, i, "table.npz");
@@ -70,14 +71,14 @@ impl Checkpoint for LqrGaifo {
             snap.put_words(ARM_NOISE, &[pos as u64, (pos >> 64) as u64]);
         }
         save_state(&checkpoint_file(dir, i, "state.npz"), &snap)?;
-        Ok((table, critic))
+        Ok(())
     }
 }
 
 impl Checkpoint for GaifoPpo {
     /// `iter_NNN_policy.json` (the policy nets) and `iter_NNN_critic.json` (not an exact
     /// checkpoint: there is no resume for this baseline).
-    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
+    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<()> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let pol = checkpoint_file(dir, i, "policy.json");
@@ -88,7 +89,7 @@ impl Checkpoint for GaifoPpo {
         ur5_shared::atomic_file::write(&pol, &serde_json::to_vec(&file)?)?;
         let critic = checkpoint_file(dir, i, "critic.json");
         self.discriminator().save(&critic)?;
-        Ok((pol, critic))
+        Ok(())
     }
 }
 
