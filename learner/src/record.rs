@@ -309,6 +309,7 @@ pub fn to_recorded_demos(
             cost_random: None,
             cost_expert: None,
         }),
+        model: Some(sim.model),
     };
     let demos = to_demos(traj, sim)?;
     crate::io::demos::check_against_arm(&demos, sim)?;

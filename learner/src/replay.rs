@@ -49,7 +49,7 @@ use crate::io::learned::{read_events, LearnedEvent};
 use crate::io::manifest::{self, Manifest};
 use crate::io::table::{load_stored, table_arrays};
 use crate::run::Checkpoint;
-use crate::serve::{Batch, ServeLearner};
+use crate::serve::Batch;
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -522,7 +522,7 @@ type Resume<'a, L> = &'a dyn Fn(&Path) -> anyhow::Result<L>;
 /// The replay loop (module docs) of `learner`; `check` compares the recorded files of the
 /// state after `i` iterations; `resume`, where the run was resumed, rebuilds the learner
 /// from its own checkpoint as the resumed run did.
-fn drive<L: Replayable>(
+fn drive<L: Learn + Checkpoint>(
     mut learner: L,
     dir: &Path,
     picks: &Picks,
@@ -554,7 +554,7 @@ fn drive<L: Replayable>(
         if resumes.remove(&i) {
             if let Some(resume) = resume {
                 let tmp = Scratch::new()?;
-                learner.save_checkpoint(&tmp.0)?;
+                learner.checkpoint(&tmp.0, None)?;
                 learner = resume(&tmp.0)
                     .with_context(|| format!("redoing the resume after iteration {i}"))?;
                 report.resumes += 1;
@@ -574,24 +574,6 @@ fn drive<L: Replayable>(
         used = files;
     }
     Ok(())
-}
-
-/// What [`drive`] needs of a learner: [`Learn`] and, for a resumable one, its checkpoint as
-/// `learner serve` writes it ([`ServeLearner::checkpoint`]).
-trait Replayable: Learn {
-    fn save_checkpoint(&self, dir: &Path) -> anyhow::Result<()>;
-}
-
-impl<L: ServeLearner> Replayable for L {
-    fn save_checkpoint(&self, dir: &Path) -> anyhow::Result<()> {
-        self.checkpoint(dir)
-    }
-}
-
-impl Replayable for GaifoPpo {
-    fn save_checkpoint(&self, dir: &Path) -> anyhow::Result<()> {
-        Checkpoint::checkpoint(self, dir, None).map(|_| ())
-    }
 }
 
 /// An f64 as the report shows it: shortest round-trip decimal and its bits.

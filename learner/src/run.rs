@@ -32,11 +32,12 @@ pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> anyhow::Result<SimArm> {
         .context("building the simulated arm")
 }
 
-/// What an imitation run saves before every iteration so that it can be resumed.
+/// What a run saves before every iteration so that it can be resumed (in process, `learner
+/// train`, and over IPC, `learner serve`) or its learning checked (`learner replay`).
 pub trait Checkpoint {
-    /// Saves the policy executed next and the critic into `dir` (with the in-process `arm`'s
-    /// noise position when there is one); returns both paths.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)>;
+    /// Saves the controller executed next and the rest of the learner state into `dir` (with
+    /// the in-process `arm`'s noise position when there is one; `None` over IPC).
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()>;
 }
 
 /// The name of checkpoint file `kind` (`table.npz`, `critic.json`, `state.npz`, ...) after `i`
@@ -54,7 +55,7 @@ impl Checkpoint for LqrGaifo {
     /// `iter_NNN_critic.json` and, last, `iter_NNN_state.npz` (the rest of the learner state,
     /// [`LqrGaifo::snapshot`], and the arm's noise position), NNN = iterations done; each file
     /// written atomically, so that a state file marks a complete checkpoint.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let table = checkpoint_file(dir, i, "table.npz");
@@ -69,7 +70,7 @@ impl Checkpoint for LqrGaifo {
             &checkpoint_file(dir, i, "state.npz"),
             &with_arm_noise(self.snapshot(), arm),
         )?;
-        Ok((table, critic))
+        Ok(())
     }
 }
 
@@ -77,14 +78,14 @@ impl Checkpoint for Mdgps {
     /// `iter_NNN_critic.json` (the one critic) and, last, `iter_NNN_state.npz` (the rest of the
     /// learner state, [`Mdgps::snapshot`]: the policy, its S-step and every condition's LQR
     /// state, and the arm's noise position), NNN = iterations done; each written atomically.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let critic = checkpoint_file(dir, i, "critic.json");
         self.critic().save(&critic)?;
         let state = checkpoint_file(dir, i, "state.npz");
         save_state(&state, &with_arm_noise(self.snapshot(), arm))?;
-        Ok((state, critic))
+        Ok(())
     }
 }
 
@@ -103,7 +104,7 @@ fn with_arm_noise(
 impl Checkpoint for GaifoPpo {
     /// `iter_NNN_policy.json` (the policy nets) and `iter_NNN_critic.json` (not an exact
     /// checkpoint: there is no resume for this baseline).
-    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<(PathBuf, PathBuf)> {
+    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<()> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let pol = checkpoint_file(dir, i, "policy.json");
@@ -114,7 +115,7 @@ impl Checkpoint for GaifoPpo {
         ur5_shared::atomic_file::write(&pol, &serde_json::to_vec(&file)?)?;
         let critic = checkpoint_file(dir, i, "critic.json");
         self.discriminator().save(&critic)?;
-        Ok((pol, critic))
+        Ok(())
     }
 }
 

@@ -413,8 +413,11 @@ pub struct ControllerConfig {
     /// Control period (s), horizon T, start pose and goal. Tables whose horizon differs from
     /// `task.horizon` are rejected.
     pub task: TaskConfig,
-    /// Joint limits for the clamp ([`ur5_shared::safety::clamp_action`]); defaults: the UR5.
-    pub limits: ArmLimits,
+    /// Joint limits for the clamp ([`ur5_shared::safety::clamp_action`]); not given: the arm
+    /// model's own (`arm.ur.model`, [`ArmLimits::for_model`]); read them with
+    /// [`ControllerConfig::limits`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limits: Option<ArmLimits>,
     /// Hold conditions.
     pub safety: Safety,
     /// Bounds a gain table must satisfy ([`GainBounds`]).
@@ -453,7 +456,7 @@ impl Default for ControllerConfig {
             action_mode: ActionMode::GoalAngles,
             arm: ArmConfig::default(),
             task: TaskConfig::default(),
-            limits: ArmLimits::default(),
+            limits: None,
             safety: Safety::default(),
             bounds: GainBounds::default(),
             policy_bounds: PolicyBounds::default(),
@@ -485,9 +488,9 @@ impl ControllerConfig {
                 "noisy_episodes + eval_episodes must be >= 1".into(),
             );
         }
-        let l = &self.limits;
+        let l = &self.limits();
         // The clamp may be tighter than the robot's own limits, never looser (docs/ur.md, "Arm
-        // models"): the defaults are the UR5's, which exceed e.g. a UR10e's joint speeds.
+        // models"): e.g. the UR5's exceed a UR10e's joint speeds.
         let model = self.arm.ur.model;
         let own = ArmLimits::for_model(model);
         for j in 0..N_JOINTS {
@@ -603,6 +606,13 @@ impl ControllerConfig {
         Ok(())
     }
 
+    /// The clamp's joint limits: `[limits]`, else those of `arm.ur.model`.
+    pub fn limits(&self) -> ArmLimits {
+        self.limits
+            .clone()
+            .unwrap_or_else(|| ArmLimits::for_model(self.arm.ur.model))
+    }
+
     /// Wall-clock period of one tick (ns): `task.dt / time_compression`.
     pub fn wall_period_ns(&self) -> u64 {
         (self.task.dt / self.time_compression * 1e9).round() as u64
@@ -626,14 +636,52 @@ mod tests {
     #[test]
     fn limits_looser_than_the_models_own_are_refused() {
         let mut c: ControllerConfig = toml::from_str("[arm.ur]\nmodel = \"ur10e\"").unwrap();
+        c.limits = Some(ArmLimits::default());
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("limits") && e.contains("ur10e"), "{e}");
-        c.limits = ArmLimits::for_model(ur5_shared::UrModel::Ur10e);
+        let mut own = ArmLimits::for_model(ur5_shared::UrModel::Ur10e);
+        c.limits = Some(own.clone());
         c.validate().unwrap();
-        c.limits.velocity[0] *= 0.5;
+        own.velocity[0] *= 0.5;
+        c.limits = Some(own.clone());
         c.validate().unwrap();
-        c.limits.velocity[0] = 10.0;
+        own.velocity[0] = 10.0;
+        c.limits = Some(own);
         assert!(c.validate().is_err());
+    }
+
+    #[test]
+    fn the_limits_default_to_the_models_own() {
+        let bits =
+            |l: &ArmLimits| [l.lower, l.upper, l.velocity, l.effort].map(|v| v.map(f64::to_bits));
+        // A UR10e without [limits]: the UR10e's, valid.
+        let c: ControllerConfig = toml::from_str("[arm.ur]\nmodel = \"ur10e\"").unwrap();
+        let ur10e = ArmLimits::for_model(ur5_shared::UrModel::Ur10e);
+        assert_eq!(bits(&c.limits()), bits(&ur10e));
+        assert_ne!(
+            bits(&ur10e),
+            bits(&ArmLimits::default()),
+            "the test tells them apart"
+        );
+        c.validate().unwrap();
+        // A UR5 config: the UR5's limits as before, bit for bit, with or without [limits].
+        let ur5 = ArmLimits::default();
+        let c: ControllerConfig = toml::from_str("").unwrap();
+        assert_eq!(bits(&c.limits()), bits(&ur5));
+        let text = toml::to_string(&ControllerConfig {
+            limits: Some(ur5.clone()),
+            ..ControllerConfig::default()
+        })
+        .unwrap();
+        assert!(text.contains("[limits]"), "{text}");
+        let c: ControllerConfig = toml::from_str(&text).unwrap();
+        assert_eq!(bits(&c.limits()), bits(&ur5));
+        // Given limits win over the model's.
+        let c: ControllerConfig =
+            toml::from_str("[arm.ur]\nmodel = \"ur10e\"\n[limits]\nvelocity = [1.0, 1.0, 1.0]")
+                .unwrap();
+        assert_eq!(c.limits().velocity, [1.0; 3]);
+        assert_eq!(c.limits().lower, ur5.lower, "the rest: ArmLimits' defaults");
     }
 
     #[test]

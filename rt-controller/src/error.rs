@@ -3,9 +3,8 @@
 
 use std::net::{IpAddr, SocketAddr};
 
-use ur_protocol::recipe::RecipeError;
-use ur_protocol::rtde::{ControllerVersion, FrameError, PackageType};
-use ur_protocol::DecodeError;
+use ur_protocol::client::ClientError;
+use ur_protocol::rtde::ControllerVersion;
 
 use crate::config::UrSeries;
 
@@ -151,33 +150,11 @@ pub enum UrSetupError {
     /// The robot closed the RTDE connection.
     #[error("the robot closed the RTDE connection during {0}; see its log (another client, or a controller restart)")]
     Closed(&'static str),
-    /// Framing lost.
-    #[error("RTDE {during}: {why}")]
-    Frame {
-        /// The step.
-        during: &'static str,
-        /// The decoder's error.
-        why: FrameError,
-    },
-    /// A package that does not decode.
-    #[error("RTDE {during}: {why}")]
-    Decode {
-        /// The step.
-        during: &'static str,
-        /// The decoder's error.
-        why: DecodeError,
-    },
-    /// An answer of the wrong type.
-    #[error("RTDE {during}: expected its answer, got a {got:?} package")]
-    Unexpected {
-        /// The step.
-        during: &'static str,
-        /// What came.
-        got: PackageType,
-    },
-    /// Neither protocol version accepted.
-    #[error("the controller refused RTDE protocol versions 2 and 1; is this a UR controller (CB3 ≥ 3.4 or e-Series)?")]
-    NoProtocol,
+    /// The RTDE client's failure whose message needs nothing of the configuration: framing
+    /// lost, a package that does not decode, an unexpected answer, both protocol versions or
+    /// START refused, an unusable recipe, the arm not RUNNING or not NORMAL.
+    #[error(transparent)]
+    Rtde(ClientError),
     /// `arm.ur.series` disagrees with the controller.
     #[error("arm.ur.series = {configured:?} but the controller reports version {reported} ({}); set arm.ur.series = \"auto\" or the right one", if reported.is_e_series() { "e-Series" } else { "CB3" })]
     SeriesMismatch {
@@ -185,28 +162,6 @@ pub enum UrSetupError {
         configured: UrSeries,
         /// Reported.
         reported: ControllerVersion,
-    },
-    /// The output recipe is unusable.
-    #[error("RTDE output recipe: {0}")]
-    Recipe(#[from] RecipeError),
-    /// START refused.
-    #[error("the controller refused RTDE START; another client may hold the interface, or the controller is busy: try again")]
-    StartRefused,
-    /// robot_mode is not RUNNING.
-    #[error("robot mode is {name} ({code}), not RUNNING: power the arm on and release the brakes (teach pendant or dashboard server), then start again")]
-    NotRunning {
-        /// The mode's name.
-        name: &'static str,
-        /// Its code.
-        code: i32,
-    },
-    /// safety_mode is not NORMAL.
-    #[error("safety mode is {name} ({code}), not NORMAL: clear the stop on the teach pendant (and its cause), then start again")]
-    NotNormal {
-        /// The mode's name.
-        name: &'static str,
-        /// Its code.
-        code: i32,
     },
     /// The RTDE socket's local address is not IPv4 (the program connects back to it).
     #[error("this PC's address toward the robot is {0}, not IPv4; the program needs an IPv4 address to connect back to")]
@@ -285,7 +240,7 @@ pub enum UrSetupError {
         timeout_s: f64,
         /// Text messages received, all of them counted.
         texts_total: u64,
-        /// The newest of them (at most [`crate::arm::ur::setup::KEPT_TEXTS`]).
+        /// The newest of them (at most [`ur_protocol::client::KEPT_TEXTS`]).
         texts: Vec<String>,
     },
     /// The RTDE port does not answer RTDE, the secondary port does: swapped.
@@ -318,4 +273,32 @@ pub enum UrSetupError {
         /// Text messages the robot sent on RTDE.
         texts: Vec<String>,
     },
+}
+
+impl From<ClientError> for UrSetupError {
+    /// The shared RTDE client's failures as the setup's: those whose advice names the setup's
+    /// configuration (`setup_timeout_s`, the `arm.ur` address) get their own variants.
+    fn from(e: ClientError) -> Self {
+        match e {
+            ClientError::Connect { addr, why } => Self::Connect {
+                what: "RTDE interface",
+                addr,
+                why,
+            },
+            ClientError::Io { during, why } => Self::Io { during, why },
+            ClientError::Closed(during) => Self::Closed(during),
+            ClientError::Deadline {
+                during,
+                timeout_s,
+                texts_total,
+                texts,
+            } => Self::Deadline {
+                during,
+                timeout_s,
+                texts_total,
+                texts,
+            },
+            e => Self::Rtde(e),
+        }
+    }
 }

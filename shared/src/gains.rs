@@ -37,11 +37,10 @@
 use core::fmt;
 use core::mem::MaybeUninit;
 
+use crate::layout::{DU, DX, MAX_HORIZON};
+use crate::table::{self, HeaderBytes, Table};
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
-use xxhash_rust::xxh3::Xxh3;
-
-use crate::layout::{DU, DX, MAX_HORIZON};
 
 /// One time step of the linear-Gaussian controller (units in the module docs).
 #[repr(C)]
@@ -344,23 +343,33 @@ impl GainBounds {
 /// Length of the hashed header: version (8), horizon, dx, du (4 each).
 const HASHED_HEADER_BYTES: usize = 20;
 
-/// The hashed header fields as little-endian bytes (module docs).
-fn header_bytes(table: &GainTable) -> [u8; HASHED_HEADER_BYTES] {
-    let mut b = [0u8; HASHED_HEADER_BYTES];
-    b[0..8].copy_from_slice(&table.version.to_le_bytes());
-    b[8..12].copy_from_slice(&table.horizon.to_le_bytes());
-    b[12..16].copy_from_slice(&table.dx.to_le_bytes());
-    b[16..20].copy_from_slice(&table.du.to_le_bytes());
-    b
-}
+// SAFETY: repr(C), integers and f64 arrays only (the size assertions above: no padding).
+unsafe impl Table for GainTable {
+    type Header = [u8; HASHED_HEADER_BYTES];
 
-/// The raw bytes of `steps`: f64 bit patterns in memory order, little-endian on this target.
-#[cfg(target_endian = "little")]
-fn steps_bytes(steps: &[GainStep]) -> &[u8] {
-    // SAFETY: GainStep is plain f64 data without padding (size assertion above); any initialised
-    // memory may be viewed as bytes, and u8 has alignment 1.
-    unsafe {
-        core::slice::from_raw_parts(steps.as_ptr().cast::<u8>(), core::mem::size_of_val(steps))
+    fn hashed_header(&self) -> Self::Header {
+        HeaderBytes::new()
+            .u64(self.version)
+            .u32(self.horizon)
+            .u32(self.dx)
+            .u32(self.du)
+            .finish()
+    }
+
+    /// `steps[..T]`, every f64 in memory order.
+    fn hashed_values(&self) -> &[f64] {
+        let steps = self.used_steps();
+        // SAFETY: GainStep is repr(C) plain f64 data without padding (size assertion above),
+        // so `steps` is `STEP_LEN · steps.len()` contiguous, aligned f64.
+        unsafe { core::slice::from_raw_parts(steps.as_ptr().cast::<f64>(), STEP_LEN * steps.len()) }
+    }
+
+    fn checksum_mut(&mut self) -> &mut u64 {
+        &mut self.checksum
+    }
+
+    fn dims_mut(&mut self) -> (&mut u32, &mut u32) {
+        (&mut self.dx, &mut self.du)
     }
 }
 
@@ -380,23 +389,13 @@ impl GainTable {
     /// (so it does not validate until filled). Allocates once and never builds the 64 KB value
     /// on the stack.
     pub fn new_boxed() -> Box<GainTable> {
-        let mut b = Box::<GainTable>::new_uninit();
-        GainTable::init_zeroed(&mut b);
-        // SAFETY: init_zeroed initialised every byte.
-        unsafe { b.assume_init() }
+        table::new_boxed()
     }
 
     /// Zeroes `slot` in place (e.g. the payload of an iceoryx2 `loan_uninit()` sample) and sets
     /// `dx`, `du`; returns the initialised table. No allocation, no stack temporary.
     pub fn init_zeroed(slot: &mut MaybeUninit<GainTable>) -> &mut GainTable {
-        // SAFETY: all fields are integers or f64, for which all-zero bytes are valid values.
-        let table = unsafe {
-            core::ptr::write_bytes(slot.as_mut_ptr(), 0, 1);
-            slot.assume_init_mut()
-        };
-        table.dx = DX as u32;
-        table.du = DU as u32;
-        table
+        table::init_zeroed(slot)
     }
 
     /// Copies `src` into `self` (one 64 KB memcpy, no allocation), e.g. into the inactive half
@@ -458,21 +457,13 @@ impl GainTable {
     /// Checksum of the current contents (module docs). Uses at most [`MAX_HORIZON`] steps even
     /// if `horizon` is larger.
     pub fn compute_checksum(&self) -> u64 {
-        let mut h = Xxh3::new();
-        h.update(&header_bytes(self));
-        #[cfg(target_endian = "little")]
-        h.update(steps_bytes(self.used_steps()));
-        #[cfg(target_endian = "big")]
-        for v in self.used_steps().iter().flat_map(GainStep::as_flat) {
-            h.update(&v.to_bits().to_le_bytes());
-        }
-        h.digest()
+        table::compute_checksum(self)
     }
 
     /// Stores the checksum of the current contents. Call after the last change, before
     /// publishing.
     pub fn seal(&mut self) {
-        self.checksum = self.compute_checksum();
+        table::seal(self)
     }
 
     /// Checks the table before use, in this order: dimensions, horizon, checksum, then for each

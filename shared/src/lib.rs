@@ -26,6 +26,8 @@
 //! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
 //! - [`config`]: task and simulator configuration (TOML), arm limits.
 //! - [`kernels`]: dot product, affine map and tanh of every MLP (learner and controller alike).
+//! - [`table`]: the storage gain and policy tables share: zeroed construction on the heap or in
+//!   place, the XXH3-64 checksum and seal.
 //!
 //! Conventions: SI units (rad, rad/s, m, m/s, N·m, s; timestamps in monotonic ns); Cartesian
 //! quantities in the arm base frame; matrices row-major (numpy C order). Nothing the
@@ -49,6 +51,7 @@ pub mod report;
 pub mod safety;
 pub mod services;
 pub mod status;
+pub mod table;
 
 pub use cost::{normalised_performance, task_cost, task_cost_from_distances, CostError};
 pub use gains::{GainBounds, GainEntry, GainField, GainStep, GainTable, GainTableError};

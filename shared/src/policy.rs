@@ -42,13 +42,12 @@
 use core::fmt;
 use core::mem::MaybeUninit;
 
-use iceoryx2::prelude::ZeroCopySend;
-use serde::{Deserialize, Serialize};
-use xxhash_rust::xxh3::Xxh3;
-
 use crate::config::ActionMode;
 use crate::kernels::{affine, dot, tanh_in_place};
 use crate::layout::{DU, DX, Q};
+use crate::table::{self, HeaderBytes, Table};
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
 
 /// Most hidden layers per head.
 pub const MAX_HIDDEN_LAYERS: usize = 4;
@@ -297,16 +296,36 @@ pub fn mode_code(mode: ActionMode) -> u32 {
 
 const HASHED_HEADER_BYTES: usize = 8 + 4 * 4 + 4 * MAX_HIDDEN_LAYERS + 4;
 
-fn header_bytes(p: &PolicyTable) -> [u8; HASHED_HEADER_BYTES] {
-    let mut b = [0u8; HASHED_HEADER_BYTES];
-    b[0..8].copy_from_slice(&p.version.to_le_bytes());
-    let head = [p.dx, p.du, p.action_mode, p.n_hidden];
-    let tail = [p.n_params];
-    let words = head.iter().chain(&p.hidden).chain(&tail);
-    for (i, w) in words.enumerate() {
-        b[8 + 4 * i..12 + 4 * i].copy_from_slice(&w.to_le_bytes());
+// SAFETY: repr(C), integers and f64 only (the size assertion above: no padding).
+unsafe impl Table for PolicyTable {
+    type Header = [u8; HASHED_HEADER_BYTES];
+
+    fn hashed_header(&self) -> Self::Header {
+        let h = HeaderBytes::new()
+            .u64(self.version)
+            .u32(self.dx)
+            .u32(self.du)
+            .u32(self.action_mode)
+            .u32(self.n_hidden);
+        self.hidden
+            .iter()
+            .fold(h, |h, &w| h.u32(w))
+            .u32(self.n_params)
+            .finish()
     }
-    b
+
+    /// θ (`params[..n_params]`).
+    fn hashed_values(&self) -> &[f64] {
+        self.theta()
+    }
+
+    fn checksum_mut(&mut self) -> &mut u64 {
+        &mut self.checksum
+    }
+
+    fn dims_mut(&mut self) -> (&mut u32, &mut u32) {
+        (&mut self.dx, &mut self.du)
+    }
 }
 
 /// Scratch memory of [`policy_action`]: two layer buffers of [`MAX_WIDTH`] (4 KB, no heap).
@@ -328,22 +347,12 @@ impl Default for PolicyScratch {
 impl PolicyTable {
     /// A zeroed table on the heap with `dx`, `du` set (it does not validate until filled).
     pub fn new_boxed() -> Box<PolicyTable> {
-        let mut b = Box::<PolicyTable>::new_uninit();
-        PolicyTable::init_zeroed(&mut b);
-        // SAFETY: init_zeroed initialised every byte.
-        unsafe { b.assume_init() }
+        table::new_boxed()
     }
 
     /// Zeroes `slot` in place (e.g. a loaned iceoryx2 sample) and sets `dx`, `du`.
     pub fn init_zeroed(slot: &mut MaybeUninit<PolicyTable>) -> &mut PolicyTable {
-        // SAFETY: all fields are integers or f64, for which all-zero bytes are valid values.
-        let table = unsafe {
-            core::ptr::write_bytes(slot.as_mut_ptr(), 0, 1);
-            slot.assume_init_mut()
-        };
-        table.dx = DX as u32;
-        table.du = DU as u32;
-        table
+        table::init_zeroed(slot)
     }
 
     /// Fills a table from hidden widths and θ (version and mode as given) and seals it.
@@ -395,16 +404,8 @@ impl PolicyTable {
     /// Copies `src` into `self` (one memcpy of the used part and the header; no allocation).
     pub fn copy_from(&mut self, src: &PolicyTable) {
         let n = (src.n_params as usize).min(MAX_POLICY_PARAMS);
-        self.version = src.version;
-        self.dx = src.dx;
-        self.du = src.du;
-        self.action_mode = src.action_mode;
-        self.n_hidden = src.n_hidden;
-        self.hidden = src.hidden;
-        self.n_params = src.n_params;
-        self.epoch = src.epoch;
-        self.checksum = src.checksum;
-        self.params[..n].copy_from_slice(&src.params[..n]);
+        let header = core::mem::offset_of!(PolicyTable, params);
+        table::copy_prefix(self, src, header + 8 * n);
     }
 
     /// The action mode, if the code is valid.
@@ -440,27 +441,12 @@ impl PolicyTable {
 
     /// Checksum of the current contents (module docs).
     pub fn compute_checksum(&self) -> u64 {
-        let mut h = Xxh3::new();
-        h.update(&header_bytes(self));
-        #[cfg(target_endian = "little")]
-        {
-            let theta = self.theta();
-            // SAFETY: f64 slice viewed as bytes; u8 has alignment 1, any initialised memory.
-            let bytes = unsafe {
-                core::slice::from_raw_parts(theta.as_ptr().cast::<u8>(), 8 * theta.len())
-            };
-            h.update(bytes);
-        }
-        #[cfg(target_endian = "big")]
-        for v in self.theta() {
-            h.update(&v.to_bits().to_le_bytes());
-        }
-        h.digest()
+        table::compute_checksum(self)
     }
 
     /// Stores the checksum of the current contents.
     pub fn seal(&mut self) {
-        self.checksum = self.compute_checksum();
+        table::seal(self)
     }
 
     /// The part of θ that index `flat` belongs to.

@@ -12,11 +12,11 @@ use std::time::{Duration, Instant};
 
 use hil_sim::ur_sim::{self, Faults, Series, UrSimConfig, UrSimHandle};
 use ur5_shared::config::{SimConfig, TaskConfig};
+use ur_protocol::client::{self, ClientError, OwnedFrame};
 use ur_protocol::recipe::{OutputRecipe, RecipeError};
-use ur_protocol::rtde::{Frame, PackageType, Protocol, TextMessage};
+use ur_protocol::rtde::{Protocol, TextMessage};
 use ur_protocol::script::{self, ScriptParams};
 use ur_protocol::state::runtime_state;
-use ur_protocol::stream::FrameDecoder;
 use ur_protocol::{
     ClientMessage, ControlMode, ReverseCommand, RobotMessage, RobotState, SafetyMode,
 };
@@ -39,123 +39,95 @@ fn start(lockstep: bool, faults: Faults) -> UrSimHandle {
     ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).expect("ur-sim starts")
 }
 
-/// A minimal RTDE client.
-pub(super) struct Client {
-    s: TcpStream,
-    dec: Box<FrameDecoder<8192>>,
-    protocol: Protocol,
-    pub(super) texts: Vec<String>,
+/// The shared RTDE client ([`ur_protocol::client`]) with the tests' conveniences: each step
+/// bounded by [`DEADLINE`], a failure that is not under test a panic.
+pub(super) struct Client(client::Client);
+
+impl std::ops::Deref for Client {
+    type Target = client::Client;
+    fn deref(&self) -> &client::Client {
+        &self.0
+    }
 }
 
-/// A frame copied out of the decoder.
-struct Owned(PackageType, Vec<u8>);
+impl std::ops::DerefMut for Client {
+    fn deref_mut(&mut self) -> &mut client::Client {
+        &mut self.0
+    }
+}
 
-impl Owned {
+/// A frame decoded (the server's frames are well formed).
+trait Msg {
+    fn msg(&self, p: Protocol) -> RobotMessage<'_>;
+}
+
+impl Msg for OwnedFrame {
     fn msg(&self, p: Protocol) -> RobotMessage<'_> {
-        RobotMessage::decode(
-            &Frame {
-                kind: self.0,
-                payload: &self.1,
-            },
-            p,
-        )
-        .expect("well-formed package")
+        self.decode(p, "test").expect("well-formed package")
+    }
+}
+
+/// A clear message for a failed read.
+fn why(e: ClientError) -> String {
+    match e {
+        ClientError::Closed(_) => "connection closed by the controller".into(),
+        e => e.to_string(),
     }
 }
 
 impl Client {
     fn connect(addr: SocketAddr) -> Self {
-        let s = TcpStream::connect(addr).unwrap();
-        s.set_read_timeout(Some(DEADLINE)).unwrap();
-        Self {
-            s,
-            dec: Box::default(),
-            protocol: Protocol::V1,
-            texts: Vec::new(),
-        }
+        Self(client::Client::connect(addr, DEADLINE).unwrap())
     }
 
     fn send(&mut self, m: ClientMessage<'_>) {
-        let mut buf = [0u8; 1024];
-        let n = m.encode(&mut buf).unwrap();
-        self.s.write_all(&buf[..n]).unwrap();
+        self.0.send(m, "test").unwrap();
     }
 
     /// The next frame of any type; `Err` with a clear message on a closed connection.
-    fn next_any(&mut self) -> Result<Owned, String> {
-        loop {
-            if let Some(f) = self.dec.next_frame().map_err(|e| e.to_string())? {
-                return Ok(Owned(f.kind, f.payload.to_vec()));
-            }
-            match self.s.read(self.dec.spare()) {
-                Ok(0) => return Err("connection closed by the controller".into()),
-                Ok(n) => self.dec.commit(n),
-                Err(e) => return Err(format!("read failed: {e}")),
-            }
-        }
+    fn next_any(&mut self) -> Result<OwnedFrame, String> {
+        self.0.restart_deadline(DEADLINE);
+        self.0.next_frame("test").map_err(why)
     }
 
     /// The next frame that is not a text message; text messages are kept in `texts`.
-    fn next(&mut self) -> Result<Owned, String> {
-        loop {
-            let f = self.next_any()?;
-            if f.0 == PackageType::TextMessage {
-                if let RobotMessage::TextMessage(TextMessage::V2 { message, .. }) =
-                    f.msg(self.protocol)
-                {
-                    self.texts.push(message.to_owned());
-                } else {
-                    self.texts.push("(v1 text)".into());
-                }
-                continue;
-            }
-            return Ok(f);
-        }
+    fn next(&mut self) -> Result<OwnedFrame, String> {
+        self.0.restart_deadline(DEADLINE);
+        self.0.next("test").map_err(why)
     }
 
-    /// Reads frames until a text message; keeps it in `texts` and returns it.
+    /// Reads frames until a text message (v2) and returns it.
     pub(super) fn next_text(&mut self) -> Result<String, String> {
         loop {
             let f = self.next_any()?;
             if let RobotMessage::TextMessage(TextMessage::V2 { message, .. }) = f.msg(self.protocol)
             {
-                self.texts.push(message.to_owned());
                 return Ok(message.to_owned());
             }
         }
     }
 
     fn negotiate(&mut self, version: u16) -> bool {
-        self.send(ClientMessage::RequestProtocolVersion(version));
-        let f = self.next().unwrap();
-        let RobotMessage::ProtocolVersion { accepted } = f.msg(self.protocol) else {
-            panic!("expected a protocol answer, got {:?}", f.0)
-        };
-        if accepted {
-            self.protocol = Protocol::from_u16(version).unwrap();
-        }
-        accepted
+        self.0.restart_deadline(DEADLINE);
+        self.0.request_protocol(version).unwrap()
     }
 
     fn setup(&mut self, names: &str) -> Result<OutputRecipe, RecipeError> {
-        self.send(ClientMessage::SetupOutputs {
-            frequency: (self.protocol == Protocol::V2).then_some(500.0),
-            names,
-        });
-        let f = self.next().unwrap();
-        let RobotMessage::SetupOutputs { recipe_id, types } = f.msg(self.protocol) else {
-            panic!("expected a SETUP_OUTPUTS answer")
-        };
-        OutputRecipe::from_answer(names, recipe_id, types)
+        self.0.restart_deadline(DEADLINE);
+        match self.0.setup_outputs(names, 500.0) {
+            Ok(r) => Ok(r),
+            Err(ClientError::Recipe(e)) => Err(e),
+            Err(e) => panic!("SETUP_OUTPUTS: {e}"),
+        }
     }
 
     fn start(&mut self) -> bool {
-        self.send(ClientMessage::Start);
-        let f = self.next().unwrap();
-        let RobotMessage::Start { accepted } = f.msg(self.protocol) else {
-            panic!("expected a START answer")
-        };
-        accepted
+        self.0.restart_deadline(DEADLINE);
+        match self.0.start() {
+            Ok(()) => true,
+            Err(ClientError::StartRefused) => false,
+            Err(e) => panic!("START: {e}"),
+        }
     }
 
     /// Handshake v2, the driver's recipe, START.
@@ -168,13 +140,8 @@ impl Client {
     }
 
     pub(super) fn state(&mut self, recipe: &OutputRecipe) -> Result<RobotState, String> {
-        let f = self.next()?;
-        let mut s = RobotState::default();
-        let m = f.msg(self.protocol);
-        if !s.update(recipe, &m).map_err(|e| e.to_string())? {
-            return Err(format!("expected a data package, got {:?}", f.0));
-        }
-        Ok(s)
+        self.0.restart_deadline(DEADLINE);
+        self.0.state(recipe).map_err(why)
     }
 }
 
@@ -303,9 +270,9 @@ fn ur_lockstep_servoj_moves_the_arm_and_a_silent_controller_stops_it() {
         "stopped short of the target"
     );
     assert!(
-        c.texts.iter().any(|t| t.contains("receive timeout")),
+        c.texts().iter().any(|t| t.contains("receive timeout")),
         "{:?}",
-        c.texts
+        c.texts()
     );
     // The reverse socket is closed by the ended program.
     let mut b = [0u8; 1];
@@ -332,11 +299,11 @@ fn ur_limit_violation_raises_a_protective_stop() {
     }
     assert_eq!(s.safety_mode, 3);
     assert!(
-        c.texts
+        c.texts()
             .iter()
             .any(|t| t.contains("protective stop") && t.contains("elbow")),
         "{:?}",
-        c.texts
+        c.texts()
     );
     assert_eq!(sim.stop().protective_stops, 1);
 }
@@ -448,10 +415,10 @@ fn ur_fault_text_before_reply_and_refused_start() {
     c.setup(NAMES).unwrap();
     assert!(!c.start(), "START refused");
     assert_eq!(
-        c.texts.len(),
+        c.texts().len(),
         3,
         "one text before each answer: {:?}",
-        c.texts
+        c.texts()
     );
     sim.stop();
 }
@@ -612,32 +579,25 @@ fn ur_real_time_servoj_and_the_watchdog_stop() {
 }
 
 impl Client {
-    /// Sends a package of any size (a long recipe).
-    fn send_big(&mut self, m: ClientMessage<'_>) {
-        let mut buf = vec![0u8; usize::from(u16::MAX)];
-        let n = m.encode(&mut buf).unwrap();
-        self.s.write_all(&buf[..n]).unwrap();
-    }
-
     /// SETUP_OUTPUTS with any names: (recipe id, types).
     fn setup_raw(&mut self, names: &str) -> (u8, String) {
-        self.send_big(ClientMessage::SetupOutputs {
+        self.send(ClientMessage::SetupOutputs {
             frequency: Some(500.0),
             names,
         });
         let f = self.next().expect("an answer, not a closed connection");
         let RobotMessage::SetupOutputs { recipe_id, types } = f.msg(self.protocol) else {
-            panic!("expected a SETUP_OUTPUTS answer, got {:?}", f.0)
+            panic!("expected a SETUP_OUTPUTS answer, got {:?}", f.kind)
         };
         (recipe_id, types.to_owned())
     }
 
     /// SETUP_INPUTS with any names: (recipe id, types).
     fn setup_inputs_raw(&mut self, names: &str) -> (u8, String) {
-        self.send_big(ClientMessage::SetupInputs { names });
+        self.send(ClientMessage::SetupInputs { names });
         let f = self.next().expect("an answer, not a closed connection");
         let RobotMessage::SetupInputs { recipe_id, types } = f.msg(self.protocol) else {
-            panic!("expected a SETUP_INPUTS answer, got {:?}", f.0)
+            panic!("expected a SETUP_INPUTS answer, got {:?}", f.kind)
         };
         (recipe_id, types.to_owned())
     }
@@ -665,11 +625,11 @@ fn ur_recipes_it_cannot_set_up_are_refused_and_the_server_serves_on() {
         Err(RecipeError::Refused)
     );
     assert!(
-        c.texts
+        c.texts()
             .iter()
             .any(|t| t.contains("65 variables") && t.contains("at most 64")),
         "{:?}",
-        c.texts
+        c.texts()
     );
     // 64 is the most: accepted.
     let (id, _) = c.setup_raw(&many[..64].join(","));
@@ -686,12 +646,12 @@ fn ur_recipes_it_cannot_set_up_are_refused_and_the_server_serves_on() {
     assert_eq!(id, 0);
     // Empty recipes (nothing, or only ur_rtde's empty names): refused as a controller does.
     for empty in ["", ",", ",,"] {
-        c.texts.clear();
+        c.take_texts();
         assert_eq!(c.setup_raw(empty), (0, String::new()), "{empty:?}");
         assert!(
-            c.texts.iter().any(|t| t.contains("names no variable")),
+            c.texts().iter().any(|t| t.contains("names no variable")),
             "{empty:?}: {:?}",
-            c.texts
+            c.texts()
         );
         assert_eq!(c.setup_inputs_raw(empty).0, 0, "{empty:?}");
     }
@@ -709,7 +669,7 @@ fn ur_recipes_it_cannot_set_up_are_refused_and_the_server_serves_on() {
     })
     .encode(&mut buf)
     .unwrap();
-    c.s.write_all(&buf[..n]).unwrap();
+    c.socket().write_all(&buf[..n]).unwrap();
     let recipe = c.setup(NAMES).expect("the same connection still serves");
     let (id, types) = c.setup_inputs_raw("input_double_register_0");
     assert!(id > 0, "{types}");

@@ -1,6 +1,7 @@
 //! Guided Policy Search trajectory optimisation: a faithful port of the pieces of the GPS
 //! reference code (cbfinn/gps, commit 82fa6cc) that an LQR-based learner needs, pinned down by
-//! the reference vectors in `tests/data/gps-vectors` (see [`conformance`]).
+//! the reference vectors in `tests/data/gps-vectors` (see `conformance`, behind the cargo
+//! feature of that name).
 //!
 //! Modules follow GPS's files:
 //! - [`dynamics::gmm`] (utility/gmm.py), [`dynamics::prior_gmm`] (dynamics_prior_gmm.py),
@@ -11,14 +12,16 @@
 //!   [`algorithm::update::Learner`], the state one iteration updates);
 //! - [`policy::lin_gauss`], [`policy::init`] (lin_gauss_policy.py, lin_gauss_init.py);
 //! - [`snapshot`]: the learner state as named arrays (exact checkpoints);
-//! - [`conformance`]: the checker against the reference vectors; [`synthetic`]: random
-//!   linear-Gaussian test problems.
+//! - `conformance` (cargo feature `conformance`): the checker against the reference vectors;
+//!   [`synthetic`]: random linear-Gaussian test problems.
 //!
 //! Conventions: GPS's absolute controller form `u = K x + k` throughout; arrays are row-major
 //! stacks ([`linalg::MatSeq`]) with numpy's shapes; `y = [x; u]`. Depends on faer, rand, serde
-//! and thiserror (and serde_json for the vectors files), nothing of the robot.
+//! and thiserror (and, with the `conformance` feature, serde_json for the vectors files),
+//! nothing of the robot.
 
 pub mod algorithm;
+#[cfg(feature = "conformance")]
 pub mod conformance;
 pub mod dynamics;
 pub mod error;

@@ -31,7 +31,7 @@ pub enum DatasetCmd {
     /// or a recorded run (RUN) as one MCAP file.
     Export(ExportArgs),
     /// Load demonstrations in any format `--demos` takes (.npz, LeRobot folder, .csv), check
-    /// them against the default arm and print what they hold.
+    /// them against the arm model they name (ur5 if they name none) and print what they hold.
     Check(CheckArgs),
 }
 
@@ -184,17 +184,18 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
             Ok(())
         }
         DatasetCmd::Check(a) => {
-            let sim = ur5_shared::config::SimConfig::default();
+            let model = crate::io::demos::model_of(&a.demos)?.unwrap_or_default();
+            let sim = ur5_shared::config::SimConfig::for_model(model);
             let d = crate::io::demos::load_checked(&a.demos, &sim)?;
             let summary = serde_json::json!({"command": "dataset check", "demos": a.demos,
-                "count": d.count, "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal,
+                "model": model, "count": d.count, "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal,
                 "start_q_rad": d.start_q, "cost_random": d.cost_random, "cost_expert": d.cost_expert});
             if a.json {
                 println!("{summary}");
             } else {
                 eprintln!(
                     "{}: {} demonstrations of T = {} at dt = {} s, goal {:?} m, start {:?} rad, \
-                     C_random {:.4}, C_expert {:.4}: consistent with the arm",
+                     C_random {:.4}, C_expert {:.4}: consistent with the {model}",
                     a.demos.display(),
                     d.count,
                     d.horizon,

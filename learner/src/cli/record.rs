@@ -1,6 +1,6 @@
 //! `learner record`: demonstrations taught by hand, from a UR's RTDE stream
-//! ([`crate::record`]). The RTDE client is the `ur` backend's own
-//! (`rt_controller::arm::ur::UrRtde`), used as an observer: no program is sent.
+//! ([`crate::record`]). The RTDE client is the shared one (`ur_protocol::client`), used as an
+//! observer: no program is sent.
 
 use std::net::Ipv4Addr;
 use std::path::PathBuf;
@@ -11,6 +11,9 @@ use clap::{Args, ValueEnum};
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::UrModel;
+
+use ur_protocol::client::{check_modes, Client, ClientError};
+use ur_protocol::{OutputRecipe, RobotState};
 
 use crate::record::{steps_checked, to_recorded_demos, Event, Sample, Segmenter};
 
@@ -121,16 +124,12 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
             args.out.display()
         ),
     }
-    let ur = rt_controller::config::UrConfig {
-        model: cfg.sim.model,
-        host: host.to_string(),
-        rtde_port: args.rtde_port,
-        ..Default::default()
-    };
-    let mut rtde = rt_controller::arm::ur::UrRtde::connect(&ur, Duration::from_secs(10))
+    let timeout = Duration::from_secs(10);
+    let addr = std::net::SocketAddr::from((host, args.rtde_port));
+    let mut rtde = Observer::connect(addr, timeout)
         .with_context(|| format!("connecting to RTDE at {host}:{}", args.rtde_port))?;
     let rate = 1.0 / {
-        let a = rtde.state().timestamp;
+        let a = rtde.state.timestamp;
         let b = rtde.next_state()?.timestamp;
         b - a
     };
@@ -147,7 +146,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let mut seg = Segmenter::default();
     let mut kept = Vec::new();
     let mut skipped = 0usize;
-    let t_begin = rtde.state().timestamp;
+    let t_begin = rtde.state.timestamp;
     while kept.len() < args.episodes {
         let s = rtde.next_state().with_context(|| {
             format!(
@@ -243,4 +242,39 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The outputs a recording reads (the modes for the check that the arm runs).
+const OUTPUTS: &str = "timestamp,actual_q,actual_qd,robot_mode,safety_mode";
+
+/// An RTDE observer: streaming [`OUTPUTS`] at the controller's rate, RUNNING and NORMAL.
+struct Observer {
+    c: Client,
+    recipe: OutputRecipe,
+    /// The newest state.
+    state: RobotState,
+    /// Bounds each read.
+    timeout: Duration,
+}
+
+impl Observer {
+    fn connect(addr: std::net::SocketAddr, timeout: Duration) -> Result<Self, ClientError> {
+        let mut c = Client::connect(addr, timeout)?;
+        let (_, recipe) = c.handshake(OUTPUTS)?;
+        let state = c.state(&recipe)?;
+        check_modes(&state)?;
+        Ok(Self {
+            c,
+            recipe,
+            state,
+            timeout,
+        })
+    }
+
+    /// Blocks for the next data package (at most `timeout`).
+    fn next_state(&mut self) -> Result<&RobotState, ClientError> {
+        self.c.restart_deadline(self.timeout);
+        self.state = self.c.state(&self.recipe)?;
+        Ok(&self.state)
+    }
 }

@@ -130,6 +130,21 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
     Ok(demos)
 }
 
+/// The arm model the demonstrations in `path` name: a `.npz`'s `model` (a file without it
+/// was made on the UR5), a LeRobot dataset's [`super::lerobot::MODEL_KEY`]; `None` for a CSV
+/// file and a dataset that names none.
+pub fn model_of(path: &Path) -> anyhow::Result<Option<ur5_shared::UrModel>> {
+    use anyhow::Context;
+    let at = || format!("loading demonstrations {}", path.display());
+    if path.is_dir() && super::lerobot::is_dataset(path) {
+        return super::lerobot::model_of(path).with_context(at);
+    }
+    if super::foreign::is_foreign(path) {
+        return Ok(None);
+    }
+    Ok(Some(load(path).with_context(at)?.model))
+}
+
 /// Loads the demonstrations in `path` in any format `--demos` takes (`.npz`, LeRobot dataset
 /// folder or CSV: [`super::foreign::load_foreign`]; else [`load`]) and checks them against
 /// the arm of `sim` ([`check_against_arm`]), each error naming the file: what every run that

@@ -124,6 +124,7 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
         actions: None,
         dt,
         task: None,
+        model: None,
     })
 }
 
@@ -162,6 +163,7 @@ pub fn from_demos(demos: &Demos) -> Trajectories {
             cost_random: Some(demos.cost_random),
             cost_expert: Some(demos.cost_expert),
         }),
+        model: Some(demos.model),
     }
 }
 
@@ -205,6 +207,7 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
                         cost_random: None,
                         cost_expert: None,
                     }),
+                    model: None,
                 };
                 out = Some((traj, task));
             }
@@ -226,6 +229,16 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
 /// Trajectories from any source as demonstrations for the arm of `sim`, the missing task and
 /// costs derived (module docs).
 pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
+    // A source that names another arm: derived on that arm (`load_checked` then names the
+    // difference to the configured one).
+    let model = traj.model.unwrap_or(sim.model);
+    let noted;
+    let sim = if model == sim.model {
+        sim
+    } else {
+        noted = SimConfig::for_model(model);
+        &noted
+    };
     // Before anything simulates at that period (1e300 s would be 1e303 physics steps).
     ur5_shared::config::check_dt(traj.dt).map_err(|why| {
         anyhow::anyhow!(
@@ -283,8 +296,8 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
     Ok(Demos {
         states: traj.states,
         actions,
-        // Checked against this arm by `load_checked`; the formats carry no model.
-        model: sim.model,
+        // Checked against the configured arm by `load_checked`.
+        model,
         count: traj.count,
         horizon: traj.horizon,
         goal,

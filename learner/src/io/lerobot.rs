@@ -3,7 +3,7 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | `meta/info.json` | `codebase_version` "v3.0", `robot_type` "ur5", `fps`, totals, paths, `features` (dtype, shape, names); ours also `ur5_task` ([`TaskMeta`]) |
+//! | `meta/info.json` | `codebase_version` "v3.0", `robot_type` (the arm model, "ur5" if not known), `fps`, totals, paths, `features` (dtype, shape, names); ours also `ur5_task` ([`TaskMeta`]) and `ur_model` ([`MODEL_KEY`]: the arm model, when known) |
 //! | `meta/stats.json` | per numeric feature: `min`, `max`, `mean`, `std` (per entry), `count` |
 //! | `meta/tasks.parquet` | `task_index` (int64) and `task` (string; pandas reads it as the index) |
 //! | `meta/episodes/chunk-000/file-000.parquet` | per episode: `episode_index`, `tasks`, `length`, `data/chunk_index`, `data/file_index`, `dataset_from_index`, `dataset_to_index`, `meta/episodes/chunk_index`, `meta/episodes/file_index` |
@@ -29,11 +29,16 @@ use parquet::schema::types::Type;
 use serde::{Deserialize, Serialize};
 
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
+use ur5_shared::UrModel;
 
 /// The state feature, the only one the reader needs.
 pub const STATE_FEATURE: &str = "observation.state";
 /// The action feature (written where actions were recorded).
 pub const ACTION_FEATURE: &str = "action";
+/// Our key in `meta/info.json` naming the arm model (`"ur5"`, `"ur5e"`, …; its `robot_type`
+/// says the same). Datasets exported before it, and those made elsewhere, have none: they are
+/// taken to be of the configured arm (the UR5 for `learner dataset check`).
+pub const MODEL_KEY: &str = "ur_model";
 /// The one task of every dataset we write.
 pub const TASK: &str = "reach the goal point with the end effector (UR5, 3 joints)";
 
@@ -98,6 +103,9 @@ pub struct Trajectories {
     pub dt: f64,
     /// The task, when the source notes it.
     pub task: Option<TaskMeta>,
+    /// The arm model the source notes (a LeRobot dataset's [`MODEL_KEY`], a `.npz`'s
+    /// `model`); `None`: not noted, the arm of the run's configuration is assumed.
+    pub model: Option<UrModel>,
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> LeRobotError + '_ {
@@ -352,9 +360,9 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
     for k in ["frame_index", "episode_index", "index", "task_index"] {
         features.insert(k.into(), scalar("int64"));
     }
-    let info = serde_json::json!({
+    let mut info = serde_json::json!({
         "codebase_version": "v3.0",
-        "robot_type": "ur5",
+        "robot_type": traj.model.unwrap_or_default().name(),
         "total_episodes": d,
         "total_frames": n,
         "total_tasks": 1,
@@ -368,6 +376,7 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
         "features": features,
         "ur5_task": traj.task,
     });
+    info[MODEL_KEY] = traj.model.map(UrModel::name).into();
     let write_json = |path: PathBuf, v: &serde_json::Value| -> Result<(), LeRobotError> {
         let text = serde_json::to_string_pretty(v).expect("JSON values serialise");
         std::fs::write(&path, text).map_err(io_err(&path))
@@ -418,6 +427,7 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
             f["shape"]
         )));
     }
+    let model = noted_model(&info).map_err(bad_info)?;
     let task: Option<TaskMeta> = match &info["ur5_task"] {
         serde_json::Value::Null => None,
         v => Some(
@@ -466,6 +476,33 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
         horizon,
         dt: 1.0 / fps,
         task,
+        model,
+    })
+}
+
+/// The arm model `meta/info.json` notes under [`MODEL_KEY`] (`None`: no such key, or null).
+fn noted_model(info: &serde_json::Value) -> Result<Option<UrModel>, String> {
+    match &info[MODEL_KEY] {
+        serde_json::Value::Null => Ok(None),
+        serde_json::Value::String(name) => name
+            .parse()
+            .map(Some)
+            .map_err(|e| format!("`{MODEL_KEY}`: {e}")),
+        v => Err(format!("`{MODEL_KEY}`: {v} is not a model name")),
+    }
+}
+
+/// The arm model the dataset in `dir` notes ([`MODEL_KEY`]; `None` if it notes none).
+pub fn model_of(dir: &Path) -> Result<Option<UrModel>, LeRobotError> {
+    let info_path = dir.join("meta/info.json");
+    let text = std::fs::read_to_string(&info_path).map_err(io_err(&info_path))?;
+    let info: serde_json::Value = serde_json::from_str(&text).map_err(|e| LeRobotError::Info {
+        path: info_path.clone(),
+        why: format!("not JSON: {e}"),
+    })?;
+    noted_model(&info).map_err(|why| LeRobotError::Info {
+        path: info_path,
+        why,
     })
 }
 

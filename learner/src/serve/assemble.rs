@@ -1,6 +1,6 @@
 //! Episodes from the sample stream: the controller streams one `StepSample` per step; the
 //! [`Assembler`] groups them into complete episodes and [`Batch`] keeps those of the table version
-//! an update waits for (module docs of `serve`: "Which episodes count").
+//! an update waits for (docs/design.md §3.6, "Which episodes count").
 
 use imitation::rollout::Episode;
 use serde::Serialize;

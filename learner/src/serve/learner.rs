@@ -13,6 +13,7 @@ use serde::Serialize;
 use ur5_shared::GainTable;
 
 use super::ServeOptions;
+use crate::arm::SimArm;
 use crate::io::checkpoint::{save_checkpoint, ExpertCheckpoint};
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::learned::{append_event, LearnedEvent};
@@ -23,14 +24,13 @@ use crate::run::Checkpoint;
 
 /// A learner `learner serve` runs: [`LinGaussLearn`] (steps 2–6 on the streamed episodes, the
 /// controller to publish) plus its files and progress line. Implemented for the expert
-/// ([`ExpertLearner`]) and LQR+GAIfO ([`LqrGaifo`]).
-pub trait ServeLearner: LinGaussLearn<Log: Serialize> {
+/// ([`ExpertLearner`]) and LQR+GAIfO ([`LqrGaifo`]); [`Checkpoint`] writes what `--resume`
+/// needs.
+pub trait ServeLearner: LinGaussLearn<Log: Serialize> + Checkpoint {
     /// Where the task comes from (for messages).
     const TASK_SOURCE: &'static str;
     /// Header of [`ServeLearner::progress_line`].
     const PROGRESS_HEADER: &'static str;
-    /// Writes what `--resume` needs into `out`.
-    fn checkpoint(&self, out: &Path) -> anyhow::Result<()>;
     /// Opens the per-iteration CSV in `out` for appending (`resumed`: a resumed run).
     fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File>;
     /// One CSV row, newline included.
@@ -41,10 +41,11 @@ pub trait ServeLearner: LinGaussLearn<Log: Serialize> {
     fn planned_iterations(&self) -> usize;
 }
 
-impl ServeLearner for ExpertLearner {
-    const TASK_SOURCE: &'static str = "this learner's config ([task])";
-    const PROGRESS_HEADER: &'static str = IterationLog::PROGRESS_HEADER;
-    fn checkpoint(&self, out: &Path) -> anyhow::Result<()> {
+/// The expert's checkpoint of a served run: `checkpoint.npz` (controller, iteration,
+/// random-policy cost, best controller and patience count), read by
+/// [`super::expert_from_checkpoint`].
+impl Checkpoint for ExpertLearner {
+    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<()> {
         let c = ExpertCheckpoint {
             pol: self.policy().clone(),
             iteration: self.iteration(),
@@ -52,8 +53,13 @@ impl ServeLearner for ExpertLearner {
             best: self.best().map(|(p, e)| (p.clone(), e.clone())),
             since_best: self.since_best(),
         };
-        save_checkpoint(&out.join("checkpoint.npz"), &c, self.config().seed)
+        save_checkpoint(&dir.join("checkpoint.npz"), &c, self.config().seed)
     }
+}
+
+impl ServeLearner for ExpertLearner {
+    const TASK_SOURCE: &'static str = "this learner's config ([task])";
+    const PROGRESS_HEADER: &'static str = IterationLog::PROGRESS_HEADER;
     fn open_csv(&self, out: &Path, _resumed: bool) -> anyhow::Result<std::fs::File> {
         let path = out.join("serve_log.csv");
         let new_csv = !path.exists();
@@ -83,9 +89,6 @@ impl ServeLearner for ExpertLearner {
 impl ServeLearner for LqrGaifo {
     const TASK_SOURCE: &'static str = "the demonstrations";
     const PROGRESS_HEADER: &'static str = GaifoLog::PROGRESS_HEADER;
-    fn checkpoint(&self, out: &Path) -> anyhow::Result<()> {
-        Checkpoint::checkpoint(self, out, None).map(|_| ())
-    }
     fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File> {
         open_log(
             &out.join("gaifo_log.csv"),
@@ -126,7 +129,7 @@ impl<L: ServeLearner> Run<L> {
         let version = self.learner.version();
         let mut table = self.learner.table();
         table.epoch = self.epoch;
-        self.learner.checkpoint(out)?;
+        self.learner.checkpoint(out, None)?;
         let dt = self.learner.task().dt;
         let file = crate::io::table::version_path(out, version);
         save_table(&file, &table, dt)?;

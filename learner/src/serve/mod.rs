@@ -5,102 +5,27 @@
 //!                                     <-- controller/gains --
 //! ```
 //!
-//! Algorithm 1 with step 1 ("execute the controller") done by the real-time loop: the learner
-//! publishes a gain table, assembles the episodes the controller runs with it from the
-//! [`ur5_shared::StepSample`] stream, and when `samples` noisy episodes and one noise-free episode of that
-//! table version are in, runs steps 2–6 and publishes the next version. One loop serves both
-//! learners ([`ServeLearner`]):
-//! - `--algo expert` (default): [`ExpertLearner::update`] on the true task cost (the same code
-//!   as the in-process [`imitation::expert::train`]); the task is the config's `[task]`;
-//! - `--algo lqr-gaifo --demos FILE`: [`LqrGaifo::learn`] (the same code as the in-process
-//!   `learner train`); the task (goal, start pose, T, dt) is the
-//!   demonstrations'.
-//!
-//! # Same episodes as in process
-//! The controller draws the noise of the k-th episode of a table version from
-//! `Noise::new(seed, version, k)`, episodes k = 0 … N−1 of a version with noise and k = N
-//! without (`noisy_episodes = N`, `eval_episodes = 1`), exactly the order of
-//! [`imitation::rollout::execute`]. With the same seed, task and arm (lockstep), the episodes over
-//! IPC equal the in-process ones bit for bit, and so does everything learned from them. The
-//! dynamics are fitted on the executed actions (`StepSample::a_sent`, after the clamp).
-//!
-//! # The task must be the controller's and the arm's
-//! The learner checks what the sample stream shows and stops with an error naming the setting:
-//! a step t ≥ T, or three episodes in a row that end after the same number of steps < T (the
-//! controller's horizon differs); on the first complete episode (of any table version), a
-//! first state whose joint angles (start pose) or end effector minus goal differ from the
-//! task's by more than `serve.task_tolerance`; on the first complete noisy episode of its own
-//! table version, motion per step that is not what the task's dt gives (ratio of
-//! Σ Δq·q̄̇ / Σ q̄̇² — q̄̇ the mean joint velocity of the two ends of a step — to the same on an
-//! in-process replay of that table with the episode-0 noise, outside [1/2, 2]; the band and
-//! its measurement: docs/design.md §5 D21). The dt check is a heuristic: in
-//! lockstep the samples carry no simulated time. In real time it also catches an arm that
-//! cannot keep up with its clock (less simulated time per control period than dt).
-//!
-//! # Which episodes count
-//! Only complete episodes (t = 0 … T−1 in order, one table version, one noise flag) of the
-//! version the learner waits for; the first N noisy and the first noise-free one, in arrival
-//! order. Partial (aborted, or samples lost), mixed-version episodes are discarded and counted;
-//! complete episodes of other versions (the controller keeps running the old table while the
-//! learner updates) and surplus ones are recorded but not used.
-//!
-//! # Files (`--out`)
-//! - `episodes/NNNNNN_eEPISODE_vVERSION.npz`: every complete episode as it arrives
-//!   ([`crate::io::episode`]);
-//! - `tables/vVERSION.npz`: every table published ([`crate::io::table`]); `latest_table.npz`;
-//! - the checkpoint of the controller to execute next, written before its table is published:
-//!   expert: `checkpoint.npz` (all GPS policy arrays, its iteration, the random-policy cost,
-//!   the best controller so far with its noise-free episode and the patience count);
-//!   lqr-gaifo: `iter_NNN_table.npz`, `iter_NNN_critic.json` and `iter_NNN_state.npz`, as
-//!   `learner train` writes them ([`crate::run::Checkpoint`]);
-//! - the per-iteration CSV: expert: `serve_log.csv` ([`crate::io::log::EXPERT_CSV_HEADER`], appended
-//!   across runs); lqr-gaifo: `gaifo_log.csv` ([`crate::io::log::CSV_HEADER`], as `learner train`;
-//!   `t_execute_s` is the time from the version's first sample to its last needed episode;
-//!   appended across resumes); `best_table.npz` at exit;
-//! - with `--mcap`, `run.mcap`: the run's recorded episodes and tables as one MCAP file
-//!   ([`crate::io::run_mcap::RunMcap`]), written episode by episode (one chunk each), its
-//!   summary at exit; a killed learner leaves it readable by streaming readers up to its last
-//!   complete episode; a resumed one writes it again from the folder's episodes, then goes on.
-//!
-//! # Peers that die
-//! A dead or absent controller: the learner keeps waiting and says so every `wait_report_s`.
-//! A restarted learner: `--resume DIR` continues from DIR's checkpoint (expert:
-//! `checkpoint.npz`; lqr-gaifo: the latest complete `iter_NNN_*` checkpoint,
-//! [`crate::run::resume`]) and publishes that table version again.
-//!
-//! # Exact resume
-//! The resumed learner publishes its version with the next epoch (one more than the epoch
-//! of `DIR/tables/vVERSION.npz`; [`ur5_shared::GainTable::epoch`]). A controller running
-//! that version takes it again at its next boundary and restarts the version's episode count,
-//! so the episodes k = 0 … N of the new publication draw the noise of the first publication's;
-//! samples carry the epoch (`StepSample::table_epoch`) and episodes of an earlier publication
-//! count as an older version. LQR+GAIfO's whole learner state (critic, GMM dynamics prior,
-//! step size, previous controller, RNG positions) resumes exactly, so with an arm whose reset
-//! is exact (`hil-sim serve` in lockstep) a served run killed anywhere and resumed learns what
-//! the uninterrupted run learns, bit for bit (tests/tests/suite/resume_ipc.rs). Without `--resume` a
-//! new learner starts at version 1, which a controller running a newer version rejects: the
-//! learner then reports the newer version it sees in the samples and keeps waiting.
+//! Algorithm 1 with step 1 ("execute the controller") done by the real-time loop, for both
+//! learners ([`ServeLearner`]: `--algo expert`, [`ExpertLearner`]; `--algo lqr-gaifo`,
+//! [`LqrGaifo`]). The protocol (same episodes as in process, the task checks, which episodes
+//! count, the files, peers that die, exact resume): docs/design.md §3.6; the loop:
+//! `session.rs`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use imitation::controller::to_gain_table;
 use imitation::demos::Demos;
 use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
 use serde::{Deserialize, Serialize};
 
-use crate::io::learned::LearnedEvent;
-use crate::io::table::save_table;
-use gps::policy::lin_gauss::LinGaussPolicy;
-use iceoryx2::port::update_connections::UpdateConnections;
+use ur5_shared::GainTable;
 
 pub mod assemble;
 mod learner;
 pub mod policy;
 mod ports;
+mod session;
 mod task_check;
 
 pub use assemble::{episode_from_samples, Assembled, Assembler, Batch, Counts};
@@ -109,7 +34,7 @@ pub use task_check::motion_per_step;
 
 use learner::Run;
 use ports::Ports;
-use task_check::{validate, TaskCheck};
+use task_check::validate;
 
 /// Which learner `learner serve` runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -137,7 +62,7 @@ pub struct ServeOptions {
     pub prefix: String,
     /// Output folder.
     pub out: PathBuf,
-    /// Continue from the checkpoint in this folder of an earlier run (see the module docs).
+    /// Continue from the checkpoint in this folder of an earlier run (docs/design.md §3.6).
     pub resume: Option<PathBuf>,
     /// Start a new run in `out` even though another run's files are there: they are deleted
     /// first (without it such a folder is refused; [`crate::io::manifest`]).
@@ -334,7 +259,7 @@ fn claim_dirs<S: Serialize>(
 
 /// The epoch a resumed learner publishes `version` with: one more than the epoch of the
 /// copy recorded in `dir/tables/` (0 if there is none), so that the controller takes it again
-/// and restarts the version's episode count (module docs, "Exact resume").
+/// and restarts the version's episode count (docs/design.md §3.6, "Exact resume").
 fn republication_epoch(dir: &Path, version: u64) -> anyhow::Result<u32> {
     let path = crate::io::table::version_path(dir, version);
     let recorded = if path.is_file() {
@@ -348,16 +273,7 @@ fn republication_epoch(dir: &Path, version: u64) -> anyhow::Result<u32> {
         .with_context(|| format!("{}: epoch {recorded} cannot be increased", path.display()))
 }
 
-/// `v` or `v (publication e)` for the log.
-fn publication(version: u64, epoch: u32) -> String {
-    if epoch == 0 {
-        version.to_string()
-    } else {
-        format!("{version} (publication {epoch})")
-    }
-}
-
-/// The one serve loop (module docs) around `learner`.
+/// The one serve loop (docs/design.md §3.6) around `learner`.
 fn serve_loop<L: ServeLearner>(
     learner: L,
     opts: ServeOptions,
@@ -399,253 +315,22 @@ fn serve_loop<L: ServeLearner>(
     };
 
     // Setup: every port before anything runs.
-    let ports = Ports::create(&run.opts.prefix)?;
+    let ports = Ports::<GainTable>::create(&run.opts.prefix)?;
     // Any error from here on is told to the controller before it is returned (§3.12).
-    let result = serve_with_ports(&ports, run, &mut progress);
+    let result = session::serve_with_ports(&ports, run, &mut progress);
     if let Err(e) = &result {
         ports.status.stopping(e);
     }
     result
 }
 
-/// [`serve_loop`] once its ports exist.
-fn serve_with_ports<L: ServeLearner>(
-    ports: &Ports,
-    mut run: Run<L>,
-    progress: &mut impl FnMut(&L::Log),
-) -> anyhow::Result<ServeSummary<L::Log>> {
-    let out = run.opts.out.clone();
-    let start_version = run.learner.version();
-    let table = run.save_current()?;
-    ports.publish(&table)?;
-    if let Some(from) = &run.opts.resume {
-        let same = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_owned());
-        run.note(&LearnedEvent::Resumed {
-            iteration: run.learner.iteration(),
-            same_folder: same(from) == same(&out),
-        })?;
-    }
-    let (n, t_len) = (run.learner.samples(), run.learner.task().horizon);
-    eprintln!(
-        "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version",
-        L::ALGO,
-        run.opts.prefix,
-        if run.opts.resume.is_some() {
-            format!(" (resumed; publication {} of it)", run.epoch)
-        } else {
-            String::new()
-        },
-    );
-    eprintln!("{}", L::PROGRESS_HEADER);
-
-    let mut asm = Assembler::new(t_len);
-    let mut batch = Batch {
-        noisy: Vec::with_capacity(n),
-        eval: None,
-    };
-    // The seed is checked on the first version this learner publishes itself: the controller
-    // may have run the start version (a resumed one, or one it already had) for longer, with
-    // later episodes' noise.
-    let mut check = TaskCheck::default();
-    check.seed_from_version = start_version + 1;
-    let mut counts = Counts::default();
-    let mut log = Vec::new();
-    let mut best: Option<(LinGaussPolicy, f64)> = None;
-    let mut finishing = run.learner.done();
-    let report = Duration::from_secs_f64(run.opts.wait_report_s);
-    let idle = Duration::from_micros(run.opts.idle_sleep_us.max(1));
-    let mut last_sample = Instant::now();
-    let mut last_report = Instant::now();
-    let mut version_started: Option<Instant> = None;
-    let mut newer_reported = (0u64, 0u32);
-    // The recorded files of the batch's episodes (`episodes/learned.jsonl`).
-    let mut used_noisy: Vec<String> = Vec::with_capacity(n);
-    let mut used_eval: Option<String> = None;
-
-    let bar = crate::progress::Progress::new(
-        run.learner
-            .planned_iterations()
-            .saturating_sub(run.learner.iteration()) as u64,
-        "iterations",
-    );
-    let exit = 'outer: loop {
-        let mut got = false;
-        while let Some(sample) = ports
-            .samples
-            .receive()
-            .map_err(|e| anyhow::anyhow!("receiving samples: {e:?}"))?
-        {
-            let s = *sample;
-            drop(sample);
-            got = true;
-            counts.samples += 1;
-            check.sample(&s, &run.learner)?;
-            if (s.table_version, s.table_epoch) == (run.learner.version(), run.epoch)
-                && version_started.is_none()
-            {
-                version_started = Some(Instant::now());
-            }
-            for a in asm.push(&s) {
-                let (episode, version, epoch, ep) = match a {
-                    Assembled::Complete {
-                        episode,
-                        version,
-                        epoch,
-                        ep,
-                    } => (episode, version, epoch, ep),
-                    Assembled::Partial { episode, have } => {
-                        counts.partial += 1;
-                        bar.println(&format!(
-                            "learner serve: discarded episode {episode}: {have} of {t_len} steps"
-                        ));
-                        check.partial(have, &run.learner)?;
-                        continue;
-                    }
-                    Assembled::Mixed { episode } => {
-                        counts.mixed += 1;
-                        bar.println(&format!("learner serve: discarded episode {episode}: table version or noise flag changed inside it"));
-                        continue;
-                    }
-                };
-                counts.episodes += 1;
-                let file = run.record(&ep, episode, version, epoch)?;
-                check.episode(&ep, version, &run.learner, run.opts.task_tolerance)?;
-                let current = run.learner.version();
-                // An earlier publication of the current version counts as an older version:
-                // its episodes carry later noise keys than the ones this learner waits for.
-                if (version, epoch) < (current, run.epoch) {
-                    counts.old_version += 1;
-                } else if (version, epoch) > (current, run.epoch) {
-                    counts.newer_version += 1;
-                    if (version, epoch) != newer_reported {
-                        newer_reported = (version, epoch);
-                        bar.println(&format!(
-                            "learner serve: the controller runs table version {}, newer than this learner's {}: \
-                             another learner published it; restart this one with --resume <its out dir> to continue from there",
-                            publication(version, epoch),
-                            publication(current, run.epoch)
-                        ));
-                    }
-                } else if finishing {
-                    // The controller took the last table: nothing more to learn.
-                    break 'outer ServeExit::Done;
-                } else {
-                    let noisy = ep.noisy;
-                    if batch.offer(ep, n) {
-                        counts.used += 1;
-                        match (noisy, file) {
-                            (true, Some(f)) => used_noisy.push(f),
-                            (false, f) => used_eval = f,
-                            (true, None) => {}
-                        }
-                    } else {
-                        counts.surplus += 1;
-                    }
-                }
-            }
-            if batch.full(n) {
-                let eval = batch.eval.take().expect("full batch");
-                let cost = eval.task_cost();
-                if best.as_ref().is_none_or(|(_, c)| cost < *c) {
-                    best = Some((run.learner.policy().clone(), cost));
-                }
-                let waited = version_started
-                    .take()
-                    .map_or(0.0, |t0| t0.elapsed().as_secs_f64());
-                // Before the update's checkpoint: the last line of a version counts.
-                if let Some(eval) = used_eval.take() {
-                    run.note(&LearnedEvent::Learned {
-                        iteration: run.learner.iteration() + 1,
-                        version: run.learner.version(),
-                        noisy: std::mem::take(&mut used_noisy),
-                        eval,
-                    })?;
-                }
-                let entry = run.learner.learn(&batch.noisy, &eval, waited)?;
-                batch.noisy.clear();
-                // The row before the checkpoint, as `learner train` writes them: a kill between
-                // the two leaves a row that a resume from the previous checkpoint drops and
-                // writes again, never a checkpoint without its row.
-                let row = run.learner.csv_row(&entry)?;
-                run.csv.write_all(row.as_bytes())?;
-                run.epoch = 0;
-                let table = run.save_current()?;
-                ports.publish(&table)?;
-                bar.done_one(&L::progress_line(&entry));
-                progress(&entry);
-                log.push(entry);
-                finishing = run.learner.done();
-                if finishing {
-                    bar.println(&format!(
-                        "learner serve: learning done ({} iterations); published the last table, version {}; \
-                         exiting once the controller runs it",
-                        run.learner.iteration(),
-                        run.learner.version()
-                    ));
-                }
-            }
-        }
-        if got {
-            last_sample = Instant::now();
-            continue;
-        }
-        // Idle: deliver the table (history) to a controller that connected late, and stop
-        // with the controller's message if it stopped (§3.12).
-        let _ = ports.gains.update_connections();
-        ports.status.check_controller()?;
-        if last_sample.elapsed() >= report && last_report.elapsed() >= report {
-            last_report = Instant::now();
-            bar.println(&format!(
-                "learner serve: waiting for episodes of table version {} on prefix `{}`: no sample for {:.0} s \
-                 (is rt-controller running with --prefix {}?)",
-                run.learner.version(),
-                run.opts.prefix,
-                last_sample.elapsed().as_secs_f64(),
-                run.opts.prefix
-            ));
-        }
-        if ports.node.wait(idle).is_err() {
-            break ServeExit::Stopped;
-        }
-    };
-
-    drop(bar);
-    if let Some((pol, _)) = &best {
-        save_table(
-            &out.join("best_table.npz"),
-            &to_gain_table(pol, run.learner.version()),
-            run.learner.task().dt,
-        )?;
-    }
-    if let Some(m) = run.mcap.take() {
-        let c = m.finish()?;
-        eprintln!(
-            "learner serve: {} episodes and {} tables -> {}",
-            c.episodes,
-            c.tables,
-            out.join("run.mcap").display()
-        );
-    }
-    Ok(ServeSummary {
-        command: "serve",
-        algorithm: L::ALGO,
-        exit_reason: exit,
-        start_version,
-        table_version: run.learner.version(),
-        iterations: log.len(),
-        eval_costs: log.iter().map(L::eval_cost).collect(),
-        best_eval_cost: best.map(|(_, c)| c),
-        log,
-        counts,
-        out,
-    })
-}
-
 #[cfg(test)]
 mod tests {
+    use super::task_check::TaskCheck;
     use super::*;
     use crate::arm::SimArm;
     use crate::io::checkpoint::{load_checkpoint, save_checkpoint, ExpertCheckpoint};
+    use imitation::controller::to_gain_table;
     use imitation::rollout::{run_episode, Episode};
     use ur5_shared::config::{SimConfig, TaskConfig};
     use ur5_shared::layout::{DU, DX};

@@ -8,16 +8,11 @@
 
 use std::time::{Duration, Instant};
 
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::*;
 use serde::Serialize;
 use ur5_shared::layout::EE_MINUS_GOAL;
-use ur5_shared::services::{self, ServiceNames};
-use ur5_shared::{policy_action, PolicyScratch, PolicyTable, StepSample, NO_NOISE};
+use ur5_shared::{policy_action, PolicyScratch, PolicyTable, NO_NOISE};
 
-use super::ports::StatusPorts;
+use super::ports::Ports;
 
 /// One episode the controller ran with the policy.
 #[derive(Clone, Debug, Serialize)]
@@ -50,61 +45,6 @@ pub struct PolicyServeOptions {
     pub timeout_s: f64,
 }
 
-struct PolicyPorts {
-    status: StatusPorts,
-    samples: Subscriber<ipc::Service, StepSample, ()>,
-    policy: Publisher<ipc::Service, PolicyTable, ()>,
-    _node: Node<ipc::Service>,
-    _role: services::RoleLock,
-}
-
-impl PolicyPorts {
-    fn create(prefix: &str) -> anyhow::Result<Self> {
-        let role = services::RoleLock::acquire(prefix, "learner")?;
-        let _ = Node::<ipc::Service>::try_cleanup_dead_nodes(Config::global_config());
-        let names = ServiceNames::new(prefix);
-        let node = NodeBuilder::new().create::<ipc::Service>().map_err(|e| {
-            anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}; is /dev/shm writable?")
-        })?;
-        let status = StatusPorts::create(&node, &names)?;
-        let samples = services::LEARNER_SAMPLES_QOS
-            .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?
-            .subscriber_builder()
-            .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
-            .create()
-            .map_err(|e| {
-                anyhow::anyhow!("cannot subscribe to `{}`: {e:?}", names.learner_samples)
-            })?;
-        let policy = services::CONTROLLER_POLICY_QOS
-            .open_or_create_retrying::<PolicyTable>(&node, &names.controller_policy)?
-            .publisher_builder()
-            .create()
-            .map_err(|e| {
-                anyhow::anyhow!("cannot publish on `{}`: {e:?}", names.controller_policy)
-            })?;
-        Ok(Self {
-            status,
-            samples,
-            policy,
-            _node: node,
-            _role: role,
-        })
-    }
-
-    fn publish(&self, table: &PolicyTable) -> anyhow::Result<()> {
-        let mut slot = self
-            .policy
-            .loan_uninit()
-            .map_err(|e| anyhow::anyhow!("loaning a policy-table sample: {e:?}"))?;
-        PolicyTable::init_zeroed(slot.payload_mut()).copy_from(table);
-        // SAFETY: init_zeroed initialised the whole payload.
-        unsafe { slot.assume_init() }
-            .send()
-            .map_err(|e| anyhow::anyhow!("publishing the policy table: {e:?}"))?;
-        Ok(())
-    }
-}
-
 /// Publishes `table` and collects `opts.episodes` complete episodes of it, calling `report`
 /// on each. Errors if no sample arrives for `opts.timeout_s`.
 pub fn serve_policy(
@@ -118,7 +58,7 @@ pub fn serve_policy(
         "--timeout-s {} must be > 0",
         opts.timeout_s
     );
-    let ports = PolicyPorts::create(&opts.prefix)?;
+    let ports = Ports::<PolicyTable>::create(&opts.prefix)?;
     let result = collect(&ports, table, opts, &mut report);
     if let Err(e) = &result {
         ports.status.stopping(e);
@@ -128,7 +68,7 @@ pub fn serve_policy(
 
 /// [`serve_policy`] once its ports exist.
 fn collect(
-    ports: &PolicyPorts,
+    ports: &Ports<PolicyTable>,
     table: &PolicyTable,
     opts: &PolicyServeOptions,
     report: &mut impl FnMut(&PolicyEpisode),
@@ -140,7 +80,7 @@ fn collect(
     let mut cur: Option<(u64, u64, bool, usize, f64, usize)> = None;
     let mut last_sample = Instant::now();
     while done.len() < opts.episodes {
-        let _ = ports.policy.update_connections();
+        ports.update_connections();
         let sample = match ports.samples.receive() {
             Ok(Some(s)) => *s,
             Ok(None) => {

@@ -1,4 +1,4 @@
-//! The learner's iceoryx2 ports: samples in, gain tables out (docs/design.md §3).
+//! The learner's iceoryx2 ports: samples in, gain or policy tables out (docs/design.md §3).
 
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -7,7 +7,9 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::status::PeerStatus;
-use ur5_shared::{GainTable, StepSample};
+use ur5_shared::{GainTable, PolicyTable, StepSample};
+
+use core::mem::MaybeUninit;
 
 /// The status ports of a learner (docs/design.md §3.12): `learner/status` out (why this learner
 /// stops), `controller/status` in (why the controller stopped). Create them before the sample
@@ -72,19 +74,60 @@ impl StatusPorts {
     }
 }
 
-/// The learner's iceoryx2 node and its ports. Fields drop in order: ports before the node.
-pub(super) struct Ports {
+/// A table the learner publishes to the controller: gain tables on `controller/gains`
+/// (`learner serve`), policy tables on `controller/policy` (`learner policy serve`).
+pub(super) trait Outgoing: Sized + core::fmt::Debug + ZeroCopySend + 'static {
+    /// Its service's QoS.
+    const QOS: services::Qos;
+    /// What a loaned sample holds, for errors ("a gain-table sample").
+    const SAMPLE: &'static str;
+    /// What is published, for errors ("a gain table").
+    const PUBLISHED: &'static str;
+    /// Its service's name under the prefix.
+    fn service(names: &ServiceNames) -> &str;
+    /// Writes `self` into a loaned, uninitialised sample, initialising all of it.
+    fn write_to(&self, slot: &mut MaybeUninit<Self>);
+}
+
+impl Outgoing for GainTable {
+    const QOS: services::Qos = services::CONTROLLER_GAINS_QOS;
+    const SAMPLE: &'static str = "a gain-table sample";
+    const PUBLISHED: &'static str = "a gain table";
+    fn service(names: &ServiceNames) -> &str {
+        &names.controller_gains
+    }
+    fn write_to(&self, slot: &mut MaybeUninit<Self>) {
+        self.copy_to_uninit(slot);
+    }
+}
+
+impl Outgoing for PolicyTable {
+    const QOS: services::Qos = services::CONTROLLER_POLICY_QOS;
+    const SAMPLE: &'static str = "a policy-table sample";
+    const PUBLISHED: &'static str = "the policy table";
+    fn service(names: &ServiceNames) -> &str {
+        &names.controller_policy
+    }
+    fn write_to(&self, slot: &mut MaybeUninit<Self>) {
+        PolicyTable::init_zeroed(slot).copy_from(self);
+    }
+}
+
+/// The learner's iceoryx2 node and its ports: samples in, tables `T` out. Fields drop in
+/// order: ports before the node.
+pub(super) struct Ports<T: Outgoing> {
     pub(super) status: StatusPorts,
     pub(super) samples: Subscriber<ipc::Service, StepSample, ()>,
-    pub(super) gains: Publisher<ipc::Service, GainTable, ()>,
+    tables: Publisher<ipc::Service, T, ()>,
     pub(super) node: Node<ipc::Service>,
     /// This learner is the prefix's only one while it runs.
     _role: services::RoleLock,
 }
 
-impl Ports {
+impl<T: Outgoing> Ports<T> {
     /// Setup: removes what dead processes left behind (e.g. this learner's killed
-    /// predecessor), then opens both services with the project's QoS and creates the ports.
+    /// predecessor), then opens both services with the project's QoS and creates the ports
+    /// (the status ports first, §3.12).
     pub(super) fn create(prefix: &str) -> anyhow::Result<Self> {
         let role = services::RoleLock::acquire(prefix, "learner")?;
         let _ = Node::<ipc::Service>::try_cleanup_dead_nodes(Config::global_config());
@@ -95,8 +138,7 @@ impl Ports {
         let status = StatusPorts::create(&node, &names)?;
         let samples_svc = services::LEARNER_SAMPLES_QOS
             .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?;
-        let gains_svc = services::CONTROLLER_GAINS_QOS
-            .open_or_create_retrying::<GainTable>(&node, &names.controller_gains)?;
+        let tables_svc = T::QOS.open_or_create_retrying::<T>(&node, T::service(&names))?;
         let samples = samples_svc
             .subscriber_builder()
             .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
@@ -104,28 +146,36 @@ impl Ports {
             .map_err(|e| {
                 anyhow::anyhow!("cannot subscribe to `{}`: {e:?}", names.learner_samples)
             })?;
-        let gains = gains_svc.publisher_builder().create().map_err(|e| {
-            anyhow::anyhow!("cannot publish on `{}`: {e:?}", names.controller_gains)
-        })?;
+        let tables = tables_svc
+            .publisher_builder()
+            .create()
+            .map_err(|e| anyhow::anyhow!("cannot publish on `{}`: {e:?}", T::service(&names)))?;
         Ok(Self {
             status,
             samples,
-            gains,
+            tables,
             node,
             _role: role,
         })
     }
 
-    pub(super) fn publish(&self, table: &GainTable) -> anyhow::Result<()> {
+    /// Publishes `table` (one loaned sample).
+    pub(super) fn publish(&self, table: &T) -> anyhow::Result<()> {
         let mut slot = self
-            .gains
+            .tables
             .loan_uninit()
-            .map_err(|e| anyhow::anyhow!("loaning a gain-table sample: {e:?}"))?;
-        table.copy_to_uninit(slot.payload_mut());
-        // SAFETY: copy_to_uninit initialised the whole payload.
+            .map_err(|e| anyhow::anyhow!("loaning {}: {e:?}", T::SAMPLE))?;
+        table.write_to(slot.payload_mut());
+        // SAFETY: write_to initialised the whole payload.
         unsafe { slot.assume_init() }
             .send()
-            .map_err(|e| anyhow::anyhow!("publishing a gain table: {e:?}"))?;
+            .map_err(|e| anyhow::anyhow!("publishing {}: {e:?}", T::PUBLISHED))?;
         Ok(())
+    }
+
+    /// Delivers the published history to subscribers that connected since (a controller
+    /// that started late).
+    pub(super) fn update_connections(&self) {
+        let _ = self.tables.update_connections();
     }
 }

@@ -1,4 +1,4 @@
-//! The checks that the controller and the arm run the learner's task (module docs of `serve`:
+//! The checks that the controller and the arm run the learner's task (docs/design.md §3.6,
 //! "The task must be the controller's and the arm's").
 
 use imitation::controller::to_gain_table;
@@ -63,7 +63,7 @@ pub fn motion_per_step(ep: &Episode) -> Option<f64> {
     (den > 1e-12 && num.is_finite()).then(|| num / den)
 }
 
-/// The checks of the module docs ("The task must be the controller's and the arm's").
+/// The checks of docs/design.md §3.6 ("The task must be the controller's and the arm's").
 #[derive(Default)]
 pub(super) struct TaskCheck {
     /// The first state of the first complete episode (any version) was the task's.

@@ -7,7 +7,7 @@ use crate::common;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use common::{learner, short_expert};
+use common::{learner, learner_output, short_expert};
 
 use imitation::demos::Demos;
 use imitation::expert::ExpertConfig;
@@ -18,7 +18,7 @@ use parquet::basic::{Compression, ConvertedType, LogicalType, Repetition, Type a
 use parquet::data_type::{FloatType, Int32Type, Int64Type};
 use parquet::file::writer::SerializedFileWriter;
 use parquet::schema::types::Type;
-use ur5_shared::config::SimConfig;
+use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DX, STATE_NAMES};
 
 fn scratch(tag: &str) -> PathBuf {
@@ -564,5 +564,83 @@ fn exports_never_mix_with_older_files_or_overwrite_their_input() {
     assert_eq!(std::fs::read(run.join("run.json")).unwrap(), manifest);
     let (ok, err) = export("mcap", &run, &dir.join("run.mcap"));
     assert!(ok, "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A UR5e recording exported to LeRobot names its model (`robot_type`, `ur_model`):
+/// `dataset check` checks it on the UR5e, the UR5 refuses it naming both, `train --demos` with
+/// a UR5e config trains on it; without the key a dataset is of the configured arm.
+#[test]
+fn a_ur5e_recording_exported_to_lerobot_checks_and_trains_as_a_ur5e() {
+    let dir = scratch("ur5e");
+    let m = ur5_shared::UrModel::Ur5e;
+    let cfg = ExpertConfig {
+        task: TaskConfig {
+            horizon: 10,
+            ..TaskConfig::for_model(m)
+        },
+        sim: SimConfig::for_model(m),
+        iterations: 3,
+        demos: 2,
+        ..ExpertConfig::default()
+    };
+    let run = learner::run::expert(&cfg, |_| {}).unwrap();
+    let demos = learner::run::demos(&cfg, &run).unwrap();
+    assert_eq!(demos.model, m);
+    let npz = dir.join("demos.npz");
+    learner::io::demos::save(&demos, &npz).unwrap();
+    let lr = dir.join("lr");
+    fn s(p: &Path) -> String {
+        p.to_str().unwrap().to_owned()
+    }
+    let (ok, err) = learner(&["dataset", "export", &s(&npz), &s(&lr)]);
+    assert!(ok, "{err}");
+    let info_path = lr.join("meta/info.json");
+    let mut info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&info_path).unwrap()).unwrap();
+    assert_eq!(
+        (&info["robot_type"], &info["ur_model"]),
+        (&"ur5e".into(), &"ur5e".into())
+    );
+    assert_eq!(lerobot::import(&lr).unwrap().model, Some(m));
+
+    let (ok, out, err) = learner_output(&["dataset", "check", &s(&lr), "--json"]);
+    assert!(ok, "{err}");
+    let summary: serde_json::Value = serde_json::from_str(out.trim()).expect(&out);
+    assert_eq!(
+        (&summary["model"], &summary["count"]),
+        (&"ur5e".into(), &2.into())
+    );
+    let e = format!(
+        "{:#}",
+        learner::io::demos::load_checked(&lr, &SimConfig::default()).unwrap_err()
+    );
+    assert!(
+        e.contains("made on a ur5e") && e.contains("arm is a ur5:"),
+        "{e}"
+    );
+
+    let train_cfg = dir.join("ur5e.toml");
+    std::fs::write(&train_cfg, "seed = 1\n[sim]\nmodel = \"ur5e\"\n").unwrap();
+    let (ok, err) = learner(&[
+        "train",
+        "--demos",
+        &s(&lr),
+        "--config",
+        &s(&train_cfg),
+        "--iterations",
+        "1",
+        "--out",
+        &s(&dir.join("run")),
+    ]);
+    assert!(ok, "{err}");
+    assert!(err.contains("final distance"), "{err}");
+
+    // Without the key (an older export, a dataset made elsewhere): the configured arm's.
+    info.as_object_mut().unwrap().remove("ur_model");
+    std::fs::write(&info_path, info.to_string()).unwrap();
+    assert_eq!(learner::io::demos::model_of(&lr).unwrap(), None);
+    let d = learner::io::demos::load_checked(&lr, &SimConfig::for_model(m)).unwrap();
+    assert_eq!(d.model, m);
     std::fs::remove_dir_all(&dir).ok();
 }

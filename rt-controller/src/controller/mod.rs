@@ -284,7 +284,7 @@ impl<A: ArmBackend> Controller<A> {
                 cfg.action_mode,
             ),
             scratch: Box::default(),
-            limits: cfg.limits.clone(),
+            limits: cfg.limits(),
             noise: Noise::new(cfg.seed, 0, 0),
             stats: LoopStats::new(),
             rt,

@@ -9,13 +9,17 @@
 //! - [`reverse`]: the 8 × i32 command of the reverse interface (TCP 50001 on the PC);
 //! - [`modes`]: robot, safety and control modes with their names;
 //! - [`script`]: the header of the project's robot-side URScript program (its marker and the
-//!   reverse address the driver substitutes).
+//!   reverse address the driver substitutes);
+//! - [`client`]: a blocking RTDE client over a `TcpStream` (setup, recording, tests; it
+//!   allocates, unlike everything above).
 //!
 //! Everything on the wire is big-endian. Decoding and encoding in the steady state (data
 //! packages, reverse commands, the stream decoder) work on caller-owned buffers and never
-//! allocate; setup (recipes) may fail with typed errors but does not allocate either.
+//! allocate; setup (recipes) may fail with typed errors but does not allocate either (except
+//! in [`client`]).
 //! No decode path panics on any input.
 
+pub mod client;
 pub mod modes;
 pub mod recipe;
 pub mod reverse;

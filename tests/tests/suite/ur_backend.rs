@@ -22,6 +22,7 @@ use rt_controller::arm::ur::{UrSession, UrSetupError};
 use rt_controller::config::{UrConfig, UrSeries};
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::UrModel;
+use ur_protocol::client::ClientError;
 use ur_protocol::rtde::Protocol;
 
 const TIMEOUT: Duration = Duration::from_secs(20);
@@ -101,7 +102,10 @@ fn ur_backend_setup_reports_a_refused_start_and_a_missing_robot() {
     let e = UrSession::connect(&ur_cfg(&s, UrSeries::Auto), TIMEOUT)
         .err()
         .expect("START refused");
-    assert!(matches!(e, UrSetupError::StartRefused), "{e}");
+    assert!(
+        matches!(e, UrSetupError::Rtde(ClientError::StartRefused)),
+        "{e}"
+    );
     let cfg = ur_cfg(&s, UrSeries::Auto);
     s.stop();
     let e = UrSession::connect(&cfg, TIMEOUT)
@@ -134,7 +138,10 @@ fn ur_backend_setup_skips_text_messages_and_reports_refused_versions() {
     let e = UrSession::connect(&ur_cfg(&s, UrSeries::Auto), TIMEOUT)
         .err()
         .expect("every version refused");
-    assert!(matches!(e, UrSetupError::NoProtocol), "{e}");
+    assert!(
+        matches!(e, UrSetupError::Rtde(ClientError::NoProtocol)),
+        "{e}"
+    );
     s.stop();
 }
 
@@ -773,7 +780,10 @@ fn ur_backend_brings_up_a_powered_off_arm_when_asked() {
     let e = UrSession::connect(&cfg, TIMEOUT)
         .err()
         .expect("a powered-off arm");
-    assert!(matches!(e, UrSetupError::NotRunning { .. }), "{e}");
+    assert!(
+        matches!(e, UrSetupError::Rtde(ClientError::NotRunning { .. })),
+        "{e}"
+    );
     assert!(e.to_string().contains("POWER_OFF"), "{e}");
     // With it: power on, brake release, RUNNING, the program connects back.
     let u = UrSession::connect(

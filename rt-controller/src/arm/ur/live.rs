@@ -206,7 +206,7 @@ impl UrArm {
     pub fn new(cfg: &crate::config::ControllerConfig) -> Self {
         Self {
             cfg: cfg.arm.ur.clone(),
-            limits: cfg.limits.clone(),
+            limits: cfg.limits(),
             period_s: cfg.task.dt,
             real_time: (cfg.mode == crate::config::Mode::RealTime).then_some(cfg.time_compression),
             timeout: Duration::from_secs_f64(cfg.setup_timeout_s),

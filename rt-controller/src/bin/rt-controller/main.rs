@@ -378,7 +378,13 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Cmd::PrintConfig => {
-            print!("{}", toml::to_string(&ControllerConfig::default())?);
+            // Every option written out, [limits] as the default model's own.
+            let c = ControllerConfig::default();
+            let c = ControllerConfig {
+                limits: Some(c.limits()),
+                ..c
+            };
+            print!("{}", toml::to_string(&c)?);
             Ok(0)
         }
     }

@@ -11,6 +11,7 @@
 
 use std::time::{Duration, Instant};
 
+use ur_protocol::client::ClientError;
 use ur_protocol::{RobotMessage, SafetyMode};
 
 use super::{Live, Motion, UrArm, REVERSE_CLOSED};
@@ -95,9 +96,11 @@ fn read_until(
 ) -> Result<bool, UrSetupError> {
     use std::io::Read;
     loop {
-        while let Some(frame) = l.dec.next_frame().map_err(|why| UrSetupError::Frame {
-            during: "protective-stop recovery",
-            why,
+        while let Some(frame) = l.dec.next_frame().map_err(|why| {
+            UrSetupError::Rtde(ClientError::Frame {
+                during: "protective-stop recovery",
+                why,
+            })
         })? {
             if let Ok(m @ RobotMessage::DataPackage { .. }) =
                 RobotMessage::decode(&frame, l.protocol)
