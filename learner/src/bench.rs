@@ -43,6 +43,11 @@ pub struct BenchResult {
     pub eta_search_cpu_s: f64,
     pub gmm_k: usize,
     pub gmm_em_iterations: usize,
+    /// The EM's E- and M-step flops ([`em_flops`]) per second of the GMM prior update's CPU
+    /// time, GFLOP/s.
+    pub gmm_gflops: f64,
+    /// One core's f64 multiply-add peak measured in the same run ([`fma_peak_gflops`]).
+    pub fma_peak_gflops: f64,
     pub dgd_backward_calls: usize,
     /// (η, KL) of each backward pass of the η search, and the KL target.
     pub dgd_trace: Vec<(f64, f64)>,
@@ -68,7 +73,7 @@ pub fn run(
         Samples::default(),
     );
     let mut out = LinGaussPolicy::zeros(t, dx, du);
-    let (mut k, mut its, mut calls) = (0, 0, 0);
+    let (mut k, mut its, mut calls, mut flops) = (0, 0, 0, 0.0);
     let mut trace = Vec::new();
     let mut kl_target = 0.0;
     for _ in 0..reps {
@@ -98,6 +103,7 @@ pub fn run(
         tot.push(gw + fw + ew, gc + fc + ec);
         k = rep.k;
         its = rep.ll_trace.len();
+        flops = em_flops(&rep, 2 * dx + du);
         calls = res.trace.len();
         trace = res.trace.iter().map(|s| (s.eta_out, s.kl)).collect();
         kl_target = l.alg.kl_step * l.step_mult * t as f64;
@@ -119,10 +125,38 @@ pub fn run(
         eta_search_cpu_s: e.cpu_s,
         gmm_k: k,
         gmm_em_iterations: its,
+        gmm_gflops: flops / g.cpu_s / 1e9,
+        fma_peak_gflops: fma_peak_gflops(),
         dgd_backward_calls: calls,
         dgd_trace: trace,
         kl_target,
     })
+}
+
+/// Flops of the E- and M-steps of one EM run (`gps::dynamics::em_kernels::estep_flops`,
+/// `mstep_flops`) on points of dimension `d`: an E-step per recorded log-likelihood, an M-step
+/// after each but the last unless EM ran out of iterations.
+pub fn em_flops(rep: &gps::dynamics::gmm::EmReport, d: usize) -> f64 {
+    use gps::dynamics::em_kernels::{estep_flops, mstep_flops};
+    let e = rep.ll_trace.len();
+    let m = if rep.stop == gps::dynamics::gmm::EmStop::MaxIterations {
+        e
+    } else {
+        e.saturating_sub(1)
+    };
+    e as f64 * estep_flops(rep.n_points, d, rep.k) + m as f64 * mstep_flops(rep.n_points, d, rep.k)
+}
+
+/// One core's f64 fused multiply-add peak, GFLOP/s of thread CPU time: the best of 7 runs of
+/// `gps::dynamics::em_kernels::fma_peak` (twelve independent 4-lane chains, AVX2+FMA where the
+/// CPU has them).
+pub fn fma_peak_gflops() -> f64 {
+    (0..7)
+        .map(|_| {
+            let ((flops, _), _, cpu) = timed(|| gps::dynamics::em_kernels::fma_peak(2_000_000));
+            flops / cpu / 1e9
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Wall and thread-CPU time of a closure, s.
@@ -185,6 +219,9 @@ pub struct VectorsIterationBench {
     pub gps_gmm_k: usize,
     pub em_iterations: usize,
     pub gps_em_iterations: usize,
+    /// The EM's E- and M-step flops ([`em_flops`]) per second of the GMM prior update's CPU
+    /// time, GFLOP/s.
+    pub gmm_gflops: f64,
     /// Backward passes of the η search (ours, GPS's).
     pub backward_calls: usize,
     pub gps_backward_calls: usize,
@@ -215,6 +252,8 @@ pub struct VectorsBenchResult {
     pub du: usize,
     pub reps: usize,
     pub iterations: Vec<VectorsIterationBench>,
+    /// One core's f64 multiply-add peak measured in the same run ([`fma_peak_gflops`]).
+    pub fma_peak_gflops: f64,
 }
 
 /// Redoes, `reps` times, the GMM prior update, dynamics fit and η search of every recorded
@@ -295,10 +334,12 @@ pub fn vectors(file: &str, reps: usize) -> Result<VectorsBenchResult, crate::Lea
         ]
         .into_iter()
         .fold(0.0, f64::max);
+        let gmm_prior_update = g.median();
         iterations.push(VectorsIterationBench {
             iteration: index,
             n: it.n,
-            gmm_prior_update: g.median(),
+            gmm_gflops: em_flops(&em, 2 * dx + du) / gmm_prior_update.cpu_s / 1e9,
+            gmm_prior_update,
             dynamics_fit: f.median(),
             eta_search: e.median(),
             total: tot.median(),
@@ -319,6 +360,7 @@ pub fn vectors(file: &str, reps: usize) -> Result<VectorsBenchResult, crate::Lea
         du,
         reps: reps.max(1),
         iterations,
+        fma_peak_gflops: fma_peak_gflops(),
     })
 }
 

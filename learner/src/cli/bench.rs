@@ -83,6 +83,14 @@ fn print_pieces(rows: &[(&str, PieceTime, String)]) {
     }
 }
 
+/// The GMM's arithmetic rate beside the peak measured in the same run.
+fn print_gflops(gmm: f64, peak: f64) {
+    println!(
+        "GMM EM arithmetic: {gmm:.1} GFLOP/s of CPU time over the whole GMM prior update (E- and M-step flops), one-core f64 FMA peak measured now {peak:.1} GFLOP/s: {:.0} %",
+        100.0 * gmm / peak
+    );
+}
+
 /// Runs `learner bench`.
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     if let Some(file) = &args.vectors {
@@ -123,6 +131,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         ),
         ("total", piece(r.total_s, r.total_cpu_s), String::new()),
     ]);
+    print_gflops(r.gmm_gflops, r.fma_peak_gflops);
     let tr: Vec<String> = r
         .dgd_trace
         .iter()
@@ -177,6 +186,7 @@ fn run_vectors(file: &Path, reps: usize, json: bool) -> anyhow::Result<()> {
                 gps::conformance::TOL_DET,
                 if it.matches_gps() { "same work, same result" } else { "DIFFERS" }
             );
+            print_gflops(it.gmm_gflops, r.fma_peak_gflops);
         }
     }
     anyhow::ensure!(

@@ -17,12 +17,12 @@
 //! Data points are rows of an `N x D` matrix; the model owns a workspace that grows to the
 //! largest `N` seen and is reused afterwards.
 
-use faer::prelude::{Reborrow, ReborrowMut};
-use faer::{Accum, Mat, MatMut, MatRef};
+use faer::{MatMut, MatRef};
 use rand::Rng;
 
+use crate::dynamics::em_kernels::{self, Moments, BLOCK};
 use crate::error::GpsError;
-use crate::linalg::{gemm, llt_lower, solve_lower, MatSeq, Scratch};
+use crate::linalg::{llt_lower, MatSeq, Scratch};
 
 /// Up to this many points the E-step uses its own small-N forward substitution.
 const SMALL_N: usize = 32;
@@ -79,6 +79,20 @@ fn exp_or_zero(x: f64) -> f64 {
     }
 }
 
+/// `m = L⁻¹` for a lower-triangular `d x d` row-major `l` (forward substitution on the columns
+/// of the identity); only the lower triangle of `m` is written.
+fn invert_lower(l: &[f64], m: &mut [f64], d: usize) {
+    for b in 0..d {
+        for a in b..d {
+            let mut s = if a == b { 1.0 } else { 0.0 };
+            for c in b..a {
+                s -= l[a * d + c] * m[c * d + b];
+            }
+            m[a * d + b] = s / l[a * d + a];
+        }
+    }
+}
+
 /// GPS `logsum` over an iterator: `log Σ exp(v − max) + max`, with `max = −∞` replaced by 0.
 #[inline]
 pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
@@ -91,49 +105,44 @@ pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
 }
 
 struct Workspace {
-    /// `D x Ncap`: centred, then whitened points of one cluster.
-    diff: Mat<f64>,
+    /// The points in blocks of [`BLOCK`], dimension-major within a block, padding points zero
+    /// (`em_kernels`, docs/design.md §5 D35).
+    xb: Vec<f64>,
+    /// Number of blocks in `xb`.
+    blocks: usize,
+    /// `D x BLOCK` scratch of the E-step.
+    diff: Vec<f64>,
+    /// One cluster's M-step sums.
+    moments: Moments,
     /// `N x K` row-major log observation probabilities, then log responsibilities.
     logobs: Vec<f64>,
     /// `N x K` row-major weights for refitting.
     w: Vec<f64>,
-    /// `N x D` weighted data of one cluster.
-    wdata: Mat<f64>,
     rowlse: Vec<f64>,
     collse: Vec<f64>,
-    xx: Mat<f64>,
-    mu_t: Mat<f64>,
-    /// `D x Ncap`: the points as columns.
-    data_t: Mat<f64>,
+    /// `D x D` row-major weighted second moment of one cluster (lower triangle).
+    xx: Vec<f64>,
     /// `N x D` row-major scratch of the small-N E-step.
     small: Vec<f64>,
 }
 
-impl Default for Workspace {
-    fn default() -> Self {
+impl Workspace {
+    fn new(d: usize) -> Self {
         Self {
-            diff: Mat::zeros(0, 0),
+            xb: Vec::new(),
+            blocks: 0,
+            diff: vec![0.0; d * BLOCK],
+            moments: Moments::new(d),
             logobs: Vec::new(),
             w: Vec::new(),
-            wdata: Mat::zeros(0, 0),
             rowlse: Vec::new(),
             collse: Vec::new(),
-            xx: Mat::zeros(0, 0),
-            mu_t: Mat::zeros(0, 0),
-            data_t: Mat::zeros(0, 0),
+            xx: vec![0.0; d * d],
             small: Vec::new(),
         }
     }
-}
 
-impl Workspace {
-    fn ensure(&mut self, n: usize, d: usize, k: usize) {
-        if self.diff.nrows() != d || self.diff.ncols() < n {
-            self.diff = Mat::zeros(d, n);
-        }
-        if self.wdata.nrows() < n || self.wdata.ncols() != d {
-            self.wdata = Mat::zeros(n, d);
-        }
+    fn ensure(&mut self, n: usize, k: usize) {
         if self.logobs.len() < n * k {
             self.logobs.resize(n * k, 0.0);
             self.w.resize(n * k, 0.0);
@@ -144,11 +153,19 @@ impl Workspace {
         if self.collse.len() < k {
             self.collse.resize(k, 0.0);
         }
-        if self.xx.nrows() != d {
-            self.xx = Mat::zeros(d, d);
-        }
-        if self.mu_t.nrows() != k || self.mu_t.ncols() != d {
-            self.mu_t = Mat::zeros(k, d);
+    }
+
+    /// Copies the rows of `data (N x D)` into the blocks `xb`.
+    fn load(&mut self, data: MatRef<'_, f64>) {
+        let (n, d) = (data.nrows(), data.ncols());
+        self.blocks = n.div_ceil(BLOCK);
+        self.xb.clear();
+        self.xb.resize(self.blocks * d * BLOCK, 0.0);
+        for a in 0..d {
+            let col = data.col(a);
+            for p in 0..n {
+                self.xb[(p / BLOCK) * d * BLOCK + a * BLOCK + p % BLOCK] = col[p];
+            }
         }
     }
 }
@@ -176,6 +193,8 @@ pub struct Gmm {
     moment_buf: Vec<f64>,
     initialized: bool,
     chol: MatSeq,
+    /// `L_i⁻¹` (lower triangular), `(K, D, D)`.
+    minv: MatSeq,
     half_logdet: Vec<f64>,
     chol_valid: bool,
     scratch: Scratch,
@@ -198,10 +217,11 @@ impl Gmm {
             moment_buf: Vec::with_capacity(dim * dim + dim),
             initialized: false,
             chol: MatSeq::zeros(0, dim, dim),
+            minv: MatSeq::zeros(0, dim, dim),
             half_logdet: Vec::new(),
             chol_valid: false,
             scratch: Scratch::for_llt(dim),
-            ws: Workspace::default(),
+            ws: Workspace::new(dim),
         }
     }
 
@@ -238,6 +258,7 @@ impl Gmm {
         self.logmass.resize(k, 0.0);
         self.mass.resize(k, 0.0);
         self.half_logdet.resize(k, 0.0);
+        self.minv = MatSeq::zeros(k, d, d);
         self.last_logwts.resize(k, 0.0);
     }
 
@@ -255,49 +276,40 @@ impl Gmm {
             }
             let l = self.chol.mat(i);
             self.half_logdet[i] = (0..self.dim).map(|j| l[(j, j)].ln()).sum();
+            invert_lower(self.chol.slice(i), self.minv.slice_mut(i), self.dim);
         }
         self.chol_valid = true;
         Ok(())
     }
 
     /// GPS `estep`: `logobs[n, i] = log N(x_n; μ_i, Σ_i) + logmass_i` into the workspace
-    /// (`N x K` row-major).
-    fn estep(&mut self, data: MatRef<'_, f64>) -> Result<(), GpsError> {
+    /// (`N x K` row-major). `loaded`: the workspace's blocks already hold `data`.
+    fn estep(&mut self, data: MatRef<'_, f64>, loaded: bool) -> Result<(), GpsError> {
         self.factor()?;
         let (n, d) = (data.nrows(), data.ncols());
         let k = self.k;
-        self.ws.ensure(n, d, k);
-        if self.ws.data_t.nrows() != d || self.ws.data_t.ncols() < n {
-            self.ws.data_t = Mat::zeros(d, n);
-        }
-        self.ws
-            .data_t
-            .as_mut()
-            .submatrix_mut(0, 0, d, n)
-            .copy_from(data.transpose());
+        self.ws.ensure(n, k);
         let c0 = -0.5 * d as f64 * (2.0 * std::f64::consts::PI).ln();
         if n <= SMALL_N {
-            self.estep_small(n, c0);
+            self.estep_small(data, c0);
             return Ok(());
         }
-        for i in 0..k {
-            let mu = &self.mu[i * d..(i + 1) * d];
-            let mut diff = self.ws.diff.as_mut().submatrix_mut(0, 0, d, n);
-            for p in 0..n {
-                let src = self.ws.data_t.col(p);
-                let mut dst = diff.rb_mut().col_mut(p);
-                for a in 0..d {
-                    dst[a] = src[a] - mu[a];
+        if !loaded {
+            self.ws.load(data);
+        }
+        let fast = em_kernels::fast_path();
+        let ws = &mut self.ws;
+        for blk in 0..ws.blocks {
+            let (p0, xb) = (blk * BLOCK, &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK]);
+            let m = BLOCK.min(n - p0);
+            for i in 0..k {
+                let mut ss = [0.0; BLOCK];
+                let (minv, mu) = (self.minv.slice(i), &self.mu[i * d..(i + 1) * d]);
+                em_kernels::whitened_norms(fast, minv, mu, d, xb, &mut ws.diff, &mut ss);
+                let base = c0 - self.half_logdet[i] + self.logmass[i];
+                for (j, &s) in ss[..m].iter().enumerate() {
+                    ws.logobs[(p0 + j) * k + i] = base - 0.5 * s;
                 }
-            }
-            solve_lower(self.chol.mat(i), diff.rb_mut());
-            for p in 0..n {
-                let col = diff.rb().col(p);
-                let mut ss = 0.0;
-                for a in 0..d {
-                    ss += col[a] * col[a];
-                }
-                self.ws.logobs[p * k + i] = c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
             }
         }
         Ok(())
@@ -306,8 +318,8 @@ impl Gmm {
     /// E-step for a handful of points (the per-time-step prior queries): forward substitution
     /// written out, four points at a time, subtracting in the same order as reference BLAS
     /// `dtrsm`; a library triangular solve costs more in call overhead than in flops here.
-    fn estep_small(&mut self, n: usize, c0: f64) {
-        let (d, k) = (self.dim, self.k);
+    fn estep_small(&mut self, data: MatRef<'_, f64>, c0: f64) {
+        let (n, d, k) = (data.nrows(), self.dim, self.k);
         let y = &mut self.ws.small;
         y.clear();
         y.resize(d * n, 0.0);
@@ -315,9 +327,8 @@ impl Gmm {
             let mu = &self.mu[i * d..(i + 1) * d];
             let l = self.chol.slice(i);
             for p in 0..n {
-                let src = self.ws.data_t.col(p);
                 for a in 0..d {
-                    y[p * d + a] = src[a] - mu[a];
+                    y[p * d + a] = data[(p, a)] - mu[a];
                 }
             }
             let mut p0 = 0;
@@ -371,7 +382,8 @@ impl Gmm {
         if reinit {
             self.initialize(data, k, init)?;
         }
-        self.ws.ensure(n, d, k);
+        self.ws.ensure(n, k);
+        self.ws.load(data);
         let mut report = EmReport {
             k,
             n_points: n,
@@ -382,7 +394,7 @@ impl Gmm {
         };
         let mut prevll = f64::NEG_INFINITY;
         for itr in 0..max_iterations {
-            self.estep(data)?;
+            self.estep(data, true)?;
             let Workspace {
                 logobs,
                 w,
@@ -433,65 +445,39 @@ impl Gmm {
                     };
                 }
             }
-            self.mstep(data);
+            self.mstep(n);
         }
         Ok(report)
     }
 
-    /// M-step for means and covariances from the weights in the workspace.
-    fn mstep(&mut self, data: MatRef<'_, f64>) {
-        let (n, d) = (data.nrows(), data.ncols());
-        let k = self.k;
+    /// M-step for means and covariances from the weights in the workspace and the points in its
+    /// blocks.
+    fn mstep(&mut self, n: usize) {
+        let (d, k) = (self.dim, self.k);
+        let fast = em_kernels::fast_path();
         let ws = &mut self.ws;
-        let wmat = MatRef::from_row_major_slice(&ws.w[..n * k], n, k);
-        // μ_i = Σ_n w_ni x_n  (K x D = wᵀ X)
-        gemm(
-            ws.mu_t.as_mut(),
-            Accum::Replace,
-            wmat.transpose(),
-            data,
-            1.0,
-        );
         for i in 0..k {
-            for a in 0..d {
-                self.mu[i * d + a] = ws.mu_t[(i, a)];
-            }
-        }
-        for i in 0..k {
-            for p in 0..n {
-                ws.rowlse[p] = ws.w[p * k + i].sqrt();
-            }
-            let mut wd = ws.wdata.as_mut().submatrix_mut(0, 0, n, d);
-            for a in 0..d {
-                let col = data.col(a);
-                let mut out = wd.rb_mut().col_mut(a);
-                for p in 0..n {
-                    out[p] = col[p] * ws.rowlse[p];
+            // μ_i = Σ_p w_pi x_p and the lower triangle of XX = Σ_p w_pi x_p x_pᵀ.
+            ws.moments.clear();
+            for blk in 0..ws.blocks {
+                let mut wb = [0.0; BLOCK];
+                for (j, v) in wb.iter_mut().enumerate().take(n - blk * BLOCK) {
+                    *v = ws.w[(blk * BLOCK + j) * k + i];
                 }
+                let xb = &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK];
+                em_kernels::moments_block(fast, &mut ws.moments, xb, &wb);
             }
-            let wd = ws.wdata.as_ref().submatrix(0, 0, n, d);
-            // Only the lower triangle of XX = wdᵀ wd is formed; Σ is symmetrised below anyway.
-            faer::linalg::matmul::triangular::matmul(
-                ws.xx.as_mut(),
-                faer::linalg::matmul::triangular::BlockStructure::TriangularLower,
-                Accum::Replace,
-                wd.transpose(),
-                faer::linalg::matmul::triangular::BlockStructure::Rectangular,
-                wd,
-                faer::linalg::matmul::triangular::BlockStructure::Rectangular,
-                1.0,
-                faer::Par::Seq,
-            );
-            let mu = &self.mu[i * d..(i + 1) * d];
+            let mu = &mut self.mu[i * d..(i + 1) * d];
+            ws.moments.finish(mu, &mut ws.xx);
             let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
             for a in 0..d {
                 for b in 0..a {
                     // GPS: Σ = XX − μμᵀ, then 0.5 (Σ + Σᵀ); XX is symmetric by construction.
-                    let v = ws.xx[(a, b)] - mu[a] * mu[b];
+                    let v = ws.xx[a * d + b] - mu[a] * mu[b];
                     s[(a, b)] = v;
                     s[(b, a)] = v;
                 }
-                s[(a, a)] = (ws.xx[(a, a)] - mu[a] * mu[a]) + 1e-6;
+                s[(a, a)] = (ws.xx[a * d + a] - mu[a] * mu[a]) + 1e-6;
             }
         }
         self.chol_valid = false;
@@ -564,7 +550,7 @@ impl Gmm {
     /// GPS `clusterwts`: average posterior log cluster weights of the points `pts (N x D)`,
     /// written to `self.last_logwts`.
     pub fn clusterwts(&mut self, pts: MatRef<'_, f64>) -> Result<(), GpsError> {
-        self.estep(pts)?;
+        self.estep(pts, false)?;
         let n = pts.nrows();
         let k = self.k;
         let Workspace { logobs, rowlse, .. } = &mut self.ws;
@@ -637,6 +623,7 @@ impl Gmm {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use faer::Mat;
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 

@@ -1,6 +1,7 @@
 //! Dynamics estimation: per-time-step linear-Gaussian models fitted by (Bayesian) linear
 //! regression, with a GMM prior over transitions (GPS python/gps/algorithm/dynamics/).
 
+pub mod em_kernels;
 pub mod gmm;
 pub mod lr;
 pub mod lr_prior;
