@@ -1,4 +1,4 @@
-//! The dense arithmetic of the GMM's EM (docs/design.md §5 D35): the E-step's whitened squared
+//! The dense arithmetic of the GMM's EM (docs/design.md §5 D33): the E-step's whitened squared
 //! distances `‖L⁻¹ (x − μ)‖²` and the M-step's weighted first and second moments `Σ_p w_p x_p`,
 //! `Σ_p w_p x_p x_pᵀ` (lower triangle only).
 //!

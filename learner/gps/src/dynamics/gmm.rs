@@ -106,7 +106,7 @@ pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
 
 struct Workspace {
     /// The points in blocks of [`BLOCK`], dimension-major within a block, padding points zero
-    /// (`em_kernels`, docs/design.md §5 D35).
+    /// (`em_kernels`, docs/design.md §5 D33).
     xb: Vec<f64>,
     /// Number of blocks in `xb`.
     blocks: usize,
