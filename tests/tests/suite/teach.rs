@@ -11,7 +11,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use hil_sim::ur_sim::{self, UrSimConfig};
+use hil_sim::ur_sim::{self, Series, UrSimConfig};
 use integration_tests::{
     cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc, TestLearner,
 };
@@ -238,4 +238,87 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     assert!(dist <= 0.01, "final distance over RTDE {dist} m");
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Recording from a CB3 controller (125 Hz, the UR5 of the paper): the recorder takes the
+/// arm's rate from the stream and cuts, resamples and checks the taught reaches as on an
+/// e-Series arm.
+#[test]
+fn teach_by_hand_records_from_a_cb3_at_125_hz() {
+    let m = UrModel::Ur5;
+    let dir = scratch("teach-cb3");
+    let d = |p: &str| dir.join(p).display().to_string();
+    let reaches = [
+        "--model",
+        "ur5",
+        "playback-gen",
+        "--motions",
+        "3",
+        "--seed",
+        "2",
+        "--out",
+    ];
+    let mut args: Vec<&str> = reaches.to_vec();
+    let out = d("reaches.csv");
+    args.push(&out);
+    let gen = run_ok("hil-sim", "playback-gen", &args, &dir);
+    assert_eq!(gen["motions"], 3);
+    let sim = ur_sim::spawn(
+        &TaskConfig::for_model(m),
+        &SimConfig::for_model(m),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            series: Series::Cb3,
+            time_compression: 10.0,
+            playback: Some(dir.join("reaches.csv")),
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim plays");
+    let port = sim.rtde_addr.port().to_string();
+    let rec_cfg = write_config(
+        &dir,
+        "record.toml",
+        &format!("[task]\nhorizon = {T}\n[sim]\nmodel = \"ur5\"\n"),
+    );
+    let rec = run_ok(
+        "learner",
+        "record",
+        &[
+            "record",
+            "--ur",
+            "127.0.0.1",
+            "--rtde-port",
+            &port,
+            "--episodes",
+            "3",
+            "--config",
+            &rec_cfg,
+            "--out",
+            &d("rec"),
+            "--max-time-s",
+            "100",
+            "--json",
+        ],
+        &dir,
+    );
+    sim.stop();
+    let rate = rec["rate_hz"].as_f64().unwrap();
+    assert!((rate - 125.0).abs() < 1.0, "a CB3 streams at 125 Hz: {rec}");
+    let r = &rec["report"];
+    assert_eq!(r["episodes"], 3, "{rec}");
+    assert!(r["goal_spread_max_m"].as_f64().unwrap() < 0.01, "{rec}");
+    let demos = learner::io::demos::load(&dir.join("rec/demos.npz")).unwrap();
+    assert_eq!((demos.count, demos.horizon, demos.model), (3, T, m));
+    let dg = (0..3)
+        .map(|k| (demos.goal[k] - m.default_goal()[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        dg < 0.01,
+        "the recorded goal {:?} is the taught region's",
+        demos.goal
+    );
+    assert!(demos.cost_expert < demos.cost_random, "{rec}");
 }
