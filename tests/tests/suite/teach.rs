@@ -40,82 +40,7 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     let m = UrModel::Ur5e;
     let dir = scratch("teach");
     let d = |p: &str| dir.join(p).display().to_string();
-    let gen = run_ok(
-        "hil-sim",
-        "playback-gen",
-        &[
-            "--model",
-            "ur5e",
-            "playback-gen",
-            "--motions",
-            "5",
-            "--seed",
-            "1",
-            "--out",
-            &d("reaches.csv"),
-        ],
-        &dir,
-    );
-    assert_eq!(gen["motions"], 5);
-
-    // Playback at 10 times real time; the recorder reads every package it is sent.
-    let sim = ur_sim::spawn(
-        &TaskConfig::for_model(m),
-        &SimConfig::for_model(m),
-        &UrSimConfig {
-            rtde_port: 0,
-            secondary_port: 0,
-            time_compression: 10.0,
-            playback: Some(dir.join("reaches.csv")),
-            ..UrSimConfig::default()
-        },
-    )
-    .expect("ur-sim plays");
-    let port = sim.rtde_addr.port().to_string();
-    let rec_cfg = write_config(
-        &dir,
-        "record.toml",
-        &format!("[task]\nhorizon = {T}\n[sim]\nmodel = \"ur5e\"\n"),
-    );
-    let rec = run_ok(
-        "learner",
-        "record",
-        &[
-            "record",
-            "--ur",
-            "127.0.0.1",
-            "--rtde-port",
-            &port,
-            "--episodes",
-            "5",
-            "--config",
-            &rec_cfg,
-            "--out",
-            &d("rec"),
-            "--max-time-s",
-            "100",
-            "--json",
-        ],
-        &dir,
-    );
-    sim.stop();
-    let r = &rec["report"];
-    assert_eq!(r["episodes"], 5, "{rec}");
-    let spread = r["goal_spread_max_m"].as_f64().unwrap();
-    // The goal region is a cube of half side 5 mm: the ends lie within its diagonal.
-    assert!(spread < 0.01, "{rec}");
-    let demos = learner::io::demos::load(&dir.join("rec/demos.npz")).unwrap();
-    assert_eq!((demos.count, demos.horizon, demos.model), (5, T, m));
-    let dg = (0..3)
-        .map(|k| (demos.goal[k] - m.default_goal()[k]).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    assert!(
-        dg < 0.01,
-        "the recorded goal {:?} is the taught region's",
-        demos.goal
-    );
-    assert!(demos.cost_expert < demos.cost_random, "{rec}");
+    let (demos, spread) = record_played_back(m, Series::E, 5, 1, &dir);
 
     // LQR+GAIfO on the UR5e model, in process.
     let train_cfg = write_config(&dir, "gaifo.toml", "seed = 1\n[sim]\nmodel = \"ur5e\"\n");
@@ -245,31 +170,51 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
 /// e-Series arm.
 #[test]
 fn teach_by_hand_records_from_a_cb3_at_125_hz() {
-    let m = UrModel::Ur5;
-    let dir = scratch("teach-cb3");
+    record_played_back(UrModel::Ur5, Series::Cb3, 3, 2, &scratch("teach-cb3"));
+}
+
+/// `hil-sim playback-gen` writes `motions` human-like reaches (seed `seed`) of model `m`, an
+/// in-process ur-sim of `series` plays them as freedrive at 10 times real time, and `learner
+/// record` cuts as many demonstrations of T steps from its RTDE stream into `dir/rec`. Checks
+/// the recording: the arm's rate taken from the stream, every reach kept, the model named, the
+/// end points within 1 cm of each other and of the taught goal, the expert's cost below the
+/// random policy's. Returns the demonstrations and the end points' largest distance from their
+/// mean (m).
+fn record_played_back(
+    m: UrModel,
+    series: Series,
+    motions: usize,
+    seed: u64,
+    dir: &Path,
+) -> (imitation::demos::Demos, f64) {
     let d = |p: &str| dir.join(p).display().to_string();
-    let reaches = [
-        "--model",
-        "ur5",
+    let (model, n, seed) = (m.name(), motions.to_string(), seed.to_string());
+    let gen = run_ok(
+        "hil-sim",
         "playback-gen",
-        "--motions",
-        "3",
-        "--seed",
-        "2",
-        "--out",
-    ];
-    let mut args: Vec<&str> = reaches.to_vec();
-    let out = d("reaches.csv");
-    args.push(&out);
-    let gen = run_ok("hil-sim", "playback-gen", &args, &dir);
-    assert_eq!(gen["motions"], 3);
+        &[
+            "--model",
+            model,
+            "playback-gen",
+            "--motions",
+            &n,
+            "--seed",
+            &seed,
+            "--out",
+            &d("reaches.csv"),
+        ],
+        dir,
+    );
+    assert_eq!(gen["motions"], motions);
+
+    // The recorder reads every package it is sent.
     let sim = ur_sim::spawn(
         &TaskConfig::for_model(m),
         &SimConfig::for_model(m),
         &UrSimConfig {
             rtde_port: 0,
             secondary_port: 0,
-            series: Series::Cb3,
+            series,
             time_compression: 10.0,
             playback: Some(dir.join("reaches.csv")),
             ..UrSimConfig::default()
@@ -278,9 +223,9 @@ fn teach_by_hand_records_from_a_cb3_at_125_hz() {
     .expect("ur-sim plays");
     let port = sim.rtde_addr.port().to_string();
     let rec_cfg = write_config(
-        &dir,
+        dir,
         "record.toml",
-        &format!("[task]\nhorizon = {T}\n[sim]\nmodel = \"ur5\"\n"),
+        &format!("[task]\nhorizon = {T}\n[sim]\nmodel = \"{model}\"\n"),
     );
     let rec = run_ok(
         "learner",
@@ -292,7 +237,7 @@ fn teach_by_hand_records_from_a_cb3_at_125_hz() {
             "--rtde-port",
             &port,
             "--episodes",
-            "3",
+            &n,
             "--config",
             &rec_cfg,
             "--out",
@@ -301,16 +246,21 @@ fn teach_by_hand_records_from_a_cb3_at_125_hz() {
             "100",
             "--json",
         ],
-        &dir,
+        dir,
     );
     sim.stop();
     let rate = rec["rate_hz"].as_f64().unwrap();
-    assert!((rate - 125.0).abs() < 1.0, "a CB3 streams at 125 Hz: {rec}");
+    assert!(
+        (rate - 1.0 / series.cycle_s()).abs() < 1.0,
+        "the arm's rate from the stream: {rec}"
+    );
     let r = &rec["report"];
-    assert_eq!(r["episodes"], 3, "{rec}");
-    assert!(r["goal_spread_max_m"].as_f64().unwrap() < 0.01, "{rec}");
+    assert_eq!(r["episodes"], motions, "{rec}");
+    // The goal region is a cube of half side 5 mm: the ends lie within its diagonal.
+    let spread = r["goal_spread_max_m"].as_f64().unwrap();
+    assert!(spread < 0.01, "{rec}");
     let demos = learner::io::demos::load(&dir.join("rec/demos.npz")).unwrap();
-    assert_eq!((demos.count, demos.horizon, demos.model), (3, T, m));
+    assert_eq!((demos.count, demos.horizon, demos.model), (motions, T, m));
     let dg = (0..3)
         .map(|k| (demos.goal[k] - m.default_goal()[k]).powi(2))
         .sum::<f64>()
@@ -321,4 +271,5 @@ fn teach_by_hand_records_from_a_cb3_at_125_hz() {
         demos.goal
     );
     assert!(demos.cost_expert < demos.cost_random, "{rec}");
+    (demos, spread)
 }
