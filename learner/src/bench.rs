@@ -153,7 +153,7 @@ pub fn em_flops(rep: &gps::dynamics::gmm::EmReport, d: usize) -> f64 {
 pub fn fma_peak_gflops() -> f64 {
     (0..7)
         .map(|_| {
-            let ((flops, _), _, cpu) = timed(|| gps::dynamics::em_kernels::fma_peak(2_000_000));
+            let (flops, _, cpu) = timed(|| gps::dynamics::em_kernels::fma_peak(2_000_000));
             flops / cpu / 1e9
         })
         .fold(0.0, f64::max)
