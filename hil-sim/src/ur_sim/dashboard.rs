@@ -53,14 +53,7 @@ pub(crate) fn serve_dashboard(ctx: Arc<Ctx>, mut stream: TcpStream) {
         let n = match stream.read(&mut chunk) {
             Ok(0) => return,
             Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
-                continue
-            }
+            Err(e) if ur_protocol::stream::timed_out(&e) => continue,
             Err(_) => return,
         };
         for &b in &chunk[..n] {

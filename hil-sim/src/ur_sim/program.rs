@@ -62,12 +62,7 @@ pub(crate) fn serve_secondary(ctx: Arc<Ctx>, mut stream: TcpStream) {
             }
             // EINTR (a SIGSTOP/SIGCONT of ur-sim): read on.
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
+            Err(e) if ur_protocol::stream::timed_out(&e) => {
                 if !text.is_empty() {
                     run_script(&ctx, &String::from_utf8_lossy(&text));
                     text.clear();
@@ -239,9 +234,10 @@ fn command_loop(ctx: &Ctx, generation: u64, mut s: TcpStream) -> End {
         if let Err(e) = s.read_exact(&mut bytes) {
             // A timeout, a closed socket or a partial command: the URScript's read returns
             // fewer than 8 integers in every case, and the program stops the arm.
-            return match e.kind() {
-                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => End::Timeout,
-                _ => End::Closed,
+            return if ur_protocol::stream::timed_out(&e) {
+                End::Timeout
+            } else {
+                End::Closed
             };
         }
         Stats::add(&ctx.stats.commands);

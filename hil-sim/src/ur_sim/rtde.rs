@@ -42,10 +42,7 @@ impl Outlet {
         let mut s = self.stream.lock().unwrap_or_else(|e| e.into_inner());
         let r = s.write_all(bytes);
         if let Err(e) = &r {
-            if matches!(
-                e.kind(),
-                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-            ) {
+            if ur_protocol::stream::timed_out(e) {
                 eprintln!(
                     "hil-sim ur-sim: dropping an RTDE client that does not read its packages"
                 );

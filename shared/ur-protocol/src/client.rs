@@ -235,14 +235,7 @@ impl Client {
                 Ok(0) => return Err(ClientError::Closed(during)),
                 Ok(n) => self.dec.commit(n),
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                    ) =>
-                {
-                    return Err(self.deadline_passed(during))
-                }
+                Err(e) if crate::stream::timed_out(&e) => return Err(self.deadline_passed(during)),
                 Err(why) => return Err(ClientError::Io { during, why }),
             }
         }

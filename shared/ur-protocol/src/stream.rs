@@ -15,6 +15,15 @@
 //! ```
 
 use crate::rtde::HEADER_LEN;
+
+/// Whether a read or write on a TCP socket ended because its timeout (`set_read_timeout`,
+/// `set_write_timeout`) expired: Unix reports `WouldBlock`, Windows `TimedOut`.
+pub fn timed_out(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+    )
+}
 pub use crate::rtde::{Frame, FrameError};
 
 /// Frames from a byte stream. `N` is the buffer size: the largest frame accepted.
