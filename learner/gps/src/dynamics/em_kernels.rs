@@ -40,6 +40,16 @@ trait Lanes: Copy {
     fn fma(self, a: Self, b: Self) -> Self;
     fn add(self, b: Self) -> Self;
     fn sub(self, b: Self) -> Self;
+    fn mul(self, b: Self) -> Self;
+    /// `self > b ? self : b` in every lane (`b` where either is NaN, as `vmaxpd`).
+    fn max(self, b: Self) -> Self;
+    /// `self < b ? self : b` in every lane (`b` where either is NaN, as `vminpd`).
+    fn min(self, b: Self) -> Self;
+    /// `2^n` for lanes holding `t = n + 1.5 · 2^52` with an integer `n` in `[−1022, 1023]`:
+    /// the bits of `t` plus 1023, shifted left by 52, leave `n + 1023` in the exponent field.
+    fn exp2_of_rounded(self) -> Self;
+    /// `self` where `x` is not below `lim` (NaN included), else `+0`.
+    fn zero_where_below(self, x: Self, lim: f64) -> Self;
     /// `(l0 + l1) + (l2 + l3)`.
     fn sum(self) -> f64 {
         let mut o = [0.0; 4];
@@ -76,6 +86,26 @@ impl Lanes for [f64; 4] {
     #[inline(always)]
     fn sub(self, b: Self) -> Self {
         [0, 1, 2, 3].map(|j| self[j] - b[j])
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        [0, 1, 2, 3].map(|j| self[j] * b[j])
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        [0, 1, 2, 3].map(|j| if self[j] > b[j] { self[j] } else { b[j] })
+    }
+    #[inline(always)]
+    fn min(self, b: Self) -> Self {
+        [0, 1, 2, 3].map(|j| if self[j] < b[j] { self[j] } else { b[j] })
+    }
+    #[inline(always)]
+    fn exp2_of_rounded(self) -> Self {
+        self.map(|t| f64::from_bits(t.to_bits().wrapping_add(1023) << 52))
+    }
+    #[inline(always)]
+    fn zero_where_below(self, x: Self, lim: f64) -> Self {
+        [0, 1, 2, 3].map(|j| if x[j] < lim { 0.0 } else { self[j] })
     }
 }
 
@@ -120,6 +150,33 @@ mod avx {
         #[inline(always)]
         fn sub(self, b: Self) -> Self {
             Avx(unsafe { _mm256_sub_pd(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn mul(self, b: Self) -> Self {
+            Avx(unsafe { _mm256_mul_pd(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn max(self, b: Self) -> Self {
+            Avx(unsafe { _mm256_max_pd(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn min(self, b: Self) -> Self {
+            Avx(unsafe { _mm256_min_pd(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn exp2_of_rounded(self) -> Self {
+            Avx(unsafe {
+                let bits = _mm256_add_epi64(_mm256_castpd_si256(self.0), _mm256_set1_epi64x(1023));
+                _mm256_castsi256_pd(_mm256_slli_epi64::<52>(bits))
+            })
+        }
+        #[inline(always)]
+        fn zero_where_below(self, x: Self, lim: f64) -> Self {
+            // NLT_UQ: true where x ≥ lim or either is NaN, so NaN keeps `self`.
+            Avx(unsafe {
+                let keep = _mm256_cmp_pd::<_CMP_NLT_UQ>(x.0, _mm256_set1_pd(lim));
+                _mm256_and_pd(keep, self.0)
+            })
         }
     }
 }
@@ -342,6 +399,174 @@ pub fn moments_block(fast: bool, acc: &mut Moments, x: &[f64], w: &[f64; BLOCK])
     )
 }
 
+/// Below this argument [`exp`] returns `+0`: `e^-600` ≈ 2.7e-261. Terms that small change no
+/// sum of the EM (a log-sum-exp shifted by its maximum adds at least 1; a cluster's weights add
+/// up to 1), and flushing them keeps the M-step's products out of the subnormal range, where x86
+/// multiply-adds take a microcode assist (docs/design.md §5 D33).
+pub const EXP_FLOOR: f64 = -600.0;
+
+/// `1 / k!` for `k = 0 … 13`: the Taylor polynomial of `e^r` on `|r| ≤ ln 2 / 2`, whose
+/// remainder (`(ln 2 / 2)^14 / 14!` ≈ 4e-18) is below half an ulp.
+const EXP_TAYLOR: [f64; 14] = [
+    1.0,
+    1.0,
+    0.5,
+    0.16666666666666666,
+    0.041666666666666664,
+    0.008333333333333333,
+    0.001388888888888889,
+    0.0001984126984126984,
+    2.48015873015873e-05,
+    2.7557319223985893e-06,
+    2.755731922398589e-07,
+    2.505210838544172e-08,
+    2.08767569878681e-09,
+    1.6059043836821613e-10,
+];
+
+/// `e^x` in every lane for `x ≤ 700`, within 2 ulp of the correctly rounded value (tested);
+/// `+0` for `x <` [`EXP_FLOOR`] (`−∞` included), NaN for NaN. `x = n ln 2 + r` with `n` the
+/// nearest integer to `x log₂e` (rounded by adding 1.5·2^52) and `r` by Cody–Waite's two-part
+/// `ln 2`; `e^r` by Horner on [`EXP_TAYLOR`]; `2^n` from `n`'s bits.
+#[inline(always)]
+fn exp<V: Lanes>(x: V) -> V {
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
+    // Clamp into [EXP_FLOOR, 700] (NaN stays NaN: vmaxpd/vminpd return their second operand).
+    let xc = V::splat(EXP_FLOOR).max(V::splat(700.0).min(x));
+    let t = V::splat(ROUND).fma(xc, V::splat(std::f64::consts::LOG2_E));
+    let n = t.sub(V::splat(ROUND));
+    let r = xc.fma(n, V::splat(-LN2_HI)).fma(n, V::splat(-LN2_LO));
+    let mut p = V::splat(EXP_TAYLOR[13]);
+    for &c in EXP_TAYLOR[..13].iter().rev() {
+        p = V::splat(c).fma(p, r);
+    }
+    p.mul(t.exp2_of_rounded()).zero_where_below(x, EXP_FLOOR)
+}
+
+/// Four values from `s[i..]`, lanes past `s.len()` filled with `−∞` (which [`exp`] maps to 0
+/// and a maximum ignores).
+#[inline(always)]
+fn load_or_neg_inf<V: Lanes>(s: &[f64], i: usize) -> V {
+    if i + 4 <= s.len() {
+        V::load(&s[i..])
+    } else {
+        let mut t = [f64::NEG_INFINITY; 4];
+        t[..s.len() - i].copy_from_slice(&s[i..]);
+        V::load(&t)
+    }
+}
+
+/// `e^x` of every element of `x` into `out` (same length), as the EM's [`exp`] computes it.
+pub fn exp_slice(fast: bool, x: &[f64], out: &mut [f64]) {
+    assert_eq!(x.len(), out.len());
+    dispatch!(
+        fast,
+        fn k(x: &[f64], out: &mut [f64]) {
+            let mut buf = [0.0; 4];
+            for i in (0..x.len()).step_by(4) {
+                exp(load_or_neg_inf::<V>(x, i)).store(&mut buf);
+                let m = (x.len() - i).min(4);
+                out[i..i + m].copy_from_slice(&buf[..m]);
+            }
+        }
+    )
+}
+
+/// GPS `logsum` along the clusters, then the subtraction that turns log probabilities into log
+/// responsibilities: for each point `p < n` of the cluster-major `l` (cluster `i`'s values at
+/// `l[i * stride ..]`), `lse[p] = log Σ_i exp(l_ip − m_p) + m_p` with `m_p` the largest `l_ip`
+/// (GPS's `max = −∞ → 0` gives the same `−∞`), then `l_ip −= lse[p]`. Lanes are points; each
+/// point's sum runs over `i` in ascending order.
+pub fn normalise_over_clusters(
+    fast: bool,
+    l: &mut [f64],
+    stride: usize,
+    n: usize,
+    k: usize,
+    lse: &mut [f64],
+) {
+    assert!(n <= stride && l.len() >= (k.max(1) - 1) * stride + n && lse.len() >= n);
+    dispatch!(
+        fast,
+        fn kern(l: &mut [f64], stride: usize, n: usize, k: usize, lse: &mut [f64]) {
+            let mut buf = [0.0; 4];
+            for p in (0..n).step_by(4) {
+                let row = |i: usize| &l[i * stride..i * stride + n];
+                let mut m = V::splat(f64::MIN);
+                for i in 0..k {
+                    m = m.max(load_or_neg_inf(row(i), p));
+                }
+                let mut s = V::zero();
+                for i in 0..k {
+                    s = s.add(exp(load_or_neg_inf::<V>(row(i), p).sub(m)));
+                }
+                let (mut sb, mut mb) = ([0.0; 4], [0.0; 4]);
+                s.store(&mut sb);
+                m.store(&mut mb);
+                for j in 0..4 {
+                    buf[j] = sb[j].ln() + mb[j];
+                }
+                let c = (n - p).min(4);
+                lse[p..p + c].copy_from_slice(&buf[..c]);
+                for i in 0..k {
+                    for (v, &b) in l[i * stride + p..i * stride + p + c].iter_mut().zip(&buf) {
+                        *v -= b;
+                    }
+                }
+            }
+        }
+    )
+}
+
+/// GPS `logsum` of the `n` values `l` (one cluster's log responsibilities over the points):
+/// `log Σ_p exp(l_p − m) + m`, `m` the largest value (`−∞` for an empty or all-`−∞` row, as
+/// GPS's `max = −∞ → 0` gives). The sum runs in four lanes (`p mod 4`, ascending `p`), added as
+/// `(l0 + l1) + (l2 + l3)`.
+pub fn logsum_points(fast: bool, l: &[f64]) -> f64 {
+    let mut out = 0.0;
+    let sink = &mut out;
+    dispatch!(
+        fast,
+        fn k(l: &[f64], sink: &mut f64) {
+            let mut m = V::splat(f64::MIN);
+            for p in (0..l.len()).step_by(4) {
+                m = m.max(load_or_neg_inf(l, p));
+            }
+            let mut mb = [0.0; 4];
+            m.store(&mut mb);
+            let mx = mb[0].max(mb[1]).max(mb[2].max(mb[3]));
+            let mv = V::splat(mx);
+            let mut s = V::zero();
+            for p in (0..l.len()).step_by(4) {
+                s = s.add(exp(load_or_neg_inf::<V>(l, p).sub(mv)));
+            }
+            *sink = s.sum().ln() + mx;
+        }
+    );
+    out
+}
+
+/// The M-step's weights of one cluster: `w[p] = exp(l[p] − c)` for `p < l.len()` (`+0` below
+/// `e^`[`EXP_FLOOR`]), `w[p] = 0` for the padding `l.len() ≤ p < w.len()`.
+pub fn weights(fast: bool, l: &[f64], c: f64, w: &mut [f64]) {
+    assert!(w.len() >= l.len());
+    dispatch!(
+        fast,
+        fn k(l: &[f64], c: f64, w: &mut [f64]) {
+            let cv = V::splat(c);
+            let mut buf = [0.0; 4];
+            for p in (0..l.len()).step_by(4) {
+                exp(load_or_neg_inf::<V>(l, p).sub(cv)).store(&mut buf);
+                let m = (l.len() - p).min(4);
+                w[p..p + m].copy_from_slice(&buf[..m]);
+            }
+        }
+    );
+    w[l.len()..].fill(0.0);
+}
+
 /// Flops of the E-step's dense arithmetic on `n` points, `k` clusters, dimension `d`, as
 /// [`whitened_norms`] does it (padding excluded; a multiply-add counted as two): per cluster and
 /// point, `d` subtractions, `d(d+1)/2` multiply-adds of `L⁻¹ (x − μ)` and `d` of the norm.
@@ -470,6 +695,146 @@ mod tests {
             let (s1b, xxb) = run(false);
             assert_eq!(bits(&s1), bits(&s1b));
             assert_eq!(bits(&xx), bits(&xxb));
+        }
+    }
+
+    /// Distance in units in the last place between two finite positive doubles.
+    fn ulps(a: f64, b: f64) -> u64 {
+        a.to_bits().abs_diff(b.to_bits())
+    }
+
+    #[test]
+    fn exp_is_within_two_ulp_of_libm_flushes_below_the_floor_and_both_builds_agree() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut x: Vec<f64> = (0..20_000)
+            .map(|i| match i % 4 {
+                0 => rng.random_range(EXP_FLOOR..0.0),
+                1 => rng.random_range(-1.0..1.0),
+                2 => rng.random_range(-40.0..0.0),
+                _ => rng.random_range(0.0..700.0),
+            })
+            .collect();
+        // Halfway points of the rounding to n, both ends of the range, exact cases.
+        x.extend([
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            EXP_FLOOR,
+            700.0,
+            0.5 * std::f64::consts::LN_2,
+        ]);
+        x.extend((1..20).map(|n| -(n as f64 + 0.5) * std::f64::consts::LN_2));
+        let mut y = vec![0.0; x.len()];
+        exp_slice(fast_path(), &x, &mut y);
+        let worst = x
+            .iter()
+            .zip(&y)
+            .map(|(&xi, &yi)| (ulps(yi, xi.exp()), xi))
+            .max_by_key(|&(u, _)| u)
+            .unwrap();
+        assert!(
+            worst.0 <= 2,
+            "exp off by {} ulp at x = {:e}",
+            worst.0,
+            worst.1
+        );
+        assert_eq!(y[20_000], 1.0, "e^0");
+        let mut y2 = vec![0.0; x.len()];
+        exp_slice(false, &x, &mut y2);
+        assert_eq!(bits(&y), bits(&y2), "the two instantiations differ");
+
+        let special = [
+            EXP_FLOOR - 1e-9,
+            -601.0,
+            -1e300,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        let mut z = [1.0; 5];
+        exp_slice(fast_path(), &special, &mut z);
+        assert_eq!(bits(&z[..4]), bits(&[0.0; 4]), "below the floor: +0");
+        assert!(z[4].is_nan(), "NaN stays NaN");
+    }
+
+    /// GPS `logsum` written out (max-shifted, `−∞` max replaced by 0), on libm's `exp`.
+    fn logsum_ref(v: &[f64]) -> f64 {
+        let mut m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if m == f64::NEG_INFINITY {
+            m = 0.0;
+        }
+        v.iter().map(|x| (x - m).exp()).sum::<f64>().ln() + m
+    }
+
+    #[test]
+    fn responsibilities_match_gps_logsum_and_both_builds_agree_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
+        for (n, k) in [(1usize, 1usize), (5, 3), (37, 12), (64, 2)] {
+            let stride = n.div_ceil(BLOCK) * BLOCK;
+            let mut l = vec![f64::NAN; stride * k];
+            for i in 0..k {
+                for p in 0..n {
+                    l[i * stride + p] = rng.random_range(-900.0..10.0);
+                }
+            }
+            if n > 1 {
+                // A point far from every cluster and a cluster no point belongs to.
+                l[1] = f64::NEG_INFINITY;
+                for p in 0..n {
+                    l[(k - 1) * stride + p] -= 2000.0;
+                }
+            }
+            let run = |fast: bool| {
+                let mut l = l.clone();
+                let mut lse = vec![0.0; n];
+                normalise_over_clusters(fast, &mut l, stride, n, k, &mut lse);
+                let col: Vec<f64> = (0..k)
+                    .map(|i| logsum_points(fast, &l[i * stride..][..n]))
+                    .collect();
+                let mut w = vec![f64::NAN; stride * k];
+                for i in 0..k {
+                    let wi = &mut w[i * stride..(i + 1) * stride];
+                    weights(fast, &l[i * stride..][..n], col[i], wi);
+                }
+                (l, lse, col, w)
+            };
+            let (lr, lse, col, w) = run(fast_path());
+            for p in 0..n {
+                let v: Vec<f64> = (0..k).map(|i| l[i * stride + p]).collect();
+                let want = logsum_ref(&v);
+                assert!(
+                    (lse[p] - want).abs() <= 1e-12 * want.abs().max(1.0),
+                    "n={n} p={p}"
+                );
+                for i in 0..k {
+                    assert_eq!(lr[i * stride + p], l[i * stride + p] - lse[p]);
+                }
+            }
+            for i in 0..k {
+                let row = &lr[i * stride..][..n];
+                let want = logsum_ref(row);
+                assert!(
+                    (col[i] - want).abs() <= 1e-12 * want.abs().max(1.0),
+                    "n={n} i={i}"
+                );
+                for p in 0..stride {
+                    let wp = w[i * stride + p];
+                    if p >= n {
+                        assert_eq!(wp.to_bits(), 0, "padding weighs +0");
+                    } else if row[p] - col[i] < EXP_FLOOR {
+                        assert_eq!(wp.to_bits(), 0, "below the floor: +0");
+                    } else {
+                        let want = (row[p] - col[i]).exp();
+                        assert!(ulps(wp, want) <= 2, "n={n} i={i} p={p}");
+                        assert!(wp.is_normal(), "no subnormal weight");
+                    }
+                }
+            }
+            let (lr2, lse2, col2, w2) = run(false);
+            assert_eq!(bits(&lr), bits(&lr2));
+            assert_eq!(bits(&lse), bits(&lse2));
+            assert_eq!(bits(&col), bits(&col2));
+            assert_eq!(bits(&w), bits(&w2));
         }
     }
 
