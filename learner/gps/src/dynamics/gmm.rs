@@ -146,7 +146,7 @@ impl Workspace {
             xb: Vec::new(),
             blocks: 0,
             diff: vec![0.0; d * BLOCK],
-            moments: Moments::new(d),
+            moments: Moments::new(),
             logobs: Vec::new(),
             w: Vec::new(),
             stride: 0,
@@ -470,16 +470,18 @@ impl Gmm {
         let ws = &mut self.ws;
         for i in 0..k {
             // μ_i = Σ_p w_pi x_p and the lower triangle of XX = Σ_p w_pi x_p x_pᵀ.
-            ws.moments.clear();
-            for blk in 0..ws.blocks {
-                let wb = ws.w[i * ws.stride + blk * BLOCK..][..BLOCK]
-                    .try_into()
-                    .unwrap();
-                let xb = &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK];
-                em_kernels::moments_block(fast, &mut ws.moments, xb, wb);
-            }
             let mu = &mut self.mu[i * d..(i + 1) * d];
-            ws.moments.finish(mu, &mut ws.xx);
+            let w = &ws.w[i * ws.stride..(i + 1) * ws.stride];
+            em_kernels::moments(
+                fast,
+                &mut ws.moments,
+                d,
+                ws.blocks,
+                &ws.xb,
+                w,
+                mu,
+                &mut ws.xx,
+            );
             let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
             for a in 0..d {
                 for b in 0..a {
