@@ -79,16 +79,27 @@ fn exp_or_zero(x: f64) -> f64 {
     }
 }
 
-/// `m = L⁻¹` for a lower-triangular `d x d` row-major `l` (forward substitution on the columns
-/// of the identity); only the lower triangle of `m` is written.
+/// `m = L⁻¹` for a lower-triangular `d x d` row-major `l`: row by row,
+/// `m[a, ..] = (e_a − Σ_{c<a} l[a, c] m[c, ..]) / l[a, a]`, each row an update by the rows
+/// above it in ascending `c`, over the columns `b ≤ c` where `m[c, b]` can be non-zero. Each
+/// element gets the products of forward substitution on the columns of the identity, in the
+/// same order (the same bits), but the lanes of a row are independent, so it vectorises.
+/// Only the lower triangle of `m` is written.
 fn invert_lower(l: &[f64], m: &mut [f64], d: usize) {
-    for b in 0..d {
-        for a in b..d {
-            let mut s = if a == b { 1.0 } else { 0.0 };
-            for c in b..a {
-                s -= l[a * d + c] * m[c * d + b];
+    for a in 0..d {
+        let (above, rest) = m.split_at_mut(a * d);
+        let row = &mut rest[..=a];
+        row.fill(0.0);
+        row[a] = 1.0;
+        for c in 0..a {
+            let lac = l[a * d + c];
+            for (r, &mc) in row[..=c].iter_mut().zip(&above[c * d..=c * d + c]) {
+                *r -= lac * mc;
             }
-            m[a * d + b] = s / l[a * d + a];
+        }
+        let laa = l[a * d + a];
+        for r in row.iter_mut() {
+            *r /= laa;
         }
     }
 }
@@ -114,10 +125,13 @@ struct Workspace {
     diff: Vec<f64>,
     /// One cluster's M-step sums.
     moments: Moments,
-    /// `N x K` row-major log observation probabilities, then log responsibilities.
+    /// Log observation probabilities, then log responsibilities, cluster-major: cluster `i`'s
+    /// value for point `p` at `logobs[i * stride + p]` (padding points after `N`).
     logobs: Vec<f64>,
-    /// `N x K` row-major weights for refitting.
+    /// Weights for refitting, laid out as `logobs` (padding points weigh 0).
     w: Vec<f64>,
+    /// Row length of `logobs` and `w`: `N` rounded up to whole blocks.
+    stride: usize,
     rowlse: Vec<f64>,
     collse: Vec<f64>,
     /// `D x D` row-major weighted second moment of one cluster (lower triangle).
@@ -132,9 +146,10 @@ impl Workspace {
             xb: Vec::new(),
             blocks: 0,
             diff: vec![0.0; d * BLOCK],
-            moments: Moments::new(d),
+            moments: Moments::new(),
             logobs: Vec::new(),
             w: Vec::new(),
+            stride: 0,
             rowlse: Vec::new(),
             collse: Vec::new(),
             xx: vec![0.0; d * d],
@@ -142,10 +157,12 @@ impl Workspace {
         }
     }
 
+    /// Sizes the buffers for `n` points and `k` clusters (rows of `n` rounded up to blocks).
     fn ensure(&mut self, n: usize, k: usize) {
-        if self.logobs.len() < n * k {
-            self.logobs.resize(n * k, 0.0);
-            self.w.resize(n * k, 0.0);
+        self.stride = n.div_ceil(BLOCK) * BLOCK;
+        if self.logobs.len() < self.stride * k {
+            self.logobs.resize(self.stride * k, 0.0);
+            self.w.resize(self.stride * k, 0.0);
         }
         if self.rowlse.len() < n {
             self.rowlse.resize(n, 0.0);
@@ -282,8 +299,8 @@ impl Gmm {
         Ok(())
     }
 
-    /// GPS `estep`: `logobs[n, i] = log N(x_n; μ_i, Σ_i) + logmass_i` into the workspace
-    /// (`N x K` row-major). `loaded`: the workspace's blocks already hold `data`.
+    /// GPS `estep`: `log N(x_p; μ_i, Σ_i) + logmass_i` into the workspace's `logobs`
+    /// (cluster-major, see [`Workspace`]). `loaded`: the workspace's blocks already hold `data`.
     fn estep(&mut self, data: MatRef<'_, f64>, loaded: bool) -> Result<(), GpsError> {
         self.factor()?;
         let (n, d) = (data.nrows(), data.ncols());
@@ -301,14 +318,14 @@ impl Gmm {
         let ws = &mut self.ws;
         for blk in 0..ws.blocks {
             let (p0, xb) = (blk * BLOCK, &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK]);
-            let m = BLOCK.min(n - p0);
             for i in 0..k {
                 let mut ss = [0.0; BLOCK];
                 let (minv, mu) = (self.minv.slice(i), &self.mu[i * d..(i + 1) * d]);
                 em_kernels::whitened_norms(fast, minv, mu, d, xb, &mut ws.diff, &mut ss);
                 let base = c0 - self.half_logdet[i] + self.logmass[i];
-                for (j, &s) in ss[..m].iter().enumerate() {
-                    ws.logobs[(p0 + j) * k + i] = base - 0.5 * s;
+                let row = &mut ws.logobs[i * ws.stride + p0..][..BLOCK];
+                for (o, &s) in row.iter_mut().zip(&ss) {
+                    *o = base - 0.5 * s;
                 }
             }
         }
@@ -358,7 +375,8 @@ impl Gmm {
                 for a in 0..d {
                     ss += col[a] * col[a];
                 }
-                self.ws.logobs[p * k + i] = c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
+                self.ws.logobs[i * self.ws.stride + p] =
+                    c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
             }
         }
     }
@@ -393,20 +411,21 @@ impl Gmm {
             stop_itr: max_iterations,
         };
         let mut prevll = f64::NEG_INFINITY;
+        let fast = em_kernels::fast_path();
         for itr in 0..max_iterations {
             self.estep(data, true)?;
             let Workspace {
                 logobs,
                 w,
+                stride,
                 rowlse,
                 collse,
                 ..
             } = &mut self.ws;
-            let mut ll = 0.0;
-            for p in 0..n {
-                rowlse[p] = logsum(logobs[p * k..(p + 1) * k].iter().copied());
-                ll += rowlse[p];
-            }
+            let stride = *stride;
+            // Log responsibilities: logobs − logsum over clusters, in place.
+            em_kernels::normalise_over_clusters(fast, logobs, stride, n, k, rowlse);
+            let ll: f64 = rowlse[..n].iter().sum();
             report.ll_trace.push(ll);
             if ll < prevll {
                 report.stop = EmStop::LlDecreased;
@@ -420,14 +439,8 @@ impl Gmm {
             }
             prevll = ll;
 
-            // logw = logobs − logsum over clusters (responsibilities, in place).
-            for p in 0..n {
-                for i in 0..k {
-                    logobs[p * k + i] -= rowlse[p];
-                }
-            }
             for i in 0..k {
-                collse[i] = logsum((0..n).map(|p| logobs[p * k + i]));
+                collse[i] = em_kernels::logsum_points(fast, &logobs[i * stride..][..n]);
             }
             let lm = logsum(collse[..k].iter().copied());
             for i in 0..k {
@@ -436,39 +449,39 @@ impl Gmm {
             }
             let small = 1.0 / k as f64 * 1e-4;
             for i in 0..k {
-                let reboot = self.mass[i] < small;
-                for p in 0..n {
-                    w[p * k + i] = if reboot {
-                        1.0 / n as f64
-                    } else {
-                        exp_or_zero(logobs[p * k + i] - collse[i])
-                    };
+                let wi = &mut w[i * stride..(i + 1) * stride];
+                if self.mass[i] < small {
+                    wi[..n].fill(1.0 / n as f64);
+                    wi[n..].fill(0.0);
+                } else {
+                    em_kernels::weights(fast, &logobs[i * stride..][..n], collse[i], wi);
                 }
             }
-            self.mstep(n);
+            self.mstep();
         }
         Ok(report)
     }
 
     /// M-step for means and covariances from the weights in the workspace and the points in its
     /// blocks.
-    fn mstep(&mut self, n: usize) {
+    fn mstep(&mut self) {
         let (d, k) = (self.dim, self.k);
         let fast = em_kernels::fast_path();
         let ws = &mut self.ws;
         for i in 0..k {
             // μ_i = Σ_p w_pi x_p and the lower triangle of XX = Σ_p w_pi x_p x_pᵀ.
-            ws.moments.clear();
-            for blk in 0..ws.blocks {
-                let mut wb = [0.0; BLOCK];
-                for (j, v) in wb.iter_mut().enumerate().take(n - blk * BLOCK) {
-                    *v = ws.w[(blk * BLOCK + j) * k + i];
-                }
-                let xb = &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK];
-                em_kernels::moments_block(fast, &mut ws.moments, xb, &wb);
-            }
             let mu = &mut self.mu[i * d..(i + 1) * d];
-            ws.moments.finish(mu, &mut ws.xx);
+            let w = &ws.w[i * ws.stride..(i + 1) * ws.stride];
+            em_kernels::moments(
+                fast,
+                &mut ws.moments,
+                d,
+                ws.blocks,
+                &ws.xb,
+                w,
+                mu,
+                &mut ws.xx,
+            );
             let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
             for a in 0..d {
                 for b in 0..a {
@@ -553,16 +566,18 @@ impl Gmm {
         self.estep(pts, false)?;
         let n = pts.nrows();
         let k = self.k;
-        let Workspace { logobs, rowlse, .. } = &mut self.ws;
-        for p in 0..n {
-            rowlse[p] = logsum(logobs[p * k..(p + 1) * k].iter().copied());
-            for i in 0..k {
-                logobs[p * k + i] -= rowlse[p];
-            }
-        }
+        let fast = em_kernels::fast_path();
+        let Workspace {
+            logobs,
+            stride,
+            rowlse,
+            ..
+        } = &mut self.ws;
+        em_kernels::normalise_over_clusters(fast, logobs, *stride, n, k, rowlse);
         let ln_n = (n as f64).ln();
         for i in 0..k {
-            self.last_logwts[i] = logsum((0..n).map(|p| logobs[p * k + i])) - ln_n;
+            self.last_logwts[i] =
+                em_kernels::logsum_points(fast, &logobs[i * *stride..][..n]) - ln_n;
         }
         Ok(())
     }
@@ -626,6 +641,37 @@ mod tests {
     use faer::Mat;
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
+
+    #[test]
+    fn invert_lower_equals_forward_substitution_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for d in [1, 2, 7, 27] {
+            let mut l = vec![0.0; d * d];
+            for a in 0..d {
+                for b in 0..a {
+                    l[a * d + b] = rand::Rng::random_range(&mut rng, -0.5..0.5);
+                }
+                l[a * d + a] = rand::Rng::random_range(&mut rng, 0.5..2.0);
+            }
+            let mut m = vec![f64::NAN; d * d];
+            invert_lower(&l, &mut m, d);
+            // Forward substitution on the columns of the identity, column by column.
+            for b in 0..d {
+                let mut col = vec![0.0; d];
+                for a in b..d {
+                    let mut s = if a == b { 1.0 } else { 0.0 };
+                    for c in b..a {
+                        s -= l[a * d + c] * col[c];
+                    }
+                    col[a] = s / l[a * d + a];
+                    assert_eq!(m[a * d + b].to_bits(), col[a].to_bits(), "d={d} ({a},{b})");
+                }
+                for a in 0..b {
+                    assert!(m[a * d + b].is_nan(), "upper triangle written");
+                }
+            }
+        }
+    }
 
     #[test]
     fn logsum_handles_all_neg_inf() {
