@@ -24,6 +24,7 @@ use crate::traj_opt::lqr::{TrajInfo, TrajOptLqr};
 
 mod iteration;
 mod json;
+mod pilqr;
 pub mod recorded;
 mod unit;
 
@@ -355,6 +356,9 @@ pub fn run_file(file: &str) -> Result<Report, ConformanceError> {
 
 /// Runs the conformance checks on a parsed vectors document.
 pub fn run_value(v: &Value) -> Result<Report, ConformanceError> {
+    if path(v, "pilqr_update").is_some() {
+        return pilqr::run(v);
+    }
     let mut r = Report::default();
     let d = Dims {
         t: req_usize(v, "dims.T")?,

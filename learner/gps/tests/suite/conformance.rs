@@ -98,3 +98,38 @@ fn corrupted_output_fails() {
         .unwrap();
     assert_eq!(l.status, Status::Fail, "{}", rep.to_text());
 }
+
+/// PI2 and PILQR against GPS's recorded `TrajOptPILQR.update`, `approximated_cost`, the
+/// `res_percent` step rule and `update_pi2` (vectors from `make_pilqr_vectors.py`).
+fn assert_pilqr_conforms(name: &str) {
+    let rep = run_file(&data(name)).expect("vectors file loads");
+    assert!(rep.all_pass(), "{}", rep.to_text());
+    for key in [
+        "approximated_cost.predicted_cost",
+        "pilqr_update.lqr_controller.K",
+        "pilqr_update.residual_cost",
+        "pilqr_update.controller (GPS temperatures).k",
+        "pilqr_update.controller (fitted temperatures).k",
+        "dual at ours <= dual at GPS's",
+        "step_rule_res_percent[3].step_mult_after",
+        "pi2_update[4].chol_cov_new",
+    ] {
+        assert!(
+            rep.lines
+                .iter()
+                .any(|l| l.name.ends_with(key) && l.status == Status::Pass),
+            "no passing line for {key}:\n{}",
+            rep.to_text()
+        );
+    }
+}
+
+#[test]
+fn pilqr_a_conforms() {
+    assert_pilqr_conforms("pilqr_A.json");
+}
+
+#[test]
+fn pilqr_b_conforms() {
+    assert_pilqr_conforms("pilqr_B.json");
+}
