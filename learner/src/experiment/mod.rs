@@ -6,6 +6,7 @@
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25) | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
+//! | `pilqr` | LQR against PILQR (`[traj_opt] method`) for the expert and LQR+GAIfO, nominal and perturbed arm ([`pilqr`]) | expert, 3 seeds × 30 iterations |
 //! | `multi-goal` | one MDGPS policy from the 8 square points vs the centre's LQR+GAIfO controller, at never-demonstrated goals ([`multi_goal`]) | 3 seeds × 20 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
@@ -43,6 +44,7 @@ use crate::run::{arm_for, run_iterations};
 
 pub mod ipc;
 pub mod multi_goal;
+pub mod pilqr;
 pub mod scheduler;
 pub mod shard;
 pub mod summary;
@@ -65,6 +67,8 @@ pub enum ExperimentName {
     Ablation,
     /// One MDGPS policy for many goals vs the centre's linear-Gaussian controller.
     MultiGoal,
+    /// The KL-bounded LQR step against PILQR, nominal and perturbed arm.
+    Pilqr,
 }
 
 impl ExperimentName {
@@ -77,6 +81,7 @@ impl ExperimentName {
             Self::Stability => "stability",
             Self::Ablation => "ablation",
             Self::MultiGoal => "multi-goal",
+            Self::Pilqr => "pilqr",
         }
     }
 }
@@ -144,6 +149,8 @@ pub struct ExperimentConfig {
     /// Multi-goal: seed of the evaluation goals (fixed across run seeds, so every seed is
     /// evaluated at the same goals).
     pub eval_seed: u64,
+    /// PILQR: learners, arms, methods and goals compared ([`pilqr`]).
+    pub pilqr: pilqr::PilqrExperimentConfig,
 }
 
 /// The comparison's algorithms ([`ExperimentConfig::algorithms`]).
@@ -228,6 +235,7 @@ impl ExperimentConfig {
             eval_outside: 4,
             eval_outside_margin: 0.03,
             eval_seed: 14,
+            pilqr: Default::default(),
         };
         match name {
             ExperimentName::Comparison => base,
@@ -254,6 +262,11 @@ impl ExperimentConfig {
             ExperimentName::MultiGoal => Self {
                 seeds: 3,
                 iterations: 20,
+                ..base
+            },
+            ExperimentName::Pilqr => Self {
+                seeds: 3,
+                iterations: 30,
                 ..base
             },
         }
@@ -739,6 +752,9 @@ pub fn run_sharded(
         }
         ExperimentName::MultiGoal => {
             anyhow::bail!("multi-goal has its own outputs: learner::experiment::multi_goal::run")
+        }
+        ExperimentName::Pilqr => {
+            anyhow::bail!("pilqr has its own jobs: learner::experiment::pilqr::run")
         }
     };
     let total = jobs.len();

@@ -50,6 +50,10 @@ pub enum StepRule {
     ResPercent,
     /// Keep the step multiplier.
     Const,
+    /// The learner's own LQR rule (GPS `_stepadjust` on predicted vs actual improvement of
+    /// the Laplace cost estimates) where the learner adapts the step (the expert; LQR+GAIfO
+    /// with `adapt_step`), else constant.
+    Laplace,
 }
 
 /// PILQR settings (`[traj_opt.pilqr]`): the PI2 update's and the step rule's. Defaults are
