@@ -27,6 +27,7 @@ use gps::traj_opt::pilqr::TrajOptMethod;
 use imitation::demos::Demos;
 use imitation::gaifo::GaifoLog;
 
+use super::summary::by_variant;
 use super::{pool, write_outputs, ExperimentConfig, Run};
 use crate::arm::SimArm;
 
@@ -317,17 +318,10 @@ fn gaifo_job(cfg: &ExperimentConfig, j: &Job, demos: Demos) -> anyhow::Result<Jo
 
 /// Per variant: seeds that reached 1 cm and 3 mm and the training episodes they needed.
 fn reach_text(runs: &[Run]) -> String {
-    let mut variants: Vec<&str> = Vec::new();
-    for r in runs {
-        if !variants.contains(&r.variant.as_str()) {
-            variants.push(&r.variant);
-        }
-    }
     let mut s = String::from(
         "variant | seeds | within 1 cm: seeds, episodes mean ± sd | within 3 mm: seeds, episodes mean ± sd | within 2 mm by iteration 30 (counted from 1) | final distance at the last iteration, mm, mean ± sd\n",
     );
-    for v in variants {
-        let rs: Vec<&Run> = runs.iter().filter(|r| r.variant == v).collect();
+    for (v, rs) in by_variant(runs) {
         let reach = |th: f64| -> String {
             let eps: Vec<f64> = rs
                 .iter()
@@ -379,17 +373,10 @@ fn mean_sd(x: &[f64]) -> (f64, f64) {
 /// `variant,iteration,seeds,final_distance_mean_m,final_distance_sd_m,min_m,max_m`, one row
 /// per variant and iteration (1-based).
 fn spread_csv(runs: &[Run]) -> String {
-    let mut variants: Vec<&str> = Vec::new();
-    for r in runs {
-        if !variants.contains(&r.variant.as_str()) {
-            variants.push(&r.variant);
-        }
-    }
     let mut s = String::from(
         "variant,iteration,seeds,final_distance_mean_m,final_distance_sd_m,min_m,max_m\n",
     );
-    for v in variants {
-        let rs: Vec<&Run> = runs.iter().filter(|r| r.variant == v).collect();
+    for (v, rs) in by_variant(runs) {
         let iters = rs.iter().map(|r| r.logs.len()).max().unwrap_or(0);
         for i in 0..iters {
             let d: Vec<f64> = rs

@@ -87,6 +87,16 @@ impl Report {
         });
     }
 
+    /// A line that passes when `err <= tol`.
+    fn gate(&mut self, name: &str, err: f64, tol: f64, note: impl Into<String>) {
+        let st = if err <= tol {
+            Status::Pass
+        } else {
+            Status::Fail
+        };
+        self.push(name, st, err, tol, note);
+    }
+
     fn skip(&mut self, name: &str, why: &str) {
         self.push(name, Status::Skipped, f64::NAN, f64::NAN, why);
     }
@@ -360,12 +370,7 @@ pub fn run_value(v: &Value) -> Result<Report, ConformanceError> {
         return pilqr::run(v);
     }
     let mut r = Report::default();
-    let d = Dims {
-        t: req_usize(v, "dims.T")?,
-        dx: req_usize(v, "dims.dX")?,
-        du: req_usize(v, "dims.dU")?,
-        n: req_usize(v, "dims.N")?,
-    };
+    let d = Dims::of(v)?;
     let (t_len, dx, du) = (d.t, d.dx, d.du);
     let hp = req(v, "hyperparams")?;
     let recorded::Settings {

@@ -6,7 +6,7 @@
 use serde_json::Value;
 
 use super::json::*;
-use super::{ConformanceError, Report, Status, TOL_DET};
+use super::{ConformanceError, Report, TOL_DET};
 use crate::linalg::MatSeq;
 use crate::traj_opt::lqr::{TrajOptConfig, TrajOptLqr};
 use crate::traj_opt::pi2::{kl_dual, Pi2Config, Temperature, TrajOptPi2};
@@ -26,12 +26,7 @@ pub const TOL_FITTED: f64 = 1e-3;
 /// Runs every check of a PILQR vectors file.
 pub(super) fn run(v: &Value) -> Result<Report, ConformanceError> {
     let mut r = Report::default();
-    let d = Dims {
-        t: req_usize(v, "dims.T")?,
-        dx: req_usize(v, "dims.dX")?,
-        du: req_usize(v, "dims.dU")?,
-        n: req_usize(v, "dims.N")?,
-    };
+    let d = Dims::of(v)?;
     let (t_len, dx, du, n) = (d.t, d.dx, d.du, d.n);
     let dd = dx + du;
     let inp = req(v, "inputs")?;
@@ -50,7 +45,7 @@ pub(super) fn run(v: &Value) -> Result<Report, ConformanceError> {
         covariance_damping: req_f64(pi2_hp, "covariance_damping")?,
         min_temperature: req_f64(pi2_hp, "min_temperature")?,
         del0: req_f64(pi2_hp, "del0")?,
-        ..PilqrConfig::default()
+        ..PilqrConfig::GPS_DEFAULTS
     };
 
     // approximated_cost of the executed controller.
@@ -307,14 +302,8 @@ fn check_duals(
         );
         worst = worst.max((a - b) / b.abs().max(1.0));
     }
-    let st = if worst <= TOL_DUAL {
-        Status::Pass
-    } else {
-        Status::Fail
-    };
-    r.push(
+    r.gate(
         &format!("{name}: dual at ours <= dual at GPS's"),
-        st,
         worst.max(0.0),
         TOL_DUAL,
         format!("largest (ours - GPS) / max(|GPS|, 1) = {worst:e}"),

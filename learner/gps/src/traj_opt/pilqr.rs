@@ -16,6 +16,11 @@
 //! The step rule `res_percent` sets the next KL step from the residual's share of the sampled
 //! cost: `r = mean_i Σ_t |res| / mean_i Σ_t |cs|`; `r > dec` halves the step multiplier,
 //! `r < inc` doubles it (GPS `step_rule_res_ratio_dec` 0.2, `_inc` 0.05).
+//!
+//! The pieces are GPS's (tests/data/gps-vectors, `pilqr_*.json`); the defaults are not
+//! ([`PilqrConfig::default`]): with 5 samples per iteration GPS's temperature, fitted on the
+//! sampled costs and applied to the residual ones, puts all weight on one sample and
+//! collapses the covariance. [`TemperatureFrom::Residual`] fits it on the costs it weighs.
 
 use crate::error::GpsError;
 use crate::policy::lin_gauss::LinGaussPolicy;
@@ -56,6 +61,17 @@ pub enum StepRule {
     Laplace,
 }
 
+/// Which costs PI2's temperature is fitted on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TemperatureFrom {
+    /// The sampled costs (GPS `TrajOptPILQR.update`), then applied to the residual.
+    #[default]
+    Sampled,
+    /// The residual costs PI2 weighs, so that the KL bound holds for the weights used.
+    Residual,
+}
+
 /// PILQR settings (`[traj_opt.pilqr]`): the PI2 update's and the step rule's. Defaults are
 /// GPS's `TRAJ_OPT_PI2` and `ALG_PILQR`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -69,6 +85,8 @@ pub struct PilqrConfig {
     pub min_temperature: f64,
     /// First temperature increment when a covariance is not positive definite (GPS 1e-4).
     pub del0: f64,
+    /// Costs the PI2 temperature is fitted on (GPS: the sampled ones).
+    pub temperature_from: TemperatureFrom,
     /// Step rule between iterations.
     pub step_rule: StepRule,
     /// Residual share above which the step multiplier halves (GPS 0.2).
@@ -78,19 +96,38 @@ pub struct PilqrConfig {
 }
 
 impl Default for PilqrConfig {
+    /// Not GPS's `TRAJ_OPT_PI2` / `ALG_PILQR` values (ε = 1, damping 2, temperature from the
+    /// sampled costs, `res_percent`), which GPS runs with 20 samples: with our N = 5 they
+    /// collapse the covariance (by 1e-49 in the first step on the default task) and the next
+    /// LQR step finds no positive-definite Q_uu; these are the settings that kept learning
+    /// (docs/design.md §5 D34). GPS's values are `GPS_DEFAULTS`.
     fn default() -> Self {
-        let p = Pi2Config::default();
-        // GPS algorithm/config.py ALG_PILQR.
         Self {
-            kl_threshold: p.kl_threshold,
-            covariance_damping: p.covariance_damping,
-            min_temperature: p.min_temperature,
-            del0: p.del0,
-            step_rule: StepRule::ResPercent,
+            kl_threshold: 0.2,
+            covariance_damping: 10.0,
+            min_temperature: 0.001,
+            del0: 1e-4,
+            temperature_from: TemperatureFrom::Residual,
+            step_rule: StepRule::Laplace,
             step_rule_res_ratio_dec: 0.2,
             step_rule_res_ratio_inc: 0.05,
         }
     }
+}
+
+impl PilqrConfig {
+    /// GPS's own settings (traj_opt/config.py `TRAJ_OPT_PI2`, algorithm/config.py
+    /// `ALG_PILQR`, the temperature as `TrajOptPILQR.update` fits it).
+    pub const GPS_DEFAULTS: PilqrConfig = PilqrConfig {
+        kl_threshold: 1.0,
+        covariance_damping: 2.0,
+        min_temperature: 0.001,
+        del0: 1e-4,
+        temperature_from: TemperatureFrom::Sampled,
+        step_rule: StepRule::ResPercent,
+        step_rule_res_ratio_dec: 0.2,
+        step_rule_res_ratio_inc: 0.05,
+    };
 }
 
 impl PilqrConfig {
@@ -239,6 +276,8 @@ pub struct PilqrReport {
     pub mean_eta: f64,
     /// Largest change of the feed-forward term by PI2, action units.
     pub max_dk: f64,
+    /// Smallest ratio over the steps of the PI2 covariance's trace to the LQR one's.
+    pub min_cov_ratio: f64,
 }
 
 /// GPS `TrajOptPILQR`'s PI2 half for one problem size (the LQR half is
@@ -350,8 +389,12 @@ impl TrajOptPilqr {
         match temperature {
             Some(eta) => self.eta.copy_from_slice(eta),
             None => {
+                let on = match self.cfg.temperature_from {
+                    TemperatureFrom::Sampled => cs,
+                    TemperatureFrom::Residual => &self.residual,
+                };
                 self.pi2
-                    .update_pi2(&self.samples, cs, n, &pol.pol_covar, Temperature::Fitted)?;
+                    .update_pi2(&self.samples, on, n, &pol.pol_covar, Temperature::Fitted)?;
                 self.eta.copy_from_slice(&self.pi2.out.eta);
             }
         }
@@ -363,10 +406,14 @@ impl TrajOptPilqr {
             Temperature::Fixed(&self.eta),
         )?;
         let mut max_dk: f64 = 0.0;
+        let mut min_cov_ratio = f64::INFINITY;
+        let trace = |m: &[f64]| (0..du).map(|a| m[a * du + a]).sum::<f64>();
         for t in 0..t_len {
             for (a, b) in pol.k.slice(t).iter().zip(out.mean.slice(t)) {
                 max_dk = max_dk.max((a - b).abs());
             }
+            min_cov_ratio =
+                min_cov_ratio.min(trace(out.cov.slice(t)) / trace(pol.pol_covar.slice(t)));
         }
         pol.k.copy_from(&out.mean);
         pol.pol_covar.copy_from(&out.cov);
@@ -376,6 +423,7 @@ impl TrajOptPilqr {
             residual_share: share,
             mean_eta: self.eta.iter().sum::<f64>() / t_len as f64,
             max_dk,
+            min_cov_ratio,
         })
     }
 }
