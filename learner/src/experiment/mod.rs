@@ -6,7 +6,6 @@
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25) | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
-//! | `pilqr` | LQR against PILQR (`[traj_opt] method`) for the expert and LQR+GAIfO, nominal and perturbed arm ([`pilqr`]) | expert, 3 seeds × 30 iterations |
 //! | `multi-goal` | one MDGPS policy from the 8 square points vs the centre's LQR+GAIfO controller, at never-demonstrated goals ([`multi_goal`]) | 3 seeds × 20 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
@@ -264,11 +263,7 @@ impl ExperimentConfig {
                 iterations: 20,
                 ..base
             },
-            ExperimentName::Pilqr => Self {
-                seeds: 3,
-                iterations: 30,
-                ..base
-            },
+            ExperimentName::Pilqr => pilqr::defaults(base),
         }
     }
 
@@ -747,14 +742,8 @@ pub fn run_sharded(
                     .to_string(),
             )
         }
-        ExperimentName::SimVsPhysical => {
-            anyhow::bail!("sim-vs-physical runs over IPC: learner::experiment::ipc::run")
-        }
-        ExperimentName::MultiGoal => {
-            anyhow::bail!("multi-goal has its own outputs: learner::experiment::multi_goal::run")
-        }
-        ExperimentName::Pilqr => {
-            anyhow::bail!("pilqr has its own jobs: learner::experiment::pilqr::run")
+        ExperimentName::SimVsPhysical | ExperimentName::MultiGoal | ExperimentName::Pilqr => {
+            anyhow::bail!("{} has its own runner", name.as_str())
         }
     };
     let total = jobs.len();

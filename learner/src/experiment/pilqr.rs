@@ -42,6 +42,16 @@ pub const WORKSPACE_GOALS: [(&str, [f64; 3]); 5] = [
     ("far-low", [-0.60, -0.20, 0.10]),
 ];
 
+/// The experiment's defaults over `base`: 3 seeds × 30 iterations (the expert, both arms, both
+/// methods).
+pub fn defaults(base: ExperimentConfig) -> ExperimentConfig {
+    ExperimentConfig {
+        seeds: 3,
+        iterations: 30,
+        ..base
+    }
+}
+
 /// Settings of `learner experiment pilqr` (`[pilqr]` of its config file).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -22,65 +22,7 @@ use faer::Mat;
 
 use crate::error::GpsError;
 use crate::linalg::{llt_lower, LuSolver, MatSeq, Scratch};
-
-/// GPS `TRAJ_OPT_PI2` settings (traj_opt/config.py).
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct Pi2Config {
-    /// KL bound ε of each time step's sample weights, nats (GPS `kl_threshold`, 1.0).
-    pub kl_threshold: f64,
-    /// Covariance damping d: the new covariance is the old one times the fitted multiplier to
-    /// the power 1/d; 0 takes the weighted maximum-likelihood covariance itself (GPS 2.0).
-    pub covariance_damping: f64,
-    /// Lower bound of the temperature η (GPS `min_temperature`, 0.001).
-    pub min_temperature: f64,
-    /// First η increment when a new covariance is not positive definite (GPS `del0`, 1e-4).
-    pub del0: f64,
-}
-
-impl Default for Pi2Config {
-    fn default() -> Self {
-        // GPS traj_opt/config.py TRAJ_OPT_PI2.
-        Self {
-            kl_threshold: 1.0,
-            covariance_damping: 2.0,
-            min_temperature: 0.001,
-            del0: 1e-4,
-        }
-    }
-}
-
-impl Pi2Config {
-    /// Checks every setting's range.
-    pub fn validate(&self) -> Result<(), GpsError> {
-        use crate::error::check;
-        let pos = |v: f64| v.is_finite() && v > 0.0;
-        check(
-            pos(self.kl_threshold),
-            "traj_opt.pilqr.kl_threshold",
-            self.kl_threshold,
-            "finite and > 0 nats",
-        )?;
-        check(
-            self.covariance_damping.is_finite() && self.covariance_damping >= 0.0,
-            "traj_opt.pilqr.covariance_damping",
-            self.covariance_damping,
-            "finite and >= 0",
-        )?;
-        check(
-            pos(self.min_temperature),
-            "traj_opt.pilqr.min_temperature",
-            self.min_temperature,
-            "finite and > 0",
-        )?;
-        check(
-            pos(self.del0),
-            "traj_opt.pilqr.del0",
-            self.del0,
-            "finite and > 0",
-        )
-    }
-}
+pub use crate::traj_opt::config::Pi2Config;
 
 /// How each time step's temperature is chosen.
 #[derive(Clone, Copy, Debug)]

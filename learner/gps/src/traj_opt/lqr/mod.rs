@@ -20,7 +20,7 @@ use crate::dynamics::Dynamics;
 use crate::error::GpsError;
 use crate::linalg::{frob_dot, MatSeq, Scratch};
 use crate::policy::lin_gauss::LinGaussPolicy;
-use crate::traj_opt::pilqr::{PilqrConfig, TrajOptMethod};
+use crate::traj_opt::config::{PilqrConfig, TrajOptMethod};
 
 /// GPS `DGD_MAX_ITER`: η bracketing rounds (total-KL mode).
 pub const DGD_MAX_ITER: usize = 50;
