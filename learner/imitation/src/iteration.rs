@@ -9,6 +9,7 @@ use gps::algorithm::eval_cost::{eval_cost, CostDerivs};
 use gps::algorithm::update::Learner;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::snapshot::Snapshot;
+use gps::traj_opt::pilqr::{PilqrReport, StepRule, TrajOptMethod};
 use ur5_shared::layout::{DU, DX};
 
 use crate::cost::Cost;
@@ -24,6 +25,8 @@ pub struct StepReport {
     pub eta: f64,
     /// Step multiplier used.
     pub step_mult: f64,
+    /// What PILQR's PI2 half did (`traj_opt.method = "pilqr"`), else `None`.
+    pub pilqr: Option<PilqrReport>,
 }
 
 /// The state one LQR iteration updates: the GPS learner (dynamics prior and fit, x0, step
@@ -35,6 +38,10 @@ pub struct LqrIteration {
     prev_pol: Option<LinGaussPolicy>,
     new_pol: LinGaussPolicy,
     derivs: CostDerivs,
+    /// PILQR: the samples' sampled costs (N, T) and exploration noise ε (N, T, dU), taken
+    /// with the expansion.
+    cs: Vec<f64>,
+    noise: Vec<f64>,
     iteration: usize,
 }
 
@@ -48,6 +55,8 @@ impl LqrIteration {
             pol,
             prev_pol: None,
             derivs: CostDerivs::default(),
+            cs: Vec::new(),
+            noise: Vec::new(),
             iteration,
         }
     }
@@ -108,14 +117,29 @@ impl LqrIteration {
 
     /// Steps 4–5: the per-sample second-order expansion of `cost` around `episodes` (the
     /// episodes of `samples`), with the dynamics fitted by [`LqrIteration::fit_dynamics`].
+    /// With PILQR it also keeps the episodes' sampled costs ([`Cost::sampled`]) and noise.
     pub fn expand(&mut self, cost: &mut dyn Cost, episodes: &[Episode]) {
         cost.expand(episodes, &self.learner.info.dynamics, &mut self.derivs);
+        if self.pilqr() {
+            cost.sampled(episodes, &self.derivs, &mut self.cs);
+            self.noise.clear();
+            for ep in episodes {
+                self.noise.extend_from_slice(&ep.eps);
+            }
+        }
+    }
+
+    fn pilqr(&self) -> bool {
+        self.learner.opt.cfg.method == TrajOptMethod::Pilqr
     }
 
     /// Step 6: averages the expansion into the quadratic model (GPS `_eval_cost`), adapts the
     /// KL step from the previous step's predicted vs actual improvement (from the second
     /// iteration on, when `adapt_step`), takes the KL-bounded LQR step, and makes the new
-    /// controller the one executed next.
+    /// controller the one executed next. With `traj_opt.method = "pilqr"` the step rule is
+    /// `[traj_opt.pilqr] step_rule` (GPS's PILQR default: the residual's share, whatever
+    /// `adapt_step`; `laplace`: the rule above) and PI2 on the residual cost follows the LQR
+    /// step (`gps::traj_opt::pilqr`).
     pub fn improve(
         &mut self,
         samples: &SampleList,
@@ -155,11 +179,26 @@ impl LqrIteration {
             &mut learner.info.cv,
             &mut learner.info.cm,
         );
-        if let (Some(prev), true) = (self.prev_pol.as_ref(), adapt_step) {
-            learner.update_step_size(prev, &self.pol)?;
+        let pilqr = learner.opt.cfg.method == TrajOptMethod::Pilqr;
+        if pilqr {
+            // PILQR's prediction of the samples' costs, and its residual step rule (GPS
+            // `AlgorithmTrajOptPILQR._stepadjust`, from the second iteration on) when that is
+            // the rule.
+            let n = samples.n;
+            learner.pilqr_predict(&self.pol, &self.noise, &self.cs, n, self.prev_pol.is_some())?;
+        }
+        if !pilqr || learner.pilqr.cfg.step_rule == StepRule::Laplace {
+            if let (Some(prev), true) = (self.prev_pol.as_ref(), adapt_step) {
+                learner.update_step_size(prev, &self.pol)?;
+            }
         }
         let step_mult = learner.step_mult;
         let res = learner.update_trajectories(anchor.unwrap_or(&self.pol), &mut self.new_pol)?;
+        let pilqr = if pilqr {
+            Some(learner.pilqr_update(&self.noise, &self.cs, samples.n, &mut self.new_pol)?)
+        } else {
+            None
+        };
         let kl = res.trace.last().map(|s| s.kl).unwrap_or(f64::NAN);
         match self.prev_pol.as_mut() {
             Some(p) => p.copy_from(&self.pol),
@@ -171,6 +210,7 @@ impl LqrIteration {
             kl,
             eta: res.eta,
             step_mult,
+            pilqr,
         })
     }
 }

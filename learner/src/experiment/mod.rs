@@ -43,6 +43,7 @@ use crate::run::{arm_for, run_iterations};
 
 pub mod ipc;
 pub mod multi_goal;
+pub mod pilqr;
 pub mod scheduler;
 pub mod shard;
 pub mod summary;
@@ -65,6 +66,8 @@ pub enum ExperimentName {
     Ablation,
     /// One MDGPS policy for many goals vs the centre's linear-Gaussian controller.
     MultiGoal,
+    /// The KL-bounded LQR step against PILQR, nominal and perturbed arm.
+    Pilqr,
 }
 
 impl ExperimentName {
@@ -77,6 +80,7 @@ impl ExperimentName {
             Self::Stability => "stability",
             Self::Ablation => "ablation",
             Self::MultiGoal => "multi-goal",
+            Self::Pilqr => "pilqr",
         }
     }
 }
@@ -144,6 +148,8 @@ pub struct ExperimentConfig {
     /// Multi-goal: seed of the evaluation goals (fixed across run seeds, so every seed is
     /// evaluated at the same goals).
     pub eval_seed: u64,
+    /// PILQR: learners, arms, methods and goals compared ([`pilqr`]).
+    pub pilqr: pilqr::PilqrExperimentConfig,
 }
 
 /// The comparison's algorithms ([`ExperimentConfig::algorithms`]).
@@ -228,6 +234,7 @@ impl ExperimentConfig {
             eval_outside: 4,
             eval_outside_margin: 0.03,
             eval_seed: 14,
+            pilqr: Default::default(),
         };
         match name {
             ExperimentName::Comparison => base,
@@ -256,6 +263,7 @@ impl ExperimentConfig {
                 iterations: 20,
                 ..base
             },
+            ExperimentName::Pilqr => pilqr::defaults(base),
         }
     }
 
@@ -734,11 +742,8 @@ pub fn run_sharded(
                     .to_string(),
             )
         }
-        ExperimentName::SimVsPhysical => {
-            anyhow::bail!("sim-vs-physical runs over IPC: learner::experiment::ipc::run")
-        }
-        ExperimentName::MultiGoal => {
-            anyhow::bail!("multi-goal has its own outputs: learner::experiment::multi_goal::run")
+        ExperimentName::SimVsPhysical | ExperimentName::MultiGoal | ExperimentName::Pilqr => {
+            anyhow::bail!("{} has its own runner", name.as_str())
         }
     };
     let total = jobs.len();

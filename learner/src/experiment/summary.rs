@@ -107,7 +107,7 @@ pub(super) fn report_points(iterations: usize) -> Vec<usize> {
 }
 
 /// Variants in order of first appearance, each with its runs.
-fn by_variant(runs: &[Run]) -> Vec<(String, Vec<&Run>)> {
+pub(super) fn by_variant(runs: &[Run]) -> Vec<(String, Vec<&Run>)> {
     let mut out: Vec<(String, Vec<&Run>)> = Vec::new();
     for r in runs {
         match out.iter_mut().find(|(v, _)| *v == r.variant) {

@@ -76,3 +76,39 @@ fn same_seed_same_demonstrations_bit_for_bit() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// PILQR's step from the same first episodes as LQR's: the same feedback gains (PI2 changes
+/// only the feed-forward terms and the covariances), other feed-forward terms and covariances,
+/// a positive-definite covariance, and the same episodes bit for bit on a rerun.
+#[test]
+fn pilqr_keeps_the_lqr_gains_and_moves_the_feed_forward() {
+    use gps::traj_opt::pilqr::TrajOptMethod;
+    use imitation::expert::ExpertLearner;
+    let mut cfg = ExpertConfig::default();
+    cfg.task.horizon = 30;
+    let arm = learner::arm::SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+    let step = |method| {
+        let mut c = cfg.clone();
+        c.traj_opt.method = method;
+        let mut el = ExpertLearner::new(c, None);
+        imitation::learn::iterate(&mut el, &arm).unwrap();
+        el.policy().clone()
+    };
+    let (lqr, pilqr) = (step(TrajOptMethod::Lqr), step(TrajOptMethod::Pilqr));
+    assert_eq!(lqr.gain, pilqr.gain);
+    assert_ne!(lqr.k, pilqr.k);
+    assert_ne!(lqr.pol_covar, pilqr.pol_covar);
+    for t in 0..pilqr.t {
+        let c = pilqr.pol_covar.slice(t);
+        let r = pilqr.chol_pol_covar.slice(t);
+        // Σ = Rᵀ R with R upper triangular, positive diagonal.
+        for a in 0..3 {
+            assert!(r[a * 3 + a] > 0.0);
+            for b in 0..3 {
+                let rtr: f64 = (0..3).map(|k| r[k * 3 + a] * r[k * 3 + b]).sum();
+                assert!((rtr - c[a * 3 + b]).abs() <= 1e-12 * c[a * 3 + a].abs().max(1e-12));
+            }
+        }
+    }
+    assert_eq!(step(TrajOptMethod::Pilqr), pilqr);
+}

@@ -14,6 +14,7 @@ use crate::dynamics::prior_gmm::{DynamicsPriorGmm, PriorGmmConfig};
 use crate::error::GpsError;
 use crate::policy::lin_gauss::LinGaussPolicy;
 use crate::traj_opt::lqr::{DgdResult, TrajInfo, TrajOptConfig, TrajOptLqr};
+use crate::traj_opt::pilqr::{res_percent_step_mult, PilqrReport, StepRule, TrajOptPilqr};
 
 /// Learner state across iterations (GPS `Algorithm.cur` / `prev` for one condition).
 pub struct Learner {
@@ -21,6 +22,8 @@ pub struct Learner {
     pub fit_cfg: LrPriorConfig,
     pub prior: DynamicsPriorGmm,
     pub opt: TrajOptLqr,
+    /// PILQR's PI2 half (used with `traj_opt.method = "pilqr"`).
+    pub pilqr: TrajOptPilqr,
     /// Current iteration's dynamics, x0 and cost model (`cur.traj_info`); the caller fills the
     /// cost (`cc`, `cv`, `cm`) before [`Learner::update_trajectories`].
     pub info: TrajInfo,
@@ -54,6 +57,7 @@ impl Learner {
             alg,
             fit_cfg,
             prior: DynamicsPriorGmm::new(prior_cfg, t, dx, du),
+            pilqr: TrajOptPilqr::new(opt_cfg.pilqr.clone(), t, dx, du, n),
             opt: TrajOptLqr::new(opt_cfg, t, dx, du),
             info: TrajInfo::zeros(t, dx, du),
             prev_info: None,
@@ -145,5 +149,46 @@ impl Learner {
             .update(prev_pol, &self.info, self.eta, kl_step, out)?;
         self.eta = res.eta;
         Ok(res)
+    }
+
+    /// PILQR, before the LQR step: the LQR model's prediction of the samples' costs under the
+    /// controller that drew them (`executed`, with their noise `noise (N,T,dU)`), against
+    /// their sampled costs `cs (N,T)`; returns the residual's share of the sampled cost. With
+    /// `adapt_step` and the `res_percent` rule it sets the step multiplier from that share
+    /// (GPS `AlgorithmTrajOptPILQR._stepadjust`, from the second iteration on).
+    pub fn pilqr_predict(
+        &mut self,
+        executed: &LinGaussPolicy,
+        noise: &[f64],
+        cs: &[f64],
+        n: usize,
+        adapt_step: bool,
+    ) -> Result<f64, GpsError> {
+        let share = self.pilqr.predict(noise, cs, n, executed, &self.info)?;
+        if adapt_step && self.pilqr.cfg.step_rule == StepRule::ResPercent {
+            let c = &self.pilqr.cfg;
+            self.step_mult = res_percent_step_mult(
+                share,
+                self.step_mult,
+                c.step_rule_res_ratio_dec,
+                c.step_rule_res_ratio_inc,
+                self.alg.min_step_mult,
+                self.alg.max_step_mult,
+            );
+        }
+        Ok(share)
+    }
+
+    /// PILQR, after the LQR step into `pol`: PI2 on the residual cost updates `pol`'s
+    /// feed-forward terms and covariances (GPS `TrajOptPILQR.update`). Call
+    /// [`Learner::pilqr_predict`] for this iteration's samples first.
+    pub fn pilqr_update(
+        &mut self,
+        noise: &[f64],
+        cs: &[f64],
+        n: usize,
+        pol: &mut LinGaussPolicy,
+    ) -> Result<PilqrReport, GpsError> {
+        self.pilqr.update(noise, cs, n, pol, None)
     }
 }

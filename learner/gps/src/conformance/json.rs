@@ -98,6 +98,18 @@ pub(super) struct Dims {
     pub n: usize,
 }
 
+impl Dims {
+    /// The file's `dims` block.
+    pub fn of(v: &Value) -> Result<Self, ConformanceError> {
+        Ok(Self {
+            t: req_usize(v, "dims.T")?,
+            dx: req_usize(v, "dims.dX")?,
+            du: req_usize(v, "dims.dU")?,
+            n: req_usize(v, "dims.N")?,
+        })
+    }
+}
+
 pub(super) fn load_policy(v: &Value, d: &Dims) -> Result<LinGaussPolicy, ConformanceError> {
     let (t, dx, du) = (d.t, d.dx, d.du);
     Ok(LinGaussPolicy {

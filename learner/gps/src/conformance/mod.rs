@@ -24,6 +24,7 @@ use crate::traj_opt::lqr::{TrajInfo, TrajOptLqr};
 
 mod iteration;
 mod json;
+mod pilqr;
 pub mod recorded;
 mod unit;
 
@@ -84,6 +85,16 @@ impl Report {
             tol,
             note: note.into(),
         });
+    }
+
+    /// A line that passes when `err <= tol`.
+    fn gate(&mut self, name: &str, err: f64, tol: f64, note: impl Into<String>) {
+        let st = if err <= tol {
+            Status::Pass
+        } else {
+            Status::Fail
+        };
+        self.push(name, st, err, tol, note);
     }
 
     fn skip(&mut self, name: &str, why: &str) {
@@ -355,13 +366,11 @@ pub fn run_file(file: &str) -> Result<Report, ConformanceError> {
 
 /// Runs the conformance checks on a parsed vectors document.
 pub fn run_value(v: &Value) -> Result<Report, ConformanceError> {
+    if path(v, "pilqr_update").is_some() {
+        return pilqr::run(v);
+    }
     let mut r = Report::default();
-    let d = Dims {
-        t: req_usize(v, "dims.T")?,
-        dx: req_usize(v, "dims.dX")?,
-        du: req_usize(v, "dims.dU")?,
-        n: req_usize(v, "dims.N")?,
-    };
+    let d = Dims::of(v)?;
     let (t_len, dx, du) = (d.t, d.dx, d.du);
     let hp = req(v, "hyperparams")?;
     let recorded::Settings {

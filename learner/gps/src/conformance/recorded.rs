@@ -52,6 +52,7 @@ pub fn settings(v: &Value) -> Result<Settings, ConformanceError> {
             cons_per_step: flag("traj_opt.cons_per_step", opt0.cons_per_step),
             use_prev_distr: flag("traj_opt.use_prev_distr", opt0.use_prev_distr),
             max_ent_traj: opt_f64(hp, "algorithm.max_ent_traj", opt0.max_ent_traj),
+            ..opt0.clone()
         },
         prior: PriorGmmConfig {
             min_samples_per_cluster: count(

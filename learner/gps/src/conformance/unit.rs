@@ -4,7 +4,7 @@ use faer::{Mat, MatRef};
 use serde_json::Value;
 
 use super::json::*;
-use super::{rel_err, ConformanceError, Report, Status, TOL_DET, TOL_DYN_COVAR, TOL_FM};
+use super::{rel_err, ConformanceError, Report, TOL_DET, TOL_DYN_COVAR, TOL_FM};
 use crate::algorithm::step_adjust::set_new_mult;
 use crate::dynamics::gmm::{ClusterInit, Gmm};
 use crate::dynamics::{lr, Dynamics};
@@ -482,14 +482,8 @@ pub(super) fn check_lr_noprior(
             worst = worst.max((g - e).abs() / var.max(f64::MIN_POSITIVE));
         }
     }
-    let st = if worst <= TOL_DYN_COVAR {
-        Status::Pass
-    } else {
-        Status::Fail
-    };
-    r.push(
+    r.gate(
         &format!("{p}.dyn_covar (relative to var x_t+1)"),
-        st,
         worst,
         TOL_DYN_COVAR,
         "",

@@ -19,13 +19,21 @@ fn assert_conforms(name: &str, min_pass: usize) {
     assert!(failed.is_empty(), "{}", rep.to_text());
     // Guard against a runner that silently skips everything.
     assert!(rep.count(Status::Pass) >= min_pass, "{}", rep.to_text());
-    for key in [
-        "new_controller.K",
-        "dgd_trace.attempt_etas",
-        "gmm.ll_trace",
-        "dynamics.Fm (recorded prior)",
-        "x0sigma",
-    ] {
+    assert_passing_lines(
+        &rep,
+        &[
+            "new_controller.K",
+            "dgd_trace.attempt_etas",
+            "gmm.ll_trace",
+            "dynamics.Fm (recorded prior)",
+            "x0sigma",
+        ],
+    );
+}
+
+/// Each of `keys` ends the name of a passing line of `rep`.
+fn assert_passing_lines(rep: &gps::conformance::Report, keys: &[&str]) {
+    for key in keys {
         assert!(
             rep.lines
                 .iter()
@@ -97,4 +105,34 @@ fn corrupted_output_fails() {
         .find(|l| l.name == "iter0.new_controller.K")
         .unwrap();
     assert_eq!(l.status, Status::Fail, "{}", rep.to_text());
+}
+
+/// PI2 and PILQR against GPS's recorded `TrajOptPILQR.update`, `approximated_cost`, the
+/// `res_percent` step rule and `update_pi2` (vectors from `make_pilqr_vectors.py`).
+fn assert_pilqr_conforms(name: &str) {
+    let rep = run_file(&data(name)).expect("vectors file loads");
+    assert!(rep.all_pass(), "{}", rep.to_text());
+    assert_passing_lines(
+        &rep,
+        &[
+            "approximated_cost.predicted_cost",
+            "pilqr_update.lqr_controller.K",
+            "pilqr_update.residual_cost",
+            "pilqr_update.controller (GPS temperatures).k",
+            "pilqr_update.controller (fitted temperatures).k",
+            "dual at ours <= dual at GPS's",
+            "step_rule_res_percent[3].step_mult_after",
+            "pi2_update[4].chol_cov_new",
+        ],
+    );
+}
+
+#[test]
+fn pilqr_a_conforms() {
+    assert_pilqr_conforms("pilqr_A.json");
+}
+
+#[test]
+fn pilqr_b_conforms() {
+    assert_pilqr_conforms("pilqr_B.json");
 }

@@ -249,6 +249,22 @@ impl Cost for CompositeCost<'_> {
     fn expand(&mut self, episodes: &[Episode], dynamics: &Dynamics, out: &mut CostDerivs) {
         composite_cost_derivs(self.disc, dynamics, episodes, self.ws, out);
     }
+
+    /// The critic on the transitions the arm made, D(s_t, s_{t+1}), and D(s, s) at the last
+    /// step: what each sample incurred, where the expansion used the model's predicted s'
+    /// (PILQR's residual is the difference, docs/design.md §5 D34).
+    fn sampled(&mut self, episodes: &[Episode], _: &CostDerivs, out: &mut Vec<f64>) {
+        out.clear();
+        for ep in episodes {
+            let t_len = ep.horizon();
+            for t in 0..t_len {
+                let next = (t + 1).min(t_len - 1);
+                self.ws.x[..DX].copy_from_slice(&ep.x[t * DX..(t + 1) * DX]);
+                self.ws.x[DX..].copy_from_slice(&ep.x[next * DX..(next + 1) * DX]);
+                out.push(self.disc.value(&self.ws.x, &mut self.ws.disc));
+            }
+        }
+    }
 }
 
 /// Per-sample composite-cost derivatives for N episodes (GPS layout), ready for `eval_cost`:

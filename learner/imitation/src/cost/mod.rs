@@ -20,4 +20,14 @@ pub trait Cost {
     /// model fitted on those episodes this iteration (a cost of the predicted next state needs
     /// it; the task cost does not).
     fn expand(&mut self, episodes: &[Episode], dynamics: &Dynamics, out: &mut CostDerivs);
+
+    /// GPS `cs`: the cost each of `episodes` incurred at each step, `(N, T)` into `out`; what
+    /// PILQR's PI2 step weighs. `derivs` is this cost's [`Cost::expand`] around the same
+    /// episodes; its `l` is the cost at each executed (s, a), which is the sampled cost of a
+    /// cost of (s, a) alone (this default).
+    fn sampled(&mut self, episodes: &[Episode], derivs: &CostDerivs, out: &mut Vec<f64>) {
+        let _ = episodes;
+        out.clear();
+        out.extend_from_slice(&derivs.l);
+    }
 }

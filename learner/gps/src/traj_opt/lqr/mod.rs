@@ -20,6 +20,7 @@ use crate::dynamics::Dynamics;
 use crate::error::GpsError;
 use crate::linalg::{frob_dot, MatSeq, Scratch};
 use crate::policy::lin_gauss::LinGaussPolicy;
+use crate::traj_opt::config::{PilqrConfig, TrajOptMethod};
 
 /// GPS `DGD_MAX_ITER`: η bracketing rounds (total-KL mode).
 pub const DGD_MAX_ITER: usize = 50;
@@ -49,6 +50,15 @@ pub struct TrajOptConfig {
     pub use_prev_distr: bool,
     /// Entropy bonus weight ν (GPS `ALG.max_ent_traj`, default 0.0).
     pub max_ent_traj: f64,
+    /// `"lqr"` (default) or `"pilqr"`: LQR followed by PI2 on the residual cost
+    /// ([`crate::traj_opt::pilqr`]). Written out only when not the default, so settings
+    /// hashed before the setting existed keep their hash.
+    #[serde(skip_serializing_if = "TrajOptMethod::is_lqr")]
+    pub method: TrajOptMethod,
+    /// PILQR's PI2 and step-rule settings (`[traj_opt.pilqr]`; read only with
+    /// `method = "pilqr"`; written out only when not the defaults).
+    #[serde(skip_serializing_if = "PilqrConfig::is_default")]
+    pub pilqr: PilqrConfig,
 }
 
 impl TrajOptConfig {
@@ -68,7 +78,8 @@ impl TrajOptConfig {
             "traj_opt.max_ent_traj",
             self.max_ent_traj,
             "finite and >= 0",
-        )
+        )?;
+        self.pilqr.validate()
     }
 }
 
@@ -82,6 +93,8 @@ impl Default for TrajOptConfig {
             cons_per_step: false,
             use_prev_distr: false,
             max_ent_traj: 0.0,
+            method: TrajOptMethod::Lqr,
+            pilqr: PilqrConfig::default(),
         }
     }
 }

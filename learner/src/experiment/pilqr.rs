@@ -1,0 +1,403 @@
+//! `learner experiment pilqr`: the KL-bounded LQR step against PILQR (LQR followed by PI2 on
+//! the residual cost, `[traj_opt] method`, docs/design.md §5 D34), for the expert (on the task
+//! cost) and for LQR+GAIfO (on the critic's cost), on the nominal arm and on the perturbed one
+//! (`physical`, whose one-step latency and friction the fitted linear dynamics get wrong), at
+//! one or more goals.
+//!
+//! Jobs are learner × arm × goal × method × seed, independent and run on one pool. LQR+GAIfO
+//! imitates the demonstrations of the nominal arm's default (LQR) expert at that goal, on either
+//! arm (as `sim-vs-physical`, docs/design.md §5 D26), normalised by those demonstrations. The
+//! expert's "normalised performance" is 1 − C / C_random (its `performance_proxy`; there are
+//! no demonstrations to normalise it by), and it runs all `iterations` (patience off).
+//!
+//! Outputs as the other experiments' (`pilqr.csv`, `pilqr.png`, `summary.txt`,
+//! `summary.json`), plus `reach.txt`: per variant, the training episodes (i·N before the
+//! evaluated controller of iteration i) each seed needed to first end within 1 cm and within
+//! 3 mm of the goal, and the mean ± standard deviation of the final distance over seeds at
+//! every iteration (`spread.csv`).
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use gps::traj_opt::pilqr::TrajOptMethod;
+use imitation::demos::Demos;
+use imitation::gaifo::GaifoLog;
+
+use super::summary::by_variant;
+use super::{pool, write_outputs, ExperimentConfig, Run};
+use crate::arm::SimArm;
+
+/// Goals spread over the UR5's workspace away from the default one (m, base frame), named
+/// for the experiments that test precision beyond the goal the defaults were tuned on. The
+/// first three are docs/design.md §5 D25's "other goals".
+pub const WORKSPACE_GOALS: [(&str, [f64; 3]); 5] = [
+    ("near-low", [-0.30, -0.40, 0.20]),
+    ("far-high", [-0.55, 0.05, 0.35]),
+    ("table", [-0.40, -0.10, 0.05]),
+    ("side-high", [-0.20, -0.50, 0.40]),
+    ("far-low", [-0.60, -0.20, 0.10]),
+];
+
+/// The experiment's defaults over `base`: 3 seeds × 30 iterations (the expert, both arms, both
+/// methods).
+pub fn defaults(base: ExperimentConfig) -> ExperimentConfig {
+    ExperimentConfig {
+        seeds: 3,
+        iterations: 30,
+        ..base
+    }
+}
+
+/// Settings of `learner experiment pilqr` (`[pilqr]` of its config file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PilqrExperimentConfig {
+    /// Learners: `expert` (the task cost) and `lqr-gaifo`.
+    pub learners: Vec<String>,
+    /// Arms: `nominal`, `perturbed` (the experiment's `physical` perturbation).
+    pub arms: Vec<String>,
+    /// Trajectory optimisers to compare.
+    pub methods: Vec<TrajOptMethod>,
+    /// Goals (m); empty: the expert's `task.goal`. `workspace_goals = true` adds
+    /// [`WORKSPACE_GOALS`].
+    pub goals: Vec<[f64; 3]>,
+    /// Add the five [`WORKSPACE_GOALS`].
+    pub workspace_goals: bool,
+}
+
+impl Default for PilqrExperimentConfig {
+    fn default() -> Self {
+        Self {
+            learners: vec!["expert".into()],
+            arms: vec!["nominal".into(), "perturbed".into()],
+            methods: vec![TrajOptMethod::Lqr, TrajOptMethod::Pilqr],
+            goals: Vec::new(),
+            workspace_goals: false,
+        }
+    }
+}
+
+impl PilqrExperimentConfig {
+    /// Checks the names.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        for l in &self.learners {
+            anyhow::ensure!(
+                ["expert", "lqr-gaifo"].contains(&l.as_str()),
+                "pilqr.learners: unknown `{l}`; known: expert, lqr-gaifo"
+            );
+        }
+        for a in &self.arms {
+            anyhow::ensure!(
+                ["nominal", "perturbed"].contains(&a.as_str()),
+                "pilqr.arms: unknown `{a}`; known: nominal, perturbed"
+            );
+        }
+        anyhow::ensure!(
+            !self.learners.is_empty() && !self.arms.is_empty() && !self.methods.is_empty(),
+            "pilqr.learners, arms and methods must each name at least one"
+        );
+        Ok(())
+    }
+
+    /// The goals to run.
+    fn goal_list(&self, default: [f64; 3]) -> Vec<[f64; 3]> {
+        let mut g = self.goals.clone();
+        if self.workspace_goals {
+            g.extend(WORKSPACE_GOALS.iter().map(|(_, p)| *p));
+        }
+        if g.is_empty() {
+            g.push(default);
+        }
+        g
+    }
+}
+
+fn method_name(m: TrajOptMethod) -> &'static str {
+    match m {
+        TrajOptMethod::Lqr => "lqr",
+        TrajOptMethod::Pilqr => "pilqr",
+    }
+}
+
+struct Job {
+    learner: String,
+    arm: String,
+    goal: usize,
+    method: TrajOptMethod,
+    seed: u64,
+}
+
+/// Runs the experiment into `out`; returns the runs.
+pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<Run>> {
+    let p = &cfg.pilqr;
+    p.validate()?;
+    let goals = p.goal_list(cfg.expert.task.goal);
+    let t0 = Instant::now();
+    let pool = pool(cfg.threads)?;
+    let mut jobs = Vec::new();
+    for learner in &p.learners {
+        for arm in &p.arms {
+            for goal in 0..goals.len() {
+                for &method in &p.methods {
+                    for s in 0..cfg.seeds {
+                        jobs.push(Job {
+                            learner: learner.clone(),
+                            arm: arm.clone(),
+                            goal,
+                            method,
+                            seed: cfg.first_seed + s as u64,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    eprintln!(
+        "experiment pilqr: {} job(s) ({} seed(s) from {}, {} iterations, goals {:?}) on {} thread(s) -> {}",
+        jobs.len(),
+        cfg.seeds,
+        cfg.first_seed,
+        cfg.iterations,
+        goals,
+        pool.current_num_threads(),
+        out.display()
+    );
+    crate::io::create_dir(out)?;
+    // LQR+GAIfO's demonstrations: the nominal arm's default expert at each goal.
+    let demos: Vec<Option<Demos>> = if p.learners.iter().any(|l| l == "lqr-gaifo") {
+        pool.install(|| {
+            goals
+                .par_iter()
+                .map(|&g| {
+                    let mut e = cfg.expert.clone();
+                    e.task.goal = g;
+                    super::expert_demos(&e).map(Some)
+                })
+                .collect::<anyhow::Result<Vec<_>>>()
+        })?
+    } else {
+        vec![None; goals.len()]
+    };
+    let label = |j: &Job| {
+        let g = if goals.len() > 1 {
+            format!(" goal {:?}", goals[j.goal])
+        } else {
+            String::new()
+        };
+        format!("{} {} {}{g}", j.learner, j.arm, method_name(j.method))
+    };
+    // A run that fails (a learner error) keeps the iterations it finished: it is reported in
+    // `reach.txt` and left out of the curves, and the other runs go on.
+    let results: Vec<(Run, Option<String>)> = pool.install(|| {
+        jobs.par_iter()
+            .map(|j| {
+                let t = Instant::now();
+                let (logs, n, horizon, err) = if j.learner == "expert" {
+                    expert_job(cfg, j, goals[j.goal])?
+                } else {
+                    let d = demos[j.goal].clone().expect("demonstrations trained above");
+                    gaifo_job(cfg, j, d)?
+                };
+                let last = logs.last().map_or(f64::NAN, |l| l.final_distance);
+                eprintln!(
+                    "  {} seed {}: final distance {:.2} mm after {} iterations ({:.0} s){}",
+                    label(j),
+                    j.seed,
+                    1e3 * last,
+                    logs.len(),
+                    t.elapsed().as_secs_f64(),
+                    err.as_deref()
+                        .map_or(String::new(), |e| format!("; failed: {e}"))
+                );
+                Ok((
+                    Run {
+                        variant: label(j),
+                        algorithm: j.learner.clone(),
+                        seed: j.seed,
+                        episodes_per_iteration: n,
+                        horizon,
+                        logs,
+                        wall_s: t.elapsed().as_secs_f64(),
+                    },
+                    err,
+                ))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+    })?;
+    let failed: Vec<(Run, String)> = results
+        .iter()
+        .filter_map(|(r, e)| e.as_ref().map(|e| (r.clone(), e.clone())))
+        .collect();
+    let runs: Vec<Run> = results
+        .into_iter()
+        .filter_map(|(r, e)| e.is_none().then_some(r))
+        .collect();
+    anyhow::ensure!(
+        !runs.is_empty(),
+        "every run failed; the first: {}",
+        failed[0].1
+    );
+    write_outputs(
+        "pilqr",
+        "LQR vs PILQR: noise-free episode per iteration",
+        &runs,
+        out,
+    )?;
+    let mut reach = reach_text(&runs);
+    for (r, e) in &failed {
+        reach += &format!(
+            "FAILED {} seed {} after {} iterations (last final distance {:.2} mm): {e}\n",
+            r.variant,
+            r.seed,
+            r.logs.len(),
+            r.logs.last().map_or(f64::NAN, |l| 1e3 * l.final_distance)
+        );
+    }
+    std::fs::write(out.join("reach.txt"), &reach)?;
+    std::fs::write(out.join("spread.csv"), spread_csv(&runs))?;
+    eprint!("{reach}");
+    eprintln!(
+        "experiment pilqr done in {:.0} s; outputs in {}",
+        t0.elapsed().as_secs_f64(),
+        out.display()
+    );
+    Ok(runs)
+}
+
+/// What a job returns: its logs, N, T, and the error that stopped it early, if one did.
+type JobResult = (Vec<GaifoLog>, usize, usize, Option<String>);
+
+/// One expert run with every iteration logged (patience off).
+fn expert_job(cfg: &ExperimentConfig, j: &Job, goal: [f64; 3]) -> anyhow::Result<JobResult> {
+    let mut e = cfg.expert.clone();
+    e.task.goal = goal;
+    e.seed = j.seed;
+    e.iterations = cfg.iterations;
+    e.patience = cfg.iterations;
+    e.traj_opt.method = j.method;
+    if j.arm == "perturbed" {
+        e.sim.perturbation = cfg.physical.clone();
+    }
+    let arm = SimArm::new(e.sim.clone(), e.task.dt).context("building the simulated arm")?;
+    let mut logs = Vec::new();
+    let res = imitation::expert::train(&e, &arm, |l| {
+        logs.push(GaifoLog {
+            iteration: l.iteration,
+            task_cost: l.eval_cost,
+            performance: l.performance_proxy,
+            final_distance: l.final_distance,
+            critic_loss: f64::NAN,
+            wasserstein: f64::NAN,
+            kl: l.kl,
+            eta: l.eta,
+            step_mult: l.step_mult,
+            ..GaifoLog::default()
+        })
+    });
+    Ok((
+        logs,
+        e.samples,
+        e.task.horizon,
+        res.err().map(|e| e.to_string()),
+    ))
+}
+
+/// One LQR+GAIfO run on `demos`.
+fn gaifo_job(cfg: &ExperimentConfig, j: &Job, demos: Demos) -> anyhow::Result<JobResult> {
+    let mut g = cfg.lqr_gaifo.clone();
+    g.seed = j.seed;
+    g.iterations = cfg.iterations;
+    g.traj_opt.method = j.method;
+    if j.arm == "perturbed" {
+        g.sim.perturbation = cfg.physical.clone();
+    }
+    let horizon = demos.task()?.horizon;
+    let mut logs = Vec::new();
+    let res = crate::run::train(&g, demos, None, |l| logs.push(l.clone()));
+    Ok((
+        logs,
+        g.samples,
+        horizon,
+        res.err().map(|e| format!("{e:#}")),
+    ))
+}
+
+/// Per variant: seeds that reached 1 cm and 3 mm and the training episodes they needed.
+fn reach_text(runs: &[Run]) -> String {
+    let mut s = String::from(
+        "variant | seeds | within 1 cm: seeds, episodes mean ± sd | within 3 mm: seeds, episodes mean ± sd | within 2 mm by iteration 30 (counted from 1) | final distance at the last iteration, mm, mean ± sd\n",
+    );
+    for (v, rs) in by_variant(runs) {
+        let reach = |th: f64| -> String {
+            let eps: Vec<f64> = rs
+                .iter()
+                .filter_map(|r| {
+                    r.logs
+                        .iter()
+                        .position(|l| l.final_distance <= th)
+                        .map(|i| (i * r.episodes_per_iteration) as f64)
+                })
+                .collect();
+            let (m, sd) = mean_sd(&eps);
+            format!("{}/{}, {m:.0} ± {sd:.0}", eps.len(), rs.len())
+        };
+        let by30 = rs
+            .iter()
+            .filter(|r| r.logs.iter().take(30).any(|l| l.final_distance <= 2e-3))
+            .count();
+        let last: Vec<f64> = rs
+            .iter()
+            .filter_map(|r| r.logs.last().map(|l| 1e3 * l.final_distance))
+            .collect();
+        let (m, sd) = mean_sd(&last);
+        s += &format!(
+            "{v} | {} | {} | {} | {by30}/{} | {m:.2} ± {sd:.2}\n",
+            rs.len(),
+            reach(0.01),
+            reach(0.003),
+            rs.len()
+        );
+    }
+    s
+}
+
+/// Mean and sample standard deviation (NaN when empty; sd 0 for one value).
+fn mean_sd(x: &[f64]) -> (f64, f64) {
+    if x.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = x.len() as f64;
+    let m = x.iter().sum::<f64>() / n;
+    let var = if x.len() > 1 {
+        x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    (m, var.sqrt())
+}
+
+/// `variant,iteration,seeds,final_distance_mean_m,final_distance_sd_m,min_m,max_m`, one row
+/// per variant and iteration (1-based).
+fn spread_csv(runs: &[Run]) -> String {
+    let mut s = String::from(
+        "variant,iteration,seeds,final_distance_mean_m,final_distance_sd_m,min_m,max_m\n",
+    );
+    for (v, rs) in by_variant(runs) {
+        let iters = rs.iter().map(|r| r.logs.len()).max().unwrap_or(0);
+        for i in 0..iters {
+            let d: Vec<f64> = rs
+                .iter()
+                .filter_map(|r| r.logs.get(i).map(|l| l.final_distance))
+                .collect();
+            let (m, sd) = mean_sd(&d);
+            let mn = d.iter().copied().fold(f64::INFINITY, f64::min);
+            let mx = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            s += &format!("\"{v}\",{},{},{m:e},{sd:e},{mn:e},{mx:e}\n", i + 1, d.len());
+        }
+    }
+    s
+}
