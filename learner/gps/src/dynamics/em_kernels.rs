@@ -117,6 +117,16 @@ mod avx {
     #[derive(Clone, Copy)]
     pub(super) struct Avx(__m256d);
 
+    /// A lane-wise `fn $name(self, b) -> Self` on the AVX intrinsic `$op`.
+    macro_rules! binary {
+        ($name:ident, $op:ident) => {
+            #[inline(always)]
+            fn $name(self, b: Self) -> Self {
+                Avx(unsafe { $op(self.0, b.0) })
+            }
+        };
+    }
+
     // SAFETY (all methods): only reached from `#[target_feature(enable = "avx2,fma")]`
     // functions, which run only when `fast_path()` saw both features; loads and stores are
     // of slices checked to hold four elements.
@@ -143,26 +153,11 @@ mod avx {
         fn fma(self, a: Self, b: Self) -> Self {
             Avx(unsafe { _mm256_fmadd_pd(a.0, b.0, self.0) })
         }
-        #[inline(always)]
-        fn add(self, b: Self) -> Self {
-            Avx(unsafe { _mm256_add_pd(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn sub(self, b: Self) -> Self {
-            Avx(unsafe { _mm256_sub_pd(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn mul(self, b: Self) -> Self {
-            Avx(unsafe { _mm256_mul_pd(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn max(self, b: Self) -> Self {
-            Avx(unsafe { _mm256_max_pd(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn min(self, b: Self) -> Self {
-            Avx(unsafe { _mm256_min_pd(self.0, b.0) })
-        }
+        binary!(add, _mm256_add_pd);
+        binary!(sub, _mm256_sub_pd);
+        binary!(mul, _mm256_mul_pd);
+        binary!(max, _mm256_max_pd);
+        binary!(min, _mm256_min_pd);
         #[inline(always)]
         fn exp2_of_rounded(self) -> Self {
             Avx(unsafe {
