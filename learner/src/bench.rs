@@ -24,6 +24,23 @@ use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::synthetic::random_problem;
 use gps::traj_opt::lqr::{TrajOptConfig, TrajOptLqr};
 
+/// What stopped a benchmark.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// A GPS piece (dynamics fit, LQR step, step adjustment) failed.
+    #[error(transparent)]
+    Gps(#[from] gps::GpsError),
+    /// A GPS reference-vectors file that cannot be read or does not follow the layout.
+    #[error(transparent)]
+    Vectors(#[from] gps::conformance::ConformanceError),
+    /// The LQR+GAIfO run that is timed.
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+    /// `iterations = 0`: nothing to time.
+    #[error("no iterations: set iterations >= 1")]
+    NoIterations,
+}
+
 /// Median timings (seconds) of the pieces of one update.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct BenchResult {
@@ -62,7 +79,7 @@ pub fn run(
     n: usize,
     reps: usize,
     seed: u64,
-) -> Result<BenchResult, crate::LearnerError> {
+) -> Result<BenchResult, BenchError> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (sys, pol, truth) = random_problem(&mut rng, t, dx, du);
     let (x, u) = sys.rollout(&pol, n, &mut rng);
@@ -259,7 +276,7 @@ pub struct VectorsBenchResult {
 /// Redoes, `reps` times, the GMM prior update, dynamics fit and η search of every recorded
 /// iteration of the vectors file `file` on GPS's recorded inputs (one thread), and returns the
 /// median timings with the comparison against GPS's recorded outputs.
-pub fn vectors(file: &str, reps: usize) -> Result<VectorsBenchResult, crate::LearnerError> {
+pub fn vectors(file: &str, reps: usize) -> Result<VectorsBenchResult, BenchError> {
     let p = gps::conformance::recorded::load_file(file)?;
     let (t, dx, du) = (p.t, p.dx, p.du);
     let cfg = &p.settings;
@@ -389,9 +406,11 @@ pub struct GaifoBenchResult {
 pub fn gaifo(
     cfg: &imitation::gaifo::GaifoConfig,
     demos: imitation::demos::Demos,
-) -> anyhow::Result<GaifoBenchResult> {
+) -> Result<GaifoBenchResult, BenchError> {
     let logs = crate::run::train(cfg, demos, None, |_| {})?;
-    anyhow::ensure!(!logs.is_empty(), "no iterations");
+    if logs.is_empty() {
+        return Err(BenchError::NoIterations);
+    }
     let col =
         |f: fn(&imitation::gaifo::GaifoLog) -> f64| -> Vec<f64> { logs.iter().map(f).collect() };
     let mut cpu = col(|l| l.cpu_learner);

@@ -11,13 +11,15 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 use plotters::prelude::*;
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::kinematics::UrKinematics;
 use ur5_shared::layout::{DX, Q};
 
-use crate::plot::{register_font, write_png, PALETTE};
+use crate::io::IoError;
+use crate::plot::{register_font, write_png, PlotError, PALETTE};
+
+type Result<T> = std::result::Result<T, PlotError>;
 
 /// One arm to draw: a legend label and its chain points per step (m, base frame).
 pub struct Motion {
@@ -44,7 +46,7 @@ pub fn chain_of_states(states: &[f64], sim: &SimConfig) -> Vec<[[f64; 3]; 8]> {
 pub fn rerun_table(table_path: &Path, task: &TaskConfig, sim: &SimConfig) -> Result<Vec<f64>> {
     let (mut table, _) =
         crate::io::table::load_table(table_path, &ur5_shared::GainBounds::default())
-            .with_context(|| format!("reading {}", table_path.display()))?;
+            .map_err(IoError::from)?;
     let mut arm = crate::arm::SimArm::new(sim.clone(), task.dt)?;
     let ep = imitation::rollout::run_episode(&mut arm, task, &mut *table, None)?;
     Ok(ep.x)
@@ -69,7 +71,7 @@ pub fn run_motions(dir: &Path, demos: &Path, count: usize) -> Result<(Vec<Motion
         chain: chain_of_states(&expert_states, &sim),
     });
     let mut iters: Vec<(usize, PathBuf)> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {}", dir.display()))?
+        .map_err(IoError::file("reading", dir))?
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().into_owned();
@@ -82,12 +84,11 @@ pub fn run_motions(dir: &Path, demos: &Path, count: usize) -> Result<(Vec<Motion
         })
         .collect();
     iters.sort();
-    anyhow::ensure!(
-        !iters.is_empty(),
-        "{}: no iter_NNN_table.npz (the folder of a `learner train` or `learner serve --algo \
-         lqr-gaifo` run)",
-        dir.display()
-    );
+    if iters.is_empty() {
+        return Err(PlotError::NoTables {
+            dir: dir.to_owned(),
+        });
+    }
     let n = count.clamp(1, iters.len());
     let mut picked: Vec<usize> = (0..n)
         .map(|i| {
@@ -139,8 +140,8 @@ fn colour(i: usize) -> RGBColor {
     }
 }
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow::anyhow!("drawing the arm: {e}")
+fn err<E: std::fmt::Display>(e: E) -> PlotError {
+    PlotError::Arm(e.to_string())
 }
 
 /// Square axis ranges (m) holding every point of every motion and the goal in `view`.
@@ -306,8 +307,7 @@ pub fn animation(
     register_font()?;
     let horizon = motions.iter().map(|m| m.chain.len()).max().unwrap_or(1);
     let (w, h) = (640u16, 320u16);
-    let file =
-        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let file = std::fs::File::create(path).map_err(IoError::file("cannot create", path))?;
     let mut enc = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[]).map_err(err)?;
     enc.set_repeat(gif::Repeat::Infinite).map_err(err)?;
     let steps: Vec<usize> = (0..horizon)

@@ -30,5 +30,3 @@ pub mod replay;
 pub mod run;
 pub mod serve;
 pub mod stats;
-
-pub use error::LearnerError;

@@ -12,10 +12,132 @@
 use std::fmt::Display;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use anyhow::{anyhow, bail, Context, Result};
+use crate::io::IoError;
+
+/// What stopped a figure (`learner plot`, the experiments' figures, the arm's pictures).
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// A picture size out of range.
+    #[error(
+        "plot {}: size {width}x{height} px is out of range (each side {MIN_SIDE}..={MAX_SIDE})",
+        path.display()
+    )]
+    Size {
+        /// The figure.
+        path: PathBuf,
+        /// Width (px).
+        width: u32,
+        /// Height (px).
+        height: u32,
+    },
+    /// A figure of no panels.
+    #[error("plot {}: no panels", path.display())]
+    NoPanels {
+        /// The figure.
+        path: PathBuf,
+    },
+    /// Data a figure cannot show.
+    #[error("plot {}", path.display())]
+    In {
+        /// The figure.
+        path: PathBuf,
+        /// What is wrong with the data.
+        source: Box<PlotError>,
+    },
+    /// Drawing a panel failed.
+    #[error("plot {}: drawing failed", path.display())]
+    Drawing {
+        /// The figure.
+        path: PathBuf,
+        /// Why.
+        source: Box<PlotError>,
+    },
+    /// The font compiled into the program is not one (a broken build).
+    #[error("the bundled DejaVuSans.ttf is not a valid font")]
+    Font,
+    /// No curves given.
+    #[error("no series to plot")]
+    NoSeries,
+    /// A curve whose arrays differ in length.
+    #[error(
+        "series {label:?}: x, mean and stderr must have one length, got {}, {}, {}",
+        lengths[0],
+        lengths[1],
+        lengths[2]
+    )]
+    Ragged {
+        /// The curve.
+        label: String,
+        /// Lengths of x, mean and stderr.
+        lengths: [usize; 3],
+    },
+    /// A negative standard error.
+    #[error("series {label:?}: negative stderr {stderr} at index {index}")]
+    NegativeStderr {
+        /// The curve.
+        label: String,
+        /// The value.
+        stderr: f64,
+        /// Where.
+        index: usize,
+    },
+    /// Curves without a single drawable point.
+    #[error(
+        "nothing to plot: no series has a point with finite x and mean{} (all empty or NaN)",
+        if *log_y { " > 0" } else { "" }
+    )]
+    NothingToPlot {
+        /// Logarithmic y axis (points need mean > 0).
+        log_y: bool,
+    },
+    /// The plotting library's error.
+    #[error("plotters: {0}")]
+    Plotters(String),
+    /// The PNG file cannot be created: check the folder.
+    #[error("cannot create PNG file {}", path.display())]
+    CreatePng {
+        /// The file.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// The PNG file cannot be written.
+    #[error("cannot write PNG file {}", path.display())]
+    WritePng {
+        /// The file.
+        path: PathBuf,
+        /// What the encoder said.
+        source: png::EncodingError,
+    },
+    /// Drawing the arm (`learner plot arm`).
+    #[error("drawing the arm: {0}")]
+    Arm(String),
+    /// A run folder without the controllers of its iterations.
+    #[error(
+        "{}: no iter_NNN_table.npz (the folder of a `learner train` or `learner serve --algo \
+         lqr-gaifo` run)",
+        dir.display()
+    )]
+    NoTables {
+        /// The folder.
+        dir: PathBuf,
+    },
+    /// The animated GIF.
+    #[error("writing the GIF")]
+    Gif(#[from] gif::EncodingError),
+    /// The files plotted.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// The arm the controllers are run on again.
+    #[error(transparent)]
+    Sim(#[from] hil_sim::SimError),
+    /// Running a controller again, or the demonstrations' task.
+    #[error(transparent)]
+    Imitation(#[from] imitation::ImitationError),
+}
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -96,7 +218,7 @@ pub fn plot_curves(
     y_label: &str,
     series: &[Series],
     size: (u32, u32),
-) -> Result<()> {
+) -> Result<(), PlotError> {
     let panel = Panel {
         y_label,
         series,
@@ -126,16 +248,19 @@ pub fn plot_panels(
     x_label: &str,
     panels: &[Panel<'_>],
     size: (u32, u32),
-) -> Result<()> {
+) -> Result<(), PlotError> {
     let (width, height) = size;
     if !(MIN_SIDE..=MAX_SIDE).contains(&width) || !(MIN_SIDE..=MAX_SIDE).contains(&height) {
-        bail!(
-            "plot {}: size {width}x{height} px is out of range (each side {MIN_SIDE}..={MAX_SIDE})",
-            path.display()
-        );
+        return Err(PlotError::Size {
+            path: path.to_owned(),
+            width,
+            height,
+        });
     }
     if panels.is_empty() {
-        bail!("plot {}: no panels", path.display());
+        return Err(PlotError::NoPanels {
+            path: path.to_owned(),
+        });
     }
     let prepared = panels
         .iter()
@@ -144,8 +269,11 @@ pub fn plot_panels(
             let ranges = ranges(&curves);
             Ok((p, curves, ranges))
         })
-        .collect::<Result<Vec<_>>>()
-        .with_context(|| format!("plot {}", path.display()))?;
+        .collect::<Result<Vec<_>, PlotError>>()
+        .map_err(|e| PlotError::In {
+            path: path.to_owned(),
+            source: Box::new(e),
+        })?;
     register_font()?;
 
     let mut rgb = vec![0u8; width as usize * height as usize * 3];
@@ -166,7 +294,10 @@ pub fn plot_panels(
                 x_range.clone(),
                 y_range.clone(),
             )
-            .with_context(|| format!("plot {}: drawing failed", path.display()))?;
+            .map_err(|e| PlotError::Drawing {
+                path: path.to_owned(),
+                source: Box::new(e),
+            })?;
         }
         root.present().map_err(plot_err)?;
     }
@@ -185,15 +316,13 @@ const FONT: &str = "sans-serif";
 static DEJAVU_SANS: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// Registers the bundled DejaVu Sans with plotters' ab_glyph text backend, once per process.
-pub(crate) fn register_font() -> Result<()> {
-    static REGISTERED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
+pub(crate) fn register_font() -> Result<(), PlotError> {
+    static REGISTERED: OnceLock<Result<(), ()>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
-            plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS)
-                .map_err(|_| "the bundled DejaVuSans.ttf is not a valid font".to_string())
+            plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS).map_err(|_| ())
         })
-        .clone()
-        .map_err(|e| anyhow!(e))
+        .map_err(|()| PlotError::Font)
 }
 
 /// Matplotlib's "tab10" colours: distinct, and readable by most colour-blind readers.
@@ -226,24 +355,28 @@ impl Curve<'_> {
     }
 }
 
-fn prepare(series: &[Series], log_y: bool) -> Result<Vec<Curve<'_>>> {
+fn prepare(series: &[Series], log_y: bool) -> Result<Vec<Curve<'_>>, PlotError> {
     if series.is_empty() {
-        bail!("no series to plot");
+        return Err(PlotError::NoSeries);
     }
     let mut curves = Vec::with_capacity(series.len());
     for s in series {
         let (nx, nm, ns) = (s.x.len(), s.mean.len(), s.stderr.len());
         if nx != nm || nx != ns {
-            bail!(
-                "series {:?}: x, mean and stderr must have one length, got {nx}, {nm}, {ns}",
-                s.label
-            );
+            return Err(PlotError::Ragged {
+                label: s.label.clone(),
+                lengths: [nx, nm, ns],
+            });
         }
         let mut segments = vec![Vec::new()];
         for i in 0..nx {
             let (x, m, se) = (s.x[i], s.mean[i], s.stderr[i]);
             if se < 0.0 {
-                bail!("series {:?}: negative stderr {se} at index {i}", s.label);
+                return Err(PlotError::NegativeStderr {
+                    label: s.label.clone(),
+                    stderr: se,
+                    index: i,
+                });
             }
             let se = if se.is_finite() { se } else { 0.0 };
             let point = if !(x.is_finite() && m.is_finite()) || (log_y && m <= 0.0) {
@@ -274,10 +407,7 @@ fn prepare(series: &[Series], log_y: bool) -> Result<Vec<Curve<'_>>> {
         });
     }
     if curves.iter().all(|c| c.segments.is_empty()) {
-        bail!(
-            "nothing to plot: no series has a point with finite x and mean{} (all empty or NaN)",
-            if log_y { " > 0" } else { "" }
-        );
+        return Err(PlotError::NothingToPlot { log_y });
     }
     // Lower edges without a logarithm go to the bottom of the other points' range.
     if log_y {
@@ -330,8 +460,8 @@ fn pad(lo: f64, hi: f64, frac: f64) -> std::ops::Range<f64> {
     }
 }
 
-fn plot_err<E: Display>(e: E) -> anyhow::Error {
-    anyhow!("plotters: {e}")
+fn plot_err<E: Display>(e: E) -> PlotError {
+    PlotError::Plotters(e.to_string())
 }
 
 fn draw(
@@ -341,7 +471,7 @@ fn draw(
     curves: &[Curve<'_>],
     x_range: std::ops::Range<f64>,
     y_range: std::ops::Range<f64>,
-) -> Result<()> {
+) -> Result<(), PlotError> {
     let (_, height) = area.dim_in_pixel();
     let text_px = (height / 36).clamp(11, 20);
 
@@ -508,14 +638,16 @@ fn legend_corner(
 }
 
 /// Writes the RGB buffer `rgb` (`width` × `height`, 8 bits per channel) as a PNG file.
-pub(crate) fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<()> {
-    let file =
-        File::create(path).with_context(|| format!("cannot create PNG file {}", path.display()))?;
+pub(crate) fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), PlotError> {
+    let file = File::create(path).map_err(|source| PlotError::CreatePng {
+        path: path.to_owned(),
+        source,
+    })?;
     let mut out = BufWriter::new(file);
     let mut encoder = png::Encoder::new(&mut out, width, height);
     encoder.set_color(png::ColorType::Rgb);
     encoder.set_depth(png::BitDepth::Eight);
-    let write = || -> Result<()> {
+    let write = || -> Result<(), png::EncodingError> {
         let mut writer = encoder.write_header()?;
         writer.write_image_data(rgb)?;
         writer.finish()?;
@@ -523,7 +655,10 @@ pub(crate) fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Res
     };
     write()
         .and_then(|()| out.flush().map_err(Into::into))
-        .with_context(|| format!("cannot write PNG file {}", path.display()))
+        .map_err(|source| PlotError::WritePng {
+            path: path.to_owned(),
+            source,
+        })
 }
 
 #[cfg(test)]
@@ -764,7 +899,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("learner-plot-missing-{}", std::process::id()));
         let path = dir.join("sub").join("fig.png");
         let err = plot_curves(&path, "t", "x", "y", &example_series(), (400, 300)).unwrap_err();
-        let msg = format!("{err:#}");
+        let msg = crate::error::line(&err);
         assert!(msg.contains(&path.display().to_string()), "{msg}");
         assert!(!path.exists());
     }
@@ -773,10 +908,7 @@ mod tests {
     fn plot_curves_rejects_what_it_cannot_draw() {
         let path = temp_png("rejected");
         let msg = |series: &[Series], size| {
-            format!(
-                "{:#}",
-                plot_curves(&path, "t", "x", "y", series, size).unwrap_err()
-            )
+            crate::error::line(&plot_curves(&path, "t", "x", "y", series, size).unwrap_err())
         };
         assert!(msg(&[], (400, 300)).contains("no series"));
         let nan = Series {

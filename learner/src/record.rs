@@ -34,6 +34,20 @@ use imitation::demos::Demos;
 use crate::io::foreign::{to_demos, DERIVED_SEED};
 use crate::io::lerobot::{TaskMeta, Trajectories};
 
+/// Why recorded demonstrations cannot be turned into the learner's.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// Nothing was recorded (no segment was taken for a demonstration).
+    #[error("no demonstrations were recorded")]
+    NoDemonstrations,
+    /// The demonstrations checked against the arm.
+    #[error(transparent)]
+    Demos(#[from] crate::io::demos::DemosError),
+    /// The recorded trajectories as demonstrations of the arm.
+    #[error(transparent)]
+    Io(#[from] crate::io::IoError),
+}
+
 /// Joint speed below which the arm counts as at rest (rad/s, every joint): above a held arm's
 /// tremor, well below a deliberate motion's speed (tenths of rad/s).
 pub const REST_SPEED: f64 = 0.05;
@@ -265,8 +279,10 @@ pub fn to_recorded_demos(
     start: &Joints6,
     task: &TaskConfig,
     sim: &SimConfig,
-) -> anyhow::Result<(Demos, RecordReport)> {
-    anyhow::ensure!(!episodes.is_empty(), "no demonstrations were recorded");
+) -> Result<(Demos, RecordReport), RecordError> {
+    if episodes.is_empty() {
+        return Err(RecordError::NoDemonstrations);
+    }
     let kin = UrKinematics::new(sim.model, sim.ee_offset);
     let points: Vec<Vec<([f64; 3], [f64; 3])>> = episodes
         .iter()

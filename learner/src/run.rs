@@ -4,7 +4,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use imitation::controller::to_gain_table;
 use imitation::cost::composite::D_IN;
 use imitation::demos::Demos;
@@ -14,22 +13,134 @@ use imitation::expert::{
 };
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
 use imitation::learn::{iterate_observed, Learn};
-use imitation::mdgps::{Mdgps, MdgpsConfig};
+use imitation::mdgps::{Mdgps, MdgpsConfig, MdgpsLog};
 use imitation::ppo::gaifo_ppo::GaifoPpo;
 use imitation::ppo::UpdateStats;
 use serde::Serialize;
 
 use crate::arm::SimArm;
+use crate::error::ensure;
 use crate::io::checkpoint::{load_state, save_state};
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
-use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
+use crate::io::log::{open_log_with, write_record, LogRow, EXPERT_CSV_HEADER};
+use crate::io::npz::NpzError;
 use crate::io::table::save_table;
+use crate::io::IoError;
+
+/// What went wrong in an in-process run, its checkpoints or its resume.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The simulated arm cannot be built for the learner's model and period.
+    #[error("building the simulated arm")]
+    Arm(#[source] hil_sim::SimError),
+    /// `--resume` of a folder that cannot be read.
+    #[error(
+        "cannot resume from {}: {source} (expected the --out folder of an earlier `learner \
+         train` or `learner serve --algo lqr-gaifo` run)",
+        dir.display()
+    )]
+    NoFolder {
+        /// The folder.
+        dir: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// `--resume` of a folder without a complete checkpoint.
+    #[error(
+        "cannot resume from {}: no checkpoint in it (no iter_NNN_state.npz with its \
+         iter_NNN_critic.json, written by `learner train` and `learner serve --algo \
+         lqr-gaifo`){}",
+        dir.display(),
+        if *tables_only {
+            " (its iter_NNN_table.npz files come from a build before exact resume, which wrote \
+             no learner state: start a new run)"
+        } else {
+            ""
+        }
+    )]
+    NoCheckpoint {
+        /// The folder.
+        dir: PathBuf,
+        /// Whether it holds the tables of a build before exact resume.
+        tables_only: bool,
+    },
+    /// A learner state that does not fit the run's settings and demonstrations.
+    #[error("{}", path.display())]
+    Restore {
+        /// The state file.
+        path: PathBuf,
+        /// Why it does not fit.
+        source: imitation::ImitationError,
+    },
+    /// A learner state without an entry it must have.
+    #[error("{}", path.display())]
+    StateEntry {
+        /// The state file.
+        path: PathBuf,
+        /// The missing or malformed entry.
+        source: gps::GpsError,
+    },
+    /// A state file whose iteration is not the one its name says (renamed or edited).
+    #[error("{}: holds iteration {at}, its name says {named}", path.display())]
+    Iteration {
+        /// The state file.
+        path: PathBuf,
+        /// Iteration it holds.
+        at: u64,
+        /// Iteration its name says.
+        named: usize,
+    },
+    /// A state file whose arm noise position is malformed.
+    #[error("{}: array `{ARM_NOISE}` has {len} values, expected 2", path.display())]
+    ArmNoise {
+        /// The state file.
+        path: PathBuf,
+        /// Values found.
+        len: usize,
+    },
+    /// A checkpoint's critic that cannot be read.
+    #[error("resuming from {}", path.display())]
+    Critic {
+        /// The critic file.
+        path: PathBuf,
+        /// Why.
+        source: imitation::discriminator::DiscriminatorError,
+    },
+    /// A resume asked for fewer iterations than the run holds.
+    #[error(
+        "{} already holds {start} iterations, more than iterations = {asked} asks for: a resume \
+         never shortens a run (raise --iterations)",
+        dir.display()
+    )]
+    Shorter {
+        /// The run folder.
+        dir: PathBuf,
+        /// Iterations it holds.
+        start: usize,
+        /// Iterations asked for.
+        asked: usize,
+    },
+    /// The run's files.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// A learner piece (an iteration, the expert, a policy).
+    #[error(transparent)]
+    Imitation(#[from] imitation::ImitationError),
+    /// The critic (saving it).
+    #[error(transparent)]
+    Discriminator(#[from] imitation::discriminator::DiscriminatorError),
+}
+
+impl From<NpzError> for RunError {
+    fn from(e: NpzError) -> Self {
+        Self::Io(e.into())
+    }
+}
 
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
 /// period.
-pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> anyhow::Result<SimArm> {
-    SimArm::new(learner.sim_config().clone(), learner.task().dt)
-        .context("building the simulated arm")
+pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> Result<SimArm, RunError> {
+    SimArm::new(learner.sim_config().clone(), learner.task().dt).map_err(RunError::Arm)
 }
 
 /// What a run saves before every iteration so that it can be resumed (in process, `learner
@@ -37,7 +148,7 @@ pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> anyhow::Result<SimArm> {
 pub trait Checkpoint {
     /// Saves the controller executed next and the rest of the learner state into `dir` (with
     /// the in-process `arm`'s noise position when there is one; `None` over IPC).
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()>;
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> Result<(), RunError>;
 }
 
 /// The name of checkpoint file `kind` (`table.npz`, `critic.json`, `state.npz`, ...) after `i`
@@ -55,7 +166,7 @@ impl Checkpoint for LqrGaifo {
     /// `iter_NNN_critic.json` and, last, `iter_NNN_state.npz` (the rest of the learner state,
     /// [`LqrGaifo::snapshot`], and the arm's noise position), NNN = iterations done; each file
     /// written atomically, so that a state file marks a complete checkpoint.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()> {
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> Result<(), RunError> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let table = checkpoint_file(dir, i, "table.npz");
@@ -78,7 +189,7 @@ impl Checkpoint for Mdgps {
     /// `iter_NNN_critic.json` (the one critic) and, last, `iter_NNN_state.npz` (the rest of the
     /// learner state, [`Mdgps::snapshot`]: the policy, its S-step and every condition's LQR
     /// state, and the arm's noise position), NNN = iterations done; each written atomically.
-    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> anyhow::Result<()> {
+    fn checkpoint(&self, dir: &Path, arm: Option<&SimArm>) -> Result<(), RunError> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let critic = checkpoint_file(dir, i, "critic.json");
@@ -104,7 +215,7 @@ fn with_arm_noise(
 impl Checkpoint for GaifoPpo {
     /// `iter_NNN_policy.json` (the policy nets) and `iter_NNN_critic.json` (not an exact
     /// checkpoint: there is no resume for this baseline).
-    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<()> {
+    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> Result<(), RunError> {
         crate::io::create_dir(dir)?;
         let i = self.iteration();
         let pol = checkpoint_file(dir, i, "policy.json");
@@ -112,7 +223,8 @@ impl Checkpoint for GaifoPpo {
             .ppo()
             .actor_critic()
             .policy_file(&self.config().ppo.pi_hidden);
-        ur5_shared::atomic_file::write(&pol, &serde_json::to_vec(&file)?)?;
+        let bytes = serde_json::to_vec(&file).map_err(IoError::from)?;
+        ur5_shared::atomic_file::write(&pol, &bytes).map_err(IoError::file("writing", &pol))?;
         let critic = checkpoint_file(dir, i, "critic.json");
         self.discriminator().save(&critic)?;
         Ok(())
@@ -122,18 +234,15 @@ impl Checkpoint for GaifoPpo {
 /// The latest complete checkpoint in `dir`: (NNN, `iter_NNN_state.npz`,
 /// `iter_NNN_critic.json`) with the largest NNN for which both files exist (the state file is
 /// written last, atomically). A clear error when there is none.
-pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)> {
-    let entries = std::fs::read_dir(dir).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot resume from {}: {e} (expected the --out folder of an earlier \
-             `learner train` or `learner serve --algo lqr-gaifo` run)",
-            dir.display()
-        )
+pub fn latest_checkpoint(dir: &Path) -> Result<(usize, PathBuf, PathBuf), RunError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| RunError::NoFolder {
+        dir: dir.to_owned(),
+        source,
     })?;
     let mut best: Option<usize> = None;
     let mut tables_only = false;
     for entry in entries {
-        let name = entry?.file_name();
+        let name = entry.map_err(IoError::file("reading", dir))?.file_name();
         let number = |suffix: &str| {
             name.to_str()
                 .and_then(|n| n.strip_prefix("iter_"))
@@ -149,19 +258,9 @@ pub fn latest_checkpoint(dir: &Path) -> anyhow::Result<(usize, PathBuf, PathBuf)
             best = Some(n);
         }
     }
-    let n = best.ok_or_else(|| {
-        let older = if tables_only {
-            " (its iter_NNN_table.npz files come from a build before exact resume, which wrote \
-             no learner state: start a new run)"
-        } else {
-            ""
-        };
-        anyhow::anyhow!(
-            "cannot resume from {}: no checkpoint in it (no iter_NNN_state.npz with its \
-             iter_NNN_critic.json, written by `learner train` and `learner serve --algo \
-             lqr-gaifo`){older}",
-            dir.display()
-        )
+    let n = best.ok_or_else(|| RunError::NoCheckpoint {
+        dir: dir.to_owned(),
+        tables_only,
     })?;
     Ok((
         n,
@@ -180,10 +279,13 @@ pub fn resume(
     cfg: GaifoConfig,
     demos: Demos,
     dir: &Path,
-) -> anyhow::Result<(LqrGaifo, Option<u128>)> {
+) -> Result<(LqrGaifo, Option<u128>), RunError> {
     let (snap, disc, arm, state_path) = load_checkpoint(dir, "lqr.iteration")?;
-    let run = LqrGaifo::from_snapshot(cfg, demos, &snap, disc)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?;
+    let run =
+        LqrGaifo::from_snapshot(cfg, demos, &snap, disc).map_err(|source| RunError::Restore {
+            path: state_path,
+            source,
+        })?;
     Ok((run, arm))
 }
 
@@ -196,10 +298,13 @@ pub fn resume_mdgps(
     cfg: MdgpsConfig,
     demos: Vec<Demos>,
     dir: &Path,
-) -> anyhow::Result<(Mdgps, Option<u128>)> {
+) -> Result<(Mdgps, Option<u128>), RunError> {
     let (snap, disc, arm, state_path) = load_checkpoint(dir, "mdgps.iteration")?;
-    let run = Mdgps::from_snapshot(cfg, demos, &snap, disc)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?;
+    let run =
+        Mdgps::from_snapshot(cfg, demos, &snap, disc).map_err(|source| RunError::Restore {
+            path: state_path,
+            source,
+        })?;
     Ok((run, arm))
 }
 
@@ -209,50 +314,62 @@ pub fn resume_mdgps(
 fn load_checkpoint(
     dir: &Path,
     iteration_key: &str,
-) -> anyhow::Result<(
-    gps::snapshot::Snapshot,
-    Discriminator,
-    Option<u128>,
-    PathBuf,
-)> {
+) -> Result<
+    (
+        gps::snapshot::Snapshot,
+        Discriminator,
+        Option<u128>,
+        PathBuf,
+    ),
+    RunError,
+> {
     let (iteration, state_path, critic_path) = latest_checkpoint(dir)?;
     let snap = load_state(&state_path)?;
     let at = snap
         .words(iteration_key, 1)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", state_path.display()))?[0];
-    anyhow::ensure!(
+        .map_err(|source| RunError::StateEntry {
+            path: state_path.clone(),
+            source,
+        })?[0];
+    ensure!(
         at == iteration as u64,
-        "{}: holds iteration {at}, its name says {iteration}",
-        state_path.display()
+        RunError::Iteration {
+            path: state_path,
+            at,
+            named: iteration
+        }
     );
     let arm = match snap.words.get(ARM_NOISE).map(Vec::as_slice) {
         None => None,
         Some(&[lo, hi]) => Some(u128::from(lo) | (u128::from(hi) << 64)),
-        Some(w) => anyhow::bail!(
-            "{}: array `{ARM_NOISE}` has {} values, expected 2",
-            state_path.display(),
-            w.len()
-        ),
+        Some(w) => {
+            return Err(RunError::ArmNoise {
+                path: state_path,
+                len: w.len(),
+            })
+        }
     };
-    let disc = Discriminator::load(&critic_path, D_IN)
-        .with_context(|| format!("resuming from {}", critic_path.display()))?;
+    let disc = Discriminator::load(&critic_path, D_IN).map_err(|source| RunError::Critic {
+        path: critic_path,
+        source,
+    })?;
     Ok((snap, disc, arm, state_path))
 }
 
 /// Runs `iterations` iterations of `run` on `arm`, calling `progress` after each, writing
 /// `gaifo_log.csv` (column `algorithm` = `R::ALGO`) and per-iteration checkpoints into `out`
 /// when it is given.
-pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
+pub fn run_iterations<R: Learn<Log: LogRow> + Checkpoint>(
     run: &mut R,
     arm: &SimArm,
     iterations: usize,
     out: Option<&Path>,
-    progress: impl FnMut(&GaifoLog, &R),
-) -> anyhow::Result<Vec<GaifoLog>> {
+    progress: impl FnMut(&R::Log, &R),
+) -> Result<Vec<R::Log>, RunError> {
     let csv = match out {
         Some(dir) => {
             crate::io::create_dir(dir)?;
-            let f = open_log(&dir.join("gaifo_log.csv"), None)?;
+            let f = open_log_with(&dir.join(R::Log::FILE), R::Log::HEADER, None)?;
             run.checkpoint(dir, Some(arm))?;
             crate::io::files::note_checkpoint(dir, run.iteration())?;
             Some((f, dir))
@@ -266,13 +383,13 @@ pub fn run_iterations<R: Learn<Log = GaifoLog> + Checkpoint>(
 /// when the run folder has an `episodes/` folder (`learner train --record-episodes`, and its
 /// resumes), every episode is recorded there first, as `learner serve` records them
 /// ([`EpisodeRecorder`]), so that `learner replay` can redo the run.
-fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
+fn drive<R: Learn<Log: LogRow> + Checkpoint>(
     run: &mut R,
     arm: &SimArm,
     iterations: usize,
     mut csv: Option<(std::fs::File, &Path)>,
-    mut progress: impl FnMut(&GaifoLog, &R),
-) -> anyhow::Result<Vec<GaifoLog>> {
+    mut progress: impl FnMut(&R::Log, &R),
+) -> Result<Vec<R::Log>, RunError> {
     use std::io::Write;
     let mut logs = Vec::with_capacity(iterations);
     let mut recorder = match &csv {
@@ -284,7 +401,7 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
     for _ in 0..iterations {
         let (version, n) = (run.version(), run.samples() as u64);
         let (seed, task) = (run.seed(), run.task().clone());
-        let mut recorded: anyhow::Result<()> = Ok(());
+        let mut recorded: Result<(), IoError> = Ok(());
         let run_dir = csv.as_ref().map(|(_, d)| d.to_path_buf());
         let (log, _) = iterate_observed(run, arm, &mut |noisy, evals| {
             let Some(rec) = recorder.as_mut() else { return };
@@ -299,7 +416,7 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
                 if recorded.is_ok() {
                     recorded = rec
                         .record(ep, &origin, &task)
-                        .map_err(anyhow::Error::from)
+                        .map_err(IoError::from)
                         .and_then(|p| match &run_dir {
                             Some(d) => crate::io::files::note(d, &[&p]),
                             None => Ok(()),
@@ -310,8 +427,10 @@ fn drive<R: Learn<Log = GaifoLog> + Checkpoint>(
         recorded?;
         progress(&log, run);
         if let Some((f, dir)) = csv.as_mut() {
-            write_csv_row(f, &log, run.seed(), R::ALGO)?;
-            f.flush()?;
+            let path = dir.join(R::Log::FILE);
+            log.write_row(f, run.seed(), R::ALGO)
+                .and_then(|()| f.flush())
+                .map_err(IoError::file("writing", &path))?;
             run.checkpoint(dir, Some(arm))?;
             crate::io::files::note_checkpoint(dir, run.iteration())?;
         }
@@ -326,7 +445,7 @@ pub fn train(
     demos: Demos,
     out: Option<&Path>,
     mut progress: impl FnMut(&GaifoLog),
-) -> anyhow::Result<Vec<GaifoLog>> {
+) -> Result<Vec<GaifoLog>, RunError> {
     let mut run = LqrGaifo::new(cfg.clone(), demos)?;
     let arm = arm_for(&run)?;
     run_iterations(&mut run, &arm, cfg.iterations, out, |l, _| progress(l))
@@ -339,7 +458,7 @@ pub fn train_ppo(
     demos: Demos,
     out: Option<&Path>,
     mut progress: impl FnMut(&GaifoLog, &UpdateStats),
-) -> anyhow::Result<Vec<GaifoLog>> {
+) -> Result<Vec<GaifoLog>, RunError> {
     let mut run = GaifoPpo::new(cfg.clone(), demos)?;
     let arm = arm_for(&run)?;
     run_iterations(&mut run, &arm, cfg.iterations, out, |l, r| {
@@ -349,7 +468,7 @@ pub fn train_ppo(
 
 /// Continues the LQR+GAIfO run whose checkpoints are in `dir` ([`resume`], with the arm's noise
 /// stream where the checkpoint left it) up to `cfg.iterations` iterations in all, appending to
-/// `dir/gaifo_log.csv` ([`open_log`]) and writing the next checkpoints into `dir`. Iterations
+/// `dir/gaifo_log.csv` ([`crate::io::log::open_log`]) and writing the next checkpoints into `dir`. Iterations
 /// are numbered on from the checkpoint; tables and CSV rows are the uninterrupted run's bit
 /// for bit (timing columns aside). A run that already holds `cfg.iterations` iterations is
 /// complete: nothing is run and the result is empty; one that holds more is refused.
@@ -358,17 +477,30 @@ pub fn train_resumed(
     demos: Demos,
     dir: &Path,
     mut progress: impl FnMut(&GaifoLog),
-) -> anyhow::Result<Vec<GaifoLog>> {
-    let (mut run, arm_noise) = resume(cfg.clone(), demos, dir)?;
+) -> Result<Vec<GaifoLog>, RunError> {
+    let (run, arm_noise) = resume(cfg.clone(), demos, dir)?;
+    continue_run(run, arm_noise, dir, cfg.iterations, |l, _| progress(l))
+}
+
+/// Continues `run`, resumed from its checkpoint in `dir` (with the in-process arm's noise
+/// position `arm_noise`), up to `iterations` in all ([`train_resumed`], [`train_mdgps_resumed`]).
+fn continue_run<R: Learn<Log: LogRow> + Checkpoint>(
+    mut run: R,
+    arm_noise: Option<u128>,
+    dir: &Path,
+    iterations: usize,
+    progress: impl FnMut(&R::Log, &R),
+) -> Result<Vec<R::Log>, RunError> {
     let start = run.iteration();
-    anyhow::ensure!(
-        start <= cfg.iterations,
-        "{} already holds {start} iterations, more than iterations = {} asks for: a resume \
-         never shortens a run (raise --iterations)",
-        dir.display(),
-        cfg.iterations
+    ensure!(
+        start <= iterations,
+        RunError::Shorter {
+            dir: dir.to_owned(),
+            start,
+            asked: iterations
+        }
     );
-    if start == cfg.iterations {
+    if start == iterations {
         // The run is complete (a kill after its last checkpoint, or a retried job): resuming
         // it again is a no-op, not an error, so a scheduler may re-run the same command.
         return Ok(Vec::new());
@@ -377,29 +509,65 @@ pub fn train_resumed(
     if let Some(pos) = arm_noise {
         arm.sim_mut().set_noise_position(pos);
     }
-    let csv = open_log(&dir.join("gaifo_log.csv"), Some(start))?;
+    let csv = open_log_with(&dir.join(R::Log::FILE), R::Log::HEADER, Some(start))?;
     drive(
         &mut run,
         &arm,
-        cfg.iterations - start,
+        iterations - start,
         Some((csv, dir)),
+        progress,
+    )
+}
+
+/// Runs `cfg.lqr_gaifo.iterations` iterations of MDGPS on `demos` (one set per goal, each a
+/// condition) in process ([`run_iterations`]), writing `mdgps_log.csv` and a checkpoint before
+/// every iteration into `out` (`learner train --algo mdgps`).
+pub fn train_mdgps(
+    cfg: &MdgpsConfig,
+    demos: Vec<Demos>,
+    out: &Path,
+    mut progress: impl FnMut(&MdgpsLog),
+) -> Result<Vec<MdgpsLog>, RunError> {
+    let mut run = Mdgps::new(cfg.clone(), demos)?;
+    let arm = arm_for(&run)?;
+    run_iterations(
+        &mut run,
+        &arm,
+        cfg.lqr_gaifo.iterations,
+        Some(out),
         |l, _| progress(l),
     )
+}
+
+/// Continues the MDGPS run whose checkpoints are in `dir` ([`resume_mdgps`], the arm's noise
+/// stream where the checkpoint left it) up to `cfg.lqr_gaifo.iterations` in all, as
+/// [`train_resumed`] continues an LQR+GAIfO run: the checkpoints and CSV rows (timing columns
+/// aside) are the uninterrupted run's bit for bit.
+pub fn train_mdgps_resumed(
+    cfg: &MdgpsConfig,
+    demos: Vec<Demos>,
+    dir: &Path,
+    mut progress: impl FnMut(&MdgpsLog),
+) -> Result<Vec<MdgpsLog>, RunError> {
+    let (run, arm_noise) = resume_mdgps(cfg.clone(), demos, dir)?;
+    continue_run(run, arm_noise, dir, cfg.lqr_gaifo.iterations, |l, _| {
+        progress(l)
+    })
 }
 
 /// Trains the expert of `cfg` on a fresh in-process arm ([`imitation::expert::train`]).
 pub fn expert(
     cfg: &ExpertConfig,
     progress: impl FnMut(&IterationLog),
-) -> anyhow::Result<ExpertRun> {
-    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).context("building the simulated arm")?;
+) -> Result<ExpertRun, RunError> {
+    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).map_err(RunError::Arm)?;
     Ok(train_expert(cfg, &arm, progress)?)
 }
 
 /// Records `cfg.demos` demonstrations of `run`'s best controller on a fresh in-process arm
 /// ([`imitation::expert::record_demos`]).
-pub fn demos(cfg: &ExpertConfig, run: &ExpertRun) -> anyhow::Result<Demos> {
-    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).context("building the simulated arm")?;
+pub fn demos(cfg: &ExpertConfig, run: &ExpertRun) -> Result<Demos, RunError> {
+    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).map_err(RunError::Arm)?;
     Ok(record_demos(cfg, &arm, &run.policy, run.cost_random)?)
 }
 
@@ -434,7 +602,7 @@ pub fn train_and_record(
     cfg: &ExpertConfig,
     out: &Path,
     progress: impl FnMut(&IterationLog),
-) -> anyhow::Result<ExpertSummary> {
+) -> Result<ExpertSummary, RunError> {
     use std::io::Write;
     let run = expert(cfg, progress)?;
     crate::io::create_dir(out)?;
@@ -445,11 +613,10 @@ pub fn train_and_record(
         cfg.task.dt,
     )?;
     let log_path = out.join("expert_log.csv");
-    let mut csv = std::fs::File::create(&log_path)?;
-    writeln!(csv, "{EXPERT_CSV_HEADER}")?;
-    for l in &run.log {
-        write_record(&mut csv, l)?;
-    }
+    let mut csv = std::fs::File::create(&log_path).map_err(IoError::file("creating", &log_path))?;
+    writeln!(csv, "{EXPERT_CSV_HEADER}")
+        .and_then(|()| run.log.iter().try_for_each(|l| write_record(&mut csv, l)))
+        .map_err(IoError::file("writing", &log_path))?;
     let demos = demos(cfg, &run)?;
     let demos_path = out.join("demos.npz");
     crate::io::demos::save(&demos, &demos_path)?;

@@ -73,7 +73,7 @@ fn read_input(input: &Path) -> anyhow::Result<Trajectories> {
             }
         }
     }
-    foreign::from_episodes(input)
+    Ok(foreign::from_episodes(input)?)
 }
 
 /// `path` made absolute with its symbolic links resolved, also when it does not exist yet

@@ -40,7 +40,9 @@ pub struct ExpertArgs {
 pub(super) fn train_with_progress(c: &ExpertConfig, out: &Path) -> anyhow::Result<ExpertSummary> {
     eprintln!("{}", IterationLog::PROGRESS_HEADER);
     let bar = crate::progress::Progress::new(c.iterations as u64, "iterations");
-    train_and_record(c, out, |l| bar.done_one(&l.progress_line()))
+    Ok(train_and_record(c, out, |l| {
+        bar.done_one(&l.progress_line())
+    })?)
 }
 
 /// The expert's closing line: its best cost, final distance and the `demos` recorded.

@@ -24,7 +24,9 @@ use rayon::prelude::*;
 use ur5_shared::config::Perturbation;
 
 use super::summary::{summary_text, write_outputs, SummaryRow};
+use super::ExperimentError;
 use super::{expert_demos, pool, ExperimentConfig, ExperimentName, Run};
+use crate::error::ensure;
 use crate::io::log::read_gaifo_csv;
 use crate::process::{sibling, Spawned};
 use crate::progress::Progress;
@@ -34,7 +36,7 @@ use imitation::demos::Demos;
 const GRACE: Duration = Duration::from_secs(3);
 
 /// `v` as a TOML value.
-fn value<T: serde::Serialize>(v: &T) -> anyhow::Result<toml::Value> {
+fn value<T: serde::Serialize>(v: &T) -> Result<toml::Value, ExperimentError> {
     Ok(toml::Value::try_from(v)?)
 }
 
@@ -57,7 +59,7 @@ fn csv_rows(path: &Path) -> u64 {
 
 impl IpcRun<'_> {
     /// The run; `progress` counts its iterations as its learner logs them.
-    fn run(&self, progress: &Progress) -> anyhow::Result<Run> {
+    fn run(&self, progress: &Progress) -> Result<Run, ExperimentError> {
         let t0 = Instant::now();
         let cfg = self.cfg;
         let dir = &self.dir;
@@ -72,7 +74,7 @@ impl IpcRun<'_> {
         let table = |pairs: Vec<(&str, toml::Value)>| -> toml::Value {
             toml::Value::Table(pairs.into_iter().map(|(k, v)| (k.to_string(), v)).collect())
         };
-        let write = |name: &str, v: toml::Value| -> anyhow::Result<String> {
+        let write = |name: &str, v: toml::Value| -> Result<String, ExperimentError> {
             let p = dir.join(name);
             std::fs::write(&p, toml::to_string(&v)?)?;
             Ok(p.display().to_string())
@@ -167,31 +169,37 @@ impl IpcRun<'_> {
                 progress.inc((cfg.iterations as u64).saturating_sub(logged));
                 break st;
             }
-            anyhow::ensure!(
+            ensure!(
                 t0.elapsed() < limit,
-                "{} seed {}: learner still running after {:.0} s (log: {})",
-                self.arm,
-                self.seed,
-                limit.as_secs_f64(),
-                dir.join("learner.log").display()
+                ExperimentError::Ipc(format!(
+                    "{} seed {}: learner still running after {:.0} s (log: {})",
+                    self.arm,
+                    self.seed,
+                    limit.as_secs_f64(),
+                    dir.join("learner.log").display()
+                ))
             );
             std::thread::sleep(Duration::from_millis(200));
         };
-        anyhow::ensure!(
+        ensure!(
             status.success(),
-            "{} seed {}: learner serve failed ({status}); log: {}",
-            self.arm,
-            self.seed,
-            dir.join("learner.log").display()
+            ExperimentError::Ipc(format!(
+                "{} seed {}: learner serve failed ({status}); log: {}",
+                self.arm,
+                self.seed,
+                dir.join("learner.log").display()
+            ))
         );
         let logs = read_gaifo_csv(&out.join("gaifo_log.csv"))?;
-        anyhow::ensure!(
+        ensure!(
             logs.len() >= cfg.iterations,
-            "{} seed {}: {} of {} iterations logged",
-            self.arm,
-            self.seed,
-            logs.len(),
-            cfg.iterations
+            ExperimentError::Ipc(format!(
+                "{} seed {}: {} of {} iterations logged",
+                self.arm,
+                self.seed,
+                logs.len(),
+                cfg.iterations
+            ))
         );
         Ok(Run {
             variant: self.arm.to_string(),
@@ -211,7 +219,7 @@ pub fn run(
     cfg: &ExperimentConfig,
     out: &Path,
     demos: Option<&Path>,
-) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+) -> Result<(Vec<Run>, Vec<SummaryRow>), ExperimentError> {
     let name = ExperimentName::SimVsPhysical;
     cfg.validate(name)?;
     let pool = pool(cfg.threads)?;
@@ -292,7 +300,7 @@ pub fn run(
                 ));
                 Ok(r)
             })
-            .collect::<anyhow::Result<Vec<_>>>()
+            .collect::<Result<Vec<_>, ExperimentError>>()
     })?;
     drop(progress);
     let rows = write_outputs(

@@ -30,12 +30,17 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::Context;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use imitation::demos::Demos;
-use imitation::expert::{square_goals, ExpertConfig};
+
+mod error;
+
+pub use error::ExperimentError;
+
+use crate::error::ensure;
+use imitation::expert::ExpertConfig;
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
 use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 
@@ -49,6 +54,11 @@ pub mod shard;
 pub mod summary;
 
 pub use summary::{csv_header, summarise, summary_text, write_outputs, SummaryRow};
+
+mod demos;
+
+use demos::demos_for;
+pub use demos::{combine_demos, expert_demos, experts_at, generalisation_demos, subset};
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
@@ -174,7 +184,7 @@ pub const ABLATION_VARIANTS: [(&str, &str); 4] = [
 ];
 
 /// `base` changed as ablation variant `name` says ([`ABLATION_VARIANTS`]).
-pub fn ablation_variant(name: &str, base: &GaifoConfig) -> anyhow::Result<GaifoConfig> {
+pub fn ablation_variant(name: &str, base: &GaifoConfig) -> Result<GaifoConfig, ExperimentError> {
     use imitation::discriminator::PenaltySpace;
     let mut c = base.clone();
     match name {
@@ -186,14 +196,17 @@ pub fn ablation_variant(name: &str, base: &GaifoConfig) -> anyhow::Result<GaifoC
             c.discriminator.penalty_space = PenaltySpace::Raw;
             c.critic_lr_half_life = 0.0;
         }
-        _ => anyhow::bail!(
-            "unknown ablation variant `{name}`; known: {}",
-            ABLATION_VARIANTS
-                .iter()
-                .map(|(n, _)| *n)
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
+        _ => {
+            return Err(ExperimentError::Settings(format!(
+                "unknown ablation variant `{name}`; known: {}",
+                ABLATION_VARIANTS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+            .into())
+        }
     }
     Ok(c)
 }
@@ -268,53 +281,74 @@ impl ExperimentConfig {
     }
 
     /// Checks the settings an experiment needs.
-    pub fn validate(&self, name: ExperimentName) -> anyhow::Result<()> {
-        anyhow::ensure!(self.seeds >= 1, "seeds must be >= 1");
-        anyhow::ensure!(self.iterations >= 1, "iterations must be >= 1");
+    pub fn validate(&self, name: ExperimentName) -> Result<(), ExperimentError> {
+        ensure!(
+            self.seeds >= 1,
+            ExperimentError::Settings("seeds must be >= 1".into())
+        );
+        ensure!(
+            self.iterations >= 1,
+            ExperimentError::Settings("iterations must be >= 1".into())
+        );
         for a in &self.algorithms {
-            anyhow::ensure!(
+            ensure!(
                 ALGORITHMS.contains(&a.as_str()),
-                "algorithms: unknown `{a}`; known: {}",
-                ALGORITHMS.join(", ")
+                ExperimentError::Settings(format!(
+                    "algorithms: unknown `{a}`; known: {}",
+                    ALGORITHMS.join(", ")
+                ))
             );
         }
-        anyhow::ensure!(
+        ensure!(
             (1..=GaifoConfig::MAX_COUNT).contains(&self.ppo_converged_samples),
-            "ppo_converged_samples = {}: must be in 1..={}",
-            self.ppo_converged_samples,
-            GaifoConfig::MAX_COUNT
+            ExperimentError::Settings(format!(
+                "ppo_converged_samples = {}: must be in 1..={}",
+                self.ppo_converged_samples,
+                GaifoConfig::MAX_COUNT
+            ))
         );
         if name == ExperimentName::Comparison {
-            anyhow::ensure!(!self.algorithms.is_empty(), "algorithms is empty");
+            ensure!(
+                !self.algorithms.is_empty(),
+                ExperimentError::Settings("algorithms is empty".into())
+            );
         }
         if name == ExperimentName::Stability {
-            anyhow::ensure!(
+            ensure!(
                 !self.critic_steps.is_empty() && self.critic_steps.iter().all(|&n| n >= 1),
-                "critic_steps must list numbers >= 1, got {:?}",
-                self.critic_steps
+                ExperimentError::Settings(format!(
+                    "critic_steps must list numbers >= 1, got {:?}",
+                    self.critic_steps
+                ))
             );
         }
         if name == ExperimentName::Ablation {
-            anyhow::ensure!(
+            ensure!(
                 !self.ablation_variants.is_empty(),
-                "ablation_variants is empty"
+                ExperimentError::Settings("ablation_variants is empty".into())
             );
             for v in &self.ablation_variants {
                 ablation_variant(v, &self.lqr_gaifo)?;
             }
         }
         if name == ExperimentName::MultiGoal {
-            anyhow::ensure!(self.demos_per_point >= 1, "demos_per_point must be >= 1");
-            anyhow::ensure!(
-                self.eval_outside_margin > 0.0 && self.eval_outside_margin <= 1.0,
-                "eval_outside_margin = {}: must be in (0, 1] m",
-                self.eval_outside_margin
+            ensure!(
+                self.demos_per_point >= 1,
+                ExperimentError::Settings("demos_per_point must be >= 1".into())
             );
-            anyhow::ensure!(
+            ensure!(
+                self.eval_outside_margin > 0.0 && self.eval_outside_margin <= 1.0,
+                ExperimentError::Settings(format!(
+                    "eval_outside_margin = {}: must be in (0, 1] m",
+                    self.eval_outside_margin
+                ))
+            );
+            ensure!(
                 self.eval_inside <= 1000 && self.eval_outside <= 1000,
-                "eval_inside = {}, eval_outside = {}: each must be in 0..=1000",
-                self.eval_inside,
-                self.eval_outside
+                ExperimentError::Settings(format!(
+                    "eval_inside = {}, eval_outside = {}: each must be in 0..=1000",
+                    self.eval_inside, self.eval_outside
+                ))
             );
             imitation::mdgps::MdgpsConfig {
                 lqr_gaifo: self.lqr_gaifo.clone(),
@@ -324,23 +358,30 @@ impl ExperimentConfig {
             .validate()?;
         }
         if name == ExperimentName::Generalisation {
-            anyhow::ensure!(
+            ensure!(
                 !self.subset_sizes.is_empty()
                     && self.subset_sizes.iter().all(|k| (1..=8).contains(k)),
-                "subset_sizes must be numbers of square points in 1..=8, got {:?}",
-                self.subset_sizes
+                ExperimentError::Settings(format!(
+                    "subset_sizes must be numbers of square points in 1..=8, got {:?}",
+                    self.subset_sizes
+                ))
             );
-            anyhow::ensure!(self.demos_per_point >= 1, "demos_per_point must be >= 1");
+            ensure!(
+                self.demos_per_point >= 1,
+                ExperimentError::Settings("demos_per_point must be >= 1".into())
+            );
         }
-        anyhow::ensure!(
+        ensure!(
             (1..=GaifoConfig::MAX_COUNT).contains(&self.physical_expert_iterations),
-            "physical_expert_iterations = {}: must be in 1..={}",
-            self.physical_expert_iterations,
-            GaifoConfig::MAX_COUNT
+            ExperimentError::Settings(format!(
+                "physical_expert_iterations = {}: must be in 1..={}",
+                self.physical_expert_iterations,
+                GaifoConfig::MAX_COUNT
+            ))
         );
-        anyhow::ensure!(
+        ensure!(
             self.time_compression > 0.0 && self.time_compression.is_finite(),
-            "time_compression must be > 0"
+            ExperimentError::Settings("time_compression must be > 0".into())
         );
         self.expert.task.validate()?;
         self.expert.sim.validate()?;
@@ -409,7 +450,7 @@ impl Job {
     }
 
     /// Runs the job in this thread.
-    pub fn run(&self) -> anyhow::Result<Run> {
+    pub fn run(&self) -> Result<Run, ExperimentError> {
         let t0 = Instant::now();
         let demos = (*self.demos).clone();
         let (seed, algo) = (self.seed(), self.algorithm());
@@ -442,17 +483,19 @@ impl Job {
 }
 
 /// A rayon pool of `threads` workers (0 = one per core).
-pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
-    anyhow::ensure!(
+pub fn pool(threads: usize) -> Result<rayon::ThreadPool, ExperimentError> {
+    ensure!(
         threads <= MAX_THREADS,
-        "--threads {threads}: must be 0 (one per core) to {MAX_THREADS}; this machine has {} \
+        ExperimentError::Settings(format!(
+            "--threads {threads}: must be 0 (one per core) to {MAX_THREADS}; this machine has {} \
          cores",
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        ))
     );
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
-        .context("building the worker pool")
+        .map_err(ExperimentError::from)
 }
 
 /// Most worker threads a pool may have (`--threads`, `threads`): far above any core count we
@@ -461,7 +504,7 @@ pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {
 pub const MAX_THREADS: usize = 1024;
 
 /// Runs every job on `pool`, printing one line per finished job; results in job order.
-pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Run>> {
+pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> Result<Vec<Run>, ExperimentError> {
     let done = AtomicUsize::new(0);
     let t0 = Instant::now();
     let total = jobs.len();
@@ -469,8 +512,9 @@ pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Ru
     pool.install(|| {
         jobs.par_iter()
             .map(|job| {
-                let run = job.run().with_context(|| {
-                    format!("{} seed {} ({})", job.variant, job.seed(), job.algorithm())
+                let run = job.run().map_err(|e| ExperimentError::Job {
+                    label: format!("{} seed {} ({})", job.variant, job.seed(), job.algorithm()),
+                    source: Box::new(e),
                 })?;
                 let k = done.fetch_add(1, Ordering::Relaxed) + 1;
                 let last = run.logs.last().map(|l| l.performance).unwrap_or(f64::NAN);
@@ -487,56 +531,6 @@ pub fn run_jobs(pool: &rayon::ThreadPool, jobs: &[Job]) -> anyhow::Result<Vec<Ru
             })
             .collect()
     })
-}
-
-/// Trains `cfg` (an expert) and records `cfg.demos` demonstrations, with one progress line.
-pub fn expert_demos(cfg: &ExpertConfig) -> anyhow::Result<Demos> {
-    let t0 = Instant::now();
-    let run = crate::run::expert(cfg, |_| {})?;
-    let demos = crate::run::demos(cfg, &run)?;
-    eprintln!(
-        "expert for goal {:?}: {} demonstrations, mean cost {:.4} (random {:.4}), {:.0} s",
-        cfg.task.goal,
-        demos.count,
-        demos.cost_expert,
-        demos.cost_random,
-        t0.elapsed().as_secs_f64()
-    );
-    Ok(demos)
-}
-
-/// The demonstration set of the generalisation experiment for the square points `points`:
-/// their state trajectories, with the task (goal, start, T, dt) and the normalisation costs of
-/// `centre` (the target nobody demonstrated).
-pub fn combine_demos(centre: &Demos, points: &[&Demos]) -> anyhow::Result<Demos> {
-    anyhow::ensure!(!points.is_empty(), "no demonstrations to combine");
-    let mut out = Demos {
-        states: Vec::new(),
-        actions: Vec::new(),
-        count: 0,
-        ..centre.clone()
-    };
-    for d in points {
-        anyhow::ensure!(
-            d.horizon == centre.horizon && d.dt == centre.dt && d.start_q == centre.start_q,
-            "demonstrations of goal {:?} have another T, dt or start pose than the centre's",
-            d.goal
-        );
-        out.states.extend_from_slice(&d.states);
-        out.actions.extend_from_slice(&d.actions);
-        out.count += d.count;
-    }
-    Ok(out)
-}
-
-/// Square points demonstrated by a set of `k` (1…8): spread evenly around the square (the
-/// points are in order around it, corners and mid-edges alternating), starting at the first
-/// corner, so that every set of two or more surrounds the centre as evenly as `k` allows:
-/// indices `round(i · 8 / k)`, i = 0…k−1.
-pub fn subset(k: usize) -> Vec<usize> {
-    (0..k)
-        .map(|i| ((i * 8) as f64 / k as f64).round() as usize % 8)
-        .collect()
 }
 
 /// Jobs of the comparison: every algorithm × seed on `demos`.
@@ -587,74 +581,6 @@ pub fn lqr_jobs(cfg: &ExperimentConfig, variant: &str, demos: Arc<Demos>) -> Vec
         .collect()
 }
 
-/// Loads `path` or trains the expert of `cfg.expert` and saves its demonstrations as
-/// `out/demos.npz`.
-fn demos_for(cfg: &ExperimentConfig, path: Option<&Path>, out: &Path) -> anyhow::Result<Demos> {
-    if let Some(p) = path {
-        let d = crate::io::demos::load_checked(p, &cfg.lqr_gaifo.sim)?;
-        eprintln!(
-            "demonstrations: {} ({} of goal {:?})",
-            p.display(),
-            d.count,
-            d.goal
-        );
-        return Ok(d);
-    }
-    let d = expert_demos(&cfg.expert)?;
-    crate::io::create_dir(out)?;
-    crate::io::demos::save(&d, &out.join("demos.npz"))?;
-    Ok(d)
-}
-
-/// Trains one expert per `(goal, demonstrations)` of `wanted` (`cfg` with that goal and that
-/// many demonstrations), in parallel on `pool`; results in order.
-pub fn experts_at(
-    cfg: &ExpertConfig,
-    pool: &rayon::ThreadPool,
-    wanted: &[([f64; 3], usize)],
-) -> anyhow::Result<Vec<Demos>> {
-    pool.install(|| {
-        wanted
-            .par_iter()
-            .map(|&(g, n)| {
-                let mut e = cfg.clone();
-                e.task.goal = g;
-                e.demos = n;
-                expert_demos(&e)
-            })
-            .collect()
-    })
-}
-
-/// The generalisation experiment's demonstration sets: trains the centre expert and the 8
-/// square experts (in parallel), saves them under `out/experts/`, returns one set per subset
-/// size.
-pub fn generalisation_demos(
-    cfg: &ExperimentConfig,
-    pool: &rayon::ThreadPool,
-    out: &Path,
-) -> anyhow::Result<Vec<(usize, Demos)>> {
-    let centre_goal = cfg.expert.task.goal;
-    let mut wanted = vec![(centre_goal, cfg.expert.demos)];
-    wanted.extend(
-        square_goals(centre_goal, cfg.expert.square_half_side).map(|g| (g, cfg.demos_per_point)),
-    );
-    let experts = experts_at(&cfg.expert, pool, &wanted)?;
-    let dir = out.join("experts");
-    crate::io::create_dir(&dir)?;
-    crate::io::demos::save(&experts[0], &dir.join("centre.npz"))?;
-    for (i, d) in experts[1..].iter().enumerate() {
-        crate::io::demos::save(d, &dir.join(format!("point_{i}.npz")))?;
-    }
-    cfg.subset_sizes
-        .iter()
-        .map(|&k| {
-            let pts: Vec<&Demos> = subset(k).into_iter().map(|i| &experts[1 + i]).collect();
-            Ok((k, combine_demos(&experts[0], &pts)?))
-        })
-        .collect()
-}
-
 /// Runs an in-process experiment (`comparison`, `generalisation`, `stability`) and writes its
 /// outputs; `demos` replaces training the expert (comparison and stability).
 pub fn run(
@@ -662,7 +588,7 @@ pub fn run(
     cfg: &ExperimentConfig,
     out: &Path,
     demos: Option<&Path>,
-) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+) -> Result<(Vec<Run>, Vec<SummaryRow>), ExperimentError> {
     run_sharded(name, cfg, out, demos, None)
 }
 
@@ -674,7 +600,7 @@ pub fn run_sharded(
     out: &Path,
     demos: Option<&Path>,
     shard: Option<shard::Shard>,
-) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
+) -> Result<(Vec<Run>, Vec<SummaryRow>), ExperimentError> {
     cfg.validate(name)?;
     let pool = pool(cfg.threads)?;
     eprintln!(
@@ -726,9 +652,12 @@ pub fn run_sharded(
             )
         }
         ExperimentName::Generalisation => {
-            anyhow::ensure!(
+            ensure!(
                 demos.is_none(),
-                "--demos does not apply to the generalisation experiment (it trains 9 experts)"
+                ExperimentError::Settings(
+                    "--demos does not apply to the generalisation experiment (it trains 9 experts)"
+                        .into()
+                )
             );
             let sets = generalisation_demos(cfg, &pool, out)?;
             let mut jobs = Vec::new();
@@ -742,8 +671,23 @@ pub fn run_sharded(
                     .to_string(),
             )
         }
-        ExperimentName::SimVsPhysical | ExperimentName::MultiGoal | ExperimentName::Pilqr => {
-            anyhow::bail!("{} has its own runner", name.as_str())
+        ExperimentName::SimVsPhysical => {
+            return Err(ExperimentError::Settings(
+                "sim-vs-physical runs over IPC: learner::experiment::ipc::run".into(),
+            )
+            .into())
+        }
+        ExperimentName::MultiGoal => {
+            return Err(ExperimentError::Settings(
+                "multi-goal has its own outputs: learner::experiment::multi_goal::run".into(),
+            )
+            .into())
+        }
+        ExperimentName::Pilqr => {
+            return Err(ExperimentError::Settings(
+                "pilqr has its own outputs: learner::experiment::pilqr::run".into(),
+            )
+            .into())
         }
     };
     let total = jobs.len();

@@ -17,7 +17,8 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::Context;
+use super::ExperimentError;
+use crate::error::ensure;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -34,6 +35,7 @@ use ur5_shared::config::TaskConfig;
 
 use super::{combine_demos, experts_at, pool, ExperimentConfig};
 use crate::arm::SimArm;
+use crate::io::log::MdgpsRow;
 use crate::io::policy::{save_policy, PolicyFile};
 use crate::plot::{mean_stderr, plot_panels, Panel, Series};
 
@@ -133,7 +135,7 @@ pub fn evaluate(
     policy: &mut dyn Policy,
     goals: &[EvalGoal],
     experts: &[Demos],
-) -> anyhow::Result<Vec<GoalResult>> {
+) -> Result<Vec<GoalResult>, ExperimentError> {
     goals
         .iter()
         .zip(experts)
@@ -164,7 +166,7 @@ fn run_mdgps(
     experts: &[Demos],
     out: &Path,
     progress: &Progress,
-) -> anyhow::Result<MethodRun> {
+) -> Result<MethodRun, ExperimentError> {
     let mut c = MdgpsConfig {
         lqr_gaifo: cfg.lqr_gaifo.clone(),
         kl_step: cfg.mdgps_kl_step,
@@ -216,7 +218,7 @@ fn run_lqr_centre(
     goals: &[EvalGoal],
     experts: &[Demos],
     progress: &Progress,
-) -> anyhow::Result<MethodRun> {
+) -> Result<MethodRun, ExperimentError> {
     let mut c = cfg.lqr_gaifo.clone();
     c.seed = seed;
     c.iterations = cfg.iterations;
@@ -388,29 +390,7 @@ struct CsvRow<'a> {
     final_distance_m: f64,
 }
 
-/// One CSV row of `mdgps_log.csv`.
-#[derive(Serialize)]
-struct LogRow {
-    seed: u64,
-    iteration: usize,
-    mean_performance_at_conditions: f64,
-    mean_final_distance_m_at_conditions: f64,
-    mean_controller_cost: f64,
-    critic_loss: f64,
-    wasserstein: f64,
-    kl: f64,
-    eta: f64,
-    s_loss_before: f64,
-    s_loss_after: f64,
-    t_execute_s: f64,
-    t_dynamics_s: f64,
-    t_critic_s: f64,
-    t_cost_s: f64,
-    t_lqr_s: f64,
-    t_policy_s: f64,
-}
-
-fn write_csvs(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()> {
+fn write_csvs(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> Result<(), ExperimentError> {
     let mut w = csv::Writer::from_path(out.join("multi-goal.csv"))?;
     for r in runs {
         for (i, ev) in r.evals.iter().enumerate() {
@@ -435,26 +415,7 @@ fn write_csvs(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Res
     let mut w = csv::Writer::from_path(out.join("mdgps_log.csv"))?;
     for r in runs {
         for l in &r.mdgps_logs {
-            w.serialize(LogRow {
-                seed: r.seed,
-                iteration: l.iteration,
-                mean_performance_at_conditions: l.mean_performance(),
-                mean_final_distance_m_at_conditions: l.mean_final_distance(),
-                mean_controller_cost: l.controller_cost.iter().sum::<f64>()
-                    / l.controller_cost.len().max(1) as f64,
-                critic_loss: l.critic_loss,
-                wasserstein: l.wasserstein,
-                kl: l.kl,
-                eta: l.eta,
-                s_loss_before: l.s_loss_before,
-                s_loss_after: l.s_loss_after,
-                t_execute_s: l.t_execute,
-                t_dynamics_s: l.t_dynamics,
-                t_critic_s: l.t_critic,
-                t_cost_s: l.t_cost,
-                t_lqr_s: l.t_lqr,
-                t_policy_s: l.t_policy,
-            })?;
+            w.serialize(MdgpsRow::new(l, r.seed))?;
         }
     }
     w.flush()?;
@@ -463,7 +424,7 @@ fn write_csvs(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Res
 
 /// Curves per (method, kind): per seed the mean over that kind's goals after each iteration,
 /// then mean ± s.e. over seeds.
-fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()> {
+fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> Result<(), ExperimentError> {
     let curves = |f: fn(&GoalResult) -> f64| -> Vec<Series> {
         let mut v = Vec::new();
         for method in METHODS {
@@ -498,7 +459,7 @@ fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()
         v
     };
     let (perf, dist) = (curves(|g| g.performance), curves(|g| g.final_distance_m));
-    plot_panels(
+    Ok(plot_panels(
         &out.join("multi-goal.png"),
         "One MDGPS policy vs the centre's LQR+GAIfO controller, never-demonstrated goals",
         "iterations done",
@@ -515,7 +476,7 @@ fn plot(runs: &[MethodRun], goals: &[EvalGoal], out: &Path) -> anyhow::Result<()
             },
         ],
         (1000, 1100),
-    )
+    )?)
 }
 
 /// The experts of `wanted` from `dir` (the `experts/` folder of an earlier run: `names[i]`
@@ -525,21 +486,15 @@ fn load_experts(
     dir: &Path,
     wanted: &[([f64; 3], usize)],
     names: &[String],
-) -> anyhow::Result<Vec<Demos>> {
+) -> Result<Vec<Demos>, ExperimentError> {
     wanted
         .iter()
         .zip(names)
         .map(|(&(goal, n), name)| {
             let p = dir.join(name);
             let d = crate::io::demos::load_checked(&p, &cfg.lqr_gaifo.sim)?;
-            anyhow::ensure!(
-                d.goal == goal && d.count == n,
-                "{}: {} demonstrations of goal {:?}, this run needs {n} of goal {goal:?} (another \
-                 square, eval_seed or demos count: train the experts again without --demos)",
-                p.display(),
-                d.count,
-                d.goal
-            );
+            ensure!(d.goal == goal && d.count == n, ExperimentError::Settings(format!("{}: {} demonstrations of goal {:?}, this run needs {n} of goal {goal:?} (another \
+                 square, eval_seed or demos count: train the experts again without --demos)", p.display(), d.count, d.goal)));
             Ok(d)
         })
         .collect()
@@ -551,7 +506,7 @@ pub fn run(
     cfg: &ExperimentConfig,
     out: &Path,
     experts: Option<&Path>,
-) -> anyhow::Result<Vec<MultiGoalRow>> {
+) -> Result<Vec<MultiGoalRow>, ExperimentError> {
     cfg.validate(super::ExperimentName::MultiGoal)?;
     let pool = pool(cfg.threads)?;
     let t0 = Instant::now();
@@ -623,9 +578,12 @@ pub fn run(
                 } else {
                     run_lqr_centre(cfg, seed, &centre_set, &goals, &norm, &progress)
                 };
-                r.with_context(|| format!("{} seed {seed}", METHODS[m]))
+                r.map_err(|e| ExperimentError::Job {
+                    label: format!("{} seed {seed}", METHODS[m]),
+                    source: Box::new(e),
+                })
             })
-            .collect::<anyhow::Result<Vec<_>>>()
+            .collect::<Result<Vec<_>, ExperimentError>>()
     })?;
     drop(progress);
     write_csvs(&runs, &goals, out)?;

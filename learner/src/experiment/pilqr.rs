@@ -19,7 +19,6 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Context;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -28,8 +27,9 @@ use imitation::demos::Demos;
 use imitation::gaifo::GaifoLog;
 
 use super::summary::by_variant;
-use super::{pool, write_outputs, ExperimentConfig, Run};
+use super::{pool, write_outputs, ExperimentConfig, ExperimentError, Run};
 use crate::arm::SimArm;
+use crate::error::ensure;
 
 /// Goals spread over the UR5's workspace away from the default one (m, base frame), named
 /// for the experiments that test precision beyond the goal the defaults were tuned on. The
@@ -83,22 +83,27 @@ impl Default for PilqrExperimentConfig {
 
 impl PilqrExperimentConfig {
     /// Checks the names.
-    pub fn validate(&self) -> anyhow::Result<()> {
+    pub fn validate(&self) -> Result<(), ExperimentError> {
+        let bad = |m: String| ExperimentError::Settings(m);
         for l in &self.learners {
-            anyhow::ensure!(
+            ensure!(
                 ["expert", "lqr-gaifo"].contains(&l.as_str()),
-                "pilqr.learners: unknown `{l}`; known: expert, lqr-gaifo"
+                bad(format!(
+                    "pilqr.learners: unknown `{l}`; known: expert, lqr-gaifo"
+                ))
             );
         }
         for a in &self.arms {
-            anyhow::ensure!(
+            ensure!(
                 ["nominal", "perturbed"].contains(&a.as_str()),
-                "pilqr.arms: unknown `{a}`; known: nominal, perturbed"
+                bad(format!(
+                    "pilqr.arms: unknown `{a}`; known: nominal, perturbed"
+                ))
             );
         }
-        anyhow::ensure!(
+        ensure!(
             !self.learners.is_empty() && !self.arms.is_empty() && !self.methods.is_empty(),
-            "pilqr.learners, arms and methods must each name at least one"
+            bad("pilqr.learners, arms and methods must each name at least one".into())
         );
         Ok(())
     }
@@ -132,7 +137,7 @@ struct Job {
 }
 
 /// Runs the experiment into `out`; returns the runs.
-pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<Run>> {
+pub fn run(cfg: &ExperimentConfig, out: &Path) -> Result<Vec<Run>, ExperimentError> {
     let p = &cfg.pilqr;
     p.validate()?;
     let goals = p.goal_list(cfg.expert.task.goal);
@@ -177,7 +182,7 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<Run>> {
                     e.task.goal = g;
                     super::expert_demos(&e).map(Some)
                 })
-                .collect::<anyhow::Result<Vec<_>>>()
+                .collect::<Result<Vec<_>, ExperimentError>>()
         })?
     } else {
         vec![None; goals.len()]
@@ -226,7 +231,7 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<Run>> {
                     err,
                 ))
             })
-            .collect::<anyhow::Result<Vec<_>>>()
+            .collect::<Result<Vec<_>, ExperimentError>>()
     })?;
     let failed: Vec<(Run, String)> = results
         .iter()
@@ -236,10 +241,9 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<Run>> {
         .into_iter()
         .filter_map(|(r, e)| e.is_none().then_some(r))
         .collect();
-    anyhow::ensure!(
+    ensure!(
         !runs.is_empty(),
-        "every run failed; the first: {}",
-        failed[0].1
+        ExperimentError::Settings(format!("every run failed; the first: {}", failed[0].1))
     );
     write_outputs(
         "pilqr",
@@ -272,7 +276,11 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> anyhow::Result<Vec<Run>> {
 type JobResult = (Vec<GaifoLog>, usize, usize, Option<String>);
 
 /// One expert run with every iteration logged (patience off).
-fn expert_job(cfg: &ExperimentConfig, j: &Job, goal: [f64; 3]) -> anyhow::Result<JobResult> {
+fn expert_job(
+    cfg: &ExperimentConfig,
+    j: &Job,
+    goal: [f64; 3],
+) -> Result<JobResult, ExperimentError> {
     let mut e = cfg.expert.clone();
     e.task.goal = goal;
     e.seed = j.seed;
@@ -282,7 +290,7 @@ fn expert_job(cfg: &ExperimentConfig, j: &Job, goal: [f64; 3]) -> anyhow::Result
     if j.arm == "perturbed" {
         e.sim.perturbation = cfg.physical.clone();
     }
-    let arm = SimArm::new(e.sim.clone(), e.task.dt).context("building the simulated arm")?;
+    let arm = SimArm::new(e.sim.clone(), e.task.dt)?;
     let mut logs = Vec::new();
     let res = imitation::expert::train(&e, &arm, |l| {
         logs.push(GaifoLog {
@@ -302,12 +310,12 @@ fn expert_job(cfg: &ExperimentConfig, j: &Job, goal: [f64; 3]) -> anyhow::Result
         logs,
         e.samples,
         e.task.horizon,
-        res.err().map(|e| e.to_string()),
+        res.err().map(|e| crate::error::line(&e)),
     ))
 }
 
 /// One LQR+GAIfO run on `demos`.
-fn gaifo_job(cfg: &ExperimentConfig, j: &Job, demos: Demos) -> anyhow::Result<JobResult> {
+fn gaifo_job(cfg: &ExperimentConfig, j: &Job, demos: Demos) -> Result<JobResult, ExperimentError> {
     let mut g = cfg.lqr_gaifo.clone();
     g.seed = j.seed;
     g.iterations = cfg.iterations;
@@ -322,7 +330,7 @@ fn gaifo_job(cfg: &ExperimentConfig, j: &Job, demos: Demos) -> anyhow::Result<Jo
         logs,
         g.samples,
         horizon,
-        res.err().map(|e| format!("{e:#}")),
+        res.err().map(|e| crate::error::line(&e)),
     ))
 }
 

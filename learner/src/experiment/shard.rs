@@ -8,7 +8,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use super::ExperimentError;
+use crate::error::ensure;
+use crate::io::IoError;
 use serde::{Deserialize, Serialize};
 
 use super::summary::write_outputs;
@@ -99,7 +101,10 @@ pub const SHARD_FILE: &str = "shard.json";
 
 /// [`ShardMeta::settings_hash`] of an experiment's settings `cfg` and its demonstrations'
 /// file (`None`: recorded by the experiment itself, from its settings).
-pub fn settings_hash(cfg: &impl Serialize, demos: Option<&Path>) -> anyhow::Result<String> {
+pub fn settings_hash(
+    cfg: &impl Serialize,
+    demos: Option<&Path>,
+) -> Result<String, ExperimentError> {
     let mut v = serde_json::to_value(cfg)?;
     if let Some(m) = v.as_object_mut() {
         m.remove("threads");
@@ -125,7 +130,7 @@ pub fn write_meta(
     indices: &[usize],
     runs: &[Run],
     settings_hash: String,
-) -> anyhow::Result<()> {
+) -> Result<(), ExperimentError> {
     let meta = ShardMeta {
         experiment: experiment.into(),
         title: title.into(),
@@ -148,29 +153,33 @@ pub fn write_meta(
             .collect(),
     };
     let path = out.join(SHARD_FILE);
-    std::fs::write(&path, serde_json::to_vec_pretty(&meta)?)
-        .with_context(|| format!("writing {}", path.display()))
+    let bytes = serde_json::to_vec_pretty(&meta)?;
+    std::fs::write(&path, bytes).map_err(|e| IoError::file("writing", &path)(e).into())
 }
 
 /// The rows of a shard's `<experiment>.csv`: (variant, log row) in file order.
-fn read_rows(path: &Path) -> anyhow::Result<Vec<(String, GaifoRow)>> {
-    let mut r =
-        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
-    let header = r.headers()?.clone();
-    anyhow::ensure!(
+fn read_rows(path: &Path) -> Result<Vec<(String, GaifoRow)>, ExperimentError> {
+    let mut r = csv::Reader::from_path(path).map_err(IoError::csv("reading", path))?;
+    let header = r.headers().map_err(IoError::csv("reading", path))?.clone();
+    ensure!(
         header.len() > 2 && &header[0] == "experiment" && &header[1] == "variant",
-        "{}: not an experiment CSV (header {:?})",
-        path.display(),
-        header
+        ExperimentError::Shards(format!(
+            "{}: not an experiment CSV (header {:?})",
+            path.display(),
+            header
+        ))
     );
     let tail: csv::StringRecord = header.iter().skip(2).collect();
     let mut rows = Vec::new();
     for (k, rec) in r.records().enumerate() {
-        let rec = rec.with_context(|| format!("{} row {}", path.display(), k + 2))?;
+        let at_row = |source| IoError::CsvRow {
+            path: path.to_owned(),
+            row: k + 2,
+            source,
+        };
+        let rec = rec.map_err(at_row)?;
         let fields: csv::StringRecord = rec.iter().skip(2).collect();
-        let row: GaifoRow = fields
-            .deserialize(Some(&tail))
-            .with_context(|| format!("{} row {}", path.display(), k + 2))?;
+        let row: GaifoRow = fields.deserialize(Some(&tail)).map_err(at_row)?;
         rows.push((rec[1].to_string(), row));
     }
     Ok(rows)
@@ -178,13 +187,15 @@ fn read_rows(path: &Path) -> anyhow::Result<Vec<(String, GaifoRow)>> {
 
 /// Checks that the shards `parts` ((K, folder) in the order given) are each of 1..=`n` once,
 /// naming every missing K and every K given more than once (with its folders).
-pub fn check_parts(parts: &[(usize, &Path)], n: usize) -> anyhow::Result<()> {
+pub fn check_parts(parts: &[(usize, &Path)], n: usize) -> Result<(), ExperimentError> {
     let mut by_k: Vec<Vec<&Path>> = vec![Vec::new(); n];
     for &(k, dir) in parts {
-        anyhow::ensure!(
+        ensure!(
             (1..=n).contains(&k),
-            "{}: shard {k}/{n} is no part of {n} (need 1 <= K <= N)",
-            dir.display()
+            ExperimentError::Shards(format!(
+                "{}: shard {k}/{n} is no part of {n} (need 1 <= K <= N)",
+                dir.display()
+            ))
         );
         by_k[k - 1].push(dir);
     }
@@ -212,11 +223,13 @@ pub fn check_parts(parts: &[(usize, &Path)], n: usize) -> anyhow::Result<()> {
             twice.join("; ")
         ));
     }
-    anyhow::ensure!(
+    ensure!(
         problems.is_empty(),
-        "merge needs every shard 1/{n} … {n}/{n} once: {} (run the missing shards; give each \
+        ExperimentError::Shards(format!(
+            "merge needs every shard 1/{n} … {n}/{n} once: {} (run the missing shards; give each \
          shard's folder once)",
-        problems.join("; ")
+            problems.join("; ")
+        ))
     );
     Ok(())
 }
@@ -224,52 +237,51 @@ pub fn check_parts(parts: &[(usize, &Path)], n: usize) -> anyhow::Result<()> {
 /// Joins the shards in `dirs` into `out`: checks that they are parts of one experiment that
 /// together hold every job once, puts their runs in the list's order and writes the
 /// experiment's outputs ([`write_outputs`]).
-pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<SummaryRow>)> {
-    anyhow::ensure!(!dirs.is_empty(), "merge: no shard folders given");
+pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(Vec<Run>, Vec<SummaryRow>), ExperimentError> {
+    ensure!(
+        !dirs.is_empty(),
+        ExperimentError::Shards("merge: no shard folders given".into())
+    );
     let mut all: Vec<(usize, Run)> = Vec::new();
     let mut first: Option<ShardMeta> = None;
     let mut parts: Vec<(usize, &Path)> = Vec::new();
     for dir in dirs {
         let path = dir.join(SHARD_FILE);
-        let text = std::fs::read(&path).with_context(|| {
-            format!(
-                "{}: not a shard (run `learner experiment NAME --shard K/N`)",
-                path.display()
-            )
+        let text = std::fs::read(&path).map_err(|source| ExperimentError::NotShard {
+            path: path.clone(),
+            source,
         })?;
-        let meta: ShardMeta =
-            serde_json::from_slice(&text).with_context(|| format!("reading {}", path.display()))?;
+        let meta: ShardMeta = serde_json::from_slice(&text).map_err(|source| IoError::Json {
+            path: path.clone(),
+            line: None,
+            source,
+        })?;
         if let Some(f) = &first {
-            anyhow::ensure!(
+            ensure!(
                 meta.experiment == f.experiment
                     && meta.jobs_total == f.jobs_total
                     && meta.shard.n == f.shard.n
                     && meta.title == f.title,
-                "{}: shard {}/{} of `{}` ({} jobs), not of the first's `{}` ({} jobs, N = {})",
-                dir.display(),
-                meta.shard.k,
-                meta.shard.n,
-                meta.experiment,
-                meta.jobs_total,
-                f.experiment,
-                f.jobs_total,
-                f.shard.n
+                ExperimentError::Shards(format!(
+                    "{}: shard {}/{} of `{}` ({} jobs), not of the first's `{}` ({} jobs, N = {})",
+                    dir.display(),
+                    meta.shard.k,
+                    meta.shard.n,
+                    meta.experiment,
+                    meta.jobs_total,
+                    f.experiment,
+                    f.jobs_total,
+                    f.shard.n
+                ))
             );
         }
         if let (Some(a), Some(b)) = (
             &meta.settings_hash,
             first.as_ref().and_then(|f| f.settings_hash.as_ref()),
         ) {
-            anyhow::ensure!(
-                a == b,
-                "{}: shard {}/{} ran other settings than {} (settings hash {a} there, {b} in the \
+            ensure!(a == b, ExperimentError::Shards(format!("{}: shard {}/{} ran other settings than {} (settings hash {a} there, {b} in the \
                  first shard): seeds, iterations, demonstrations or settings differ; merge the \
-                 shards of one experiment run",
-                dir.display(),
-                meta.shard.k,
-                meta.shard.n,
-                dirs[0].display()
-            );
+                 shards of one experiment run", dir.display(), meta.shard.k, meta.shard.n, dirs[0].display())));
         }
         parts.push((meta.shard.k, dir));
         // An empty shard (more shards than jobs) has no CSV.
@@ -285,19 +297,9 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<Summ
                 .filter(|(v, r)| *v == m.variant && r.seed == m.seed && r.algorithm == m.algorithm)
                 .map(|(_, r)| r.log())
                 .collect();
-            anyhow::ensure!(
-                !logs.is_empty() && m.iterations.is_none_or(|n| n == logs.len()),
-                "{}: {} rows for {} seed {} ({}), {} says {}: the CSV lost rows; run the shard \
-                 again",
-                csv.display(),
-                logs.len(),
-                m.variant,
-                m.seed,
-                m.algorithm,
-                SHARD_FILE,
-                m.iterations
-                    .map_or("it ran".to_string(), |n| format!("{n} iterations"))
-            );
+            ensure!(!logs.is_empty() && m.iterations.is_none_or(|n| n == logs.len()), ExperimentError::Shards(format!("{}: {} rows for {} seed {} ({}), {} says {}: the CSV lost rows; run the shard \
+                 again", csv.display(), logs.len(), m.variant, m.seed, m.algorithm, SHARD_FILE, m.iterations
+                    .map_or("it ran".to_string(), |n| format!("{n} iterations")))));
             all.push((
                 m.job,
                 Run {
@@ -317,11 +319,13 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> anyhow::Result<(Vec<Run>, Vec<Summ
     check_parts(&parts, meta.shard.n)?;
     all.sort_by_key(|(job, _)| *job);
     let jobs: Vec<usize> = all.iter().map(|(j, _)| *j).collect();
-    anyhow::ensure!(
+    ensure!(
         jobs == (0..meta.jobs_total).collect::<Vec<_>>(),
-        "the shards hold jobs {jobs:?} of 0..{}: each job exactly once is needed (a shard \
+        ExperimentError::Shards(format!(
+            "the shards hold jobs {jobs:?} of 0..{}: each job exactly once is needed (a shard \
          missing or given twice?)",
-        meta.jobs_total
+            meta.jobs_total
+        ))
     );
     let runs: Vec<Run> = all.into_iter().map(|(_, r)| r).collect();
     let rows = write_outputs(&meta.experiment, &meta.title, &runs, out)?;

@@ -3,7 +3,8 @@
 
 use std::path::Path;
 
-use anyhow::Context;
+use super::ExperimentError;
+use crate::io::IoError;
 use serde::Serialize;
 
 use super::Run;
@@ -336,13 +337,12 @@ pub fn write_outputs(
     title: &str,
     runs: &[Run],
     out: &Path,
-) -> anyhow::Result<Vec<SummaryRow>> {
+) -> Result<Vec<SummaryRow>, ExperimentError> {
     use std::io::Write;
     crate::io::create_dir(out)?;
     let csv_path = out.join(format!("{name}.csv"));
     let mut f = std::io::BufWriter::new(
-        std::fs::File::create(&csv_path)
-            .with_context(|| format!("creating {}", csv_path.display()))?,
+        std::fs::File::create(&csv_path).map_err(IoError::file("creating", &csv_path))?,
     );
     writeln!(f, "{}", csv_header())?;
     for r in runs {

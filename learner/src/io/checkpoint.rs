@@ -33,7 +33,7 @@ pub struct ExpertCheckpoint {
 }
 
 /// Writes the controller to execute next and where it stands (see the module docs).
-pub fn save_checkpoint(path: &Path, c: &ExpertCheckpoint, seed: u64) -> anyhow::Result<()> {
+pub fn save_checkpoint(path: &Path, c: &ExpertCheckpoint, seed: u64) -> Result<(), NpzError> {
     let mut w = NpzWriter::create(path)?;
     w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
     write_policy(&mut w, "", &c.pol)?;
@@ -56,7 +56,7 @@ pub fn save_checkpoint(path: &Path, c: &ExpertCheckpoint, seed: u64) -> anyhow::
     Ok(())
 }
 
-fn write_policy(w: &mut NpzWriter, prefix: &str, pol: &LinGaussPolicy) -> anyhow::Result<()> {
+fn write_policy(w: &mut NpzWriter, prefix: &str, pol: &LinGaussPolicy) -> Result<(), NpzError> {
     let (t, dx, du) = (pol.t as u64, pol.dx as u64, pol.du as u64);
     w.f64(&format!("{prefix}K"), &[t, du, dx], &pol.gain.data)?;
     w.f64(&format!("{prefix}k"), &[t, du], &pol.k.data)?;
@@ -70,21 +70,22 @@ fn write_policy(w: &mut NpzWriter, prefix: &str, pol: &LinGaussPolicy) -> anyhow
     Ok(())
 }
 
-fn read_policy(f: &NpzFile, path: &Path, prefix: &str) -> anyhow::Result<LinGaussPolicy> {
+fn read_policy(f: &NpzFile, prefix: &str) -> Result<LinGaussPolicy, NpzError> {
     let (shape, gain) = f.f64(&format!("{prefix}K"))?;
     let [t, du, dx] = shape[..] else {
-        anyhow::bail!(
-            "{}: {prefix}K has shape {shape:?}, expected (T, dU, dX)",
-            path.display()
-        );
+        return Err(f.bad(
+            &format!("{prefix}K"),
+            format!("shape {shape:?}, expected (T, dU, dX)"),
+        ));
     };
-    anyhow::ensure!(
-        (du, dx) == (DU as u64, DX as u64),
-        "{}: {prefix}K has shape {shape:?}, expected (T, {DU}, {DX})",
-        path.display()
-    );
+    if (du, dx) != (DU as u64, DX as u64) {
+        return Err(f.bad(
+            &format!("{prefix}K"),
+            format!("shape {shape:?}, expected (T, {DU}, {DX})"),
+        ));
+    }
     let (tn, dun) = (t as usize, du as usize);
-    let seq = |name: &str, cols: u64| -> anyhow::Result<MatSeq> {
+    let seq = |name: &str, cols: u64| -> Result<MatSeq, NpzError> {
         let data = f.f64_shaped(&format!("{prefix}{name}"), &[t, du, cols])?;
         Ok(MatSeq::from_vec(tn, dun, cols as usize, data))
     };
@@ -99,22 +100,20 @@ fn read_policy(f: &NpzFile, path: &Path, prefix: &str) -> anyhow::Result<LinGaus
         inv_pol_covar: seq("inv_pol_covar", du)?,
     };
     let all = [&pol.gain, &pol.k, &pol.pol_covar, &pol.chol_pol_covar];
-    anyhow::ensure!(
-        all.iter().all(|m| m.data.iter().all(|v| v.is_finite())),
-        "{}: non-finite controller values ({prefix}K …)",
-        path.display()
-    );
+    if !all.iter().all(|m| m.data.iter().all(|v| v.is_finite())) {
+        return Err(f.bad(&format!("{prefix}K"), "non-finite controller values".into()));
+    }
     Ok(pol)
 }
 
 /// Reads a checkpoint written by [`save_checkpoint`].
-pub fn load_checkpoint(path: &Path) -> anyhow::Result<ExpertCheckpoint> {
+pub fn load_checkpoint(path: &Path) -> Result<ExpertCheckpoint, NpzError> {
     let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
-    let pol = read_policy(&f, path, "")?;
+    let pol = read_policy(&f, "")?;
     let iteration = f.u64_scalar("iteration")? as usize;
     let cost_random = f.f64_shaped("cost_random", &[])?[0];
     let (best, since_best) = if f.names().iter().any(|n| n == "best_K") {
-        let best = read_policy(&f, path, "best_")?;
+        let best = read_policy(&f, "best_")?;
         let (t, du) = (best.t as u64, DU as u64);
         let ep = Episode {
             x: f.f64_shaped("best_x", &[t, DX as u64])?,
@@ -122,18 +121,21 @@ pub fn load_checkpoint(path: &Path) -> anyhow::Result<ExpertCheckpoint> {
             u_policy: f.f64_shaped("best_u_policy", &[t, du])?,
             eps: match f.f64("best_eps")? {
                 (s, v) if s == [t, du] || s == [0, du] => v,
-                (s, _) => anyhow::bail!(
-                    "{}: best_eps has shape {s:?}, expected ({t}, {du}) or (0, {du})",
-                    path.display()
-                ),
+                (s, _) => {
+                    return Err(f.bad(
+                        "best_eps",
+                        format!("shape {s:?}, expected ({t}, {du}) or (0, {du})"),
+                    ))
+                }
             },
             noisy: f.u64_scalar("best_noisy")? != 0,
         };
-        anyhow::ensure!(
-            ep.x.iter().chain(&ep.u).all(|v| v.is_finite()),
-            "{}: non-finite values in the best controller's episode",
-            path.display()
-        );
+        if !ep.x.iter().chain(&ep.u).all(|v| v.is_finite()) {
+            return Err(f.bad(
+                "best_x",
+                "non-finite values in the best controller's episode".into(),
+            ));
+        }
         (Some((best, ep)), f.u64_scalar("since_best")? as usize)
     } else {
         (None, 0)

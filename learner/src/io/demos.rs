@@ -24,6 +24,151 @@ use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 use imitation::demos::Demos;
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
+use super::IoError;
+use crate::error::ensure;
+
+/// Demonstrations that could not have come from the configured arm ([`check_against_arm`]);
+/// each error names the array, the demonstration, the step and the value, and says what to do.
+#[derive(Debug, thiserror::Error)]
+pub enum DemosError {
+    /// Demonstrations made on another arm model than the config's.
+    #[error(
+        "demonstrations {} were made on a {made_on}, the config's arm is a {config}: set \
+         `model = \"{made_on}\"` in the config's [sim] table (or give demonstrations made on a \
+         {config})",
+        path.display()
+    )]
+    OtherModel {
+        /// The demonstrations.
+        path: std::path::PathBuf,
+        /// The arm they were made on.
+        made_on: ur5_shared::UrModel,
+        /// The config's arm.
+        config: ur5_shared::UrModel,
+    },
+    /// A control period the arm cannot run.
+    #[error("dt: {0}")]
+    Dt(String),
+    /// Normalisation costs that do not measure imitation.
+    #[error(
+        "cost_expert = {expert} and cost_random = {random}: both must be finite and the \
+         expert's below the random policy's, or normalised performance (C_random − C) / \
+         (C_random − C_expert) does not measure imitation (it would exceed 1 for a policy worse \
+         than the expert)"
+    )]
+    Costs {
+        /// The expert's cost.
+        expert: f64,
+        /// The random policy's cost.
+        random: f64,
+    },
+    /// A state value that is NaN or infinite.
+    #[error(
+        "states[{demo}, {step}]: {name} = {value}: every state value must be finite \
+         (demonstration {demo}, step {step})"
+    )]
+    StateNotFinite {
+        /// Demonstration.
+        demo: usize,
+        /// Step.
+        step: usize,
+        /// The state's name.
+        name: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// An action value that is NaN or infinite.
+    #[error("actions[{demo}, {step}, {joint}] = {value}: every action value must be finite")]
+    ActionNotFinite {
+        /// Demonstration.
+        demo: usize,
+        /// Step.
+        step: usize,
+        /// Joint.
+        joint: usize,
+        /// The value.
+        value: f64,
+    },
+    /// A joint angle outside the arm's limits.
+    #[error("{at}: joint {joint} at {q} rad, outside the arm's limits [{lower}, {upper}]")]
+    JointLimit {
+        /// `states[i, t]`.
+        at: String,
+        /// Joint.
+        joint: usize,
+        /// Its angle (rad).
+        q: f64,
+        /// Lower limit (rad).
+        lower: f64,
+        /// Upper limit (rad).
+        upper: f64,
+    },
+    /// A joint speed the arm cannot reach.
+    #[error(
+        "{at}: joint {joint} at {qd} rad/s, more than {SPEED_LIMIT_FACTOR} × the arm's speed \
+         limit {limit} rad/s"
+    )]
+    JointSpeed {
+        /// `states[i, t]`.
+        at: String,
+        /// Joint.
+        joint: usize,
+        /// Its speed (rad/s).
+        qd: f64,
+        /// The arm's limit (rad/s).
+        limit: f64,
+    },
+    /// A demonstration that does not start at `start_q`.
+    #[error("{at}: joint {joint} starts at {q} rad, start_q says {start} (tolerance {tol})")]
+    Start {
+        /// `states[i, 0]`.
+        at: String,
+        /// Joint.
+        joint: usize,
+        /// Its first angle (rad).
+        q: f64,
+        /// `start_q` (rad).
+        start: f64,
+        /// Tolerance (rad).
+        tol: f64,
+    },
+    /// End-effector points away from the arm's forward kinematics.
+    #[error(
+        "{at}: the end effector is {err:.4} m from where the arm's forward kinematics puts it at \
+         these joint angles (tolerance {tol} m): recorded on another arm or edited; record \
+         demonstrations with `learner expert` on this arm"
+    )]
+    Kinematics {
+        /// `states[i, t]`.
+        at: String,
+        /// Distance (m).
+        err: f64,
+        /// Tolerance (m).
+        tol: f64,
+    },
+    /// A control period the joint velocities contradict.
+    #[error(
+        "dt = {dt} s ({} fps) disagrees with the joint velocities: the joints move {moved:.4} rad \
+         in all, the velocities × dt say {said:.4} rad (ratio {ratio:.3}, expected {} to {}); is \
+         the dataset's fps (or time column) right?",
+        1.0 / dt,
+        PERIOD_CONSISTENCY.0,
+        PERIOD_CONSISTENCY.1
+    )]
+    Period {
+        /// The period (s).
+        dt: f64,
+        /// How far the joints move (rad).
+        moved: f64,
+        /// How far the velocities say (rad).
+        said: f64,
+        /// `moved / said`.
+        ratio: f64,
+    },
+    /// The arm the demonstrations are checked on (its goal, its construction).
+    #[error(transparent)]
+    Sim(#[from] hil_sim::SimError),
+}
 
 /// Version of this file layout.
 pub const SCHEMA_VERSION: i64 = 1;
@@ -133,41 +278,37 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
 /// The arm model the demonstrations in `path` name: a `.npz`'s `model` (a file without it
 /// was made on the UR5), a LeRobot dataset's [`super::lerobot::MODEL_KEY`]; `None` for a CSV
 /// file and a dataset that names none.
-pub fn model_of(path: &Path) -> anyhow::Result<Option<ur5_shared::UrModel>> {
-    use anyhow::Context;
-    let at = || format!("loading demonstrations {}", path.display());
+pub fn model_of(path: &Path) -> Result<Option<ur5_shared::UrModel>, IoError> {
+    let at = |e: IoError| e.at("loading demonstrations", path);
     if path.is_dir() && super::lerobot::is_dataset(path) {
-        return super::lerobot::model_of(path).with_context(at);
+        return super::lerobot::model_of(path).map_err(|e| at(e.into()));
     }
     if super::foreign::is_foreign(path) {
         return Ok(None);
     }
-    Ok(Some(load(path).with_context(at)?.model))
+    Ok(Some(load(path).map_err(|e| at(e.into()))?.model))
 }
 
 /// Loads the demonstrations in `path` in any format `--demos` takes (`.npz`, LeRobot dataset
 /// folder or CSV: [`super::foreign::load_foreign`]; else [`load`]) and checks them against
 /// the arm of `sim` ([`check_against_arm`]), each error naming the file: what every run that
 /// imitates a file calls.
-pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<Demos> {
-    use anyhow::Context;
+pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> Result<Demos, IoError> {
     let demos = if super::foreign::is_foreign(path) {
         super::foreign::load_foreign(path, sim)
     } else {
-        load(path).map_err(anyhow::Error::from)
+        load(path).map_err(IoError::from)
     }
-    .with_context(|| format!("loading demonstrations {}", path.display()))?;
-    anyhow::ensure!(
+    .map_err(|e| e.at("loading demonstrations", path))?;
+    ensure!(
         demos.model == sim.model,
-        "demonstrations {} were made on a {}, the config's arm is a {}: set `model = \"{}\"` in \
-         the config's [sim] table (or give demonstrations made on a {})",
-        path.display(),
-        demos.model,
-        sim.model,
-        demos.model,
-        sim.model
+        DemosError::OtherModel {
+            path: path.to_owned(),
+            made_on: demos.model,
+            config: sim.model
+        }
     );
-    check_against_arm(&demos, sim).with_context(|| format!("demonstrations {}", path.display()))?;
+    check_against_arm(&demos, sim).map_err(|e| IoError::from(e).at("demonstrations", path))?;
     Ok(demos)
 }
 
@@ -187,16 +328,15 @@ pub const SPEED_LIMIT_FACTOR: f64 = 2.0;
 /// end-effector point (`ee − goal` + goal) within [`CONSISTENCY_TOLERANCE`] of the arm's
 /// forward kinematics at the demonstrated joint angles. Each error names the array, the
 /// demonstration, the step and the value.
-pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
+pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> Result<(), DemosError> {
     use ur5_shared::layout::{EE_MINUS_GOAL, Q, QD};
-    ur5_shared::config::check_dt(d.dt).map_err(|why| anyhow::anyhow!("dt: {why}"))?;
-    anyhow::ensure!(
+    ur5_shared::config::check_dt(d.dt).map_err(DemosError::Dt)?;
+    ensure!(
         d.cost_random.is_finite() && d.cost_expert.is_finite() && d.cost_expert < d.cost_random,
-        "cost_expert = {} and cost_random = {}: both must be finite and the expert's below the \
-         random policy's, or normalised performance (C_random − C) / (C_random − C_expert) \
-         does not measure imitation (it would exceed 1 for a policy worse than the expert)",
-        d.cost_expert,
-        d.cost_random
+        DemosError::Costs {
+            expert: d.cost_expert,
+            random: d.cost_random
+        }
     );
     check_finite(d)?;
     check_period(d)?;
@@ -211,26 +351,35 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyh
             let q: [f64; 3] = s[Q].try_into().expect("3");
             let qd: [f64; 3] = s[QD].try_into().expect("3");
             for j in 0..3 {
-                anyhow::ensure!(
+                ensure!(
                     q[j] >= limits.lower[j] - tol && q[j] <= limits.upper[j] + tol,
-                    "{at}: joint {j} at {} rad, outside the arm's limits [{}, {}]",
-                    q[j],
-                    limits.lower[j],
-                    limits.upper[j]
+                    DemosError::JointLimit {
+                        at: at.clone(),
+                        joint: j,
+                        q: q[j],
+                        lower: limits.lower[j],
+                        upper: limits.upper[j]
+                    }
                 );
-                anyhow::ensure!(
+                ensure!(
                     qd[j].abs() <= SPEED_LIMIT_FACTOR * limits.velocity[j],
-                    "{at}: joint {j} at {} rad/s, more than {SPEED_LIMIT_FACTOR} × the arm's \
-                     speed limit {} rad/s",
-                    qd[j],
-                    limits.velocity[j]
+                    DemosError::JointSpeed {
+                        at: at.clone(),
+                        joint: j,
+                        qd: qd[j],
+                        limit: limits.velocity[j]
+                    }
                 );
                 if t == 0 {
-                    anyhow::ensure!(
+                    ensure!(
                         (q[j] - d.start_q[j]).abs() <= tol,
-                        "{at}: joint {j} starts at {} rad, start_q says {} (tolerance {tol})",
-                        q[j],
-                        d.start_q[j]
+                        DemosError::Start {
+                            at: at.clone(),
+                            joint: j,
+                            q: q[j],
+                            start: d.start_q[j],
+                            tol
+                        }
                     );
                 }
             }
@@ -241,13 +390,7 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyh
                 .map(|k| (e[k] + d.goal[k] - fk[k]).powi(2))
                 .sum::<f64>()
                 .sqrt();
-            anyhow::ensure!(
-                err <= tol,
-                "{at}: the end effector is {:.4} m from where the arm's forward kinematics puts \
-                 it at these joint angles (tolerance {tol} m): recorded on another arm or \
-                 edited; record demonstrations with `learner expert` on this arm",
-                err
-            );
+            ensure!(err <= tol, DemosError::Kinematics { at, err, tol });
         }
     }
     Ok(())
@@ -255,28 +398,24 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> anyh
 
 /// Every state and action value finite; the error names the demonstration, the step and the
 /// state's name ([`ur5_shared::layout::STATE_NAMES`]).
-fn check_finite(d: &Demos) -> anyhow::Result<()> {
+fn check_finite(d: &Demos) -> Result<(), DemosError> {
     if let Some(k) = d.states.iter().position(|v| !v.is_finite()) {
         let (row, c) = (k / DX, k % DX);
-        anyhow::bail!(
-            "states[{}, {}]: {} = {}: every state value must be finite (demonstration {}, step {})",
-            row / d.horizon,
-            row % d.horizon,
-            STATE_NAMES[c],
-            d.states[k],
-            row / d.horizon,
-            row % d.horizon
-        );
+        return Err(DemosError::StateNotFinite {
+            demo: row / d.horizon,
+            step: row % d.horizon,
+            name: STATE_NAMES[c],
+            value: d.states[k],
+        });
     }
     if let Some(k) = d.actions.iter().position(|v| !v.is_finite()) {
         let row = k / DU;
-        anyhow::bail!(
-            "actions[{}, {}, {}] = {}: every action value must be finite",
-            row / d.horizon,
-            row % d.horizon,
-            k % DU,
-            d.actions[k]
-        );
+        return Err(DemosError::ActionNotFinite {
+            demo: row / d.horizon,
+            step: row % d.horizon,
+            joint: k % DU,
+            value: d.actions[k],
+        });
     }
     Ok(())
 }
@@ -292,7 +431,7 @@ pub const PERIOD_CONSISTENCY: (f64, f64) = (0.5, 3.0);
 /// The control period `dt` consistent with the recorded joint velocities
 /// ([`PERIOD_CONSISTENCY`]); skipped for demonstrations that barely move (Σ|q̇| dt < 1e-3
 /// rad, nothing to tell from).
-fn check_period(d: &Demos) -> anyhow::Result<()> {
+fn check_period(d: &Demos) -> Result<(), DemosError> {
     use ur5_shared::layout::{Q, QD};
     let (mut moved, mut said) = (0.0, 0.0);
     for i in 0..d.count {
@@ -308,15 +447,14 @@ fn check_period(d: &Demos) -> anyhow::Result<()> {
         return Ok(());
     }
     let ratio = moved / said;
-    anyhow::ensure!(
-        ratio >= PERIOD_CONSISTENCY.0 && ratio <= PERIOD_CONSISTENCY.1,
-        "dt = {} s ({} fps) disagrees with the joint velocities: the joints move {moved:.4} rad \
-         in all, the velocities × dt say {said:.4} rad (ratio {ratio:.3}, expected {} to {}); \
-         is the dataset's fps (or time column) right?",
-        d.dt,
-        1.0 / d.dt,
-        PERIOD_CONSISTENCY.0,
-        PERIOD_CONSISTENCY.1
+    ensure!(
+        (PERIOD_CONSISTENCY.0..=PERIOD_CONSISTENCY.1).contains(&ratio),
+        DemosError::Period {
+            dt: d.dt,
+            moved,
+            said,
+            ratio
+        }
     );
     Ok(())
 }
@@ -353,10 +491,7 @@ mod tests {
         };
         save(&d, &path).unwrap();
         assert_eq!(load(&path).unwrap().model, UrModel::Ur5e);
-        let e = format!(
-            "{:#}",
-            load_checked(&path, &Default::default()).unwrap_err()
-        );
+        let e = crate::error::line(&load_checked(&path, &Default::default()).unwrap_err());
         assert!(
             e.contains("made on a ur5e") && e.contains("arm is a ur5") && e.contains("[sim]"),
             "{e}"
@@ -511,7 +646,7 @@ mod tests {
         for (what, edit) in cases {
             let mut d = good.clone();
             edit(&mut d);
-            let e = format!("{:#}", check_against_arm(&d, &cfg.sim).unwrap_err());
+            let e = crate::error::line(&check_against_arm(&d, &cfg.sim).unwrap_err());
             assert!(e.contains(what), "{what}: {e}");
         }
     }

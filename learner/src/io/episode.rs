@@ -24,6 +24,7 @@ use ur5_shared::config::TaskConfig;
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
+use super::IoError;
 use imitation::rollout::Episode;
 
 /// Version of this file layout.
@@ -159,23 +160,21 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
 
 /// The episode files (`*.npz`) of `folder` in name order, which for an
 /// [`EpisodeRecorder`]'s folder is arrival order, loaded; none when there is no folder.
-pub fn recorded_episodes(folder: &Path) -> anyhow::Result<Vec<(PathBuf, Episode, EpisodeOrigin)>> {
-    use anyhow::Context;
+pub fn recorded_episodes(folder: &Path) -> Result<Vec<(PathBuf, Episode, EpisodeOrigin)>, IoError> {
     let mut files: Vec<PathBuf> = match std::fs::read_dir(folder) {
         Ok(entries) => entries
             .map(|e| e.map(|e| e.path()))
             .collect::<Result<_, _>>()
-            .with_context(|| format!("reading {}", folder.display()))?,
+            .map_err(IoError::file("reading", &folder))?,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", folder.display())),
+        Err(e) => return Err(e).map_err(IoError::file("reading", &folder)),
     };
     files.retain(|p| p.extension().is_some_and(|x| x == "npz"));
     files.sort();
     files
         .into_iter()
         .map(|p| {
-            let (ep, origin) =
-                load_episode(&p).with_context(|| format!("reading {}", p.display()))?;
+            let (ep, origin) = load_episode(&p)?;
             Ok((p, ep, origin))
         })
         .collect()

@@ -21,7 +21,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use super::IoError;
 use serde::{Deserialize, Serialize};
 
 /// FNV-1a 64 of `bytes`, as 16 hex digits (identity, not security; also the hashes of
@@ -61,7 +61,7 @@ fn rel(run: &Path, path: &Path) -> String {
         .join("/")
 }
 
-fn append(run: &Path, entries: &[Entry]) -> anyhow::Result<()> {
+fn append(run: &Path, entries: &[Entry]) -> Result<(), IoError> {
     if entries.is_empty() {
         return Ok(());
     }
@@ -76,11 +76,11 @@ fn append(run: &Path, entries: &[Entry]) -> anyhow::Result<()> {
         .append(true)
         .open(&path)
         .and_then(|mut f| f.write_all(&text))
-        .with_context(|| format!("appending to {}", path.display()))
+        .map_err(IoError::file("appending to", &path))
 }
 
-fn whole(run: &Path, path: &Path) -> anyhow::Result<Entry> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+fn whole(run: &Path, path: &Path) -> Result<Entry, IoError> {
+    let bytes = std::fs::read(path).map_err(IoError::file("reading", &path))?;
     Ok(Entry {
         file: rel(run, path),
         from: 0,
@@ -90,22 +90,22 @@ fn whole(run: &Path, path: &Path) -> anyhow::Result<Entry> {
 }
 
 /// Starts an empty record in `run` (a new run).
-pub fn start(run: &Path) -> anyhow::Result<()> {
+pub fn start(run: &Path) -> Result<(), IoError> {
     ur5_shared::atomic_file::write(&run.join(FILES), b"")
-        .with_context(|| format!("writing {}", run.join(FILES).display()))
+        .map_err(IoError::file("writing", &run.join(FILES)))
 }
 
 /// Records the complete files `files` of the run in `run`.
-pub fn note(run: &Path, files: &[&Path]) -> anyhow::Result<()> {
+pub fn note(run: &Path, files: &[&Path]) -> Result<(), IoError> {
     let entries = files
         .iter()
         .map(|f| whole(run, f))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<Result<Vec<_>, IoError>>()?;
     append(run, &entries)
 }
 
 /// Records the checkpoint files `iter_NNN_*` (NNN = `i`) present in `run`.
-pub fn note_checkpoint(run: &Path, i: usize) -> anyhow::Result<()> {
+pub fn note_checkpoint(run: &Path, i: usize) -> Result<(), IoError> {
     let prefix = format!("iter_{i:03}_");
     let mut files: Vec<PathBuf> = checkpoint_files(run)?
         .into_iter()
@@ -121,8 +121,8 @@ pub fn note_checkpoint(run: &Path, i: usize) -> anyhow::Result<()> {
 }
 
 /// Records the bytes from `from` to the end of the append-only `file` (a line just appended).
-pub fn note_appended(run: &Path, file: &Path, from: u64) -> anyhow::Result<()> {
-    let bytes = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
+pub fn note_appended(run: &Path, file: &Path, from: u64) -> Result<(), IoError> {
+    let bytes = std::fs::read(file).map_err(IoError::file("reading", &file))?;
     let from = from.min(bytes.len() as u64);
     append(
         run,
@@ -147,7 +147,7 @@ fn is_checkpoint(name: &str) -> bool {
             .any(|s| name.ends_with(s))
 }
 
-fn checkpoint_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
+fn checkpoint_files(run: &Path) -> Result<Vec<PathBuf>, IoError> {
     Ok(list(run)?
         .into_iter()
         .filter(|p| {
@@ -159,17 +159,15 @@ fn checkpoint_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
 }
 
 /// The files of `dir` (none when it does not exist).
-fn list(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+fn list(dir: &Path) -> Result<Vec<PathBuf>, IoError> {
     let entries = match std::fs::read_dir(dir) {
         Ok(e) => e,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", dir.display())),
+        Err(e) => return Err(e).map_err(IoError::file("reading", &dir)),
     };
     let mut out = Vec::new();
     for e in entries {
-        let p = e
-            .with_context(|| format!("reading {}", dir.display()))?
-            .path();
+        let p = e.map_err(IoError::file("reading", &dir))?.path();
         if p.is_file() {
             out.push(p);
         }
@@ -179,7 +177,7 @@ fn list(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 }
 
 /// The files of `run` that the record covers (module docs), sorted.
-pub fn in_scope(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
+pub fn in_scope(run: &Path) -> Result<Vec<PathBuf>, IoError> {
     let mut files = checkpoint_files(run)?;
     let ends = |p: &Path, s: &str| p.to_str().is_some_and(|n| n.ends_with(s));
     files.extend(
@@ -197,12 +195,12 @@ pub fn in_scope(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
 }
 
 /// The record's entries; `None` when `run` has none. A last line cut by a kill is left out.
-pub fn read(run: &Path) -> anyhow::Result<Option<Vec<Entry>>> {
+pub fn read(run: &Path) -> Result<Option<Vec<Entry>>, IoError> {
     let path = run.join(FILES);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        Err(e) => return Err(e).map_err(IoError::file("reading", &path)),
     };
     let complete = text.is_empty() || text.ends_with('\n');
     let lines: Vec<&str> = text.lines().collect();
@@ -211,7 +209,13 @@ pub fn read(run: &Path) -> anyhow::Result<Option<Vec<Entry>>> {
         match serde_json::from_str(line) {
             Ok(e) => entries.push(e),
             Err(_) if k + 1 == lines.len() && !complete => {}
-            Err(e) => anyhow::bail!("{} line {}: {e}", path.display(), k + 1),
+            Err(e) => {
+                return Err(IoError::Json {
+                    path: path.clone(),
+                    line: Some(k + 1),
+                    source: e,
+                })
+            }
         }
     }
     Ok(Some(entries))
@@ -249,7 +253,7 @@ pub struct Verified {
 
 /// Checks every file the record of `run` lists (length and hash) and that every file of the
 /// record's scope in the folder is listed; `None` when `run` has no record.
-pub fn verify(run: &Path) -> anyhow::Result<Option<Verified>> {
+pub fn verify(run: &Path) -> Result<Option<Verified>, IoError> {
     let Some(entries) = read(run)? else {
         return Ok(None);
     };
@@ -266,7 +270,7 @@ pub fn verify(run: &Path) -> anyhow::Result<Option<Verified>> {
                 problems.push(Problem::Missing(name.clone()));
                 continue;
             }
-            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+            Err(e) => return Err(e).map_err(IoError::file("reading", &path)),
         };
         if let Some(why) = mismatch(es, &bytes) {
             problems.push(Problem::Altered(name.clone(), why));
@@ -321,13 +325,13 @@ fn mismatch(es: &[Entry], bytes: &[u8]) -> Option<String> {
 /// scope that is unrecorded, or differs from its record (a checkpoint rewritten by a kill
 /// before its line), is recorded as it is now, and a cut last line of the record is dropped.
 /// Starts the record of a run written by a build without one.
-pub fn adopt(run: &Path) -> anyhow::Result<()> {
+pub fn adopt(run: &Path) -> Result<(), IoError> {
     let path = run.join(FILES);
     if let Ok(text) = std::fs::read_to_string(&path) {
         if !text.is_empty() && !text.ends_with('\n') {
             let keep = text.rfind('\n').map_or(0, |k| k + 1);
             ur5_shared::atomic_file::write(&path, &text.as_bytes()[..keep])
-                .with_context(|| format!("writing {}", path.display()))?;
+                .map_err(IoError::file("writing", &path))?;
         }
     }
     let entries = read(run)?.unwrap_or_default();
@@ -344,8 +348,7 @@ pub fn adopt(run: &Path) -> anyhow::Result<()> {
             // enough, which keeps a resume of a long served run cheap.
             Some(es) if episode && es.last().is_some_and(|e| e.to == len(&p)) => {}
             Some(es) => {
-                let bytes =
-                    std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+                let bytes = std::fs::read(&p).map_err(IoError::file("reading", &p))?;
                 if mismatch(es, &bytes).is_some() {
                     new.push(whole(run, &p)?);
                 }

@@ -12,7 +12,8 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use super::IoError;
+use crate::error::ensure;
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX, EE_MINUS_GOAL, Q, STATE_NAMES};
 
@@ -31,42 +32,51 @@ pub const CSV_INDEX_COLUMNS: [&str; 2] = ["episode", "time_s"];
 /// Reads a demonstrations CSV file: a header `episode,time_s,<the 12 state names>` and one row
 /// per step, the steps of an episode together and in time order, every episode of the same
 /// length, times 0, dt, 2 dt, … (dt from the first episode, the same for all).
-pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
-    let mut r =
-        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
-    let header: Vec<String> = r.headers()?.iter().map(str::to_string).collect();
+pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
+    let mut r = csv::Reader::from_path(path).map_err(IoError::csv("reading", path))?;
+    let header: Vec<String> = r
+        .headers()
+        .map_err(IoError::csv("reading", path))?
+        .iter()
+        .map(str::to_string)
+        .collect();
     let expected: Vec<&str> = CSV_INDEX_COLUMNS
         .iter()
         .chain(STATE_NAMES.iter())
         .copied()
         .collect();
-    anyhow::ensure!(
+    ensure!(
         header == expected,
-        "{}: header {header:?}, expected {expected:?}",
-        path.display()
+        IoError::content(path, format!("header {header:?}, expected {expected:?}"))
     );
     let mut rows: Vec<(u64, f64, [f64; DX])> = Vec::new();
     for (line, rec) in r.records().enumerate() {
-        let rec = rec.with_context(|| format!("{}: row {}", path.display(), line + 2))?;
-        let num = |k: usize| -> anyhow::Result<f64> {
-            rec[k].trim().parse::<f64>().with_context(|| {
+        let rec = rec.map_err(|source| IoError::CsvRow {
+            path: path.to_owned(),
+            row: line + 2,
+            source,
+        })?;
+        let not_a_number = |k: usize, why: &dyn std::fmt::Display| {
+            IoError::content(
+                path,
                 format!(
-                    "{}: row {}, column {}: `{}`",
-                    path.display(),
+                    "row {}, column {}: `{}`: {why}",
                     line + 2,
                     expected[k],
                     &rec[k]
-                )
-            })
-        };
-        let e = rec[0].trim().parse::<u64>().with_context(|| {
-            format!(
-                "{}: row {}, column episode: `{}`",
-                path.display(),
-                line + 2,
-                &rec[0]
+                ),
             )
-        })?;
+        };
+        let num = |k: usize| -> Result<f64, IoError> {
+            rec[k]
+                .trim()
+                .parse::<f64>()
+                .map_err(|e| not_a_number(k, &e))
+        };
+        let e = rec[0]
+            .trim()
+            .parse::<u64>()
+            .map_err(|e| not_a_number(0, &e))?;
         let mut s = [0.0; DX];
         for (k, v) in s.iter_mut().enumerate() {
             *v = num(2 + k)?;
@@ -75,16 +85,22 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
     }
     let first = rows.first().map(|r| r.0);
     let horizon = rows.iter().take_while(|r| Some(r.0) == first).count();
-    anyhow::ensure!(
+    ensure!(
         horizon >= 2,
-        "{}: the first episode has {horizon} rows: need at least 2",
-        path.display()
+        IoError::content(
+            path,
+            format!("the first episode has {horizon} rows: need at least 2")
+        )
     );
-    anyhow::ensure!(
+    ensure!(
         rows.len() % horizon == 0,
-        "{}: {} rows are not whole episodes of {horizon} steps",
-        path.display(),
-        rows.len()
+        IoError::content(
+            path,
+            format!(
+                "{} rows are not whole episodes of {horizon} steps",
+                rows.len()
+            )
+        )
     );
     let dt = rows[1].1 - rows[0].1;
     let mut states = Vec::with_capacity(rows.len() * DX);
@@ -93,27 +109,39 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
         let (d, t) = (i / horizon, i % horizon);
         // An episode's rows together, each label once: a reused or interleaved label would
         // otherwise join steps of two episodes into one.
-        anyhow::ensure!(
+        ensure!(
             t != 0 || seen.insert(*e),
-            "{}: row {}: episode {e} again, after other episodes: the rows of an episode must \
-             be consecutive and every episode label used once",
-            path.display(),
-            i + 2
+            IoError::content(
+                path,
+                format!(
+                    "row {}: episode {e} again, after other episodes: the rows of an episode \
+                     must be consecutive and every episode label used once",
+                    i + 2
+                )
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             *e == rows[d * horizon].0 && (t == 0 || rows[i - 1].0 == *e),
-            "{}: row {}: episode {e} where episode {} has {horizon} steps (every episode must be \
-             as long as the first)",
-            path.display(),
-            i + 2,
-            rows[d * horizon].0
+            IoError::content(
+                path,
+                format!(
+                    "row {}: episode {e} where episode {} has {horizon} steps (every episode \
+                     must be as long as the first)",
+                    i + 2,
+                    rows[d * horizon].0
+                )
+            )
         );
-        anyhow::ensure!(
+        ensure!(
             (time - t as f64 * dt).abs() <= 1e-6 * dt.max(1.0),
-            "{}: row {}: time_s {time}, expected {} (steps of {dt} s)",
-            path.display(),
-            i + 2,
-            t as f64 * dt
+            IoError::content(
+                path,
+                format!(
+                    "row {}: time_s {time}, expected {} (steps of {dt} s)",
+                    i + 2,
+                    t as f64 * dt
+                )
+            )
         );
         states.extend_from_slice(s);
     }
@@ -129,22 +157,23 @@ pub fn read_csv(path: &Path) -> anyhow::Result<Trajectories> {
 }
 
 /// Writes `traj`'s states as a demonstrations CSV file ([`read_csv`]'s layout).
-pub fn write_csv(traj: &Trajectories, path: &Path) -> anyhow::Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("writing {}", path.display()))?;
+pub fn write_csv(traj: &Trajectories, path: &Path) -> Result<(), IoError> {
+    let mut w = csv::Writer::from_path(path).map_err(IoError::csv("writing", path))?;
     let header: Vec<&str> = CSV_INDEX_COLUMNS
         .iter()
         .chain(STATE_NAMES.iter())
         .copied()
         .collect();
-    w.write_record(&header)?;
+    w.write_record(&header)
+        .map_err(IoError::csv("writing", path))?;
     for (i, s) in traj.states.chunks(DX).enumerate() {
         let (d, t) = (i / traj.horizon, i % traj.horizon);
         let mut rec = vec![d.to_string(), format!("{}", t as f64 * traj.dt)];
         rec.extend(s.iter().map(|v| format!("{v:?}")));
-        w.write_record(&rec)?;
+        w.write_record(&rec)
+            .map_err(IoError::csv("writing", path))?;
     }
-    w.flush()?;
+    w.flush().map_err(IoError::file("writing", path))?;
     Ok(())
 }
 
@@ -169,10 +198,10 @@ pub fn from_demos(demos: &Demos) -> Trajectories {
 
 /// Recorded episodes (`learner serve`'s `.npz` files: `path` is one file or a folder of them,
 /// read in name order) as trajectories with their executed actions. They must be of one task.
-pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
+pub fn from_episodes(path: &Path) -> Result<Trajectories, IoError> {
     let files: Vec<PathBuf> = if path.is_dir() {
         let mut f: Vec<PathBuf> = std::fs::read_dir(path)
-            .with_context(|| format!("reading {}", path.display()))?
+            .map_err(IoError::file("reading", path))?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|e| e == "npz"))
             .collect();
@@ -181,17 +210,14 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
     } else {
         vec![path.to_path_buf()]
     };
-    anyhow::ensure!(
+    ensure!(
         !files.is_empty(),
-        "{}: no .npz episode files",
-        path.display()
+        IoError::content(path, "no .npz episode files")
     );
     let mut out: Option<(Trajectories, TaskConfig)> = None;
     for f in &files {
-        let (ep, origin) =
-            super::episode::load_episode(f).with_context(|| format!("reading {}", f.display()))?;
-        let task = super::episode::load_episode_task(f)
-            .with_context(|| format!("reading {}", f.display()))?;
+        let (ep, origin) = super::episode::load_episode(f)?;
+        let task = super::episode::load_episode_task(f)?;
         match &mut out {
             None => {
                 let traj = Trajectories {
@@ -212,10 +238,12 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
                 out = Some((traj, task));
             }
             Some((traj, first)) => {
-                anyhow::ensure!(
+                ensure!(
                     task == *first,
-                    "{}: task {task:?} differs from the first episode's {first:?}",
-                    f.display()
+                    IoError::content(
+                        f,
+                        format!("task {task:?} differs from the first episode's {first:?}")
+                    )
                 );
                 traj.states.extend_from_slice(&ep.x);
                 traj.actions.as_mut().expect("set").extend_from_slice(&ep.u);
@@ -228,7 +256,7 @@ pub fn from_episodes(path: &Path) -> anyhow::Result<Trajectories> {
 
 /// Trajectories from any source as demonstrations for the arm of `sim`, the missing task and
 /// costs derived (module docs).
-pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
+pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
     // A source that names another arm: derived on that arm (`load_checked` then names the
     // difference to the configured one).
     let model = traj.model.unwrap_or(sim.model);
@@ -240,11 +268,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
         &noted
     };
     // Before anything simulates at that period (1e300 s would be 1e303 physics steps).
-    ur5_shared::config::check_dt(traj.dt).map_err(|why| {
-        anyhow::anyhow!(
-            "time step dt of the trajectories (1 / fps, or the step of the time column): {why}"
-        )
-    })?;
+    ur5_shared::config::check_dt(traj.dt).map_err(IoError::TrajectoryDt)?;
     let seed = DERIVED_SEED;
     let s0 = &traj.states[..DX];
     let mut arm = hil_sim::Ur5Sim::new(sim.clone(), traj.dt)?;
@@ -264,7 +288,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> anyhow::Result<Demos> {
         start_q,
         goal,
     };
-    task.validate().context("the task the trajectories show")?;
+    task.validate().map_err(IoError::TrajectoryTask)?;
     let known = traj.task.as_ref();
     let cost_expert = match known.and_then(|m| m.cost_expert) {
         Some(c) => c,
@@ -319,12 +343,14 @@ pub fn is_foreign(path: &Path) -> bool {
 }
 
 /// The demonstrations in the LeRobot dataset folder or `.csv` file `path` ([`is_foreign`]).
-pub fn load_foreign(path: &Path, sim: &SimConfig) -> anyhow::Result<Demos> {
+pub fn load_foreign(path: &Path, sim: &SimConfig) -> Result<Demos, IoError> {
     if path.is_dir() {
-        anyhow::ensure!(
+        ensure!(
             super::lerobot::is_dataset(path),
-            "{} is a folder without meta/info.json: not a LeRobot dataset",
-            path.display()
+            IoError::content(
+                path,
+                "a folder without meta/info.json: not a LeRobot dataset"
+            )
         );
         return to_demos(super::lerobot::import(path)?, sim);
     }

@@ -20,7 +20,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use super::IoError;
 use serde::{Deserialize, Serialize};
 
 /// The file's name inside the `episodes/` folder.
@@ -42,7 +42,7 @@ pub enum LearnedEvent {
 }
 
 /// Appends `event` as one line to `episodes/learned.jsonl`.
-pub fn append_event(episodes: &Path, event: &LearnedEvent) -> anyhow::Result<()> {
+pub fn append_event(episodes: &Path, event: &LearnedEvent) -> Result<(), IoError> {
     let path = episodes.join(LEARNED);
     let mut line = serde_json::to_vec(event)?;
     line.push(b'\n');
@@ -51,18 +51,18 @@ pub fn append_event(episodes: &Path, event: &LearnedEvent) -> anyhow::Result<()>
         .append(true)
         .open(&path)
         .and_then(|mut f| f.write_all(&line))
-        .with_context(|| format!("appending to {}", path.display()))
+        .map_err(IoError::file("appending to", &path))
 }
 
 /// The events of `episodes/learned.jsonl`, in order; `None` when there is no such file (a run
 /// of `learner train`, or of a build before 2026-12-02). A last line cut by a kill is left
 /// out; any other line that does not parse is an error naming it.
-pub fn read_events(episodes: &Path) -> anyhow::Result<Option<Vec<LearnedEvent>>> {
+pub fn read_events(episodes: &Path) -> Result<Option<Vec<LearnedEvent>>, IoError> {
     let path = episodes.join(LEARNED);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        Err(e) => return Err(e).map_err(IoError::file("reading", &path)),
     };
     let complete = text.ends_with('\n');
     let lines: Vec<&str> = text.lines().collect();
@@ -71,7 +71,13 @@ pub fn read_events(episodes: &Path) -> anyhow::Result<Option<Vec<LearnedEvent>>>
         match serde_json::from_str(line) {
             Ok(e) => events.push(e),
             Err(_) if k + 1 == lines.len() && !complete => {}
-            Err(e) => anyhow::bail!("{} line {}: {e}", path.display(), k + 1),
+            Err(e) => {
+                return Err(IoError::Json {
+                    path: path.clone(),
+                    line: Some(k + 1),
+                    source: e,
+                })
+            }
         }
     }
     Ok(Some(events))

@@ -1,11 +1,13 @@
 //! The per-iteration CSV of the imitation runs (`gaifo_log.csv`, the same columns for
-//! LQR+GAIfO and GAIfO (PPO); docs/design.md §4).
+//! LQR+GAIfO and GAIfO (PPO); `mdgps_log.csv` for MDGPS; docs/design.md §4).
 
 use std::path::Path;
 
-use anyhow::Context;
+use super::IoError;
+use crate::error::ensure;
 
 use imitation::gaifo::GaifoLog;
+use imitation::mdgps::MdgpsLog;
 use serde::{Deserialize, Serialize};
 
 /// Header of the per-iteration CSV (`gaifo_log.csv`), the same for both algorithms: the fields
@@ -99,6 +101,99 @@ pub fn write_record(f: &mut impl std::io::Write, row: &impl Serialize) -> std::i
     w.flush()
 }
 
+/// The header of `mdgps_log.csv` ([`MdgpsRow`]'s fields).
+pub const MDGPS_CSV_HEADER: &str = "iteration,seed,mean_performance_at_conditions,mean_final_distance_m_at_conditions,mean_controller_cost,critic_loss,wasserstein,kl,eta,s_loss_before,s_loss_after,t_execute_s,t_dynamics_s,t_critic_s,t_cost_s,t_lqr_s,t_policy_s";
+
+/// One row of `mdgps_log.csv`: an MDGPS iteration, its per-condition results as means over the
+/// conditions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MdgpsRow {
+    pub iteration: usize,
+    pub seed: u64,
+    pub mean_performance_at_conditions: f64,
+    pub mean_final_distance_m_at_conditions: f64,
+    pub mean_controller_cost: f64,
+    pub critic_loss: f64,
+    pub wasserstein: f64,
+    pub kl: f64,
+    pub eta: f64,
+    pub s_loss_before: f64,
+    pub s_loss_after: f64,
+    pub t_execute_s: f64,
+    pub t_dynamics_s: f64,
+    pub t_critic_s: f64,
+    pub t_cost_s: f64,
+    pub t_lqr_s: f64,
+    pub t_policy_s: f64,
+}
+
+impl MdgpsRow {
+    /// The row of `log` of the run of `seed`.
+    pub fn new(log: &MdgpsLog, seed: u64) -> Self {
+        Self {
+            iteration: log.iteration,
+            seed,
+            mean_performance_at_conditions: log.mean_performance(),
+            mean_final_distance_m_at_conditions: log.mean_final_distance(),
+            mean_controller_cost: log.controller_cost.iter().sum::<f64>()
+                / log.controller_cost.len().max(1) as f64,
+            critic_loss: log.critic_loss,
+            wasserstein: log.wasserstein,
+            kl: log.kl,
+            eta: log.eta,
+            s_loss_before: log.s_loss_before,
+            s_loss_after: log.s_loss_after,
+            t_execute_s: log.t_execute,
+            t_dynamics_s: log.t_dynamics,
+            t_critic_s: log.t_critic,
+            t_cost_s: log.t_cost,
+            t_lqr_s: log.t_lqr,
+            t_policy_s: log.t_policy,
+        }
+    }
+}
+
+/// A learner's per-iteration log as a row of its run's CSV.
+pub trait LogRow {
+    /// The CSV's file name in the run folder.
+    const FILE: &'static str;
+    /// Its header.
+    const HEADER: &'static str;
+    /// Writes the row of run `seed` of `algorithm`.
+    fn write_row(
+        &self,
+        f: &mut impl std::io::Write,
+        seed: u64,
+        algorithm: &str,
+    ) -> std::io::Result<()>;
+}
+
+impl LogRow for GaifoLog {
+    const FILE: &'static str = "gaifo_log.csv";
+    const HEADER: &'static str = CSV_HEADER;
+    fn write_row(
+        &self,
+        f: &mut impl std::io::Write,
+        seed: u64,
+        algorithm: &str,
+    ) -> std::io::Result<()> {
+        write_csv_row(f, self, seed, algorithm)
+    }
+}
+
+impl LogRow for MdgpsLog {
+    const FILE: &'static str = "mdgps_log.csv";
+    const HEADER: &'static str = MDGPS_CSV_HEADER;
+    fn write_row(
+        &self,
+        f: &mut impl std::io::Write,
+        seed: u64,
+        _algorithm: &str,
+    ) -> std::io::Result<()> {
+        write_record(f, &MdgpsRow::new(self, seed))
+    }
+}
+
 /// One CSV row (columns of [`CSV_HEADER`]) of run `seed` of `algorithm`.
 pub fn write_csv_row(
     f: &mut impl std::io::Write,
@@ -116,24 +211,35 @@ pub fn write_csv_row(
 /// its next checkpoint — are dropped, as the resumed run writes them again, and so is a last
 /// row cut short by a kill (fewer columns or no newline). The file is then rewritten
 /// atomically ([`ur5_shared::atomic_file::write`]), so a kill during the rewrite loses nothing.
-pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs::File> {
-    use anyhow::Context;
+pub fn open_log(path: &Path, resume_at: Option<usize>) -> Result<std::fs::File, IoError> {
+    open_log_with(path, CSV_HEADER, resume_at)
+}
+
+/// [`open_log`] of a CSV whose first line is `header` (an iteration number first in every row).
+pub fn open_log_with(
+    path: &Path,
+    header: &str,
+    resume_at: Option<usize>,
+) -> Result<std::fs::File, IoError> {
     use std::io::Write;
     let Some(start) = resume_at.filter(|_| path.exists()) else {
-        let mut f =
-            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        writeln!(f, "{CSV_HEADER}")?;
+        let mut f = std::fs::File::create(path).map_err(IoError::file("creating", &path))?;
+        writeln!(f, "{header}").map_err(IoError::file("writing", path))?;
         return Ok(f);
     };
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = std::fs::read_to_string(path).map_err(IoError::file("reading", &path))?;
     let mut lines = text.split_inclusive('\n');
-    anyhow::ensure!(
-        lines.next().map(|l| l.trim_end_matches('\n')) == Some(CSV_HEADER),
-        "{}: not a per-iteration log of this build (its first line is not the header {CSV_HEADER:?})",
-        path.display()
+    ensure!(
+        lines.next().map(|l| l.trim_end_matches('\n')) == Some(header),
+        IoError::content(
+            path,
+            format!(
+                "not a per-iteration log of this build (its first line is not the header \
+                 {header:?})"
+            )
+        )
     );
-    let columns = CSV_HEADER.split(',').count();
+    let columns = header.split(',').count();
     let mut kept = String::new();
     let mut dropped = 0;
     let mut lines = lines.enumerate().peekable();
@@ -148,12 +254,14 @@ pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs
             .next()
             .and_then(|c| c.parse().ok())
             .filter(|_| complete)
-            .with_context(|| {
-                format!(
-                    "{} line {}: not a complete row ({columns} columns, an iteration number \
-                     first)",
-                    path.display(),
-                    k + 2
+            .ok_or_else(|| {
+                IoError::content(
+                    path,
+                    format!(
+                        "line {}: not a complete row ({columns} columns, an iteration number \
+                         first)",
+                        k + 2
+                    ),
                 )
             })?;
         if it < start {
@@ -168,23 +276,26 @@ pub fn open_log(path: &Path, resume_at: Option<usize>) -> anyhow::Result<std::fs
              after the checkpoint this run resumes from",
             path.display()
         );
-        ur5_shared::atomic_file::write(path, format!("{CSV_HEADER}\n{kept}").as_bytes())?;
+        ur5_shared::atomic_file::write(path, format!("{header}\n{kept}").as_bytes())
+            .map_err(IoError::file("writing", path))?;
     }
     std::fs::OpenOptions::new()
         .append(true)
         .open(path)
-        .with_context(|| format!("opening {}", path.display()))
+        .map_err(IoError::file("opening", &path))
 }
 
 /// Parses a `gaifo_log.csv` (columns of [`CSV_HEADER`], by name) back into logs.
-pub fn read_gaifo_csv(path: &Path) -> anyhow::Result<Vec<GaifoLog>> {
-    let mut r =
-        csv::Reader::from_path(path).with_context(|| format!("reading {}", path.display()))?;
+pub fn read_gaifo_csv(path: &Path) -> Result<Vec<GaifoLog>, IoError> {
+    let mut r = csv::Reader::from_path(path).map_err(IoError::csv("reading", path))?;
     r.deserialize::<GaifoRow>()
         .enumerate()
         .map(|(k, row)| {
-            row.map(|r| r.log())
-                .with_context(|| format!("{} row {}", path.display(), k + 1))
+            row.map(|r| r.log()).map_err(|source| IoError::CsvRow {
+                path: path.to_owned(),
+                row: k + 1,
+                source,
+            })
         })
         .collect()
 }

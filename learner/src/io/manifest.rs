@@ -16,7 +16,8 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use super::IoError;
+use crate::error::ensure;
 use serde::{Deserialize, Serialize};
 
 /// The file name of the manifest.
@@ -61,6 +62,89 @@ pub enum Claim {
 
 pub use crate::io::files::fnv1a64;
 
+/// A run folder that cannot be taken for a run, or a manifest that does not describe it.
+#[derive(Debug, thiserror::Error)]
+pub enum ManifestError {
+    /// `--resume` of a folder without a manifest.
+    #[error(
+        "{} has no {MANIFEST}: it is not a run of this build (or not a run at all); start a new \
+         run instead of resuming",
+        dir.display()
+    )]
+    NoManifest {
+        /// The folder.
+        dir: PathBuf,
+    },
+    /// `--resume` of a folder that holds a run of other settings.
+    #[error(
+        "{} holds another run than this one: {}; resume it with its own command, algorithm, \
+         seed, demonstrations and settings, or start a new run in another --out",
+        dir.display(),
+        differences.join("; ")
+    )]
+    AnotherRun {
+        /// The folder.
+        dir: PathBuf,
+        /// What differs, one entry per field.
+        differences: Vec<String>,
+    },
+    /// `--resume` of a run whose per-iteration log is gone.
+    #[error(
+        "{} has no {log}: its per-iteration log is missing, so a resumed run would write rows \
+         with a gap; restore the file or start a new run",
+        dir.display()
+    )]
+    NoLog {
+        /// The folder.
+        dir: PathBuf,
+        /// The log's file name.
+        log: &'static str,
+    },
+    /// A new run into a folder that holds a run's files.
+    #[error(
+        "{} already holds {what} ({count} of its files, e.g. {}): continue it with --resume {}, \
+         choose another --out, or pass --force to delete those files and start over",
+        dir.display(),
+        example.display(),
+        dir.display()
+    )]
+    Occupied {
+        /// The folder.
+        dir: PathBuf,
+        /// The run found there.
+        what: String,
+        /// How many of its files are there.
+        count: usize,
+        /// One of them.
+        example: PathBuf,
+    },
+    /// A manifest without settings (replay needs them).
+    #[error("{MANIFEST} records no settings (written by a build before `learner replay`)")]
+    NoSettings,
+    /// Settings that do not read back as this build's.
+    #[error("the settings in {MANIFEST}")]
+    Settings(#[source] serde_json::Error),
+    /// Settings that read back other than they were written.
+    #[error(
+        "the settings in {MANIFEST} hash to {hash}, the run's settings to {recorded}: not this \
+         build's settings"
+    )]
+    SettingsHash {
+        /// The hash of the settings read back.
+        hash: String,
+        /// The hash the manifest records.
+        recorded: String,
+    },
+    /// A `run.json` that does not parse.
+    #[error("{}: not a run manifest of this build", path.display())]
+    NotManifest {
+        /// The file.
+        path: PathBuf,
+        /// What the parser said.
+        source: serde_json::Error,
+    },
+}
+
 impl Manifest {
     /// The manifest of a run of `command`/`algo` with `seed` on the demonstrations in `demos`
     /// (read and hashed) and `settings`.
@@ -70,7 +154,7 @@ impl Manifest {
         seed: u64,
         demos: Option<&Path>,
         settings: &S,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, IoError> {
         let (demos, demos_hash) = match demos {
             Some(p) => (p.display().to_string(), demos_hash(p)?),
             None => ("-".into(), "-".into()),
@@ -117,19 +201,16 @@ impl Manifest {
     /// The run's settings as `C`, checked against [`Manifest::config_hash`] (the settings
     /// read back must hash as the run's did, so a value that did not survive the JSON round
     /// trip is found).
-    pub fn settings_as<C: Serialize + serde::de::DeserializeOwned>(&self) -> anyhow::Result<C> {
-        let v = self.settings.clone().ok_or_else(|| {
-            anyhow::anyhow!(
-                "{MANIFEST} records no settings (written by a build before `learner replay`)"
-            )
-        })?;
-        let c: C = serde_json::from_value(v).context("the settings in run.json")?;
+    pub fn settings_as<C: Serialize + serde::de::DeserializeOwned>(&self) -> Result<C, IoError> {
+        let v = self.settings.clone().ok_or(ManifestError::NoSettings)?;
+        let c: C = serde_json::from_value(v).map_err(ManifestError::Settings)?;
         let hash = settings_hash(&serde_json::to_value(&c)?)?;
-        anyhow::ensure!(
+        ensure!(
             hash == self.config_hash,
-            "the settings in {MANIFEST} hash to {hash}, the run's settings to {}: not this \
-             build's settings",
-            self.config_hash
+            ManifestError::SettingsHash {
+                hash,
+                recorded: self.config_hash.clone()
+            }
         );
         Ok(c)
     }
@@ -143,7 +224,7 @@ impl Manifest {
 }
 
 /// FNV-1a 64 of settings serialised as JSON without `iterations` ([`Manifest::config_hash`]).
-fn settings_hash(settings: &serde_json::Value) -> anyhow::Result<String> {
+fn settings_hash(settings: &serde_json::Value) -> Result<String, IoError> {
     let mut v = settings.clone();
     if let Some(m) = v.as_object_mut() {
         m.remove("iterations");
@@ -152,24 +233,22 @@ fn settings_hash(settings: &serde_json::Value) -> anyhow::Result<String> {
 }
 
 /// The FNV-1a 64 of the demonstrations at `path` as [`Manifest::demos_hash`] records it.
-pub fn demos_hash(path: &Path) -> anyhow::Result<String> {
+pub fn demos_hash(path: &Path) -> Result<String, IoError> {
     Ok(fnv1a64(&content_bytes(path)?))
 }
 
 /// The bytes that identify the demonstrations at `path`: a file's bytes; for a folder (a
 /// LeRobot dataset) every file below it in path order, each as its relative path, a zero
 /// byte, then its bytes.
-fn content_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
+fn content_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
     if !path.is_dir() {
-        return std::fs::read(path).with_context(|| format!("reading {}", path.display()));
+        return std::fs::read(path).map_err(IoError::file("reading", &path));
     }
     let mut files = Vec::new();
     let mut todo = vec![path.to_path_buf()];
     while let Some(dir) = todo.pop() {
-        for e in std::fs::read_dir(&dir).with_context(|| format!("reading {}", dir.display()))? {
-            let p = e
-                .with_context(|| format!("reading {}", dir.display()))?
-                .path();
+        for e in std::fs::read_dir(&dir).map_err(IoError::file("reading", &dir))? {
+            let p = e.map_err(IoError::file("reading", &dir))?.path();
             if p.is_dir() {
                 todo.push(p);
             } else {
@@ -183,18 +262,19 @@ fn content_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
         let rel = f.strip_prefix(path).unwrap_or(&f);
         bytes.extend_from_slice(rel.to_string_lossy().as_bytes());
         bytes.push(0);
-        bytes.extend(std::fs::read(&f).with_context(|| format!("reading {}", f.display()))?);
+        bytes.extend(std::fs::read(&f).map_err(IoError::file("reading", &f))?);
     }
     Ok(bytes)
 }
 
 /// Files and folders a run writes into its directory.
-fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    const NAMES: [&str; 11] = [
+fn run_files(dir: &Path) -> Result<Vec<PathBuf>, IoError> {
+    const NAMES: [&str; 12] = [
         MANIFEST,
         crate::io::files::FILES,
         "run.mcap",
         "gaifo_log.csv",
+        "mdgps_log.csv",
         "serve_log.csv",
         "checkpoint.npz",
         "latest_table.npz",
@@ -207,10 +287,10 @@ fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let entries = match std::fs::read_dir(dir) {
         Ok(e) => e,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(found),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", dir.display())),
+        Err(e) => return Err(e).map_err(IoError::file("reading", &dir)),
     };
     for e in entries {
-        let e = e.with_context(|| format!("reading {}", dir.display()))?;
+        let e = e.map_err(IoError::file("reading", &dir))?;
         let full = e.file_name().to_string_lossy().into_owned();
         // A write cut short by a kill leaves `<name>.partial` or `<name>.tmp`.
         let name = full
@@ -233,21 +313,18 @@ fn run_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 /// `episodes/`: `*.partial` (an [`crate::io::npz::NpzWriter`] before its rename) and `*.tmp`
 /// (an atomic file before its rename). Neither is ever a complete file, and the run's record
 /// (`files.jsonl`) lists none of them.
-fn remove_cut_writes(dir: &Path) -> anyhow::Result<()> {
+fn remove_cut_writes(dir: &Path) -> Result<(), IoError> {
     for d in [dir.to_path_buf(), dir.join("tables"), dir.join("episodes")] {
         let entries = match std::fs::read_dir(&d) {
             Ok(e) => e,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-            Err(e) => return Err(e).with_context(|| format!("reading {}", d.display())),
+            Err(e) => return Err(e).map_err(IoError::file("reading", &d)),
         };
         for e in entries {
-            let p = e
-                .with_context(|| format!("reading {}", d.display()))?
-                .path();
+            let p = e.map_err(IoError::file("reading", &d))?.path();
             let name = p.file_name().unwrap_or_default().to_string_lossy();
             if p.is_file() && (name.ends_with(".partial") || name.ends_with(".tmp")) {
-                std::fs::remove_file(&p)
-                    .with_context(|| format!("deleting the cut write {}", p.display()))?;
+                std::fs::remove_file(&p).map_err(IoError::file("deleting the cut write", &p))?;
             }
         }
     }
@@ -255,47 +332,50 @@ fn remove_cut_writes(dir: &Path) -> anyhow::Result<()> {
 }
 
 /// Reads `dir`'s manifest, if any.
-pub fn read(dir: &Path) -> anyhow::Result<Option<Manifest>> {
+pub fn read(dir: &Path) -> Result<Option<Manifest>, IoError> {
     let p = dir.join(MANIFEST);
     match std::fs::read(&p) {
-        Ok(bytes) => Ok(Some(serde_json::from_slice(&bytes).with_context(|| {
-            format!("{}: not a run manifest of this build", p.display())
+        Ok(bytes) => Ok(Some(serde_json::from_slice(&bytes).map_err(|source| {
+            ManifestError::NotManifest {
+                path: p.clone(),
+                source,
+            }
         })?)),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(e) => Err(e).with_context(|| format!("reading {}", p.display())),
+        Err(e) => Err(IoError::file("reading", &p)(e)),
     }
 }
 
 /// Takes `dir` for the run `m` as `claim` says (module docs); creates `dir` if needed.
-pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
+pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> Result<(), IoError> {
     let found = read(dir)?;
     match claim {
         Claim::Resume => {
             let Some(there) = found else {
-                anyhow::bail!(
-                    "{} has no {MANIFEST}: it is not a run of this build (or not a run at all); \
-                     start a new run instead of resuming",
-                    dir.display()
-                );
+                return Err(ManifestError::NoManifest {
+                    dir: dir.to_owned(),
+                }
+                .into());
             };
             let d = there.differences(m);
-            anyhow::ensure!(
+            ensure!(
                 d.is_empty(),
-                "{} holds another run than this one: {}; resume it with its own command, \
-                 algorithm, seed, demonstrations and settings, or start a new run in another --out",
-                dir.display(),
-                d.join("; ")
+                ManifestError::AnotherRun {
+                    dir: dir.to_owned(),
+                    differences: d
+                }
             );
-            let log = if m.algo == "expert" {
-                "serve_log.csv"
-            } else {
-                "gaifo_log.csv"
+            let log = match m.algo.as_str() {
+                "expert" => "serve_log.csv",
+                "mdgps" => "mdgps_log.csv",
+                _ => "gaifo_log.csv",
             };
-            anyhow::ensure!(
+            ensure!(
                 dir.join(log).is_file(),
-                "{} has no {log}: its per-iteration log is missing, so a resumed run would \
-                 write rows with a gap; restore the file or start a new run",
-                dir.display()
+                ManifestError::NoLog {
+                    dir: dir.to_owned(),
+                    log
+                }
             );
             remove_cut_writes(dir)
         }
@@ -306,15 +386,14 @@ pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
                     .as_ref()
                     .map(Manifest::describe)
                     .unwrap_or_else(|| "a run without a manifest".into());
-                anyhow::ensure!(
+                ensure!(
                     force,
-                    "{} already holds {what} ({} of its files, e.g. {}): continue it with \
-                     --resume {}, choose another --out, or pass --force to delete those files \
-                     and start over",
-                    dir.display(),
-                    files.len(),
-                    files[0].display(),
-                    dir.display()
+                    ManifestError::Occupied {
+                        dir: dir.to_owned(),
+                        what,
+                        count: files.len(),
+                        example: files[0].clone(),
+                    }
                 );
                 for f in &files {
                     let r = if f.is_dir() {
@@ -322,12 +401,13 @@ pub fn claim(dir: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
                     } else {
                         std::fs::remove_file(f)
                     };
-                    r.with_context(|| format!("--force: deleting {}", f.display()))?;
+                    r.map_err(IoError::file("--force: deleting", f))?;
                 }
             }
             crate::io::create_dir(dir)?;
-            ur5_shared::atomic_file::write(&dir.join(MANIFEST), &serde_json::to_vec_pretty(m)?)
-                .context("writing the run manifest")?;
+            let path = dir.join(MANIFEST);
+            ur5_shared::atomic_file::write(&path, &serde_json::to_vec_pretty(m)?)
+                .map_err(IoError::file("writing the run manifest", &path))?;
             crate::io::files::start(dir)
         }
     }

@@ -26,7 +26,7 @@ use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use super::IoError;
 use serde_json::json;
 use ur5_shared::layout::{ACTIVE_JOINTS, DU, DX};
 
@@ -103,14 +103,12 @@ fn channels() -> Vec<(&'static str, &'static str, serde_json::Value)> {
 }
 
 /// The gain-table files of `run`: `tables/vNNNN.npz`, else `iter_NNN_table.npz`, by version.
-fn table_files(run: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let list = |dir: &Path, keep: &dyn Fn(&str) -> bool| -> anyhow::Result<Vec<PathBuf>> {
+fn table_files(run: &Path) -> Result<Vec<PathBuf>, IoError> {
+    let list = |dir: &Path, keep: &dyn Fn(&str) -> bool| -> Result<Vec<PathBuf>, IoError> {
         let mut f = Vec::new();
         if let Ok(entries) = std::fs::read_dir(dir) {
             for e in entries {
-                let p = e
-                    .with_context(|| format!("reading {}", dir.display()))?
-                    .path();
+                let p = e.map_err(IoError::file("reading", dir))?.path();
                 if p.file_name().and_then(|n| n.to_str()).is_some_and(keep) {
                     f.push(p);
                 }
@@ -148,8 +146,8 @@ pub struct TableInfo {
 
 impl TableInfo {
     /// The table stored in `file`.
-    pub fn load(file: &Path) -> anyhow::Result<Self> {
-        let t = load_stored(file).with_context(|| format!("reading {}", file.display()))?;
+    pub fn load(file: &Path) -> Result<Self, IoError> {
+        let t = load_stored(file)?;
         Ok(Self {
             version: t.version,
             epoch: t.epoch,
@@ -197,12 +195,11 @@ pub struct RunMcap {
 
 impl RunMcap {
     /// Creates `out` (and its folder) with the header, the schemas and the channels.
-    pub fn create(out: &Path) -> anyhow::Result<Self> {
+    pub fn create(out: &Path) -> Result<Self, IoError> {
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             super::create_dir(dir)?;
         }
-        let file =
-            std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
+        let file = std::fs::File::create(out).map_err(IoError::file("creating", out))?;
         let mut w = mcap::WriteOptions::new()
             .compression(None)
             .profile("")
@@ -229,7 +226,7 @@ impl RunMcap {
         })
     }
 
-    fn put(&mut self, topic: &'static str, ns: u64, msg: serde_json::Value) -> anyhow::Result<()> {
+    fn put(&mut self, topic: &'static str, ns: u64, msg: serde_json::Value) -> Result<(), IoError> {
         self.seq += 1;
         *self.counts.messages.entry(topic.to_owned()).or_default() += 1;
         let header = mcap::records::MessageHeader {
@@ -240,7 +237,7 @@ impl RunMcap {
         };
         self.w
             .write_to_known_channel(&header, &serde_json::to_vec(&msg)?)
-            .map_err(anyhow::Error::from)
+            .map_err(IoError::from)
     }
 
     /// Announces a table: its `/table` message comes when its first episode starts (or at the
@@ -261,7 +258,7 @@ impl RunMcap {
         ep: &Episode,
         origin: &EpisodeOrigin,
         dt: f64,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), IoError> {
         let start = self.start;
         let ns = |t: usize| ((start + t as f64 * dt) * 1e9).round() as u64;
         let v = origin.table_version;
@@ -331,13 +328,12 @@ impl RunMcap {
     /// Writes what the run folder `run` holds so far: its tables ([`table_files`]) and its
     /// recorded episodes in arrival order (a whole run exported, or a resumed served run's
     /// earlier part).
-    pub fn add_run(&mut self, run: &Path) -> anyhow::Result<()> {
+    pub fn add_run(&mut self, run: &Path) -> Result<(), IoError> {
         for f in table_files(run)? {
             self.table(TableInfo::load(&f)?);
         }
         for (path, ep, origin) in recorded_episodes(&run.join("episodes"))? {
-            let task =
-                load_episode_task(&path).with_context(|| format!("reading {}", path.display()))?;
+            let task = load_episode_task(&path)?;
             self.episode(&path, &ep, &origin, task.dt)?;
         }
         Ok(())
@@ -345,7 +341,7 @@ impl RunMcap {
 
     /// The tables that ran no episode (at the end of the time line), then the summary
     /// section and footer.
-    pub fn finish(mut self) -> anyhow::Result<McapCounts> {
+    pub fn finish(mut self) -> Result<McapCounts, IoError> {
         let end = (self.start * 1e9).round() as u64;
         for t in std::mem::take(&mut self.pending) {
             self.put("/table", end, t.message())?;
@@ -356,17 +352,17 @@ impl RunMcap {
 }
 
 /// Writes the run in `run` (its `episodes/` and tables) to the MCAP file `out` (module docs).
-pub fn write_run_mcap(run: &Path, out: &Path) -> anyhow::Result<McapCounts> {
+pub fn write_run_mcap(run: &Path, out: &Path) -> Result<McapCounts, IoError> {
     let mut m = RunMcap::create(out)?;
     m.add_run(run)?;
     if m.counts.episodes == 0 {
         drop(m);
         std::fs::remove_file(out).ok();
-        anyhow::bail!(
-            "{} holds no recorded episodes (episodes/*.npz; `learner serve` records them, \
-             `learner train` with --record-episodes)",
-            run.display()
-        );
+        return Err(IoError::content(
+            run,
+            "no recorded episodes (episodes/*.npz; `learner serve` records them, `learner \
+             train` with --record-episodes)",
+        ));
     }
     m.finish()
 }

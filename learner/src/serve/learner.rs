@@ -4,7 +4,6 @@
 use std::io::Write;
 use std::path::Path;
 
-use anyhow::Context;
 use imitation::expert::{ExpertLearner, IterationLog};
 use imitation::gaifo::{GaifoLog, LqrGaifo};
 use imitation::learn::{Learn, LinGaussLearn};
@@ -12,7 +11,7 @@ use imitation::rollout::Episode;
 use serde::Serialize;
 use ur5_shared::GainTable;
 
-use super::ServeOptions;
+use super::{ServeError, ServeOptions};
 use crate::arm::SimArm;
 use crate::io::checkpoint::{save_checkpoint, ExpertCheckpoint};
 use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
@@ -20,7 +19,9 @@ use crate::io::learned::{append_event, LearnedEvent};
 use crate::io::log::{open_log, write_csv_row, write_record, EXPERT_CSV_HEADER};
 use crate::io::run_mcap::{RunMcap, TableInfo};
 use crate::io::table::save_table;
+use crate::io::IoError;
 use crate::run::Checkpoint;
+use crate::run::RunError;
 
 /// A learner `learner serve` runs: [`LinGaussLearn`] (steps 2–6 on the streamed episodes, the
 /// controller to publish) plus its files and progress line. Implemented for the expert
@@ -32,9 +33,9 @@ pub trait ServeLearner: LinGaussLearn<Log: Serialize> + Checkpoint {
     /// Header of [`ServeLearner::progress_line`].
     const PROGRESS_HEADER: &'static str;
     /// Opens the per-iteration CSV in `out` for appending (`resumed`: a resumed run).
-    fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File>;
+    fn open_csv(&self, out: &Path, resumed: bool) -> Result<std::fs::File, ServeError>;
     /// One CSV row, newline included.
-    fn csv_row(&self, log: &Self::Log) -> anyhow::Result<String>;
+    fn csv_row(&self, log: &Self::Log) -> Result<String, ServeError>;
     /// The progress line of an iteration.
     fn progress_line(log: &Self::Log) -> String;
     /// Iterations the settings ask for in all (the progress bar's length).
@@ -45,7 +46,7 @@ pub trait ServeLearner: LinGaussLearn<Log: Serialize> + Checkpoint {
 /// random-policy cost, best controller and patience count), read by
 /// [`super::expert_from_checkpoint`].
 impl Checkpoint for ExpertLearner {
-    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> anyhow::Result<()> {
+    fn checkpoint(&self, dir: &Path, _arm: Option<&SimArm>) -> Result<(), RunError> {
         let c = ExpertCheckpoint {
             pol: self.policy().clone(),
             iteration: self.iteration(),
@@ -53,30 +54,34 @@ impl Checkpoint for ExpertLearner {
             best: self.best().map(|(p, e)| (p.clone(), e.clone())),
             since_best: self.since_best(),
         };
-        save_checkpoint(&dir.join("checkpoint.npz"), &c, self.config().seed)
+        Ok(save_checkpoint(
+            &dir.join("checkpoint.npz"),
+            &c,
+            self.config().seed,
+        )?)
     }
 }
 
 impl ServeLearner for ExpertLearner {
     const TASK_SOURCE: &'static str = "this learner's config ([task])";
     const PROGRESS_HEADER: &'static str = IterationLog::PROGRESS_HEADER;
-    fn open_csv(&self, out: &Path, _resumed: bool) -> anyhow::Result<std::fs::File> {
+    fn open_csv(&self, out: &Path, _resumed: bool) -> Result<std::fs::File, ServeError> {
         let path = out.join("serve_log.csv");
         let new_csv = !path.exists();
         let mut csv = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
             .open(&path)
-            .with_context(|| format!("opening {}", path.display()))?;
+            .map_err(IoError::file("opening", &path))?;
         if new_csv {
-            writeln!(csv, "{EXPERT_CSV_HEADER}")?;
+            writeln!(csv, "{EXPERT_CSV_HEADER}").map_err(IoError::file("writing", &path))?;
         }
         Ok(csv)
     }
-    fn csv_row(&self, log: &IterationLog) -> anyhow::Result<String> {
+    fn csv_row(&self, log: &IterationLog) -> Result<String, ServeError> {
         let mut row = Vec::new();
-        write_record(&mut row, log)?;
-        Ok(String::from_utf8(row)?)
+        write_record(&mut row, log).map_err(ServeError::Row)?;
+        Ok(String::from_utf8_lossy(&row).into_owned())
     }
     fn progress_line(log: &IterationLog) -> String {
         log.progress_line()
@@ -89,16 +94,16 @@ impl ServeLearner for ExpertLearner {
 impl ServeLearner for LqrGaifo {
     const TASK_SOURCE: &'static str = "the demonstrations";
     const PROGRESS_HEADER: &'static str = GaifoLog::PROGRESS_HEADER;
-    fn open_csv(&self, out: &Path, resumed: bool) -> anyhow::Result<std::fs::File> {
-        open_log(
+    fn open_csv(&self, out: &Path, resumed: bool) -> Result<std::fs::File, ServeError> {
+        Ok(open_log(
             &out.join("gaifo_log.csv"),
             resumed.then_some(self.iteration()),
-        )
+        )?)
     }
-    fn csv_row(&self, log: &GaifoLog) -> anyhow::Result<String> {
+    fn csv_row(&self, log: &GaifoLog) -> Result<String, ServeError> {
         let mut row = Vec::new();
-        write_csv_row(&mut row, log, self.seed(), Self::ALGO)?;
-        Ok(String::from_utf8(row)?)
+        write_csv_row(&mut row, log, self.seed(), Self::ALGO).map_err(ServeError::Row)?;
+        Ok(String::from_utf8_lossy(&row).into_owned())
     }
     fn progress_line(log: &GaifoLog) -> String {
         log.progress_line()
@@ -124,7 +129,7 @@ pub(super) struct Run<L> {
 
 impl<L: ServeLearner> Run<L> {
     /// Saves the checkpoint and the table of the controller to execute next; returns the table.
-    pub(super) fn save_current(&mut self) -> anyhow::Result<Box<GainTable>> {
+    pub(super) fn save_current(&mut self) -> Result<Box<GainTable>, ServeError> {
         let out = &self.opts.out;
         let version = self.learner.version();
         let mut table = self.learner.table();
@@ -155,7 +160,7 @@ impl<L: ServeLearner> Run<L> {
         episode: u64,
         version: u64,
         epoch: u32,
-    ) -> anyhow::Result<Option<String>> {
+    ) -> Result<Option<String>, ServeError> {
         let Some(rec) = self.recorder.as_mut() else {
             return Ok(None);
         };
@@ -175,7 +180,7 @@ impl<L: ServeLearner> Run<L> {
 
     /// Appends `event` to `episodes/learned.jsonl` ([`crate::io::learned`]) when episodes are
     /// recorded (without them there is nothing to replay).
-    pub(super) fn note(&self, event: &LearnedEvent) -> anyhow::Result<()> {
+    pub(super) fn note(&self, event: &LearnedEvent) -> Result<(), ServeError> {
         if self.recorder.is_none() {
             return Ok(());
         }
@@ -183,6 +188,10 @@ impl<L: ServeLearner> Run<L> {
         let list = episodes.join(crate::io::learned::LEARNED);
         let from = crate::io::files::len(&list);
         append_event(&episodes, event)?;
-        crate::io::files::note_appended(&self.opts.out, &list, from)
+        Ok(crate::io::files::note_appended(
+            &self.opts.out,
+            &list,
+            from,
+        )?)
     }
 }

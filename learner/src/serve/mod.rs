@@ -13,7 +13,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use imitation::demos::Demos;
 use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
@@ -32,6 +31,8 @@ pub use assemble::{episode_from_samples, Assembled, Assembler, Batch, Counts};
 pub use learner::ServeLearner;
 pub use task_check::motion_per_step;
 
+use crate::error::ensure;
+use crate::io::IoError;
 use learner::Run;
 use ports::Ports;
 use task_check::validate;
@@ -100,16 +101,154 @@ impl Default for ServeOptions {
     }
 }
 
+/// What stopped `learner serve` or `learner policy serve`, or why it could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// A config file that does not parse as TOML.
+    #[error("parsing {}", path.display())]
+    Toml {
+        /// The config file.
+        path: PathBuf,
+        /// What the parser said.
+        source: toml::de::Error,
+    },
+    /// A `[serve]` table with unknown keys or wrong types.
+    #[error("[serve] in {}", path.display())]
+    ServeTable {
+        /// The config file.
+        path: PathBuf,
+        /// What the parser said.
+        source: toml::de::Error,
+    },
+    /// A config file's learner settings that are not valid.
+    #[error("{what} settings in {}", path.display())]
+    Settings {
+        /// "expert", "LQR+GAIfO".
+        what: &'static str,
+        /// The config file.
+        path: PathBuf,
+        /// What is wrong.
+        source: ur5_shared::config::ConfigError,
+    },
+    /// Settings that cannot be written back as TOML (a bug).
+    #[error("writing the settings as TOML")]
+    ToToml(#[from] toml::ser::Error),
+    /// An expert checkpoint that cannot be read.
+    #[error("resuming from {}", path.display())]
+    Checkpoint {
+        /// `checkpoint.npz`.
+        path: PathBuf,
+        /// Why.
+        source: crate::io::npz::NpzError,
+    },
+    /// An expert checkpoint of another horizon than the task's.
+    #[error(
+        "{} holds a controller of T = {t} (best: {best:?}), the task has T = {horizon}",
+        path.display()
+    )]
+    CheckpointHorizon {
+        /// `checkpoint.npz`.
+        path: PathBuf,
+        /// Its controller's T.
+        t: usize,
+        /// Its best controller's and best episode's T.
+        best: Option<(usize, usize)>,
+        /// The task's T.
+        horizon: usize,
+    },
+    /// The task of the demonstrations, or settings, that serving cannot run.
+    #[error("the demonstrations' task or the settings")]
+    DemosTask(#[source] Box<ServeError>),
+    /// A resumed version published too often to be published again.
+    #[error("{}: epoch {recorded} cannot be increased", path.display())]
+    Epoch {
+        /// The recorded table.
+        path: PathBuf,
+        /// Its epoch.
+        recorded: u32,
+    },
+    /// `mcap` without `record_episodes`.
+    #[error(
+        "mcap = true needs record_episodes = true: run.mcap is written from the recorded episodes"
+    )]
+    McapWithoutEpisodes,
+    /// A setting out of its range; the message names it and the range.
+    #[error("{0}")]
+    Range(String),
+    /// The controller or the arm runs another task than the learner (docs/design.md §3.6):
+    /// the message says which part differs and what to run.
+    #[error("{0}")]
+    TaskMismatch(String),
+    /// The learner's model of the arm cannot be built.
+    #[error("the learner's model of the arm")]
+    Model(#[source] hil_sim::SimError),
+    /// The learner's model of the arm cannot be put at the task's start.
+    #[error("the learner's model of the arm")]
+    ModelReset(#[source] imitation::ImitationError),
+    /// The first episode replayed on the learner's model of the arm.
+    #[error("replaying the first episode in process")]
+    FirstEpisode(#[source] imitation::ImitationError),
+    /// An iceoryx2 operation that failed; the message names it, with iceoryx2's error.
+    #[error("{0}")]
+    Ipc(String),
+    /// The controller said it stopped (docs/design.md §3.12).
+    #[error("the controller stopped: {0}")]
+    ControllerStopped(String),
+    /// No sample came for the time allowed.
+    #[error(
+        "no sample on prefix `{prefix}` for {timeout_s} s: is `rt-controller run --prefix \
+         {prefix}` running (with hil-sim serve or a robot)?"
+    )]
+    NoSamples {
+        /// The prefix.
+        prefix: String,
+        /// The time allowed (s).
+        timeout_s: f64,
+    },
+    /// A service that cannot be opened or created.
+    #[error(transparent)]
+    Service(#[from] ur5_shared::services::OpenServiceError),
+    /// A service name iceoryx2 refuses.
+    #[error(transparent)]
+    ServiceName(#[from] ur5_shared::services::InvalidServiceName),
+    /// Another learner holds the prefix.
+    #[error(transparent)]
+    Role(#[from] ur5_shared::services::RoleLockError),
+    /// The task.
+    #[error(transparent)]
+    Config(#[from] ur5_shared::config::ConfigError),
+    /// A CSV row that cannot be formatted (a bug).
+    #[error("formatting a CSV row")]
+    Row(#[source] std::io::Error),
+    /// The run's files.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// The learner's checkpoints and resume.
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+    /// A learner piece (an update, the settings, the demonstrations' task).
+    #[error(transparent)]
+    Imitation(#[from] imitation::ImitationError),
+}
+
+impl From<crate::io::npz::NpzError> for ServeError {
+    fn from(e: crate::io::npz::NpzError) -> Self {
+        Self::Io(e.into())
+    }
+}
+
 /// Reads a config file: its `[serve]` table (optional) and the rest, unparsed.
-pub(crate) fn read_config(path: &Path) -> anyhow::Result<(toml::Table, ServeOptions)> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut value: toml::Table =
-        toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+pub(crate) fn read_config(path: &Path) -> Result<(toml::Table, ServeOptions), ServeError> {
+    let text = std::fs::read_to_string(path).map_err(IoError::file("reading", path))?;
+    let mut value: toml::Table = toml::from_str(&text).map_err(|source| ServeError::Toml {
+        path: path.to_owned(),
+        source,
+    })?;
     let serve = match value.remove("serve") {
-        Some(v) => v
-            .try_into()
-            .with_context(|| format!("[serve] in {}", path.display()))?,
+        Some(v) => v.try_into().map_err(|source| ServeError::ServeTable {
+            path: path.to_owned(),
+            source,
+        })?,
         None => ServeOptions::default(),
     };
     Ok((value, serve))
@@ -120,21 +259,24 @@ pub(crate) fn read_config(path: &Path) -> anyhow::Result<(toml::Table, ServeOpti
 pub(crate) fn settings<C: Serialize + serde::de::DeserializeOwned + Default>(
     rest: toml::Table,
     path: &Path,
-    what: &str,
-) -> anyhow::Result<C> {
+    what: &'static str,
+) -> Result<C, ServeError> {
     let text = toml::to_string(&rest)?;
-    ur5_shared::config::from_toml_str(&text)
-        .with_context(|| format!("{what} settings in {}", path.display()))
+    ur5_shared::config::from_toml_str(&text).map_err(|source| ServeError::Settings {
+        what,
+        path: path.to_owned(),
+        source,
+    })
 }
 
 /// Reads a config file: an [`ExpertConfig`] at the top level plus an optional `[serve]` table.
-pub fn load_config(path: &Path) -> anyhow::Result<(ExpertConfig, ServeOptions)> {
+pub fn load_config(path: &Path) -> Result<(ExpertConfig, ServeOptions), ServeError> {
     let (rest, serve) = read_config(path)?;
     Ok((settings(rest, path, "expert")?, serve))
 }
 
 /// Reads a config file: a [`GaifoConfig`] at the top level plus an optional `[serve]` table.
-pub fn load_gaifo_config(path: &Path) -> anyhow::Result<(GaifoConfig, ServeOptions)> {
+pub fn load_gaifo_config(path: &Path) -> Result<(GaifoConfig, ServeOptions), ServeError> {
     let (rest, serve) = read_config(path)?;
     Ok((settings(rest, path, "LQR+GAIfO")?, serve))
 }
@@ -183,7 +325,7 @@ pub fn serve(
     cfg: ExpertConfig,
     opts: ServeOptions,
     progress: impl FnMut(&IterationLog),
-) -> anyhow::Result<ServeSummary> {
+) -> Result<ServeSummary, ServeError> {
     validate(&cfg.task, cfg.samples, cfg.init_var, &opts)?;
     cfg.validate()?;
     claim_dirs(&opts, "expert", cfg.seed, &cfg)?;
@@ -198,18 +340,22 @@ pub fn serve(
 /// (controller, iteration, random-policy cost, best controller and patience count) through
 /// [`ExpertLearner::resume`] and [`ExpertLearner::with_best`] (also what
 /// `learner replay` does where a served expert run was resumed).
-pub fn expert_from_checkpoint(cfg: ExpertConfig, dir: &Path) -> anyhow::Result<ExpertLearner> {
+pub fn expert_from_checkpoint(cfg: ExpertConfig, dir: &Path) -> Result<ExpertLearner, ServeError> {
     let path = dir.join("checkpoint.npz");
-    let c = crate::io::checkpoint::load_checkpoint(&path)
-        .with_context(|| format!("resuming from {}", path.display()))?;
+    let c = match crate::io::checkpoint::load_checkpoint(&path) {
+        Ok(c) => c,
+        Err(source) => return Err(ServeError::Checkpoint { path, source }),
+    };
     let best_t = c.best.as_ref().map(|(p, e)| (p.t, e.horizon()));
-    anyhow::ensure!(
+    ensure!(
         c.pol.t == cfg.task.horizon
             && best_t.is_none_or(|(p, e)| p == cfg.task.horizon && e == cfg.task.horizon),
-        "{} holds a controller of T = {} (best: {best_t:?}), the task has T = {}",
-        path.display(),
-        c.pol.t,
-        cfg.task.horizon
+        ServeError::CheckpointHorizon {
+            path,
+            t: c.pol.t,
+            best: best_t,
+            horizon: cfg.task.horizon
+        }
     );
     Ok(
         ExpertLearner::resume(cfg, c.pol, c.iteration, c.cost_random)
@@ -225,10 +371,10 @@ pub fn serve_gaifo(
     demos: Demos,
     opts: ServeOptions,
     progress: impl FnMut(&GaifoLog),
-) -> anyhow::Result<ServeSummary<GaifoLog>> {
+) -> Result<ServeSummary<GaifoLog>, ServeError> {
     let task = demos.task()?;
     validate(&task, cfg.samples, cfg.init_var, &opts)
-        .context("the demonstrations' task or the settings")?;
+        .map_err(|e| ServeError::DemosTask(Box::new(e)))?;
     cfg.validate()?;
     claim_dirs(&opts, "lqr-gaifo", cfg.seed, &cfg)?;
     let run = match &opts.resume {
@@ -245,22 +391,22 @@ fn claim_dirs<S: Serialize>(
     algo: &str,
     seed: u64,
     settings: &S,
-) -> anyhow::Result<()> {
+) -> Result<(), ServeError> {
     use crate::io::manifest::{claim, Claim, Manifest};
     let m = Manifest::new("serve", algo, seed, opts.demos.as_deref(), settings)?;
     if let Some(dir) = &opts.resume {
         claim(dir, &m, Claim::Resume)?;
         if *dir == opts.out {
-            return crate::io::files::adopt(dir);
+            return Ok(crate::io::files::adopt(dir)?);
         }
     }
-    claim(&opts.out, &m, Claim::New { force: opts.force })
+    Ok(claim(&opts.out, &m, Claim::New { force: opts.force })?)
 }
 
 /// The epoch a resumed learner publishes `version` with: one more than the epoch of the
 /// copy recorded in `dir/tables/` (0 if there is none), so that the controller takes it again
 /// and restarts the version's episode count (docs/design.md §3.6, "Exact resume").
-fn republication_epoch(dir: &Path, version: u64) -> anyhow::Result<u32> {
+fn republication_epoch(dir: &Path, version: u64) -> Result<u32, ServeError> {
     let path = crate::io::table::version_path(dir, version);
     let recorded = if path.is_file() {
         crate::io::npz::NpzFile::open_schema(&path, crate::io::table::SCHEMA_VERSION)?
@@ -270,7 +416,7 @@ fn republication_epoch(dir: &Path, version: u64) -> anyhow::Result<u32> {
     };
     recorded
         .checked_add(1)
-        .with_context(|| format!("{}: epoch {recorded} cannot be increased", path.display()))
+        .ok_or(ServeError::Epoch { path, recorded })
 }
 
 /// The one serve loop (docs/design.md §3.6) around `learner`.
@@ -278,10 +424,10 @@ fn serve_loop<L: ServeLearner>(
     learner: L,
     opts: ServeOptions,
     mut progress: impl FnMut(&L::Log),
-) -> anyhow::Result<ServeSummary<L::Log>> {
-    anyhow::ensure!(
+) -> Result<ServeSummary<L::Log>, ServeError> {
+    ensure!(
         !opts.mcap || opts.record_episodes,
-        "mcap = true needs record_episodes = true: run.mcap is written from the recorded episodes"
+        ServeError::McapWithoutEpisodes
     );
     let out = opts.out.clone();
     for d in [out.clone(), out.join("tables"), out.join("episodes")] {
@@ -512,12 +658,12 @@ mod tests {
             Some(&mut Noise::new(7, 1, 0)),
         )
         .unwrap();
-        let e = format!("{:#}", check(&other_seed).unwrap_err());
+        let e = crate::error::line(&check(&other_seed).unwrap_err());
         assert!(
             e.contains("learner's seed 0") && e.contains("seed = 0"),
             "{e}"
         );
-        let err = |task: TaskConfig| format!("{:#}", check(&episode(&task, 0)).unwrap_err());
+        let err = |task: TaskConfig| crate::error::line(&check(&episode(&task, 0)).unwrap_err());
         let e = err(TaskConfig {
             goal: [-0.45, -0.2, 0.25],
             ..cfg.task.clone()
@@ -560,11 +706,11 @@ mod tests {
         // Horizon: a step beyond T, or episodes that keep ending early.
         let mut c = TaskCheck::default();
         let s = sample(4, 30, 1, 1);
-        assert!(format!("{:#}", c.sample(&s, &el).unwrap_err()).contains("horizon = 30"));
+        assert!(crate::error::line(&c.sample(&s, &el).unwrap_err()).contains("horizon = 30"));
         c.sample(&sample(4, 29, 1, 1), &el).unwrap();
         c.partial(20, &el).unwrap();
         c.partial(20, &el).unwrap();
-        let e = format!("{:#}", c.partial(20, &el).unwrap_err());
+        let e = crate::error::line(&c.partial(20, &el).unwrap_err());
         assert!(
             e.contains("end after 20 steps") && e.contains("horizon = 30"),
             "{e}"

@@ -13,6 +13,8 @@ use ur5_shared::layout::EE_MINUS_GOAL;
 use ur5_shared::{policy_action, PolicyScratch, PolicyTable, NO_NOISE};
 
 use super::ports::Ports;
+use super::ServeError;
+use crate::error::ensure;
 
 /// One episode the controller ran with the policy.
 #[derive(Clone, Debug, Serialize)]
@@ -51,12 +53,14 @@ pub fn serve_policy(
     table: &PolicyTable,
     opts: &PolicyServeOptions,
     mut report: impl FnMut(&PolicyEpisode),
-) -> anyhow::Result<Vec<PolicyEpisode>> {
-    anyhow::ensure!(opts.steps >= 1, "--steps must be >= 1");
-    anyhow::ensure!(
+) -> Result<Vec<PolicyEpisode>, ServeError> {
+    ensure!(
+        opts.steps >= 1,
+        ServeError::Range("--steps must be >= 1".into())
+    );
+    ensure!(
         opts.timeout_s.is_finite() && opts.timeout_s > 0.0,
-        "--timeout-s {} must be > 0",
-        opts.timeout_s
+        ServeError::Range(format!("--timeout-s {} must be > 0", opts.timeout_s))
     );
     let ports = Ports::<PolicyTable>::create(&opts.prefix)?;
     let result = collect(&ports, table, opts, &mut report);
@@ -72,7 +76,7 @@ fn collect(
     table: &PolicyTable,
     opts: &PolicyServeOptions,
     report: &mut impl FnMut(&PolicyEpisode),
-) -> anyhow::Result<Vec<PolicyEpisode>> {
+) -> Result<Vec<PolicyEpisode>, ServeError> {
     ports.publish(table)?;
     let mut scratch = PolicyScratch::default();
     let mut done = Vec::new();
@@ -85,17 +89,17 @@ fn collect(
             Ok(Some(s)) => *s,
             Ok(None) => {
                 ports.status.check_controller()?;
-                anyhow::ensure!(
+                ensure!(
                     last_sample.elapsed().as_secs_f64() < opts.timeout_s,
-                    "no sample on prefix `{}` for {} s: is `rt-controller run --prefix {}` running (with hil-sim serve or a robot)?",
-                    opts.prefix,
-                    opts.timeout_s,
-                    opts.prefix
+                    ServeError::NoSamples {
+                        prefix: opts.prefix.clone(),
+                        timeout_s: opts.timeout_s
+                    }
                 );
                 std::thread::sleep(Duration::from_millis(1));
                 continue;
             }
-            Err(e) => anyhow::bail!("receiving samples: {e:?}"),
+            Err(e) => return Err(ServeError::Ipc(format!("receiving samples: {e:?}"))),
         };
         last_sample = Instant::now();
         if sample.table_version != table.version {

@@ -11,6 +11,8 @@ use ur5_shared::{GainTable, PolicyTable, StepSample};
 
 use core::mem::MaybeUninit;
 
+use super::ServeError;
+
 /// The status ports of a learner (docs/design.md §3.12): `learner/status` out (why this learner
 /// stops), `controller/status` in (why the controller stopped). Create them before the sample
 /// subscriber, so that they exist when the controller's setup sees the learner.
@@ -21,17 +23,25 @@ pub(crate) struct StatusPorts {
 }
 
 impl StatusPorts {
-    pub(crate) fn create(node: &Node<ipc::Service>, names: &ServiceNames) -> anyhow::Result<Self> {
+    pub(crate) fn create(
+        node: &Node<ipc::Service>,
+        names: &ServiceNames,
+    ) -> Result<Self, ServeError> {
         let out_svc = services::STATUS_QOS
             .open_or_create_retrying::<PeerStatus>(node, &names.learner_status)?;
         let in_svc = services::STATUS_QOS
             .open_or_create_retrying::<PeerStatus>(node, &names.controller_status)?;
-        let out = out_svc
-            .publisher_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("cannot publish on `{}`: {e:?}", names.learner_status))?;
+        let out = out_svc.publisher_builder().create().map_err(|e| {
+            ServeError::Ipc(format!(
+                "cannot publish on `{}`: {e:?}",
+                names.learner_status
+            ))
+        })?;
         let from_controller = in_svc.subscriber_builder().create().map_err(|e| {
-            anyhow::anyhow!("cannot subscribe to `{}`: {e:?}", names.controller_status)
+            ServeError::Ipc(format!(
+                "cannot subscribe to `{}`: {e:?}",
+                names.controller_status
+            ))
         })?;
         Ok(Self {
             out,
@@ -41,14 +51,14 @@ impl StatusPorts {
     }
 
     /// `Err` with the controller's message if it said it stopped.
-    pub(crate) fn check_controller(&self) -> anyhow::Result<()> {
+    pub(crate) fn check_controller(&self) -> Result<(), ServeError> {
         while let Some(s) = self
             .from_controller
             .receive()
-            .map_err(|e| anyhow::anyhow!("receiving the controller's status: {e:?}"))?
+            .map_err(|e| ServeError::Ipc(format!("receiving the controller's status: {e:?}")))?
         {
             if s.is_fatal() {
-                anyhow::bail!("the controller stopped: {}", s.text());
+                return Err(ServeError::ControllerStopped(s.text().to_string()));
             }
         }
         Ok(())
@@ -56,10 +66,10 @@ impl StatusPorts {
 
     /// Tells the controller why this learner stops, then waits (at most 2 s) until it has
     /// read it and gone (it stops on reading it).
-    pub(crate) fn stopping(&self, why: &anyhow::Error) {
+    pub(crate) fn stopping(&self, why: &ServeError) {
         let st = PeerStatus::fatal(
             ur5_shared::clock::monotonic_ns(),
-            format_args!("the learner stopped: {why:#}"),
+            format_args!("the learner stopped: {}", crate::error::line(why)),
         );
         let _ = self.out.update_connections();
         if self.out.send_copy(st).is_err() {
@@ -128,12 +138,14 @@ impl<T: Outgoing> Ports<T> {
     /// Setup: removes what dead processes left behind (e.g. this learner's killed
     /// predecessor), then opens both services with the project's QoS and creates the ports
     /// (the status ports first, §3.12).
-    pub(super) fn create(prefix: &str) -> anyhow::Result<Self> {
+    pub(super) fn create(prefix: &str) -> Result<Self, ServeError> {
         let role = services::RoleLock::acquire(prefix, "learner")?;
         let _ = Node::<ipc::Service>::try_cleanup_dead_nodes(Config::global_config());
         let names = ServiceNames::new(prefix);
         let node = NodeBuilder::new().create::<ipc::Service>().map_err(|e| {
-            anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}; is /dev/shm writable?")
+            ServeError::Ipc(format!(
+                "cannot create the iceoryx2 node: {e:?}; is /dev/shm writable?"
+            ))
         })?;
         let status = StatusPorts::create(&node, &names)?;
         let samples_svc = services::LEARNER_SAMPLES_QOS
@@ -144,12 +156,14 @@ impl<T: Outgoing> Ports<T> {
             .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
             .create()
             .map_err(|e| {
-                anyhow::anyhow!("cannot subscribe to `{}`: {e:?}", names.learner_samples)
+                ServeError::Ipc(format!(
+                    "cannot subscribe to `{}`: {e:?}",
+                    names.learner_samples
+                ))
             })?;
-        let tables = tables_svc
-            .publisher_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("cannot publish on `{}`: {e:?}", T::service(&names)))?;
+        let tables = tables_svc.publisher_builder().create().map_err(|e| {
+            ServeError::Ipc(format!("cannot publish on `{}`: {e:?}", T::service(&names)))
+        })?;
         Ok(Self {
             status,
             samples,
@@ -160,16 +174,16 @@ impl<T: Outgoing> Ports<T> {
     }
 
     /// Publishes `table` (one loaned sample).
-    pub(super) fn publish(&self, table: &T) -> anyhow::Result<()> {
+    pub(super) fn publish(&self, table: &T) -> Result<(), ServeError> {
         let mut slot = self
             .tables
             .loan_uninit()
-            .map_err(|e| anyhow::anyhow!("loaning {}: {e:?}", T::SAMPLE))?;
+            .map_err(|e| ServeError::Ipc(format!("loaning {}: {e:?}", T::SAMPLE)))?;
         table.write_to(slot.payload_mut());
         // SAFETY: write_to initialised the whole payload.
         unsafe { slot.assume_init() }
             .send()
-            .map_err(|e| anyhow::anyhow!("publishing {}: {e:?}", T::PUBLISHED))?;
+            .map_err(|e| ServeError::Ipc(format!("publishing {}: {e:?}", T::PUBLISHED)))?;
         Ok(())
     }
 

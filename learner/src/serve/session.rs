@@ -13,9 +13,12 @@ use ur5_shared::{GainTable, StepSample};
 use super::learner::Run;
 use super::ports::Ports;
 use super::task_check::TaskCheck;
-use super::{Assembled, Assembler, Batch, Counts, ServeExit, ServeLearner, ServeSummary};
+use super::{
+    Assembled, Assembler, Batch, Counts, ServeError, ServeExit, ServeLearner, ServeSummary,
+};
 use crate::io::learned::LearnedEvent;
 use crate::io::table::save_table;
+use crate::io::IoError;
 use crate::progress::Progress;
 
 /// Runs the serve loop on `ports` until the learning is done or SIGINT/SIGTERM.
@@ -23,7 +26,7 @@ pub(super) fn serve_with_ports<L: ServeLearner>(
     ports: &Ports<GainTable>,
     run: Run<L>,
     progress: &mut impl FnMut(&L::Log),
-) -> anyhow::Result<ServeSummary<L::Log>> {
+) -> Result<ServeSummary<L::Log>, ServeError> {
     let mut session = Session::start(ports, run)?;
     let exit = session.serve(progress)?;
     session.finish(exit)
@@ -79,7 +82,7 @@ struct Session<'p, L: ServeLearner> {
 
 impl<'p, L: ServeLearner> Session<'p, L> {
     /// Saves and publishes the start version, notes a resume and says what it waits for.
-    fn start(ports: &'p Ports<GainTable>, mut run: Run<L>) -> anyhow::Result<Self> {
+    fn start(ports: &'p Ports<GainTable>, mut run: Run<L>) -> Result<Self, ServeError> {
         let start_version = run.learner.version();
         let table = run.save_current()?;
         ports.publish(&table)?;
@@ -141,7 +144,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     /// Handles samples as they come; while none do, delivers the table to a controller that
     /// connected late, stops with the controller's message if it stopped (§3.12) and says
     /// every `wait_report_s` that it waits.
-    fn serve(&mut self, progress: &mut impl FnMut(&L::Log)) -> anyhow::Result<ServeExit> {
+    fn serve(&mut self, progress: &mut impl FnMut(&L::Log)) -> Result<ServeExit, ServeError> {
         let report = Duration::from_secs_f64(self.run.opts.wait_report_s);
         let idle = Duration::from_micros(self.run.opts.idle_sleep_us.max(1));
         let mut last_sample = Instant::now();
@@ -168,13 +171,13 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     }
 
     /// Handles every sample waiting.
-    fn drain(&mut self, progress: &mut impl FnMut(&L::Log)) -> anyhow::Result<Drained> {
+    fn drain(&mut self, progress: &mut impl FnMut(&L::Log)) -> Result<Drained, ServeError> {
         let mut got = Drained::Nothing;
         while let Some(sample) = self
             .ports
             .samples
             .receive()
-            .map_err(|e| anyhow::anyhow!("receiving samples: {e:?}"))?
+            .map_err(|e| ServeError::Ipc(format!("receiving samples: {e:?}")))?
         {
             let s = *sample;
             drop(sample);
@@ -192,7 +195,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
         &mut self,
         s: &StepSample,
         progress: &mut impl FnMut(&L::Log),
-    ) -> anyhow::Result<Option<ServeExit>> {
+    ) -> Result<Option<ServeExit>, ServeError> {
         self.counts.samples += 1;
         self.check.sample(s, &self.run.learner)?;
         if (s.table_version, s.table_epoch) == (self.run.learner.version(), self.run.epoch)
@@ -212,7 +215,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     }
 
     /// Counts a discarded episode, or handles a complete one.
-    fn on_assembled(&mut self, a: Assembled) -> anyhow::Result<Option<ServeExit>> {
+    fn on_assembled(&mut self, a: Assembled) -> Result<Option<ServeExit>, ServeError> {
         match a {
             Assembled::Complete {
                 episode,
@@ -246,7 +249,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
         episode: u64,
         version: u64,
         epoch: u32,
-    ) -> anyhow::Result<Option<ServeExit>> {
+    ) -> Result<Option<ServeExit>, ServeError> {
         self.counts.episodes += 1;
         let file = self.run.record(&ep, episode, version, epoch)?;
         self.check.episode(
@@ -298,7 +301,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
 
     /// Steps 2–6 on the full batch: notes the episodes used, learns, writes the CSV row,
     /// saves and publishes the next version.
-    fn update(&mut self, progress: &mut impl FnMut(&L::Log)) -> anyhow::Result<()> {
+    fn update(&mut self, progress: &mut impl FnMut(&L::Log)) -> Result<(), ServeError> {
         let run = &mut self.run;
         let eval = self.batch.eval.take().expect("full batch");
         let cost = eval.task_cost();
@@ -324,7 +327,10 @@ impl<'p, L: ServeLearner> Session<'p, L> {
         // two leaves a row that a resume from the previous checkpoint drops and writes again,
         // never a checkpoint without its row.
         let row = run.learner.csv_row(&entry)?;
-        run.csv.write_all(row.as_bytes())?;
+        run.csv.write_all(row.as_bytes()).map_err(IoError::file(
+            "writing the per-iteration log in",
+            &run.opts.out,
+        ))?;
         run.epoch = 0;
         let table = run.save_current()?;
         self.ports.publish(&table)?;
@@ -355,7 +361,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     }
 
     /// Writes `best_table.npz` and finishes `run.mcap`; the summary.
-    fn finish(self, exit: ServeExit) -> anyhow::Result<ServeSummary<L::Log>> {
+    fn finish(self, exit: ServeExit) -> Result<ServeSummary<L::Log>, ServeError> {
         let Self {
             mut run,
             bar,

@@ -10,8 +10,10 @@ use ur5_shared::services::ServiceNames;
 use ur5_shared::StepSample;
 
 use super::learner::ServeLearner;
+use super::ServeError;
 use super::ServeOptions;
 use crate::arm::SimArm;
+use crate::error::ensure;
 
 /// Checks what `serve` needs of the configuration.
 pub(super) fn validate(
@@ -19,30 +21,38 @@ pub(super) fn validate(
     samples: usize,
     init_var: f64,
     opts: &ServeOptions,
-) -> anyhow::Result<()> {
+) -> Result<(), ServeError> {
     task.validate()?;
-    anyhow::ensure!(
+    ensure!(
         task.horizon <= MAX_HORIZON,
-        "task.horizon = {} exceeds the gain table's MAX_HORIZON = {MAX_HORIZON}",
-        task.horizon
+        ServeError::Range(format!(
+            "task.horizon = {} exceeds the gain table's MAX_HORIZON = {MAX_HORIZON}",
+            task.horizon
+        ))
     );
-    anyhow::ensure!(
+    ensure!(
         samples >= 2,
-        "samples = {samples} noisy episodes per iteration: the dynamics fit needs at least 2"
+        ServeError::Range(format!(
+            "samples = {samples} noisy episodes per iteration: the dynamics fit needs at least 2"
+        ))
     );
-    anyhow::ensure!(
+    ensure!(
         init_var > 0.0 && init_var.is_finite(),
-        "init_var must be finite and > 0 (rad²)"
+        ServeError::Range("init_var must be finite and > 0 (rad²)".into())
     );
-    anyhow::ensure!(
+    ensure!(
         opts.wait_report_s.is_finite() && opts.wait_report_s > 0.0,
-        "serve.wait_report_s = {} must be > 0 (s)",
-        opts.wait_report_s
+        ServeError::Range(format!(
+            "serve.wait_report_s = {} must be > 0 (s)",
+            opts.wait_report_s
+        ))
     );
-    anyhow::ensure!(
+    ensure!(
         opts.task_tolerance.is_finite() && opts.task_tolerance > 0.0,
-        "serve.task_tolerance = {} must be > 0",
-        opts.task_tolerance
+        ServeError::Range(format!(
+            "serve.task_tolerance = {} must be > 0",
+            opts.task_tolerance
+        ))
     );
     ServiceNames::new(&opts.prefix).learner_samples()?;
     Ok(())
@@ -83,16 +93,10 @@ impl TaskCheck {
         &self,
         s: &StepSample,
         learner: &L,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ServeError> {
         let t_len = learner.task().horizon;
-        anyhow::ensure!(
-            (s.t as usize) < t_len,
-            "the controller runs episodes longer than the task's T = {t_len} steps (episode {} \
-             has step t = {}): run rt-controller and hil-sim with [task] horizon = {t_len}, as in {}",
-            s.episode,
-            s.t,
-            L::TASK_SOURCE
-        );
+        ensure!((s.t as usize) < t_len, ServeError::TaskMismatch(format!("the controller runs episodes longer than the task's T = {t_len} steps (episode {} \
+             has step t = {}): run rt-controller and hil-sim with [task] horizon = {t_len}, as in {}", s.episode, s.t, L::TASK_SOURCE)));
         Ok(())
     }
 
@@ -100,20 +104,14 @@ impl TaskCheck {
         &mut self,
         have: usize,
         learner: &L,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ServeError> {
         self.short = if self.short.0 == have {
             (have, self.short.1 + 1)
         } else {
             (have, 1)
         };
-        anyhow::ensure!(
-            self.short.1 < 3,
-            "the controller's episodes end after {have} steps (3 in a row), the task has T = {} \
-             steps: run rt-controller and hil-sim with [task] horizon = {}, as in {}",
-            learner.task().horizon,
-            learner.task().horizon,
-            L::TASK_SOURCE
-        );
+        ensure!(self.short.1 < 3, ServeError::TaskMismatch(format!("the controller's episodes end after {have} steps (3 in a row), the task has T = {} \
+             steps: run rt-controller and hil-sim with [task] horizon = {}, as in {}", learner.task().horizon, learner.task().horizon, L::TASK_SOURCE)));
         Ok(())
     }
 
@@ -126,10 +124,12 @@ impl TaskCheck {
         ep: &Episode,
         version: u64,
         learner: &L,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ServeError> {
         let table = to_gain_table(learner.policy(), version);
         let s0 = ep.state(0);
-        let got: [f64; DU] = ep.u_policy[..DU].try_into()?;
+        let got: [f64; DU] = ep.u_policy[..DU]
+            .try_into()
+            .expect("an episode has dU actions per step");
         let seed = learner.seed();
         // k beyond N + 1 only if episodes were lost before this one; allow a few.
         let matches = (0..=4 * (learner.samples() as u64 + 1)).any(|k| {
@@ -138,12 +138,14 @@ impl TaskCheck {
             ur5_shared::controller_action(&table, 0, &s0, &eps, &mut a).is_ok()
                 && (0..DU).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
         });
-        anyhow::ensure!(
+        ensure!(
             matches,
-            "the controller's exploration noise is not that of the learner's seed {seed} (its \
+            ServeError::TaskMismatch(format!(
+                "the controller's exploration noise is not that of the learner's seed {seed} (its \
              action at t = 0 of a noisy episode of table v{version} is {got:?}, which no episode \
              of that version under seed {seed} gives): run rt-controller with seed = {seed}, or \
              the learner with the controller's seed"
+            ))
         );
         self.seed_checked = true;
         Ok(())
@@ -156,7 +158,7 @@ impl TaskCheck {
         version: u64,
         learner: &L,
         tolerance: f64,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ServeError> {
         self.short = (0, 0);
         let own = ep.noisy && version == learner.version();
         let check_dt = !self.dt_checked && own;
@@ -167,29 +169,31 @@ impl TaskCheck {
             return Ok(());
         }
         let task = learner.task();
-        let mut sim = SimArm::new(learner.sim_config().clone(), task.dt)
-            .map_err(|e| anyhow::anyhow!("the learner's model of the arm: {e}"))?;
+        let mut sim =
+            SimArm::new(learner.sim_config().clone(), task.dt).map_err(ServeError::Model)?;
         if !self.start_checked {
             // Joint angles and end effector minus goal (velocities: sensor noise only).
             let want = sim
                 .reset(task.start_q, task.goal)
-                .map_err(|e| anyhow::anyhow!("the learner's model of the arm: {e}"))?;
+                .map_err(ServeError::ModelReset)?;
             let parts = |s: &[f64; DX]| [s[0], s[1], s[2], s[6], s[7], s[8]];
             let (got, want) = (parts(&ep.state(0)), parts(&want));
             let diff = (0..6).map(|i| (got[i] - want[i]).abs()).fold(0.0, f64::max);
-            anyhow::ensure!(
+            ensure!(
                 diff <= tolerance,
-                "the controller's episodes start at joint angles {:.4?} rad with end effector \
+                ServeError::TaskMismatch(format!(
+                    "the controller's episodes start at joint angles {:.4?} rad with end effector \
                  minus goal {:.4?} m; the task's start is {:.4?} rad, {:.4?} m (start_q {:?}, \
                  goal {:?}): they differ by {diff:.3e} > serve.task_tolerance = {tolerance}; run \
                  rt-controller and hil-sim with the [task] start_q and goal of {}",
-                &got[..3],
-                &got[3..],
-                &want[..3],
-                &want[3..],
-                task.start_q,
-                task.goal,
-                L::TASK_SOURCE
+                    &got[..3],
+                    &got[3..],
+                    &want[..3],
+                    &want[3..],
+                    task.start_q,
+                    task.goal,
+                    L::TASK_SOURCE
+                ))
             );
             self.start_checked = true;
         }
@@ -197,17 +201,19 @@ impl TaskCheck {
             let mut table = to_gain_table(learner.policy(), version);
             let mut noise = Noise::new(learner.seed(), version, 0);
             let replay = run_episode(&mut sim, task, &mut *table, Some(&mut noise))
-                .map_err(|e| anyhow::anyhow!("replaying the first episode in process: {e}"))?;
+                .map_err(ServeError::FirstEpisode)?;
             if let (Some(a), Some(b)) = (motion_per_step(ep), motion_per_step(&replay)) {
                 let ratio = a / b;
-                anyhow::ensure!(
+                ensure!(
                     (0.5..=2.0).contains(&ratio),
-                    "the arm moves {ratio:.2}x as far per step as the task's control period \
+                    ServeError::TaskMismatch(format!(
+                        "the arm moves {ratio:.2}x as far per step as the task's control period \
                      dt = {} s gives on the learner's model of the arm (allowed 1/2 to 2): the \
                      arm or the controller runs another dt (or, in real time, the arm cannot \
                      keep up with its clock); run both with the [task] dt of {}",
-                    task.dt,
-                    L::TASK_SOURCE
+                        task.dt,
+                        L::TASK_SOURCE
+                    ))
                 );
             }
             self.dt_checked = true;

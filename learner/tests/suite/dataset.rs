@@ -448,10 +448,7 @@ fn imported_demonstrations_are_checked_like_our_own() {
     // Data at 10 Hz said to be at 1 kHz or 20 Hz.
     for fps in [1000.0, 20.0] {
         let d = foreign(&format!("fps{fps}"), &demos.states, Index::I64, fps);
-        let e = format!(
-            "{:#}",
-            learner::io::demos::load_checked(&d, &sim).unwrap_err()
-        );
+        let e = learner::error::line(&learner::io::demos::load_checked(&d, &sim).unwrap_err());
         assert!(
             e.contains("disagrees with the joint velocities"),
             "{fps}: {e}"
@@ -463,10 +460,7 @@ fn imported_demonstrations_are_checked_like_our_own() {
         let mut states = demos.states.clone();
         states[(demos.horizon + 3) * DX + ee_vel_x] = bad;
         let d = foreign("nan", &states, Index::I64, 10.0);
-        let e = format!(
-            "{:#}",
-            learner::io::demos::load_checked(&d, &sim).unwrap_err()
-        );
+        let e = learner::error::line(&learner::io::demos::load_checked(&d, &sim).unwrap_err());
         let want = format!(
             "states[1, 3]: ee_vel_x = {}: every state value must be finite",
             bad as f32 as f64
@@ -482,10 +476,7 @@ fn imported_demonstrations_are_checked_like_our_own() {
         ..demos.clone()
     };
     learner::io::demos::save(&swapped, &npz).unwrap();
-    let e = format!(
-        "{:#}",
-        learner::io::demos::load_checked(&npz, &sim).unwrap_err()
-    );
+    let e = learner::error::line(&learner::io::demos::load_checked(&npz, &sim).unwrap_err());
     assert!(e.contains("the expert's below the random policy's"), "{e}");
 
     // A CSV whose first episode's label comes back after the second.
@@ -504,10 +495,7 @@ fn imported_demonstrations_are_checked_like_our_own() {
     let first: Vec<&str> = text.lines().skip(1).take(demos.horizon).collect();
     let again = format!("{text}{}\n", first.join("\n"));
     std::fs::write(&csv, again).unwrap();
-    let e = format!(
-        "{:#}",
-        learner::io::demos::load_checked(&csv, &sim).unwrap_err()
-    );
+    let e = learner::error::line(&learner::io::demos::load_checked(&csv, &sim).unwrap_err());
     let want = format!(
         "row {}: episode 0 again, after other episodes",
         2 * demos.horizon + 2
@@ -611,9 +599,8 @@ fn a_ur5e_recording_exported_to_lerobot_checks_and_trains_as_a_ur5e() {
         (&summary["model"], &summary["count"]),
         (&"ur5e".into(), &2.into())
     );
-    let e = format!(
-        "{:#}",
-        learner::io::demos::load_checked(&lr, &SimConfig::default()).unwrap_err()
+    let e = learner::error::line(
+        &learner::io::demos::load_checked(&lr, &SimConfig::default()).unwrap_err(),
     );
     assert!(
         e.contains("made on a ur5e") && e.contains("arm is a ur5:"),

@@ -356,7 +356,7 @@ mod resume {
         let resumed = resume(cfg(4), demos.clone(), &split).unwrap().0;
         assert_eq!((resumed.iteration(), resumed.version()), (2, 3));
         drop(resumed);
-        let msg = |e: anyhow::Error| format!("{e:#}");
+        let msg = |e: learner::run::RunError| learner::error::line(&e);
         // A complete run resumes to nothing (a retried job); a shorter one is refused.
         let again = std::fs::read(split.join("gaifo_log.csv")).unwrap();
         assert!(train_resumed(&cfg(2), demos.clone(), &split, |_| {})

@@ -1,7 +1,7 @@
-//! The code's shape (issue "architecture"): no source file with more than 800 lines of
-//! non-test code, and no import circle between the modules of a crate (Cargo already forbids
-//! circles between crates). A module's imports are its `crate::…` and `super::…` paths outside
-//! comments and outside its `#[cfg(test)]` part.
+//! The code's shape: no source file with more than 800 lines of non-test code, no import
+//! circle between the modules of a crate (Cargo already forbids circles between crates), and
+//! `anyhow` only in the learner's command line. A module's imports are its `crate::…` and
+//! `super::…` paths outside comments and outside its `#[cfg(test)]` part.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -153,4 +153,31 @@ fn no_import_circle_between_the_modules_of_a_crate() {
             }
         }
     }
+}
+
+/// Typed errors below the binaries (docs/dev.md, "Errors"): `anyhow` only in the learner's
+/// command line (`src/cli/`) and `main.rs`, which turn the library's error enums into a
+/// printed cause chain; outside comments.
+#[test]
+fn anyhow_only_in_the_command_line() {
+    let src = root().join("learner").join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut found = Vec::new();
+    for f in files {
+        let rel = f.strip_prefix(&src).unwrap();
+        if rel.starts_with("cli") || rel == Path::new("main.rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (k, line) in text.lines().enumerate() {
+            if !line.trim_start().starts_with("//") && line.contains("anyhow") {
+                found.push(format!("{}:{}: {}", rel.display(), k + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "library code returns its module's error enum, not anyhow: {found:#?}"
+    );
 }

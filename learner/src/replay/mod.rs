@@ -36,7 +36,6 @@
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use imitation::expert::{ExpertConfig, ExpertLearner};
 use imitation::gaifo::{GaifoConfig, LqrGaifo};
 use imitation::learn::{Learn, LinGaussLearn};
@@ -44,12 +43,21 @@ use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 use imitation::rollout::Episode;
 use serde::Serialize;
 
+mod error;
+
+pub use error::ReplayError;
+
+use crate::error::ensure;
 use crate::io::episode::{recorded_episodes, EpisodeOrigin};
 use crate::io::learned::{read_events, LearnedEvent};
 use crate::io::manifest::{self, Manifest};
 use crate::io::table::{load_stored, table_arrays};
+use crate::io::IoError;
 use crate::run::Checkpoint;
 use crate::serve::Batch;
+
+/// The learners whose runs a replay redoes.
+pub(crate) const REPLAYED: [&str; 3] = ["lqr-gaifo", "expert", "gaifo-ppo"];
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -128,77 +136,70 @@ impl ReplayReport {
 
 /// Replays the run in `dir` (module docs). `demos` replaces the demonstrations' path recorded
 /// in `run.json` (their hash must still be the run's).
-pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> {
-    let m = manifest::read(dir)?.ok_or_else(|| {
-        anyhow::anyhow!(
-            "{} has no {}: not a run folder of `learner train` or `learner serve`",
-            dir.display(),
-            manifest::MANIFEST
-        )
+pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayError> {
+    let m = manifest::read(dir)?.ok_or_else(|| ReplayError::NotRun {
+        dir: dir.to_owned(),
     })?;
     if let Some(s) = m.settings.as_ref().and_then(|s| s.get("seed")) {
-        anyhow::ensure!(
+        ensure!(
             s.as_u64() == Some(m.seed),
-            "{}: seed {} but settings.seed {s}: the run's manifest was altered (a run has one \
-             seed)",
-            dir.join(manifest::MANIFEST).display(),
-            m.seed
+            ReplayError::SeedAltered {
+                path: dir.join(manifest::MANIFEST),
+                seed: m.seed,
+                settings: s.to_string()
+            }
         );
     }
     let record = crate::io::files::verify(dir)?;
     match (&record, &m.files) {
-        (None, Some(name)) => anyhow::bail!(
-            "{} has no {name}, the record of its files that its {} says the run kept: without \
-             it a replay cannot tell which files are missing or altered; restore it (or the run)",
-            dir.display(),
-            manifest::MANIFEST
-        ),
+        (None, Some(name)) => {
+            return Err(ReplayError::NoRecord {
+                dir: dir.to_owned(),
+                name: name.clone(),
+            })
+        }
         (Some(v), _) if !v.problems.is_empty() => {
             let shown: Vec<String> = v.problems.iter().take(4).map(|p| p.to_string()).collect();
-            anyhow::bail!(
-                "{}: {} of the run's files are not as its record {} says: {}{}; a replay of \
-                 what is left would check only part of the run: restore the files (or the run)",
-                dir.display(),
-                v.problems.len(),
-                crate::io::files::FILES,
-                shown.join(", "),
-                if v.problems.len() > shown.len() {
-                    format!(" and {} more", v.problems.len() - shown.len())
-                } else {
-                    String::new()
-                }
-            )
+            let more = v.problems.len() - shown.len();
+            return Err(ReplayError::Altered {
+                dir: dir.to_owned(),
+                count: v.problems.len(),
+                shown: shown.join(", ")
+                    + &if more > 0 {
+                        format!(" and {more} more")
+                    } else {
+                        String::new()
+                    },
+            });
         }
         _ => {}
     }
     let folder = dir.join("episodes");
     let episodes = recorded_episodes(&folder)?;
-    anyhow::ensure!(
+    ensure!(
         !episodes.is_empty(),
-        "{} holds no recorded episodes (episodes/*.npz): a replay needs them; `learner serve` \
-         records every episode, `learner train` only with --record-episodes",
-        dir.display()
+        ReplayError::NoEpisodes {
+            dir: dir.to_owned()
+        }
     );
     // A non-finite value would surface deep in the dynamics fit (a covariance that is not
     // positive definite); name the file, step and state instead.
     for (path, ep, _) in &episodes {
         let dx = ur5_shared::layout::DX;
         if let Some(k) = ep.x.iter().position(|v| !v.is_finite()) {
-            anyhow::bail!(
-                "{}: step {}: {} = {}: a recorded episode's states must be finite",
-                path.display(),
-                k / dx,
-                ur5_shared::layout::STATE_NAMES[k % dx],
-                ep.x[k]
-            );
+            return Err(ReplayError::StateNotFinite {
+                path: path.clone(),
+                step: k / dx,
+                name: ur5_shared::layout::STATE_NAMES[k % dx],
+                value: ep.x[k],
+            });
         }
         if let Some(k) = ep.u.iter().position(|v| !v.is_finite()) {
-            anyhow::bail!(
-                "{}: action {} = {}: a recorded episode's actions must be finite",
-                path.display(),
-                k,
-                ep.u[k]
-            );
+            return Err(ReplayError::ActionNotFinite {
+                path: path.clone(),
+                index: k,
+                value: ep.u[k],
+            });
         }
     }
     let events = read_events(&folder)?;
@@ -211,15 +212,10 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
             }
         )
     }) {
-        anyhow::bail!(
-            "{} continues a run resumed from another folder after {iteration} iterations \
-             (`learner serve --resume OTHER --out {}`): the iterations before it, and the \
-             learner state it started from, are in that folder, not here, so this folder \
-             alone cannot be replayed; resume into the run's own folder (--resume DIR --out \
-             DIR) to keep a run replayable",
-            dir.display(),
-            dir.display()
-        );
+        return Err(ReplayError::ResumedElsewhere {
+            dir: dir.to_owned(),
+            iteration: *iteration,
+        });
     }
     let mut report = ReplayReport {
         command: "replay",
@@ -290,7 +286,10 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
         }
         "expert" => {
             let cfg: ExpertConfig = m.settings_as()?;
-            let resume = |tmp: &Path| crate::serve::expert_from_checkpoint(cfg.clone(), tmp);
+            let resume = |tmp: &Path| {
+                crate::serve::expert_from_checkpoint(cfg.clone(), tmp)
+                    .map_err(|e| ReplayError::from(Box::new(e)))
+            };
             let learner = ExpertLearner::new(cfg.clone(), None);
             drive(learner, dir, &picks, &mut report, Some(&resume), tables)?;
         }
@@ -308,10 +307,12 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
                 |l, dir, i, r| checkpoint_files(l, dir, i, &["policy.json", "critic.json"], r),
             )?;
         }
-        other => anyhow::bail!(
-            "{}: a replay redoes runs of lqr-gaifo, expert and gaifo-ppo, not {other}",
-            dir.display()
-        ),
+        other => {
+            return Err(ReplayError::Algorithm {
+                dir: dir.to_owned(),
+                algo: other.to_owned(),
+            })
+        }
     }
     if let (Some(v), None) = (&record, &report.difference) {
         let compared: BTreeSet<String> = report
@@ -335,41 +336,39 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> anyhow::Result<ReplayReport> 
                 (checkpoint || f.starts_with("tables/")) && !compared.contains(*f)
             })
             .collect();
-        anyhow::ensure!(
+        ensure!(
             missed.is_empty(),
-            "{}: the replay ended after {} iterations, before {} recorded checkpoint file(s) \
-             of the run ({}{}): the episodes it learns from (episodes/, {}) do not carry it \
-             that far",
-            dir.display(),
-            report.iterations,
-            missed.len(),
-            missed
-                .iter()
-                .take(3)
-                .map(|s| s.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            if missed.len() > 3 { ", …" } else { "" },
-            crate::io::learned::LEARNED
+            ReplayError::Unreached {
+                dir: dir.to_owned(),
+                iterations: report.iterations,
+                count: missed.len(),
+                files: missed
+                    .iter()
+                    .take(3)
+                    .map(|s| s.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+                    + if missed.len() > 3 { ", …" } else { "" },
+            }
         );
     }
     Ok(report)
 }
 
 /// The demonstrations of run `m`: `demos` or the recorded path, with the run's hash.
-pub(crate) fn demos_path(m: &Manifest, demos: Option<&Path>) -> anyhow::Result<PathBuf> {
+pub(crate) fn demos_path(m: &Manifest, demos: Option<&Path>) -> Result<PathBuf, ReplayError> {
     let path = demos.map_or_else(|| PathBuf::from(&m.demos), Path::to_owned);
-    let hash = manifest::demos_hash(&path).with_context(|| {
-        format!(
-            "the run's demonstrations {} (pass --demos with their new place)",
-            path.display()
-        )
+    let hash = manifest::demos_hash(&path).map_err(|source| ReplayError::DemosGone {
+        path: path.clone(),
+        source,
     })?;
-    anyhow::ensure!(
+    ensure!(
         hash == m.demos_hash,
-        "{} hashes to {hash}, the run's demonstrations to {}: not the run's demonstrations",
-        path.display(),
-        m.demos_hash
+        ReplayError::DemosHash {
+            path,
+            hash,
+            recorded: m.demos_hash.clone()
+        }
     );
     Ok(path)
 }
@@ -432,7 +431,7 @@ impl<'a> Picks<'a> {
 
     /// The `n` noisy and the noise-free episode the update of table version `v` learns from;
     /// `None` when the run has none (it ended before that update).
-    fn pick(&self, v: u64, n: usize) -> anyhow::Result<Option<Picked>> {
+    fn pick(&self, v: u64, n: usize) -> Result<Option<Picked>, ReplayError> {
         let Some(events) = self.events else {
             let mut batch = Batch::default();
             let mut used = Vec::new();
@@ -459,31 +458,39 @@ impl<'a> Picks<'a> {
             return Ok(None);
         };
         let list = self.folder.join(crate::io::learned::LEARNED);
-        anyhow::ensure!(
+        ensure!(
             noisy.len() == n,
-            "{} lists {} noisy episodes for table version {v}, the run's settings ask for {n}",
-            list.display(),
-            noisy.len()
+            ReplayError::Listed {
+                list: list.clone(),
+                why: format!(
+                    "{} noisy episodes for table version {v}, the run's settings ask for {n}",
+                    noisy.len()
+                )
+            }
         );
         let mut picked = (Vec::with_capacity(n), None, Vec::with_capacity(n + 1));
         for (name, want_noisy) in noisy.iter().map(|f| (f, true)).chain([(eval, false)]) {
-            let k = *self.by_name.get(name).ok_or_else(|| {
-                anyhow::anyhow!(
-                    "{} lists {name} for table version {v}, which is not among the recorded \
-                     episodes in {}",
-                    list.display(),
+            let k = *self.by_name.get(name).ok_or_else(|| ReplayError::Listed {
+                list: list.clone(),
+                why: format!(
+                    "{name} for table version {v}, which is not among the recorded episodes in \
+                     {}",
                     self.folder.display()
-                )
+                ),
             })?;
             let (path, ep, origin) = &self.episodes[k];
-            anyhow::ensure!(
+            ensure!(
                 origin.table_version == v && ep.noisy == want_noisy,
-                "{} lists {name} as a {} episode of table version {v}; the file holds a {} \
-                 episode of version {}",
-                list.display(),
-                if want_noisy { "noisy" } else { "noise-free" },
-                if ep.noisy { "noisy" } else { "noise-free" },
-                origin.table_version
+                ReplayError::Listed {
+                    list: list.clone(),
+                    why: format!(
+                        "{name} as a {} episode of table version {v}; the file holds a {} \
+                         episode of version {}",
+                        if want_noisy { "noisy" } else { "noise-free" },
+                        if ep.noisy { "noisy" } else { "noise-free" },
+                        origin.table_version
+                    )
+                }
             );
             if want_noisy {
                 picked.0.push(ep.clone());
@@ -500,7 +507,7 @@ impl<'a> Picks<'a> {
 struct Scratch(PathBuf);
 
 impl Scratch {
-    fn new() -> anyhow::Result<Self> {
+    fn new() -> Result<Self, ReplayError> {
         static K: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
         let k = K.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let p = std::env::temp_dir().join(format!("learner-replay-{}-{k}", std::process::id()));
@@ -517,7 +524,7 @@ impl Drop for Scratch {
 
 /// A resume function: the learner `learner serve --resume DIR` builds from the checkpoint in
 /// DIR.
-type Resume<'a, L> = &'a dyn Fn(&Path) -> anyhow::Result<L>;
+type Resume<'a, L> = &'a dyn Fn(&Path) -> Result<L, ReplayError>;
 
 /// The replay loop (module docs) of `learner`; `check` compares the recorded files of the
 /// state after `i` iterations; `resume`, where the run was resumed, rebuilds the learner
@@ -528,8 +535,8 @@ fn drive<L: Learn + Checkpoint>(
     picks: &Picks,
     report: &mut ReplayReport,
     resume: Option<Resume<L>>,
-    check: impl Fn(&L, &Path, usize, &mut ReplayReport) -> anyhow::Result<Checked>,
-) -> anyhow::Result<()> {
+    check: impl Fn(&L, &Path, usize, &mut ReplayReport) -> Result<Checked, ReplayError>,
+) -> Result<(), ReplayError> {
     let mut used: Vec<PathBuf> = Vec::new();
     let mut resumes = picks.resumes();
     loop {
@@ -555,8 +562,10 @@ fn drive<L: Learn + Checkpoint>(
             if let Some(resume) = resume {
                 let tmp = Scratch::new()?;
                 learner.checkpoint(&tmp.0, None)?;
-                learner = resume(&tmp.0)
-                    .with_context(|| format!("redoing the resume after iteration {i}"))?;
+                learner = resume(&tmp.0).map_err(|e| ReplayError::Resume {
+                    iteration: i,
+                    source: Box::new(e),
+                })?;
                 report.resumes += 1;
             }
         }
@@ -568,7 +577,10 @@ fn drive<L: Learn + Checkpoint>(
         };
         learner
             .learn(&noisy, &eval, 0.0)
-            .with_context(|| format!("replaying iteration {}", i + 1))?;
+            .map_err(|source| ReplayError::Learn {
+                iteration: i + 1,
+                source,
+            })?;
         report.iterations += 1;
         report.episodes_used += files.len();
         used = files;
@@ -631,7 +643,7 @@ fn tables<L: LinGaussLearn>(
     dir: &Path,
     i: usize,
     report: &mut ReplayReport,
-) -> anyhow::Result<Checked> {
+) -> Result<Checked, ReplayError> {
     let v = learner.version();
     let files: Vec<PathBuf> = [
         dir.join(format!("iter_{i:03}_table.npz")),
@@ -646,7 +658,7 @@ fn tables<L: LinGaussLearn>(
     let table = learner.table();
     let arrays = table_arrays(&table);
     for f in files {
-        let stored = load_stored(&f).with_context(|| format!("reading {}", f.display()))?;
+        let stored = load_stored(&f)?;
         report.tables_checked += 1;
         report.compared.insert(f.clone());
         if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, &table) {
@@ -666,7 +678,7 @@ fn checkpoint_files<L: Checkpoint>(
     i: usize,
     kinds: &[&str],
     report: &mut ReplayReport,
-) -> anyhow::Result<Checked> {
+) -> Result<Checked, ReplayError> {
     let name = |kind: &str| format!("iter_{i:03}_{kind}");
     let recorded: Vec<&str> = kinds
         .iter()
@@ -680,8 +692,9 @@ fn checkpoint_files<L: Checkpoint>(
     learner.checkpoint(&tmp.0, None)?;
     for kind in recorded {
         let file = dir.join(name(kind));
-        let rec = std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
-        let rep = std::fs::read(tmp.0.join(name(kind)))?;
+        let rec = std::fs::read(&file).map_err(IoError::file("reading", &file))?;
+        let written = tmp.0.join(name(kind));
+        let rep = std::fs::read(&written).map_err(IoError::file("reading", &written))?;
         report.compared.insert(file.clone());
         match kind {
             "policy.json" => report.policies_checked += 1,
