@@ -12,6 +12,7 @@
 //!   (`hil-sim ur-sim`).
 
 pub mod model;
+pub mod ros2_sim;
 pub mod serve;
 pub mod servo;
 pub mod sim;

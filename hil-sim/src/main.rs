@@ -117,6 +117,10 @@ enum Cmd {
     /// (rt-controller/urscript/external_control.script) and refuses other scripts. Prints one
     /// JSON line with the bound addresses on stdout, then serves until killed.
     UrSim(UrSimArgs),
+    /// The simulated arm as Universal Robots' ROS 2 driver presents it, over DDS (docs/design.md
+    /// §3.13): `/joint_states` at 500 Hz, `/forward_position_controller/commands` taken, the
+    /// driver's robot and safety modes. Real time; serves until killed.
+    Ros2Sim(Ros2SimArgs),
     /// Write a playback file for `ur-sim --playback` of human-like reaches: per reach a rest
     /// of at least 1 s at the start pose, a minimum-jerk reach of seeded duration (1.2–2 s)
     /// into the goal region (joint goal by IK of the model's kinematics) overshooting it by
@@ -217,6 +221,36 @@ struct UrSimArgs {
     /// --time-compression plays it faster.
     #[arg(long, value_name = "FILE.csv")]
     playback: Option<PathBuf>,
+}
+
+/// Options of `hil-sim ros2-sim` (see `hil_sim::ros2_sim`).
+#[derive(clap::Args)]
+struct Ros2SimArgs {
+    /// TOML file with optional [task] and [sim] tables (start pose: task.start_q).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// ROS_DOMAIN_ID.
+    #[arg(long, default_value_t = 0)]
+    domain_id: u16,
+    /// DDS discovery: loopback (this machine only, unicast) or all (multicast on every
+    /// interface).
+    #[arg(long, default_value = "loopback")]
+    network: String,
+    /// Joint states per second (500: e-Series, 125: CB3).
+    #[arg(long, default_value_t = 500.0)]
+    rate: f64,
+    /// Real time runs this many times faster than wall time.
+    #[arg(long, default_value_t = 1.0)]
+    time_compression: f64,
+    /// Fault: a protective stop N arm cycles after the first command.
+    #[arg(long, default_value_t = 0)]
+    fault_protective_stop_after: u64,
+    /// Fault: no joint states from N arm cycles after the first command on …
+    #[arg(long, default_value_t = 0)]
+    fault_silence_after: u64,
+    /// … for this many cycles.
+    #[arg(long, default_value_t = 0)]
+    fault_silence_cycles: u64,
 }
 
 /// Options of `hil-sim playback-gen`.
@@ -347,6 +381,7 @@ fn run() -> Result<()> {
             json,
         } => serve(config, model, prefix, mode, time_compression, json),
         Cmd::UrSim(args) => ur_sim(args, model),
+        Cmd::Ros2Sim(args) => ros2_sim(args, model),
         Cmd::PlaybackGen(args) => playback_gen(args, model),
     }
 }
@@ -401,6 +436,47 @@ fn ur_sim(args: UrSimArgs, model: Option<UrModel>) -> Result<()> {
         } else {
             format!("real time x{}", cfg.time_compression)
         }
+    );
+    handle.wait();
+    Ok(())
+}
+
+fn ros2_sim(args: Ros2SimArgs, model: Option<UrModel>) -> Result<()> {
+    use std::io::Write;
+    let file = load(args.config.clone(), model)?;
+    let network = match args.network.as_str() {
+        "loopback" => ur5_ros2::Network::Loopback,
+        "all" => ur5_ros2::Network::All,
+        other => anyhow::bail!("--network {other}: loopback or all"),
+    };
+    let cfg = hil_sim::ros2_sim::Ros2SimConfig {
+        domain_id: args.domain_id,
+        network,
+        rate_hz: args.rate,
+        time_compression: args.time_compression,
+        fault_protective_stop_after: args.fault_protective_stop_after,
+        fault_silence_after: args.fault_silence_after,
+        fault_silence_cycles: args.fault_silence_cycles,
+        ..Default::default()
+    };
+    let handle = hil_sim::ros2_sim::spawn(&file.task, &file.sim, &cfg)?;
+    println!(
+        "{}",
+        serde_json::json!({"domain_id": cfg.domain_id, "network": cfg.network,
+            "joint_states": cfg.joint_states_topic, "commands": cfg.command_topic,
+            "model": file.sim.model.name(), "rate_hz": cfg.rate_hz,
+            "time_compression": cfg.time_compression})
+    );
+    std::io::stdout().flush()?;
+    eprintln!(
+        "hil-sim ros2-sim: {} on ROS domain {} ({:?}), {} at {} Hz, commands on {}, real time x{}",
+        file.sim.model,
+        cfg.domain_id,
+        cfg.network,
+        cfg.joint_states_topic,
+        cfg.rate_hz,
+        cfg.command_topic,
+        cfg.time_compression
     );
     handle.wait();
     Ok(())

@@ -113,6 +113,9 @@ pub enum ArmKind {
     /// A Universal Robots controller (or `hil-sim ur-sim`): RTDE for the state, the project's
     /// URScript program and its reverse socket for the commands (docs/design.md §3.10).
     Ur,
+    /// Universal Robots' ROS 2 driver (`ur_robot_driver`, or `hil-sim ros2-sim`) over DDS:
+    /// `/joint_states` in, `/forward_position_controller/commands` out (docs/design.md §3.13).
+    Ros2,
 }
 
 /// Which UR controller generation, hence the arm cycle.
@@ -266,14 +269,86 @@ impl Default for UrConfig {
     }
 }
 
+/// How the `ros2` arm reaches UR's ROS 2 driver (`[arm.ros2]`); the arm itself (model, wrist
+/// angles, end-effector offset, reset speed, servo target) is described by `[arm.ur]`. The
+/// defaults are the driver's: its topics, ROS domain 0, and its QoS (reliable, keep last 10).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Ros2Config {
+    /// ROS_DOMAIN_ID (0–232).
+    pub domain_id: u16,
+    /// `loopback` (the driver on this machine; nothing leaves it, no multicast) or `all` (DDS's
+    /// default discovery by multicast on every interface).
+    pub network: ur5_ros2::Network,
+    /// The driver's joint states (`sensor_msgs/msg/JointState`, from `joint_state_broadcaster`).
+    pub joint_states_topic: String,
+    pub joint_states_qos: ur5_ros2::TopicQos,
+    /// The forward position controller's input (`std_msgs/msg/Float64MultiArray`).
+    pub command_topic: String,
+    pub command_qos: ur5_ros2::TopicQos,
+    /// The controller's joints, in the order its commands carry them (its `joints` parameter;
+    /// the driver's `ur_controllers.yaml` with an empty `tf_prefix`). Joint states are matched
+    /// to them by name.
+    pub joints: [String; 6],
+    /// Read the driver's robot and safety modes and stop the run (exit 5) when the robot is
+    /// not RUNNING or the safety mode is not NORMAL (or REDUCED), like the `ur` arm.
+    pub watch_status: bool,
+    /// `io_and_status_controller`'s `ur_dashboard_msgs/msg/RobotMode`.
+    pub robot_mode_topic: String,
+    /// `io_and_status_controller`'s `ur_dashboard_msgs/msg/SafetyMode`.
+    pub safety_mode_topic: String,
+    pub status_qos: ur5_ros2::TopicQos,
+    /// The rate the driver publishes joint states at (Hz): 500 for an e-Series, 125 for a CB3.
+    /// A state is due every control period of their header stamps, within half a cycle.
+    pub joint_state_rate_hz: f64,
+}
+
+/// The joint names of a UR arm in the driver's controller order.
+pub const UR_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
+impl Default for Ros2Config {
+    fn default() -> Self {
+        Self {
+            domain_id: 0,
+            network: ur5_ros2::Network::Loopback,
+            joint_states_topic: "/joint_states".into(),
+            joint_states_qos: ur5_ros2::TopicQos::reliable(10),
+            command_topic: "/forward_position_controller/commands".into(),
+            command_qos: ur5_ros2::TopicQos::reliable(10),
+            joints: UR_JOINTS.map(String::from),
+            watch_status: true,
+            robot_mode_topic: "/io_and_status_controller/robot_mode".into(),
+            safety_mode_topic: "/io_and_status_controller/safety_mode".into(),
+            status_qos: ur5_ros2::TopicQos::reliable(10),
+            joint_state_rate_hz: 500.0,
+        }
+    }
+}
+
 /// The arm backend (`[arm]`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArmConfig {
-    /// `iceoryx2` (default) or `ur`.
+    /// `iceoryx2` (default), `ur` or `ros2`.
     pub backend: ArmKind,
-    /// Used when `backend = "ur"`.
+    /// Used when `backend = "ur"`; for `ros2`, the arm's model, wrist angles, end-effector
+    /// offset, reset speed and servo target.
     pub ur: UrConfig,
+    /// Used when `backend = "ros2"`. Not serialised when it is the default, so configurations
+    /// of the other backends print and hash as before.
+    #[serde(skip_serializing_if = "is_ros2_default")]
+    pub ros2: Ros2Config,
+}
+
+fn is_ros2_default(c: &Ros2Config) -> bool {
+    *c == Ros2Config::default()
 }
 
 /// Accepted `arm.ur.receive_timeout_ms` (ms): above a CB3 cycle, at most a second.
@@ -282,10 +357,64 @@ pub const UR_RECEIVE_TIMEOUT_RANGE_MS: (u32, u32) = (10, 1000);
 impl ArmConfig {
     /// Checks the `ur` settings when that backend is chosen.
     fn validate(&self, action_mode: ActionMode) -> Result<(), ConfigError> {
-        if self.backend != ArmKind::Ur {
-            return Ok(());
-        }
         let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
+        match self.backend {
+            ArmKind::Iceoryx2 => return Ok(()),
+            ArmKind::Ur => {}
+            ArmKind::Ros2 => {
+                let r = &self.ros2;
+                if r.domain_id > 232 {
+                    return bad(
+                        "arm.ros2.domain_id",
+                        format!("{} must be in 0..=232 (ROS_DOMAIN_ID)", r.domain_id),
+                    );
+                }
+                for (key, topic) in [
+                    ("arm.ros2.joint_states_topic", &r.joint_states_topic),
+                    ("arm.ros2.command_topic", &r.command_topic),
+                    ("arm.ros2.robot_mode_topic", &r.robot_mode_topic),
+                    ("arm.ros2.safety_mode_topic", &r.safety_mode_topic),
+                ] {
+                    if topic.trim_start_matches('/').is_empty()
+                        || topic.contains(char::is_whitespace)
+                    {
+                        return bad(key, format!("`{topic}` is not a ROS topic name"));
+                    }
+                }
+                for (key, q) in [
+                    ("arm.ros2.joint_states_qos.depth", r.joint_states_qos),
+                    ("arm.ros2.command_qos.depth", r.command_qos),
+                    ("arm.ros2.status_qos.depth", r.status_qos),
+                ] {
+                    if q.depth == 0 {
+                        return bad(key, "must be >= 1".into());
+                    }
+                }
+                if r.joints.iter().any(String::is_empty)
+                    || (1..6).any(|i| r.joints[..i].contains(&r.joints[i]))
+                {
+                    return bad(
+                        "arm.ros2.joints",
+                        format!("{:?} must be six different joint names", r.joints),
+                    );
+                }
+                if !(r.joint_state_rate_hz >= 10.0 && r.joint_state_rate_hz <= 10_000.0) {
+                    return bad(
+                        "arm.ros2.joint_state_rate_hz",
+                        format!(
+                            "{} must be in [10, 10000] Hz (500 for an e-Series, 125 for a CB3)",
+                            r.joint_state_rate_hz
+                        ),
+                    );
+                }
+                if action_mode != ActionMode::GoalAngles {
+                    return bad(
+                        "action_mode",
+                        format!("{action_mode:?} is not possible with arm.backend = \"ros2\": the forward position controller takes joint positions; use action_mode = \"goal_angles\""),
+                    );
+                }
+            }
+        }
         let u = &self.ur;
         if u.host.parse::<std::net::Ipv4Addr>().is_err() {
             return bad(
@@ -559,13 +688,19 @@ impl ControllerConfig {
             );
         }
         self.arm.validate(self.action_mode)?;
-        if self.arm.backend == ArmKind::Ur
+        if self.arm.backend == ArmKind::Ros2 && self.mode == Mode::Lockstep {
+            return bad(
+                "mode",
+                "arm.backend = \"ros2\" runs in real time, clocked by the driver's joint states: set mode = \"real_time\" and pacing = \"arm\"".into(),
+            );
+        }
+        if matches!(self.arm.backend, ArmKind::Ur | ArmKind::Ros2)
             && self.mode == Mode::RealTime
             && self.pacing != Pacing::Arm
         {
             return bad(
                 "pacing",
-                "arm.backend = \"ur\" is clocked by the robot's RTDE packages: set pacing = \"arm\" (or --pacing arm)".into(),
+                format!("arm.backend = \"{}\" is clocked by the robot's {}: set pacing = \"arm\" (or --pacing arm)", if self.arm.backend == ArmKind::Ur { "ur" } else { "ros2" }, if self.arm.backend == ArmKind::Ur { "RTDE packages" } else { "joint states" }),
             );
         }
         if let Err((key, v)) = self.bounds.validate() {
@@ -744,6 +879,32 @@ mod tests {
         assert_eq!(c.arm.ur.secondary_port, 30002);
         assert_eq!(c.arm.ur.series, UrSeries::Auto);
         assert!(toml::from_str::<ControllerConfig>("[arm]\nbackend = \"ros\"").is_err());
+        let ros2: ControllerConfig = toml::from_str(
+            "mode = \"real_time\"\npacing = \"arm\"\n[arm]\nbackend = \"ros2\"\n[arm.ros2]\ndomain_id = 7\n[arm.ros2.command_qos]\nreliability = \"best_effort\"\ndepth = 1",
+        )
+        .unwrap();
+        assert_eq!(ros2.arm.ros2.domain_id, 7);
+        assert_eq!(ros2.arm.ros2.joint_states_topic, "/joint_states");
+        assert_eq!(
+            ros2.arm.ros2.command_qos.reliability,
+            ur5_ros2::ReliabilityKind::BestEffort
+        );
+        ros2.validate().unwrap();
+        for (extra, key) in [
+            ("", "mode"),
+            ("mode = \"real_time\"\n", "pacing"),
+            ("mode = \"real_time\"\npacing = \"arm\"\n[arm.ros2]\ndomain_id = 233", "arm.ros2.domain_id"),
+            ("mode = \"real_time\"\npacing = \"arm\"\n[arm.ros2]\njoints = [\"a\", \"b\", \"c\", \"d\", \"e\", \"a\"]", "arm.ros2.joints"),
+            ("mode = \"real_time\"\npacing = \"arm\"\n[arm.ros2]\ncommand_topic = \"/\"", "arm.ros2.command_topic"),
+        ] {
+            let (head, tail) = extra.split_once("[arm.ros2]").unwrap_or((extra, ""));
+            let text = format!("{head}[arm]\nbackend = \"ros2\"\n{}", if tail.is_empty() { String::new() } else { format!("[arm.ros2]{tail}") });
+            let c: ControllerConfig = toml::from_str(&text).unwrap();
+            match c.validate() {
+                Err(ConfigError::Invalid { key: k, .. }) => assert_eq!(k, key, "{text}"),
+                other => panic!("{text}: {other:?}"),
+            }
+        }
         assert!(toml::from_str::<ControllerConfig>("[arm.ur]\nhots = \"x\"").is_err());
         for (text, key) in [
             (

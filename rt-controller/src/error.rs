@@ -15,11 +15,14 @@ pub enum SetupError {
     #[error(transparent)]
     Config(#[from] ur5_shared::config::ConfigError),
     /// The configured arm backend is not the one this setup builds.
-    #[error("this setup builds the {0} arm but the configuration's arm.backend differs; call the setup of the configured backend (Controller::setup for iceoryx2, Controller::setup_ur for ur)")]
+    #[error("this setup builds the {0} arm but the configuration's arm.backend differs; call the setup of the configured backend (Controller::setup for iceoryx2, Controller::setup_ur for ur, Controller::setup_ros2 for ros2)")]
     BackendMismatch(&'static str),
     /// The `ur` arm's setup failed.
     #[error(transparent)]
     Ur(#[from] UrSetupError),
+    /// The `ros2` arm's setup failed.
+    #[error(transparent)]
+    Ros2(#[from] Ros2SetupError),
     /// Another controller runs on the prefix.
     #[error(transparent)]
     Role(#[from] ur5_shared::services::RoleLockError),
@@ -124,6 +127,54 @@ impl StreamFault {
             StreamFault::ClockFrozen { .. } => "the robot's clock (RTDE timestamp) is frozen (see arm.stream_fault)",
         }
     }
+}
+
+/// Why the `ros2` arm could not be set up; each message names the topic and what to start.
+#[derive(Debug, thiserror::Error)]
+pub enum Ros2SetupError {
+    /// DDS refused a participant, topic, reader or writer.
+    #[error(transparent)]
+    Dds(#[from] ur5_ros2::DdsError),
+    /// The loop's wake-up descriptor.
+    #[error("cannot create the eventfd that wakes the DDS thread: {0}")]
+    Eventfd(String),
+    /// The DDS thread.
+    #[error("cannot start the DDS thread: {0}")]
+    Thread(String),
+    /// Nobody publishes the joint states.
+    #[error("no publisher on {topic} (sensor_msgs/msg/JointState) on ROS domain {domain} within {timeout_s} s: start UR's driver (`ros2 launch ur_robot_driver ur_control.launch.py ...`) or `hil-sim ros2-sim`, on the same ROS_DOMAIN_ID (arm.ros2.domain_id) and network (arm.ros2.network), or fix arm.ros2.joint_states_topic")]
+    NoPublisher {
+        topic: String,
+        domain: u16,
+        timeout_s: f64,
+    },
+    /// The topic carries another type.
+    #[error("{topic} is published with DDS type {found}, not {expected}: fix arm.ros2.joint_states_topic")]
+    WrongType {
+        topic: String,
+        found: String,
+        expected: &'static str,
+    },
+    /// The joint states do not name the controller's joints.
+    #[error("the joint states on {topic} name {names:?}, not all of arm.ros2.joints {joints:?}: set arm.ros2.joints to the driver's names (a tf_prefix?)")]
+    JointsMissing {
+        topic: String,
+        joints: [String; 6],
+        names: Vec<String>,
+    },
+    /// A publisher is there but nothing arrived.
+    #[error("{publishers} publisher(s) on {topic} but no joint state arrived within {timeout_s} s: the QoS may not match (arm.ros2.joint_states_qos: a reliable reader does not match a best-effort writer)")]
+    NothingReceived {
+        topic: String,
+        publishers: usize,
+        timeout_s: f64,
+    },
+    /// Nobody takes the commands.
+    #[error("no subscriber on {topic} within {timeout_s} s: activate the driver's forward_position_controller (`ros2 control switch_controllers --activate forward_position_controller --deactivate scaled_joint_trajectory_controller`), or fix arm.ros2.command_topic")]
+    NoSubscriber { topic: String, timeout_s: f64 },
+    /// The first joint state cannot be acted on.
+    #[error("the first joint state: {0}")]
+    Stream(StreamFault),
 }
 
 /// Why the `ur` arm could not be set up.

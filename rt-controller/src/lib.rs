@@ -36,7 +36,7 @@ pub mod tables;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 
-pub use arm::{ArmBackend, Iceoryx2Arm, UrArm};
+pub use arm::{ArmBackend, Iceoryx2Arm, Ros2Arm, UrArm};
 pub use config::{ControllerConfig, Mode, Pacing};
 pub use controller::{Controller, ExitReason, Summary};
 pub use ports::SetupError;

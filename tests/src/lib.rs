@@ -328,6 +328,61 @@ pub fn lqr_gaifo_in_process(
     (tables, logs)
 }
 
+/// `learner serve --json` (config `learner_cfg`, output `DIR/out-LABEL`) and `rt-controller
+/// run --json` (config `ctl_cfg`) on `prefix` against an arm already running; `during` runs
+/// while they learn (given the learner and its output folder). Waits for the learner to
+/// finish, then stops the controller (SIGTERM); both must exit 0, the controller with no
+/// aborted episode and no rejected table. Returns both summaries (learner, controller).
+pub fn learn_over_ipc(
+    dir: &Path,
+    prefix: &str,
+    learner_cfg: &str,
+    ctl_cfg: &str,
+    label: &str,
+    timeout: Duration,
+    during: impl FnOnce(&mut Proc, &Path),
+) -> (serde_json::Value, serde_json::Value) {
+    let out = dir.join(format!("out-{label}"));
+    let mut learner = Proc::spawn(
+        "learner",
+        &format!("learner-{label}"),
+        &[
+            "serve",
+            "--config",
+            learner_cfg,
+            "--prefix",
+            prefix,
+            "--out",
+            &out.display().to_string(),
+            "--json",
+        ],
+        dir,
+    );
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        &format!("controller-{label}"),
+        &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
+        dir,
+    );
+    during(&mut learner, &out);
+    let (code, lout) = learner.wait(timeout);
+    let log = learner.log();
+    assert_eq!(
+        code,
+        Some(0),
+        "learner ({label}):\n{log}\ncontroller:\n{}",
+        ctl.log()
+    );
+    ctl.signal(libc::SIGTERM);
+    let (code, cout) = ctl.wait(timeout);
+    let clog = ctl.log();
+    assert_eq!(code, Some(0), "controller ({label}):\n{clog}");
+    let c = json_summary(&cout, &clog);
+    assert_eq!(c["episodes_aborted"], 0, "{c}");
+    assert_eq!(c["rejected_total"], 0, "{c}");
+    (json_summary(&lout, &log), c)
+}
+
 /// `hil-sim serve` and `rt-controller run --json` with the given config files on `prefix`.
 pub fn spawn_sim_and_controller(
     sim_cfg: &str,

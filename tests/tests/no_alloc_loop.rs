@@ -309,34 +309,29 @@ fn no_allocation_across_a_swap(kinds: [Kind; 2]) {
     );
 }
 
-/// The `ur` arm's loop (RTDE packages in, servoj targets out) against `hil-sim ur-sim` in this
-/// process (lockstep; its threads are not counted), across boundaries and a table swap from a
-/// gain table to a policy table. The
-/// order is fixed by the test: version 1 waits in the controller's queue before the loop; the
-/// learner stand-in raises `pause` at the first sample (version 1 is then in use), the loop
-/// returns, the test publishes version 2 (not counted) and runs the loop again, which takes
-/// version 2 at its next boundary.
-#[test]
-fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
-    use hil_sim::ur_sim::{self, UrSimConfig};
-    use rt_controller::config::{ArmConfig, ArmKind, UrConfig};
-    use rt_controller::UrArm;
-    use ur5_shared::config::{SimConfig, TaskConfig};
+/// What [`run_swapping`] saw: the two runs' exits, the allocations and frees counted on the
+/// loop's thread, and every (episode, table version) sampled.
+struct Swapped<A: rt_controller::ArmBackend> {
+    first: ExitReason,
+    second: ExitReason,
+    allocs: u64,
+    frees: u64,
+    received: Vec<(u64, u64)>,
+    controller: Controller<A>,
+}
 
-    const T_UR: usize = 20;
-    const EPISODES_UR: u64 = 5;
-    let sim = ur_sim::spawn(
-        &TaskConfig::default(),
-        &SimConfig::default(),
-        &UrSimConfig {
-            rtde_port: 0,
-            secondary_port: 0,
-            lockstep: true,
-            ..UrSimConfig::default()
-        },
-    )
-    .expect("ur-sim");
-    let prefix = unique_prefix("no-alloc-ur");
+/// A controller from `make` (given the service prefix) run under the counting allocator across
+/// boundaries and a table swap from a gain table to a policy table. The order is fixed by the
+/// test: version 1 waits in the controller's queue before the loop; the learner stand-in
+/// raises `pause` at the first sample (version 1 is then in use), the loop returns, the test
+/// publishes version 2 (not counted) and runs the loop again, which takes version 2 at its
+/// next boundary.
+fn run_swapping<A: rt_controller::ArmBackend>(
+    tag: &str,
+    horizon: usize,
+    make: impl FnOnce(&str) -> Controller<A>,
+) -> Swapped<A> {
+    let prefix = unique_prefix(tag);
     let names = ServiceNames::new(&prefix);
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -389,42 +384,12 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
         })
     };
     ready.recv().unwrap();
-
-    let cfg = ControllerConfig {
-        prefix: prefix.clone(),
-        episodes: EPISODES_UR,
-        wait_for_learner: true,
-        episode_report: true,
-        task: TaskConfig {
-            horizon: T_UR,
-            ..TaskConfig::default()
-        },
-        safety: Safety {
-            stale_state_timeout_s: 30.0,
-            ..Safety::default()
-        },
-        arm: ArmConfig {
-            backend: ArmKind::Ur,
-            ur: UrConfig {
-                host: "127.0.0.1".into(),
-                rtde_port: sim.rtde_addr.port(),
-                secondary_port: sim.secondary_addr.port(),
-                reverse_port: 0,
-                // ur-sim's library default (a UR5 on an e-Series controller) has no dashboard.
-                check_model: false,
-                // Long: a descheduled test thread must not end the program.
-                receive_timeout_ms: 1000,
-                ..UrConfig::default()
-            },
-        },
-        ..ControllerConfig::default()
-    };
-    let mut controller: Controller<UrArm> = Controller::setup_ur(cfg).expect("setup");
+    let mut controller = make(&prefix);
     while gains.dynamic_config().number_of_subscribers() == 0 {
         std::thread::sleep(Duration::from_millis(1));
     }
     publisher
-        .send_copy(*constant_goal_table(1, T_UR, [0.2, -1.8, 2.2], 0.01))
+        .send_copy(*constant_goal_table(1, horizon, [0.2, -1.8, 2.2], 0.01))
         .unwrap();
     ALLOCS.with(|c| c.set(0));
     FREES.with(|c| c.set(0));
@@ -441,14 +406,78 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
     let second = controller.run(&never);
     ARMED.with(|a| a.set(false));
     let (allocs, frees) = (ALLOCS.with(|c| c.get()), FREES.with(|c| c.get()));
-
     stop.store(true, Ordering::Relaxed);
     let received = watcher.join().unwrap();
-    let report = controller.arm().report();
-    let s = controller.stats();
+    Swapped {
+        first,
+        second,
+        allocs,
+        frees,
+        received,
+        controller,
+    }
+}
+
+/// The `ur` arm's loop (RTDE packages in, servoj targets out) against `hil-sim ur-sim` in this
+/// process (lockstep; its threads are not counted), across boundaries and a table swap from a
+/// gain table to a policy table ([`run_swapping`]).
+#[test]
+fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
+    use hil_sim::ur_sim::{self, UrSimConfig};
+    use rt_controller::config::{ArmConfig, ArmKind, UrConfig};
+    use ur5_shared::config::{SimConfig, TaskConfig};
+
+    const T_UR: usize = 20;
+    const EPISODES_UR: u64 = 5;
+    let sim = ur_sim::spawn(
+        &TaskConfig::default(),
+        &SimConfig::default(),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            lockstep: true,
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim");
+    let run = run_swapping("no-alloc-ur", T_UR, |prefix| {
+        let cfg = ControllerConfig {
+            prefix: prefix.to_owned(),
+            episodes: EPISODES_UR,
+            wait_for_learner: true,
+            episode_report: true,
+            task: TaskConfig {
+                horizon: T_UR,
+                ..TaskConfig::default()
+            },
+            safety: Safety {
+                stale_state_timeout_s: 30.0,
+                ..Safety::default()
+            },
+            arm: ArmConfig {
+                backend: ArmKind::Ur,
+                ur: UrConfig {
+                    host: "127.0.0.1".into(),
+                    rtde_port: sim.rtde_addr.port(),
+                    secondary_port: sim.secondary_addr.port(),
+                    reverse_port: 0,
+                    // ur-sim's library default (a UR5 on an e-Series controller) has no dashboard.
+                    check_model: false,
+                    // Long: a descheduled test thread must not end the program.
+                    receive_timeout_ms: 1000,
+                    ..UrConfig::default()
+                },
+                ..ArmConfig::default()
+            },
+            ..ControllerConfig::default()
+        };
+        Controller::setup_ur(cfg).expect("setup")
+    });
+    let report = run.controller.arm().report();
+    let s = run.controller.stats();
     sim.stop();
     assert_eq!(
-        (first, second),
+        (run.first, run.second),
         (ExitReason::Stopped, ExitReason::EpisodesDone)
     );
     assert_eq!(
@@ -457,12 +486,92 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
     );
     assert!(s.ticks >= 80, "only {} ticks", s.ticks);
     assert!(report.packages >= 50 * s.ticks, "{report:?}");
-    assert!(received.iter().any(|(_, v)| *v == 2));
+    assert!(run.received.iter().any(|(_, v)| *v == 2));
     assert_eq!(
-        (allocs, frees),
+        (run.allocs, run.frees),
         (0, 0),
-        "the ur loop allocated {allocs} and freed {frees} times over {} ticks and {} packages",
+        "the ur loop allocated {} and freed {} times over {} ticks and {} packages",
+        run.allocs,
+        run.frees,
         s.ticks,
         report.packages
+    );
+}
+
+/// The `ros2` arm's loop (joint states from its DDS thread through the lock-free queue in,
+/// targets out through the other) against `hil-sim ros2-sim` in this process over DDS on the
+/// loopback (real time x10; the DDS and sim threads are not counted), across boundaries and a
+/// table swap ([`run_swapping`]).
+#[test]
+fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
+    use hil_sim::ros2_sim::{self, Ros2SimConfig};
+    use rt_controller::config::{ArmConfig, ArmKind, Mode, Pacing, Ros2Config};
+    use ur5_shared::config::{SimConfig, TaskConfig};
+
+    const T_R: usize = 20;
+    const EPISODES_R: u64 = 5;
+    // ROS domain 125: this test's own.
+    const DOMAIN: u16 = 125;
+    let sim = ros2_sim::spawn(
+        &TaskConfig::default(),
+        &SimConfig::default(),
+        &Ros2SimConfig {
+            domain_id: DOMAIN,
+            time_compression: 10.0,
+            ..Ros2SimConfig::default()
+        },
+    )
+    .expect("ros2-sim");
+    let run = run_swapping("no-alloc-ros2", T_R, |prefix| {
+        let cfg = ControllerConfig {
+            prefix: prefix.to_owned(),
+            episodes: EPISODES_R,
+            wait_for_learner: true,
+            episode_report: true,
+            mode: Mode::RealTime,
+            pacing: Pacing::Arm,
+            time_compression: 10.0,
+            task: TaskConfig {
+                horizon: T_R,
+                ..TaskConfig::default()
+            },
+            safety: Safety {
+                stale_state_timeout_s: 30.0,
+                ..Safety::default()
+            },
+            arm: ArmConfig {
+                backend: ArmKind::Ros2,
+                ros2: Ros2Config {
+                    domain_id: DOMAIN,
+                    ..Ros2Config::default()
+                },
+                ..ArmConfig::default()
+            },
+            ..ControllerConfig::default()
+        };
+        Controller::setup_ros2(cfg).expect("setup")
+    });
+    let report = run.controller.arm().report();
+    let s = run.controller.stats();
+    let summary = sim.stop();
+    assert_eq!(
+        (run.first, run.second),
+        (ExitReason::Stopped, ExitReason::EpisodesDone)
+    );
+    assert_eq!(s.swaps, 2, "version 1 (gains) first, version 2 (policy)");
+    assert!(s.ticks >= 80, "only {} ticks", s.ticks);
+    // Several joint states per control period (all 50 at x1; at x10, 5000 a second, DDS
+    // delivers fewer on this machine).
+    assert!(report.samples >= 2 * s.ticks, "{report:?} {summary:?}");
+    assert!(report.commands > 0, "{report:?}");
+    assert!(run.received.iter().any(|(_, v)| *v == 2));
+    assert_eq!(
+        (run.allocs, run.frees),
+        (0, 0),
+        "the ros2 loop allocated {} and freed {} times over {} ticks and {} joint states",
+        run.allocs,
+        run.frees,
+        s.ticks,
+        report.samples
     );
 }

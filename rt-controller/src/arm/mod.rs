@@ -7,11 +7,19 @@
 //!   same service prefix.
 //! - [`ur`]: a Universal Robots controller (or `hil-sim ur-sim`) over RTDE and the reverse
 //!   interface ([`ur::UrArm`]).
+//! - [`ros2`]: Universal Robots' ROS 2 driver (or `hil-sim ros2-sim`) over DDS
+//!   ([`ros2::Ros2Arm`]).
+//!
+//! [`servo`] is what the `ur` and `ros2` arms share: the goal held between commands, resets as
+//! quintic moves, the state built from six measured joints.
 
 pub mod iceoryx2;
+pub mod ros2;
+pub(crate) mod servo;
 pub mod ur;
 
 pub use self::iceoryx2::Iceoryx2Arm;
+pub use self::ros2::Ros2Arm;
 pub use self::ur::UrArm;
 
 use ur5_shared::{ArmCommand, ArmState};
@@ -81,4 +89,6 @@ pub trait ArmBackend {
 pub enum ArmReport {
     /// The `ur` arm's counters.
     Ur(ur::UrReport),
+    /// The `ros2` arm's counters.
+    Ros2(ros2::Ros2Report),
 }

@@ -49,7 +49,7 @@ use ur5_shared::layout::N_JOINTS;
 use ur5_shared::status::PeerStatus;
 use ur5_shared::{ArmState, PolicyScratch};
 
-use crate::arm::{ArmBackend, ArmReport, Iceoryx2Arm, UrArm};
+use crate::arm::{ArmBackend, ArmReport, Iceoryx2Arm, Ros2Arm, UrArm};
 use crate::config::{ArmKind, ControllerConfig, Mode};
 use crate::monitor::{LostPeers, PeerMonitor};
 use crate::noise::Noise;
@@ -229,6 +229,18 @@ impl Controller<UrArm> {
             return Err(SetupError::BackendMismatch("ur"));
         }
         Self::setup_with(cfg, |cfg, _| Ok(UrArm::new(cfg)))
+    }
+}
+
+impl Controller<Ros2Arm> {
+    /// Setup phase with the `ros2` arm (`cfg.arm.ros2`; docs/design.md §3.13): see
+    /// [`Controller::setup_with`].
+    pub fn setup_ros2(cfg: ControllerConfig) -> Result<Self, SetupError> {
+        cfg.validate()?;
+        if cfg.arm.backend != ArmKind::Ros2 {
+            return Err(SetupError::BackendMismatch("ros2"));
+        }
+        Self::setup_with(cfg, |cfg, _| Ros2Arm::new(cfg))
     }
 }
 

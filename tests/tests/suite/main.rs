@@ -14,6 +14,7 @@ mod processes;
 mod reliability;
 mod resume_ipc;
 mod resume_kill;
+mod ros2_backend;
 mod serve;
 mod soak;
 mod teach;

@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use hil_sim::ur_sim::{self, Faults, Series, UrSimConfig, UrSimHandle};
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, reaching_table, scratch, unique_prefix, write_config, Proc,
-    TestLearner,
+    cleanup_dead_nodes, json_summary, learn_over_ipc, reaching_table, scratch, unique_prefix,
+    write_config, Proc, TestLearner,
 };
 use rt_controller::arm::ur::setup::KEPT_TEXTS;
 use rt_controller::arm::ur::UrRtde;
@@ -280,68 +280,38 @@ fn learn(
     label: &str,
     pause: Option<&UrSimHandle>,
 ) -> (serde_json::Value, serde_json::Value) {
-    let out = dir.join(format!("out-{label}"));
-    let mut learner = Proc::spawn(
-        "learner",
-        &format!("learner-{label}"),
-        &[
-            "serve",
-            "--config",
-            &learner_toml(dir),
-            "--prefix",
-            prefix,
-            "--out",
-            &out.display().to_string(),
-            "--json",
-        ],
+    learn_over_ipc(
         dir,
-    );
-    let mut ctl = Proc::spawn(
-        "rt-controller",
-        &format!("controller-{label}"),
-        &["run", "--config", ctl_cfg, "--prefix", prefix, "--json"],
-        dir,
-    );
-    if let Some(arm) = pause {
-        use std::time::{Duration, Instant};
-        let second = out.join("tables").join("v0002.npz");
-        let t0 = Instant::now();
-        while !second.exists() {
-            assert!(
-                t0.elapsed() < LONG,
-                "no second table within {LONG:?}:\n{}",
-                learner.log()
-            );
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        learner.signal(libc::SIGSTOP);
-        let (mut packages, mut since) = (arm.summary().packages, Instant::now());
-        while since.elapsed() < Duration::from_millis(1500) {
-            assert!(t0.elapsed() < LONG, "the arm never went quiet");
-            std::thread::sleep(Duration::from_millis(20));
-            let now = arm.summary().packages;
-            if now != packages {
-                (packages, since) = (now, Instant::now());
+        prefix,
+        &learner_toml(dir),
+        ctl_cfg,
+        label,
+        LONG,
+        |learner, out| {
+            let Some(arm) = pause else { return };
+            let second = out.join("tables").join("v0002.npz");
+            let t0 = Instant::now();
+            while !second.exists() {
+                assert!(
+                    t0.elapsed() < LONG,
+                    "no second table within {LONG:?}:\n{}",
+                    learner.log()
+                );
+                std::thread::sleep(Duration::from_millis(5));
             }
-        }
-        learner.signal(libc::SIGCONT);
-    }
-    let (code, out) = learner.wait(LONG);
-    let log = learner.log();
-    assert_eq!(
-        code,
-        Some(0),
-        "learner ({label}):\n{log}\ncontroller:\n{}",
-        ctl.log()
-    );
-    ctl.signal(libc::SIGTERM);
-    let (code, cout) = ctl.wait(LONG);
-    let clog = ctl.log();
-    assert_eq!(code, Some(0), "controller ({label}):\n{clog}");
-    let c = json_summary(&cout, &clog);
-    assert_eq!(c["episodes_aborted"], 0, "{c}");
-    assert_eq!(c["rejected_total"], 0, "{c}");
-    (json_summary(&out, &log), c)
+            learner.signal(libc::SIGSTOP);
+            let (mut packages, mut since) = (arm.summary().packages, Instant::now());
+            while since.elapsed() < Duration::from_millis(1500) {
+                assert!(t0.elapsed() < LONG, "the arm never went quiet");
+                std::thread::sleep(Duration::from_millis(20));
+                let now = arm.summary().packages;
+                if now != packages {
+                    (packages, since) = (now, Instant::now());
+                }
+            }
+            learner.signal(libc::SIGCONT);
+        },
+    )
 }
 
 #[test]

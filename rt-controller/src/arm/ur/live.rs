@@ -16,12 +16,13 @@ use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ArmLimits;
 use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::layout::N_JOINTS;
-use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind};
+use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus};
 use ur_protocol::state::runtime_state;
 use ur_protocol::{ControlMode, ReverseCommand};
 
+use crate::arm::servo::{arm_state, Servo};
 use crate::arm::{ArmBackend, ArmIoError};
-use crate::config::{ServoTarget, UrConfig};
+use crate::config::UrConfig;
 use crate::error::SetupError;
 use crate::stats::{Histogram, Percentiles};
 
@@ -34,15 +35,7 @@ use lateness::Lateness;
 
 // ------------------------------------------------------------------------------ the loop side
 
-/// A reset to the start pose counts as done when every joint is this close (rad) …
-pub const RESET_TOL_Q: f64 = 2e-3;
-/// … and this slow (rad/s).
-pub const RESET_TOL_QD: f64 = 1e-2;
-/// After the reset motion ends, the arm has this long (s of arm time) to settle; then the
-/// reset is acknowledged where the arm is.
-pub const RESET_SETTLE_MAX_S: f64 = 3.0;
-/// Shortest reset motion (s).
-const RESET_MIN_S: f64 = 0.5;
+pub use crate::arm::servo::{RESET_SETTLE_MAX_S, RESET_TOL_Q, RESET_TOL_QD};
 /// A measured active joint may be this far (rad) outside `[limits]` (a servo's overshoot at a
 /// limit) before the state counts as a fault ([`StreamFault::OutsideLimits`]).
 pub const MEASURED_LIMIT_MARGIN_RAD: f64 = 0.05;
@@ -50,22 +43,6 @@ pub const MEASURED_LIMIT_MARGIN_RAD: f64 = 0.05;
 /// ([`StreamFault::ClockFrozen`]; 0.1 s of an e-Series, 0.4 s of a CB3). One repeat is normal
 /// (a package sent twice).
 pub const FROZEN_CLOCK_PACKAGES: u64 = 50;
-
-/// What the program is servoing to.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Motion {
-    /// The controller's goal (or a hold), as [`ServoTarget`] says.
-    Servo,
-    /// A quintic joint-space move from `from` to `to` starting at arm time `t0` (s), lasting
-    /// `duration` (s); acknowledged with `seq` once settled.
-    Reset {
-        from: Joints6,
-        to: Joints6,
-        t0: f64,
-        duration: f64,
-        seq: u64,
-    },
-}
 
 /// What the `ur` arm did in the loop (the summary's `arm` field).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -119,9 +96,6 @@ struct Counts {
     states: u64,
     writes: u64,
     keepalives: u64,
-    refused: u64,
-    resets: u64,
-    unsettled: u64,
     texts: u64,
     decode_errors: u64,
     recoveries: u64,
@@ -141,12 +115,8 @@ struct Live {
     cycle_s: f64,
     /// Control period (s of arm time).
     period_s: f64,
-    motion: Motion,
-    /// The goal in force (six joints, rad) and, for `ramp`, the target it ramps from and the
-    /// arm time (s) of the package it answered.
-    goal: Joints6,
-    ramp_from: Joints6,
-    goal_ts: f64,
+    /// The goal in force, the reset in progress, the acknowledged command and episode.
+    servo: Servo,
     /// Arm time (s) of the next control-period state.
     next_emit_ts: f64,
     /// An emitted state the controller has not answered yet (the write for its package waits).
@@ -156,8 +126,6 @@ struct Live {
     /// (docs/ur.md, "Lockstep"); the next command ends it.
     idle: bool,
     state_seq: u64,
-    last_command_seq: u64,
-    episode: u64,
     last_write_ns: u64,
     last_text: heapless::String<256>,
     robot_stop: Option<(i32, i32, u32)>,
@@ -226,9 +194,9 @@ impl UrArm {
             states: c.states,
             commands_written: c.writes,
             keepalives: c.keepalives,
-            commands_refused: c.refused,
-            resets: c.resets,
-            resets_unsettled: c.unsettled,
+            commands_refused: l.servo.refused,
+            resets: l.servo.resets,
+            resets_unsettled: l.servo.unsettled,
             texts: c.texts,
             last_text: l.last_text.as_str().to_owned(),
             decode_errors: c.decode_errors,
@@ -262,7 +230,8 @@ impl ArmBackend for UrArm {
             fault,
         })?;
         let kin = UrKinematics::new(self.cfg.model, self.cfg.ee_offset);
-        let s = state_from(&kin, r.state(), 0, 0, 0, ArmStatus::READY);
+        let st = r.state();
+        let s = arm_state(&kin, &st.actual_q, &st.actual_qd, 0, 0, 0, ArmStatus::READY);
         self.rtde = Some(r);
         Ok(s)
     }
@@ -297,16 +266,11 @@ impl ArmBackend for UrArm {
             kin: UrKinematics::new(self.cfg.model, self.cfg.ee_offset),
             cycle_s: session.cycle_s,
             period_s: self.period_s,
-            motion: Motion::Servo,
-            goal: q,
-            ramp_from: q,
-            goal_ts: ts,
+            servo: Servo::new(q, ts, session.cycle_s, self.period_s),
             next_emit_ts: ts + self.period_s,
             awaiting_answer: false,
             idle: false,
             state_seq: 0,
-            last_command_seq: 0,
-            episode: 0,
             last_write_ns: monotonic_ns(),
             last_text: heapless::String::new(),
             robot_stop: None,
@@ -396,14 +360,23 @@ const REVERSE_CLOSED: &str =
 /// A measured state the controller may act on: all six joints' `actual_q` and `actual_qd`
 /// finite, the three active joints within `limits` (± [`MEASURED_LIMIT_MARGIN_RAD`]).
 pub fn check_measured(r: &RobotState, limits: &ArmLimits) -> Result<(), StreamFault> {
+    check_joints(&r.actual_q, &r.actual_qd, limits)
+}
+
+/// [`check_measured`] of six measured joint angles (rad) and speeds (rad/s).
+pub fn check_joints(
+    actual_q: &Joints6,
+    actual_qd: &Joints6,
+    limits: &ArmLimits,
+) -> Result<(), StreamFault> {
     for j in 0..6 {
-        let (q, qd) = (r.actual_q[j], r.actual_qd[j]);
+        let (q, qd) = (actual_q[j], actual_qd[j]);
         if !q.is_finite() || !qd.is_finite() {
             return Err(StreamFault::NonFinite { joint: j, q, qd });
         }
     }
     for j in 0..N_JOINTS {
-        let (q, lower, upper) = (r.actual_q[j], limits.lower[j], limits.upper[j]);
+        let (q, lower, upper) = (actual_q[j], limits.lower[j], limits.upper[j]);
         let m = MEASURED_LIMIT_MARGIN_RAD;
         if q < lower - m || q > upper + m {
             return Err(StreamFault::OutsideLimits {
@@ -416,38 +389,6 @@ pub fn check_measured(r: &RobotState, limits: &ArmLimits) -> Result<(), StreamFa
         }
     }
     Ok(())
-}
-
-/// The controller's [`ArmState`] from an RTDE state: the three active joints, the
-/// end-effector point and velocity from all six measured joints (`ur5_shared::kinematics`).
-/// No fault bits: [`Live::emit`] sets `DRIVER` from the modes [`Live::on_package`] checked.
-fn state_from(
-    kin: &UrKinematics,
-    r: &RobotState,
-    seq: u64,
-    last_command_seq: u64,
-    episode: u64,
-    status: ArmStatus,
-) -> ArmState {
-    let (ee_pos, ee_vel) = kin.ee_point_velocity(&r.actual_q, &r.actual_qd);
-    ArmState {
-        seq,
-        stamp_ns: monotonic_ns(),
-        episode,
-        last_command_seq,
-        q: [r.actual_q[0], r.actual_q[1], r.actual_q[2]],
-        qd: [r.actual_qd[0], r.actual_qd[1], r.actual_qd[2]],
-        ee_pos,
-        ee_vel,
-        status,
-        faults: ArmFaults::default(),
-    }
-}
-
-/// Quintic time scaling: 0 → 1 with zero velocity and acceleration at both ends.
-fn quintic(tau: f64) -> f64 {
-    let t = tau.clamp(0.0, 1.0);
-    t * t * t * (10.0 + t * (-15.0 + 6.0 * t))
 }
 
 impl Live {
@@ -632,26 +573,12 @@ impl Live {
             return Some(self.emit(ArmStatus::READY));
         }
         let mut status = ArmStatus::READY;
-        if let Motion::Reset {
-            to,
-            t0,
-            duration,
-            seq,
-            ..
-        } = self.motion
-        {
-            let settled = (0..6).all(|j| {
-                (r.actual_q[j] - to[j]).abs() < RESET_TOL_Q && r.actual_qd[j].abs() < RESET_TOL_QD
-            });
-            let end = t0 + duration;
-            if ts >= end && (settled || ts >= end + RESET_SETTLE_MAX_S) {
-                self.counts.resets += 1;
-                self.counts.unsettled += u64::from(!settled);
-                self.motion = Motion::Servo;
-                self.goal = to;
-                self.ramp_from = to;
-                self.goal_ts = ts;
-                self.last_command_seq = seq;
+        if self.servo.resetting() {
+            if self
+                .servo
+                .reset_done(&r.actual_q, &r.actual_qd, ts)
+                .is_some()
+            {
                 self.next_emit_ts = ts + period_s;
                 self.awaiting_answer = true;
                 return Some(self.emit(ArmStatus::READY));
@@ -674,12 +601,13 @@ impl Live {
 
     fn emit(&mut self, status: ArmStatus) -> ArmState {
         self.state_seq += 1;
-        let mut s = state_from(
+        let mut s = arm_state(
             &self.kin,
-            &self.robot,
+            &self.robot.actual_q,
+            &self.robot.actual_qd,
             self.state_seq,
-            self.last_command_seq,
-            self.episode,
+            self.servo.last_command_seq,
+            self.servo.episode,
             status,
         );
         if self.robot_stop.is_some() {
@@ -691,76 +619,15 @@ impl Live {
     /// Takes a controller command; false if it could not be sent as it is (then the arm
     /// holds where it is).
     fn take_command(&mut self, cmd: &ArmCommand, limits: &ArmLimits, cfg: &UrConfig) -> bool {
-        self.last_command_seq = cmd.seq;
-        self.episode = cmd.episode;
-        let here = self.robot.actual_q;
-        let hold_here = UrKinematics::six(&[here[0], here[1], here[2]], &cfg.wrist_q);
-        let in_limits = |q: &[f64; N_JOINTS]| {
-            (0..N_JOINTS)
-                .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
-        };
-        let (goal, ok) = match cmd.kind() {
-            Ok(CommandKind::GoalAngles) if in_limits(&cmd.values) => {
-                (UrKinematics::six(&cmd.values, &cfg.wrist_q), true)
-            }
-            Ok(CommandKind::Hold) => (hold_here, true),
-            Ok(CommandKind::Reset) if in_limits(&cmd.reset_pose) => {
-                let to = UrKinematics::six(&cmd.reset_pose, &cfg.wrist_q);
-                match &mut self.motion {
-                    // The same reset again (the controller's retry): it goes on.
-                    Motion::Reset { to: t, seq, .. } if *t == to => *seq = cmd.seq,
-                    _ => {
-                        let dist = (0..6).fold(0.0f64, |m, j| m.max((to[j] - here[j]).abs()));
-                        // Peak speed of the quintic: 15/8 · distance / duration.
-                        let duration = (1.875 * dist / cfg.reset_speed_rad_s).max(RESET_MIN_S);
-                        self.motion = Motion::Reset {
-                            from: here,
-                            to,
-                            t0: self.robot.timestamp,
-                            duration,
-                            seq: cmd.seq,
-                        };
-                    }
-                }
-                // Acknowledged when done ([`Self::on_package`]).
-                self.last_command_seq = cmd.seq.saturating_sub(1);
-                return true;
-            }
-            _ => (hold_here, false),
-        };
-        if !ok {
-            self.counts.refused += 1;
-        }
-        self.ramp_from = self.target(cfg, self.robot.timestamp);
-        self.motion = Motion::Servo;
-        self.goal = goal;
-        self.goal_ts = self.robot.timestamp;
-        ok
-    }
-
-    /// The servo target for the cycle after the package of arm time `ts`.
-    fn target(&self, cfg: &UrConfig, ts: f64) -> Joints6 {
-        match self.motion {
-            Motion::Reset {
-                from,
-                to,
-                t0,
-                duration,
-                ..
-            } => {
-                let s = quintic((ts + self.cycle_s - t0) / duration);
-                core::array::from_fn(|j| from[j] + s * (to[j] - from[j]))
-            }
-            Motion::Servo => match cfg.servo_target {
-                ServoTarget::Hold => self.goal,
-                ServoTarget::Ramp => {
-                    let f = ((ts + self.cycle_s - self.goal_ts) / self.period_s).clamp(0.0, 1.0);
-                    core::array::from_fn(|j| {
-                        self.ramp_from[j] + f * (self.goal[j] - self.ramp_from[j])
-                    })
-                }
-            },
-        }
+        self.servo.take_command(
+            cmd,
+            limits,
+            &cfg.wrist_q,
+            cfg.reset_speed_rad_s,
+            cfg.servo_target,
+            self.robot.actual_q,
+            self.robot.timestamp,
+        )
     }
 
     /// Writes the servo target for the next cycle on the reverse socket.
@@ -768,7 +635,7 @@ impl Live {
         if self.reverse_closed {
             return Err(ArmIoError::Send);
         }
-        let q = self.target(cfg, self.robot.timestamp);
+        let q = self.servo.target(cfg.servo_target, self.robot.timestamp);
         let cmd = ReverseCommand {
             timeout_ms: cfg.receive_timeout_ms as i32,
             q,

@@ -9,5 +9,7 @@ pub mod live;
 pub mod setup;
 
 pub use dashboard::Dashboard;
-pub use live::{UrArm, UrReport, LATENESS_BASELINE, RESET_SETTLE_MAX_S, RESET_TOL_Q, RESET_TOL_QD};
+pub use live::{
+    check_joints, UrArm, UrReport, LATENESS_BASELINE, RESET_SETTLE_MAX_S, RESET_TOL_Q, RESET_TOL_QD,
+};
 pub use setup::{check_modes, UrRtde, UrSession, UrSetupError, OUTPUTS, PROGRAM};

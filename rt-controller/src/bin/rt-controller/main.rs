@@ -264,6 +264,7 @@ fn real_main() -> Result<i32> {
             let summary = match cfg.arm.backend {
                 ArmKind::Iceoryx2 => run_loop(Controller::setup(cfg)?),
                 ArmKind::Ur => run_loop(Controller::setup_ur(cfg)?),
+                ArmKind::Ros2 => run_loop(Controller::setup_ros2(cfg)?),
             };
             if json {
                 println!("{}", serde_json::to_string(&summary)?);

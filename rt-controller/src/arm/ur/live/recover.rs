@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use ur_protocol::client::ClientError;
 use ur_protocol::{RobotMessage, SafetyMode};
 
-use super::{Live, Motion, UrArm, REVERSE_CLOSED};
+use super::{Live, UrArm, REVERSE_CLOSED};
 use crate::arm::ur::dashboard::Dashboard;
 use crate::arm::ur::setup::{send_program, UrSetupError};
 use ur5_shared::kinematics::UrKinematics;
@@ -70,10 +70,7 @@ impl UrArm {
         l.reverse_closed = false;
         l.program_seen = false;
         l.restarted = true;
-        l.motion = Motion::Servo;
-        l.goal = here;
-        l.ramp_from = here;
-        l.goal_ts = ts;
+        l.servo.hold(here, ts);
         l.next_emit_ts = ts + period_s;
         l.awaiting_answer = false;
         l.counts.recoveries += 1;

@@ -1,0 +1,682 @@
+//! The `ros2` arm (docs/design.md §3.13): Universal Robots' ROS 2 driver, or `hil-sim
+//! ros2-sim`, over DDS. `/joint_states` in (matched to `arm.ros2.joints` by name), six positions
+//! on `/forward_position_controller/commands` out, the driver's robot and safety modes watched.
+//!
+//! DDS (RustDDS) runs on a thread of its own: it decodes joint states into fixed-size samples in
+//! the controller's joint order and hands them to the loop through a preallocated lock-free
+//! queue; the loop hands its targets back through another and wakes the thread with an
+//! `eventfd` write. The loop thread neither allocates nor locks.
+//!
+//! As in the `ur` arm, the joint states clock the loop: one [`ArmState`] per control period of
+//! their header stamps; resets are quintic moves published at the joint-state rate; a goal is
+//! published once and the forward controller holds it ([`crate::arm::servo`]).
+
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use crossbeam_queue::ArrayQueue;
+use serde::Serialize;
+use ur5_ros2::{
+    Float64MultiArray, JointState, Message, MultiArrayLayout, Node, Reader, RobotMode, SafetyMode,
+    Writer,
+};
+use ur5_shared::clock::monotonic_ns;
+use ur5_shared::config::ArmLimits;
+use ur5_shared::kinematics::{Joints6, UrKinematics};
+use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus};
+use ur_protocol::modes::{robot_mode_name, safety_mode_name};
+
+use crate::arm::servo::{arm_state, Servo};
+use crate::arm::ur::check_joints;
+use crate::arm::{ArmBackend, ArmIoError, ArmReport};
+use crate::config::{Ros2Config, ServoTarget, UrConfig};
+use crate::error::{Ros2SetupError, SetupError, StreamFault};
+use crate::stats::{Histogram, Percentiles};
+
+/// Joint samples the DDS thread may queue ahead of the loop (0.5 s at 500 Hz); when full, the
+/// oldest is dropped (counted).
+const STATE_QUEUE: usize = 256;
+/// Targets the loop may queue ahead of the DDS thread.
+const COMMAND_QUEUE: usize = 64;
+/// A mode not received yet.
+const UNKNOWN_MODE: i32 = i32::MIN;
+
+/// One joint state in the controller's joint order.
+#[derive(Clone, Copy, Debug, Default)]
+struct JointSample {
+    /// Header stamp (ns).
+    stamp_ns: u64,
+    q: Joints6,
+    qd: Joints6,
+    /// When the DDS thread decoded it (monotonic ns): the handoff latency's start.
+    received_ns: u64,
+}
+
+/// What the DDS thread and the loop share: the two queues, the wake-up and the modes.
+struct Shared {
+    states: ArrayQueue<JointSample>,
+    commands: ArrayQueue<Joints6>,
+    wake: OwnedFd,
+    stop: AtomicBool,
+    robot_mode: AtomicI32,
+    safety_mode: AtomicI32,
+    // DDS thread counters.
+    received: AtomicU64,
+    unmatched: AtomicU64,
+    dropped_states: AtomicU64,
+    published: AtomicU64,
+    publish_errors: AtomicU64,
+}
+
+impl Shared {
+    fn new() -> std::io::Result<Self> {
+        // SAFETY: eventfd returns a new descriptor or -1.
+        let fd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
+        if fd < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(Self {
+            states: ArrayQueue::new(STATE_QUEUE),
+            commands: ArrayQueue::new(COMMAND_QUEUE),
+            // SAFETY: fd is a fresh descriptor we own.
+            wake: unsafe { OwnedFd::from_raw_fd(fd) },
+            stop: AtomicBool::new(false),
+            robot_mode: AtomicI32::new(UNKNOWN_MODE),
+            safety_mode: AtomicI32::new(UNKNOWN_MODE),
+            received: AtomicU64::new(0),
+            unmatched: AtomicU64::new(0),
+            dropped_states: AtomicU64::new(0),
+            published: AtomicU64::new(0),
+            publish_errors: AtomicU64::new(0),
+        })
+    }
+
+    /// Queues a target and wakes the DDS thread (one `write` on the eventfd; no allocation).
+    fn command(&self, q: Joints6) {
+        let _ = self.commands.force_push(q);
+        self.notify();
+    }
+
+    fn notify(&self) {
+        let one = 1u64.to_ne_bytes();
+        // SAFETY: writes 8 bytes from a live buffer to our eventfd.
+        let _ = unsafe { libc::write(self.wake.as_raw_fd(), one.as_ptr().cast(), 8) };
+    }
+
+    fn drain_wake(&self) {
+        let mut buf = [0u8; 8];
+        // SAFETY: reads at most 8 bytes into a live buffer from our non-blocking eventfd.
+        let _ = unsafe { libc::read(self.wake.as_raw_fd(), buf.as_mut_ptr().cast(), 8) };
+    }
+}
+
+/// Maps a joint state's names onto the controller's joints (cached while the names repeat).
+struct JointMap {
+    joints: [String; 6],
+    names: Vec<String>,
+    index: Option<[usize; 6]>,
+}
+
+impl JointMap {
+    fn new(joints: &[String; 6]) -> Self {
+        Self {
+            joints: joints.clone(),
+            names: Vec::new(),
+            index: None,
+        }
+    }
+
+    /// The sample in the controller's order; `Err(joint)`: a joint missing from the message
+    /// (or its position or velocity).
+    fn sample(&mut self, m: &JointState) -> Result<JointSample, usize> {
+        if m.name != self.names {
+            self.names.clone_from(&m.name);
+            let mut index = [0usize; 6];
+            let mut missing = None;
+            for (j, want) in self.joints.iter().enumerate() {
+                match m.name.iter().position(|n| n == want) {
+                    Some(i) => index[j] = i,
+                    None => {
+                        missing.get_or_insert(j);
+                    }
+                }
+            }
+            self.index = if missing.is_none() { Some(index) } else { None };
+            if let Some(j) = missing {
+                return Err(j);
+            }
+        }
+        let index = self.index.ok_or(0usize)?;
+        let mut s = JointSample {
+            stamp_ns: m.header.stamp.to_ns(),
+            received_ns: monotonic_ns(),
+            ..JointSample::default()
+        };
+        for (j, &i) in index.iter().enumerate() {
+            s.q[j] = *m.position.get(i).ok_or(j)?;
+            s.qd[j] = *m.velocity.get(i).ok_or(j)?;
+        }
+        Ok(s)
+    }
+}
+
+/// The DDS endpoints, created in setup and moved to the DDS thread at [`ArmBackend::connect`].
+struct Endpoints {
+    node: Node,
+    joint_states: Reader<JointState>,
+    robot_mode: Option<Reader<RobotMode>>,
+    safety_mode: Option<Reader<SafetyMode>>,
+    commands: Writer<Float64MultiArray>,
+    map: JointMap,
+}
+
+impl Endpoints {
+    fn create(cfg: &Ros2Config) -> Result<Self, Ros2SetupError> {
+        let node = Node::new(cfg.domain_id, cfg.network)?;
+        let joint_states = node.reader(&cfg.joint_states_topic, cfg.joint_states_qos)?;
+        let commands = node.writer(&cfg.command_topic, cfg.command_qos)?;
+        let (robot_mode, safety_mode) = if cfg.watch_status {
+            (
+                Some(node.reader(&cfg.robot_mode_topic, cfg.status_qos)?),
+                Some(node.reader(&cfg.safety_mode_topic, cfg.status_qos)?),
+            )
+        } else {
+            (None, None)
+        };
+        Ok(Self {
+            node,
+            joint_states,
+            robot_mode,
+            safety_mode,
+            commands,
+            map: JointMap::new(&cfg.joints),
+        })
+    }
+
+    /// Reads every queued message: joint states into `shared.states`, modes into the atomics.
+    fn pump(&mut self, shared: &Shared) {
+        while let Some(m) = self.joint_states.take() {
+            shared.received.fetch_add(1, Ordering::Relaxed);
+            match self.map.sample(&m) {
+                Ok(s) => {
+                    if shared.states.force_push(s).is_some() {
+                        shared.dropped_states.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Err(_) => {
+                    shared.unmatched.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+        if let Some(r) = self.robot_mode.as_mut() {
+            while let Some(m) = r.take() {
+                shared
+                    .robot_mode
+                    .store(i32::from(m.mode), Ordering::Relaxed);
+            }
+        }
+        if let Some(r) = self.safety_mode.as_mut() {
+            while let Some(m) = r.take() {
+                shared
+                    .safety_mode
+                    .store(i32::from(m.mode), Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Publishes every queued target.
+    fn publish(&mut self, shared: &Shared, msg: &mut Float64MultiArray) {
+        while let Some(q) = shared.commands.pop() {
+            msg.data.clear();
+            msg.data.extend_from_slice(&q);
+            let ok = self.commands.write(msg.clone()).is_ok();
+            let c = if ok {
+                &shared.published
+            } else {
+                &shared.publish_errors
+            };
+            c.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The DDS thread: waits (epoll through mio) for any reader or the loop's wake-up, then moves
+/// messages both ways.
+fn dds_thread(mut ep: Endpoints, shared: Arc<Shared>) {
+    use rustdds::mio::unix::EventedFd;
+    use rustdds::mio::{Events, Poll, PollOpt, Ready, Token};
+    let poll = Poll::new().expect("mio poll");
+    let edge = PollOpt::edge();
+    let _ = poll.register(ep.joint_states.evented(), Token(0), Ready::readable(), edge);
+    if let Some(r) = &ep.robot_mode {
+        let _ = poll.register(r.evented(), Token(1), Ready::readable(), edge);
+    }
+    if let Some(r) = &ep.safety_mode {
+        let _ = poll.register(r.evented(), Token(2), Ready::readable(), edge);
+    }
+    let fd = shared.wake.as_raw_fd();
+    let _ = poll.register(&EventedFd(&fd), Token(3), Ready::readable(), edge);
+    let mut events = Events::with_capacity(16);
+    let mut msg = Float64MultiArray {
+        layout: MultiArrayLayout::default(),
+        data: Vec::with_capacity(6),
+    };
+    while !shared.stop.load(Ordering::Relaxed) {
+        let _ = poll.poll(&mut events, Some(Duration::from_millis(20)));
+        shared.drain_wake();
+        ep.publish(&shared, &mut msg);
+        ep.pump(&shared);
+    }
+}
+
+/// What the `ros2` arm did (the summary's `arm` field).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Ros2Report {
+    /// Joint states received, of them not matching `arm.ros2.joints` (a joint missing), and
+    /// dropped because the loop fell 256 behind.
+    pub joint_states: u64,
+    pub unmatched: u64,
+    pub dropped: u64,
+    /// Joint states the loop used, and states handed to the controller.
+    pub samples: u64,
+    pub states: u64,
+    /// Stamps that did not advance (skipped).
+    pub out_of_order: u64,
+    /// Commands published, and publications that failed.
+    pub commands: u64,
+    pub publish_errors: u64,
+    /// Commands the controller sent that could not go to the arm (non-finite, outside the
+    /// limits, torques): replaced by a hold.
+    pub commands_refused: u64,
+    pub resets: u64,
+    pub resets_unsettled: u64,
+    /// Gaps between joint states longer than `safety.stale_state_timeout_s` (a stale stream: the
+    /// controller held), and the longest gap (s of wall time).
+    pub stale_gaps: u64,
+    pub longest_gap_s: f64,
+    /// Why the robot stopped the run, if it did.
+    pub robot_stop: Option<String>,
+    /// Why the arm is gone, if it is.
+    pub lost: Option<&'static str>,
+    pub stream_fault: Option<String>,
+    /// Joint state decoded on the DDS thread → taken by the loop (ns).
+    pub handoff: Percentiles,
+}
+
+/// The loop side.
+struct Live {
+    kin: UrKinematics,
+    servo: Servo,
+    servo_target: ServoTarget,
+    q: Joints6,
+    qd: Joints6,
+    first_stamp_ns: u64,
+    last_stamp_ns: u64,
+    /// Arm time (s since the first joint state's stamp).
+    ts: f64,
+    next_emit_ts: f64,
+    state_seq: u64,
+    robot_stop: Option<(i32, i32)>,
+    lost: Option<&'static str>,
+    stream_fault: Option<StreamFault>,
+    last_sample_ns: u64,
+    in_gap: bool,
+    samples: u64,
+    states: u64,
+    out_of_order: u64,
+    stale_gaps: u64,
+    longest_gap_ns: u64,
+    handoff: Histogram,
+}
+
+/// The `ros2` arm backend.
+pub struct Ros2Arm {
+    cfg: Ros2Config,
+    ur: UrConfig,
+    limits: ArmLimits,
+    period_s: f64,
+    cycle_s: f64,
+    /// A gap between joint states longer than this (ns of wall time) is a stale stream
+    /// (`safety.stale_state_timeout_s`: the controller holds), counted.
+    stale_gap_ns: u64,
+    shared: Arc<Shared>,
+    endpoints: Option<Endpoints>,
+    first: Option<JointSample>,
+    thread: Option<JoinHandle<()>>,
+    live: Option<Live>,
+}
+
+impl Ros2Arm {
+    /// The arm of `cfg.arm.ros2` (and `cfg.arm.ur`'s arm description), not connected yet.
+    pub fn new(cfg: &crate::config::ControllerConfig) -> Result<Self, SetupError> {
+        let shared = Shared::new().map_err(|e| Ros2SetupError::Eventfd(e.to_string()))?;
+        Ok(Self {
+            cfg: cfg.arm.ros2.clone(),
+            ur: cfg.arm.ur.clone(),
+            limits: cfg.limits(),
+            period_s: cfg.task.dt,
+            cycle_s: 1.0 / cfg.arm.ros2.joint_state_rate_hz,
+            stale_gap_ns: (cfg.safety.stale_state_timeout_s * 1e9) as u64,
+            shared: Arc::new(shared),
+            endpoints: None,
+            first: None,
+            thread: None,
+            live: None,
+        })
+    }
+
+    /// What the loop saw (allocates; after the loop).
+    pub fn report(&self) -> Ros2Report {
+        let sh = &self.shared;
+        let g = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        let mut r = Ros2Report {
+            joint_states: g(&sh.received),
+            unmatched: g(&sh.unmatched),
+            dropped: g(&sh.dropped_states),
+            commands: g(&sh.published),
+            publish_errors: g(&sh.publish_errors),
+            ..Ros2Report::default()
+        };
+        if let Some(l) = &self.live {
+            r.samples = l.samples;
+            r.states = l.states;
+            r.out_of_order = l.out_of_order;
+            r.commands_refused = l.servo.refused;
+            r.resets = l.servo.resets;
+            r.resets_unsettled = l.servo.unsettled;
+            r.stale_gaps = l.stale_gaps;
+            r.longest_gap_s = l.longest_gap_ns as f64 * 1e-9;
+            r.robot_stop = l.robot_stop.map(|(rm, sm)| {
+                format!(
+                    "robot mode {} ({rm}), safety mode {} ({sm})",
+                    if rm == UNKNOWN_MODE {
+                        "not received"
+                    } else {
+                        robot_mode_name(rm)
+                    },
+                    if sm == UNKNOWN_MODE {
+                        "not received"
+                    } else {
+                        safety_mode_name(sm)
+                    },
+                )
+            });
+            r.lost = l.lost;
+            r.stream_fault = l.stream_fault.map(|f| f.to_string());
+            r.handoff = l.handoff.summary();
+        }
+        r
+    }
+
+    /// Why setup found no usable joint state in time: the topic has no publisher, one of
+    /// another type, or the joints do not match.
+    fn diagnose(&self, ep: &Endpoints, timeout_s: f64) -> Ros2SetupError {
+        let c = &self.cfg;
+        let publishers = ep.node.publishers_of(&c.joint_states_topic);
+        if publishers.is_empty() {
+            return Ros2SetupError::NoPublisher {
+                topic: c.joint_states_topic.clone(),
+                domain: c.domain_id,
+                timeout_s,
+            };
+        }
+        if let Some(other) = publishers.iter().find(|t| *t != JointState::DDS_TYPE) {
+            return Ros2SetupError::WrongType {
+                topic: c.joint_states_topic.clone(),
+                found: other.clone(),
+                expected: JointState::DDS_TYPE,
+            };
+        }
+        if self.shared.unmatched.load(Ordering::Relaxed) > 0 {
+            return Ros2SetupError::JointsMissing {
+                topic: c.joint_states_topic.clone(),
+                joints: c.joints.clone(),
+                names: ep.map.names.clone(),
+            };
+        }
+        Ros2SetupError::NothingReceived {
+            topic: c.joint_states_topic.clone(),
+            publishers: publishers.len(),
+            timeout_s,
+        }
+    }
+}
+
+impl ArmBackend for Ros2Arm {
+    fn wait_ready(&mut self, timeout_s: f64) -> Result<ArmState, SetupError> {
+        let mut ep = Endpoints::create(&self.cfg)?;
+        let t0 = monotonic_ns();
+        let timeout_ns = (timeout_s * 1e9) as u64;
+        let mut first = None;
+        let mut subscribed = false;
+        while first.is_none() || !subscribed {
+            ep.pump(&self.shared);
+            while let Some(s) = self.shared.states.pop() {
+                first = Some(s);
+            }
+            subscribed = subscribed || !ep.node.subscribers_of(&self.cfg.command_topic).is_empty();
+            if monotonic_ns() - t0 > timeout_ns {
+                return Err(if first.is_none() {
+                    self.diagnose(&ep, timeout_s)
+                } else {
+                    Ros2SetupError::NoSubscriber {
+                        topic: self.cfg.command_topic.clone(),
+                        timeout_s,
+                    }
+                }
+                .into());
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        let s = first.expect("loop ends with a sample");
+        check_joints(&s.q, &s.qd, &self.limits).map_err(Ros2SetupError::Stream)?;
+        let kin = UrKinematics::new(self.ur.model, self.ur.ee_offset);
+        self.first = Some(s);
+        self.endpoints = Some(ep);
+        Ok(arm_state(&kin, &s.q, &s.qd, 0, 0, 0, ArmStatus::READY))
+    }
+
+    fn connect(&mut self) -> Result<(), SetupError> {
+        let ep = self
+            .endpoints
+            .take()
+            .expect("wait_ready succeeded before connect");
+        let mut s = self.first.take().expect("wait_ready kept its sample");
+        // The newest sample queued meanwhile (the thread is not running yet).
+        let mut ep = ep;
+        ep.pump(&self.shared);
+        while let Some(n) = self.shared.states.pop() {
+            s = n;
+        }
+        let shared = Arc::clone(&self.shared);
+        self.thread = Some(
+            std::thread::Builder::new()
+                .name("ros2-dds".into())
+                .spawn(move || dds_thread(ep, shared))
+                .map_err(|e| Ros2SetupError::Thread(e.to_string()))?,
+        );
+        let here = UrKinematics::six(&[s.q[0], s.q[1], s.q[2]], &self.ur.wrist_q);
+        let live = Live {
+            kin: UrKinematics::new(self.ur.model, self.ur.ee_offset),
+            servo: Servo::new(here, 0.0, self.cycle_s, self.period_s),
+            servo_target: self.ur.servo_target,
+            q: s.q,
+            qd: s.qd,
+            first_stamp_ns: s.stamp_ns,
+            last_stamp_ns: s.stamp_ns,
+            ts: 0.0,
+            next_emit_ts: self.period_s,
+            state_seq: 0,
+            robot_stop: None,
+            lost: None,
+            stream_fault: None,
+            last_sample_ns: monotonic_ns(),
+            in_gap: false,
+            samples: 0,
+            states: 0,
+            out_of_order: 0,
+            stale_gaps: 0,
+            longest_gap_ns: 0,
+            handoff: Histogram::new(),
+        };
+        // Hold where the arm is until the controller's first command.
+        self.shared.command(here);
+        self.live = Some(live);
+        Ok(())
+    }
+
+    fn receive(&mut self) -> Result<Option<ArmState>, ArmIoError> {
+        let Some(l) = self.live.as_mut() else {
+            return Err(ArmIoError::Receive);
+        };
+        if l.lost.is_some() {
+            return Ok(None);
+        }
+        let now = monotonic_ns();
+        let gap = now.saturating_sub(l.last_sample_ns);
+        if !l.in_gap && gap > self.stale_gap_ns {
+            l.in_gap = true;
+            l.stale_gaps += 1;
+        }
+        if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
+            l.lost = Some("the DDS thread ended");
+            return Err(ArmIoError::Receive);
+        }
+        while let Some(s) = self.shared.states.pop() {
+            if s.stamp_ns <= l.last_stamp_ns {
+                l.out_of_order += 1;
+                continue;
+            }
+            l.longest_gap_ns = l.longest_gap_ns.max(now.saturating_sub(l.last_sample_ns));
+            l.in_gap = false;
+            l.last_sample_ns = now;
+            l.handoff.record(now.saturating_sub(s.received_ns));
+            l.samples += 1;
+            if let Err(f) = check_joints(&s.q, &s.qd, &self.limits) {
+                l.stream_fault = Some(f);
+                l.lost = Some(f.reason());
+                return Err(ArmIoError::Receive);
+            }
+            l.q = s.q;
+            l.qd = s.qd;
+            l.last_stamp_ns = s.stamp_ns;
+            l.ts = (s.stamp_ns - l.first_stamp_ns) as f64 * 1e-9;
+            if let Some(state) = l.on_sample(&self.cfg, &self.shared, self.period_s, self.cycle_s) {
+                l.states += 1;
+                return Ok(Some(state));
+            }
+        }
+        Ok(None)
+    }
+
+    fn send(&mut self, cmd: &ArmCommand) -> Result<(), ArmIoError> {
+        let Some(l) = self.live.as_mut() else {
+            return Err(ArmIoError::Send);
+        };
+        let ok = l.servo.take_command(
+            cmd,
+            &self.limits,
+            &self.ur.wrist_q,
+            self.ur.reset_speed_rad_s,
+            self.ur.servo_target,
+            UrKinematics::six(&[l.q[0], l.q[1], l.q[2]], &self.ur.wrist_q),
+            l.ts,
+        );
+        if l.robot_stop.is_none() {
+            self.shared
+                .command(l.servo.target(self.ur.servo_target, l.ts));
+        }
+        if ok {
+            Ok(())
+        } else {
+            Err(ArmIoError::Send)
+        }
+    }
+
+    fn lost(&self) -> Option<&'static str> {
+        self.live.as_ref().and_then(|l| l.lost)
+    }
+
+    fn report(&self) -> Option<ArmReport> {
+        Some(ArmReport::Ros2(Ros2Arm::report(self)))
+    }
+}
+
+impl Drop for Ros2Arm {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Relaxed);
+        self.shared.notify();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Live {
+    /// One joint state: the modes, the reset's progress, the target stream of a reset or a
+    /// ramp, and the control-period state if one is due.
+    fn on_sample(
+        &mut self,
+        cfg: &Ros2Config,
+        shared: &Shared,
+        period_s: f64,
+        cycle_s: f64,
+    ) -> Option<ArmState> {
+        let ts = self.ts;
+        if cfg.watch_status && self.robot_stop.is_none() {
+            let rm = shared.robot_mode.load(Ordering::Relaxed);
+            let sm = shared.safety_mode.load(Ordering::Relaxed);
+            let robot_bad = rm != UNKNOWN_MODE && rm != i32::from(RobotMode::RUNNING);
+            let safety_bad = sm != UNKNOWN_MODE
+                && sm != i32::from(SafetyMode::NORMAL)
+                && sm != i32::from(SafetyMode::REDUCED);
+            if robot_bad || safety_bad {
+                self.robot_stop = Some((rm, sm));
+                // The controller hears of it at once, not at the next control period.
+                return Some(self.emit(ArmStatus::READY));
+            }
+        }
+        let mut status = ArmStatus::READY;
+        if self.servo.resetting() {
+            if self.servo.reset_done(&self.q, &self.qd, ts).is_some() {
+                self.next_emit_ts = ts + period_s;
+                shared.command(self.servo.goal);
+                return Some(self.emit(ArmStatus::READY));
+            }
+            status = ArmStatus::RESETTING;
+        }
+        if (self.servo.resetting() || self.servo_target == ServoTarget::Ramp)
+            && self.robot_stop.is_none()
+        {
+            shared.command(self.servo.target(self.servo_target, ts));
+        }
+        if ts >= self.next_emit_ts - 0.49 * cycle_s {
+            self.next_emit_ts += period_s;
+            if self.next_emit_ts <= ts {
+                self.next_emit_ts = ts + period_s;
+            }
+            return Some(self.emit(status));
+        }
+        None
+    }
+
+    fn emit(&mut self, status: ArmStatus) -> ArmState {
+        self.state_seq += 1;
+        let mut s = arm_state(
+            &self.kin,
+            &self.q,
+            &self.qd,
+            self.state_seq,
+            self.servo.last_command_seq,
+            self.servo.episode,
+            status,
+        );
+        if self.robot_stop.is_some() {
+            s.faults.insert(ArmFaults::DRIVER);
+        }
+        s
+    }
+}

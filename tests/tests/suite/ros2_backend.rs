@@ -1,0 +1,357 @@
+//! rt-controller's `ros2` arm against `hil-sim ros2-sim` over DDS on the loopback (docs/design.md
+//! §3.13): episodes in real time with the joints matched by name (ros2-sim publishes them in
+//! the driver's order, not the controller's), a clear error naming the topic when no driver
+//! publishes, a protective stop ending the run (exit 5), a silent stream held and reported,
+//! and the expert's learning over ROS 2 against the same over iceoryx2.
+//!
+//! Each test has a ROS domain of its own (`DOMAIN_*`), so parallel tests never discover each
+//! other. Waits are bounded only to catch a hang; nothing asserts on timing.
+
+use std::time::{Duration, Instant};
+
+use hil_sim::ros2_sim::{self, Ros2SimConfig, Ros2SimHandle};
+use integration_tests::{
+    cleanup_dead_nodes, json_summary, learn_over_ipc, reaching_table, scratch, unique_prefix,
+    write_config, Proc, TestLearner,
+};
+use ur5_shared::config::{SimConfig, TaskConfig};
+
+// One ROS domain per test (ur5_ros2's own tests use 201).
+const DOMAIN_EPISODES: u16 = 120;
+const DOMAIN_NO_DRIVER: u16 = 121;
+const DOMAIN_STOP: u16 = 122;
+const DOMAIN_SILENT: u16 = 123;
+const DOMAIN_LEARN: u16 = 124;
+
+const LONG: Duration = Duration::from_secs(180);
+/// The reaching tables' goal (rad).
+const GOAL: [f64; 3] = [0.3, -1.7, 2.0];
+
+fn ros2_sim(
+    domain_id: u16,
+    compression: f64,
+    task: TaskConfig,
+    faults: Ros2SimConfig,
+) -> Ros2SimHandle {
+    ros2_sim::spawn(
+        &task,
+        &SimConfig::default(),
+        &Ros2SimConfig {
+            domain_id,
+            time_compression: compression,
+            ..faults
+        },
+    )
+    .expect("ros2-sim")
+}
+
+/// `[arm]` of a controller on ROS domain `domain`.
+fn arm_toml(domain: u16) -> String {
+    format!("[arm]\nbackend = \"ros2\"\n[arm.ros2]\ndomain_id = {domain}\n")
+}
+
+/// A controller (`ros2` arm, real time, arm pacing, `compression`) with a learner stand-in
+/// publishing a reaching table; returns (exit code, summary, log, samples (episode, t, q)).
+fn run_controller(
+    tag: &str,
+    domain: u16,
+    compression: f64,
+    horizon: usize,
+    episodes: u64,
+    extra: &str,
+) -> (Option<i32>, serde_json::Value, String, Samples) {
+    let (code, out, log, samples) =
+        run_controller_raw(tag, domain, compression, horizon, episodes, 20.0, extra);
+    (code, json_summary(&out, &log), log, samples)
+}
+
+/// (episode, t, q) of every sample.
+type Samples = Vec<(u64, u32, [f64; 3])>;
+
+/// [`run_controller`] with the setup timeout given and the raw stdout.
+fn run_controller_raw(
+    tag: &str,
+    domain: u16,
+    compression: f64,
+    horizon: usize,
+    episodes: u64,
+    setup_timeout_s: f64,
+    extra: &str,
+) -> (Option<i32>, String, String, Samples) {
+    let dir = scratch(tag);
+    let prefix = unique_prefix(tag);
+    let cfg = write_config(
+        &dir,
+        "ctl.toml",
+        &format!(
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"real_time\"\npacing = \"arm\"\ntime_compression = {compression}\nsetup_timeout_s = {setup_timeout_s}\n{extra}\n[task]\nhorizon = {horizon}\n{}",
+            arm_toml(domain)
+        ),
+    );
+    let mut learner = TestLearner::learner_only(&prefix);
+    learner.publish(&reaching_table(1, horizon, GOAL, 0.01));
+    let episodes = episodes.to_string();
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &[
+            "run",
+            "--config",
+            &cfg,
+            "--prefix",
+            &prefix,
+            "--json",
+            "--episodes",
+            &episodes,
+        ],
+        &dir,
+    );
+    let t0 = Instant::now();
+    while ctl.running() && t0.elapsed() < LONG {
+        learner.poll();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (code, out) = ctl.wait(LONG);
+    learner.poll();
+    let log = ctl.log();
+    let samples = learner
+        .received
+        .iter()
+        .map(|s| (s.episode, s.t, [s.s[0], s.s[1], s.s[2]]))
+        .collect();
+    std::fs::remove_dir_all(&dir).ok();
+    (code, out, log, samples)
+}
+
+#[test]
+fn ros2_controller_runs_episodes_on_ros2_sim_with_joints_matched_by_name() {
+    let sim = ros2_sim(
+        DOMAIN_EPISODES,
+        10.0,
+        TaskConfig {
+            horizon: 20,
+            ..TaskConfig::default()
+        },
+        Ros2SimConfig::default(),
+    );
+    let (code, j, log, samples) = run_controller("ros2-episodes", DOMAIN_EPISODES, 10.0, 20, 3, "");
+    let summary = sim.stop();
+    assert_eq!(code, Some(0), "{log}");
+    assert_eq!(j["episodes_completed"], 3, "{j}");
+    assert_eq!(j["arm"]["backend"], "ros2", "{j}");
+    assert_eq!(j["arm"]["unmatched"], 0, "{j}");
+    assert_eq!(j["arm"]["resets"], 3, "{j}");
+    assert!(
+        summary.commands > 0 && summary.commands_ignored == 0,
+        "{summary:?}"
+    );
+    assert_eq!(samples.len(), 60, "{j}");
+    for (i, (e, t, _)) in samples.iter().enumerate() {
+        assert_eq!((*e, *t as usize), ((i / 20) as u64, i % 20));
+    }
+    // Each episode starts at the start pose and reaches toward the goal (the shoulder pan
+    // joint is the controller's first and the driver's last: a mix-up would not).
+    let start = TaskConfig::default().start_q;
+    for e in 0..3 {
+        let first = samples[e * 20].2;
+        let last = samples[e * 20 + 19].2;
+        let d =
+            |q: [f64; 3], r: [f64; 3]| (0..3).map(|k| (q[k] - r[k]).powi(2)).sum::<f64>().sqrt();
+        assert!(d(first, start) < 0.01, "episode {e} starts at {first:?}");
+        assert!(
+            d(last, GOAL) < 0.5 * d(start, GOAL),
+            "episode {e} ends at {last:?}"
+        );
+    }
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ros2_no_driver_is_an_error_naming_the_topic() {
+    let (code, _, log, _) = run_controller_raw("ros2-none", DOMAIN_NO_DRIVER, 1.0, 10, 1, 2.0, "");
+    assert_ne!(code, Some(0), "{log}");
+    assert!(
+        log.contains("no publisher on /joint_states") && log.contains("ROS domain 121"),
+        "{log}"
+    );
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ros2_a_protective_stop_ends_the_run_with_its_own_exit_code() {
+    // 2 s of arm time after the controller's first command: inside its first episode.
+    let sim = ros2_sim(
+        DOMAIN_STOP,
+        10.0,
+        TaskConfig {
+            horizon: 40,
+            ..TaskConfig::default()
+        },
+        Ros2SimConfig {
+            fault_protective_stop_after: 1000,
+            ..Ros2SimConfig::default()
+        },
+    );
+    let (code, j, log, _) = run_controller("ros2-stop", DOMAIN_STOP, 10.0, 40, 3, "");
+    let summary = sim.stop();
+    assert_eq!(summary.protective_stops, 1, "{summary:?}");
+    assert_eq!(code, Some(5), "{log}");
+    assert_eq!(j["exit_reason"], "arm_stopped", "{j}");
+    assert!(
+        j["arm"]["robot_stop"]
+            .as_str()
+            .unwrap()
+            .contains("PROTECTIVE_STOP"),
+        "{j}"
+    );
+    cleanup_dead_nodes();
+}
+
+#[test]
+fn ros2_a_silent_stream_is_held_and_reported() {
+    // From 2 s of arm time after the controller's first command (inside its first episode),
+    // 1 s without joint states (0.1 s of wall time at x10); the controller's stale timeout is
+    // shorter, so it holds and aborts that episode.
+    let sim = ros2_sim(
+        DOMAIN_SILENT,
+        10.0,
+        TaskConfig {
+            horizon: 40,
+            ..TaskConfig::default()
+        },
+        Ros2SimConfig {
+            fault_silence_after: 1000,
+            fault_silence_cycles: 500,
+            ..Ros2SimConfig::default()
+        },
+    );
+    let (code, j, log, _) = run_controller(
+        "ros2-silent",
+        DOMAIN_SILENT,
+        10.0,
+        40,
+        3,
+        "[safety]\nstale_state_timeout_s = 0.03",
+    );
+    sim.stop();
+    assert_eq!(code, Some(0), "{log}");
+    assert_eq!(j["arm"]["stale_gaps"], 1, "{j}");
+    assert!(j["faults"]["stale_state"].as_u64().unwrap() >= 1, "{j}");
+    assert!(j["arm"]["longest_gap_s"].as_f64().unwrap() >= 0.05, "{j}");
+    // --episodes counts the aborted one.
+    assert_eq!(j["episodes_aborted"], 1, "{j}");
+    assert_eq!(j["episodes_completed"], 2, "{j}");
+    cleanup_dead_nodes();
+}
+
+/// The expert's first three iterations over ROS 2 (ros2-sim at 500 Hz, the `ros2` arm, real
+/// time) against the same over iceoryx2 (`hil-sim serve` in real time): the noise-free costs
+/// of the first two within 5 % (measured ≤ 1.1 %), the third within 15 %. Over ROS 2 a
+/// command takes effect at the next 2 ms cycle after the state it answers, or a later one when
+/// DDS is slower (real time over DDS is not exact), and the reset is a motion where hil-sim
+/// serve places the arm; the learning amplifies those differences: the third cost varied
+/// from run to run over ROS 2 (1.64 and 1.74 at x1, 1.78 and 1.91 at x2, against 1.79 over
+/// iceoryx2, exactly repeatable).
+#[test]
+fn ros2_learning_in_real_time_has_the_outcome_of_the_iceoryx2_run() {
+    // iceoryx2: hil-sim serve publishes one state per control period and applies the command
+    // for the next whole period, so real time is as exact as lockstep at any compression.
+    // ROS 2: x1, the driver's own pace; faster, RustDDS (about 500 samples a second between
+    // two participants here) drops joint states and the run varies by which arrive.
+    const X: f64 = 5.0;
+    const X_ROS2: f64 = 1.0;
+    let dir = scratch("ros2-learn");
+    let learner_cfg = write_config(
+        &dir,
+        "learner.toml",
+        "samples = 5\nseed = 7\niterations = 3\nrandom_episodes = 1\n[task]\nhorizon = 30\n\
+         [serve]\nwait_report_s = 1.0\nidle_sleep_us = 200\n",
+    );
+    let common = |x: f64| {
+        format!(
+            "seed = 7\nnoisy_episodes = 5\neval_episodes = 1\nmode = \"real_time\"\ntime_compression = {x}\n"
+        )
+    };
+    // Over iceoryx2.
+    let prefix = unique_prefix("ros2-learn-i");
+    let sim_cfg = write_config(
+        &dir,
+        "sim.toml",
+        &format!("[task]\nhorizon = 30\n[serve]\nmode = \"real_time\"\ntime_compression = {X}\nstate_period_s = 0.1\n"),
+    );
+    let serve = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &["serve", "--config", &sim_cfg, "--prefix", &prefix],
+        &dir,
+    );
+    let ctl_ice = write_config(
+        &dir,
+        "ctl-ice.toml",
+        &format!("{}pacing = \"arm\"\n[task]\nhorizon = 30\n", common(X)),
+    );
+    let (ice, _) = learn_over_ipc(
+        &dir,
+        &prefix,
+        &learner_cfg,
+        &ctl_ice,
+        "iceoryx2",
+        LONG,
+        |_, _| {},
+    );
+    serve.signal(libc::SIGTERM);
+    // Over ROS 2.
+    let sim = ros2_sim(
+        DOMAIN_LEARN,
+        X_ROS2,
+        TaskConfig {
+            horizon: 30,
+            ..TaskConfig::default()
+        },
+        Ros2SimConfig::default(),
+    );
+    let prefix = unique_prefix("ros2-learn-r");
+    let ctl_ros = write_config(
+        &dir,
+        "ctl-ros2.toml",
+        &format!(
+            "{}pacing = \"arm\"\n[task]\nhorizon = 30\n{}",
+            common(X_ROS2),
+            arm_toml(DOMAIN_LEARN)
+        ),
+    );
+    let (ros, c) = learn_over_ipc(
+        &dir,
+        &prefix,
+        &learner_cfg,
+        &ctl_ros,
+        "ros2",
+        LONG,
+        |_, _| {},
+    );
+    let summary = sim.stop();
+    assert_eq!(summary.protective_stops, 0, "{summary:?}");
+    assert_eq!(c["arm"]["unmatched"], 0, "{c}");
+    for i in 0..3 {
+        let (a, b) = (
+            ice["eval_costs"][i].as_f64().unwrap(),
+            ros["eval_costs"][i].as_f64().unwrap(),
+        );
+        let (da, db) = (
+            ice["log"][i]["final_distance_m"].as_f64().unwrap(),
+            ros["log"][i]["final_distance_m"].as_f64().unwrap(),
+        );
+        eprintln!("iteration {i}: cost {a:.5} (iceoryx2) vs {b:.5} (ros2); final distance {da:.5} vs {db:.5} m");
+        let tolerance = if i < 2 { 0.05 } else { 0.15 };
+        assert!(
+            (a - b).abs() <= tolerance * a,
+            "iteration {i}: cost {a} vs {b}"
+        );
+    }
+    assert!(
+        ros["eval_costs"][2].as_f64().unwrap() < ros["eval_costs"][0].as_f64().unwrap(),
+        "it learned: {ros}"
+    );
+    cleanup_dead_nodes();
+    std::fs::remove_dir_all(&dir).ok();
+}
