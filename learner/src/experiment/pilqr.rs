@@ -121,6 +121,14 @@ impl PilqrExperimentConfig {
     }
 }
 
+/// A goal's name in [`WORKSPACE_GOALS`], else its coordinates as `x/y/z` (m).
+fn goal_name(g: [f64; 3]) -> String {
+    match WORKSPACE_GOALS.iter().find(|(_, p)| *p == g) {
+        Some((n, _)) => n.to_string(),
+        None => format!("{}/{}/{}", g[0], g[1], g[2]),
+    }
+}
+
 fn method_name(m: TrajOptMethod) -> &'static str {
     match m {
         TrajOptMethod::Lqr => "lqr",
@@ -188,8 +196,9 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> Result<Vec<Run>, ExperimentErr
         vec![None; goals.len()]
     };
     let label = |j: &Job| {
+        // No commas: the label is a CSV field.
         let g = if goals.len() > 1 {
-            format!(" goal {:?}", goals[j.goal])
+            format!(" goal {}", goal_name(goals[j.goal]))
         } else {
             String::new()
         };

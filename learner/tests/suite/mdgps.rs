@@ -650,3 +650,36 @@ fn an_mdgps_resume_that_cannot_be_exact_is_refused() {
     let e = refuse(&cfg, &demos, &damaged);
     assert!(e.contains("s_step.rng"), "{e}");
 }
+
+/// `[traj_opt] method = "pilqr"` reaches MDGPS's C-step: a tiny run goes through without an
+/// error or a NaN in its logs, keeps LQR's feedback gains at the first C-step and ends with
+/// other controllers than the LQR run.
+#[test]
+fn a_tiny_mdgps_run_with_pilqr_runs_and_differs_from_lqr() {
+    use gps::traj_opt::pilqr::TrajOptMethod;
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let run = |method, iterations| {
+        let mut cfg = tiny_config();
+        cfg.lqr_gaifo.traj_opt.method = method;
+        let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+        let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+        let mut logs = Vec::new();
+        for _ in 0..iterations {
+            let (samples, evals) = m.execute(&arm).unwrap();
+            logs.push(format!("{:?}", m.learn(&samples, &evals, 0.0).unwrap()));
+        }
+        let ctrl: Vec<_> = (0..m.conditions())
+            .map(|c| m.controller(c).clone())
+            .collect();
+        (ctrl, logs)
+    };
+    let (first_lqr, first_pilqr) = (run(TrajOptMethod::Lqr, 1).0, run(TrajOptMethod::Pilqr, 1).0);
+    for (a, b) in first_lqr.iter().zip(&first_pilqr) {
+        assert_eq!(a.gain, b.gain);
+        assert_ne!(a.k, b.k);
+    }
+    let (lqr, pilqr) = (run(TrajOptMethod::Lqr, 3), run(TrajOptMethod::Pilqr, 3));
+    assert!(pilqr.1.iter().all(|l| !l.contains("NaN")), "{:?}", pilqr.1);
+    assert_ne!(lqr.0, pilqr.0);
+}
