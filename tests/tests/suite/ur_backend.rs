@@ -27,12 +27,18 @@ use ur_protocol::rtde::Protocol;
 
 const TIMEOUT: Duration = Duration::from_secs(20);
 
+/// A lockstep ur-sim on free ports with `cfg`'s other settings.
 fn sim(cfg: UrSimConfig) -> UrSimHandle {
+    sim_clocked(cfg, true)
+}
+
+/// A ur-sim on free ports, in lockstep or in real time, with `cfg`'s other settings.
+fn sim_clocked(cfg: UrSimConfig, lockstep: bool) -> UrSimHandle {
     let cfg = UrSimConfig {
         rtde_port: 0,
         secondary_port: 0,
         dashboard_port: Some(0),
-        lockstep: true,
+        lockstep,
         ..cfg
     };
     ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).expect("ur-sim starts")
@@ -881,11 +887,15 @@ fn ur_a_frozen_controller_is_stopped_by_the_programs_watchdog() {
     // the arm. A CB3 (125 Hz, 16 kB/s of packages): the frozen controller's socket buffers hold
     // seconds of its stream, so ur-sim does not drop it as a client that does not read (at
     // 500 Hz they filled in about a second under load; the robot closing RTDE is then exit 3).
-    let s = sim(UrSimConfig {
-        lockstep: false,
-        series: Series::Cb3,
-        ..UrSimConfig::default()
-    });
+    // In lockstep nothing would advance the arm once the controller stops commanding it, so
+    // the stop and its packages would depend on thread timing: real time.
+    let s = sim_clocked(
+        UrSimConfig {
+            series: Series::Cb3,
+            ..UrSimConfig::default()
+        },
+        false,
+    );
     let dir = scratch("ur-freeze");
     let prefix = unique_prefix("ur-freeze");
     let cfg = write_config(
