@@ -243,22 +243,22 @@ impl Endpoints {
     }
 }
 
-/// The DDS thread: waits (epoll through mio) for any reader or the loop's wake-up, then moves
-/// messages both ways.
+/// The DDS thread: waits (epoll through mio 1) for any reader or the loop's wake-up, then
+/// moves messages both ways; every 20 ms regardless.
 fn dds_thread(mut ep: Endpoints, shared: Arc<Shared>) {
-    use rustdds::mio::unix::EventedFd;
-    use rustdds::mio::{Events, Poll, PollOpt, Ready, Token};
-    let poll = Poll::new().expect("mio poll");
-    let edge = PollOpt::edge();
-    let _ = poll.register(ep.joint_states.evented(), Token(0), Ready::readable(), edge);
-    if let Some(r) = &ep.robot_mode {
-        let _ = poll.register(r.evented(), Token(1), Ready::readable(), edge);
+    use rustdds::mio1::unix::SourceFd;
+    use rustdds::mio1::{Events, Interest, Poll, Token};
+    let mut poll = Poll::new().expect("mio poll");
+    let r = poll.registry();
+    let _ = r.register(ep.joint_states.source(), Token(0), Interest::READABLE);
+    if let Some(rd) = ep.robot_mode.as_mut() {
+        let _ = r.register(rd.source(), Token(1), Interest::READABLE);
     }
-    if let Some(r) = &ep.safety_mode {
-        let _ = poll.register(r.evented(), Token(2), Ready::readable(), edge);
+    if let Some(rd) = ep.safety_mode.as_mut() {
+        let _ = r.register(rd.source(), Token(2), Interest::READABLE);
     }
     let fd = shared.wake.as_raw_fd();
-    let _ = poll.register(&EventedFd(&fd), Token(3), Ready::readable(), edge);
+    let _ = r.register(&mut SourceFd(&fd), Token(3), Interest::READABLE);
     let mut events = Events::with_capacity(16);
     let mut msg = Float64MultiArray {
         layout: MultiArrayLayout::default(),

@@ -241,8 +241,10 @@ impl<M: Message> Writer<M> {
 #[error("DDS write failed")]
 pub struct WriteError;
 
-/// A typed DDS reader; registers with a `rustdds::mio::Poll` (mio 0.6, edge-triggered: drain
-/// with [`Reader::take`] after each readiness event).
+/// A typed DDS reader; registers with a `rustdds::mio1::Poll` (mio 1, edge-triggered: drain
+/// with [`Reader::take`] after each readiness event). Not with mio 0.6: RustDDS 0.15's mio 0.6
+/// notification channel is never drained, so after its capacity it stops signalling (the
+/// readers then looked rate-limited to their history depth per poll timeout).
 pub struct Reader<M: Message + 'static> {
     inner: DataReader<M, CdrAdapter<M>>,
 }
@@ -260,9 +262,9 @@ impl<M: Message + 'static> Reader<M> {
         }
     }
 
-    /// For `Poll::register`.
-    pub fn evented(&self) -> &impl rustdds::mio::Evented {
-        &self.inner
+    /// For `Registry::register`.
+    pub fn source(&mut self) -> &mut impl rustdds::mio1::event::Source {
+        &mut self.inner
     }
 }
 

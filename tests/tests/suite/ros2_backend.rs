@@ -210,8 +210,9 @@ fn ros2_a_protective_stop_ends_the_run_with_its_own_exit_code() {
 #[test]
 fn ros2_a_silent_stream_is_held_and_reported() {
     // From 2 s of arm time after the controller's first command (inside its first episode),
-    // 1 s without joint states (0.1 s of wall time at x10); the controller's stale timeout is
-    // shorter, so it holds and aborts that episode.
+    // 2 s without joint states (at least 0.2 s of wall time at x10); the controller's stale
+    // timeout is shorter, so it holds and aborts that episode. A stall of the loaded test
+    // machine may add a gap of its own: counts are bounded from below.
     let sim = ros2_sim(
         DOMAIN_SILENT,
         10.0,
@@ -221,7 +222,7 @@ fn ros2_a_silent_stream_is_held_and_reported() {
         },
         Ros2SimConfig {
             fault_silence_after: 1000,
-            fault_silence_cycles: 500,
+            fault_silence_cycles: 1000,
             ..Ros2SimConfig::default()
         },
     );
@@ -231,16 +232,21 @@ fn ros2_a_silent_stream_is_held_and_reported() {
         10.0,
         40,
         3,
-        "[safety]\nstale_state_timeout_s = 0.03",
+        "[safety]\nstale_state_timeout_s = 0.05",
     );
     sim.stop();
     assert_eq!(code, Some(0), "{log}");
-    assert_eq!(j["arm"]["stale_gaps"], 1, "{j}");
+    assert!(j["arm"]["stale_gaps"].as_u64().unwrap() >= 1, "{j}");
     assert!(j["faults"]["stale_state"].as_u64().unwrap() >= 1, "{j}");
-    assert!(j["arm"]["longest_gap_s"].as_f64().unwrap() >= 0.05, "{j}");
-    // --episodes counts the aborted one.
-    assert_eq!(j["episodes_aborted"], 1, "{j}");
-    assert_eq!(j["episodes_completed"], 2, "{j}");
+    assert!(j["arm"]["longest_gap_s"].as_f64().unwrap() >= 0.15, "{j}");
+    // --episodes counts the aborted ones.
+    let aborted = j["episodes_aborted"].as_u64().unwrap();
+    assert!(aborted >= 1, "{j}");
+    assert_eq!(
+        j["episodes_completed"].as_u64().unwrap() + aborted,
+        3,
+        "{j}"
+    );
     cleanup_dead_nodes();
 }
 

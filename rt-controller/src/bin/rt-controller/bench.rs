@@ -225,3 +225,130 @@ fn policy_stand_in(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// The `ros2` arm's round trip (docs/design.md §3.13): a driver stand-in publishes a joint state
+/// (stamps one control period apart, so that each is a control-period state) over DDS on the
+/// loopback, the real loop ([`Controller::run`], real time, arm pacing) answers through the
+/// arm's DDS thread, and the stand-in times joint state published → command received, then
+/// publishes the next one. Domain `domain` (ROS_DOMAIN_ID) and a fresh iceoryx2 prefix.
+pub fn run_ros2(
+    episodes: u64,
+    horizon: usize,
+    spin_ns: u64,
+    domain: u16,
+) -> anyhow::Result<Percentiles> {
+    use rt_controller::config::{ArmConfig, ArmKind, Pacing, Ros2Config};
+    let prefix = unique_prefix("rt-bench-ros2");
+    let stop = Arc::new(AtomicBool::new(false));
+    let dt = 0.01;
+    let driver = {
+        let stop = stop.clone();
+        std::thread::spawn(move || driver_stand_in(domain, dt, &stop))
+    };
+    let learner = {
+        let (prefix, stop) = (prefix.clone(), stop.clone());
+        std::thread::spawn(move || learner_stand_in(&prefix, horizon, Kind::Gains, &stop))
+    };
+    let cfg = ControllerConfig {
+        prefix,
+        mode: Mode::RealTime,
+        pacing: Pacing::Arm,
+        episodes,
+        episode_report: false,
+        wait_for_learner: true,
+        task: ur5_shared::config::TaskConfig {
+            dt,
+            horizon,
+            ..Default::default()
+        },
+        polling: Polling {
+            spin_ns,
+            sleep_ns: 20_000,
+        },
+        arm: ArmConfig {
+            backend: ArmKind::Ros2,
+            ros2: Ros2Config {
+                domain_id: domain,
+                joint_state_rate_hz: 1.0 / dt,
+                watch_status: false,
+                ..Ros2Config::default()
+            },
+            ..ArmConfig::default()
+        },
+        ..ControllerConfig::default()
+    };
+    let mut controller = rt_controller::Controller::setup_ros2(cfg)?;
+    let never = AtomicBool::new(false);
+    controller.run(&never);
+    stop.store(true, Ordering::Relaxed);
+    let round_trip = driver
+        .join()
+        .map_err(|_| anyhow::anyhow!("driver thread panicked"))??;
+    learner
+        .join()
+        .map_err(|_| anyhow::anyhow!("learner thread panicked"))??;
+    Ok(round_trip)
+}
+
+/// A kinematic UR arm behind the driver's topics: publishes a joint state, waits (epoll) for a
+/// command, moves there, publishes the next; times each round trip (ns).
+fn driver_stand_in(domain: u16, dt: f64, stop: &AtomicBool) -> anyhow::Result<Percentiles> {
+    use rt_controller::stats::Histogram;
+    use rustdds::mio1::{Events, Interest, Poll, Token};
+    use ur5_ros2::{Float64MultiArray, Header, JointState, Network, Node, Time, TopicQos};
+    use ur5_shared::clock::monotonic_ns;
+    let cfg = rt_controller::config::Ros2Config::default();
+    let node = Node::new(domain, Network::Loopback)?;
+    let writer = node.writer::<JointState>(&cfg.joint_states_topic, cfg.joint_states_qos)?;
+    let mut reader =
+        node.reader::<Float64MultiArray>(&cfg.command_topic, TopicQos::reliable(10))?;
+    let mut poll = Poll::new()?;
+    poll.registry()
+        .register(reader.source(), Token(0), Interest::READABLE)?;
+    let mut events = Events::with_capacity(4);
+    let start = ur5_shared::config::TaskConfig::default().start_q;
+    let mut q = [
+        start[0],
+        start[1],
+        start[2],
+        -core::f64::consts::FRAC_PI_2,
+        core::f64::consts::FRAC_PI_2,
+        0.0,
+    ];
+    let mut msg = JointState {
+        header: Header::default(),
+        name: cfg.joints.to_vec(),
+        position: q.to_vec(),
+        velocity: vec![0.0; 6],
+        effort: vec![],
+    };
+    let mut hist = Histogram::new();
+    let mut stamp_ns = 1_000_000_000u64;
+    while !stop.load(Ordering::Relaxed) {
+        stamp_ns += (dt * 1e9) as u64;
+        msg.header.stamp = Time::from_ns(stamp_ns);
+        msg.position.copy_from_slice(&q);
+        let sent = monotonic_ns();
+        writer
+            .write(msg.clone())
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        // The answer, or after 50 ms the next state (the controller may be waiting for a table).
+        let deadline = sent + 50_000_000;
+        let mut answered = false;
+        while !answered && monotonic_ns() < deadline && !stop.load(Ordering::Relaxed) {
+            while let Some(c) = reader.take() {
+                if !answered {
+                    hist.record(monotonic_ns() - sent);
+                    answered = true;
+                }
+                if c.data.len() == 6 {
+                    q.copy_from_slice(&c.data);
+                }
+            }
+            if !answered {
+                let _ = poll.poll(&mut events, Some(core::time::Duration::from_millis(5)));
+            }
+        }
+    }
+    Ok(hist.summary())
+}

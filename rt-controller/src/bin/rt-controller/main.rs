@@ -127,6 +127,10 @@ enum Cmd {
         /// Controller busy-poll budget per wait (ns) before it sleeps between polls.
         #[arg(long, default_value_t = 1_000_000)]
         spin_ns: u64,
+        /// Also the `ros2` arm's round trip over DDS on the loopback (joint state → command),
+        /// against a driver stand-in on this ROS domain.
+        #[arg(long)]
+        ros2_domain: Option<u16>,
         /// Print a one-line JSON summary on stdout at the end.
         #[arg(long)]
         json: bool,
@@ -352,10 +356,14 @@ fn real_main() -> Result<i32> {
             episodes,
             horizon,
             spin_ns,
+            ros2_domain,
             json,
             ..
         } => {
             let r = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains)?;
+            let ros2 = ros2_domain
+                .map(|d| bench::run_ros2(episodes, horizon, spin_ns, d))
+                .transpose()?;
             let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy)?;
             let alone = bench::policy_action_alone(20_000);
             println!("rt-controller bench: {} + {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc; gain tables, then policy tables (heads 12-{}-1, {} parameters)", r.episodes, p.episodes, horizon,
@@ -373,8 +381,12 @@ fn real_main() -> Result<i32> {
                 ("policy: intake (receive + copy + validate + flip)", p.intake),
                 ("policy: IPC round trip state → command", p.round_trip),
             ]);
+            if let Some(d) = ros2 {
+                println!("ros2 arm: real time, arm pacing, a driver stand-in over DDS (RustDDS) on the loopback");
+                print_table(&[("gain table: DDS round trip joint state → command", d)]);
+            }
             if json {
-                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone}));
+                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone, "ros2_round_trip": ros2}));
             }
             Ok(0)
         }
