@@ -60,7 +60,7 @@ pub struct TrainArgs {
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
     /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
-    /// --algo gaifo-ppo (not mdgps).
+    /// --algo gaifo-ppo and mdgps.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
@@ -166,6 +166,20 @@ fn demos_file(
     Ok((s.demos, true))
 }
 
+/// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
+/// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
+/// records into because it is there.
+fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
+    manifest::claim(out, m, claim)?;
+    if claim == Claim::Resume {
+        crate::io::files::adopt(out)?;
+    }
+    if record {
+        crate::io::create_dir(out.join("episodes"))?;
+    }
+    Ok(())
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.algo == Algo::Mdgps {
@@ -230,14 +244,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             force: args.force || claimed,
         },
     };
-    manifest::claim(&out, &m, claim)?;
-    if claim == Claim::Resume {
-        crate::io::files::adopt(&out)?;
-    }
-    if args.record_episodes {
-        // `run::train` records into it because it is there.
-        crate::io::create_dir(out.join("episodes"))?;
-    }
+    take_folder(args.record_episodes, &out, &m, claim)?;
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,
@@ -343,10 +350,6 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
 /// ([`crate::run::train_mdgps`], [`crate::run::train_mdgps_resumed`]).
 fn run_mdgps(args: &TrainArgs) -> anyhow::Result<()> {
     use imitation::mdgps::{MdgpsConfig, MdgpsLog};
-    anyhow::ensure!(
-        !args.record_episodes,
-        "--record-episodes records LQR+GAIfO and GAIfO (PPO) runs (not --algo mdgps)"
-    );
     let mut cfg: MdgpsConfig = args.common.settings()?;
     if let Some(i) = args.iterations {
         cfg.lqr_gaifo.iterations = i;
@@ -367,17 +370,14 @@ fn run_mdgps(args: &TrainArgs) -> anyhow::Result<()> {
     let folder = args.demos.as_deref().context(
         "--algo mdgps needs --demos DIR, a folder of .npz demonstrations, one file per goal",
     )?;
-    let demos = goal_demos(folder, &cfg.lqr_gaifo.sim)?;
+    let demos = crate::io::demos::load_goals(folder, &cfg.lqr_gaifo.sim)?;
     let seed = cfg.lqr_gaifo.seed;
     let m = Manifest::new("train", "mdgps", seed, Some(folder), &cfg)?;
     let claim = match args.resume {
         Some(_) => Claim::Resume,
         None => Claim::New { force: args.force },
     };
-    manifest::claim(&out, &m, claim)?;
-    if claim == Claim::Resume {
-        crate::io::files::adopt(&out)?;
-    }
+    take_folder(args.record_episodes, &out, &m, claim)?;
     eprintln!(
         "MDGPS on {} goals ({} demonstrations each, T = {}), seed {seed}, -> {}{}",
         demos.len(),
@@ -421,24 +421,4 @@ fn run_mdgps(args: &TrainArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-/// The demonstrations of every goal: the `.npz` files of `folder` in name order, each checked
-/// against the arm of `sim`.
-fn goal_demos(folder: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<Vec<Demos>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(folder)
-        .with_context(|| format!("reading {}", folder.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "npz"))
-        .collect();
-    files.sort();
-    anyhow::ensure!(
-        !files.is_empty(),
-        "{}: no .npz demonstrations (one file per goal)",
-        folder.display()
-    );
-    Ok(files
-        .iter()
-        .map(|f| crate::io::demos::load_checked(f, sim))
-        .collect::<Result<_, _>>()?)
 }

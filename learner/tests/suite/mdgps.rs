@@ -651,14 +651,9 @@ fn an_mdgps_resume_that_cannot_be_exact_is_refused() {
     assert!(e.contains("s_step.rng"), "{e}");
 }
 
-/// `learner train --algo mdgps` on a folder of two goals' demonstrations, its folder then put
-/// in the state a kill during the third iteration leaves (checkpoints 0 to 2, the next
-/// checkpoint's critic file cut short, a row cut short) and resumed with `--resume`, ends with
-/// the checkpoint files and `mdgps_log.csv` rows (timing columns aside) of the uninterrupted
-/// command, bit for bit.
-#[test]
-fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run() {
-    let root = tmp("train-cmd");
+/// The inputs of a tiny `learner train --algo mdgps` in `root`: a folder of two goals'
+/// demonstrations (`tiny_demos`) and the config file of `tiny_config`.
+fn command_inputs(root: &Path) -> (PathBuf, PathBuf) {
     let goals = square_goals(TaskConfig::default().goal, 0.1);
     let demos = root.join("demos");
     std::fs::create_dir_all(&demos).unwrap();
@@ -667,6 +662,18 @@ fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run()
     }
     let config = root.join("mdgps.toml");
     std::fs::write(&config, toml::to_string(&tiny_config()).unwrap()).unwrap();
+    (demos, config)
+}
+
+/// `learner train --algo mdgps` on a folder of two goals' demonstrations, its folder then put
+/// in the state a kill during the third iteration leaves (checkpoints 0 to 2, the next
+/// checkpoint's critic file cut short, a row cut short) and resumed with `--resume`, ends with
+/// the checkpoint files and `mdgps_log.csv` rows (timing columns aside) of the uninterrupted
+/// command, bit for bit.
+#[test]
+fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run() {
+    let root = tmp("train-cmd");
+    let (demos, config) = command_inputs(&root);
     let args = |out: &Path| {
         vec![
             "train".to_string(),
@@ -732,5 +739,47 @@ fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run()
     other.extend(["--seed".to_string(), "10".into()]);
     let (ok, err) = learner(&other.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(!ok && err.contains("another run"), "{err}");
+    std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// `learner train --algo mdgps --record-episodes` records every goal's episodes, and `learner
+/// replay` redoes the run's learning from them: every recorded critic and learner state
+/// (policy, S-step and each goal's LQR state) equal to the replay's, bit for bit.
+#[test]
+fn a_recorded_mdgps_run_replays_bit_for_bit() {
+    let root = tmp("replay-cmd");
+    let (demos, config) = command_inputs(&root);
+    let out = root.join("run");
+    let (d, c, o) = (
+        demos.display().to_string(),
+        config.display().to_string(),
+        out.display().to_string(),
+    );
+    let (ok, err) = learner(&[
+        "train",
+        "--algo",
+        "mdgps",
+        "--demos",
+        &d,
+        "--config",
+        &c,
+        "--iterations",
+        "3",
+        "--record-episodes",
+        "--out",
+        &o,
+    ]);
+    assert!(ok, "{err}");
+    // 2 goals × (3 noisy + 1 evaluation) per iteration.
+    let episodes = std::fs::read_dir(out.join("episodes")).unwrap().count();
+    assert_eq!(episodes, 3 * 2 * 4);
+    let (ok, json, err) = common::learner_output(&["replay", &o, "--json"]);
+    assert!(ok, "{err}");
+    let r: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    assert!(r["difference"].is_null(), "{r}");
+    assert_eq!(r["iterations"], 3, "{r}");
+    assert_eq!(r["critics_checked"], 4, "{r}");
+    assert_eq!(r["policies_checked"], 4, "{r}");
+    assert_eq!(r["episodes_used"], 3 * 2 * 4, "{r}");
     std::fs::remove_dir_all(&root).unwrap();
 }
