@@ -159,7 +159,7 @@ fn checkpoint_file(dir: &Path, i: usize, kind: &str) -> PathBuf {
 
 /// The entry of [`LqrGaifo::snapshot`] holding the in-process arm's noise position
 /// ([`hil_sim::Ur5Sim::noise_position`], low and high word).
-const ARM_NOISE: &str = "arm.noise_position";
+pub(crate) const ARM_NOISE: &str = "arm.noise_position";
 
 impl Checkpoint for LqrGaifo {
     /// `iter_NNN_table.npz` (the controller as gain table version NNN + 1),
@@ -399,23 +399,27 @@ fn drive<R: Learn<Log: LogRow> + Checkpoint>(
         _ => None,
     };
     for _ in 0..iterations {
-        let (version, n) = (run.version(), run.samples() as u64);
-        let (seed, task) = (run.seed(), run.task().clone());
+        let (version, n) = (run.version(), run.samples());
+        let seed = run.seed();
+        // Each episode's goal: noisy ones goal-major (N each), then one evaluation per goal.
+        let tasks: Vec<_> = run.goal_tasks().into_iter().cloned().collect();
+        let per_version = (tasks.len() * (n + 1)) as u64;
         let mut recorded: Result<(), IoError> = Ok(());
         let run_dir = csv.as_ref().map(|(_, d)| d.to_path_buf());
         let (log, _) = iterate_observed(run, arm, &mut |noisy, evals| {
             let Some(rec) = recorder.as_mut() else { return };
             // Numbered as a controller started with version 1 numbers its episodes.
-            for (k, ep) in noisy.iter().chain(evals).enumerate() {
+            let goals = (0..noisy.len()).map(|k| k / n.max(1)).chain(0..evals.len());
+            for (k, (ep, goal)) in noisy.iter().chain(evals).zip(goals).enumerate() {
                 let origin = EpisodeOrigin {
                     table_version: version,
                     table_epoch: 0,
-                    episode: (version - 1) * (n + 1) + k as u64,
+                    episode: (version - 1) * per_version + k as u64,
                     seed,
                 };
                 if recorded.is_ok() {
                     recorded = rec
-                        .record(ep, &origin, &task)
+                        .record(ep, &origin, &tasks[goal])
                         .map_err(IoError::from)
                         .and_then(|p| match &run_dir {
                             Some(d) => crate::io::files::note(d, &[&p]),

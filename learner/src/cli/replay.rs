@@ -9,7 +9,7 @@ use clap::Args;
 #[derive(Args, Debug)]
 pub struct ReplayArgs {
     /// The `--out` folder of a `learner serve` run (resumed ones included), or of a
-    /// `learner train --record-episodes` run (LQR+GAIfO or `--algo gaifo-ppo`).
+    /// `learner train --record-episodes` run (LQR+GAIfO, `--algo gaifo-ppo` or `--algo mdgps`).
     pub run_dir: PathBuf,
     /// The run's demonstrations, when they are no longer where `run.json` says (their hash
     /// must be the run's).
@@ -57,12 +57,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             );
             match r.files_verified {
                 Some(n) => eprintln!(
-                    "equal: every recorded table is the replay's, bit for bit; all {n} files \
-                     of the run's record present and unaltered"
+                    "equal: every recorded checkpoint is the replay's, bit for bit; all {n} \
+                     files of the run's record present and unaltered"
                 ),
                 None => eprintln!(
-                    "equal as far as found: every table found is the replay's, bit for bit \
-                     (no record of the run's files: a missing one cannot be told)"
+                    "equal as far as found: every checkpoint found is the replay's, bit for \
+                     bit (no record of the run's files: a missing one cannot be told)"
                 ),
             }
             Ok(())

@@ -21,6 +21,9 @@ pub enum Algo {
     LqrGaifo,
     /// GAIfO with a PPO policy (the baseline).
     GaifoPpo,
+    /// MDGPS: one neural-network policy for several goals (docs/design.md §6); --demos is a
+    /// folder of `.npz` demonstrations, one file per goal.
+    Mdgps,
 }
 
 /// Arguments of `learner train`.
@@ -30,7 +33,8 @@ pub struct TrainArgs {
     /// file (docs/design.md §4.2); state trajectories only are used. Without it the default
     /// expert (`learner expert`'s settings on this run's arm and seed) is trained first and its
     /// demonstrations are recorded into OUT/expert/ (about 15 s); with --resume DIR, DIR's own
-    /// DIR/expert/demos.npz.
+    /// DIR/expert/demos.npz. For --algo mdgps, a folder of `.npz` demonstrations (one file per
+    /// goal, in name order); required.
     #[arg(long)]
     pub demos: Option<PathBuf>,
     /// Algorithm.
@@ -39,13 +43,14 @@ pub struct TrainArgs {
     /// Iterations; overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
-    /// Continue the LQR+GAIfO run in DIR (its --out) from its latest complete checkpoint
-    /// (iter_NNN_critic.json + iter_NNN_state.npz) up to --iterations in all, with the run's
-    /// own demonstrations, config and seed: iterations are numbered on from NNN and rows are
-    /// appended to DIR/gaifo_log.csv. The resume is exact: the whole learner state (critic with
-    /// Adam moments, GMM dynamics prior and its data, previous controller, step size, η, every
-    /// RNG position) was checkpointed, so tables and CSV rows (timing columns aside) are those
-    /// of an uninterrupted run, bit for bit, wherever the run was stopped or killed.
+    /// Continue the LQR+GAIfO or MDGPS run in DIR (its --out) from its latest complete
+    /// checkpoint (iter_NNN_critic.json + iter_NNN_state.npz) up to --iterations in all, with
+    /// the run's own demonstrations, config and seed: iterations are numbered on from NNN and
+    /// rows are appended to DIR/gaifo_log.csv (DIR/mdgps_log.csv for MDGPS). The resume is
+    /// exact: the whole learner state (critic with Adam moments, GMM dynamics prior and its data,
+    /// previous controllers, step size, η, MDGPS's policy and its optimiser, every RNG position)
+    /// was checkpointed, so tables and CSV rows (timing columns aside) are those of an
+    /// uninterrupted run, bit for bit, wherever the run was stopped or killed.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
     /// Start a new run in --out even though another run's files are there: they are deleted
@@ -55,7 +60,7 @@ pub struct TrainArgs {
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
     /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
-    /// --algo gaifo-ppo.
+    /// --algo gaifo-ppo and mdgps.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
@@ -65,7 +70,8 @@ pub struct TrainArgs {
     /// --config: for lqr-gaifo a `GaifoConfig` (keys `samples`, `iterations`, `init_var`,
     /// `critic_updates`, `adapt_step`, `psd_hessian`, `seed`; tables `sim`, `discriminator`,
     /// `algorithm`, `prior`, `fit`, `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys
-    /// `samples`, `iterations`, `critic_updates`, `seed`; tables `sim`, `discriminator`, `ppo`).
+    /// `samples`, `iterations`, `critic_updates`, `seed`; tables `sim`, `discriminator`, `ppo`),
+    /// for mdgps an `MdgpsConfig` (key `kl_step`; tables `lqr_gaifo`, `policy`).
     /// --out: per-iteration CSV, gain tables and critic checkpoints [default: runs/train; with
     /// --resume, DIR].
     #[command(flatten)]
@@ -160,8 +166,25 @@ fn demos_file(
     Ok((s.demos, true))
 }
 
+/// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
+/// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
+/// records into because it is there.
+fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
+    manifest::claim(out, m, claim)?;
+    if claim == Claim::Resume {
+        crate::io::files::adopt(out)?;
+    }
+    if record {
+        crate::io::create_dir(out.join("episodes"))?;
+    }
+    Ok(())
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    if args.algo == Algo::Mdgps {
+        return run_mdgps(&args);
+    }
     if args.algo == Algo::GaifoPpo {
         anyhow::ensure!(
             args.resume.is_none(),
@@ -221,14 +244,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             force: args.force || claimed,
         },
     };
-    manifest::claim(&out, &m, claim)?;
-    if claim == Claim::Resume {
-        crate::io::files::adopt(&out)?;
-    }
-    if args.record_episodes {
-        // `run::train` records into it because it is there.
-        crate::io::create_dir(out.join("episodes"))?;
-    }
+    take_folder(args.record_episodes, &out, &m, claim)?;
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,
@@ -326,5 +342,83 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
     })?;
     drop(bar);
     report(&logs, "gaifo-ppo", pcfg.seed, &out, args.common.json);
+    Ok(())
+}
+
+/// `learner train --algo mdgps`: MDGPS in process on the demonstrations of the `--demos` folder
+/// (one `.npz` per goal), with checkpoints before every iteration and `--resume`
+/// ([`crate::run::train_mdgps`], [`crate::run::train_mdgps_resumed`]).
+fn run_mdgps(args: &TrainArgs) -> anyhow::Result<()> {
+    use imitation::mdgps::{MdgpsConfig, MdgpsLog};
+    let mut cfg: MdgpsConfig = args.common.settings()?;
+    if let Some(i) = args.iterations {
+        cfg.lqr_gaifo.iterations = i;
+    }
+    if let Some(s) = args.common.seed {
+        cfg.lqr_gaifo.seed = s;
+    }
+    cfg.validate()?;
+    let out = args.out_dir();
+    if let Some(dir) = &args.resume {
+        anyhow::ensure!(
+            out == *dir,
+            "--out {} and --resume {} differ: a resumed run continues in its own folder",
+            out.display(),
+            dir.display()
+        );
+    }
+    let folder = args.demos.as_deref().context(
+        "--algo mdgps needs --demos DIR, a folder of .npz demonstrations, one file per goal",
+    )?;
+    let demos = crate::io::demos::load_goals(folder, &cfg.lqr_gaifo.sim)?;
+    let seed = cfg.lqr_gaifo.seed;
+    let m = Manifest::new("train", "mdgps", seed, Some(folder), &cfg)?;
+    let claim = match args.resume {
+        Some(_) => Claim::Resume,
+        None => Claim::New { force: args.force },
+    };
+    take_folder(args.record_episodes, &out, &m, claim)?;
+    eprintln!(
+        "MDGPS on {} goals ({} demonstrations each, T = {}), seed {seed}, -> {}{}",
+        demos.len(),
+        demos[0].count,
+        demos[0].horizon,
+        out.display(),
+        if args.resume.is_some() {
+            " (resumed)"
+        } else {
+            ""
+        }
+    );
+    let iterations = cfg.lqr_gaifo.iterations;
+    let start = match &args.resume {
+        Some(dir) => crate::run::latest_checkpoint(dir).map_or(0, |(n, _, _)| n),
+        None => 0,
+    };
+    let bar = crate::progress::Progress::new(iterations.saturating_sub(start) as u64, "iterations");
+    let print = |l: &MdgpsLog| bar.done_one(&l.progress_line());
+    let logs = match &args.resume {
+        Some(dir) => crate::run::train_mdgps_resumed(&cfg, demos, dir, print)?,
+        None => crate::run::train_mdgps(&cfg, demos, &out, print)?,
+    };
+    drop(bar);
+    let last = logs.last();
+    eprintln!(
+        "done: {} iterations run{}; log and checkpoints in {}",
+        logs.len(),
+        last.map_or(String::new(), |l| format!(
+            ", mean normalised performance at the goals {:.3}",
+            l.mean_performance()
+        )),
+        out.display()
+    );
+    if args.common.json {
+        println!(
+            "{}",
+            serde_json::json!({"command": "train", "algo": "mdgps", "iterations": logs.len(),
+                "seed": seed, "final_mean_performance": last.map(|l| l.mean_performance()),
+                "out": out})
+        );
+    }
     Ok(())
 }

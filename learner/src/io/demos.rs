@@ -312,6 +312,25 @@ pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> Result<
     Ok(demos)
 }
 
+/// The demonstrations of every goal of a multi-goal learner (MDGPS): the `.npz` files of the
+/// folder `folder` in name order, each loaded and checked as [`load_checked`] does.
+pub fn load_goals(
+    folder: &Path,
+    sim: &ur5_shared::config::SimConfig,
+) -> Result<Vec<Demos>, IoError> {
+    let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(folder)
+        .map_err(IoError::file("reading", folder))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "npz"))
+        .collect();
+    files.sort();
+    ensure!(
+        !files.is_empty(),
+        IoError::content(folder, "no .npz demonstrations (one file per goal)")
+    );
+    files.iter().map(|f| load_checked(f, sim)).collect()
+}
+
 /// Largest difference (rad) between a demonstration's first joint angles and `start_q`, and
 /// (m) between a demonstrated end-effector point and the arm's forward kinematics at the
 /// demonstrated joint angles. Ours: 0.01, ten times the perturbed arm's sensor noise (1e-3).

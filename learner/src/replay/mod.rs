@@ -38,7 +38,8 @@ use std::path::{Path, PathBuf};
 
 use imitation::expert::{ExpertConfig, ExpertLearner};
 use imitation::gaifo::{GaifoConfig, LqrGaifo};
-use imitation::learn::{Learn, LinGaussLearn};
+use imitation::learn::Learn;
+use imitation::mdgps::{Mdgps, MdgpsConfig};
 use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 use imitation::rollout::Episode;
 use serde::Serialize;
@@ -47,17 +48,19 @@ mod error;
 
 pub use error::ReplayError;
 
+mod check;
+
+use check::{checkpoint_files, state_file, tables};
+
 use crate::error::ensure;
 use crate::io::episode::{recorded_episodes, EpisodeOrigin};
 use crate::io::learned::{read_events, LearnedEvent};
 use crate::io::manifest::{self, Manifest};
-use crate::io::table::{load_stored, table_arrays};
-use crate::io::IoError;
 use crate::run::Checkpoint;
 use crate::serve::Batch;
 
 /// The learners whose runs a replay redoes.
-pub(crate) const REPLAYED: [&str; 3] = ["lqr-gaifo", "expert", "gaifo-ppo"];
+pub(crate) const REPLAYED: [&str; 4] = ["lqr-gaifo", "expert", "gaifo-ppo", "mdgps"];
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -102,7 +105,8 @@ pub struct ReplayReport {
     pub tables_checked: usize,
     /// Recorded critic checkpoints compared.
     pub critics_checked: usize,
-    /// Recorded policy checkpoints (GAIfO (PPO)) compared.
+    /// Recorded policy checkpoints compared: GAIfO (PPO)'s policy files, MDGPS's learner states
+    /// (its policy, S-step and every goal's LQR state, entry by entry).
     pub policies_checked: usize,
     /// Recorded episodes found.
     pub episodes: usize,
@@ -307,6 +311,23 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayEr
                 |l, dir, i, r| checkpoint_files(l, dir, i, &["policy.json", "critic.json"], r),
             )?;
         }
+        "mdgps" => {
+            let cfg: MdgpsConfig = m.settings_as()?;
+            let path = demos_path(&m, demos)?;
+            let d = crate::io::demos::load_goals(&path, &cfg.lqr_gaifo.sim)?;
+            // Only in process (`learner train`): no resume to redo (exact resume changes no bit).
+            drive(
+                Mdgps::new(cfg, d)?,
+                dir,
+                &picks,
+                &mut report,
+                None,
+                |l, dir, i, r| match checkpoint_files(l, dir, i, &["critic.json"], r)? {
+                    Checked::Equal => state_file(&l.snapshot(), dir, i, r),
+                    other => Ok(other),
+                },
+            )?;
+        }
         other => {
             return Err(ReplayError::Algorithm {
                 dir: dir.to_owned(),
@@ -396,7 +417,7 @@ struct Picks<'a> {
 }
 
 /// The episodes of one update: noisy, noise-free, their files in that order.
-type Picked = (Vec<Episode>, Episode, Vec<PathBuf>);
+type Picked = (Vec<Episode>, Vec<Episode>, Vec<PathBuf>);
 
 impl<'a> Picks<'a> {
     fn new(
@@ -431,7 +452,10 @@ impl<'a> Picks<'a> {
 
     /// The `n` noisy and the noise-free episode the update of table version `v` learns from;
     /// `None` when the run has none (it ended before that update).
-    fn pick(&self, v: u64, n: usize) -> Result<Option<Picked>, ReplayError> {
+    fn pick(&self, v: u64, n: usize, goals: usize) -> Result<Option<Picked>, ReplayError> {
+        if goals > 1 {
+            return Ok(self.pick_goals(v, n, goals));
+        }
         let Some(events) = self.events else {
             let mut batch = Batch::default();
             let mut used = Vec::new();
@@ -444,7 +468,7 @@ impl<'a> Picks<'a> {
                 .eval
                 .take()
                 .filter(|_| batch.noisy.len() == n)
-                .map(|eval| (batch.noisy, eval, used)));
+                .map(|eval| (batch.noisy, vec![eval], used)));
         };
         let Some((noisy, eval)) = events.iter().rev().find_map(|e| match e {
             LearnedEvent::Learned {
@@ -499,7 +523,36 @@ impl<'a> Picks<'a> {
             }
             picked.2.push(path.clone());
         }
-        Ok(Some((picked.0, picked.1.expect("the eval file"), picked.2)))
+        Ok(Some((
+            picked.0,
+            vec![picked.1.expect("the eval file")],
+            picked.2,
+        )))
+    }
+
+    /// The episodes of the update of version `v` of a learner of `goals` goals (MDGPS, recorded
+    /// in process: `learner train --record-episodes`): the version's noisy episodes in arrival
+    /// order (goal-major, `n` each), then its evaluations (one per goal); `None` when the run
+    /// recorded fewer (it ended before that update).
+    fn pick_goals(&self, v: u64, n: usize, goals: usize) -> Option<Picked> {
+        let mine = || {
+            self.episodes
+                .iter()
+                .filter(|(_, _, o)| o.table_version == v)
+        };
+        let noisy: Vec<_> = mine().filter(|(_, ep, _)| ep.noisy).collect();
+        let evals: Vec<_> = mine().filter(|(_, ep, _)| !ep.noisy).collect();
+        if noisy.len() != n * goals || evals.len() != goals {
+            return None;
+        }
+        let files = noisy
+            .iter()
+            .chain(&evals)
+            .map(|(p, _, _)| p.clone())
+            .collect();
+        let eps =
+            |v: &[&(PathBuf, Episode, EpisodeOrigin)]| v.iter().map(|e| e.1.clone()).collect();
+        Some((eps(&noisy), eps(&evals), files))
     }
 }
 
@@ -572,11 +625,12 @@ fn drive<L: Learn + Checkpoint>(
         if learner.done() {
             break;
         }
-        let Some((noisy, eval, files)) = picks.pick(v, learner.samples())? else {
+        let goals = learner.goal_tasks().len();
+        let Some((noisy, evals, files)) = picks.pick(v, learner.samples(), goals)? else {
             break;
         };
         learner
-            .learn(&noisy, &eval, 0.0)
+            .learn_goals(&noisy, &evals, 0.0)
             .map_err(|source| ReplayError::Learn {
                 iteration: i + 1,
                 source,
@@ -586,135 +640,4 @@ fn drive<L: Learn + Checkpoint>(
         used = files;
     }
     Ok(())
-}
-
-/// An f64 as the report shows it: shortest round-trip decimal and its bits.
-fn show(x: f64) -> String {
-    format!("{x:?} ({:#018x})", x.to_bits())
-}
-
-/// The first entry where `stored` and the replayed `arrays` (of `table`) differ: (array,
-/// index, recorded, replayed).
-fn table_difference(
-    stored: &crate::io::table::StoredTable,
-    arrays: &[(&'static str, Vec<u64>, Vec<f64>)],
-    table: &ur5_shared::GainTable,
-) -> Option<(String, Vec<u64>, String, String)> {
-    for ((name, shape, rec), (_, want_shape, rep)) in stored.arrays.iter().zip(arrays) {
-        if shape != want_shape {
-            return Some((
-                format!("{name} (shape)"),
-                Vec::new(),
-                format!("{shape:?}"),
-                format!("{want_shape:?}"),
-            ));
-        }
-        if let Some(j) = (0..rec.len()).find(|&j| rec[j].to_bits() != rep[j].to_bits()) {
-            // Row-major index of entry j.
-            let mut index = vec![0; shape.len()];
-            let mut rest = j as u64;
-            for (d, len) in shape.iter().enumerate().rev() {
-                index[d] = rest % len;
-                rest /= len;
-            }
-            return Some((name.to_string(), index, show(rec[j]), show(rep[j])));
-        }
-    }
-    for (name, rec, rep) in [
-        ("version", stored.version, table.version),
-        ("checksum", stored.checksum, table.checksum),
-    ] {
-        if rec != rep {
-            return Some((
-                name.into(),
-                Vec::new(),
-                format!("{rec:#018x}"),
-                format!("{rep:#018x}"),
-            ));
-        }
-    }
-    None
-}
-
-/// The recorded tables of the state after `i` iterations of a gain-table learner
-/// (`iter_NNN_table.npz`, `tables/vVERSION.npz`) against its table, entry by entry.
-fn tables<L: LinGaussLearn>(
-    learner: &L,
-    dir: &Path,
-    i: usize,
-    report: &mut ReplayReport,
-) -> Result<Checked, ReplayError> {
-    let v = learner.version();
-    let files: Vec<PathBuf> = [
-        dir.join(format!("iter_{i:03}_table.npz")),
-        crate::io::table::version_path(dir, v),
-    ]
-    .into_iter()
-    .filter(|p| p.is_file())
-    .collect();
-    if files.is_empty() {
-        return Ok(Checked::NothingRecorded);
-    }
-    let table = learner.table();
-    let arrays = table_arrays(&table);
-    for f in files {
-        let stored = load_stored(&f)?;
-        report.tables_checked += 1;
-        report.compared.insert(f.clone());
-        if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, &table) {
-            return Ok(Checked::Differs((f, array, index, rec, rep)));
-        }
-    }
-    Ok(Checked::Equal)
-}
-
-/// The recorded checkpoint files `iter_NNN_KIND` (NNN = `i`) of each of `kinds`
-/// (`critic.json`, `policy.json`) against the replayed learner's, written by the same
-/// [`Checkpoint`] code into a scratch folder, byte for byte; the difference names the first
-/// differing byte offset and the text around it.
-fn checkpoint_files<L: Checkpoint>(
-    learner: &L,
-    dir: &Path,
-    i: usize,
-    kinds: &[&str],
-    report: &mut ReplayReport,
-) -> Result<Checked, ReplayError> {
-    let name = |kind: &str| format!("iter_{i:03}_{kind}");
-    let recorded: Vec<&str> = kinds
-        .iter()
-        .copied()
-        .filter(|k| dir.join(name(k)).is_file())
-        .collect();
-    if recorded.is_empty() {
-        return Ok(Checked::NothingRecorded);
-    }
-    let tmp = Scratch::new()?;
-    learner.checkpoint(&tmp.0, None)?;
-    for kind in recorded {
-        let file = dir.join(name(kind));
-        let rec = std::fs::read(&file).map_err(IoError::file("reading", &file))?;
-        let written = tmp.0.join(name(kind));
-        let rep = std::fs::read(&written).map_err(IoError::file("reading", &written))?;
-        report.compared.insert(file.clone());
-        match kind {
-            "policy.json" => report.policies_checked += 1,
-            _ => report.critics_checked += 1,
-        }
-        let Some(at) = (0..rec.len().max(rep.len())).find(|&j| rec.get(j) != rep.get(j)) else {
-            continue;
-        };
-        let around = |b: &[u8]| {
-            let lo = at.saturating_sub(20);
-            String::from_utf8_lossy(&b[lo.min(b.len())..(at + 40).min(b.len())]).into_owned()
-        };
-        let array = kind.trim_end_matches(".json").to_string();
-        return Ok(Checked::Differs((
-            file,
-            array,
-            vec![at as u64],
-            around(&rec),
-            around(&rep),
-        )));
-    }
-    Ok(Checked::Equal)
 }

@@ -683,3 +683,136 @@ fn a_tiny_mdgps_run_with_pilqr_runs_and_differs_from_lqr() {
     assert!(pilqr.1.iter().all(|l| !l.contains("NaN")), "{:?}", pilqr.1);
     assert_ne!(lqr.0, pilqr.0);
 }
+
+/// The inputs of a tiny `learner train --algo mdgps` in `root`: a folder of two goals'
+/// demonstrations (`tiny_demos`) and the config file of `tiny_config`.
+fn command_inputs(root: &Path) -> (PathBuf, PathBuf) {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = root.join("demos");
+    std::fs::create_dir_all(&demos).unwrap();
+    for (k, g) in [goals[0], goals[4]].into_iter().enumerate() {
+        learner::io::demos::save(&tiny_demos(g, 12), &demos.join(format!("goal_{k}.npz"))).unwrap();
+    }
+    let config = root.join("mdgps.toml");
+    std::fs::write(&config, toml::to_string(&tiny_config()).unwrap()).unwrap();
+    (demos, config)
+}
+
+/// `learner train --algo mdgps` on a folder of two goals' demonstrations, its folder then put
+/// in the state a kill during the third iteration leaves (checkpoints 0 to 2, the next
+/// checkpoint's critic file cut short, a row cut short) and resumed with `--resume`, ends with
+/// the checkpoint files and `mdgps_log.csv` rows (timing columns aside) of the uninterrupted
+/// command, bit for bit.
+#[test]
+fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run() {
+    let root = tmp("train-cmd");
+    let (demos, config) = command_inputs(&root);
+    let args = |out: &Path| {
+        vec![
+            "train".to_string(),
+            "--algo".into(),
+            "mdgps".into(),
+            "--demos".into(),
+            demos.display().to_string(),
+            "--config".into(),
+            config.display().to_string(),
+            "--iterations".into(),
+            "4".into(),
+            "--out".into(),
+            out.display().to_string(),
+        ]
+    };
+    let whole = root.join("whole");
+    let a = args(&whole);
+    let (ok, err) = learner(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{err}");
+    // Killed during the third iteration: what it wrote after checkpoint 2 is gone or cut.
+    let killed = root.join("killed");
+    let k = args(&killed);
+    let (ok, err) = learner(&k.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{err}");
+    for i in 3..=4 {
+        for kind in ["critic.json", "state.npz"] {
+            std::fs::remove_file(killed.join(format!("iter_{i:03}_{kind}"))).unwrap();
+        }
+    }
+    std::fs::write(killed.join("iter_003_critic.json"), "{\"format\": ").unwrap();
+    let csv = killed.join("mdgps_log.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let kept: Vec<&str> = text.split_inclusive('\n').take(3).collect();
+    std::fs::write(&csv, format!("{}2,9,0.5", kept.concat())).unwrap();
+    let mut resume = args(&killed);
+    resume.extend(["--resume".to_string(), killed.display().to_string()]);
+    let (ok, err) = learner(&resume.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{err}");
+    for i in 0..=4 {
+        for kind in ["critic.json", "state.npz"] {
+            let name = format!("iter_{i:03}_{kind}");
+            assert!(
+                std::fs::read(whole.join(&name)).unwrap()
+                    == std::fs::read(killed.join(&name)).unwrap(),
+                "{name} differs"
+            );
+        }
+    }
+    // Rows without their timing columns (t_*_s, the last six).
+    let rows = |dir: &Path| -> Vec<String> {
+        std::fs::read_to_string(dir.join("mdgps_log.csv"))
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').take(11).collect::<Vec<_>>().join(","))
+            .collect()
+    };
+    assert_eq!(rows(&whole).len(), 5, "header and 4 rows");
+    assert_eq!(rows(&killed), rows(&whole));
+    // A complete run resumes to nothing; another seed is refused.
+    let (ok, err) = learner(&resume.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{err}");
+    let mut other = resume.clone();
+    other.extend(["--seed".to_string(), "10".into()]);
+    let (ok, err) = learner(&other.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!ok && err.contains("another run"), "{err}");
+    std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// `learner train --algo mdgps --record-episodes` records every goal's episodes, and `learner
+/// replay` redoes the run's learning from them: every recorded critic and learner state
+/// (policy, S-step and each goal's LQR state) equal to the replay's, bit for bit.
+#[test]
+fn a_recorded_mdgps_run_replays_bit_for_bit() {
+    let root = tmp("replay-cmd");
+    let (demos, config) = command_inputs(&root);
+    let out = root.join("run");
+    let (d, c, o) = (
+        demos.display().to_string(),
+        config.display().to_string(),
+        out.display().to_string(),
+    );
+    let (ok, err) = learner(&[
+        "train",
+        "--algo",
+        "mdgps",
+        "--demos",
+        &d,
+        "--config",
+        &c,
+        "--iterations",
+        "3",
+        "--record-episodes",
+        "--out",
+        &o,
+    ]);
+    assert!(ok, "{err}");
+    // 2 goals × (3 noisy + 1 evaluation) per iteration.
+    let episodes = std::fs::read_dir(out.join("episodes")).unwrap().count();
+    assert_eq!(episodes, 3 * 2 * 4);
+    let (ok, json, err) = common::learner_output(&["replay", &o, "--json"]);
+    assert!(ok, "{err}");
+    let r: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    assert!(r["difference"].is_null(), "{r}");
+    assert_eq!(r["iterations"], 3, "{r}");
+    assert_eq!(r["critics_checked"], 4, "{r}");
+    assert_eq!(r["policies_checked"], 4, "{r}");
+    assert_eq!(r["episodes_used"], 3 * 2 * 4, "{r}");
+    std::fs::remove_dir_all(&root).unwrap();
+}
