@@ -512,12 +512,19 @@ fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
     const EPISODES_R: u64 = 5;
     // ROS domain 125: this test's own.
     const DOMAIN: u16 = 125;
+    // Topics of this process only: a second run of this test at the same time uses the same
+    // domain.
+    let ns = format!("/na{}", std::process::id());
     let sim = ros2_sim::spawn(
         &TaskConfig::default(),
         &SimConfig::default(),
         &Ros2SimConfig {
             domain_id: DOMAIN,
             time_compression: 10.0,
+            joint_states_topic: format!("{ns}/joint_states"),
+            command_topic: format!("{ns}/forward_position_controller/commands"),
+            robot_mode_topic: format!("{ns}/io_and_status_controller/robot_mode"),
+            safety_mode_topic: format!("{ns}/io_and_status_controller/safety_mode"),
             ..Ros2SimConfig::default()
         },
     )
@@ -543,6 +550,10 @@ fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
                 backend: ArmKind::Ros2,
                 ros2: Ros2Config {
                     domain_id: DOMAIN,
+                    joint_states_topic: format!("{ns}/joint_states"),
+                    command_topic: format!("{ns}/forward_position_controller/commands"),
+                    robot_mode_topic: format!("{ns}/io_and_status_controller/robot_mode"),
+                    safety_mode_topic: format!("{ns}/io_and_status_controller/safety_mode"),
                     ..Ros2Config::default()
                 },
                 ..ArmConfig::default()

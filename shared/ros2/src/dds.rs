@@ -334,14 +334,17 @@ mod tests {
     #[test]
     fn two_nodes_talk_over_loopback_unicast_only() {
         let mcast_before = ipv4_out_multicast_packets();
-        // Domain 201: unique to this test (parallel tests use others).
+        // Domain 201: unique to this test (parallel tests use others); the topic is this
+        // process's, so that a second run at the same time does not cross-talk.
+        let topic = format!("/t{}/joint_states", std::process::id());
         let a = Node::new(201, Network::Loopback).unwrap();
         let b = Node::new(201, Network::Loopback).unwrap();
         let w = a
-            .writer::<JointState>("/joint_states", TopicQos::reliable(10))
+            .writer::<JointState>(&topic, TopicQos::reliable(10))
             .unwrap();
+        // Without the leading slash: the same ROS topic.
         let mut r = b
-            .reader::<JointState>("joint_states", TopicQos::reliable(10))
+            .reader::<JointState>(topic.trim_start_matches('/'), TopicQos::reliable(10))
             .unwrap();
         let msg = JointState {
             header: Header {
@@ -366,11 +369,11 @@ mod tests {
         }
         assert_eq!(got, Some(msg));
         assert_eq!(
-            b.publishers_of("/joint_states"),
+            b.publishers_of(&topic),
             vec!["sensor_msgs::msg::dds_::JointState_".to_owned()]
         );
         assert_eq!(
-            a.subscribers_of("/joint_states"),
+            a.subscribers_of(&topic),
             vec!["sensor_msgs::msg::dds_::JointState_".to_owned()]
         );
         if let (Some(before), Some(after)) = (mcast_before, ipv4_out_multicast_packets()) {

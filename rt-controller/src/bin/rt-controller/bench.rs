@@ -74,23 +74,7 @@ pub fn run(episodes: u64, horizon: usize, spin_ns: u64, kind: Kind) -> anyhow::R
         std::thread::spawn(move || learner_stand_in(&prefix, horizon, kind, &stop))
     };
 
-    let cfg = ControllerConfig {
-        prefix: prefix.clone(),
-        mode: Mode::Lockstep,
-        episodes,
-        episode_report: false,
-        wait_for_learner: true,
-        task: ur5_shared::config::TaskConfig {
-            dt,
-            horizon,
-            ..Default::default()
-        },
-        polling: Polling {
-            spin_ns,
-            sleep_ns: 20_000,
-        },
-        ..ControllerConfig::default()
-    };
+    let cfg = bench_config(prefix.clone(), episodes, horizon, spin_ns, dt);
     let mut controller = Controller::setup(cfg)?;
     let never = AtomicBool::new(false);
     let reason = controller.run(&never);
@@ -115,6 +99,34 @@ pub fn run(episodes: u64, horizon: usize, spin_ns: u64, kind: Kind) -> anyhow::R
         exit_reason: reason,
         spin_ns,
     })
+}
+
+/// The benchmark's controller: lockstep, `episodes` of `horizon` ticks of `dt`, no episode
+/// report, waiting for the learner stand-in.
+fn bench_config(
+    prefix: String,
+    episodes: u64,
+    horizon: usize,
+    spin_ns: u64,
+    dt: f64,
+) -> ControllerConfig {
+    ControllerConfig {
+        prefix,
+        mode: Mode::Lockstep,
+        episodes,
+        episode_report: false,
+        wait_for_learner: true,
+        task: ur5_shared::config::TaskConfig {
+            dt,
+            horizon,
+            ..Default::default()
+        },
+        polling: Polling {
+            spin_ns,
+            sleep_ns: 20_000,
+        },
+        ..ControllerConfig::default()
+    }
 }
 
 /// [`ur5_shared::policy_action`] alone on a warm cache: `calls` calls in a row on one policy
@@ -250,21 +262,8 @@ pub fn run_ros2(
         std::thread::spawn(move || learner_stand_in(&prefix, horizon, Kind::Gains, &stop))
     };
     let cfg = ControllerConfig {
-        prefix,
         mode: Mode::RealTime,
         pacing: Pacing::Arm,
-        episodes,
-        episode_report: false,
-        wait_for_learner: true,
-        task: ur5_shared::config::TaskConfig {
-            dt,
-            horizon,
-            ..Default::default()
-        },
-        polling: Polling {
-            spin_ns,
-            sleep_ns: 20_000,
-        },
         arm: ArmConfig {
             backend: ArmKind::Ros2,
             ros2: Ros2Config {
@@ -275,7 +274,7 @@ pub fn run_ros2(
             },
             ..ArmConfig::default()
         },
-        ..ControllerConfig::default()
+        ..bench_config(prefix, episodes, horizon, spin_ns, dt)
     };
     let mut controller = rt_controller::Controller::setup_ros2(cfg)?;
     let never = AtomicBool::new(false);
