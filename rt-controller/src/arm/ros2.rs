@@ -29,7 +29,7 @@ use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus};
 use ur_protocol::modes::{robot_mode_name, safety_mode_name};
 
-use crate::arm::servo::{arm_state, Servo};
+use crate::arm::servo::{arm_state, state_due, Servo};
 use crate::arm::ur::check_joints;
 use crate::arm::{ArmBackend, ArmIoError, ArmReport};
 use crate::config::{Ros2Config, ServoTarget, UrConfig};
@@ -653,11 +653,7 @@ impl Live {
         {
             shared.command(self.servo.target(self.servo_target, ts));
         }
-        if ts >= self.next_emit_ts - 0.49 * cycle_s {
-            self.next_emit_ts += period_s;
-            if self.next_emit_ts <= ts {
-                self.next_emit_ts = ts + period_s;
-            }
+        if state_due(&mut self.next_emit_ts, ts, cycle_s, period_s) {
             return Some(self.emit(status));
         }
         None

@@ -233,3 +233,17 @@ pub(crate) fn arm_state(
         faults: ArmFaults::default(),
     }
 }
+
+/// Whether a state is due at arm time `ts` (s): one per control period `period_s` of arm time,
+/// taken at the arm cycle (`cycle_s`) nearest the deadline `next_emit_ts`, which then moves on by
+/// a period (restarting from `ts` after a gap of more than a period).
+pub(crate) fn state_due(next_emit_ts: &mut f64, ts: f64, cycle_s: f64, period_s: f64) -> bool {
+    if !(ts >= *next_emit_ts - 0.49 * cycle_s) {
+        return false;
+    }
+    *next_emit_ts += period_s;
+    if *next_emit_ts <= ts {
+        *next_emit_ts = ts + period_s;
+    }
+    true
+}

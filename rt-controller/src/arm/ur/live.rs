@@ -20,7 +20,7 @@ use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus};
 use ur_protocol::state::runtime_state;
 use ur_protocol::{ControlMode, ReverseCommand};
 
-use crate::arm::servo::{arm_state, Servo};
+use crate::arm::servo::{arm_state, state_due, Servo};
 use crate::arm::{ArmBackend, ArmIoError};
 use crate::config::UrConfig;
 use crate::error::SetupError;
@@ -587,11 +587,7 @@ impl Live {
         }
         // A state per control period of arm time (CB3: 12 or 13 cycles of 8 ms, 0.1 s on
         // average).
-        if ts >= self.next_emit_ts - 0.49 * self.cycle_s {
-            self.next_emit_ts += period_s;
-            if self.next_emit_ts <= ts {
-                self.next_emit_ts = ts + period_s;
-            }
+        if state_due(&mut self.next_emit_ts, ts, self.cycle_s, period_s) {
             // A reset's progress reports are not answered: its own commands go on.
             self.awaiting_answer = status != ArmStatus::RESETTING;
             return Some(self.emit(status));
