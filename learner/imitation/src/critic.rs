@@ -76,7 +76,7 @@ pub fn refit_critic(
             controller[(r - ne, c)]
         }
     });
-    let norm = Normalizer::from_data(both.as_ref())?;
+    let norm = Normalizer::from_data(dcfg.warp_rows(both.as_ref()).as_ref())?;
     Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
 }
 
@@ -101,7 +101,7 @@ impl Critic {
         dcfg: &DiscriminatorConfig,
         seed: u64,
     ) -> Result<Self, ImitationError> {
-        let norm = Normalizer::from_data(expert.as_ref())?;
+        let norm = Normalizer::from_data(dcfg.warp_rows(expert.as_ref()).as_ref())?;
         let disc = Discriminator::new(D_IN, critic_config(dcfg, seed), norm)?;
         Ok(Self {
             ws: disc.workspace(),

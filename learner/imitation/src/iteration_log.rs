@@ -6,9 +6,10 @@ use serde::Serialize;
 use crate::demos::Demos;
 use crate::discriminator::TrainStats;
 use crate::rollout::Episode;
+use ur5_shared::layout::DX;
 
 /// Per-iteration log (progress line and CSV row).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Serialize)]
 pub struct GaifoLog {
     /// Iteration (0-based).
     pub iteration: usize,
@@ -41,6 +42,75 @@ pub struct GaifoLog {
     /// Thread CPU seconds of the learner phases (dynamics, critic, cost, LQR): the learner
     /// time of one iteration on one core, unaffected by waiting for a core on a busy machine.
     pub cpu_learner: f64,
+    /// How far this iteration's noisy episodes end from the demonstrations, with no task cost:
+    /// [`demo_gap`] (dimensionless; docs/design.md §5 D36). NaN where the learner does not
+    /// compute it (the PPO baseline, the expert). Not a column of `gaifo_log.csv`.
+    pub demo_gap: f64,
+}
+
+impl Default for GaifoLog {
+    /// Zeros, and `demo_gap` NaN (not computed).
+    fn default() -> Self {
+        Self {
+            iteration: 0,
+            task_cost: 0.0,
+            performance: 0.0,
+            final_distance: 0.0,
+            critic_loss: 0.0,
+            wasserstein: 0.0,
+            kl: 0.0,
+            eta: 0.0,
+            step_mult: 0.0,
+            t_execute: 0.0,
+            t_dynamics: 0.0,
+            t_critic: 0.0,
+            t_cost: 0.0,
+            t_lqr: 0.0,
+            cpu_learner: 0.0,
+            demo_gap: f64::NAN,
+        }
+    }
+}
+
+/// The mean over `episodes` of the distance between each one's final state s_{T−1} and the
+/// demonstrations' mean final state, every coordinate i divided by σ_i, the standard deviation
+/// of coordinate i over all demonstrated states (all demonstrations and steps; σ_i = 1 where
+/// it is below 1e-6). Uses the states only, as imitation from observation may: a controller
+/// whose episodes come to rest where the demonstrations do scores near 0. Shapes: states of
+/// dX = 12 (docs/design.md §2).
+pub fn demo_gap(episodes: &[Episode], demos: &Demos) -> f64 {
+    let (n, t_last) = (demos.count * demos.horizon, demos.horizon - 1);
+    let mut mean = [0.0; DX];
+    let mut end = [0.0; DX];
+    for d in 0..demos.count {
+        for t in 0..demos.horizon {
+            let s = demos.state(d, t);
+            for i in 0..DX {
+                mean[i] += s[i] / n as f64;
+                if t == t_last {
+                    end[i] += s[i] / demos.count as f64;
+                }
+            }
+        }
+    }
+    let mut var = [0.0; DX];
+    for d in 0..demos.count {
+        for t in 0..demos.horizon {
+            let s = demos.state(d, t);
+            for i in 0..DX {
+                var[i] += (s[i] - mean[i]) * (s[i] - mean[i]) / n as f64;
+            }
+        }
+    }
+    let sigma = var.map(|v| if v.sqrt() < 1e-6 { 1.0 } else { v.sqrt() });
+    let gaps = episodes.iter().map(|e| {
+        let s = e.state(e.horizon() - 1);
+        (0..DX)
+            .map(|i| ((s[i] - end[i]) / sigma[i]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    });
+    gaps.sum::<f64>() / episodes.len() as f64
 }
 
 impl GaifoLog {
@@ -71,6 +141,7 @@ impl GaifoLog {
             t_cost: 0.0,
             t_lqr: 0.0,
             cpu_learner: 0.0,
+            demo_gap: f64::NAN,
         }
     }
 
@@ -99,5 +170,60 @@ impl GaifoLog {
             1e3 * self.learner_seconds(),
             1e3 * self.t_execute
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two demonstrations of T = 2: coordinate i takes the values 0, 2 (first) and 0, 0
+    /// (second) so its spread over the four states is σ = √0.75 and the mean final state 1.
+    fn demos() -> Demos {
+        let mut states = vec![0.0; 2 * 2 * DX];
+        for i in 0..DX {
+            states[DX + i] = 2.0;
+        }
+        Demos {
+            states,
+            actions: vec![0.0; 2 * 2 * 3],
+            model: Default::default(),
+            count: 2,
+            horizon: 2,
+            goal: [0.0; 3],
+            start_q: [0.0; 3],
+            dt: 0.05,
+            seed: 0,
+            cost_random: 1.0,
+            cost_expert: 0.0,
+        }
+    }
+
+    fn ending_at(s_last: [f64; DX]) -> Episode {
+        let mut x = vec![0.0; 2 * DX];
+        x[DX..].copy_from_slice(&s_last);
+        Episode {
+            x,
+            u: vec![0.0; 6],
+            u_policy: vec![0.0; 6],
+            eps: vec![0.0; 6],
+            noisy: true,
+        }
+    }
+
+    #[test]
+    fn demo_gap_is_the_mean_normalised_distance_to_the_demonstrations_end() {
+        let d = demos();
+        let sigma = 0.75f64.sqrt();
+        assert_eq!(demo_gap(&[ending_at([1.0; DX])], &d), 0.0);
+        // One coordinate off by one σ: gap 1; a second episode off by 3σ in two coordinates.
+        let mut a = [1.0; DX];
+        a[6] += sigma;
+        let mut b = [1.0; DX];
+        b[0] -= 3.0 * sigma;
+        b[11] += 3.0 * sigma;
+        let want = (1.0 + (18.0f64).sqrt()) / 2.0;
+        let got = demo_gap(&[ending_at(a), ending_at(b)], &d);
+        assert!((got - want).abs() < 1e-12, "{got} vs {want}");
     }
 }

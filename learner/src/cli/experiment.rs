@@ -137,8 +137,9 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
     }
     if args.expert_only {
         anyhow::ensure!(
-            crate::experiment::scheduler::trains_one_expert(name),
-            "--expert-only: {} does not train one expert (comparison, stability and ablation do)",
+            crate::experiment::scheduler::trains_one_expert(name, &cfg),
+            "--expert-only: {} does not train one expert (comparison, stability and ablation on \
+             one goal do)",
             name.as_str()
         );
         cfg.validate(name)?;

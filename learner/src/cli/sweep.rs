@@ -81,9 +81,9 @@ pub fn write(
     cfg: &ExperimentConfig,
 ) -> anyhow::Result<()> {
     anyhow::ensure!(
-        trains_one_expert(name),
+        trains_one_expert(name, cfg),
         "--slurm/--k8s sweep the experiments that train one expert (comparison, stability, \
-         ablation), not {}",
+         ablation on one goal), not {}",
         name.as_str()
     );
     cfg.validate(name)?;

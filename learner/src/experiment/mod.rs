@@ -5,7 +5,7 @@
 //! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison"), PPO also with a converged budget; the summary adds episodes to normalised 0.9 and to 1 cm | 10 seeds × 100 iterations each |
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
-//! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25) | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
+//! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25, D36), or candidates ([`PRECISION_VARIANTS`]); with `ablation_workspace_goals`, on the five [`goals::WORKSPACE_GOALS`] with the steady-precision outputs | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
 //! | `multi-goal` | one MDGPS policy from the 8 square points vs the centre's LQR+GAIfO controller, at never-demonstrated goals ([`multi_goal`]) | 3 seeds × 20 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
@@ -37,6 +37,7 @@ use imitation::demos::Demos;
 
 mod error;
 
+pub use ablation::{ablation_variant, ABLATION_VARIANTS, PRECISION_VARIANTS};
 pub use error::ExperimentError;
 
 use crate::error::ensure;
@@ -46,6 +47,8 @@ use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 
 use crate::run::{arm_for, run_iterations};
 
+mod ablation;
+pub mod goals;
 pub mod ipc;
 pub mod multi_goal;
 pub mod pilqr;
@@ -143,6 +146,10 @@ pub struct ExperimentConfig {
     pub time_compression: f64,
     /// Ablation: the variants to run, each a curve (names from [`ABLATION_VARIANTS`]).
     pub ablation_variants: Vec<String>,
+    /// Ablation: run every variant on the five [`goals::WORKSPACE_GOALS`] (each with its own
+    /// expert's demonstrations) instead of `expert.task.goal`, and add the steady-precision
+    /// outputs (`precision.txt`, `reach.txt`, `spread.csv`, [`goals`]).
+    pub ablation_workspace_goals: bool,
     /// Multi-goal: the global policy and its S-step (MDGPS's per-condition settings are
     /// `lqr_gaifo`'s, so it uses LQR+GAIfO's N episodes per condition).
     pub mdgps_policy: imitation::mdgps::s_step::PolicyOptConfig,
@@ -164,52 +171,6 @@ pub struct ExperimentConfig {
 
 /// The comparison's algorithms ([`ExperimentConfig::algorithms`]).
 pub const ALGORITHMS: [&str; 3] = ["lqr-gaifo", "gaifo-ppo", "gaifo-ppo-converged"];
-
-/// The ablation's variants: `lqr_gaifo` as configured (`default`), and the same with the
-/// critic decisions of docs/design.md §5 D25 undone one at a time.
-pub const ABLATION_VARIANTS: [(&str, &str); 4] = [
-    ("default", "LQR+GAIfO as configured"),
-    (
-        "raw-penalty",
-        "gradient penalty on the raw-unit gradient ‖∇ₓD‖ (before D25)",
-    ),
-    (
-        "constant-critic-lr",
-        "critic learning rate kept at its start value (no half-life)",
-    ),
-    (
-        "before-d25",
-        "raw-unit penalty, critic learning rate 1e-3, constant: the critic before D25",
-    ),
-];
-
-/// `base` changed as ablation variant `name` says ([`ABLATION_VARIANTS`]).
-pub fn ablation_variant(name: &str, base: &GaifoConfig) -> Result<GaifoConfig, ExperimentError> {
-    use imitation::discriminator::PenaltySpace;
-    let mut c = base.clone();
-    match name {
-        "default" => {}
-        "raw-penalty" => c.discriminator.penalty_space = PenaltySpace::Raw,
-        "constant-critic-lr" => c.critic_lr_half_life = 0.0,
-        "before-d25" => {
-            c.discriminator.adam.lr = 1e-3;
-            c.discriminator.penalty_space = PenaltySpace::Raw;
-            c.critic_lr_half_life = 0.0;
-        }
-        _ => {
-            return Err(ExperimentError::Settings(format!(
-                "unknown ablation variant `{name}`; known: {}",
-                ABLATION_VARIANTS
-                    .iter()
-                    .map(|(n, _)| *n)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-            .into())
-        }
-    }
-    Ok(c)
-}
 
 impl Default for ExperimentConfig {
     fn default() -> Self {
@@ -241,6 +202,7 @@ impl ExperimentConfig {
                 .iter()
                 .map(|(n, _)| n.to_string())
                 .collect(),
+            ablation_workspace_goals: false,
             mdgps_policy: Default::default(),
             mdgps_kl_step: imitation::mdgps::MdgpsConfig::default().kl_step,
             eval_inside: 8,
@@ -638,12 +600,32 @@ pub fn run_sharded(
             )
         }
         ExperimentName::Ablation => {
-            let d = Arc::new(demos_for(cfg, demos, out)?);
+            // One demonstration set per goal: the default goal's (or --demos), or one expert's
+            // at each workspace goal.
+            let sets: Vec<(String, Arc<Demos>)> = if cfg.ablation_workspace_goals {
+                ensure!(
+                    demos.is_none(),
+                    ExperimentError::Settings(
+                        "--demos does not apply with ablation_workspace_goals (an expert per goal)"
+                            .into()
+                    )
+                );
+                let g: Vec<[f64; 3]> = goals::WORKSPACE_GOALS.iter().map(|(_, p)| *p).collect();
+                goals::goal_demos(cfg, &g, &pool)?
+                    .into_iter()
+                    .zip(goals::WORKSPACE_GOALS)
+                    .map(|(d, (n, _))| (format!(" goal {n}"), Arc::new(d)))
+                    .collect()
+            } else {
+                vec![(String::new(), Arc::new(demos_for(cfg, demos, out)?))]
+            };
             let mut jobs = Vec::new();
-            for v in &cfg.ablation_variants {
-                let mut c = cfg.clone();
-                c.lqr_gaifo = ablation_variant(v, &cfg.lqr_gaifo)?;
-                jobs.extend(lqr_jobs(&c, v, d.clone()));
+            for (goal, d) in &sets {
+                for v in &cfg.ablation_variants {
+                    let mut c = cfg.clone();
+                    c.lqr_gaifo = ablation_variant(v, &cfg.lqr_gaifo)?;
+                    jobs.extend(lqr_jobs(&c, &format!("{v}{goal}"), d.clone()));
+                }
             }
             (
                 jobs,
@@ -718,6 +700,9 @@ pub fn run_sharded(
     }
     let runs = run_jobs(&pool, &jobs)?;
     let rows = write_outputs(name.as_str(), &title, &runs, out)?;
+    if goals::at_several_goals(&runs) {
+        eprint!("{}", goals::write_precision(&runs, out)?);
+    }
     if let Some(s) = shard {
         shard::write_meta(
             out,

@@ -26,21 +26,10 @@ use gps::traj_opt::pilqr::TrajOptMethod;
 use imitation::demos::Demos;
 use imitation::gaifo::GaifoLog;
 
-use super::summary::by_variant;
+use super::goals::{goal_demos, goal_list, goal_name, precision_text, reach_text, spread_csv};
 use super::{pool, write_outputs, ExperimentConfig, ExperimentError, Run};
 use crate::arm::SimArm;
 use crate::error::ensure;
-
-/// Goals spread over the UR5's workspace away from the default one (m, base frame), named
-/// for the experiments that test precision beyond the goal the defaults were tuned on. The
-/// first three are docs/design.md §5 D25's "other goals".
-pub const WORKSPACE_GOALS: [(&str, [f64; 3]); 5] = [
-    ("near-low", [-0.30, -0.40, 0.20]),
-    ("far-high", [-0.55, 0.05, 0.35]),
-    ("table", [-0.40, -0.10, 0.05]),
-    ("side-high", [-0.20, -0.50, 0.40]),
-    ("far-low", [-0.60, -0.20, 0.10]),
-];
 
 /// The experiment's defaults over `base`: 3 seeds × 30 iterations (the expert, both arms, both
 /// methods).
@@ -63,9 +52,9 @@ pub struct PilqrExperimentConfig {
     /// Trajectory optimisers to compare.
     pub methods: Vec<TrajOptMethod>,
     /// Goals (m); empty: the expert's `task.goal`. `workspace_goals = true` adds
-    /// [`WORKSPACE_GOALS`].
+    /// [`super::goals::WORKSPACE_GOALS`].
     pub goals: Vec<[f64; 3]>,
-    /// Add the five [`WORKSPACE_GOALS`].
+    /// Add the five [`super::goals::WORKSPACE_GOALS`].
     pub workspace_goals: bool,
 }
 
@@ -107,26 +96,6 @@ impl PilqrExperimentConfig {
         );
         Ok(())
     }
-
-    /// The goals to run.
-    fn goal_list(&self, default: [f64; 3]) -> Vec<[f64; 3]> {
-        let mut g = self.goals.clone();
-        if self.workspace_goals {
-            g.extend(WORKSPACE_GOALS.iter().map(|(_, p)| *p));
-        }
-        if g.is_empty() {
-            g.push(default);
-        }
-        g
-    }
-}
-
-/// A goal's name in [`WORKSPACE_GOALS`], else its coordinates as `x/y/z` (m).
-fn goal_name(g: [f64; 3]) -> String {
-    match WORKSPACE_GOALS.iter().find(|(_, p)| *p == g) {
-        Some((n, _)) => n.to_string(),
-        None => format!("{}/{}/{}", g[0], g[1], g[2]),
-    }
 }
 
 fn method_name(m: TrajOptMethod) -> &'static str {
@@ -148,7 +117,7 @@ struct Job {
 pub fn run(cfg: &ExperimentConfig, out: &Path) -> Result<Vec<Run>, ExperimentError> {
     let p = &cfg.pilqr;
     p.validate()?;
-    let goals = p.goal_list(cfg.expert.task.goal);
+    let goals = goal_list(&p.goals, p.workspace_goals, cfg.expert.task.goal);
     let t0 = Instant::now();
     let pool = pool(cfg.threads)?;
     let mut jobs = Vec::new();
@@ -182,16 +151,10 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> Result<Vec<Run>, ExperimentErr
     crate::io::create_dir(out)?;
     // LQR+GAIfO's demonstrations: the nominal arm's default expert at each goal.
     let demos: Vec<Option<Demos>> = if p.learners.iter().any(|l| l == "lqr-gaifo") {
-        pool.install(|| {
-            goals
-                .par_iter()
-                .map(|&g| {
-                    let mut e = cfg.expert.clone();
-                    e.task.goal = g;
-                    super::expert_demos(&e).map(Some)
-                })
-                .collect::<Result<Vec<_>, ExperimentError>>()
-        })?
+        goal_demos(cfg, &goals, &pool)?
+            .into_iter()
+            .map(Some)
+            .collect()
     } else {
         vec![None; goals.len()]
     };
@@ -272,6 +235,9 @@ pub fn run(cfg: &ExperimentConfig, out: &Path) -> Result<Vec<Run>, ExperimentErr
     }
     std::fs::write(out.join("reach.txt"), &reach)?;
     std::fs::write(out.join("spread.csv"), spread_csv(&runs))?;
+    if goals.len() > 1 {
+        std::fs::write(out.join("precision.txt"), precision_text(&runs))?;
+    }
     eprint!("{reach}");
     eprintln!(
         "experiment pilqr done in {:.0} s; outputs in {}",
@@ -341,80 +307,4 @@ fn gaifo_job(cfg: &ExperimentConfig, j: &Job, demos: Demos) -> Result<JobResult,
         horizon,
         res.err().map(|e| crate::error::line(&e)),
     ))
-}
-
-/// Per variant: seeds that reached 1 cm and 3 mm and the training episodes they needed.
-fn reach_text(runs: &[Run]) -> String {
-    let mut s = String::from(
-        "variant | seeds | within 1 cm: seeds, episodes mean ± sd | within 3 mm: seeds, episodes mean ± sd | within 2 mm by iteration 30 (counted from 1) | final distance at the last iteration, mm, mean ± sd\n",
-    );
-    for (v, rs) in by_variant(runs) {
-        let reach = |th: f64| -> String {
-            let eps: Vec<f64> = rs
-                .iter()
-                .filter_map(|r| {
-                    r.logs
-                        .iter()
-                        .position(|l| l.final_distance <= th)
-                        .map(|i| (i * r.episodes_per_iteration) as f64)
-                })
-                .collect();
-            let (m, sd) = mean_sd(&eps);
-            format!("{}/{}, {m:.0} ± {sd:.0}", eps.len(), rs.len())
-        };
-        let by30 = rs
-            .iter()
-            .filter(|r| r.logs.iter().take(30).any(|l| l.final_distance <= 2e-3))
-            .count();
-        let last: Vec<f64> = rs
-            .iter()
-            .filter_map(|r| r.logs.last().map(|l| 1e3 * l.final_distance))
-            .collect();
-        let (m, sd) = mean_sd(&last);
-        s += &format!(
-            "{v} | {} | {} | {} | {by30}/{} | {m:.2} ± {sd:.2}\n",
-            rs.len(),
-            reach(0.01),
-            reach(0.003),
-            rs.len()
-        );
-    }
-    s
-}
-
-/// Mean and sample standard deviation (NaN when empty; sd 0 for one value).
-fn mean_sd(x: &[f64]) -> (f64, f64) {
-    if x.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let n = x.len() as f64;
-    let m = x.iter().sum::<f64>() / n;
-    let var = if x.len() > 1 {
-        x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (n - 1.0)
-    } else {
-        0.0
-    };
-    (m, var.sqrt())
-}
-
-/// `variant,iteration,seeds,final_distance_mean_m,final_distance_sd_m,min_m,max_m`, one row
-/// per variant and iteration (1-based).
-fn spread_csv(runs: &[Run]) -> String {
-    let mut s = String::from(
-        "variant,iteration,seeds,final_distance_mean_m,final_distance_sd_m,min_m,max_m\n",
-    );
-    for (v, rs) in by_variant(runs) {
-        let iters = rs.iter().map(|r| r.logs.len()).max().unwrap_or(0);
-        for i in 0..iters {
-            let d: Vec<f64> = rs
-                .iter()
-                .filter_map(|r| r.logs.get(i).map(|l| l.final_distance))
-                .collect();
-            let (m, sd) = mean_sd(&d);
-            let mn = d.iter().copied().fold(f64::INFINITY, f64::min);
-            let mx = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            s += &format!("\"{v}\",{},{},{m:e},{sd:e},{mn:e},{mx:e}\n", i + 1, d.len());
-        }
-    }
-    s
 }

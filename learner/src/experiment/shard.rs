@@ -329,5 +329,8 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(Vec<Run>, Vec<SummaryRow>)
     );
     let runs: Vec<Run> = all.into_iter().map(|(_, r)| r).collect();
     let rows = write_outputs(&meta.experiment, &meta.title, &runs, out)?;
+    if super::goals::at_several_goals(&runs) {
+        super::goals::write_precision(&runs, out)?;
+    }
     Ok((runs, rows))
 }

@@ -90,6 +90,7 @@ impl GaifoRow {
             t_cost: self.t_cost_s,
             t_lqr: self.t_lqr_s,
             cpu_learner: self.cpu_learner_s,
+            demo_gap: f64::NAN,
         }
     }
 }
@@ -324,6 +325,8 @@ mod tests {
             t_cost: 0.0625,
             t_lqr: 3.0,
             cpu_learner: 0.7,
+            // Not a CSV column: it reads back as NaN.
+            demo_gap: 0.25,
         };
         let mut buf = Vec::new();
         let mut w = csv::Writer::from_writer(&mut buf);

@@ -135,7 +135,13 @@ fn ablation_runs_each_variant_and_reports_final_distance() {
     let names: Vec<&str> = rows.iter().map(|r| r.variant.as_str()).collect();
     assert_eq!(
         names,
-        ["default", "raw-penalty", "constant-critic-lr", "before-d25"]
+        [
+            "default",
+            "no-near-goal",
+            "raw-penalty",
+            "constant-critic-lr",
+            "before-d25"
+        ]
     );
     assert_png(&out.join("ablation.png"));
     let text = std::fs::read_to_string(out.join("summary.txt")).unwrap();

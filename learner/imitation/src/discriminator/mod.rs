@@ -29,10 +29,11 @@ mod tests;
 
 use std::path::PathBuf;
 
-use faer::{MatMut, MatRef};
+use faer::{Mat, MatMut, MatRef};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
+use ur5_shared::layout::{DX, EE_MINUS_GOAL};
 
 pub use adam::{Adam, AdamConfig};
 pub use mlp::{Mlp, MlpWorkspace};
@@ -88,6 +89,21 @@ pub struct DiscriminatorConfig {
     /// Critic files written before the field existed were trained with `raw`.
     #[serde(default)]
     pub penalty_space: PenaltySpace,
+    /// Finer resolution near the goal, c (m; 0 = off, the default): the end-effector-minus-goal
+    /// inputs of s and s' (x[6..9] and x[dX+6..dX+9], docs/design.md §2) enter the critic as
+    /// `c·asinh(x/c)` before the normalisation: unchanged within c of the goal, logarithmic
+    /// beyond, so their spread in the data, and with it the narrowest bowl a net that is
+    /// 1-Lipschitz in normalised inputs can form, shrinks from the reach's decimetres towards
+    /// c (docs/design.md §5 D36). Needs 2 dX inputs and `penalty_space = normalised`. Critic
+    /// files written before the field existed have 0.
+    #[serde(default)]
+    pub near_goal_scale: f64,
+    /// The slope the warp keeps far from the goal, a ∈ [0, 1) (0, the default: pure
+    /// `c·asinh(x/c)`, whose slope falls as c/|x|): the warp is then
+    /// `a·x + (1 − a)·c·asinh(x/c)`, so a critic of bounded slope in the warped inputs still
+    /// pulls a controller that is decimetres away (docs/design.md §5 D36).
+    #[serde(default)]
+    pub near_goal_far_slope: f64,
 }
 
 /// Where the gradient penalty `λ (‖∇D(x̂)‖ − 1)²` takes the norm, and so in which metric D is
@@ -122,6 +138,8 @@ impl Default for DiscriminatorConfig {
             adam: AdamConfig::default(),
             seed: 0,
             penalty_space: PenaltySpace::Raw,
+            near_goal_scale: 0.0,
+            near_goal_far_slope: 0.0,
         }
     }
 }
@@ -178,7 +196,66 @@ impl DiscriminatorConfig {
                 Self::MAX_COUNT
             ));
         }
+        if !(self.near_goal_scale.is_finite() && self.near_goal_scale >= 0.0) {
+            return bad(format!(
+                "near_goal_scale must be finite and >= 0 (m; 0 = off); got {}",
+                self.near_goal_scale
+            ));
+        }
+        if !(0.0..1.0).contains(&self.near_goal_far_slope) {
+            return bad(format!(
+                "near_goal_far_slope must be in [0, 1); got {}",
+                self.near_goal_far_slope
+            ));
+        }
+        if self.near_goal_scale > 0.0 && self.penalty_space != PenaltySpace::Normalised {
+            return bad(
+                "near_goal_scale > 0 needs penalty_space = \"normalised\" (the penalty then \
+                 holds in the warped inputs); with the raw penalty set near_goal_scale = 0"
+                    .into(),
+            );
+        }
         self.adam.validate().map_err(DiscriminatorError::Config)
+    }
+
+    /// Whether input `i` of a 2 dX transition is one that [`Self::near_goal_scale`] warps.
+    fn warps(&self, i: usize) -> bool {
+        self.near_goal_scale > 0.0 && EE_MINUS_GOAL.contains(&(i % DX))
+    }
+
+    /// Input `i` as the critic sees it before the normalisation: `x`, or
+    /// `g(x) = a·x + (1 − a)·c·asinh(x/c)` (c = [`Self::near_goal_scale`],
+    /// a = [`Self::near_goal_far_slope`]) for the inputs it warps.
+    pub fn warp(&self, i: usize, x: f64) -> f64 {
+        if self.warps(i) {
+            let (c, a) = (self.near_goal_scale, self.near_goal_far_slope);
+            a * x + (1.0 - a) * c * (x / c).asinh()
+        } else {
+            x
+        }
+    }
+
+    /// `(g'(x), g''(x))` of [`Self::warp`] `g` at input `i`: `(1, 0)` where it is the identity;
+    /// else, with r = x/c, `g' = a + (1 − a)/√(1 + r²)` and
+    /// `g'' = −(1 − a) r/(c (1 + r²)^{3/2})`.
+    fn warp_derivatives(&self, i: usize, x: f64) -> (f64, f64) {
+        if self.warps(i) {
+            let (c, a) = (self.near_goal_scale, self.near_goal_far_slope);
+            let r = x / c;
+            let q = 1.0 + r * r;
+            (
+                a + (1.0 - a) / q.sqrt(),
+                -(1.0 - a) * r / (c * q * q.sqrt()),
+            )
+        } else {
+            (1.0, 0.0)
+        }
+    }
+
+    /// The rows of `x` (`n × d`) through [`Self::warp`]: what the input normalisation is fitted
+    /// on.
+    pub fn warp_rows(&self, x: MatRef<'_, f64>) -> Mat<f64> {
+        Mat::from_fn(x.nrows(), x.ncols(), |r, c| self.warp(c, x[(r, c)]))
     }
 
     /// Layer sizes `[d_in, hidden..., 1]`.
@@ -325,6 +402,12 @@ impl Discriminator {
         if d_in == 0 {
             return Err(DiscriminatorError::Config("input dimension is 0".into()));
         }
+        if config.near_goal_scale > 0.0 && d_in != 2 * DX {
+            return Err(DiscriminatorError::Config(format!(
+                "near_goal_scale warps transitions [s; s'] of {} inputs; this critic has {d_in}",
+                2 * DX
+            )));
+        }
         norm.validate(d_in).map_err(DiscriminatorError::Shape)?;
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let net = Mlp::glorot(&config.sizes(d_in), &mut rng);
@@ -406,14 +489,15 @@ impl Discriminator {
     /// Normalises `x` into the net's input buffer and runs the forward pass.
     fn forward_raw(&self, x: &[f64], mlp_ws: &mut MlpWorkspace) -> f64 {
         assert_eq!(x.len(), self.input_dim(), "input length");
-        for (((u, &xi), &m), &s) in mlp_ws
+        for (i, (((u, &xi), &m), &s)) in mlp_ws
             .u
             .iter_mut()
             .zip(x)
             .zip(&self.norm.mean)
             .zip(&self.norm.std)
+            .enumerate()
         {
-            *u = (xi - m) / s;
+            *u = (self.config.warp(i, xi) - m) / s;
         }
         self.net.forward(mlp_ws)
     }
@@ -424,7 +508,8 @@ impl Discriminator {
         self.forward_raw(x, &mut ws.mlp)
     }
 
-    /// `D(x)`, and `∇ₓD(x) = diag(1/σ) ∇_u net` into `grad` (length `d`).
+    /// `D(x)`, and `∇ₓD(x) = diag(g'/σ) ∇_u net` into `grad` (length `d`; g' = 1 but for the
+    /// inputs [`DiscriminatorConfig::near_goal_scale`] warps).
     pub fn value_gradient(&self, x: &[f64], ws: &mut Workspace, grad: &mut [f64]) -> f64 {
         self.check_ws(ws);
         assert_eq!(grad.len(), self.input_dim(), "gradient length");
@@ -433,11 +518,17 @@ impl Discriminator {
         for ((g, &gu), &s) in grad.iter_mut().zip(&ws.mlp.grad_u).zip(&self.norm.std) {
             *g = gu / s;
         }
+        if self.config.near_goal_scale > 0.0 {
+            for (i, g) in grad.iter_mut().enumerate() {
+                *g *= self.config.warp_derivatives(i, x[i]).0;
+            }
+        }
         y
     }
 
     /// `D(x)`, `∇ₓD(x)` into `grad` (`d`) and the exact
-    /// `∇²ₓD(x) = diag(1/σ) ∇²_u net diag(1/σ)` into `hess` (`d × d`, symmetric): what the
+    /// `∇²ₓD(x) = diag(1/σ) ∇²_u net diag(1/σ)` (with the chain rule through
+    /// [`DiscriminatorConfig::warp`] where it warps) into `hess` (`d × d`, symmetric): what the
     /// second-order expansion of the composite cost needs (docs/design.md §1.3 step 5).
     pub fn value_gradient_hessian(
         &self,
@@ -457,6 +548,21 @@ impl Discriminator {
         for p in 0..d {
             for q in 0..d {
                 hess[(p, q)] = ws.hess_u[p * d + q] / (s[p] * s[q]);
+            }
+        }
+        if self.config.near_goal_scale > 0.0 {
+            // x ↦ g(x) elementwise: ∇²ₓD = diag(g') H diag(g') + diag(∂D/∂g ⊙ g'').
+            // d = 2 dX here (checked at construction).
+            let mut g1 = [1.0; 2 * DX];
+            let mut g2 = [0.0; 2 * DX];
+            for p in 0..d {
+                (g1[p], g2[p]) = self.config.warp_derivatives(p, x[p]);
+            }
+            for p in 0..d {
+                for q in 0..d {
+                    hess[(p, q)] *= g1[p] * g1[q];
+                }
+                hess[(p, p)] += ws.mlp.grad_u[p] / s[p] * g2[p];
             }
         }
         y

@@ -47,6 +47,10 @@ struct Case {
     normalise: bool,
     seed: u64,
     space: PenaltySpace,
+    /// `near_goal_scale` (m; 0 = off).
+    warp: f64,
+    /// `near_goal_far_slope`.
+    far_slope: f64,
 }
 
 /// Every case once per gradient-penalty space.
@@ -91,6 +95,8 @@ fn cases() -> Vec<Case> {
                 normalise,
                 seed: 100 + seed as u64,
                 space: PenaltySpace::Raw,
+                warp: 0.0,
+                far_slope: 0.0,
             });
         }
     }
@@ -115,6 +121,8 @@ fn random_critic(c: &Case) -> (Discriminator, Vec<Vec<f64>>) {
         hidden: c.hidden.clone(),
         seed: c.seed,
         penalty_space: c.space,
+        near_goal_scale: c.warp,
+        near_goal_far_slope: c.far_slope,
         ..Default::default()
     };
     let mut disc = Discriminator::new(c.d, config, norm.clone()).unwrap();
@@ -137,10 +145,32 @@ fn random_critic(c: &Case) -> (Discriminator, Vec<Vec<f64>>) {
     (disc, xs)
 }
 
+/// [`cases`], plus the 2 dX-input ones again with the end-effector inputs warped
+/// (`near_goal_scale` 0.3, on the scale of the inputs' spread so that g'' matters), without
+/// and with a far slope.
+fn cases_with_warp() -> Vec<Case> {
+    let mut v = cases();
+    let warped: Vec<Case> = v
+        .iter()
+        .filter(|c| c.d == 2 * DX)
+        .flat_map(|c| {
+            [0.0, 0.2].map(|far_slope| Case {
+                space: PenaltySpace::Normalised,
+                warp: 0.3,
+                far_slope,
+                ..c.clone()
+            })
+        })
+        .collect();
+    assert!(!warped.is_empty());
+    v.extend(warped);
+    v
+}
+
 #[test]
 fn discriminator_input_gradient_matches_finite_differences() {
     let mut worst: f64 = 0.0;
-    for c in cases() {
+    for c in cases_with_warp() {
         let (disc, xs) = random_critic(&c);
         let mut ws = disc.workspace();
         for x in &xs {
@@ -174,7 +204,7 @@ fn discriminator_input_gradient_matches_finite_differences() {
 #[test]
 fn discriminator_input_hessian_matches_finite_differences() {
     let mut worst: f64 = 0.0;
-    for c in cases() {
+    for c in cases_with_warp() {
         let (disc, xs) = random_critic(&c);
         let mut ws = disc.workspace();
         for x in &xs {
