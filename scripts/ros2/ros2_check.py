@@ -85,6 +85,29 @@ def spawn(args, log):
     return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=open(log, "w"), cwd=ROOT)
 
 
+def stop(procs, tmp, logs):
+    """Terminates `procs` (kills what does not end within 10 s); prints `logs` if a check failed."""
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+    if failures:
+        for log in logs:
+            print(f"--- {log}\n" + (tmp / log).read_text()[-3000:])
+
+
+def controller_and_learner(tmp, prefix, tag):
+    """rt-controller with `ctl{tag}.toml` and learner serve with `learner.toml` on `prefix`."""
+    ctl = spawn([str(BIN / "rt-controller"), "run", "--config", str(tmp / f"ctl{tag}.toml"), "--prefix", prefix,
+                 "--json"], tmp / f"ctl{tag}.log")
+    lrn = spawn([str(BIN / "learner"), "serve", "--config", str(tmp / "learner.toml"), "--prefix", prefix,
+                 "--out", str(tmp / f"out{tag}")], tmp / f"learner{tag}.log")
+    return ctl, lrn
+
+
 def take_for(reader, seconds):
     out, t0 = [], time.monotonic()
     while time.monotonic() - t0 < seconds:
@@ -155,10 +178,7 @@ def part2(dp, tmp):
     (tmp / "learner.toml").write_text("samples = 2\nseed = 1\niterations = 2\n[task]\nhorizon = 20\n")
     sim = spawn([str(BIN / "hil-sim"), "ros2-sim", "--domain-id", str(DOMAIN), "--time-compression", "1"],
                 tmp / "sim2.log")
-    ctl = spawn([str(BIN / "rt-controller"), "run", "--config", str(tmp / "ctl.toml"), "--prefix", prefix,
-                 "--json"], tmp / "ctl.log")
-    lrn = spawn([str(BIN / "learner"), "serve", "--config", str(tmp / "learner.toml"), "--prefix", prefix,
-                 "--out", str(tmp / "out")], tmp / "learner.log")
+    ctl, lrn = controller_and_learner(tmp, prefix, "")
     try:
         js_r = DataReader(dp, Topic(dp, "rt/joint_states", m.JointState), qos=QOS)
         cmd_r = DataReader(dp, Topic(dp, "rt/forward_position_controller/commands", m.Float64MultiArray), qos=QOS)
@@ -200,16 +220,7 @@ def part2(dp, tmp):
         check(bool(near), f"the last command {[round(v, 3) for v in last[:3]]} is near the arm "
                           f"{[round(q.get(n, float('nan')), 3) for n in UR_JOINTS[:3]]}")
     finally:
-        for p in (lrn, ctl, sim):
-            p.terminate()
-        for p in (lrn, ctl, sim):
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        if failures:
-            for log in ("ctl.log", "learner.log", "sim2.log"):
-                print(f"--- {log}\n" + (tmp / log).read_text()[-3000:])
+        stop((lrn, ctl, sim), tmp, ("ctl.log", "learner.log", "sim2.log"))
 
 
 UR5_DH = dict(d=[0.089159, 0, 0, 0.10915, 0.09465, 0.0823], a=[0, -0.425, -0.39225, 0, 0, 0],
@@ -243,10 +254,7 @@ def part3(dp, tmp):
     js_r = reader(None, m.JointState)
     sim = spawn([str(BIN / "hil-sim"), "serve", "--config", str(tmp / "sim3.toml"), "--prefix", prefix],
                 tmp / "sim3.log")
-    ctl = spawn([str(BIN / "rt-controller"), "run", "--config", str(tmp / "ctl3.toml"), "--prefix", prefix,
-                 "--json"], tmp / "ctl3.log")
-    lrn = spawn([str(BIN / "learner"), "serve", "--config", str(tmp / "learner.toml"), "--prefix", prefix,
-                 "--out", str(tmp / "out3")], tmp / "learner3.log")
+    ctl, lrn = controller_and_learner(tmp, prefix, "3")
     try:
         goals, ees, eps, tvs, jss, t0 = [], [], [], [], [], time.monotonic()
         # Until the learner's second table is shown and two more episodes after it, and 20
@@ -289,16 +297,7 @@ def part3(dp, tmp):
                   for j in jss),
               "joint states: six UR joints in order, the wrist at its locked angles")
     finally:
-        for p in (lrn, ctl, sim):
-            p.terminate()
-        for p in (lrn, ctl, sim):
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        if failures:
-            for log in ("ctl3.log", "learner3.log", "sim3.log"):
-                print(f"--- {log}\n" + (tmp / log).read_text()[-3000:])
+        stop((lrn, ctl, sim), tmp, ("ctl3.log", "learner3.log", "sim3.log"))
 
 
 def main():

@@ -12,10 +12,11 @@
 use std::time::{Duration, Instant};
 
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, reaching_table, scratch, spawn_sim_and_controller,
-    unique_prefix, write_config, TestLearner,
+    cleanup_dead_nodes, reaching_table, scratch, spawn_sim_and_controller, unique_prefix,
+    write_config, TestLearner,
 };
-use ur5_ros2::{JointState, Network, Node, PointStamped, TopicQos, UInt64};
+use rt_controller::config::UR_JOINTS;
+use ur5_ros2::{JointState, Message, Network, Node, PointStamped, Reader, TopicQos, UInt64};
 use ur5_shared::layout::EE_MINUS_GOAL;
 
 /// ur5_ros2's own tests use 201 and 202, the ros2 backend's 120–125.
@@ -25,14 +26,6 @@ const LONG: Duration = Duration::from_secs(120);
 /// A goal other than the task's default, so that the view cannot show the default by chance.
 const GOAL: [f64; 3] = [-0.40, -0.20, 0.30];
 const Q_GOAL: [f64; 3] = [0.3, -1.6, 2.0];
-const UR_JOINTS: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
 
 #[test]
 fn live_view_shows_goal_end_effector_episode_and_table_version() {
@@ -43,22 +36,14 @@ fn live_view_shows_goal_end_effector_episode_and_table_version() {
     // The readers exist before the controller, so they are matched early; what is published
     // before matching is lost (volatile), which the waits below allow.
     let node = Node::new(DOMAIN, Network::Loopback).expect("DDS node");
-    let qos = TopicQos::reliable(100);
-    let mut goal_r = node
-        .reader::<PointStamped>(&format!("{ns}/goal"), qos)
-        .unwrap();
-    let mut ee_r = node
-        .reader::<PointStamped>(&format!("{ns}/end_effector"), qos)
-        .unwrap();
-    let mut episode_r = node
-        .reader::<UInt64>(&format!("{ns}/episode"), qos)
-        .unwrap();
-    let mut version_r = node
-        .reader::<UInt64>(&format!("{ns}/table_version"), qos)
-        .unwrap();
-    let mut js_r = node
-        .reader::<JointState>(&format!("{ns}/joint_states"), qos)
-        .unwrap();
+    fn reader<M: Message + 'static>(node: &Node, topic: String) -> Reader<M> {
+        node.reader(&topic, TopicQos::reliable(100)).unwrap()
+    }
+    let mut goal_r = reader::<PointStamped>(&node, format!("{ns}/goal"));
+    let mut ee_r = reader::<PointStamped>(&node, format!("{ns}/end_effector"));
+    let mut episode_r = reader::<UInt64>(&node, format!("{ns}/episode"));
+    let mut version_r = reader::<UInt64>(&node, format!("{ns}/table_version"));
+    let mut js_r = reader::<JointState>(&node, format!("{ns}/joint_states"));
 
     let sim_cfg = write_config(
         &dir,
@@ -125,11 +110,7 @@ fn live_view_shows_goal_end_effector_episode_and_table_version() {
         );
         std::thread::sleep(Duration::from_millis(2));
     }
-    ctl.signal(libc::SIGTERM);
-    let (code, out) = ctl.wait(LONG);
-    let log = ctl.log();
-    assert_eq!(code, Some(0), "{log}");
-    let j = json_summary(&out, &log);
+    let (j, _) = ctl.terminate_ok(LONG);
     learner.poll();
 
     // The goal: the configured one, in ur_description's base frame.
