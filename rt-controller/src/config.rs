@@ -332,6 +332,141 @@ impl Default for Ros2Config {
     }
 }
 
+/// The live view (`[live_view]`; docs/design.md §3.13): what the controller does, published on
+/// ROS 2 topics for rviz2 or Foxglove, whatever the arm backend. Off by default. The loop hands
+/// at most `rate_hz` entries a second to a DDS thread of its own (no allocation, no system call
+/// in the loop; dropped, never waited for, when that thread falls behind).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LiveViewConfig {
+    /// Publish the live view.
+    pub enabled: bool,
+    /// ROS_DOMAIN_ID (0–232).
+    pub domain_id: u16,
+    /// `loopback` (viewers on this machine; nothing leaves it) or `all` (DDS's multicast
+    /// discovery on every interface).
+    pub network: ur5_ros2::Network,
+    /// The topics' namespace: `{namespace}/goal` and `{namespace}/end_effector`
+    /// (`geometry_msgs/msg/PointStamped`), `{namespace}/episode` and
+    /// `{namespace}/table_version` (`std_msgs/msg/UInt64`).
+    pub namespace: String,
+    /// The frame of the points: ur_description's `base`, the UR controller's base frame, which
+    /// is this project's arm base frame (`base_link` is it turned by π about z).
+    pub frame_id: String,
+    /// Entries per second at most (wall clock): one per control tick below that rate, else the
+    /// ticks that come `1 / rate_hz` s after the previous entry.
+    pub rate_hz: f64,
+    /// QoS of every live-view topic (reliable matches reliable and best-effort viewers).
+    pub qos: ur5_ros2::TopicQos,
+    /// Also publish the arm's six joints on `joint_states_topic` (`sensor_msgs/msg/JointState`,
+    /// the wrist at `arm.ur.wrist_q`), for `robot_state_publisher` and ur_description's model
+    /// when no driver publishes them (not with the `ros2` arm on the same domain and topic).
+    pub joint_states: bool,
+    pub joint_states_topic: String,
+    /// The joint names of `joint_states_topic`, shoulder pan to wrist 3 (ur_description's, with
+    /// an empty `tf_prefix`).
+    pub joint_names: [String; 6],
+}
+
+impl Default for LiveViewConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            domain_id: 0,
+            network: ur5_ros2::Network::Loopback,
+            namespace: "/rt_controller".into(),
+            frame_id: "base".into(),
+            rate_hz: 30.0,
+            qos: ur5_ros2::TopicQos::reliable(10),
+            joint_states: false,
+            joint_states_topic: "/joint_states".into(),
+            joint_names: UR_JOINTS.map(String::from),
+        }
+    }
+}
+
+fn is_live_view_default(c: &LiveViewConfig) -> bool {
+    *c == LiveViewConfig::default()
+}
+
+/// A ROS topic name: not empty after its leading slash, no whitespace.
+fn check_topic(key: &'static str, topic: &str) -> Result<(), ConfigError> {
+    if topic.trim_start_matches('/').is_empty() || topic.contains(char::is_whitespace) {
+        return Err(ConfigError::Invalid {
+            key,
+            why: format!("`{topic}` is not a ROS topic name"),
+        });
+    }
+    Ok(())
+}
+
+/// ROS_DOMAIN_ID's range.
+fn check_domain(key: &'static str, domain: u16) -> Result<(), ConfigError> {
+    if domain > 232 {
+        return Err(ConfigError::Invalid {
+            key,
+            why: format!("{domain} must be in 0..=232 (ROS_DOMAIN_ID)"),
+        });
+    }
+    Ok(())
+}
+
+/// Six different, non-empty joint names.
+fn check_joint_names(key: &'static str, joints: &[String; 6]) -> Result<(), ConfigError> {
+    if joints.iter().any(String::is_empty) || (1..6).any(|i| joints[..i].contains(&joints[i])) {
+        return Err(ConfigError::Invalid {
+            key,
+            why: format!("{joints:?} must be six different joint names"),
+        });
+    }
+    Ok(())
+}
+
+impl LiveViewConfig {
+    /// Checks the section when it is enabled; `arm`: the ros2 arm's driver publishes its own
+    /// joint states.
+    fn validate(&self, arm: &ArmConfig) -> Result<(), ConfigError> {
+        if !self.enabled {
+            return Ok(());
+        }
+        let bad = |key, why: String| Err(ConfigError::Invalid { key, why });
+        check_domain("live_view.domain_id", self.domain_id)?;
+        check_topic("live_view.namespace", &format!("{}/goal", self.namespace))?;
+        check_topic("live_view.joint_states_topic", &self.joint_states_topic)?;
+        check_joint_names("live_view.joint_names", &self.joint_names)?;
+        if self.frame_id.is_empty() || self.frame_id.contains(char::is_whitespace) {
+            return bad(
+                "live_view.frame_id",
+                format!("`{}` is not a frame name", self.frame_id),
+            );
+        }
+        if !(self.rate_hz > 0.0 && self.rate_hz <= 1000.0) {
+            return bad(
+                "live_view.rate_hz",
+                format!("{} must be in (0, 1000] Hz", self.rate_hz),
+            );
+        }
+        if self.qos.depth == 0 {
+            return bad("live_view.qos.depth", "must be >= 1".into());
+        }
+        if self.joint_states
+            && arm.backend == ArmKind::Ros2
+            && arm.ros2.domain_id == self.domain_id
+            && arm.ros2.joint_states_topic.trim_start_matches('/')
+                == self.joint_states_topic.trim_start_matches('/')
+        {
+            return bad(
+                "live_view.joint_states",
+                format!(
+                    "the driver publishes {} on ROS domain {} (arm.backend = \"ros2\"): a second publisher would make the model jump between them; set joint_states = false",
+                    self.joint_states_topic, self.domain_id
+                ),
+            );
+        }
+        Ok(())
+    }
+}
+
 /// The arm backend (`[arm]`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
@@ -363,23 +498,14 @@ impl ArmConfig {
             ArmKind::Ur => {}
             ArmKind::Ros2 => {
                 let r = &self.ros2;
-                if r.domain_id > 232 {
-                    return bad(
-                        "arm.ros2.domain_id",
-                        format!("{} must be in 0..=232 (ROS_DOMAIN_ID)", r.domain_id),
-                    );
-                }
+                check_domain("arm.ros2.domain_id", r.domain_id)?;
                 for (key, topic) in [
                     ("arm.ros2.joint_states_topic", &r.joint_states_topic),
                     ("arm.ros2.command_topic", &r.command_topic),
                     ("arm.ros2.robot_mode_topic", &r.robot_mode_topic),
                     ("arm.ros2.safety_mode_topic", &r.safety_mode_topic),
                 ] {
-                    if topic.trim_start_matches('/').is_empty()
-                        || topic.contains(char::is_whitespace)
-                    {
-                        return bad(key, format!("`{topic}` is not a ROS topic name"));
-                    }
+                    check_topic(key, topic)?;
                 }
                 for (key, q) in [
                     ("arm.ros2.joint_states_qos.depth", r.joint_states_qos),
@@ -390,14 +516,7 @@ impl ArmConfig {
                         return bad(key, "must be >= 1".into());
                     }
                 }
-                if r.joints.iter().any(String::is_empty)
-                    || (1..6).any(|i| r.joints[..i].contains(&r.joints[i]))
-                {
-                    return bad(
-                        "arm.ros2.joints",
-                        format!("{:?} must be six different joint names", r.joints),
-                    );
-                }
+                check_joint_names("arm.ros2.joints", &r.joints)?;
                 if !(r.joint_state_rate_hz >= 10.0 && r.joint_state_rate_hz <= 10_000.0) {
                     return bad(
                         "arm.ros2.joint_state_rate_hz",
@@ -568,6 +687,10 @@ pub struct ControllerConfig {
     pub episode_report: bool,
     /// How often a background thread looks for dead peer processes (s); 0 = never.
     pub monitor_period_s: f64,
+    /// The live view on ROS 2 topics (off by default). Not serialised when it is the default,
+    /// so configurations without it print and hash as before.
+    #[serde(skip_serializing_if = "is_live_view_default")]
+    pub live_view: LiveViewConfig,
 }
 
 impl Default for ControllerConfig {
@@ -595,6 +718,7 @@ impl Default for ControllerConfig {
             wait_for_learner: true,
             episode_report: true,
             monitor_period_s: 0.2,
+            live_view: LiveViewConfig::default(),
         }
     }
 }
@@ -688,6 +812,7 @@ impl ControllerConfig {
             );
         }
         self.arm.validate(self.action_mode)?;
+        self.live_view.validate(&self.arm)?;
         if self.arm.backend == ArmKind::Ros2 && self.mode == Mode::Lockstep {
             return bad(
                 "mode",
@@ -866,6 +991,52 @@ mod tests {
             assert!(text.contains(key), "{key} in\n{text}");
         }
         assert_eq!(toml::from_str::<ControllerConfig>(&text).unwrap(), c);
+    }
+
+    #[test]
+    fn the_live_view_is_off_by_default_and_checked_when_on() {
+        let c = ControllerConfig::default();
+        assert!(!c.live_view.enabled);
+        // Off: not printed, so configurations print and hash as before.
+        assert!(!toml::to_string(&c).unwrap().contains("live_view"));
+        let on: ControllerConfig = toml::from_str(
+            "[live_view]
+enabled = true
+domain_id = 3",
+        )
+        .unwrap();
+        on.validate().unwrap();
+        assert_eq!(on.live_view.namespace, "/rt_controller");
+        assert_eq!(on.live_view.frame_id, "base");
+        // Off, its values are not checked.
+        let off: ControllerConfig = toml::from_str(
+            "[live_view]
+domain_id = 300",
+        )
+        .unwrap();
+        off.validate().unwrap();
+        let ros2 = "mode = \"real_time\"\npacing = \"arm\"\n[arm]\nbackend = \"ros2\"\n";
+        for (text, key) in [
+            ("[live_view]\nenabled = true\ndomain_id = 233".to_owned(), "live_view.domain_id"),
+            ("[live_view]\nenabled = true\nrate_hz = 0.0".to_owned(), "live_view.rate_hz"),
+            ("[live_view]\nenabled = true\nnamespace = \"a b\"".to_owned(), "live_view.namespace"),
+            ("[live_view]\nenabled = true\nframe_id = \"\"".to_owned(), "live_view.frame_id"),
+            ("[live_view]\nenabled = true\n[live_view.qos]\nreliability = \"reliable\"\ndepth = 0".to_owned(), "live_view.qos.depth"),
+            // The ros2 arm's driver publishes /joint_states on the same domain.
+            (format!("{ros2}[live_view]\nenabled = true\njoint_states = true"), "live_view.joint_states"),
+        ] {
+            let c: ControllerConfig = toml::from_str(&text).unwrap();
+            match c.validate() {
+                Err(ConfigError::Invalid { key: k, .. }) => assert_eq!(k, key, "{text}"),
+                other => panic!("{text}: {other:?}"),
+            }
+        }
+        // On another topic or domain it may.
+        let c: ControllerConfig = toml::from_str(&format!(
+            "{ros2}[live_view]\nenabled = true\njoint_states = true\ndomain_id = 1"
+        ))
+        .unwrap();
+        c.validate().unwrap();
     }
 
     #[test]

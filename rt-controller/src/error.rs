@@ -23,6 +23,9 @@ pub enum SetupError {
     /// The `ros2` arm's setup failed.
     #[error(transparent)]
     Ros2(#[from] Ros2SetupError),
+    /// The live view (`[live_view]`) could not start.
+    #[error(transparent)]
+    LiveView(#[from] LiveViewError),
     /// Another controller runs on the prefix.
     #[error(transparent)]
     Role(#[from] ur5_shared::services::RoleLockError),
@@ -127,6 +130,20 @@ impl StreamFault {
             StreamFault::ClockFrozen { .. } => "the robot's clock (RTDE timestamp) is frozen (see arm.stream_fault)",
         }
     }
+}
+
+/// A live view (`[live_view]`, [`crate::live_view`]) that cannot start: DDS (the participant,
+/// a topic, a writer) or its thread.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveViewError {
+    #[error("cannot start the live view ([live_view]) on ROS domain {domain}: {source}")]
+    Dds {
+        domain: u16,
+        #[source]
+        source: ur5_ros2::DdsError,
+    },
+    #[error("cannot start the live view's DDS thread or its wake-up: {0}")]
+    Thread(#[source] std::io::Error),
 }
 
 /// Why the `ros2` arm could not be set up; each message names the topic and what to start.

@@ -11,7 +11,9 @@
 //!   [`arm`]: the arm backends the loop is generic over (iceoryx2); [`ports`]: the node and the
 //!   learner's iceoryx2 ports; [`rt`]: mlockall / SCHED_FIFO / pinning; [`monitor`]:
 //!   dead-peer detection off the loop; [`latency`]: the period wait's wake-up lateness alone
-//!   (`rt-controller bench --real-time`);
+//!   (`rt-controller bench --real-time`); [`live_view`]: goal, end-effector point, episode and
+//!   table version on ROS 2 topics (`[live_view]`), through a DDS thread (`dds_thread`, shared
+//!   with the `ros2` arm);
 //! - `testkit` (cargo feature `testkit`, not part of the production API): in-process stand-ins
 //!   for the arm and tables, for the integration tests and the binary's `bench` subcommand.
 //!
@@ -24,8 +26,10 @@
 pub mod arm;
 pub mod config;
 pub mod controller;
+pub(crate) mod dds_thread;
 pub mod error;
 pub mod latency;
+pub mod live_view;
 pub mod monitor;
 pub mod noise;
 pub mod ports;

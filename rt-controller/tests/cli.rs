@@ -105,6 +105,9 @@ fn print_config_lists_every_option_and_parses_back() {
         "[polling]",
         "stale_state_timeout_s",
         "noisy_episodes",
+        "[arm.ros2]",
+        "[live_view]",
+        "[live_view.qos]",
     ] {
         assert!(text.contains(key), "missing {key}:\n{text}");
     }

@@ -105,6 +105,16 @@ impl Proc {
     pub fn running(&mut self) -> bool {
         self.0.running()
     }
+
+    /// SIGTERM, then waits up to `timeout` for exit code 0 (panics with the log otherwise);
+    /// returns its `--json` summary and log.
+    pub fn terminate_ok(&mut self, timeout: Duration) -> (serde_json::Value, String) {
+        self.signal(libc::SIGTERM);
+        let (code, out) = self.wait(timeout);
+        let log = self.log();
+        assert_eq!(code, Some(0), "{} log:\n{log}", self.name());
+        (json_summary(&out, &log), log)
+    }
 }
 
 /// The last line of `stdout` parsed as JSON (the `--json` summary).

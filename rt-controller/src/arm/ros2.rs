@@ -5,19 +5,17 @@
 //! DDS (RustDDS) runs on a thread of its own: it decodes joint states into fixed-size samples in
 //! the controller's joint order and hands them to the loop through a preallocated lock-free
 //! queue; the loop hands its targets back through another and wakes the thread with an
-//! `eventfd` write. The loop thread neither allocates nor locks.
+//! `eventfd` write ([`crate::dds_thread`], shared with the live view). The loop thread neither
+//! allocates nor locks.
 //!
 //! As in the `ur` arm, the joint states clock the loop: one [`ArmState`] per control period of
 //! their header stamps; resets are quintic moves published at the joint-state rate; a goal is
 //! published once and the forward controller holds it ([`crate::arm::servo`]).
 
-use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
-use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
 use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crossbeam_queue::ArrayQueue;
 use serde::Serialize;
 use ur5_ros2::{
     Float64MultiArray, JointState, Message, MultiArrayLayout, Node, Reader, RobotMode, SafetyMode,
@@ -33,6 +31,7 @@ use crate::arm::servo::{arm_state, state_due, Servo};
 use crate::arm::ur::check_joints;
 use crate::arm::{ArmBackend, ArmIoError, ArmReport};
 use crate::config::{Ros2Config, ServoTarget, UrConfig};
+use crate::dds_thread::{DdsThread, DdsWork, Handoff, Wake};
 use crate::error::{Ros2SetupError, SetupError, StreamFault};
 use crate::stats::{Histogram, Percentiles};
 
@@ -57,38 +56,28 @@ struct JointSample {
 
 /// What the DDS thread and the loop share: the two queues, the wake-up and the modes.
 struct Shared {
-    states: ArrayQueue<JointSample>,
-    commands: ArrayQueue<Joints6>,
-    wake: OwnedFd,
-    stop: AtomicBool,
+    states: Handoff<JointSample>,
+    commands: Handoff<Joints6>,
+    wake: Arc<Wake>,
     robot_mode: AtomicI32,
     safety_mode: AtomicI32,
     // DDS thread counters.
     received: AtomicU64,
     unmatched: AtomicU64,
-    dropped_states: AtomicU64,
     published: AtomicU64,
     publish_errors: AtomicU64,
 }
 
 impl Shared {
     fn new() -> std::io::Result<Self> {
-        // SAFETY: eventfd returns a new descriptor or -1.
-        let fd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
-        if fd < 0 {
-            return Err(std::io::Error::last_os_error());
-        }
         Ok(Self {
-            states: ArrayQueue::new(STATE_QUEUE),
-            commands: ArrayQueue::new(COMMAND_QUEUE),
-            // SAFETY: fd is a fresh descriptor we own.
-            wake: unsafe { OwnedFd::from_raw_fd(fd) },
-            stop: AtomicBool::new(false),
+            states: Handoff::new(STATE_QUEUE),
+            commands: Handoff::new(COMMAND_QUEUE),
+            wake: Arc::new(Wake::new()?),
             robot_mode: AtomicI32::new(UNKNOWN_MODE),
             safety_mode: AtomicI32::new(UNKNOWN_MODE),
             received: AtomicU64::new(0),
             unmatched: AtomicU64::new(0),
-            dropped_states: AtomicU64::new(0),
             published: AtomicU64::new(0),
             publish_errors: AtomicU64::new(0),
         })
@@ -96,20 +85,8 @@ impl Shared {
 
     /// Queues a target and wakes the DDS thread (one `write` on the eventfd; no allocation).
     fn command(&self, q: Joints6) {
-        let _ = self.commands.force_push(q);
-        self.notify();
-    }
-
-    fn notify(&self) {
-        let one = 1u64.to_ne_bytes();
-        // SAFETY: writes 8 bytes from a live buffer to our eventfd.
-        let _ = unsafe { libc::write(self.wake.as_raw_fd(), one.as_ptr().cast(), 8) };
-    }
-
-    fn drain_wake(&self) {
-        let mut buf = [0u8; 8];
-        // SAFETY: reads at most 8 bytes into a live buffer from our non-blocking eventfd.
-        let _ = unsafe { libc::read(self.wake.as_raw_fd(), buf.as_mut_ptr().cast(), 8) };
+        self.commands.push(q);
+        self.wake.notify();
     }
 }
 
@@ -201,11 +178,7 @@ impl Endpoints {
         while let Some(m) = self.joint_states.take() {
             shared.received.fetch_add(1, Ordering::Relaxed);
             match self.map.sample(&m) {
-                Ok(s) => {
-                    if shared.states.force_push(s).is_some() {
-                        shared.dropped_states.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
+                Ok(s) => shared.states.push(s),
                 Err(_) => {
                     shared.unmatched.fetch_add(1, Ordering::Relaxed);
                 }
@@ -243,32 +216,30 @@ impl Endpoints {
     }
 }
 
-/// The DDS thread: waits (epoll through mio 1) for any reader or the loop's wake-up, then
-/// moves messages both ways; every 20 ms regardless.
-fn dds_thread(mut ep: Endpoints, shared: Arc<Shared>) {
-    use rustdds::mio1::unix::SourceFd;
-    use rustdds::mio1::{Events, Interest, Poll, Token};
-    let mut poll = Poll::new().expect("mio poll");
-    let r = poll.registry();
-    let _ = r.register(ep.joint_states.source(), Token(0), Interest::READABLE);
-    if let Some(rd) = ep.robot_mode.as_mut() {
-        let _ = r.register(rd.source(), Token(1), Interest::READABLE);
+/// The DDS thread's work: moves messages both ways after every wake-up (a reader's data or
+/// the loop's target), every 20 ms regardless ([`DdsThread`]).
+struct ArmDds {
+    ep: Endpoints,
+    shared: Arc<Shared>,
+    msg: Float64MultiArray,
+}
+
+impl DdsWork for ArmDds {
+    fn register(&mut self, r: &rustdds::mio1::Registry) {
+        use rustdds::mio1::{Interest, Token};
+        let ep = &mut self.ep;
+        let _ = r.register(ep.joint_states.source(), Token(0), Interest::READABLE);
+        if let Some(rd) = ep.robot_mode.as_mut() {
+            let _ = r.register(rd.source(), Token(1), Interest::READABLE);
+        }
+        if let Some(rd) = ep.safety_mode.as_mut() {
+            let _ = r.register(rd.source(), Token(2), Interest::READABLE);
+        }
     }
-    if let Some(rd) = ep.safety_mode.as_mut() {
-        let _ = r.register(rd.source(), Token(2), Interest::READABLE);
-    }
-    let fd = shared.wake.as_raw_fd();
-    let _ = r.register(&mut SourceFd(&fd), Token(3), Interest::READABLE);
-    let mut events = Events::with_capacity(16);
-    let mut msg = Float64MultiArray {
-        layout: MultiArrayLayout::default(),
-        data: Vec::with_capacity(6),
-    };
-    while !shared.stop.load(Ordering::Relaxed) {
-        let _ = poll.poll(&mut events, Some(Duration::from_millis(20)));
-        shared.drain_wake();
-        ep.publish(&shared, &mut msg);
-        ep.pump(&shared);
+
+    fn step(&mut self) {
+        self.ep.publish(&self.shared, &mut self.msg);
+        self.ep.pump(&self.shared);
     }
 }
 
@@ -345,7 +316,8 @@ pub struct Ros2Arm {
     shared: Arc<Shared>,
     endpoints: Option<Endpoints>,
     first: Option<JointSample>,
-    thread: Option<JoinHandle<()>>,
+    /// Stopped and joined when the arm drops.
+    thread: Option<DdsThread>,
     live: Option<Live>,
 }
 
@@ -375,7 +347,7 @@ impl Ros2Arm {
         let mut r = Ros2Report {
             joint_states: g(&sh.received),
             unmatched: g(&sh.unmatched),
-            dropped: g(&sh.dropped_states),
+            dropped: sh.states.dropped(),
             commands: g(&sh.published),
             publish_errors: g(&sh.publish_errors),
             ..Ros2Report::default()
@@ -491,12 +463,22 @@ impl ArmBackend for Ros2Arm {
         while let Some(n) = self.shared.states.pop() {
             s = n;
         }
-        let shared = Arc::clone(&self.shared);
+        let work = ArmDds {
+            ep,
+            shared: Arc::clone(&self.shared),
+            msg: Float64MultiArray {
+                layout: MultiArrayLayout::default(),
+                data: Vec::with_capacity(6),
+            },
+        };
         self.thread = Some(
-            std::thread::Builder::new()
-                .name("ros2-dds".into())
-                .spawn(move || dds_thread(ep, shared))
-                .map_err(|e| Ros2SetupError::Thread(e.to_string()))?,
+            DdsThread::spawn(
+                "ros2-dds",
+                Arc::clone(&self.shared.wake),
+                Duration::from_millis(20),
+                work,
+            )
+            .map_err(|e| Ros2SetupError::Thread(e.to_string()))?,
         );
         let here = UrKinematics::six(&[s.q[0], s.q[1], s.q[2]], &self.ur.wrist_q);
         let live = Live {
@@ -602,16 +584,6 @@ impl ArmBackend for Ros2Arm {
 
     fn report(&self) -> Option<ArmReport> {
         Some(ArmReport::Ros2(Ros2Arm::report(self)))
-    }
-}
-
-impl Drop for Ros2Arm {
-    fn drop(&mut self) {
-        self.shared.stop.store(true, Ordering::Relaxed);
-        self.shared.notify();
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
     }
 }
 

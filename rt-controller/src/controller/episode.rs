@@ -178,6 +178,16 @@ impl<A: ArmBackend> Controller<A> {
                 return Some(ExitReason::LearnerStopped);
             }
         }
+        // Between episodes the live view shows the arm too; a tick (and the acknowledged
+        // reset that starts one) offers its own state.
+        let ticks = match self.phase {
+            Phase::Running { .. } => true,
+            Phase::Resetting { seq, .. } => self.latest.last_command_seq >= seq,
+            _ => false,
+        };
+        if freshness == StateFreshness::Fresh && !ticks {
+            self.show(false, self.tables.active_version().unwrap_or(0));
+        }
         match self.phase {
             Phase::Boundary => self.boundary(),
             Phase::NeedTable => {
@@ -466,6 +476,7 @@ impl<A: ArmBackend> Controller<A> {
             },
             Err(_) => self.stats.ipc_errors += 1,
         }
+        self.show(true, version);
         let dt = monotonic_ns() - self.tick_start_ns;
         self.stats.compute.record(dt);
         self.stats.compute_episode.record(dt);
@@ -481,6 +492,21 @@ impl<A: ArmBackend> Controller<A> {
             self.phase = Phase::Boundary;
         } else {
             self.phase = Phase::Running { t: next };
+        }
+    }
+
+    /// Offers the latest state to the live view, if there is one (no allocation, no system
+    /// call; [`crate::live_view::LiveView::offer`]). `tick`: the controller acted on it.
+    #[inline]
+    fn show(&mut self, tick: bool, table_version: u64) {
+        if let Some(live) = self.live.as_mut() {
+            live.offer(
+                monotonic_ns(),
+                &self.latest,
+                tick,
+                self.episode,
+                table_version,
+            );
         }
     }
 

@@ -51,6 +51,7 @@ use ur5_shared::{ArmState, PolicyScratch};
 
 use crate::arm::{ArmBackend, ArmReport, Iceoryx2Arm, Ros2Arm, UrArm};
 use crate::config::{ArmKind, ControllerConfig, Mode};
+use crate::live_view::{LiveView, LiveViewReport};
 use crate::monitor::{LostPeers, PeerMonitor};
 use crate::noise::Noise;
 use crate::ports::{ControllerPorts, SetupError};
@@ -144,6 +145,9 @@ pub struct Summary {
     /// The arm backend's own counters (the `ur` arm: packages, commands, keepalives, robot
     /// stop).
     pub arm: Option<ArmReport>,
+    /// The live view's counters (`[live_view]`), if it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub live_view: Option<LiveViewReport>,
     /// Real-time privileges obtained.
     pub rt: RtOutcome,
     /// Wall time of the loop phase (s).
@@ -204,6 +208,8 @@ pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     no_table_since_ns: u64,
     wall_s: f64,
     monitor: Option<PeerMonitor>,
+    /// `[live_view]`, when enabled ([`crate::live_view`]).
+    live: Option<LiveView>,
 }
 
 impl Controller<Iceoryx2Arm> {
@@ -256,6 +262,16 @@ impl<A: ArmBackend> Controller<A> {
         cfg.validate()?;
         let rt = rt::apply(&cfg.rt);
         let ports = ControllerPorts::create(&cfg.prefix)?;
+        // Before the arm: a live view that cannot start fails the setup at once.
+        let live = if cfg.live_view.enabled {
+            Some(LiveView::start(
+                &cfg.live_view,
+                cfg.task.goal,
+                cfg.arm.ur.wrist_q,
+            )?)
+        } else {
+            None
+        };
         let mut arm = make_arm(&cfg, &ports)?;
         let t0 = monotonic_ns();
         let timeout_ns = (cfg.setup_timeout_s * 1e9) as u64;
@@ -329,6 +345,7 @@ impl<A: ArmBackend> Controller<A> {
                     core::time::Duration::from_secs_f64(cfg.monitor_period_s),
                 )
             }),
+            live,
             arm,
             ports,
             cfg,
@@ -431,6 +448,7 @@ impl<A: ArmBackend> Controller<A> {
             arm_lost: self.arm.lost(),
             stop_message: self.stop_status.as_ref().map(|s| s.text().to_owned()),
             arm: self.arm.report(),
+            live_view: self.live.as_ref().map(LiveView::report),
             rt: self.rt.clone(),
             wall_s: self.wall_s,
         }

@@ -278,11 +278,7 @@ fn run_until_learned(
     let llog = learner.log();
     assert_eq!(code, Some(0), "learner log:\n{llog}");
     let lj = json_summary(&stdout, &llog);
-    ctl.signal(libc::SIGTERM);
-    let (code, cout) = ctl.wait(LONG);
-    let clog = ctl.log();
-    assert_eq!(code, Some(0), "controller log:\n{clog}");
-    let cj = json_summary(&cout, &clog);
+    let (cj, _) = ctl.terminate_ok(LONG);
     monitor.poll();
     (lj, llog, cj)
 }

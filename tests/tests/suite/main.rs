@@ -7,6 +7,7 @@ mod experiment_ipc;
 mod fuzz;
 mod killed_setup;
 mod learning;
+mod live_view;
 mod lost_arm;
 mod peer_status;
 mod policy_run;

@@ -398,6 +398,14 @@ fn real_main() -> Result<i32> {
                 ..c
             };
             print!("{}", toml::to_string(&c)?);
+            // The sections a configuration carries only when they differ from their defaults
+            // (so that other configurations print and hash as before): written out here too.
+            let mut arm = toml::Table::new();
+            arm.insert("ros2".into(), toml::Value::try_from(&c.arm.ros2)?);
+            let mut more = toml::Table::new();
+            more.insert("arm".into(), arm.into());
+            more.insert("live_view".into(), toml::Value::try_from(&c.live_view)?);
+            print!("\n{}", toml::to_string(&more)?);
             Ok(0)
         }
     }
