@@ -816,3 +816,134 @@ fn a_recorded_mdgps_run_replays_bit_for_bit() {
     assert_eq!(r["episodes_used"], 3 * 2 * 4, "{r}");
     std::fs::remove_dir_all(&root).unwrap();
 }
+
+/// A tampered MDGPS checkpoint is refused by `learner::run::resume_mdgps` with a typed error
+/// that names the file and what is wrong, as the other learners' are: a state whose iteration
+/// is not its name's, a non-finite policy parameter, a goal's LQR state without an entry, a
+/// state file with bytes changed, and a malformed critic file.
+#[test]
+fn a_tampered_mdgps_checkpoint_is_refused_naming_file_and_entry() {
+    use imitation::learn::iterate;
+    use learner::io::checkpoint::{load_state, save_state};
+    use learner::run::{resume_mdgps, Checkpoint, RunError};
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let root = tmp("tampered");
+    let good = root.join("good");
+    let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    m.checkpoint(&good, Some(&arm)).unwrap();
+    iterate(&mut m, &arm).unwrap();
+    m.checkpoint(&good, Some(&arm)).unwrap();
+    let state = "iter_001_state.npz";
+    // The untouched folder resumes.
+    assert_eq!(
+        resume_mdgps(cfg.clone(), demos.clone(), &good)
+            .unwrap()
+            .0
+            .iteration(),
+        1
+    );
+    // A copy of the run with its latest state edited by `edit`.
+    let tampered = |name: &str, edit: &dyn Fn(&mut gps::snapshot::Snapshot)| -> RunError {
+        let dir = root.join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in std::fs::read_dir(&good).unwrap() {
+            let f = f.unwrap();
+            std::fs::copy(f.path(), dir.join(f.file_name())).unwrap();
+        }
+        let mut snap = load_state(&dir.join(state)).unwrap();
+        edit(&mut snap);
+        save_state(&dir.join(state), &snap).unwrap();
+        match resume_mdgps(cfg.clone(), demos.clone(), &dir) {
+            Ok(_) => panic!("{name}: resumed"),
+            Err(e) => e,
+        }
+    };
+    let line = |e: &RunError| learner::error::line(e);
+    // Renamed or edited: iteration 3 in the file of iteration 1.
+    let e = tampered("iteration", &|s| s.put_words("mdgps.iteration", &[3]));
+    assert!(
+        matches!(
+            e,
+            RunError::Iteration {
+                at: 3,
+                named: 1,
+                ..
+            }
+        ),
+        "{}",
+        line(&e)
+    );
+    assert!(line(&e).contains(state), "{}", line(&e));
+    // A NaN in the policy's parameters.
+    let e = tampered("nan-policy", &|s| {
+        let (shape, mut data) = s.reals["mdgps.policy"].clone();
+        data[30] = f64::NAN;
+        s.put("mdgps.policy", &shape, &data);
+    });
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Restore { .. }), "{msg}");
+    assert!(
+        msg.contains(state) && msg.contains("mdgps.policy") && msg.contains("parameter 30"),
+        "{msg}"
+    );
+    // A goal's LQR state without its controller's gains.
+    let e = tampered("missing-entry", &|s| {
+        assert!(s.reals.remove("condition1.policy.K").is_some());
+    });
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Restore { .. }), "{msg}");
+    assert!(
+        msg.contains(state) && msg.contains("condition 1") && msg.contains("policy.K"),
+        "{msg}"
+    );
+    // The S-step's Adam moments of another size.
+    let e = tampered("short-moments", &|s| {
+        let key = s
+            .reals
+            .keys()
+            .find(|k| k.starts_with("s_step."))
+            .expect("the S-step's arrays")
+            .clone();
+        let (_, data) = s.reals[&key].clone();
+        s.put(&key, &[data.len() - 1], &data[1..]);
+    });
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Restore { .. }), "{msg}");
+    assert!(msg.contains(state) && msg.contains("s_step."), "{msg}");
+    // Bytes of the state file changed on disk (inside an array's data).
+    let dir = root.join("bytes");
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in std::fs::read_dir(&good).unwrap() {
+        let f = f.unwrap();
+        std::fs::copy(f.path(), dir.join(f.file_name())).unwrap();
+    }
+    let mut bytes = std::fs::read(dir.join(state)).unwrap();
+    let at = bytes.len() / 2;
+    bytes[at] ^= 0x40;
+    std::fs::write(dir.join(state), &bytes).unwrap();
+    let e = resume_mdgps(cfg.clone(), demos.clone(), &dir)
+        .err()
+        .expect("refused");
+    let msg = line(&e);
+    assert!(
+        matches!(e, RunError::Io(_) | RunError::Restore { .. }),
+        "{msg}"
+    );
+    assert!(msg.contains(state), "{msg}");
+    // A malformed critic file.
+    std::fs::copy(good.join(state), dir.join(state)).unwrap();
+    std::fs::write(dir.join("iter_001_critic.json"), "{\"format\": ").unwrap();
+    let e = resume_mdgps(cfg.clone(), demos.clone(), &dir)
+        .err()
+        .expect("refused");
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Critic { .. }), "{msg}");
+    assert!(
+        msg.contains("iter_001_critic.json") && msg.contains("not a valid critic file"),
+        "{msg}"
+    );
+    std::fs::remove_dir_all(&root).ok();
+}
