@@ -8,6 +8,7 @@ mod fuzz;
 mod killed_setup;
 mod learning;
 mod lost_arm;
+mod mdgps_ipc;
 mod peer_status;
 mod policy_run;
 mod processes;
