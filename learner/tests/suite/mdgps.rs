@@ -698,6 +698,34 @@ fn command_inputs(root: &Path) -> (PathBuf, PathBuf) {
     (demos, config)
 }
 
+/// The MDGPS run folders `a` and `b` of `iterations` iterations hold the same checkpoint files
+/// 0 … `iterations` byte for byte and the same `mdgps_log.csv` rows without their timing
+/// columns (t_*_s, the last six).
+fn assert_same_mdgps_run(a: &Path, b: &Path, iterations: usize) {
+    for i in 0..=iterations {
+        for kind in ["critic.json", "state.npz"] {
+            let name = format!("iter_{i:03}_{kind}");
+            assert!(
+                std::fs::read(a.join(&name)).unwrap() == std::fs::read(b.join(&name)).unwrap(),
+                "{name} differs"
+            );
+        }
+    }
+    let rows = |dir: &Path| -> Vec<String> {
+        std::fs::read_to_string(dir.join("mdgps_log.csv"))
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').take(11).collect::<Vec<_>>().join(","))
+            .collect()
+    };
+    assert_eq!(
+        rows(a).len(),
+        iterations + 1,
+        "header and a row per iteration"
+    );
+    assert_eq!(rows(b), rows(a));
+}
+
 /// `learner train --algo mdgps` on a folder of two goals' demonstrations, its folder then put
 /// in the state a kill during the third iteration leaves (checkpoints 0 to 2, the next
 /// checkpoint's critic file cut short, a row cut short) and resumed with `--resume`, ends with
@@ -745,26 +773,7 @@ fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run()
     resume.extend(["--resume".to_string(), killed.display().to_string()]);
     let (ok, err) = learner(&resume.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
-    for i in 0..=4 {
-        for kind in ["critic.json", "state.npz"] {
-            let name = format!("iter_{i:03}_{kind}");
-            assert!(
-                std::fs::read(whole.join(&name)).unwrap()
-                    == std::fs::read(killed.join(&name)).unwrap(),
-                "{name} differs"
-            );
-        }
-    }
-    // Rows without their timing columns (t_*_s, the last six).
-    let rows = |dir: &Path| -> Vec<String> {
-        std::fs::read_to_string(dir.join("mdgps_log.csv"))
-            .unwrap()
-            .lines()
-            .map(|l| l.split(',').take(11).collect::<Vec<_>>().join(","))
-            .collect()
-    };
-    assert_eq!(rows(&whole).len(), 5, "header and 4 rows");
-    assert_eq!(rows(&killed), rows(&whole));
+    assert_same_mdgps_run(&whole, &killed, 4);
     // A complete run resumes to nothing; another seed is refused.
     let (ok, err) = learner(&resume.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
@@ -945,5 +954,53 @@ fn a_tampered_mdgps_checkpoint_is_refused_naming_file_and_entry() {
         msg.contains("iter_001_critic.json") && msg.contains("not a valid critic file"),
         "{msg}"
     );
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// The multi-goal experiment's MDGPS (`multi_goal::run_mdgps`) runs through `learn::Learn` with
+/// checkpoints: its seed folder holds the checkpoint files and CSV rows (timing columns aside)
+/// of `learner::run::train_mdgps` with the same settings bit for bit, its saved policy is that
+/// run's, and the folder resumes (`train_mdgps_resumed`) to more iterations.
+#[test]
+fn the_multi_goal_experiments_mdgps_writes_the_checkpoints_of_train_mdgps() {
+    use learner::experiment::multi_goal::{mdgps_config, run_mdgps, EvalGoal};
+    use learner::experiment::ExperimentConfig;
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let tiny = tiny_config();
+    let cfg = ExperimentConfig {
+        iterations: 2,
+        lqr_gaifo: tiny.lqr_gaifo.clone(),
+        mdgps_policy: tiny.policy.clone(),
+        ..ExperimentConfig::default()
+    };
+    let seed = 9;
+    let root = tmp("multi-goal-ckpt");
+    let eval: Vec<EvalGoal> = [goals[0], goals[2]]
+        .iter()
+        .map(|&goal| EvalGoal {
+            kind: "inside",
+            goal,
+        })
+        .collect();
+    let progress = learner::progress::Progress::new(2, "iterations");
+    let r = run_mdgps(&cfg, seed, &demos, &eval, &demos, &root, &progress).unwrap();
+    drop(progress);
+    assert_eq!((r.evals.len(), r.mdgps_logs.len()), (3, 2));
+    let exp = root.join(format!("mdgps_seed{seed}"));
+    let train = root.join("train");
+    let c = mdgps_config(&cfg, seed);
+    learner::run::train_mdgps(&c, demos.clone(), &train, |_| {}).unwrap();
+    assert_same_mdgps_run(&train, &exp, 2);
+    let saved = load_policy(&root.join(format!("policy_seed{seed}.npz"))).unwrap();
+    let (resumed, _) = learner::run::resume_mdgps(c.clone(), demos.clone(), &exp).unwrap();
+    assert_eq!(resumed.iteration(), 2);
+    assert_eq!(saved.policy.flat(), resumed.policy().flat());
+    // The experiment's folder continues as a `learner train --algo mdgps` folder does.
+    let mut longer = c.clone();
+    longer.lqr_gaifo.iterations = 3;
+    let more = learner::run::train_mdgps_resumed(&longer, demos.clone(), &exp, |_| {}).unwrap();
+    assert_eq!(more.len(), 1);
+    assert!(exp.join("iter_003_state.npz").is_file());
     std::fs::remove_dir_all(&root).ok();
 }

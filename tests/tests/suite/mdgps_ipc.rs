@@ -31,17 +31,11 @@ const SEED: u64 = 9;
 /// Demonstrations of the initial hold controller at `goal` (the run only has to be
 /// reproducible, not good).
 fn hold_demos(goal: [f64; 3]) -> Demos {
-    let cfg = ExpertConfig {
-        task: TaskConfig {
-            horizon: T,
-            goal,
-            ..TaskConfig::default()
-        },
-        demos: 2,
-        ..ExpertConfig::default()
-    };
+    let mut cfg = ExpertConfig::default();
+    (cfg.task.horizon, cfg.task.goal, cfg.demos) = (T, goal, 2);
+    let hold = init_hold(&cfg.task, 0.01);
     let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
-    let mut d = record_demos(&cfg, &arm, &init_hold(&cfg.task, 0.01), 0.0).unwrap();
+    let mut d = record_demos(&cfg, &arm, &hold, 0.0).unwrap();
     d.cost_random = d.cost_expert + 1.0;
     d
 }
