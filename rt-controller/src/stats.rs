@@ -298,6 +298,8 @@ pub struct RejectCounts {
     pub horizon_mismatch: u64,
     /// Version not newer than the active one.
     pub stale_version: u64,
+    /// A gain table's episode plan is not valid ([`ur5_shared::EpisodePlan::validate`]).
+    pub plan: u64,
     /// A policy table failed [`ur5_shared::PolicyTable::validate`].
     pub invalid_policy: u64,
     /// A policy table acts in another action mode than the controller's.
@@ -315,6 +317,7 @@ impl RejectCounts {
             Rejection::Invalid(GainTableError::NotLowerTriangular { .. })
             | Rejection::Invalid(GainTableError::NonPositiveDiagonal { .. }) => &mut self.cholesky,
             Rejection::Invalid(GainTableError::OutOfBounds { .. }) => &mut self.out_of_bounds,
+            Rejection::Invalid(GainTableError::Plan { .. }) => &mut self.plan,
             Rejection::HorizonMismatch { .. } => &mut self.horizon_mismatch,
             Rejection::StaleVersion { .. } => &mut self.stale_version,
             Rejection::InvalidPolicy(_) => &mut self.invalid_policy,
@@ -333,6 +336,7 @@ impl RejectCounts {
             + self.out_of_bounds
             + self.horizon_mismatch
             + self.stale_version
+            + self.plan
             + self.invalid_policy
             + self.mode_mismatch
     }

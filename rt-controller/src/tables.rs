@@ -98,6 +98,14 @@ impl Active<'_> {
         }
     }
 
+    /// The table's episode plan ([`ur5_shared::EpisodePlan`]: goal, noise stream, noise-free).
+    pub fn plan(&self) -> &ur5_shared::EpisodePlan {
+        match self {
+            Active::Gains(t) => &t.plan,
+            Active::Policy(p) => &p.plan,
+        }
+    }
+
     /// The table's publication of its version ([`GainTable::epoch`], [`PolicyTable::epoch`]).
     pub fn epoch(&self) -> u32 {
         match self {

@@ -28,7 +28,10 @@
 //! bit pattern; all integers and bit patterns little-endian (20 + 504·T bytes). On a
 //! little-endian machine this is exactly the raw bytes of those header fields followed by the raw
 //! bytes of `steps[..T]`, so any other language with an xxHash library can recompute it from the
-//! struct. Steps at t ≥ T, the `epoch` field and the checksum field itself are not covered. Note
+//! struct. A table whose episode plan is not the default ([`crate::plan`]: a goal, a noise
+//! stream or noise-free episodes) appends the plan's 32 bytes, so every table without one
+//! keeps the checksum it had before plans existed. Steps at t ≥ T, the `epoch` field and the
+//! checksum field itself are not covered. Note
 //! that 0.0 and −0.0 hash differently. The checksum guards against corruption and half-written
 //! tables, not against an adversary. Tables of wire type `GainTable.v1` (and table files of
 //! schema 1) carried a byte-wise FNV-1a 64 instead; XXH3 reads 8 bytes at a time with SIMD and
@@ -38,6 +41,7 @@ use core::fmt;
 use core::mem::MaybeUninit;
 
 use crate::layout::{DU, DX, MAX_HORIZON};
+use crate::plan::{EpisodePlan, PlanError};
 use crate::table::{self, HeaderBytes, Table};
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
@@ -67,7 +71,7 @@ pub const STEP_LEN: usize = DU * DX + DU + DX + DU + DU * DU;
 pub const GAIN_TABLE_BYTES: usize = core::mem::size_of::<GainTable>();
 
 const _: () = assert!(core::mem::size_of::<GainStep>() == STEP_LEN * 8);
-const _: () = assert!(GAIN_TABLE_BYTES == 32 + MAX_HORIZON * STEP_LEN * 8);
+const _: () = assert!(GAIN_TABLE_BYTES == 64 + MAX_HORIZON * STEP_LEN * 8);
 
 impl GainStep {
     /// The step's values in memory order (K row-major, k, ŝ, â, L row-major), as hashed by the
@@ -87,7 +91,7 @@ impl GainStep {
 /// buffer rather than by value onto a stack.
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("ur5_shared::GainTable.v2")]
+#[type_name("ur5_shared::GainTable.v3")]
 pub struct GainTable {
     /// Table version, chosen by the learner (increasing). Samples carry the version of the
     /// table that produced them.
@@ -108,6 +112,9 @@ pub struct GainTable {
     pub epoch: u32,
     /// XXH3-64 checksum (module docs), set by [`GainTable::seal`].
     pub checksum: u64,
+    /// The goal, noise stream and schedule of the table's episodes ([`crate::plan`]); the
+    /// default (all zero) runs the controller's own. Hashed unless it is the default.
+    pub plan: EpisodePlan,
     /// Steps t = 0..MAX_HORIZON; only t < `horizon` are meaningful.
     pub steps: [GainStep; MAX_HORIZON],
 }
@@ -120,6 +127,8 @@ impl fmt::Debug for GainTable {
             .field("horizon", &self.horizon)
             .field("dx", &self.dx)
             .field("du", &self.du)
+            .field("epoch", &self.epoch)
+            .field("plan", &self.plan)
             .field("checksum", &format_args!("{:#018x}", self.checksum))
             .finish_non_exhaustive()
     }
@@ -231,6 +240,14 @@ pub enum GainTableError {
         stored: u64,
         /// Checksum of the contents.
         computed: u64,
+    },
+    /// An episode plan that is not valid ([`EpisodePlan::validate`]).
+    #[error("gain table version {version}: {source}")]
+    Plan {
+        /// Table version.
+        version: u64,
+        /// What is wrong with the plan.
+        source: PlanError,
     },
     /// A NaN or infinity.
     #[error("gain table: {entry} = {value} is not finite")]
@@ -364,6 +381,10 @@ unsafe impl Table for GainTable {
         unsafe { core::slice::from_raw_parts(steps.as_ptr().cast::<f64>(), STEP_LEN * steps.len()) }
     }
 
+    fn plan(&self) -> &EpisodePlan {
+        &self.plan
+    }
+
     fn checksum_mut(&mut self) -> &mut u64 {
         &mut self.checksum
     }
@@ -466,8 +487,8 @@ impl GainTable {
         table::seal(self)
     }
 
-    /// Checks the table before use, in this order: dimensions, horizon, checksum, then for each
-    /// step t < T: every value finite, L lower triangular, L diagonal > 0, every |value| within
+    /// Checks the table before use, in this order: dimensions, horizon, checksum, episode plan,
+    /// then for each step t < T: every value finite, L lower triangular, L diagonal > 0, every |value| within
     /// `bounds`. Returns the first problem found. Allocation-free. The controller validates when a
     /// table arrives, not on every tick (cost: docs/design.md §3.9).
     pub fn validate(&self, bounds: &GainBounds) -> Result<(), GainTableError> {
@@ -491,6 +512,12 @@ impl GainTable {
                 computed,
             });
         }
+        self.plan
+            .validate()
+            .map_err(|source| GainTableError::Plan {
+                version: self.version,
+                source,
+            })?;
         for (t, step) in self.used_steps().iter().enumerate() {
             let fields = step_fields(step);
             for (field, values) in fields {
@@ -840,6 +867,60 @@ pub(crate) mod tests {
         }
     }
 
+    /// A plan other than the default is hashed after the steps (its 32 bytes); the default
+    /// plan adds nothing, so the checksum of a table without one is the one it always had. A
+    /// plan changed after sealing fails the checksum; a sealed invalid plan is named.
+    #[test]
+    fn a_plan_is_hashed_after_the_steps_and_validated() {
+        let mut table = random_table(5, 7);
+        let plain = table.checksum;
+        let steps = |t: &GainTable| {
+            let mut bytes = t.hashed_header().to_vec();
+            for v in t.hashed_values() {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            bytes
+        };
+        assert_eq!(plain, xxhash_rust::xxh3::xxh3_64(&steps(&table)));
+        table.plan = EpisodePlan::to_goal([-0.4, 0.1, 0.3]).with_noise_stream(2);
+        let e = table.validate(&GainBounds::default()).unwrap_err();
+        assert!(matches!(e, GainTableError::ChecksumMismatch { .. }), "{e}");
+        table.seal();
+        let mut bytes = steps(&table);
+        bytes.extend_from_slice(&table.plan.hashed_bytes());
+        assert_eq!(table.checksum, xxhash_rust::xxh3::xxh3_64(&bytes));
+        assert_ne!(table.checksum, plain);
+        table.validate(&GainBounds::default()).unwrap();
+        // Each part of the plan is covered.
+        for f in [
+            |p: &mut EpisodePlan| p.goal[2] = f64::from_bits(p.goal[2].to_bits() ^ 1),
+            |p: &mut EpisodePlan| p.noise_stream = 3,
+            |p: &mut EpisodePlan| p.flags |= crate::plan::PLAN_NOISE_FREE,
+        ] {
+            let mut copy = table.clone();
+            f(&mut copy.plan);
+            assert_ne!(copy.compute_checksum(), table.checksum);
+        }
+        // Back to the default plan: the old checksum.
+        table.plan = EpisodePlan::default();
+        assert_eq!(table.compute_checksum(), plain);
+        // A sealed plan with a NaN goal.
+        table.plan = EpisodePlan::to_goal([0.0, f64::NAN, 0.0]);
+        table.seal();
+        let e = table.validate(&GainBounds::default()).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                GainTableError::Plan {
+                    version: 6,
+                    source: PlanError::BadGoal { index: 1, .. }
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("goal[1] = NaN"), "{e}");
+    }
+
     #[test]
     fn checksum_matches_the_reference_xxhash() {
         // A table anyone can rebuild: version 1, T = 2, value i of step t = (63 t + i) / 4.
@@ -904,9 +985,11 @@ pub(crate) mod tests {
         assert_eq!(core::mem::offset_of!(GainTable, horizon), 8);
         assert_eq!(core::mem::offset_of!(GainTable, dx), 12);
         assert_eq!(core::mem::offset_of!(GainTable, du), 16);
+        assert_eq!(core::mem::offset_of!(GainTable, epoch), 20);
         assert_eq!(core::mem::offset_of!(GainTable, checksum), 24);
-        assert_eq!(core::mem::offset_of!(GainTable, steps), 32);
-        assert_eq!(GAIN_TABLE_BYTES, 64_544);
+        assert_eq!(core::mem::offset_of!(GainTable, plan), 32);
+        assert_eq!(core::mem::offset_of!(GainTable, steps), 64);
+        assert_eq!(GAIN_TABLE_BYTES, 64_576);
         let s = GainStep::default();
         let base = &s as *const GainStep as usize;
         assert_eq!(&s.k_vec as *const _ as usize - base, 36 * 8);

@@ -25,6 +25,14 @@ pub fn episode_seed(seed: u64, version: u64, k: u64) -> u64 {
     mix(mix(mix(seed) ^ version) ^ k)
 }
 
+/// The seed of noise stream `stream` under run seed `seed`: `seed ⊕ stream · φ` (φ the 64-bit
+/// golden ratio, wrapping), so stream 0 is `seed` itself and every other stream a distinct,
+/// reproducible seed. A table's episode plan names its stream ([`crate::plan::EpisodePlan`]);
+/// MDGPS's goal m draws from stream m + 1 in process and over IPC alike.
+pub fn stream_seed(seed: u64, stream: u32) -> u64 {
+    seed ^ u64::from(stream).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+}
+
 /// The per-episode noise source. No allocation.
 pub struct Noise {
     rng: ChaCha8Rng,

@@ -28,12 +28,13 @@
 //!
 //! XXH3-64 (seed 0) of `version` (u64), `dx`, `du`, `action_mode`, `n_hidden`, `hidden[0..4]`,
 //! `n_params` (u32 each), then `params[..n_params]` as IEEE-754 bit patterns, all little-endian
-//! (52 + 8·P bytes): on a little-endian machine the raw bytes of those fields. The `epoch`
-//! field, the checksum itself and `params[n_params..]` are not covered.
+//! (52 + 8·P bytes): on a little-endian machine the raw bytes of those fields; then, when the
+//! episode plan is not the default, its 32 bytes ([`crate::plan`], as for gain tables). The
+//! `epoch` field, the checksum itself and `params[n_params..]` are not covered.
 //!
 //! # Size
 //!
-//! [`POLICY_TABLE_BYTES`] = 56 + 8 · [`MAX_POLICY_PARAMS`] ≈ 256 KB: room for three heads of
+//! [`POLICY_TABLE_BYTES`] = 88 + 8 · [`MAX_POLICY_PARAMS`] ≈ 256 KB: room for three heads of
 //! two hidden layers of 96 (31,998 values), at most [`MAX_HIDDEN_LAYERS`] hidden layers of at
 //! most [`MAX_WIDTH`] units. Like [`crate::GainTable`], build one on the heap
 //! ([`PolicyTable::new_boxed`]) or in place ([`PolicyTable::init_zeroed`]), fill, [`PolicyTable::seal`];
@@ -45,6 +46,7 @@ use core::mem::MaybeUninit;
 use crate::config::ActionMode;
 use crate::kernels::{affine, dot, tanh_in_place};
 use crate::layout::{DU, DX, Q};
+use crate::plan::{EpisodePlan, PlanError};
 use crate::table::{self, HeaderBytes, Table};
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
@@ -58,7 +60,7 @@ pub const MAX_POLICY_PARAMS: usize = 32_768;
 /// Size of a [`PolicyTable`] in bytes.
 pub const POLICY_TABLE_BYTES: usize = core::mem::size_of::<PolicyTable>();
 
-const _: () = assert!(POLICY_TABLE_BYTES == 56 + 8 * MAX_POLICY_PARAMS);
+const _: () = assert!(POLICY_TABLE_BYTES == 88 + 8 * MAX_POLICY_PARAMS);
 
 /// Parameters of one head with hidden widths `hidden`: Σ_l (n_l · n_{l+1} + n_{l+1}) over the
 /// layer sizes `[dX, hidden…, 1]`.
@@ -80,7 +82,7 @@ pub fn flat_len(hidden: &[usize]) -> usize {
 /// The weights of a Gaussian MLP policy (module docs), as sent on `controller/policy`.
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("ur5_shared::PolicyTable.v1")]
+#[type_name("ur5_shared::PolicyTable.v2")]
 pub struct PolicyTable {
     /// Version, in the same increasing sequence as gain tables' (the controller takes the
     /// newest of either kind).
@@ -105,6 +107,10 @@ pub struct PolicyTable {
     pub epoch: u32,
     /// XXH3-64 checksum (module docs), set by [`PolicyTable::seal`].
     pub checksum: u64,
+    /// The goal, noise stream and schedule of the table's episodes ([`crate::plan`]), as a
+    /// gain table's; the default (all zero) runs the controller's own. Hashed unless it is the
+    /// default.
+    pub plan: EpisodePlan,
     /// θ in `params[..n_params]` (module docs); the rest is unused.
     pub params: [f64; MAX_POLICY_PARAMS],
 }
@@ -120,6 +126,8 @@ impl fmt::Debug for PolicyTable {
                 &&self.hidden[..(self.n_hidden as usize).min(MAX_HIDDEN_LAYERS)],
             )
             .field("n_params", &self.n_params)
+            .field("epoch", &self.epoch)
+            .field("plan", &self.plan)
             .field("checksum", &format_args!("{:#018x}", self.checksum))
             .finish_non_exhaustive()
     }
@@ -209,6 +217,14 @@ pub enum PolicyTableError {
         stored: u64,
         /// Checksum of the contents.
         computed: u64,
+    },
+    /// An episode plan that is not valid ([`EpisodePlan::validate`]).
+    #[error("policy table version {version}: {source}")]
+    Plan {
+        /// Table version.
+        version: u64,
+        /// What is wrong with the plan.
+        source: PlanError,
     },
     /// A NaN or infinity.
     #[error("policy table: {entry} = {value} is not finite")]
@@ -319,6 +335,10 @@ unsafe impl Table for PolicyTable {
         self.theta()
     }
 
+    fn plan(&self) -> &EpisodePlan {
+        &self.plan
+    }
+
     fn checksum_mut(&mut self) -> &mut u64 {
         &mut self.checksum
     }
@@ -355,8 +375,9 @@ impl PolicyTable {
         table::init_zeroed(slot)
     }
 
-    /// Fills a table from hidden widths and θ (version and mode as given) and seals it.
-    /// `Err` if the widths or θ's length exceed the table's limits.
+    /// Fills a table from hidden widths and θ (version and mode as given; epoch 0 and the
+    /// default episode plan) and seals it. `Err` if the widths or θ's length exceed the
+    /// table's limits.
     pub fn fill(
         &mut self,
         version: u64,
@@ -395,6 +416,7 @@ impl PolicyTable {
         }
         self.n_params = expected as u32;
         self.epoch = 0;
+        self.plan = EpisodePlan::default();
         self.params[..expected].copy_from_slice(theta);
         self.params[expected..].fill(0.0);
         self.seal();
@@ -515,6 +537,9 @@ impl PolicyTable {
                 computed,
             });
         }
+        self.plan
+            .validate()
+            .map_err(|source| PolicyTableError::Plan { version, source })?;
         let theta = self.theta();
         if let Some(i) = theta.iter().position(|v| !v.is_finite()) {
             return Err(PolicyTableError::NonFinite {

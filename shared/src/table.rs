@@ -2,7 +2,8 @@
 //! fixed-size `#[repr(C)]` value of integers and f64 that iceoryx2 moves through shared memory,
 //! built zeroed on the heap or in place without a stack temporary, and sealed with an XXH3-64
 //! checksum (xxHash 0.8's `XXH3_64bits`, seed 0) of its hashed header fields followed by its
-//! hashed values, every value as its IEEE-754 bit pattern, all little-endian. On a
+//! hashed values, every value as its IEEE-754 bit pattern, all little-endian, and then its
+//! episode plan's bytes when the plan is not the default ([`crate::plan`]). On a
 //! little-endian machine that is the raw bytes of those fields. Each table says which header
 //! fields and which values are hashed ([`Table::hashed_header`], [`Table::hashed_values`]);
 //! the unsafe code of all of them is here.
@@ -12,6 +13,7 @@ use core::mem::MaybeUninit;
 use xxhash_rust::xxh3::Xxh3;
 
 use crate::layout::{DU, DX};
+use crate::plan::EpisodePlan;
 
 /// A controller table's storage (module docs).
 ///
@@ -29,6 +31,9 @@ pub unsafe trait Table: Sized {
 
     /// The hashed values, after the header.
     fn hashed_values(&self) -> &[f64];
+
+    /// The table's episode plan (hashed after the values unless it is the default).
+    fn plan(&self) -> &EpisodePlan;
 
     /// The stored checksum.
     fn checksum_mut(&mut self) -> &mut u64;
@@ -90,6 +95,10 @@ pub fn compute_checksum<T: Table>(table: &T) -> u64 {
     #[cfg(target_endian = "big")]
     for v in values {
         h.update(&v.to_bits().to_le_bytes());
+    }
+    let plan = table.plan();
+    if !plan.is_default() {
+        h.update(&plan.hashed_bytes());
     }
     h.digest()
 }

@@ -29,7 +29,7 @@ pub use ur5_shared::services::unique_prefix;
 use learner::process::Spawned;
 
 use ur5_shared::services::{self, ServiceNames};
-use ur5_shared::{ArmCommand, GainTable, StepSample, DU};
+use ur5_shared::{ArmCommand, GainTable, PolicyTable, StepSample, DU};
 
 /// `target/release/<name>`, next to the directory of the test executable.
 pub fn bin(name: &str) -> PathBuf {
@@ -131,6 +131,8 @@ pub fn json_summary(stdout: &str, log: &str) -> serde_json::Value {
 /// `learner/samples`, and watches `arm/command` (a monitor, as a second subscriber).
 pub struct TestLearner {
     gains: Publisher<ipc::Service, GainTable, ()>,
+    /// `controller/policy`, when opened ([`TestLearner::with_policy`]).
+    policy: Option<Publisher<ipc::Service, PolicyTable, ()>>,
     samples: Subscriber<ipc::Service, StepSample, ()>,
     commands: Option<Subscriber<ipc::Service, ArmCommand, ()>>,
     /// Every sample received so far, in arrival order.
@@ -152,6 +154,18 @@ impl TestLearner {
         Self::open(prefix, false)
     }
 
+    /// [`TestLearner::learner_only`] that also publishes policy tables on `controller/policy`
+    /// ([`TestLearner::publish_policy`]).
+    pub fn with_policy(prefix: &str) -> Self {
+        let mut l = Self::open(prefix, false);
+        let names = ServiceNames::new(prefix);
+        let p = services::CONTROLLER_POLICY_QOS
+            .open_or_create_retrying::<PolicyTable>(&l._node, &names.controller_policy)
+            .unwrap();
+        l.policy = Some(p.publisher_builder().create().unwrap());
+        l
+    }
+
     fn open(prefix: &str, monitor_commands: bool) -> Self {
         iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
         let names = ServiceNames::new(prefix);
@@ -170,6 +184,7 @@ impl TestLearner {
             .unwrap();
         Self {
             gains: g.publisher_builder().create().unwrap(),
+            policy: None,
             samples: s.subscriber_builder().create().unwrap(),
             commands: monitor_commands.then(|| {
                 c.subscriber_builder()
@@ -191,9 +206,21 @@ impl TestLearner {
         unsafe { slot.assume_init() }.send().unwrap();
     }
 
-    /// Takes what arrived; delivers the gains history to late subscribers.
+    /// Publishes the policy `table` as it is; panics unless opened [`TestLearner::with_policy`].
+    pub fn publish_policy(&self, table: &PolicyTable) {
+        let publisher = self.policy.as_ref().expect("TestLearner::with_policy");
+        let mut slot = publisher.loan_uninit().unwrap();
+        PolicyTable::init_zeroed(slot.payload_mut()).copy_from(table);
+        // SAFETY: init_zeroed and copy_from initialised the payload.
+        unsafe { slot.assume_init() }.send().unwrap();
+    }
+
+    /// Takes what arrived; delivers the tables' history to late subscribers.
     pub fn poll(&mut self) {
         let _ = self.gains.update_connections();
+        if let Some(p) = &self.policy {
+            let _ = p.update_connections();
+        }
         while let Some(s) = self.samples.receive().unwrap() {
             self.received.push(*s);
         }

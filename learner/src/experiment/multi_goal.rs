@@ -9,8 +9,10 @@
 //! Outputs in `--out`: `multi-goal.csv` (one row per method, seed, iterations done, goal),
 //! `mdgps_log.csv` (MDGPS's per-iteration training log), `multi-goal.png` (mean over goals
 //! of each kind, mean ± standard error over seeds, per iteration), `summary.txt`,
-//! `summary.json`, `experts/` (the demonstrations and evaluation experts), and
-//! `policy_seed<S>.npz` (each seed's trained policy, `learner policy eval` runs it).
+//! `summary.json`, `experts/` (the demonstrations and evaluation experts),
+//! `policy_seed<S>.npz` (each seed's trained policy, `learner policy eval` runs it) and
+//! `mdgps_seed<S>/` (each seed's MDGPS run folder as `learner train --algo mdgps` writes it:
+//! checkpoints before every iteration and after the last, its `mdgps_log.csv`).
 
 use crate::progress::Progress;
 use std::path::Path;
@@ -34,7 +36,6 @@ use imitation::rollout::{run_episode, Arm, Episode, Policy};
 use ur5_shared::config::TaskConfig;
 
 use super::{combine_demos, experts_at, pool, ExperimentConfig};
-use crate::arm::SimArm;
 use crate::io::log::MdgpsRow;
 use crate::io::policy::{save_policy, PolicyFile};
 use crate::plot::{mean_stderr, plot_panels, Panel, Series};
@@ -156,9 +157,27 @@ pub fn evaluate(
         .collect()
 }
 
-/// MDGPS at one seed on the square's demonstrations; saves the policy as
+/// The MDGPS settings of the experiment's run at `seed`: its LQR+GAIfO settings with that seed
+/// and `iterations`, its C-step KL bound and its policy.
+pub fn mdgps_config(cfg: &ExperimentConfig, seed: u64) -> MdgpsConfig {
+    let mut c = MdgpsConfig {
+        lqr_gaifo: cfg.lqr_gaifo.clone(),
+        kl_step: cfg.mdgps_kl_step,
+        policy: cfg.mdgps_policy.clone(),
+    };
+    c.lqr_gaifo.seed = seed;
+    c.lqr_gaifo.iterations = cfg.iterations;
+    c
+}
+
+/// MDGPS at one seed on the `square`'s demonstrations through `learn::Learn`
+/// ([`crate::run::run_iterations`], as `learner train --algo mdgps`): `mdgps_log.csv` and a
+/// checkpoint before every iteration and after the last in `out/mdgps_seed<seed>/`, so that
+/// the run can be resumed (`run::train_mdgps_resumed`) or checked; the policy is evaluated at
+/// every goal of `goals` before the first iteration and after each, on an arm of its own (step
+/// 1 runs on fresh arms, so this changes no bit). Saves the policy as
 /// `out/policy_seed<seed>.npz`.
-fn run_mdgps(
+pub fn run_mdgps(
     cfg: &ExperimentConfig,
     seed: u64,
     square: &[Demos],
@@ -167,30 +186,36 @@ fn run_mdgps(
     out: &Path,
     progress: &Progress,
 ) -> Result<MethodRun, ExperimentError> {
-    let mut c = MdgpsConfig {
-        lqr_gaifo: cfg.lqr_gaifo.clone(),
-        kl_step: cfg.mdgps_kl_step,
-        policy: cfg.mdgps_policy.clone(),
-    };
-    c.lqr_gaifo.seed = seed;
-    c.lqr_gaifo.iterations = cfg.iterations;
+    let c = mdgps_config(cfg, seed);
     let mut run = Mdgps::new(c.clone(), square.to_vec())?;
     let base = run.task(0).clone();
-    let mut arm = SimArm::new(c.lqr_gaifo.sim.clone(), base.dt)?;
+    let arm = crate::run::arm_for(&run)?;
+    let mut eval_arm = crate::run::arm_for(&run)?;
     let mut ws = run.policy().workspace();
     let mut evals = Vec::with_capacity(cfg.iterations + 1);
-    let mut logs = Vec::with_capacity(cfg.iterations);
-    for _ in 0..cfg.iterations {
-        // The policy at every evaluation goal before the iteration: on `arm` itself, while
-        // step 1's episodes run on fresh arms of their own, so the order does not matter.
-        let mut actor = GlobalActor::new(run.policy(), &mut ws);
-        evals.push(evaluate(&mut arm, &base, &mut actor, goals, experts)?);
-        let (log, _) = iterate(&mut run, &arm)?;
-        progress.done_one(&format!("[mdgps seed {seed}] {}", log.progress_line()));
-        logs.push(log);
-    }
     let mut actor = GlobalActor::new(run.policy(), &mut ws);
-    evals.push(evaluate(&mut arm, &base, &mut actor, goals, experts)?);
+    evals.push(evaluate(&mut eval_arm, &base, &mut actor, goals, experts)?);
+    let mut failed = None;
+    let logs = crate::run::run_iterations(
+        &mut run,
+        &arm,
+        cfg.iterations,
+        Some(&out.join(format!("mdgps_seed{seed}"))),
+        |log, run| {
+            progress.done_one(&format!("[mdgps seed {seed}] {}", log.progress_line()));
+            let mut actor = GlobalActor::new(run.policy(), &mut ws);
+            match evaluate(&mut eval_arm, &base, &mut actor, goals, experts) {
+                Ok(e) if failed.is_none() => evals.push(e),
+                Ok(_) => {}
+                Err(e) => {
+                    failed.get_or_insert(e);
+                }
+            }
+        },
+    )?;
+    if let Some(e) = failed {
+        return Err(e);
+    }
     let file = PolicyFile {
         policy: run.policy().clone(),
         mode: c.lqr_gaifo.sim.mode,

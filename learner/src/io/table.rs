@@ -10,6 +10,8 @@
 //! | `L` | (T, dU, dU) | lower Cholesky factor of the action covariance |
 //! | `version`, `checksum` | () u64 | as in `ur5_shared::GainTable` |
 //! | `epoch` | () u64 | the publication of the version (`GainTable::epoch`), written when not 0; absent: 0 |
+//! | `plan_flags`, `plan_noise_stream` | () u64 | the episode plan (`ur5_shared::EpisodePlan`), written when it is not the default; absent: 0 |
+//! | `plan_goal` | (3,) f64 | the plan's goal (m), with the two above; absent: 0 |
 //! | `dt` | () f64 | control period (s) |
 //! | `state_names`, `action_names` | | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
@@ -65,6 +67,15 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
     w.u64("version", &[], &[table.version])?;
     if table.epoch != 0 {
         w.u64("epoch", &[], &[u64::from(table.epoch)])?;
+    }
+    if !table.plan.is_default() {
+        w.u64("plan_flags", &[], &[u64::from(table.plan.flags)])?;
+        w.u64(
+            "plan_noise_stream",
+            &[],
+            &[u64::from(table.plan.noise_stream)],
+        )?;
+        w.f64("plan_goal", &[3], &table.plan.goal)?;
     }
     w.u64("checksum", &[], &[table.checksum])?;
     w.f64("dt", &[], &[dt])?;
@@ -132,6 +143,12 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
         .map_err(|e| bad("K", e.to_string()))?;
     table.set_version(f.u64_scalar("version")?);
     table.epoch = f.u32_scalar_or_zero("epoch")?;
+    if f.names().iter().any(|n| n == "plan_goal") {
+        table.plan.flags = f.u32_scalar_or_zero("plan_flags")?;
+        table.plan.noise_stream = f.u32_scalar_or_zero("plan_noise_stream")?;
+        let goal = f.f64_shaped("plan_goal", &[3])?;
+        table.plan.goal.copy_from_slice(&goal);
+    }
     for ti in 0..t as usize {
         let mut step = GainStep::default();
         for i in 0..DU {
@@ -181,6 +198,27 @@ mod tests {
         let mut tampered = table.clone();
         tampered.step_mut(2).k_vec[0] = 9.0;
         save_table(&path, &tampered, 0.1).unwrap();
+        let e = load_table(&path, &GainBounds::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("checksum"), "{e}");
+
+        // An episode plan round-trips (and is covered by the checksum); a file without one
+        // (every file of an earlier build) reads as the default plan.
+        let mut planned = table.clone();
+        planned.plan = ur5_shared::EpisodePlan::to_goal([-0.45, 0.15, 0.2]).with_noise_stream(4);
+        planned.seal();
+        assert_ne!(planned.checksum, table.checksum);
+        save_table(&path, &planned, 0.1).unwrap();
+        let (back, _) = load_table(&path, &GainBounds::default()).unwrap();
+        assert_eq!(*back, *planned);
+        save_table(&path, &table, 0.1).unwrap();
+        let (back, _) = load_table(&path, &GainBounds::default()).unwrap();
+        assert!(back.plan.is_default());
+        // The plan changed in the file (here: dropped) fails the checksum.
+        let mut dropped = planned.clone();
+        dropped.plan = ur5_shared::EpisodePlan::default();
+        save_table(&path, &dropped, 0.1).unwrap();
         let e = load_table(&path, &GainBounds::default())
             .unwrap_err()
             .to_string();

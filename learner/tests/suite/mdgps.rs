@@ -698,6 +698,34 @@ fn command_inputs(root: &Path) -> (PathBuf, PathBuf) {
     (demos, config)
 }
 
+/// The MDGPS run folders `a` and `b` of `iterations` iterations hold the same checkpoint files
+/// 0 … `iterations` byte for byte and the same `mdgps_log.csv` rows without their timing
+/// columns (t_*_s, the last six).
+fn assert_same_mdgps_run(a: &Path, b: &Path, iterations: usize) {
+    for i in 0..=iterations {
+        for kind in ["critic.json", "state.npz"] {
+            let name = format!("iter_{i:03}_{kind}");
+            assert!(
+                std::fs::read(a.join(&name)).unwrap() == std::fs::read(b.join(&name)).unwrap(),
+                "{name} differs"
+            );
+        }
+    }
+    let rows = |dir: &Path| -> Vec<String> {
+        std::fs::read_to_string(dir.join("mdgps_log.csv"))
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').take(11).collect::<Vec<_>>().join(","))
+            .collect()
+    };
+    assert_eq!(
+        rows(a).len(),
+        iterations + 1,
+        "header and a row per iteration"
+    );
+    assert_eq!(rows(b), rows(a));
+}
+
 /// `learner train --algo mdgps` on a folder of two goals' demonstrations, its folder then put
 /// in the state a kill during the third iteration leaves (checkpoints 0 to 2, the next
 /// checkpoint's critic file cut short, a row cut short) and resumed with `--resume`, ends with
@@ -745,26 +773,7 @@ fn train_mdgps_killed_and_resumed_through_the_command_is_the_uninterrupted_run()
     resume.extend(["--resume".to_string(), killed.display().to_string()]);
     let (ok, err) = learner(&resume.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
-    for i in 0..=4 {
-        for kind in ["critic.json", "state.npz"] {
-            let name = format!("iter_{i:03}_{kind}");
-            assert!(
-                std::fs::read(whole.join(&name)).unwrap()
-                    == std::fs::read(killed.join(&name)).unwrap(),
-                "{name} differs"
-            );
-        }
-    }
-    // Rows without their timing columns (t_*_s, the last six).
-    let rows = |dir: &Path| -> Vec<String> {
-        std::fs::read_to_string(dir.join("mdgps_log.csv"))
-            .unwrap()
-            .lines()
-            .map(|l| l.split(',').take(11).collect::<Vec<_>>().join(","))
-            .collect()
-    };
-    assert_eq!(rows(&whole).len(), 5, "header and 4 rows");
-    assert_eq!(rows(&killed), rows(&whole));
+    assert_same_mdgps_run(&whole, &killed, 4);
     // A complete run resumes to nothing; another seed is refused.
     let (ok, err) = learner(&resume.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(ok, "{err}");
@@ -815,4 +824,183 @@ fn a_recorded_mdgps_run_replays_bit_for_bit() {
     assert_eq!(r["policies_checked"], 4, "{r}");
     assert_eq!(r["episodes_used"], 3 * 2 * 4, "{r}");
     std::fs::remove_dir_all(&root).unwrap();
+}
+
+/// A tampered MDGPS checkpoint is refused by `learner::run::resume_mdgps` with a typed error
+/// that names the file and what is wrong, as the other learners' are: a state whose iteration
+/// is not its name's, a non-finite policy parameter, a goal's LQR state without an entry, a
+/// state file with bytes changed, and a malformed critic file.
+#[test]
+fn a_tampered_mdgps_checkpoint_is_refused_naming_file_and_entry() {
+    use imitation::learn::iterate;
+    use learner::io::checkpoint::{load_state, save_state};
+    use learner::run::{resume_mdgps, Checkpoint, RunError};
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let cfg = tiny_config();
+    let root = tmp("tampered");
+    let good = root.join("good");
+    let mut m = Mdgps::new(cfg.clone(), demos.clone()).unwrap();
+    let arm = SimArm::new(cfg.lqr_gaifo.sim.clone(), 0.1).unwrap();
+    m.checkpoint(&good, Some(&arm)).unwrap();
+    iterate(&mut m, &arm).unwrap();
+    m.checkpoint(&good, Some(&arm)).unwrap();
+    let state = "iter_001_state.npz";
+    // The untouched folder resumes.
+    assert_eq!(
+        resume_mdgps(cfg.clone(), demos.clone(), &good)
+            .unwrap()
+            .0
+            .iteration(),
+        1
+    );
+    // A copy of the run with its latest state edited by `edit`.
+    let tampered = |name: &str, edit: &dyn Fn(&mut gps::snapshot::Snapshot)| -> RunError {
+        let dir = root.join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in std::fs::read_dir(&good).unwrap() {
+            let f = f.unwrap();
+            std::fs::copy(f.path(), dir.join(f.file_name())).unwrap();
+        }
+        let mut snap = load_state(&dir.join(state)).unwrap();
+        edit(&mut snap);
+        save_state(&dir.join(state), &snap).unwrap();
+        match resume_mdgps(cfg.clone(), demos.clone(), &dir) {
+            Ok(_) => panic!("{name}: resumed"),
+            Err(e) => e,
+        }
+    };
+    let line = |e: &RunError| learner::error::line(e);
+    // Renamed or edited: iteration 3 in the file of iteration 1.
+    let e = tampered("iteration", &|s| s.put_words("mdgps.iteration", &[3]));
+    assert!(
+        matches!(
+            e,
+            RunError::Iteration {
+                at: 3,
+                named: 1,
+                ..
+            }
+        ),
+        "{}",
+        line(&e)
+    );
+    assert!(line(&e).contains(state), "{}", line(&e));
+    // A NaN in the policy's parameters.
+    let e = tampered("nan-policy", &|s| {
+        let (shape, mut data) = s.reals["mdgps.policy"].clone();
+        data[30] = f64::NAN;
+        s.put("mdgps.policy", &shape, &data);
+    });
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Restore { .. }), "{msg}");
+    assert!(
+        msg.contains(state) && msg.contains("mdgps.policy") && msg.contains("parameter 30"),
+        "{msg}"
+    );
+    // A goal's LQR state without its controller's gains.
+    let e = tampered("missing-entry", &|s| {
+        assert!(s.reals.remove("condition1.policy.K").is_some());
+    });
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Restore { .. }), "{msg}");
+    assert!(
+        msg.contains(state) && msg.contains("condition 1") && msg.contains("policy.K"),
+        "{msg}"
+    );
+    // The S-step's Adam moments of another size.
+    let e = tampered("short-moments", &|s| {
+        let key = s
+            .reals
+            .keys()
+            .find(|k| k.starts_with("s_step."))
+            .expect("the S-step's arrays")
+            .clone();
+        let (_, data) = s.reals[&key].clone();
+        s.put(&key, &[data.len() - 1], &data[1..]);
+    });
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Restore { .. }), "{msg}");
+    assert!(msg.contains(state) && msg.contains("s_step."), "{msg}");
+    // Bytes of the state file changed on disk (inside an array's data).
+    let dir = root.join("bytes");
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in std::fs::read_dir(&good).unwrap() {
+        let f = f.unwrap();
+        std::fs::copy(f.path(), dir.join(f.file_name())).unwrap();
+    }
+    let mut bytes = std::fs::read(dir.join(state)).unwrap();
+    let at = bytes.len() / 2;
+    bytes[at] ^= 0x40;
+    std::fs::write(dir.join(state), &bytes).unwrap();
+    let e = resume_mdgps(cfg.clone(), demos.clone(), &dir)
+        .err()
+        .expect("refused");
+    let msg = line(&e);
+    assert!(
+        matches!(e, RunError::Io(_) | RunError::Restore { .. }),
+        "{msg}"
+    );
+    assert!(msg.contains(state), "{msg}");
+    // A malformed critic file.
+    std::fs::copy(good.join(state), dir.join(state)).unwrap();
+    std::fs::write(dir.join("iter_001_critic.json"), "{\"format\": ").unwrap();
+    let e = resume_mdgps(cfg.clone(), demos.clone(), &dir)
+        .err()
+        .expect("refused");
+    let msg = line(&e);
+    assert!(matches!(e, RunError::Critic { .. }), "{msg}");
+    assert!(
+        msg.contains("iter_001_critic.json") && msg.contains("not a valid critic file"),
+        "{msg}"
+    );
+    std::fs::remove_dir_all(&root).ok();
+}
+
+/// The multi-goal experiment's MDGPS (`multi_goal::run_mdgps`) runs through `learn::Learn` with
+/// checkpoints: its seed folder holds the checkpoint files and CSV rows (timing columns aside)
+/// of `learner::run::train_mdgps` with the same settings bit for bit, its saved policy is that
+/// run's, and the folder resumes (`train_mdgps_resumed`) to more iterations.
+#[test]
+fn the_multi_goal_experiments_mdgps_writes_the_checkpoints_of_train_mdgps() {
+    use learner::experiment::multi_goal::{mdgps_config, run_mdgps, EvalGoal};
+    use learner::experiment::ExperimentConfig;
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos = vec![tiny_demos(goals[0], 12), tiny_demos(goals[4], 12)];
+    let tiny = tiny_config();
+    let cfg = ExperimentConfig {
+        iterations: 2,
+        lqr_gaifo: tiny.lqr_gaifo.clone(),
+        mdgps_policy: tiny.policy.clone(),
+        ..ExperimentConfig::default()
+    };
+    let seed = 9;
+    let root = tmp("multi-goal-ckpt");
+    let eval: Vec<EvalGoal> = [goals[0], goals[2]]
+        .iter()
+        .map(|&goal| EvalGoal {
+            kind: "inside",
+            goal,
+        })
+        .collect();
+    let progress = learner::progress::Progress::new(2, "iterations");
+    let r = run_mdgps(&cfg, seed, &demos, &eval, &demos, &root, &progress).unwrap();
+    drop(progress);
+    assert_eq!((r.evals.len(), r.mdgps_logs.len()), (3, 2));
+    let exp = root.join(format!("mdgps_seed{seed}"));
+    let train = root.join("train");
+    let c = mdgps_config(&cfg, seed);
+    learner::run::train_mdgps(&c, demos.clone(), &train, |_| {}).unwrap();
+    assert_same_mdgps_run(&train, &exp, 2);
+    let saved = load_policy(&root.join(format!("policy_seed{seed}.npz"))).unwrap();
+    let (resumed, _) = learner::run::resume_mdgps(c.clone(), demos.clone(), &exp).unwrap();
+    assert_eq!(resumed.iteration(), 2);
+    assert_eq!(saved.policy.flat(), resumed.policy().flat());
+    // The experiment's folder continues as a `learner train --algo mdgps` folder does.
+    let mut longer = c.clone();
+    longer.lqr_gaifo.iterations = 3;
+    let more = learner::run::train_mdgps_resumed(&longer, demos.clone(), &exp, |_| {}).unwrap();
+    assert_eq!(more.len(), 1);
+    assert!(exp.join("iter_003_state.npz").is_file());
+    std::fs::remove_dir_all(&root).ok();
 }

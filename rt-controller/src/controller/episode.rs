@@ -256,7 +256,7 @@ impl<A: ArmBackend> Controller<A> {
         if let Some(reason) = self.pending_exit {
             return Some(reason);
         }
-        let Some(version) = self.tables.active_version() else {
+        let Some((version, plan)) = self.tables.active().map(|t| (t.version(), *t.plan())) else {
             if self.phase != Phase::NeedTable {
                 self.latch(Fault::NoTable);
                 self.phase = Phase::NeedTable;
@@ -277,8 +277,12 @@ impl<A: ArmBackend> Controller<A> {
         {
             return self.hold_for_newer_table();
         }
-        self.noisy = k % cycle < self.cfg.noisy_episodes;
-        self.noise.reseed(self.cfg.seed, version, k);
+        // The table's episode plan (docs/design.md §3.3): its goal, noise stream and whether
+        // every episode runs noise-free; the default plan is the controller's own.
+        self.noisy = !plan.is_noise_free() && k % cycle < self.cfg.noisy_episodes;
+        self.goal = *plan.goal().unwrap_or(&self.cfg.task.goal);
+        self.noise
+            .reseed(plan.noise_seed(self.cfg.seed), version, k);
         self.episodes_with_version += 1;
         self.episodes_started += 1;
         let seq = self.send_reset();
@@ -413,7 +417,7 @@ impl<A: ArmBackend> Controller<A> {
             return;
         }
         let state = self.latest;
-        let s = state.state_vector(&self.cfg.task.goal);
+        let s = state.state_vector(&self.goal);
         let eps = if self.noisy {
             self.noise.next()
         } else {

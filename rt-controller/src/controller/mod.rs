@@ -193,6 +193,9 @@ pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     /// Holding at a boundary for a table newer than the active one (`cycles_per_table`).
     waiting_newer: bool,
     noisy: bool,
+    /// The goal of the running episode: the active table's ([`ur5_shared::EpisodePlan`]), or
+    /// `task.goal`.
+    goal: [f64; 3],
     latest: ArmState,
     have_state: bool,
     used_state_seq: u64,
@@ -327,6 +330,7 @@ impl<A: ArmBackend> Controller<A> {
             aborted_with_version: 0,
             waiting_newer: false,
             noisy: false,
+            goal: cfg.task.goal,
             last_safe_q: latest.q,
             have_state: true,
             used_state_seq: 0,

@@ -191,8 +191,24 @@ fn seeds() -> &'static Seeds {
             since_best: 1,
         };
         learner::io::checkpoint::save_checkpoint(&dir.join("checkpoint.npz"), &c, 1).unwrap();
+        // One MDGPS iteration on the demonstrations' goal (its checkpoint), and its gain table
+        // with an episode plan (goal and noise stream).
+        let mcfg = mdgps_config();
+        learner::run::train_mdgps(&mcfg, vec![demos.clone()], &dir.join("mdgps"), |_| {}).unwrap();
+        let m = imitation::mdgps::Mdgps::new(mcfg, vec![demos.clone()]).unwrap();
+        learner::io::table::save_table(&dir.join("planned_table.npz"), &m.gain_table(0, 1), 0.1)
+            .unwrap();
         Seeds { dir, demos }
     })
+}
+
+/// The MDGPS settings of the seed run: one iteration, a small policy and S-step.
+fn mdgps_config() -> imitation::mdgps::MdgpsConfig {
+    let mut c = imitation::mdgps::MdgpsConfig::default();
+    c.lqr_gaifo.iterations = 1;
+    c.policy.hidden = vec![8];
+    c.policy.steps = 20;
+    c
 }
 
 fn seed_file(name: &str) -> Vec<u8> {
@@ -261,6 +277,42 @@ fn fuzz_learner_state_npz() {
             imitation::gaifo::LqrGaifo::from_snapshot(
                 cfg.clone(),
                 s.demos.clone(),
+                &snap,
+                disc.clone(),
+            )
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+        }),
+    );
+}
+
+/// A gain table file with an episode plan (its `plan_*` arrays).
+#[test]
+fn fuzz_gain_table_with_a_plan_npz() {
+    let bounds = ur5_shared::GainBounds::default();
+    fuzz(
+        "planned_table.npz",
+        seed_file("planned_table.npz"),
+        via_file("planned_table.npz", |p| {
+            learner::io::table::load_table(p, &bounds)
+        }),
+    );
+}
+
+/// MDGPS's learner state, read and then restored into a run of the seed's size.
+#[test]
+fn fuzz_mdgps_state_npz() {
+    let s = seeds();
+    let critic = s.dir.join("mdgps/iter_001_critic.json");
+    let disc = imitation::discriminator::Discriminator::load(&critic, 24).unwrap();
+    fuzz(
+        "mdgps state.npz",
+        seed_file("mdgps/iter_001_state.npz"),
+        via_file("mdgps-state.npz", |p| {
+            let snap = learner::io::checkpoint::load_state(p).map_err(|e| e.to_string())?;
+            imitation::mdgps::Mdgps::from_snapshot(
+                mdgps_config(),
+                vec![s.demos.clone()],
                 &snap,
                 disc.clone(),
             )

@@ -9,6 +9,7 @@ mod killed_setup;
 mod learning;
 mod live_view;
 mod lost_arm;
+mod mdgps_ipc;
 mod peer_status;
 mod policy_run;
 mod processes;

@@ -38,6 +38,7 @@ use serde::{Deserialize, Serialize};
 use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 use ur5_shared::noise::Noise;
+use ur5_shared::{EpisodePlan, GainTable, PolicyTable};
 
 use crate::controller::{init_hold, to_gain_table};
 use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
@@ -294,6 +295,38 @@ impl Mdgps {
     /// `Noise::new(noise_seed(m), v, k)`.
     pub fn noise_seed(&self, m: usize) -> u64 {
         condition_seed(self.cfg.lqr_gaifo.seed, m)
+    }
+
+    /// The episode plan of condition `m`'s noisy episodes on the real-time controller
+    /// (docs/design.md §3.3): its goal and its noise stream m + 1, so that the controller,
+    /// under the run seed, draws [`Mdgps::noise_seed`]`(m)`'s noise.
+    pub fn plan(&self, m: usize) -> EpisodePlan {
+        EpisodePlan::to_goal(self.conds[m].task.goal).with_noise_stream(condition_stream(m))
+    }
+
+    /// Condition `m`'s controller as the gain table the real-time controller runs its N noisy
+    /// episodes with: version [`Mdgps::version`], epoch `epoch`, [`Mdgps::plan`]`(m)`, sealed.
+    /// Its episodes k = 0 … N−1 are those [`Mdgps::execute`] runs in process.
+    pub fn gain_table(&self, m: usize, epoch: u32) -> Box<GainTable> {
+        let mut table = to_gain_table(self.conds[m].lqr.policy(), self.version());
+        table.epoch = epoch;
+        table.plan = self.plan(m);
+        table.seal();
+        table
+    }
+
+    /// The global policy as the policy table of condition `m`'s evaluation: version
+    /// [`Mdgps::version`], epoch `epoch`, goal m's plan with every episode noise-free, sealed.
+    /// Its first episode is the evaluation [`Mdgps::execute`] runs in process.
+    pub fn eval_table(&self, m: usize, epoch: u32) -> Result<Box<PolicyTable>, ImitationError> {
+        let mut table = self
+            .policy
+            .to_table(self.version(), self.mode())
+            .map_err(|e| ImitationError::Config(format!("the global policy as a table: {e}")))?;
+        table.epoch = epoch;
+        table.plan = self.plan(m).noise_free();
+        table.seal();
+        Ok(table)
     }
 
     /// Step 1 in process: per condition, N noisy episodes of its controller and one noise-free
@@ -617,9 +650,15 @@ impl Learn for Mdgps {
     }
 }
 
-/// Seed of condition `m` derived from `seed` (distinct per condition, reproducible).
+/// Noise stream of condition `m`: m + 1 (stream 0 is the run seed itself).
+fn condition_stream(m: usize) -> u32 {
+    u32::try_from(m + 1).expect("fewer than 2^32 conditions")
+}
+
+/// Seed of condition `m` derived from `seed` (distinct per condition, reproducible): noise
+/// stream m + 1 ([`ur5_shared::noise::stream_seed`]), which a table's episode plan names.
 fn condition_seed(seed: u64, m: usize) -> u64 {
-    seed ^ (m as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+    ur5_shared::noise::stream_seed(seed, condition_stream(m))
 }
 
 /// Rows of every matrix, stacked.
