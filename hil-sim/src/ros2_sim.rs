@@ -43,14 +43,7 @@ pub const DRIVER_ORDER: [&str; 6] = [
 
 /// The forward position controller's joints (its `joints` parameter in the driver's
 /// `ur_controllers.yaml`), the order of the commands.
-pub const CONTROLLER_ORDER: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
+pub use ur5_ros2::UR_JOINTS as CONTROLLER_ORDER;
 
 /// Options of `hil-sim ros2-sim`; the topic names and QoS are the driver's.
 #[derive(Clone, Debug, PartialEq, Serialize)]

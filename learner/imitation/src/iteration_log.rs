@@ -135,13 +135,7 @@ impl GaifoLog {
             kl: f64::NAN,
             eta: f64::NAN,
             step_mult: f64::NAN,
-            t_execute: 0.0,
-            t_dynamics: 0.0,
-            t_critic: 0.0,
-            t_cost: 0.0,
-            t_lqr: 0.0,
-            cpu_learner: 0.0,
-            demo_gap: f64::NAN,
+            ..Self::default()
         }
     }
 

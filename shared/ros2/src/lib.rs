@@ -12,6 +12,18 @@ pub mod cdr;
 pub mod dds;
 pub mod msg;
 
+/// The six joints of a UR arm in the order of UR's ROS 2 driver's controllers (the
+/// `joints` parameter of `forward_position_controller` in its `ur_controllers.yaml`): the
+/// order of the commands it takes.
+pub const UR_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
 pub use dds::{dds_topic, DdsError, Network, Node, Reader, ReliabilityKind, TopicQos, Writer};
 pub use msg::{
     Float64MultiArray, Header, JointState, Message, MultiArrayDimension, MultiArrayLayout, Point,

@@ -49,8 +49,11 @@ enum PacingArg {
 enum Cmd {
     /// Run episodes: reset the arm to task.start_q (rad), execute the newest gain table for
     /// task.horizon ticks of task.dt s, publish every step on learner/samples, take a new table
-    /// only at the episode boundary. The arm is `hil-sim serve` over iceoryx2 or a UR robot
-    /// (`[arm] backend = "ur"`, `[arm.ur]`). Exit codes: 0 done or stopped (SIGINT/SIGTERM),
+    /// only at the episode boundary. The arm is `hil-sim serve` over iceoryx2, a UR robot
+    /// (`[arm] backend = "ur"`, `[arm.ur]`) or a UR behind ROS 2's driver (`[arm] backend =
+    /// "ros2"`, `[arm.ros2]`); `[live_view] enabled = true` also publishes the goal, the
+    /// end-effector point, the episode and the table version on ROS 2 topics for rviz2 or
+    /// Foxglove. Exit codes: 0 done or stopped (SIGINT/SIGTERM),
     /// 2 setup error, 3 arm lost (stale for safety.give_up_after_s, its connection closed, or
     /// its stream not to be trusted: a frozen or backwards RTDE clock, a measured joint not
     /// finite or outside [limits]; arm.stream_fault says which), 4 no table (safety.no_table_timeout_s), 5 the arm stopped itself (a UR protective stop,
