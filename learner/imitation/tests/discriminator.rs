@@ -175,6 +175,43 @@ fn discriminator_save_load_round_trip_resumes_bit_for_bit() {
     std::fs::remove_file(&path).unwrap();
 }
 
+/// A critic with the near-goal warp and raw copies (30 net inputs for 24 transition inputs)
+/// saves and loads with its warp settings and 30 normalisation entries, and goes on bit for bit.
+#[test]
+fn warped_critic_with_raw_copies_round_trips() {
+    use imitation::discriminator::PenaltySpace;
+    let (e, c) = ur5_sized_batch(4);
+    let config = DiscriminatorConfig {
+        seed: 3,
+        penalty_space: PenaltySpace::Normalised,
+        near_goal_scale: 0.02,
+        near_goal_keep_raw: true,
+        ..Default::default()
+    };
+    let norm = Normalizer::from_data(config.warp_rows(e.as_ref()).as_ref()).unwrap();
+    assert_eq!(norm.mean.len(), 30);
+    let mut d = Discriminator::new(24, config, norm).unwrap();
+    assert_eq!((d.input_dim(), d.net().input_dim()), (24, 30));
+    let mut ws = d.workspace();
+    d.train(e.as_ref(), c.as_ref(), &mut ws).unwrap();
+    let path = temp_path("warped_round_trip.json");
+    d.save(&path).unwrap();
+    let mut l = Discriminator::load(&path, 24).unwrap();
+    assert_eq!(l.config(), d.config());
+    assert_eq!(l.normalizer(), d.normalizer());
+    let mut wl = l.workspace();
+    assert_eq!(
+        l.train(e.as_ref(), c.as_ref(), &mut wl).unwrap(),
+        d.train(e.as_ref(), c.as_ref(), &mut ws).unwrap()
+    );
+    let x: Vec<f64> = (0..24).map(|j| c[(1, j)]).collect();
+    assert_eq!(
+        l.value(&x, &mut wl).to_bits(),
+        d.value(&x, &mut ws).to_bits()
+    );
+    std::fs::remove_file(&path).unwrap();
+}
+
 #[test]
 fn discriminator_rejects_corrupted_or_mismatched_files() {
     let (e, c) = ur5_sized_batch(3);

@@ -29,7 +29,15 @@ pub const ABLATION_VARIANTS: [(&str, &str); 5] = [
 
 /// Candidates for steady precision near the goal (docs/design.md §5 D36), run with
 /// `ablation_variants` beside `default`; not in the default list.
-pub const PRECISION_VARIANTS: [(&str, &str); 6] = [
+pub const PRECISION_VARIANTS: [(&str, &str); 8] = [
+    (
+        "near-goal-1cm-keep-raw",
+        "critic inputs ee − goal warped, c = 1 cm, and also fed raw (six more inputs)",
+    ),
+    (
+        "near-goal-2cm-keep-raw",
+        "critic inputs ee − goal warped, c = 2 cm, and also fed raw (six more inputs)",
+    ),
     (
         "near-goal-1cm",
         "critic inputs ee − goal warped as c·asinh(x/c), c = 1 cm",
@@ -79,6 +87,14 @@ pub fn ablation_variant(name: &str, base: &GaifoConfig) -> Result<GaifoConfig, E
         "near-goal-1cm-far-0.2" => {
             c.discriminator.near_goal_scale = 0.01;
             c.discriminator.near_goal_far_slope = 0.2;
+        }
+        "near-goal-1cm-keep-raw" => {
+            c.discriminator.near_goal_scale = 0.01;
+            c.discriminator.near_goal_keep_raw = true;
+        }
+        "near-goal-2cm-keep-raw" => {
+            c.discriminator.near_goal_scale = 0.02;
+            c.discriminator.near_goal_keep_raw = true;
         }
         "critic-half-life-10" => c.critic_lr_half_life = 10.0,
         "kl-step-half" => c.algorithm.kl_step *= 0.5,

@@ -35,6 +35,15 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::layout::{DX, EE_MINUS_GOAL};
 
+/// Inputs added by [`DiscriminatorConfig::near_goal_keep_raw`]: the three end-effector-minus-goal
+/// coordinates of s and of s'.
+const RAW_COPIES: usize = 6;
+
+/// The transition input that extra net input `k` (0..6) copies: x[6..9] then x[dX+6..dX+9].
+fn raw_copy(k: usize) -> usize {
+    (k / 3) * DX + EE_MINUS_GOAL.start + k % 3
+}
+
 pub use adam::{Adam, AdamConfig};
 pub use mlp::{Mlp, MlpWorkspace};
 
@@ -104,6 +113,11 @@ pub struct DiscriminatorConfig {
     /// pulls a controller that is decimetres away (docs/design.md §5 D36).
     #[serde(default)]
     pub near_goal_far_slope: f64,
+    /// With [`Self::near_goal_scale`]: the six end-effector inputs also enter unwarped, as six
+    /// more inputs of the net (2 dX + 6), so that the critic has both the fine resolution near
+    /// the goal and the raw offset far from it (docs/design.md §5 D36). Default false.
+    #[serde(default)]
+    pub near_goal_keep_raw: bool,
 }
 
 /// Where the gradient penalty `λ (‖∇D(x̂)‖ − 1)²` takes the norm, and so in which metric D is
@@ -140,6 +154,7 @@ impl Default for DiscriminatorConfig {
             penalty_space: PenaltySpace::Raw,
             near_goal_scale: 0.0,
             near_goal_far_slope: 0.0,
+            near_goal_keep_raw: false,
         }
     }
 }
@@ -208,6 +223,9 @@ impl DiscriminatorConfig {
                 self.near_goal_far_slope
             ));
         }
+        if self.near_goal_keep_raw && self.near_goal_scale == 0.0 {
+            return bad("near_goal_keep_raw needs near_goal_scale > 0".into());
+        }
         if self.near_goal_scale > 0.0 && self.penalty_space != PenaltySpace::Normalised {
             return bad(
                 "near_goal_scale > 0 needs penalty_space = \"normalised\" (the penalty then \
@@ -252,10 +270,28 @@ impl DiscriminatorConfig {
         }
     }
 
-    /// The rows of `x` (`n × d`) through [`Self::warp`]: what the input normalisation is fitted
-    /// on.
+    /// The rows of `x` (`n × d`) through [`Self::warp`], followed by the raw copies of
+    /// [`Self::near_goal_keep_raw`] (`n × net_inputs(d)`): what the input normalisation is
+    /// fitted on.
     pub fn warp_rows(&self, x: MatRef<'_, f64>) -> Mat<f64> {
-        Mat::from_fn(x.nrows(), x.ncols(), |r, c| self.warp(c, x[(r, c)]))
+        let d = x.ncols();
+        Mat::from_fn(x.nrows(), self.net_inputs(d), |r, c| {
+            if c < d {
+                self.warp(c, x[(r, c)])
+            } else {
+                x[(r, raw_copy(c - d))]
+            }
+        })
+    }
+
+    /// The net's inputs for `d` transition inputs: `d`, plus six with
+    /// [`Self::near_goal_keep_raw`].
+    pub fn net_inputs(&self, d: usize) -> usize {
+        if self.near_goal_keep_raw {
+            d + RAW_COPIES
+        } else {
+            d
+        }
     }
 
     /// Layer sizes `[d_in, hidden..., 1]`.
@@ -408,9 +444,10 @@ impl Discriminator {
                 2 * DX
             )));
         }
-        norm.validate(d_in).map_err(DiscriminatorError::Shape)?;
+        norm.validate(config.net_inputs(d_in))
+            .map_err(DiscriminatorError::Shape)?;
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-        let net = Mlp::glorot(&config.sizes(d_in), &mut rng);
+        let net = Mlp::glorot(&config.sizes(config.net_inputs(d_in)), &mut rng);
         let adam = Adam::new(config.adam, net.params().len());
         Ok(Self {
             config,
@@ -423,20 +460,26 @@ impl Discriminator {
 
     /// Scratch memory for this net's size; reuse it for every call.
     pub fn workspace(&self) -> Workspace {
-        let d = self.input_dim();
+        let (d, dn) = (self.input_dim(), self.net.input_dim());
         Workspace {
             mlp: MlpWorkspace::new(self.net.sizes()),
             grad: vec![0.0; self.net.params().len()],
             x_e: vec![0.0; d],
             x_c: vec![0.0; d],
             x_hat: vec![0.0; d],
-            hess_u: vec![0.0; d * d],
+            hess_u: vec![0.0; dn * dn],
         }
     }
 
-    /// Input dimension `2 dX`.
+    /// Input dimension `2 dX` (the transition; the net may see six more,
+    /// [`DiscriminatorConfig::near_goal_keep_raw`]).
     pub fn input_dim(&self) -> usize {
-        self.net.input_dim()
+        self.net.input_dim() - self.extra_inputs()
+    }
+
+    /// The net's inputs beyond the transition's.
+    fn extra_inputs(&self) -> usize {
+        self.config.net_inputs(0)
     }
 
     pub fn config(&self) -> &DiscriminatorConfig {
@@ -499,6 +542,10 @@ impl Discriminator {
         {
             *u = (self.config.warp(i, xi) - m) / s;
         }
+        let d = x.len();
+        for k in 0..self.extra_inputs() {
+            mlp_ws.u[d + k] = (x[raw_copy(k)] - self.norm.mean[d + k]) / self.norm.std[d + k];
+        }
         self.net.forward(mlp_ws)
     }
 
@@ -523,6 +570,10 @@ impl Discriminator {
                 *g *= self.config.warp_derivatives(i, x[i]).0;
             }
         }
+        let d = x.len();
+        for k in 0..self.extra_inputs() {
+            grad[raw_copy(k)] += ws.mlp.grad_u[d + k] / self.norm.std[d + k];
+        }
         y
     }
 
@@ -544,6 +595,10 @@ impl Discriminator {
         );
         let y = self.value_gradient(x, ws, grad);
         self.net.input_hessian(&mut ws.mlp, &mut ws.hess_u);
+        if self.extra_inputs() > 0 {
+            self.hessian_with_raw_copies(x, ws, hess);
+            return y;
+        }
         let s = &self.norm.std;
         for p in 0..d {
             for q in 0..d {
@@ -566,6 +621,42 @@ impl Discriminator {
             }
         }
         y
+    }
+
+    /// `∇²ₓD` when the net also sees raw copies of the end-effector inputs: with J the
+    /// Jacobian of the net's inputs u(x) (u_p = (g(x_p) − μ_p)/σ_p, u_{d+k} = (x_{c(k)} −
+    /// μ_{d+k})/σ_{d+k}), `Jᵀ ∇²_u net J + diag(∂D/∂u_p g''_p/σ_p)`; each entry summed once and
+    /// mirrored, so the result is symmetric bit for bit. `ws.hess_u` holds ∇²_u net.
+    fn hessian_with_raw_copies(&self, x: &[f64], ws: &Workspace, mut hess: MatMut<'_, f64>) {
+        let (d, dn) = (x.len(), self.net.input_dim());
+        let s = &self.norm.std;
+        // Column p of J: (p, g'_p/σ_p) and, where input p has a raw copy d + k, (d + k, 1/σ_{d+k}).
+        let mut cols = [[(0usize, 0.0f64); 2]; 2 * DX];
+        let mut len = [1usize; 2 * DX];
+        let mut g2 = [0.0; 2 * DX];
+        for p in 0..d {
+            let (g1p, g2p) = self.config.warp_derivatives(p, x[p]);
+            cols[p][0] = (p, g1p / s[p]);
+            g2[p] = g2p;
+        }
+        for k in 0..self.extra_inputs() {
+            let p = raw_copy(k);
+            cols[p][1] = (d + k, 1.0 / s[d + k]);
+            len[p] = 2;
+        }
+        for p in 0..d {
+            for q in p..d {
+                let mut h = 0.0;
+                for &(a, ja) in &cols[p][..len[p]] {
+                    for &(b, jb) in &cols[q][..len[q]] {
+                        h += ja * ws.hess_u[a * dn + b] * jb;
+                    }
+                }
+                hess[(p, q)] = h;
+                hess[(q, p)] = h;
+            }
+            hess[(p, p)] += ws.mlp.grad_u[p] / s[p] * g2[p];
+        }
     }
 
     /// `grad_params += c ∂D(x)/∂θ`; returns `D(x)`.

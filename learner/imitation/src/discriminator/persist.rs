@@ -98,7 +98,7 @@ impl Discriminator {
             )));
         }
         f.config.validate().map_err(|e| bad(e.to_string()))?;
-        let sizes = f.config.sizes(d_in);
+        let sizes = f.config.sizes(f.config.net_inputs(d_in));
         if f.sizes != sizes {
             return Err(bad(format!(
                 "layer sizes {:?}, expected {sizes:?} for {d_in} inputs and hidden {:?}",
@@ -134,7 +134,7 @@ impl Discriminator {
             mean: f.norm_mean,
             std: f.norm_std,
         };
-        norm.validate(d_in).map_err(bad)?;
+        norm.validate(f.config.net_inputs(d_in)).map_err(bad)?;
         let mut rng = ChaCha8Rng::seed_from_u64(f.config.seed);
         rng.set_word_pos(f.rng_word_pos);
         let adam = Adam {

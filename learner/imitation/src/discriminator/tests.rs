@@ -51,6 +51,8 @@ struct Case {
     warp: f64,
     /// `near_goal_far_slope`.
     far_slope: f64,
+    /// `near_goal_keep_raw`.
+    keep_raw: bool,
 }
 
 /// Every case once per gradient-penalty space.
@@ -97,6 +99,7 @@ fn cases() -> Vec<Case> {
                 space: PenaltySpace::Raw,
                 warp: 0.0,
                 far_slope: 0.0,
+                keep_raw: false,
             });
         }
     }
@@ -107,23 +110,25 @@ fn cases() -> Vec<Case> {
 /// σ spread over two decades, plus a few inputs drawn around μ.
 fn random_critic(c: &Case) -> (Discriminator, Vec<Vec<f64>>) {
     let mut rng = ChaCha8Rng::seed_from_u64(c.seed);
-    let norm = if c.normalise {
-        Normalizer {
-            mean: (0..c.d).map(|_| rng.random_range(-2.0..2.0)).collect(),
-            std: (0..c.d)
-                .map(|_| 10f64.powf(rng.random_range(-1.0..1.0)))
-                .collect(),
-        }
-    } else {
-        Normalizer::identity(c.d)
-    };
     let config = DiscriminatorConfig {
         hidden: c.hidden.clone(),
         seed: c.seed,
         penalty_space: c.space,
         near_goal_scale: c.warp,
         near_goal_far_slope: c.far_slope,
+        near_goal_keep_raw: c.keep_raw,
         ..Default::default()
+    };
+    let dn = config.net_inputs(c.d);
+    let norm = if c.normalise {
+        Normalizer {
+            mean: (0..dn).map(|_| rng.random_range(-2.0..2.0)).collect(),
+            std: (0..dn)
+                .map(|_| 10f64.powf(rng.random_range(-1.0..1.0)))
+                .collect(),
+        }
+    } else {
+        Normalizer::identity(dn)
     };
     let mut disc = Discriminator::new(c.d, config, norm.clone()).unwrap();
     let net = disc.net().clone();
@@ -147,17 +152,18 @@ fn random_critic(c: &Case) -> (Discriminator, Vec<Vec<f64>>) {
 
 /// [`cases`], plus the 2 dX-input ones again with the end-effector inputs warped
 /// (`near_goal_scale` 0.3, on the scale of the inputs' spread so that g'' matters), without
-/// and with a far slope.
+/// and with a far slope, and with raw copies beside the warped inputs.
 fn cases_with_warp() -> Vec<Case> {
     let mut v = cases();
     let warped: Vec<Case> = v
         .iter()
         .filter(|c| c.d == 2 * DX)
         .flat_map(|c| {
-            [0.0, 0.2].map(|far_slope| Case {
+            [(0.0, false), (0.2, false), (0.0, true)].map(|(far_slope, keep_raw)| Case {
                 space: PenaltySpace::Normalised,
                 warp: 0.3,
                 far_slope,
+                keep_raw,
                 ..c.clone()
             })
         })
