@@ -773,4 +773,61 @@ mod tests {
             c.partial(have, &el).unwrap();
         }
     }
+
+    /// MDGPS's publications of a version: per goal its gain table (the goal's controller, plan
+    /// and noise) for N noisy episodes, then the policy table at the goal for the evaluation,
+    /// at consecutive epochs; a resume publishes above every one of them.
+    #[test]
+    fn mdgps_publishes_each_goal_s_tables_and_a_resume_publishes_above_them() {
+        let goals = imitation::expert::square_goals(TaskConfig::default().goal, 0.1);
+        let demos = [goals[0], goals[4]].map(|goal| {
+            let mut cfg = ExpertConfig::default();
+            (cfg.task.horizon, cfg.task.goal, cfg.demos) = (8, goal, 2);
+            let hold = imitation::controller::init_hold(&cfg.task, 0.01);
+            let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+            let mut d = imitation::expert::record_demos(&cfg, &arm, &hold, 0.0).unwrap();
+            d.cost_random = d.cost_expert + 1.0;
+            d
+        });
+        let mut cfg = MdgpsConfig::default();
+        cfg.policy.hidden = vec![4];
+        let run = Mdgps::new(cfg, demos.to_vec()).unwrap();
+        let publications = run.publications(7).unwrap();
+        assert_eq!(publications.len(), 4);
+        for (i, p) in publications.iter().enumerate() {
+            let m = i / 2;
+            assert_eq!(p.table.publication(), (1, 7 + i as u32));
+            assert_eq!((p.goal, p.noise_seed), (m, run.noise_seed(m)));
+            match &p.table {
+                AnyTable::Gain(t) => {
+                    assert_eq!((i % 2, p.noisy, p.eval), (0, run.samples(), false));
+                    assert_eq!(t.checksum, run.gain_table(m, 0).checksum);
+                    assert_eq!(t.plan, run.plan(m));
+                }
+                AnyTable::Policy(t) => {
+                    assert_eq!((i % 2, p.noisy, p.eval), (1, 0, true));
+                    assert_eq!(t.plan, run.plan(m).noise_free());
+                }
+            }
+        }
+        // The recorded first publication's epoch e: a resume publishes from e + 4 on.
+        let dir = std::env::temp_dir().join(format!("serve-epoch-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("tables")).unwrap();
+        assert_eq!(republication_epoch(&dir, 1, 4).unwrap(), 4);
+        let AnyTable::Gain(first) = &publications[0].table else {
+            panic!()
+        };
+        let path = crate::io::table::version_path(&dir, 1);
+        crate::io::table::save_table(&path, first, 0.1).unwrap();
+        assert_eq!(republication_epoch(&dir, 1, 4).unwrap(), 11);
+        assert_eq!(republication_epoch(&dir, 1, 1).unwrap(), 8);
+        let mut last = first.clone();
+        last.epoch = u32::MAX - 2;
+        crate::io::table::save_table(&path, &last, 0.1).unwrap();
+        assert!(matches!(
+            republication_epoch(&dir, 1, 4),
+            Err(ServeError::Epoch { .. })
+        ));
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
