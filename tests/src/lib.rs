@@ -476,3 +476,116 @@ pub fn state_bits(path: &Path) -> Vec<(String, Vec<u64>)> {
         .chain(s.words.clone())
         .collect()
 }
+
+/// What [`serve_with_kills`] did: the finishing run's `--json` summary, the kills, and how
+/// many of them were followed by a resume or by a restart.
+pub struct Killed {
+    pub summary: serde_json::Value,
+    pub kills: usize,
+    pub resumes: usize,
+    pub restarts: usize,
+}
+
+/// Runs `learner` with `base` (its arguments without `--out`, `--resume`, `--force`) into
+/// `out` while `peers` (the arm and the controller) run on: the first `kills` runs are killed
+/// with SIGKILL `window.0` to `window.0 + window.1` ms after their start (seeded by `seed`),
+/// each followed by a resume (`--resume OUT --out OUT`) or, when the kill came before the
+/// first checkpoint (`iter_000_state.npz`), a restart (`--out OUT --force`); the next run must
+/// finish with exit code 0 within `timeout`.
+pub fn serve_with_kills(
+    dir: &Path,
+    base: &[&str],
+    out: &Path,
+    peers: [&mut Proc; 2],
+    kills: usize,
+    mut seed: u64,
+    window: (u64, u64),
+    timeout: Duration,
+) -> Killed {
+    let o = out.display().to_string();
+    let [sim, ctl] = peers;
+    let (mut killed, mut resumes, mut restarts) = (0, 0, 0);
+    let mut resume = false;
+    let t0 = Instant::now();
+    let summary = loop {
+        assert!(
+            t0.elapsed() < (kills as u32 + 1) * timeout,
+            "no end after {killed} kills"
+        );
+        let args = if resume {
+            [base, &["--resume", &o, "--out", &o]].concat()
+        } else {
+            [base, &["--out", &o, "--force"]].concat()
+        };
+        let mut p = Proc::spawn("learner", &format!("learner{killed}"), &args, dir);
+        let at = Duration::from_millis(window.0 + splitmix64(&mut seed) % window.1);
+        let started = Instant::now();
+        let mut finished = None;
+        while killed >= kills || started.elapsed() < at {
+            for q in [&mut *sim, &mut *ctl] {
+                assert!(q.running(), "{} exited; its log:\n{}", q.name(), q.log());
+            }
+            if !p.running() {
+                finished = Some(p.wait(Duration::from_secs(1)));
+                break;
+            }
+            assert!(
+                started.elapsed() < timeout,
+                "learner hangs; its log:\n{}",
+                p.log()
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        match finished {
+            Some((code, stdout)) => {
+                let log = p.log();
+                assert_eq!(code, Some(0), "learner log:\n{log}");
+                break json_summary(&stdout, &log);
+            }
+            None => {
+                p.signal(libc::SIGKILL);
+                p.wait(Duration::from_secs(10));
+                killed += 1;
+                resume = checkpoint_file(out, 0, "state.npz").is_file();
+                resumes += usize::from(resume);
+                restarts += usize::from(!resume);
+                eprintln!("kill {killed} after {at:?}; resume: {resume}");
+            }
+        }
+    };
+    Killed {
+        summary,
+        kills: killed,
+        resumes,
+        restarts,
+    }
+}
+
+/// Asserts that checkpoint `i` in `out` is the one in `reference`: the learner state file
+/// (`iter_NNN_state.npz`) bit for bit, its entries named in `ignore` aside, and the critic file
+/// (`iter_NNN_critic.json`) byte for byte.
+pub fn assert_same_checkpoint(out: &Path, reference: &Path, i: usize, ignore: &[&str]) {
+    let bits = |dir: &Path| {
+        let mut b = state_bits(&checkpoint_file(dir, i, "state.npz"));
+        b.retain(|(name, _)| !ignore.contains(&name.as_str()));
+        b
+    };
+    assert_eq!(bits(out), bits(reference), "learner state of iteration {i}");
+    let name = format!("iter_{i:03}_critic.json");
+    assert_eq!(
+        std::fs::read(out.join(&name)).unwrap(),
+        std::fs::read(reference.join(&name)).unwrap(),
+        "{name}"
+    );
+}
+
+/// Asserts that the `learner serve --json` summary `s` is of a run of `algorithm` that ran
+/// `iterations` iterations to their end and discarded no episode.
+pub fn assert_served_done(s: &serde_json::Value, algorithm: &str, iterations: usize) {
+    assert_eq!(s["algorithm"], algorithm, "{s}");
+    assert_eq!(s["exit_reason"], "done", "{s}");
+    assert_eq!(s["iterations"], iterations as u64, "{s}");
+    assert_eq!(s["table_version"], iterations as u64 + 1, "{s}");
+    assert_eq!(s["counts"]["partial"], 0, "{s}");
+    assert_eq!(s["counts"]["mixed"], 0, "{s}");
+}

@@ -9,15 +9,15 @@ use imitation::gaifo::GaifoConfig;
 
 use super::CommonArgs;
 use crate::serve::{
-    read_config, serve, serve_gaifo, settings, ServeAlgo, ServeOptions, ServeSummary,
+    read_config, serve, serve_gaifo, serve_mdgps, settings, ServeAlgo, ServeOptions, ServeSummary,
 };
 
 /// Units and files, shown after `learner serve --help`.
 pub const HELP_UNITS: &str = "Units: angles rad (actions are goal joint angles), positions m (arm base frame), \
 times s (task.dt is the control period; progress `sec` (expert) and `sim_ms` (lqr-gaifo) are wall-clock from the \
 version's first sample to its update), task cost C(τ) = d_T + Σ (i/T) d_i in m; init_var rad². Every option lives \
-in the TOML file (an ExpertConfig as for `learner expert --config`, or with --algo lqr-gaifo a GaifoConfig as for \
-`learner train --config`, plus a [serve] table with algo, demos, prefix, out, resume, record_episodes, mcap, \
+in the TOML file (an ExpertConfig as for `learner expert --config`, or with --algo lqr-gaifo a GaifoConfig, with \
+--algo mdgps an MdgpsConfig, as for `learner train --config`, plus a [serve] table with algo, demos, prefix, out, resume, record_episodes, mcap, \
 wait_report_s, idle_sleep_us, task_tolerance); the flags above override it. The controller must run with the \
 same seed, task (lqr-gaifo: the demonstrations' goal, start_q, horizon, dt), noisy_episodes = samples and \
 eval_episodes = 1; the learner checks the task on the sample stream and stops with an error naming the \
@@ -26,26 +26,32 @@ checkpoint.npz, serve_log.csv; lqr-gaifo: iter_NNN_table.npz + iter_NNN_critic.j
 columns of `learner train`, and iter_NNN_state.npz). --resume restores LQR+GAIfO's whole learner state (critic \
 with Adam moments, GMM dynamics prior and its data, previous controller, step size, RNG positions), but the \
 episodes it then learns from carry later noise draws than an uninterrupted run's, so over IPC it is not bit \
-for bit; the expert's restores its controller only (its GMM prior starts afresh).";
+for bit; the expert's restores its controller only (its GMM prior starts afresh). mdgps (--demos DIR, one .npz per \
+goal): per version, goal after goal, the goal's gain table (its goal and noise stream in the table's episode plan) \
+until its N noisy episodes are in, then the policy as a noise-free policy table at the goal until its evaluation is \
+in; the checkpoints iter_NNN_critic.json + iter_NNN_state.npz and mdgps_log.csv of `learner train --algo mdgps`; \
+tables/v*.npz and latest_table.npz hold each version's first gain table.";
 
 /// Arguments of `learner serve`.
 #[derive(clap::Args, Debug)]
 #[command(after_help = HELP_UNITS)]
 pub struct ServeArgs {
-    /// Learner: `expert` (true task cost; default) or `lqr-gaifo` (imitation from --demos);
-    /// overrides the config's [serve] algo.
+    /// Learner: `expert` (true task cost; default), `lqr-gaifo` (imitation from --demos) or
+    /// `mdgps` (several goals, a folder --demos); overrides the config's [serve] algo.
     #[arg(long, value_enum)]
     pub algo: Option<ServeAlgo>,
     /// Demonstrations (.npz from `learner expert`) for --algo lqr-gaifo; their task (goal,
-    /// start pose, T, dt) is the one rt-controller and hil-sim must run.
+    /// start pose, T, dt) is the one rt-controller and hil-sim must run. For --algo mdgps a
+    /// folder of them, one per goal (as for `learner train --algo mdgps`).
     #[arg(long)]
     pub demos: Option<PathBuf>,
     /// iceoryx2 service prefix (rt-controller and hil-sim must use the same).
     #[arg(long)]
     pub prefix: Option<String>,
     /// Continue from the checkpoint in DIR of an earlier (e.g. killed) run (expert:
-    /// checkpoint.npz; lqr-gaifo: the latest iter_NNN_table.npz + iter_NNN_critic.json):
-    /// re-publishes its table version and continues learning from that controller.
+    /// checkpoint.npz; lqr-gaifo: the latest iter_NNN_table.npz + iter_NNN_critic.json; mdgps:
+    /// the latest iter_NNN_state.npz + iter_NNN_critic.json): re-publishes its table version
+    /// (every publication of it above the earlier runs') and continues learning from there.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
     /// Start a new run in --out even though another run's files are there: they are deleted
@@ -121,7 +127,7 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
         ServeAlgo::Expert => {
             anyhow::ensure!(
                 opts.demos.is_none(),
-                "--demos is for --algo lqr-gaifo; the expert learns on the true task cost"
+                "--demos is for --algo lqr-gaifo and mdgps; the expert learns on the true task cost"
             );
             let mut cfg: ExpertConfig = settings(rest, &path, "expert")?;
             if let Some(s) = args.common.seed {
@@ -148,6 +154,23 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
             }
             let demos = crate::io::demos::load_checked(&demos_path, &cfg.sim)?;
             finish(&serve_gaifo(cfg, demos, opts, |_| {})?, args.common.json)
+        }
+        ServeAlgo::Mdgps => {
+            let Some(folder) = opts.demos.clone() else {
+                anyhow::bail!(
+                    "--algo mdgps needs --demos DIR (or [serve] demos), a folder of .npz \
+                     demonstrations, one file per goal"
+                );
+            };
+            let mut cfg: imitation::mdgps::MdgpsConfig = settings(rest, &path, "MDGPS")?;
+            if let Some(s) = args.common.seed {
+                cfg.lqr_gaifo.seed = s;
+            }
+            if let Some(i) = args.iterations {
+                cfg.lqr_gaifo.iterations = i;
+            }
+            let demos = crate::io::demos::load_goals(&folder, &cfg.lqr_gaifo.sim)?;
+            finish(&serve_mdgps(cfg, demos, opts, |_| {})?, args.common.json)
         }
     }
 }

@@ -30,12 +30,16 @@ pub const LEARNED: &str = "learned.jsonl";
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(tag = "event", rename_all = "snake_case", deny_unknown_fields)]
 pub enum LearnedEvent {
-    /// Update `iteration` learned from these episode files of table `version`.
+    /// Update `iteration` learned from these episode files of table `version` (with several
+    /// goals: the noisy episodes goal-major, `eval` the first goal's evaluation and
+    /// `more_evals` the others', in goal order).
     Learned {
         iteration: usize,
         version: u64,
         noisy: Vec<String>,
         eval: String,
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        more_evals: Vec<String>,
     },
     /// A learner resumed after `iteration` updates.
     Resumed { iteration: usize, same_folder: bool },
@@ -110,6 +114,7 @@ mod tests {
             version: 1,
             noisy: vec!["000001_e000000_v0001.npz".into()],
             eval: "000002_e000001_v0001.npz".into(),
+            more_evals: Vec::new(),
         };
         let b = LearnedEvent::Resumed {
             iteration: 1,

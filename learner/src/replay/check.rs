@@ -67,7 +67,18 @@ pub(super) fn tables<L: LinGaussLearn>(
     i: usize,
     report: &mut ReplayReport,
 ) -> Result<Checked, ReplayError> {
-    let v = learner.version();
+    gain_tables(&learner.table(), dir, i, report)
+}
+
+/// The recorded tables of the state after `i` iterations (`iter_NNN_table.npz`,
+/// `tables/vVERSION.npz`, VERSION = `table.version`) against `table`, entry by entry.
+pub(super) fn gain_tables(
+    table: &ur5_shared::GainTable,
+    dir: &Path,
+    i: usize,
+    report: &mut ReplayReport,
+) -> Result<Checked, ReplayError> {
+    let v = table.version;
     let files: Vec<PathBuf> = [
         dir.join(format!("iter_{i:03}_table.npz")),
         crate::io::table::version_path(dir, v),
@@ -78,13 +89,12 @@ pub(super) fn tables<L: LinGaussLearn>(
     if files.is_empty() {
         return Ok(Checked::NothingRecorded);
     }
-    let table = learner.table();
-    let arrays = table_arrays(&table);
+    let arrays = table_arrays(table);
     for f in files {
         let stored = load_stored(&f)?;
         report.tables_checked += 1;
         report.compared.insert(f.clone());
-        if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, &table) {
+        if let Some((array, index, rec, rep)) = table_difference(&stored, &arrays, table) {
             return Ok(Checked::Differs((f, array, index, rec, rep)));
         }
     }

@@ -50,7 +50,7 @@ pub use error::ReplayError;
 
 mod check;
 
-use check::{checkpoint_files, state_file, tables};
+use check::{checkpoint_files, gain_tables, state_file, tables};
 
 use crate::error::ensure;
 use crate::io::episode::{recorded_episodes, EpisodeOrigin};
@@ -315,16 +315,33 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayEr
             let cfg: MdgpsConfig = m.settings_as()?;
             let path = demos_path(&m, demos)?;
             let d = crate::io::demos::load_goals(&path, &cfg.lqr_gaifo.sim)?;
-            // Only in process (`learner train`): no resume to redo (exact resume changes no bit).
+            // Where a served run was resumed the replay resumes as `learner serve --resume` did
+            // (an in-process run's list has no resume: exact resume changes no bit).
+            let resume = |tmp: &Path| Ok(crate::run::resume_mdgps(cfg.clone(), d.clone(), tmp)?.0);
             drive(
-                Mdgps::new(cfg, d)?,
+                Mdgps::new(cfg.clone(), d.clone())?,
                 dir,
                 &picks,
                 &mut report,
-                None,
-                |l, dir, i, r| match checkpoint_files(l, dir, i, &["critic.json"], r)? {
-                    Checked::Equal => state_file(&l.snapshot(), dir, i, r),
-                    other => Ok(other),
+                Some(&resume),
+                |l, dir, i, r| {
+                    let state = match checkpoint_files(l, dir, i, &["critic.json"], r)? {
+                        Checked::Equal => state_file(&l.snapshot(), dir, i, r)?,
+                        other => return Ok(other),
+                    };
+                    // A served run's `tables/vVERSION.npz`: the version's first publication,
+                    // goal 0's gain table (its epoch is not in its checksum).
+                    Ok(
+                        match (state, gain_tables(&l.gain_table(0, 0), dir, i, r)?) {
+                            (Checked::Differs(d), _) | (_, Checked::Differs(d)) => {
+                                Checked::Differs(d)
+                            }
+                            (Checked::NothingRecorded, Checked::NothingRecorded) => {
+                                Checked::NothingRecorded
+                            }
+                            _ => Checked::Equal,
+                        },
+                    )
                 },
             )?;
         }
@@ -450,13 +467,14 @@ impl<'a> Picks<'a> {
             .collect()
     }
 
-    /// The `n` noisy and the noise-free episode the update of table version `v` learns from;
-    /// `None` when the run has none (it ended before that update).
+    /// The `n` noisy and the noise-free episode per goal (of `goals`; noisy goal-major) the
+    /// update of table version `v` learns from, as `learned.jsonl` lists them when there is
+    /// one; `None` when the run has none (it ended before that update).
     fn pick(&self, v: u64, n: usize, goals: usize) -> Result<Option<Picked>, ReplayError> {
-        if goals > 1 {
-            return Ok(self.pick_goals(v, n, goals));
-        }
         let Some(events) = self.events else {
+            if goals > 1 {
+                return Ok(self.pick_goals(v, n, goals));
+            }
             let mut batch = Batch::default();
             let mut used = Vec::new();
             for (path, ep, origin) in self.episodes {
@@ -470,30 +488,40 @@ impl<'a> Picks<'a> {
                 .filter(|_| batch.noisy.len() == n)
                 .map(|eval| (batch.noisy, vec![eval], used)));
         };
-        let Some((noisy, eval)) = events.iter().rev().find_map(|e| match e {
+        let Some((noisy, evals)) = events.iter().rev().find_map(|e| match e {
             LearnedEvent::Learned {
                 version,
                 noisy,
                 eval,
+                more_evals,
                 ..
-            } if *version == v => Some((noisy, eval)),
+            } if *version == v => Some((noisy, std::iter::once(eval).chain(more_evals))),
             _ => None,
         }) else {
             return Ok(None);
         };
+        let evals: Vec<&String> = evals.collect();
         let list = self.folder.join(crate::io::learned::LEARNED);
         ensure!(
-            noisy.len() == n,
+            noisy.len() == n * goals && evals.len() == goals,
             ReplayError::Listed {
                 list: list.clone(),
                 why: format!(
-                    "{} noisy episodes for table version {v}, the run's settings ask for {n}",
-                    noisy.len()
+                    "{} noisy and {} noise-free episodes for table version {v}, the run's \
+                     settings ask for {} and {goals}",
+                    noisy.len(),
+                    evals.len(),
+                    n * goals
                 )
             }
         );
-        let mut picked = (Vec::with_capacity(n), None, Vec::with_capacity(n + 1));
-        for (name, want_noisy) in noisy.iter().map(|f| (f, true)).chain([(eval, false)]) {
+        let mut picked = (
+            Vec::with_capacity(n * goals),
+            Vec::with_capacity(goals),
+            Vec::with_capacity((n + 1) * goals),
+        );
+        let listed = noisy.iter().map(|f| (f, true));
+        for (name, want_noisy) in listed.chain(evals.into_iter().map(|f| (f, false))) {
             let k = *self.by_name.get(name).ok_or_else(|| ReplayError::Listed {
                 list: list.clone(),
                 why: format!(
@@ -519,19 +547,15 @@ impl<'a> Picks<'a> {
             if want_noisy {
                 picked.0.push(ep.clone());
             } else {
-                picked.1 = Some(ep.clone());
+                picked.1.push(ep.clone());
             }
             picked.2.push(path.clone());
         }
-        Ok(Some((
-            picked.0,
-            vec![picked.1.expect("the eval file")],
-            picked.2,
-        )))
+        Ok(Some(picked))
     }
 
-    /// The episodes of the update of version `v` of a learner of `goals` goals (MDGPS, recorded
-    /// in process: `learner train --record-episodes`): the version's noisy episodes in arrival
+    /// The episodes of the update of version `v` of a learner of `goals` goals without
+    /// `learned.jsonl` (MDGPS recorded in process: `learner train --record-episodes`): the version's noisy episodes in arrival
     /// order (goal-major, `n` each), then its evaluations (one per goal); `None` when the run
     /// recorded fewer (it ended before that update).
     fn pick_goals(&self, v: u64, n: usize, goals: usize) -> Option<Picked> {

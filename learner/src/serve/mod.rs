@@ -5,9 +5,10 @@
 //!                                     <-- controller/gains --
 //! ```
 //!
-//! Algorithm 1 with step 1 ("execute the controller") done by the real-time loop, for both
+//! Algorithm 1 with step 1 ("execute the controller") done by the real-time loop, for the
 //! learners ([`ServeLearner`]: `--algo expert`, [`ExpertLearner`]; `--algo lqr-gaifo`,
-//! [`LqrGaifo`]). The protocol (same episodes as in process, the task checks, which episodes
+//! [`LqrGaifo`]; `--algo mdgps`, [`Mdgps`], a gain table per goal and the policy's evaluation
+//! at each goal per version, docs/design.md §6.5). The protocol (same episodes as in process, the task checks, which episodes
 //! count, the files, peers that die, exact resume): docs/design.md §3.6; the loop:
 //! `session.rs`.
 
@@ -16,6 +17,8 @@ use std::path::{Path, PathBuf};
 use imitation::demos::Demos;
 use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
+use imitation::learn::Learn;
+use imitation::mdgps::{Mdgps, MdgpsConfig, MdgpsLog};
 use serde::{Deserialize, Serialize};
 
 use ur5_shared::GainTable;
@@ -28,13 +31,13 @@ mod session;
 mod task_check;
 
 pub use assemble::{episode_from_samples, Assembled, Assembler, Batch, Counts};
-pub use learner::ServeLearner;
+pub use learner::{Publication, ServeLearner};
 pub use task_check::motion_per_step;
 
 use crate::error::ensure;
 use crate::io::IoError;
 use learner::Run;
-use ports::Ports;
+use ports::{AnyTable, Ports};
 use task_check::validate;
 
 /// Which learner `learner serve` runs.
@@ -46,6 +49,9 @@ pub enum ServeAlgo {
     Expert,
     /// LQR+GAIfO from state-only demonstrations (the config is a `GaifoConfig`; needs `demos`).
     LqrGaifo,
+    /// MDGPS on several goals (the config is an `MdgpsConfig`; needs `demos`, a folder with one
+    /// `.npz` per goal).
+    Mdgps,
 }
 
 /// Options of `learner serve` (the `[serve]` table of the config file; the rest of the file is
@@ -57,7 +63,8 @@ pub struct ServeOptions {
     /// Which learner.
     pub algo: ServeAlgo,
     /// Demonstrations (`.npz` from `learner expert`) for `algo = "lqr-gaifo"`; their task
-    /// (goal, start pose, T, dt) is the one the controller and the arm must run.
+    /// (goal, start pose, T, dt) is the one the controller and the arm must run. For
+    /// `algo = "mdgps"` a folder of them, one per goal (in name order).
     pub demos: Option<PathBuf>,
     /// iceoryx2 service prefix; the controller and the arm must use the same.
     pub prefix: String,
@@ -281,6 +288,12 @@ pub fn load_gaifo_config(path: &Path) -> Result<(GaifoConfig, ServeOptions), Ser
     Ok((settings(rest, path, "LQR+GAIfO")?, serve))
 }
 
+/// Reads a config file: an [`MdgpsConfig`] at the top level plus an optional `[serve]` table.
+pub fn load_mdgps_config(path: &Path) -> Result<(MdgpsConfig, ServeOptions), ServeError> {
+    let (rest, serve) = read_config(path)?;
+    Ok((settings(rest, path, "MDGPS")?, serve))
+}
+
 /// Why [`serve`] returned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -296,7 +309,7 @@ pub enum ServeExit {
 pub struct ServeSummary<Log = IterationLog> {
     /// Always "serve".
     pub command: &'static str,
-    /// `expert` or `lqr-gaifo`.
+    /// `expert`, `lqr-gaifo` or `mdgps`.
     pub algorithm: &'static str,
     /// Why it ended.
     pub exit_reason: ServeExit,
@@ -306,7 +319,8 @@ pub struct ServeSummary<Log = IterationLog> {
     pub table_version: u64,
     /// Iterations (updates) run by this process.
     pub iterations: usize,
-    /// Task cost of the noise-free episode of each iteration of this run.
+    /// Task cost of the noise-free episode of each iteration of this run (MDGPS: the mean
+    /// over its goals' evaluations).
     pub eval_costs: Vec<f64>,
     /// Lowest of them.
     pub best_eval_cost: Option<f64>,
@@ -384,6 +398,30 @@ pub fn serve_gaifo(
     serve_loop(run, opts, progress)
 }
 
+/// Runs MDGPS's learner end on `demos` (one set per goal) until its iterations are done or
+/// SIGINT/SIGTERM: per version, goal after goal, the goal's gain table for its N noisy
+/// episodes and the policy table at the goal for its evaluation (docs/design.md §6.5), then
+/// [`Mdgps`]'s learning step on the version's episodes; the checkpoints and `mdgps_log.csv` of
+/// `learner train --algo mdgps`. `progress` receives each iteration's log.
+pub fn serve_mdgps(
+    cfg: MdgpsConfig,
+    demos: Vec<imitation::demos::Demos>,
+    opts: ServeOptions,
+    progress: impl FnMut(&MdgpsLog),
+) -> Result<ServeSummary<MdgpsLog>, ServeError> {
+    cfg.validate()?;
+    let run = match &opts.resume {
+        Some(dir) => crate::run::resume_mdgps(cfg.clone(), demos, dir)?.0,
+        None => Mdgps::new(cfg.clone(), demos)?,
+    };
+    for task in run.goal_tasks() {
+        validate(task, run.samples(), cfg.lqr_gaifo.init_var, &opts)
+            .map_err(|e| ServeError::DemosTask(Box::new(e)))?;
+    }
+    claim_dirs(&opts, "mdgps", run.seed(), &cfg)?;
+    serve_loop(run, opts, progress)
+}
+
 /// Takes the run directories ([`crate::io::manifest`]): `resume` must hold this run; `out`,
 /// unless it is that folder, is taken for a new one.
 fn claim_dirs<S: Serialize>(
@@ -403,10 +441,12 @@ fn claim_dirs<S: Serialize>(
     Ok(claim(&opts.out, &m, Claim::New { force: opts.force })?)
 }
 
-/// The epoch a resumed learner publishes `version` with: one more than the epoch of the
-/// copy recorded in `dir/tables/` (0 if there is none), so that the controller takes it again
-/// and restarts the version's episode count (docs/design.md §3.6, "Exact resume").
-fn republication_epoch(dir: &Path, version: u64) -> Result<u32, ServeError> {
+/// The epoch a resumed learner publishes `version` with: the epoch of the copy recorded in
+/// `dir/tables/` (the first publication of the version's last run, 0 if there is none) plus
+/// the `publications` per version, so that every publication is above all earlier ones and
+/// the controller takes it again and restarts its episode count (docs/design.md §3.6, "Exact
+/// resume").
+fn republication_epoch(dir: &Path, version: u64, publications: u32) -> Result<u32, ServeError> {
     let path = crate::io::table::version_path(dir, version);
     let recorded = if path.is_file() {
         crate::io::npz::NpzFile::open_schema(&path, crate::io::table::SCHEMA_VERSION)?
@@ -415,7 +455,7 @@ fn republication_epoch(dir: &Path, version: u64) -> Result<u32, ServeError> {
         0
     };
     recorded
-        .checked_add(1)
+        .checked_add(publications)
         .ok_or(ServeError::Epoch { path, recorded })
 }
 
@@ -434,8 +474,16 @@ fn serve_loop<L: ServeLearner>(
         crate::io::create_dir(&d)?;
     }
     let csv = learner.open_csv(&out, opts.resume.is_some())?;
+    let publications = learner.publications(0)?;
+    let policy_tables = publications
+        .iter()
+        .any(|p| matches!(p.table, AnyTable::Policy(_)));
     let epoch = match &opts.resume {
-        Some(dir) => republication_epoch(dir, learner.version())?,
+        Some(dir) => {
+            let per_version = u32::try_from(publications.len())
+                .map_err(|_| ServeError::Range("too many publications per version".into()))?;
+            republication_epoch(dir, learner.version(), per_version)?
+        }
         None => 0,
     };
     let run = Run {
@@ -461,7 +509,10 @@ fn serve_loop<L: ServeLearner>(
     };
 
     // Setup: every port before anything runs.
-    let ports = Ports::<GainTable>::create(&run.opts.prefix)?;
+    let mut ports = Ports::<GainTable>::create(&run.opts.prefix)?;
+    if policy_tables {
+        ports = ports.with_policy_tables()?;
+    }
     // Any error from here on is told to the controller before it is returned (§3.12).
     let result = session::serve_with_ports(&ports, run, &mut progress);
     if let Err(e) = &result {
@@ -472,7 +523,7 @@ fn serve_loop<L: ServeLearner>(
 
 #[cfg(test)]
 mod tests {
-    use super::task_check::TaskCheck;
+    use super::task_check::{Reference, TaskCheck};
     use super::*;
     use crate::arm::SimArm;
     use crate::io::checkpoint::{load_checkpoint, save_checkpoint, ExpertCheckpoint};
@@ -634,7 +685,9 @@ mod tests {
             let mut table = table.clone();
             run_episode(&mut sim, task, &mut table, Some(&mut Noise::new(0, 1, k))).unwrap()
         };
-        let check = |ep: &Episode| TaskCheck::default().episode(ep, 1, &el, 0.01);
+        let publications = el.publications(0).unwrap();
+        let r = Reference::of(&el, &publications[0], 1);
+        let check = |ep: &Episode| TaskCheck::default().episode(ep, (1, 0), &r, 0.01);
         // The same task (another episode of the version than the replayed k = 0 included).
         check(&episode(&cfg.task, 0)).unwrap();
         check(&episode(&cfg.task, 3)).unwrap();
@@ -679,7 +732,7 @@ mod tests {
             0,
         );
         assert!(TaskCheck::default()
-            .episode(&other_goal, 5, &el, 0.01)
+            .episode(&other_goal, (5, 0), &r, 0.01)
             .is_err());
         let half_dt = episode(
             &TaskConfig {
@@ -689,7 +742,7 @@ mod tests {
             0,
         );
         TaskCheck::default()
-            .episode(&half_dt, 5, &el, 0.01)
+            .episode(&half_dt, (5, 0), &r, 0.01)
             .unwrap();
         let e = err(TaskConfig {
             start_q: [0.05, -2.0, 2.4],
@@ -719,5 +772,62 @@ mod tests {
         for have in [20, 20, 7, 20, 20] {
             c.partial(have, &el).unwrap();
         }
+    }
+
+    /// MDGPS's publications of a version: per goal its gain table (the goal's controller, plan
+    /// and noise) for N noisy episodes, then the policy table at the goal for the evaluation,
+    /// at consecutive epochs; a resume publishes above every one of them.
+    #[test]
+    fn mdgps_publishes_each_goal_s_tables_and_a_resume_publishes_above_them() {
+        let goals = imitation::expert::square_goals(TaskConfig::default().goal, 0.1);
+        let demos = [goals[0], goals[4]].map(|goal| {
+            let mut cfg = ExpertConfig::default();
+            (cfg.task.horizon, cfg.task.goal, cfg.demos) = (8, goal, 2);
+            let hold = imitation::controller::init_hold(&cfg.task, 0.01);
+            let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).unwrap();
+            let mut d = imitation::expert::record_demos(&cfg, &arm, &hold, 0.0).unwrap();
+            d.cost_random = d.cost_expert + 1.0;
+            d
+        });
+        let mut cfg = MdgpsConfig::default();
+        cfg.policy.hidden = vec![4];
+        let run = Mdgps::new(cfg, demos.to_vec()).unwrap();
+        let publications = run.publications(7).unwrap();
+        assert_eq!(publications.len(), 4);
+        for (i, p) in publications.iter().enumerate() {
+            let m = i / 2;
+            assert_eq!(p.table.publication(), (1, 7 + i as u32));
+            assert_eq!((p.goal, p.noise_seed), (m, run.noise_seed(m)));
+            match &p.table {
+                AnyTable::Gain(t) => {
+                    assert_eq!((i % 2, p.noisy, p.eval), (0, run.samples(), false));
+                    assert_eq!(t.checksum, run.gain_table(m, 0).checksum);
+                    assert_eq!(t.plan, run.plan(m));
+                }
+                AnyTable::Policy(t) => {
+                    assert_eq!((i % 2, p.noisy, p.eval), (1, 0, true));
+                    assert_eq!(t.plan, run.plan(m).noise_free());
+                }
+            }
+        }
+        // The recorded first publication's epoch e: a resume publishes from e + 4 on.
+        let dir = std::env::temp_dir().join(format!("serve-epoch-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("tables")).unwrap();
+        assert_eq!(republication_epoch(&dir, 1, 4).unwrap(), 4);
+        let AnyTable::Gain(first) = &publications[0].table else {
+            panic!()
+        };
+        let path = crate::io::table::version_path(&dir, 1);
+        crate::io::table::save_table(&path, first, 0.1).unwrap();
+        assert_eq!(republication_epoch(&dir, 1, 4).unwrap(), 11);
+        assert_eq!(republication_epoch(&dir, 1, 1).unwrap(), 8);
+        let mut last = first.clone();
+        last.epoch = u32::MAX - 2;
+        crate::io::table::save_table(&path, &last, 0.1).unwrap();
+        assert!(matches!(
+            republication_epoch(&dir, 1, 4),
+            Err(ServeError::Epoch { .. })
+        ));
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

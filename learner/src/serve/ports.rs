@@ -123,13 +123,64 @@ impl Outgoing for PolicyTable {
     }
 }
 
-/// The learner's iceoryx2 node and its ports: samples in, tables `T` out. Fields drop in
-/// order: ports before the node.
+/// A table of either kind, as a learner with several goals publishes them (`learner serve
+/// --algo mdgps`: gain tables for the controllers' episodes, policy tables for the
+/// evaluations).
+#[derive(Clone, Debug)]
+pub enum AnyTable {
+    /// On `controller/gains`.
+    Gain(Box<GainTable>),
+    /// On `controller/policy`.
+    Policy(Box<PolicyTable>),
+}
+
+impl AnyTable {
+    /// Its publication (version, epoch).
+    pub fn publication(&self) -> (u64, u32) {
+        match self {
+            Self::Gain(t) => (t.version, t.epoch),
+            Self::Policy(t) => (t.version, t.epoch),
+        }
+    }
+}
+
+/// Creates a publisher of tables `U` on `node`.
+fn table_publisher<U: Outgoing>(
+    node: &Node<ipc::Service>,
+    names: &ServiceNames,
+) -> Result<Publisher<ipc::Service, U, ()>, ServeError> {
+    let svc = U::QOS.open_or_create_retrying::<U>(node, U::service(names))?;
+    svc.publisher_builder()
+        .create()
+        .map_err(|e| ServeError::Ipc(format!("cannot publish on `{}`: {e:?}", U::service(names))))
+}
+
+/// Publishes `table` on `publisher` (one loaned sample).
+fn publish_on<U: Outgoing>(
+    publisher: &Publisher<ipc::Service, U, ()>,
+    table: &U,
+) -> Result<(), ServeError> {
+    let mut slot = publisher
+        .loan_uninit()
+        .map_err(|e| ServeError::Ipc(format!("loaning {}: {e:?}", U::SAMPLE)))?;
+    table.write_to(slot.payload_mut());
+    // SAFETY: write_to initialised the whole payload.
+    unsafe { slot.assume_init() }
+        .send()
+        .map_err(|e| ServeError::Ipc(format!("publishing {}: {e:?}", U::PUBLISHED)))?;
+    Ok(())
+}
+
+/// The learner's iceoryx2 node and its ports: samples in, tables `T` out (and, for a learner
+/// that also publishes policy tables, those). Fields drop in order: ports before the node.
 pub(super) struct Ports<T: Outgoing> {
     pub(super) status: StatusPorts,
     pub(super) samples: Subscriber<ipc::Service, StepSample, ()>,
     tables: Publisher<ipc::Service, T, ()>,
+    /// Policy tables beside the gain tables ([`Ports::with_policy_tables`]).
+    policies: Option<Publisher<ipc::Service, PolicyTable, ()>>,
     pub(super) node: Node<ipc::Service>,
+    names: ServiceNames,
     /// This learner is the prefix's only one while it runs.
     _role: services::RoleLock,
 }
@@ -150,7 +201,6 @@ impl<T: Outgoing> Ports<T> {
         let status = StatusPorts::create(&node, &names)?;
         let samples_svc = services::LEARNER_SAMPLES_QOS
             .open_or_create_retrying::<StepSample>(&node, &names.learner_samples)?;
-        let tables_svc = T::QOS.open_or_create_retrying::<T>(&node, T::service(&names))?;
         let samples = samples_svc
             .subscriber_builder()
             .buffer_size(services::LEARNER_SAMPLES_QOS.subscriber_buffer)
@@ -161,35 +211,51 @@ impl<T: Outgoing> Ports<T> {
                     names.learner_samples
                 ))
             })?;
-        let tables = tables_svc.publisher_builder().create().map_err(|e| {
-            ServeError::Ipc(format!("cannot publish on `{}`: {e:?}", T::service(&names)))
-        })?;
+        let tables = table_publisher::<T>(&node, &names)?;
         Ok(Self {
             status,
             samples,
             tables,
+            policies: None,
             node,
+            names,
             _role: role,
         })
     }
 
     /// Publishes `table` (one loaned sample).
     pub(super) fn publish(&self, table: &T) -> Result<(), ServeError> {
-        let mut slot = self
-            .tables
-            .loan_uninit()
-            .map_err(|e| ServeError::Ipc(format!("loaning {}: {e:?}", T::SAMPLE)))?;
-        table.write_to(slot.payload_mut());
-        // SAFETY: write_to initialised the whole payload.
-        unsafe { slot.assume_init() }
-            .send()
-            .map_err(|e| ServeError::Ipc(format!("publishing {}: {e:?}", T::PUBLISHED)))?;
-        Ok(())
+        publish_on(&self.tables, table)
     }
 
     /// Delivers the published history to subscribers that connected since (a controller
     /// that started late).
     pub(super) fn update_connections(&self) {
         let _ = self.tables.update_connections();
+        if let Some(p) = &self.policies {
+            let _ = p.update_connections();
+        }
+    }
+}
+
+impl Ports<GainTable> {
+    /// These ports with a publisher of policy tables too (a learner with several goals
+    /// evaluates its policy through them).
+    pub(super) fn with_policy_tables(mut self) -> Result<Self, ServeError> {
+        self.policies = Some(table_publisher::<PolicyTable>(&self.node, &self.names)?);
+        Ok(self)
+    }
+
+    /// Publishes `table` on its service.
+    pub(super) fn publish_any(&self, table: &AnyTable) -> Result<(), ServeError> {
+        match table {
+            AnyTable::Gain(t) => self.publish(t),
+            AnyTable::Policy(t) => match &self.policies {
+                Some(p) => publish_on(p, &**t),
+                None => Err(ServeError::Ipc(
+                    "a policy table on ports without a policy-table publisher (a bug)".into(),
+                )),
+            },
+        }
     }
 }

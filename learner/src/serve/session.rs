@@ -10,9 +10,9 @@ use imitation::controller::to_gain_table;
 use imitation::rollout::Episode;
 use ur5_shared::{GainTable, StepSample};
 
-use super::learner::Run;
+use super::learner::{Publication, Run};
 use super::ports::Ports;
-use super::task_check::TaskCheck;
+use super::task_check::{Reference, TaskCheck};
 use super::{
     Assembled, Assembler, Batch, Counts, ServeError, ServeExit, ServeLearner, ServeSummary,
 };
@@ -57,17 +57,24 @@ struct Session<'p, L: ServeLearner> {
     run: Run<L>,
     /// The version this run started from.
     start_version: u64,
-    /// Noisy episodes per update (N).
-    n: usize,
     /// Horizon T (steps).
     t_len: usize,
     asm: Assembler,
+    /// The current version's publications and the one whose episodes are collected.
+    publications: Vec<Publication>,
+    at: usize,
+    /// The current publication's episodes.
     batch: Batch,
+    /// The version's episodes of its earlier publications: noisy goal-major, one evaluation
+    /// per goal.
+    noisy: Vec<Episode>,
+    evals: Vec<Episode>,
     check: TaskCheck,
     counts: Counts,
     log: Vec<L::Log>,
-    /// The best controller so far and the task cost of its noise-free episode.
-    best: Option<(LinGaussPolicy, f64)>,
+    /// The best controller so far (when the learner's policy is one) and the task cost of its
+    /// noise-free episodes (their mean with several goals).
+    best: Option<(Option<LinGaussPolicy>, f64)>,
     /// The last table is published: the run ends when the controller runs it.
     finishing: bool,
     /// The first sample of the current version (the time an update waited).
@@ -76,7 +83,7 @@ struct Session<'p, L: ServeLearner> {
     newer_reported: (u64, u32),
     /// The recorded files of the batch's episodes (`episodes/learned.jsonl`).
     used_noisy: Vec<String>,
-    used_eval: Option<String>,
+    used_evals: Vec<String>,
     bar: Progress,
 }
 
@@ -84,8 +91,8 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     /// Saves and publishes the start version, notes a resume and says what it waits for.
     fn start(ports: &'p Ports<GainTable>, mut run: Run<L>) -> Result<Self, ServeError> {
         let start_version = run.learner.version();
-        let table = run.save_current()?;
-        ports.publish(&table)?;
+        let publications = run.save_current()?;
+        ports.publish_any(&publications[0].table)?;
         if let Some(from) = &run.opts.resume {
             let same =
                 |p: &std::path::Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_owned());
@@ -95,8 +102,9 @@ impl<'p, L: ServeLearner> Session<'p, L> {
             })?;
         }
         let (n, t_len) = (run.learner.samples(), run.learner.task().horizon);
+        let goals = run.learner.goal_tasks().len();
         eprintln!(
-            "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version",
+            "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version{}",
             L::ALGO,
             run.opts.prefix,
             if run.opts.resume.is_some() {
@@ -104,8 +112,15 @@ impl<'p, L: ServeLearner> Session<'p, L> {
             } else {
                 String::new()
             },
+            if goals > 1 {
+                format!(" and goal ({goals} goals, a table for each goal's noisy episodes and one for its evaluation)")
+            } else {
+                String::new()
+            },
         );
-        eprintln!("{}", L::PROGRESS_HEADER);
+        if !L::PROGRESS_HEADER.is_empty() {
+            eprintln!("{}", L::PROGRESS_HEADER);
+        }
         // The seed is checked on the first version this learner publishes itself: the
         // controller may have run the start version (a resumed one, or one it already had)
         // for longer, with later episodes' noise.
@@ -120,13 +135,16 @@ impl<'p, L: ServeLearner> Session<'p, L> {
         Ok(Self {
             ports,
             start_version,
-            n,
             t_len,
             asm: Assembler::new(t_len),
+            publications,
+            at: 0,
             batch: Batch {
                 noisy: Vec::with_capacity(n),
                 eval: None,
             },
+            noisy: Vec::with_capacity(n * goals),
+            evals: Vec::with_capacity(goals),
             check,
             counts: Counts::default(),
             log: Vec::new(),
@@ -134,8 +152,8 @@ impl<'p, L: ServeLearner> Session<'p, L> {
             finishing: run.learner.done(),
             version_started: None,
             newer_reported: (0, 0),
-            used_noisy: Vec::with_capacity(n),
-            used_eval: None,
+            used_noisy: Vec::with_capacity(n * goals),
+            used_evals: Vec::with_capacity(goals),
             bar,
             run,
         })
@@ -208,10 +226,35 @@ impl<'p, L: ServeLearner> Session<'p, L> {
                 return Ok(Some(exit));
             }
         }
-        if self.batch.full(self.n) {
-            self.update(progress)?;
+        let p = &self.publications[self.at];
+        if self.batch.noisy.len() >= p.noisy && (self.batch.eval.is_some() || !p.eval) {
+            self.next_publication(progress)?;
         }
         Ok(None)
+    }
+
+    /// The current publication's episodes are in: keeps them and publishes the version's next
+    /// publication, or, after its last, updates.
+    fn next_publication(&mut self, progress: &mut impl FnMut(&L::Log)) -> Result<(), ServeError> {
+        self.noisy.append(&mut self.batch.noisy);
+        self.evals.extend(self.batch.eval.take());
+        self.at += 1;
+        match self.publications.get(self.at) {
+            Some(p) => {
+                self.run.epoch = p.table.publication().1;
+                self.ports.publish_any(&p.table)
+            }
+            None => self.update(progress),
+        }
+    }
+
+    /// The reference the task checks hold episodes to: the current publication.
+    fn reference(&self) -> Reference<'_> {
+        Reference::of(
+            &self.run.learner,
+            &self.publications[self.at],
+            self.publications.len(),
+        )
     }
 
     /// Counts a discarded episode, or handles a complete one.
@@ -252,12 +295,11 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     ) -> Result<Option<ServeExit>, ServeError> {
         self.counts.episodes += 1;
         let file = self.run.record(&ep, episode, version, epoch)?;
-        self.check.episode(
-            &ep,
-            version,
-            &self.run.learner,
-            self.run.opts.task_tolerance,
-        )?;
+        let tolerance = self.run.opts.task_tolerance;
+        let mut check = std::mem::take(&mut self.check);
+        let checked = check.episode(&ep, (version, epoch), &self.reference(), tolerance);
+        self.check = check;
+        checked?;
         let current = (self.run.learner.version(), self.run.epoch);
         // An earlier publication of the current version counts as an older version: its
         // episodes carry later noise keys than the ones this learner waits for.
@@ -287,42 +329,46 @@ impl<'p, L: ServeLearner> Session<'p, L> {
     /// takes.
     fn offer(&mut self, ep: Episode, file: Option<String>) {
         let noisy = ep.noisy;
-        if self.batch.offer(ep, self.n) {
+        let p = &self.publications[self.at];
+        // A publication that gives no evaluation (a gain table of several) takes none.
+        if (noisy || p.eval) && self.batch.offer(ep, p.noisy) {
             self.counts.used += 1;
             match (noisy, file) {
                 (true, Some(f)) => self.used_noisy.push(f),
-                (false, f) => self.used_eval = f,
-                (true, None) => {}
+                (false, Some(f)) => self.used_evals.push(f),
+                (_, None) => {}
             }
         } else {
             self.counts.surplus += 1;
         }
     }
 
-    /// Steps 2–6 on the full batch: notes the episodes used, learns, writes the CSV row,
-    /// saves and publishes the next version.
+    /// Steps 2–6 on the version's episodes: notes the episodes used, learns, writes the CSV
+    /// row, saves and publishes the next version.
     fn update(&mut self, progress: &mut impl FnMut(&L::Log)) -> Result<(), ServeError> {
         let run = &mut self.run;
-        let eval = self.batch.eval.take().expect("full batch");
-        let cost = eval.task_cost();
+        let evals = std::mem::take(&mut self.evals);
+        let cost = evals.iter().map(Episode::task_cost).sum::<f64>() / evals.len() as f64;
         if self.best.as_ref().is_none_or(|(_, c)| cost < *c) {
-            self.best = Some((run.learner.policy().clone(), cost));
+            self.best = Some((run.learner.served_policy().cloned(), cost));
         }
         let waited = self
             .version_started
             .take()
             .map_or(0.0, |t0| t0.elapsed().as_secs_f64());
         // Before the update's checkpoint: the last line of a version counts.
-        if let Some(eval) = self.used_eval.take() {
+        let mut used_evals = std::mem::take(&mut self.used_evals).into_iter();
+        if let Some(eval) = used_evals.next() {
             run.note(&LearnedEvent::Learned {
                 iteration: run.learner.iteration() + 1,
                 version: run.learner.version(),
                 noisy: std::mem::take(&mut self.used_noisy),
                 eval,
+                more_evals: used_evals.collect(),
             })?;
         }
-        let entry = run.learner.learn(&self.batch.noisy, &eval, waited)?;
-        self.batch.noisy.clear();
+        let entry = run.learner.learn_goals(&self.noisy, &evals, waited)?;
+        self.noisy.clear();
         // The row before the checkpoint, as `learner train` writes them: a kill between the
         // two leaves a row that a resume from the previous checkpoint drops and writes again,
         // never a checkpoint without its row.
@@ -332,8 +378,9 @@ impl<'p, L: ServeLearner> Session<'p, L> {
             &run.opts.out,
         ))?;
         run.epoch = 0;
-        let table = run.save_current()?;
-        self.ports.publish(&table)?;
+        self.publications = run.save_current()?;
+        self.at = 0;
+        self.ports.publish_any(&self.publications[0].table)?;
         self.bar.done_one(&L::progress_line(&entry));
         progress(&entry);
         self.log.push(entry);
@@ -373,7 +420,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
         } = self;
         drop(bar);
         let out = run.opts.out.clone();
-        if let Some((pol, _)) = &best {
+        if let Some((Some(pol), _)) = &best {
             save_table(
                 &out.join("best_table.npz"),
                 &to_gain_table(pol, run.learner.version()),

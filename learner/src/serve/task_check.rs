@@ -1,15 +1,14 @@
 //! The checks that the controller and the arm run the learner's task (docs/design.md §3.6,
 //! "The task must be the controller's and the arm's").
 
-use imitation::controller::to_gain_table;
 use imitation::rollout::{run_episode, Arm, Episode};
-use ur5_shared::config::TaskConfig;
+use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX, MAX_HORIZON};
 use ur5_shared::noise::Noise;
 use ur5_shared::services::ServiceNames;
-use ur5_shared::StepSample;
+use ur5_shared::{GainTable, StepSample};
 
-use super::learner::ServeLearner;
+use super::learner::{Publication, ServeLearner};
 use super::ServeError;
 use super::ServeOptions;
 use crate::arm::SimArm;
@@ -73,6 +72,53 @@ pub fn motion_per_step(ep: &Episode) -> Option<f64> {
     (den > 1e-12 && num.is_finite()).then(|| num / den)
 }
 
+/// What an episode of the learner's current publication must match: its goal's task, the
+/// gain table its noisy episodes ran and their noise.
+pub(super) struct Reference<'a> {
+    /// The publication's goal's task.
+    pub(super) task: &'a TaskConfig,
+    /// The learner's model of the arm.
+    pub(super) sim: &'a SimConfig,
+    /// The publication.
+    pub(super) version: u64,
+    pub(super) epoch: u32,
+    /// Its gain table (`None`: a policy table, whose episodes are noise-free).
+    pub(super) table: Option<&'a GainTable>,
+    /// The run seed (for messages) and the seed of the publication's noise.
+    pub(super) seed: u64,
+    pub(super) noise_seed: u64,
+    /// Noisy episodes per publication N.
+    pub(super) samples: usize,
+    /// The learner publishes one table per version (one goal): the start is checked on any
+    /// version's episode, the seed and dt on any publication of the version's.
+    pub(super) single: bool,
+    /// Where the task comes from (for messages).
+    pub(super) source: &'static str,
+}
+
+impl<'a> Reference<'a> {
+    /// The reference of `learner`'s publication `p`; `publications`: how many per version.
+    pub(super) fn of<L: ServeLearner>(
+        learner: &'a L,
+        p: &'a Publication,
+        publications: usize,
+    ) -> Self {
+        let (version, epoch) = p.table.publication();
+        Self {
+            task: learner.goal_tasks()[p.goal],
+            sim: learner.sim_config(),
+            version,
+            epoch,
+            table: p.gain_table(),
+            seed: learner.seed(),
+            noise_seed: p.noise_seed,
+            samples: learner.samples(),
+            single: publications == 1,
+            source: L::TASK_SOURCE,
+        }
+    }
+}
+
 /// The checks of docs/design.md §3.6 ("The task must be the controller's and the arm's").
 #[derive(Default)]
 pub(super) struct TaskCheck {
@@ -119,23 +165,23 @@ impl TaskCheck {
     /// action it computed at t = 0 of a noisy episode of the learner's table must be the law's
     /// with the noise of one of that version's episodes k = 0…N under the learner's seed
     /// (docs/design.md §3.7). Another seed gives other draws, off by about L_0 (ε − ε′).
-    fn check_seed<L: ServeLearner>(
+    fn check_seed(
         &mut self,
         ep: &Episode,
-        version: u64,
-        learner: &L,
+        table: &GainTable,
+        r: &Reference,
     ) -> Result<(), ServeError> {
-        let table = to_gain_table(learner.policy(), version);
+        let version = r.version;
         let s0 = ep.state(0);
         let got: [f64; DU] = ep.u_policy[..DU]
             .try_into()
             .expect("an episode has dU actions per step");
-        let seed = learner.seed();
+        let seed = r.seed;
         // k beyond N + 1 only if episodes were lost before this one; allow a few.
-        let matches = (0..=4 * (learner.samples() as u64 + 1)).any(|k| {
-            let eps = Noise::new(seed, version, k).next();
+        let matches = (0..=4 * (r.samples as u64 + 1)).any(|k| {
+            let eps = Noise::new(r.noise_seed, version, k).next();
             let mut a = [0.0; DU];
-            ur5_shared::controller_action(&table, 0, &s0, &eps, &mut a).is_ok()
+            ur5_shared::controller_action(table, 0, &s0, &eps, &mut a).is_ok()
                 && (0..DU).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
         });
         ensure!(
@@ -151,27 +197,34 @@ impl TaskCheck {
         Ok(())
     }
 
-    /// On every complete episode (table `version`).
-    pub(super) fn episode<L: ServeLearner>(
+    /// On every complete episode (publication `version`, `epoch`), against the learner's
+    /// current publication `r`.
+    pub(super) fn episode(
         &mut self,
         ep: &Episode,
-        version: u64,
-        learner: &L,
+        (version, epoch): (u64, u32),
+        r: &Reference,
         tolerance: f64,
     ) -> Result<(), ServeError> {
         self.short = (0, 0);
-        let own = ep.noisy && version == learner.version();
-        let check_dt = !self.dt_checked && own;
-        if !self.seed_checked && own && version >= self.seed_from_version {
-            self.check_seed(ep, version, learner)?;
+        // With several publications per version only the current one's goal and noise are
+        // known: the others' episodes are not checked.
+        let current = version == r.version && (r.single || epoch == r.epoch);
+        let own = ep.noisy && current;
+        let table = r.table.filter(|_| own);
+        let check_dt = !self.dt_checked && table.is_some();
+        if !self.seed_checked && version >= self.seed_from_version {
+            if let Some(table) = table {
+                self.check_seed(ep, table, r)?;
+            }
         }
-        if self.start_checked && !check_dt {
+        let check_start = !self.start_checked && (r.single || current);
+        if !check_start && !check_dt {
             return Ok(());
         }
-        let task = learner.task();
-        let mut sim =
-            SimArm::new(learner.sim_config().clone(), task.dt).map_err(ServeError::Model)?;
-        if !self.start_checked {
+        let task = r.task;
+        let mut sim = SimArm::new(r.sim.clone(), task.dt).map_err(ServeError::Model)?;
+        if check_start {
             // Joint angles and end effector minus goal (velocities: sensor noise only).
             let want = sim
                 .reset(task.start_q, task.goal)
@@ -192,14 +245,14 @@ impl TaskCheck {
                     &want[3..],
                     task.start_q,
                     task.goal,
-                    L::TASK_SOURCE
+                    r.source
                 ))
             );
             self.start_checked = true;
         }
-        if check_dt {
-            let mut table = to_gain_table(learner.policy(), version);
-            let mut noise = Noise::new(learner.seed(), version, 0);
+        if let (true, Some(table)) = (check_dt, table) {
+            let mut table = Box::new(table.clone());
+            let mut noise = Noise::new(r.noise_seed, version, 0);
             let replay = run_episode(&mut sim, task, &mut *table, Some(&mut noise))
                 .map_err(ServeError::FirstEpisode)?;
             if let (Some(a), Some(b)) = (motion_per_step(ep), motion_per_step(&replay)) {
@@ -211,8 +264,7 @@ impl TaskCheck {
                      dt = {} s gives on the learner's model of the arm (allowed 1/2 to 2): the \
                      arm or the controller runs another dt (or, in real time, the arm cannot \
                      keep up with its clock); run both with the [task] dt of {}",
-                        task.dt,
-                        L::TASK_SOURCE
+                        task.dt, r.source
                     ))
                 );
             }

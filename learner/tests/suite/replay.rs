@@ -542,6 +542,7 @@ fn a_replay_accounts_for_every_recorded_file() {
                 version: 1,
                 noisy: names[..5].to_vec(),
                 eval: names[5].clone(),
+                more_evals: Vec::new(),
             },
         )
         .unwrap();

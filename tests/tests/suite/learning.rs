@@ -15,8 +15,9 @@ use imitation::expert::{ExpertConfig, ExpertLearner, IterationLog};
 use imitation::gaifo::GaifoLog;
 use imitation::rollout::{execute, Episode};
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, learned_columns, lqr_gaifo_in_process, scratch,
-    spawn_sim_and_controller, unique_prefix, write_config, write_served_gaifo_config, Proc,
+    assert_served_done, cleanup_dead_nodes, json_summary, learned_columns, lqr_gaifo_in_process,
+    scratch, spawn_sim_and_controller, unique_prefix, write_config, write_served_gaifo_config,
+    Proc,
 };
 use learner::arm::SimArm;
 use learner::io::episode::load_episode;
@@ -499,12 +500,7 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
     let (lj, llog, cj) = run_until_learned(&mut learner, &mut sim, &mut ctl, &mut monitor);
 
-    assert_eq!(lj["algorithm"], "lqr-gaifo", "{lj}");
-    assert_eq!(lj["exit_reason"], "done", "{lj}");
-    assert_eq!(lj["iterations"], ITERATIONS as u64, "{lj}");
-    assert_eq!(lj["table_version"], ITERATIONS as u64 + 1, "{lj}");
-    assert_eq!(lj["counts"]["partial"], 0, "{lj}");
-    assert_eq!(lj["counts"]["mixed"], 0, "{lj}");
+    assert_served_done(&lj, "lqr-gaifo", ITERATIONS);
     assert_eq!(lj["counts"]["used"], (ITERATIONS * (N + 1)) as u64, "{lj}");
     assert!(llog.contains(GaifoLog::PROGRESS_HEADER), "{llog}");
     assert_eq!(cj["swaps"], ITERATIONS as u64 + 1, "{cj}");
@@ -720,6 +716,7 @@ fn assert_resumed_run_replays(out: &Path, dir: &Path, last_version: u64) {
                 version,
                 noisy,
                 eval,
+                ..
             } => Some((*iteration, *version, noisy.clone(), eval.clone())),
             LearnedEvent::Resumed { .. } => None,
         })

@@ -7,6 +7,13 @@
 //! `hil-sim serve` in lockstep. Every episode the learner would use, N noisy per goal and the
 //! policy's evaluation per goal, equals `Mdgps::execute`'s in-process episode bit for bit:
 //! states, executed and computed actions.
+//!
+//! `learner serve --algo mdgps` publishes and collects that way itself: served against
+//! `hil-sim serve` and `rt-controller run` (lockstep), its checkpoints (critic files byte for
+//! byte, learner states bit for bit but the in-process arm's noise position, which a served
+//! run has no use for) and `mdgps_log.csv` rows (timing columns aside) are those of `learner
+//! train --algo mdgps` with the same seed and demonstrations, also when the learner is killed at
+//! seeded moments and resumed each time.
 
 use std::time::Duration;
 
@@ -17,7 +24,9 @@ use imitation::learn::iterate;
 use imitation::mdgps::{Mdgps, MdgpsConfig};
 use imitation::rollout::Episode;
 use integration_tests::{
-    json_summary, scratch, spawn_sim_and_controller, unique_prefix, write_config, TestLearner,
+    assert_same_checkpoint, assert_served_done, checkpoint_file, json_summary, learn_over_ipc,
+    scratch, serve_with_kills, spawn_sim_and_controller, state_bits, unique_prefix, write_config,
+    Proc, TestLearner,
 };
 use learner::arm::SimArm;
 use learner::serve::episode_from_samples;
@@ -151,6 +160,216 @@ fn mdgps_goals_run_on_the_controller_by_their_tables_plans_as_in_process() {
     let summary = json_summary(&out, &log);
     assert_eq!(summary["rejected_total"], 0, "{summary}");
     assert_eq!(summary["episodes_aborted"], 0, "{summary}");
+    drop(sim);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The `mdgps_log.csv` columns up to `s_loss_after` (the rest are timings).
+fn learned_mdgps_columns(row: &str) -> Vec<String> {
+    row.split(',').take(11).map(str::to_owned).collect()
+}
+
+/// The files of a served MDGPS run of `iterations` in `dir`: demonstrations of two goals
+/// (`demos/`), the settings for `learner train` and, with a `[serve]` table, for `learner
+/// serve` (plus `serve_extra` in its `[serve]` table), and the arm's and the controller's
+/// configs. Starts `learner train --algo mdgps` (output `dir/reference`) and returns it with
+/// the paths (serve, sim, controller).
+fn served_run_files(
+    dir: &std::path::Path,
+    iterations: usize,
+    serve_extra: &str,
+) -> (Proc, [String; 3]) {
+    let goals = square_goals(TaskConfig::default().goal, 0.1);
+    let demos_dir = dir.join("demos");
+    std::fs::create_dir_all(&demos_dir).unwrap();
+    for (name, goal) in [("a.npz", goals[0]), ("b.npz", goals[4])] {
+        learner::io::demos::save(&hold_demos(goal), &demos_dir.join(name)).unwrap();
+    }
+    let settings = format!(
+        "[lqr_gaifo]\nsamples = {N}\nseed = {SEED}\niterations = {iterations}\n\
+         [lqr_gaifo.discriminator]\nn_critic = 5\n[policy]\nhidden = [8]\nsteps = 20\n"
+    );
+    let train_cfg = write_config(dir, "train.toml", &settings);
+    let demos_arg = demos_dir.display().to_string();
+    let serve_cfg = write_config(
+        dir,
+        "serve.toml",
+        &format!(
+            "{settings}[serve]\nalgo = \"mdgps\"\ndemos = \"{demos_arg}\"\n\
+             wait_report_s = 1.0\nidle_sleep_us = 200\n{serve_extra}"
+        ),
+    );
+    let train = Proc::spawn(
+        "learner",
+        "train",
+        &[
+            "train",
+            "--algo",
+            "mdgps",
+            "--config",
+            &train_cfg,
+            "--demos",
+            &demos_arg,
+            "--out",
+            &dir.join("reference").display().to_string(),
+        ],
+        dir,
+    );
+    let sim_cfg = write_config(dir, "sim.toml", &format!("[task]\nhorizon = {T}\n"));
+    let ctl_cfg = write_config(
+        dir,
+        "controller.toml",
+        &format!("seed = {SEED}\nnoisy_episodes = {N}\neval_episodes = 1\n[task]\nhorizon = {T}\n"),
+    );
+    (train, [serve_cfg, sim_cfg, ctl_cfg])
+}
+
+/// The served run in `out` has the checkpoints and log rows of `learner train` (`train`,
+/// into `dir/reference`): every learner state bit for bit (the in-process arm's noise position
+/// aside), every critic file byte for byte, the rows' learned columns.
+fn assert_train_equal(
+    mut train: Proc,
+    dir: &std::path::Path,
+    out: &std::path::Path,
+    iterations: usize,
+) {
+    let (code, _) = train.wait(Duration::from_secs(300));
+    assert_eq!(code, Some(0), "learner train:\n{}", train.log());
+    let ref_out = dir.join("reference");
+    for i in 0..=iterations {
+        assert_same_checkpoint(out, &ref_out, i, &["arm.noise_position"]);
+    }
+    // The run learned: its last state is not its first.
+    let state = |i| state_bits(&checkpoint_file(out, i, "state.npz"));
+    assert_ne!(state(0), state(iterations));
+    let rows = |d: &std::path::Path| -> Vec<Vec<String>> {
+        std::fs::read_to_string(d.join("mdgps_log.csv"))
+            .unwrap()
+            .lines()
+            .map(learned_mdgps_columns)
+            .collect()
+    };
+    let served = rows(out);
+    assert_eq!(served.len(), iterations + 1, "{served:?}");
+    assert_eq!(served, rows(&ref_out));
+}
+
+/// `learner replay OUT` redoes the served run from its recorded episodes (the ones
+/// `learned.jsonl` lists, every goal's evaluation included) to the same checkpoints.
+fn assert_replays(dir: &std::path::Path, out: &std::path::Path, iterations: usize) {
+    let o = out.display().to_string();
+    let mut p = Proc::spawn("learner", "replay", &["replay", &o, "--json"], dir);
+    let (code, stdout) = p.wait(Duration::from_secs(300));
+    let log = p.log();
+    assert_eq!(code, Some(0), "replay log:\n{log}");
+    let r = json_summary(&stdout, &log);
+    assert!(r["difference"].is_null(), "{r}");
+    assert_eq!(r["iterations"], iterations as u64, "{r}");
+    assert_eq!(r["resumes"], 0, "{r}");
+    assert_eq!(r["critics_checked"], iterations as u64 + 1, "{r}");
+}
+
+#[test]
+fn served_mdgps_checkpoints_equal_learner_train_bit_for_bit() {
+    const ITERATIONS: usize = 2;
+    let dir = scratch("mdgps-serve");
+    let prefix = unique_prefix("mdgps-serve");
+    let (train, [serve_cfg, sim_cfg, ctl_cfg]) = served_run_files(&dir, ITERATIONS, "");
+    let mut sim = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &["serve", "--config", &sim_cfg, "--prefix", &prefix],
+        &dir,
+    );
+    let wait = Duration::from_secs(300);
+    let (lj, cj) = learn_over_ipc(
+        &dir,
+        &prefix,
+        &serve_cfg,
+        &ctl_cfg,
+        "mdgps",
+        wait,
+        |_, _| {},
+    );
+    let out = dir.join("out-mdgps");
+    assert_served_done(&lj, "mdgps", ITERATIONS);
+    // Per iteration and goal: N noisy episodes and the evaluation.
+    assert_eq!(
+        lj["counts"]["used"],
+        (ITERATIONS * 2 * (N + 1)) as u64,
+        "{lj}"
+    );
+    // 2 goals × 2 publications per version, and the last version's first.
+    assert_eq!(cj["swaps"], (ITERATIONS * 4 + 1) as u64, "{cj}");
+    assert!(sim.running());
+    assert_train_equal(train, &dir, &out, ITERATIONS);
+    // learned.jsonl: every iteration's N noisy episodes per goal and each goal's evaluation.
+    let events = learner::io::learned::read_events(&out.join("episodes"))
+        .unwrap()
+        .unwrap();
+    assert_eq!(events.len(), ITERATIONS);
+    for (i, e) in events.iter().enumerate() {
+        let learner::io::learned::LearnedEvent::Learned {
+            iteration,
+            noisy,
+            more_evals,
+            ..
+        } = e
+        else {
+            panic!("{e:?}")
+        };
+        assert_eq!(
+            (*iteration, noisy.len(), more_evals.len()),
+            (i + 1, 2 * N, 1)
+        );
+    }
+    assert_replays(&dir, &out, ITERATIONS);
+    drop(sim);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Exact resume over IPC, as `resume_ipc.rs` for LQR+GAIfO: the served MDGPS learner killed
+/// with SIGKILL at seeded moments and resumed each time (every publication of the resumed
+/// version above all earlier ones) ends with `learner train`'s checkpoints and rows.
+#[test]
+fn a_served_mdgps_learner_killed_and_resumed_equals_learner_train() {
+    // A served iteration takes about 0.1 s here: kills 30 to 280 ms after each start land
+    // in every part of an iteration.
+    const ITERATIONS: usize = 12;
+    let dir = scratch("mdgps-resume");
+    let prefix = unique_prefix("mdgps-resume");
+    // Without recording: a learner that records every episode falls behind a lockstep
+    // controller whose episodes are this short, and its kills and restarts let the backlog
+    // grow until samples of an episode it needs are lost (then it learns from later ones).
+    let (train, [serve_cfg, sim_cfg, ctl_cfg]) =
+        served_run_files(&dir, ITERATIONS, "record_episodes = false\n");
+    let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
+    let out = dir.join("out");
+    let base = [
+        "serve", "--config", &serve_cfg, "--prefix", &prefix, "--json",
+    ];
+    let killed = serve_with_kills(
+        &dir,
+        &base,
+        &out,
+        [&mut sim, &mut ctl],
+        6,
+        31,
+        (30, 250),
+        Duration::from_secs(120),
+    );
+    eprintln!(
+        "{} kills: {} resumes, {} restarts; then finished",
+        killed.kills, killed.resumes, killed.restarts
+    );
+    assert!(
+        killed.resumes >= 1,
+        "no kill landed after the first checkpoint"
+    );
+    assert_eq!(killed.summary["exit_reason"], "done", "{}", killed.summary);
+    let (cj, _) = ctl.terminate_ok(Duration::from_secs(120));
+    assert_eq!(cj["rejected_total"], 0, "{cj}");
+    assert_train_equal(train, &dir, &out, ITERATIONS);
     drop(sim);
     std::fs::remove_dir_all(&dir).ok();
 }

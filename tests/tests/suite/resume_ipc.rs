@@ -9,12 +9,12 @@
 //! the learner uses only episodes of the new publication (docs/design.md §3.6, "Exact resume").
 
 use std::path::Path;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use integration_tests::{
-    checkpoint_file as file, cleanup_dead_nodes, json_summary, learned_columns,
-    lqr_gaifo_in_process, scratch, spawn_sim_and_controller, splitmix64, state_bits, unique_prefix,
-    write_config, write_served_gaifo_config, Proc,
+    assert_same_checkpoint, checkpoint_file as file, cleanup_dead_nodes, json_summary,
+    learned_columns, lqr_gaifo_in_process, scratch, serve_with_kills, spawn_sim_and_controller,
+    unique_prefix, write_config, write_served_gaifo_config, Killed,
 };
 use learner::io::log::{write_csv_row, CSV_HEADER};
 use learner::io::table::load_table;
@@ -64,7 +64,6 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
     };
 
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
-    let o = out.display().to_string();
     let demos_arg = demos_path.display().to_string();
     let base = [
         "serve",
@@ -76,55 +75,23 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
         &demos_arg,
         "--json",
     ];
-    let mut seed = 23u64;
-    let (mut kills, mut resumes, mut restarts) = (0, 0, 0);
-    let mut resume = false;
-    let t0 = Instant::now();
-    let summary = loop {
-        assert!(t0.elapsed() < 4 * LONG, "no end after {kills} kills");
-        let args = if resume {
-            [&base[..], &["--resume", &o, "--out", &o]].concat()
-        } else {
-            [&base[..], &["--out", &o, "--force"]].concat()
-        };
-        let mut p = Proc::spawn("learner", &format!("learner{kills}"), &args, &dir);
-        // The first KILLS runs are killed 50 to 800 ms after their start (a served iteration
-        // takes about 0.2 s here, the whole run a few seconds); the next one finishes.
-        let at = Duration::from_millis(50 + splitmix64(&mut seed) % 750);
-        let started = Instant::now();
-        let mut finished = None;
-        while kills >= KILLS || started.elapsed() < at {
-            for q in [&mut sim, &mut ctl] {
-                assert!(q.running(), "{} exited; its log:\n{}", q.name(), q.log());
-            }
-            if !p.running() {
-                finished = Some(p.wait(Duration::from_secs(1)));
-                break;
-            }
-            assert!(
-                started.elapsed() < LONG,
-                "learner hangs; its log:\n{}",
-                p.log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        match finished {
-            Some((code, stdout)) => {
-                let log = p.log();
-                assert_eq!(code, Some(0), "learner log:\n{log}");
-                break json_summary(&stdout, &log);
-            }
-            None => {
-                p.signal(libc::SIGKILL);
-                p.wait(Duration::from_secs(10));
-                kills += 1;
-                resume = file(&out, 0, "state.npz").is_file();
-                resumes += usize::from(resume);
-                restarts += usize::from(!resume);
-                eprintln!("kill {kills} after {at:?}; resume: {resume}");
-            }
-        }
-    };
+    // The first KILLS runs are killed 50 to 800 ms after their start (a served iteration
+    // takes about 0.2 s here, the whole run a few seconds); the next one finishes.
+    let Killed {
+        summary,
+        kills,
+        resumes,
+        restarts,
+    } = serve_with_kills(
+        &dir,
+        &base,
+        &out,
+        [&mut sim, &mut ctl],
+        KILLS,
+        23,
+        (50, 750),
+        LONG,
+    );
     eprintln!("{kills} kills: {resumes} resumes, {restarts} restarts; then finished");
     assert!(resumes >= 1, "no kill landed after the first checkpoint");
     assert_eq!(summary["exit_reason"], "done", "{summary}");
@@ -142,17 +109,7 @@ fn a_served_learner_killed_at_random_moments_resumes_bit_for_bit() {
     for (i, table) in tables.iter().enumerate() {
         let (got, _) = load_table(&file(&out, i, "table.npz"), &GainBounds::default()).unwrap();
         assert_eq!(got.checksum, table.checksum, "table of iteration {i}");
-        assert_eq!(
-            state_bits(&file(&out, i, "state.npz")),
-            state_bits(&file(&ref_out, i, "state.npz")),
-            "learner state of iteration {i}"
-        );
-        let name = format!("iter_{i:03}_critic.json");
-        assert_eq!(
-            std::fs::read(out.join(&name)).unwrap(),
-            std::fs::read(ref_out.join(&name)).unwrap(),
-            "{name}"
-        );
+        assert_same_checkpoint(&out, &ref_out, i, &[]);
     }
     let csv = std::fs::read_to_string(out.join("gaifo_log.csv")).unwrap();
     let mut rows = csv.lines();
