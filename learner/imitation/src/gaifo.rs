@@ -120,9 +120,11 @@ impl Default for GaifoConfig {
                 },
                 batch_size: 16,
                 penalty_space: PenaltySpace::Normalised,
-                // 2 cm: the final distance at iterations 20–50 on five workspace goals fell
-                // from 9.4 / 4.6 mm to 8.1 / 1.6 mm (docs/design.md §5 D36).
-                near_goal_scale: 0.02,
+                // 1 cm, with the raw inputs kept beside the warped ones: on five workspace
+                // goals the final distance at iterations 20 / 50 fell from 9.4 / 4.6 mm to
+                // 5.4 / 1.1 mm (docs/design.md §5 D36).
+                near_goal_scale: 0.01,
+                near_goal_keep_raw: true,
                 ..DiscriminatorConfig::default()
             },
             seed: 0,

@@ -128,10 +128,19 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let addr = std::net::SocketAddr::from((host, args.rtde_port));
     let mut rtde = Observer::connect(addr, timeout)
         .with_context(|| format!("connecting to RTDE at {host}:{}", args.rtde_port))?;
+    // The arm's package rate from its own clock: the median step of 25 consecutive packages'
+    // timestamps, so that a package the controller skipped (a loaded machine, a busy network)
+    // does not halve it.
     let rate = 1.0 / {
-        let a = rtde.state.timestamp;
-        let b = rtde.next_state()?.timestamp;
-        b - a
+        let mut steps = Vec::with_capacity(25);
+        let mut a = rtde.state.timestamp;
+        for _ in 0..25 {
+            let b = rtde.next_state()?.timestamp;
+            steps.push(b - a);
+            a = b;
+        }
+        steps.sort_by(f64::total_cmp);
+        steps[steps.len() / 2]
     };
     eprintln!(
         "recording {} demonstrations of T = {} steps of {} s from {host}:{} (packages at about \

@@ -68,25 +68,36 @@ pub fn ablation_variant(name: &str, base: &GaifoConfig) -> Result<GaifoConfig, E
     let mut c = base.clone();
     match name {
         "default" => {}
-        "no-near-goal" => c.discriminator.near_goal_scale = 0.0,
+        "no-near-goal" => {
+            c.discriminator.near_goal_scale = 0.0;
+            c.discriminator.near_goal_keep_raw = false;
+        }
         // The warp needs the penalty in normalised inputs, so undoing D25 undoes D36 too.
         "raw-penalty" => {
             c.discriminator.penalty_space = PenaltySpace::Raw;
             c.discriminator.near_goal_scale = 0.0;
+            c.discriminator.near_goal_keep_raw = false;
         }
         "constant-critic-lr" => c.critic_lr_half_life = 0.0,
         "before-d25" => {
             c.discriminator.adam.lr = 1e-3;
             c.discriminator.penalty_space = PenaltySpace::Raw;
             c.discriminator.near_goal_scale = 0.0;
+            c.discriminator.near_goal_keep_raw = false;
             c.critic_lr_half_life = 0.0;
         }
-        "near-goal-1cm" => c.discriminator.near_goal_scale = 0.01,
-        "near-goal-2cm" => c.discriminator.near_goal_scale = 0.02,
-        "near-goal-3cm" => c.discriminator.near_goal_scale = 0.03,
+        "near-goal-1cm" | "near-goal-2cm" | "near-goal-3cm" => {
+            c.discriminator.near_goal_scale = match name {
+                "near-goal-1cm" => 0.01,
+                "near-goal-2cm" => 0.02,
+                _ => 0.03,
+            };
+            c.discriminator.near_goal_keep_raw = false;
+        }
         "near-goal-1cm-far-0.2" => {
             c.discriminator.near_goal_scale = 0.01;
             c.discriminator.near_goal_far_slope = 0.2;
+            c.discriminator.near_goal_keep_raw = false;
         }
         "near-goal-1cm-keep-raw" => {
             c.discriminator.near_goal_scale = 0.01;
