@@ -486,6 +486,42 @@ pub struct Killed {
     pub restarts: usize,
 }
 
+/// `rt-controller run --config cfg --prefix prefix --json --episodes episodes` in `dir`,
+/// calling `poll` every 5 ms while it runs (for at most `limit`); returns its exit code,
+/// standard output and log.
+pub fn run_controller_polling(
+    cfg: &str,
+    prefix: &str,
+    episodes: u64,
+    dir: &Path,
+    limit: Duration,
+    mut poll: impl FnMut(),
+) -> (Option<i32>, String, String) {
+    let episodes = episodes.to_string();
+    let mut ctl = Proc::spawn(
+        "rt-controller",
+        "controller",
+        &[
+            "run",
+            "--config",
+            cfg,
+            "--prefix",
+            prefix,
+            "--json",
+            "--episodes",
+            &episodes,
+        ],
+        dir,
+    );
+    let t0 = Instant::now();
+    while ctl.running() && t0.elapsed() < limit {
+        poll();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (code, out) = ctl.wait(limit);
+    (code, out, ctl.log())
+}
+
 /// Runs `learner` with `base` (its arguments without `--out`, `--resume`, `--force`) into
 /// `out` while `peers` (the arm and the controller) run on: the first `kills` runs are killed
 /// with SIGKILL `window.0` to `window.0 + window.1` ms after their start (seeded by `seed`),

@@ -610,11 +610,11 @@ pub fn run_sharded(
                             .into()
                     )
                 );
-                let g: Vec<[f64; 3]> = goals::WORKSPACE_GOALS.iter().map(|(_, p)| *p).collect();
+                let g = goals::goal_list(&[], true, cfg.expert.task.goal);
                 goals::goal_demos(cfg, &g, &pool)?
                     .into_iter()
-                    .zip(goals::WORKSPACE_GOALS)
-                    .map(|(d, (n, _))| (format!(" goal {n}"), Arc::new(d)))
+                    .zip(&g)
+                    .map(|(d, &p)| (format!(" goal {}", goals::goal_name(p)), Arc::new(d)))
                     .collect()
             } else {
                 vec![(String::new(), Arc::new(demos_for(cfg, demos, out)?))]

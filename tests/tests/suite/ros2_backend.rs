@@ -9,12 +9,12 @@
 //! same time see each other's data. Waits are bounded only to catch a hang; nothing asserts on
 //! timing.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use hil_sim::ros2_sim::{self, Ros2SimConfig, Ros2SimHandle};
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, learn_over_ipc, reaching_table, scratch, unique_prefix,
-    write_config, Proc, TestLearner,
+    cleanup_dead_nodes, json_summary, learn_over_ipc, reaching_table, run_controller_polling,
+    scratch, unique_prefix, write_config, Proc, TestLearner,
 };
 use ur5_shared::config::{SimConfig, TaskConfig};
 
@@ -110,30 +110,9 @@ fn run_controller_raw(
     );
     let mut learner = TestLearner::learner_only(&prefix);
     learner.publish(&reaching_table(1, horizon, GOAL, 0.01));
-    let episodes = episodes.to_string();
-    let mut ctl = Proc::spawn(
-        "rt-controller",
-        "controller",
-        &[
-            "run",
-            "--config",
-            &cfg,
-            "--prefix",
-            &prefix,
-            "--json",
-            "--episodes",
-            &episodes,
-        ],
-        &dir,
-    );
-    let t0 = Instant::now();
-    while ctl.running() && t0.elapsed() < LONG {
-        learner.poll();
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    let (code, out) = ctl.wait(LONG);
+    let (code, out, log) =
+        run_controller_polling(&cfg, &prefix, episodes, &dir, LONG, || learner.poll());
     learner.poll();
-    let log = ctl.log();
     let samples = learner
         .received
         .iter()

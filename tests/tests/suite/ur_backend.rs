@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use hil_sim::ur_sim::{self, Faults, Series, UrSimConfig, UrSimHandle};
 use integration_tests::{
-    cleanup_dead_nodes, json_summary, learn_over_ipc, reaching_table, scratch, unique_prefix,
-    write_config, Proc, TestLearner,
+    cleanup_dead_nodes, json_summary, learn_over_ipc, reaching_table, run_controller_polling,
+    scratch, unique_prefix, write_config, Proc, TestLearner,
 };
 use rt_controller::arm::ur::setup::KEPT_TEXTS;
 use rt_controller::arm::ur::UrRtde;
@@ -441,29 +441,9 @@ fn run_against_raw(
     );
     let learner = TestLearner::learner_only(&prefix);
     learner.publish(&reaching_table(1, 10, q_goal, 0.01));
-    let episodes = episodes.to_string();
-    let mut ctl = Proc::spawn(
-        "rt-controller",
-        "controller",
-        &[
-            "run",
-            "--config",
-            &cfg,
-            "--prefix",
-            &prefix,
-            "--json",
-            "--episodes",
-            &episodes,
-        ],
-        &dir,
-    );
-    let t0 = Instant::now();
-    while ctl.running() && t0.elapsed() < LONG {
-        learner.poll_gains_only();
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    let (code, out) = ctl.wait(LONG);
-    let log = ctl.log();
+    let (code, out, log) = run_controller_polling(&cfg, &prefix, episodes, &dir, LONG, || {
+        learner.poll_gains_only()
+    });
     std::fs::remove_dir_all(&dir).ok();
     (code, out, log)
 }
