@@ -8,6 +8,9 @@
 //! - every iteration, `updates` WGAN-GP calls at the learning rate
 //!   `lr · 2^(−iteration / half_life)` (D25).
 //!
+//! The learners take their cost from [`Critic::cost_discriminator`]: the discriminator itself,
+//! or, with `param_average` > 0, the one with its running average of weights (D37).
+//!
 //! Its checkpoint is the discriminator's file ([`Critic::save`]); [`Critic::restore`] takes one
 //! back after checking that it was trained with the run's settings and seed.
 
@@ -85,6 +88,9 @@ pub fn refit_critic(
 pub struct Critic {
     expert: Mat<f64>,
     disc: Discriminator,
+    /// `disc` with its averaged weights ([`Discriminator::averaged`]), refreshed after every
+    /// update; `None` when averaging is off.
+    averaged: Option<Discriminator>,
     ws: Workspace,
     updates: usize,
     half_life: f64,
@@ -107,6 +113,7 @@ impl Critic {
             ws: disc.workspace(),
             expert,
             disc,
+            averaged: None,
             updates: 1,
             half_life: 0.0,
             seed,
@@ -126,6 +133,12 @@ impl Critic {
     /// The discriminator.
     pub fn discriminator(&self) -> &Discriminator {
         &self.disc
+    }
+
+    /// The critic the learners' cost is taken from: the discriminator, or with
+    /// `param_average` > 0 the discriminator with its averaged weights (docs/design.md §5 D37).
+    pub fn cost_discriminator(&self) -> &Discriminator {
+        self.averaged.as_ref().unwrap_or(&self.disc)
     }
 
     /// The expert transitions it is trained against.
@@ -159,6 +172,7 @@ impl Critic {
                 &mut self.ws,
             )?);
         }
+        self.averaged = self.disc.averaged();
         Ok(stats.expect("at least one update"))
     }
 
@@ -166,7 +180,7 @@ impl Critic {
     /// T − 1 each).
     pub fn rewards(&mut self, episodes: &[Episode]) -> Vec<Vec<f64>> {
         let mut x = [0.0; D_IN];
-        let (disc, ws) = (&self.disc, &mut self.ws);
+        let (disc, ws) = (self.averaged.as_ref().unwrap_or(&self.disc), &mut self.ws);
         episodes
             .iter()
             .map(|ep| {
@@ -199,6 +213,7 @@ impl Critic {
             )));
         }
         self.ws = disc.workspace();
+        self.averaged = disc.averaged();
         self.disc = disc;
         Ok(())
     }
@@ -243,8 +258,12 @@ mod tests {
     #[test]
     fn a_restored_critic_continues_bit_for_bit_and_another_seeds_is_refused() {
         let (expert, controller) = (transitions(40, 0.0), transitions(30, 2.5));
-        let run = |stop: Option<usize>| {
-            let mut critic = Critic::new(expert.clone(), &small(), 9)
+        let averaging = DiscriminatorConfig {
+            param_average: 0.6,
+            ..small()
+        };
+        let run = |cfg: &DiscriminatorConfig, stop: Option<usize>| {
+            let mut critic = Critic::new(expert.clone(), cfg, 9)
                 .unwrap()
                 .with_schedule(2, 4.0);
             let mut out = Vec::new();
@@ -257,7 +276,7 @@ mod tests {
                     critic.save(&path).unwrap();
                     let saved = Discriminator::load(&path, D_IN).unwrap();
                     std::fs::remove_dir_all(&dir).unwrap();
-                    let mut fresh = Critic::new(expert.clone(), &small(), 9)
+                    let mut fresh = Critic::new(expert.clone(), cfg, 9)
                         .unwrap()
                         .with_schedule(2, 4.0);
                     fresh.restore(saved).unwrap();
@@ -266,11 +285,23 @@ mod tests {
                 let st = critic.update(&controller, i).unwrap();
                 out.push((st.critic_loss.to_bits(), st.wasserstein.to_bits()));
             }
-            (out, critic.discriminator().params().to_vec())
+            (
+                out,
+                critic.discriminator().params().to_vec(),
+                critic.cost_discriminator().params().to_vec(),
+            )
         };
-        let whole = run(None);
-        for stop in 1..4 {
-            assert_eq!(run(Some(stop)), whole, "restored after {stop} iterations");
+        for cfg in [&small(), &averaging] {
+            let whole = run(cfg, None);
+            // The cost's critic is the trained one without averaging, the averaged one with it.
+            assert_eq!(whole.1 == whole.2, cfg.param_average == 0.0);
+            for stop in 1..4 {
+                assert_eq!(
+                    run(cfg, Some(stop)),
+                    whole,
+                    "restored after {stop} iterations"
+                );
+            }
         }
         let other = Critic::new(expert.clone(), &small(), 10).unwrap();
         let mut critic = Critic::new(expert, &small(), 9).unwrap();

@@ -319,7 +319,7 @@ impl LqrGaifo {
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) and its second-order expansion.
         let t3 = Instant::now();
         let mut cost = CompositeCost {
-            disc: self.critic.discriminator(),
+            disc: self.critic.cost_discriminator(),
             ws: &mut self.cost_ws,
         };
         self.lqr.expand(&mut cost, episodes);

@@ -212,6 +212,92 @@ fn warped_critic_with_raw_copies_round_trips() {
     std::fs::remove_file(&path).unwrap();
 }
 
+/// With `param_average = β` the critic keeps θ̄ = θ₁ after its first training call and
+/// θ̄ = β θ̄ + (1 − β) θ₂ after its second; the averaged critic evaluates with θ̄; θ̄ saves and
+/// loads bit for bit and the loaded critic averages on exactly as the original; a file holding
+/// θ̄ for a critic without averaging, or θ̄ of the wrong length, is refused.
+#[test]
+fn averaged_weights_follow_their_definition_and_round_trip() {
+    let (e, c) = ur5_sized_batch(5);
+    let beta = 0.75;
+    let config = DiscriminatorConfig {
+        seed: 8,
+        param_average: beta,
+        ..Default::default()
+    };
+    let norm = Normalizer::from_data(e.as_ref()).unwrap();
+    let mut d = Discriminator::new(24, config, norm).unwrap();
+    assert!(d.averaged().is_none() && d.param_average().is_empty());
+    let mut ws = d.workspace();
+    d.train(e.as_ref(), c.as_ref(), &mut ws).unwrap();
+    let theta1 = d.params().to_vec();
+    assert_eq!(d.param_average(), &theta1[..]);
+    d.train(e.as_ref(), c.as_ref(), &mut ws).unwrap();
+    let theta2 = d.params().to_vec();
+    assert_ne!(theta1, theta2);
+    let want: Vec<f64> = theta1
+        .iter()
+        .zip(&theta2)
+        .map(|(a, t)| beta * a + (1.0 - beta) * t)
+        .collect();
+    assert_eq!(d.param_average(), &want[..]);
+    let avg = d.averaged().unwrap();
+    assert_eq!(avg.params(), &want[..]);
+    let x: Vec<f64> = (0..24).map(|j| c[(2, j)]).collect();
+    let mut by_hand = d.clone();
+    by_hand.params_mut().copy_from_slice(&want);
+    assert_eq!(
+        avg.value(&x, &mut ws).to_bits(),
+        by_hand.value(&x, &mut ws).to_bits()
+    );
+    assert_ne!(avg.value(&x, &mut ws), d.value(&x, &mut ws));
+
+    let path = temp_path("averaged_round_trip.json");
+    d.save(&path).unwrap();
+    let mut l = Discriminator::load(&path, 24).unwrap();
+    assert_eq!(l.param_average(), d.param_average());
+    let mut wl = l.workspace();
+    l.train(e.as_ref(), c.as_ref(), &mut wl).unwrap();
+    d.train(e.as_ref(), c.as_ref(), &mut ws).unwrap();
+    assert_eq!(l.param_average(), d.param_average());
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    for (name, edit, expect) in [
+        (
+            "average_but_off.json",
+            Box::new(|j: &mut serde_json::Value| j["config"]["param_average"] = 0.0.into())
+                as Box<dyn Fn(&mut serde_json::Value)>,
+            "config.param_average is 0",
+        ),
+        (
+            "average_short.json",
+            Box::new(|j: &mut serde_json::Value| {
+                j["params_average"].as_array_mut().unwrap().pop();
+            }),
+            "params_average has",
+        ),
+    ] {
+        let mut j = json.clone();
+        edit(&mut j);
+        let p = temp_path(name);
+        std::fs::write(&p, j.to_string()).unwrap();
+        let err = Discriminator::load(&p, 24).expect_err(name).to_string();
+        std::fs::remove_file(&p).unwrap();
+        assert!(err.contains(expect), "{name}: {err}");
+    }
+    let bad = DiscriminatorConfig {
+        param_average: 1.0,
+        ..Default::default()
+    };
+    assert!(bad
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("param_average"));
+}
+
 #[test]
 fn discriminator_rejects_corrupted_or_mismatched_files() {
     let (e, c) = ur5_sized_batch(3);

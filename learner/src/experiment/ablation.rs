@@ -29,7 +29,7 @@ pub const ABLATION_VARIANTS: [(&str, &str); 5] = [
 
 /// Candidates for steady precision near the goal (docs/design.md §5 D36), run with
 /// `ablation_variants` beside `default`; not in the default list.
-pub const PRECISION_VARIANTS: [(&str, &str); 8] = [
+pub const PRECISION_VARIANTS: [(&str, &str); 10] = [
     (
         "near-goal-1cm-keep-raw",
         "critic inputs ee − goal warped, c = 1 cm, and also fed raw (six more inputs)",
@@ -59,6 +59,14 @@ pub const PRECISION_VARIANTS: [(&str, &str); 8] = [
         "critic learning rate halved every 10 iterations (25 by default)",
     ),
     ("kl-step-half", "KL step ε/T halved (0.1 instead of 0.2)"),
+    (
+        "critic-average-0.5",
+        "cost from the critic's running weight average, β = 0.5",
+    ),
+    (
+        "critic-average-0.8",
+        "cost from the critic's running weight average, β = 0.8",
+    ),
 ];
 
 /// `base` changed as ablation variant `name` says ([`ABLATION_VARIANTS`],
@@ -109,6 +117,8 @@ pub fn ablation_variant(name: &str, base: &GaifoConfig) -> Result<GaifoConfig, E
         }
         "critic-half-life-10" => c.critic_lr_half_life = 10.0,
         "kl-step-half" => c.algorithm.kl_step *= 0.5,
+        "critic-average-0.5" => c.discriminator.param_average = 0.5,
+        "critic-average-0.8" => c.discriminator.param_average = 0.8,
         _ => {
             return Err(ExperimentError::Settings(format!(
                 "unknown ablation variant `{name}`; known: {}",

@@ -118,6 +118,13 @@ pub struct DiscriminatorConfig {
     /// the goal and the raw offset far from it (docs/design.md §5 D36). Default false.
     #[serde(default)]
     pub near_goal_keep_raw: bool,
+    /// β of the running average of the weights, θ̄ ← β θ̄ + (1 − β) θ after every
+    /// [`Discriminator::train`] call (θ̄ = θ after the first), β ∈ [0, 1); the averaged critic
+    /// ([`Discriminator::averaged`]) is the one the learners take their cost from, so that the
+    /// cost moves less between iterations than the trained critic does (docs/design.md §5
+    /// D37). 0 (the default, and in critic files written before the field existed): off.
+    #[serde(default)]
+    pub param_average: f64,
 }
 
 /// Where the gradient penalty `λ (‖∇D(x̂)‖ − 1)²` takes the norm, and so in which metric D is
@@ -155,6 +162,7 @@ impl Default for DiscriminatorConfig {
             near_goal_scale: 0.0,
             near_goal_far_slope: 0.0,
             near_goal_keep_raw: false,
+            param_average: 0.0,
         }
     }
 }
@@ -221,6 +229,12 @@ impl DiscriminatorConfig {
             return bad(format!(
                 "near_goal_far_slope must be in [0, 1); got {}",
                 self.near_goal_far_slope
+            ));
+        }
+        if !(0.0..1.0).contains(&self.param_average) {
+            return bad(format!(
+                "param_average must be in [0, 1) (0 = off); got {}",
+                self.param_average
             ));
         }
         if self.near_goal_keep_raw && self.near_goal_scale == 0.0 {
@@ -424,6 +438,9 @@ pub struct Discriminator {
     norm: Normalizer,
     adam: Adam,
     rng: ChaCha8Rng,
+    /// θ̄, the running average of the weights ([`DiscriminatorConfig::param_average`]); empty
+    /// when that is off or before the first [`Discriminator::train`] call.
+    avg: Vec<f64>,
 }
 
 impl Discriminator {
@@ -455,6 +472,7 @@ impl Discriminator {
             norm,
             adam,
             rng,
+            avg: Vec::new(),
         })
     }
 
@@ -513,6 +531,40 @@ impl Discriminator {
     /// The flat parameter vector `θ` (layout: [`mlp`]).
     pub fn params(&self) -> &[f64] {
         self.net.params()
+    }
+
+    /// θ̄, the running average of the weights (empty when
+    /// [`DiscriminatorConfig::param_average`] is 0 or before the first training call).
+    pub fn param_average(&self) -> &[f64] {
+        &self.avg
+    }
+
+    /// The critic with the averaged weights θ̄ in place of θ (the cost's critic,
+    /// docs/design.md §5 D37); `None` when averaging is off or nothing is trained yet.
+    pub fn averaged(&self) -> Option<Discriminator> {
+        if self.avg.is_empty() {
+            return None;
+        }
+        let mut d = self.clone();
+        d.net.params_mut().copy_from_slice(&self.avg);
+        d.avg.clear();
+        Some(d)
+    }
+
+    /// θ̄ ← β θ̄ + (1 − β) θ, or θ̄ = θ the first time (β = `param_average` > 0).
+    fn update_average(&mut self) {
+        let beta = self.config.param_average;
+        if beta == 0.0 {
+            return;
+        }
+        let theta = self.net.params();
+        if self.avg.is_empty() {
+            self.avg.extend_from_slice(theta);
+        } else {
+            for (a, &t) in self.avg.iter_mut().zip(theta) {
+                *a = beta * *a + (1.0 - beta) * t;
+            }
+        }
     }
 
     /// Mutable `θ` (for tests and external optimisers).
@@ -865,6 +917,7 @@ impl Discriminator {
             loss_sum += loss * inv_m;
             gp_sum += gp * inv_m;
         }
+        self.update_average();
         let n = self.config.n_critic as f64;
         Ok(TrainStats {
             critic_loss: loss_sum / n,

@@ -36,6 +36,10 @@ struct CriticFile {
     adam_v: Vec<f64>,
     /// `ChaCha8Rng::get_word_pos` of the minibatch RNG (seeded from `config.seed`).
     rng_word_pos: u128,
+    /// θ̄ (`config.param_average`; empty when off or untrained, and in files written before
+    /// the field existed).
+    #[serde(default)]
+    params_average: Vec<f64>,
 }
 
 impl Discriminator {
@@ -44,7 +48,11 @@ impl Discriminator {
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), DiscriminatorError> {
         let path = path.as_ref();
         let all_finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        if !(all_finite(self.params()) && all_finite(&self.adam.m) && all_finite(&self.adam.v)) {
+        if !(all_finite(self.params())
+            && all_finite(&self.adam.m)
+            && all_finite(&self.adam.v)
+            && all_finite(&self.avg))
+        {
             return Err(DiscriminatorError::NonFinite(format!(
                 "critic state; not saving it to {}",
                 path.display()
@@ -62,6 +70,7 @@ impl Discriminator {
             adam_m: self.adam.m.clone(),
             adam_v: self.adam.v.clone(),
             rng_word_pos: self.rng.get_word_pos(),
+            params_average: self.avg.clone(),
         };
         let io = |source| DiscriminatorError::Io {
             path: path.to_path_buf(),
@@ -121,11 +130,28 @@ impl Discriminator {
                 return Err(bad(format!("{name}[{i}] is not finite")));
             }
         }
-        if let Some(i) = f.params.iter().position(|x| x.abs() > MAX_ABS_PARAM) {
+        if !f.params_average.is_empty() && f.config.param_average == 0.0 {
+            return Err(bad(
+                "params_average is given but config.param_average is 0 (off)".into(),
+            ));
+        }
+        if !(f.params_average.is_empty() || f.params_average.len() == n) {
             return Err(bad(format!(
-                "params[{i}] = {:e}: beyond ±{MAX_ABS_PARAM:e}, not a trained critic's weight",
-                f.params[i]
+                "params_average has {} values, the net {sizes:?} has {n} parameters",
+                f.params_average.len()
             )));
+        }
+        if let Some(i) = f.params_average.iter().position(|x| !x.is_finite()) {
+            return Err(bad(format!("params_average[{i}] is not finite")));
+        }
+        for (name, v) in [("params", &f.params), ("params_average", &f.params_average)] {
+            if let Some(i) = v.iter().position(|x| x.abs() > MAX_ABS_PARAM) {
+                return Err(bad(format!(
+                    "{name}[{i}] = {:e}: beyond ±{MAX_ABS_PARAM:e}, not a trained critic's \
+                     weight",
+                    v[i]
+                )));
+            }
         }
         if let Some(i) = f.adam_v.iter().position(|&x| x < 0.0) {
             return Err(bad(format!("adam_v[{i}] is negative")));
@@ -149,6 +175,7 @@ impl Discriminator {
             norm,
             adam,
             rng,
+            avg: f.params_average,
         })
     }
 }

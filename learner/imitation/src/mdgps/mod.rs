@@ -461,7 +461,7 @@ impl Mdgps {
     fn expand_costs(&mut self, samples: &[Vec<Episode>]) {
         for (c, eps) in self.conds.iter_mut().zip(samples) {
             let mut cost = CompositeCost {
-                disc: self.critic.discriminator(),
+                disc: self.critic.cost_discriminator(),
                 ws: &mut self.cost_ws,
             };
             c.lqr.expand(&mut cost, eps);
