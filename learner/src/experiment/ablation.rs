@@ -29,7 +29,7 @@ pub const ABLATION_VARIANTS: [(&str, &str); 5] = [
 
 /// Candidates for steady precision near the goal (docs/design.md §5 D36), run with
 /// `ablation_variants` beside `default`; not in the default list.
-pub const PRECISION_VARIANTS: [(&str, &str); 10] = [
+pub const PRECISION_VARIANTS: [(&str, &str); 12] = [
     (
         "near-goal-1cm-keep-raw",
         "critic inputs ee − goal warped, c = 1 cm, and also fed raw (six more inputs)",
@@ -56,9 +56,17 @@ pub const PRECISION_VARIANTS: [(&str, &str); 10] = [
     ),
     (
         "critic-half-life-10",
-        "critic learning rate halved every 10 iterations (25 by default)",
+        "critic learning rate halved every 10 iterations (40 by default)",
     ),
     ("kl-step-half", "KL step ε/T halved (0.1 instead of 0.2)"),
+    (
+        "critic-half-life-25",
+        "critic learning rate halved every 25 iterations (the default before D37)",
+    ),
+    (
+        "critic-half-life-60",
+        "critic learning rate halved every 60 iterations (40 by default)",
+    ),
     (
         "critic-average-0.5",
         "cost from the critic's running weight average, β = 0.5",
@@ -116,6 +124,8 @@ pub fn ablation_variant(name: &str, base: &GaifoConfig) -> Result<GaifoConfig, E
             c.discriminator.near_goal_keep_raw = true;
         }
         "critic-half-life-10" => c.critic_lr_half_life = 10.0,
+        "critic-half-life-25" => c.critic_lr_half_life = 25.0,
+        "critic-half-life-60" => c.critic_lr_half_life = 60.0,
         "kl-step-half" => c.algorithm.kl_step *= 0.5,
         "critic-average-0.5" => c.discriminator.param_average = 0.5,
         "critic-average-0.8" => c.discriminator.param_average = 0.8,
