@@ -24,9 +24,10 @@ eval_episodes = 1; the learner checks the task on the sample stream and stops wi
 setting. Files in --out: episodes/*.npz, tables/v*.npz, latest_table.npz, best_table.npz; expert: \
 checkpoint.npz, serve_log.csv; lqr-gaifo: iter_NNN_table.npz + iter_NNN_critic.json, gaifo_log.csv (the \
 columns of `learner train`, and iter_NNN_state.npz). --resume restores LQR+GAIfO's whole learner state (critic \
-with Adam moments, GMM dynamics prior and its data, previous controller, step size, RNG positions), but the \
-episodes it then learns from carry later noise draws than an uninterrupted run's, so over IPC it is not bit \
-for bit; the expert's restores its controller only (its GMM prior starts afresh). mdgps (--demos DIR, one .npz per \
+with Adam moments, GMM dynamics prior and its data, previous controller, step size, RNG positions) and \
+republishes its version at a higher epoch, so the controller restarts that version's noise draws: against an \
+arm whose reset is exact (hil-sim serve, lockstep) the resumed run equals an uninterrupted one bit for bit, \
+against one whose reset is not (ur-sim, a real arm) it does not; the expert's restores its controller only (its GMM prior starts afresh). mdgps (--demos DIR, one .npz per \
 goal): per version, goal after goal, the goal's gain table (its goal and noise stream in the table's episode plan) \
 until its N noisy episodes are in, then the policy as a noise-free policy table at the goal until its evaluation is \
 in; the checkpoints iter_NNN_critic.json + iter_NNN_state.npz and mdgps_log.csv of `learner train --algo mdgps`; \
