@@ -7,30 +7,61 @@
 //! `blk * BLOCK + j`), padding points zero. Inverse Cholesky factors are `D x D` row-major lower
 //! triangles (`m[a * d + b]`, `b ≤ a`).
 //!
-//! Every kernel is written once, generic over a 4-lane vector ([`Lanes`]), and instantiated twice:
-//! on AVX2+FMA registers (chosen at run time when the CPU has both) and on plain `[f64; 4]` arrays
-//! whose multiply-add is the correctly rounded `f64::mul_add`. Both do the same fused operations in
-//! the same order, so the results are the same bits on every x86_64 machine (the tests compare
-//! the two); the portable one is slow where the CPU has no FMA instruction.
+//! Every kernel is written once, generic over a 4-lane vector ([`Lanes`]), and instantiated
+//! three times ([`Isa`]): on AVX2+FMA registers, on the same 256-bit registers and instructions
+//! compiled with AVX-512VL (which gives the register allocator 32 of them instead of 16, so the
+//! kernels take larger tiles), and on plain `[f64; 4]` arrays whose multiply-add is the correctly
+//! rounded `f64::mul_add`. A tile's shape changes which sums are in registers together, never
+//! the order of any one sum, so all three give the same bits on every x86_64 machine (the tests
+//! compare them); the portable one is slow where the CPU has no FMA instruction.
 
 /// Points per block.
 pub const BLOCK: usize = 32;
 
-/// Whether the AVX2+FMA instantiation runs on this CPU.
-#[inline]
-pub fn fast_path() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+/// Which instantiation of the kernels runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Isa {
+    /// `[f64; 4]` with `f64::mul_add`, on any CPU.
+    Portable,
+    /// 256-bit AVX2+FMA, sixteen registers.
+    Avx2,
+    /// The same 256-bit operations compiled with AVX-512F/VL: thirty-two registers, larger
+    /// tiles. Never 512-bit arithmetic (eight lanes would sum in another order).
+    Avx512,
+}
+
+impl Isa {
+    /// The fastest instantiation this CPU runs (std caches the CPUID check).
+    #[inline]
+    pub fn detect() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx2") && has!("fma") {
+                if has!("avx512f") && has!("avx512vl") {
+                    return Isa::Avx512;
+                }
+                return Isa::Avx2;
+            }
+        }
+        Isa::Portable
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
+
+    /// Whether this CPU can run `self`.
+    pub fn available(self) -> bool {
+        match (self, Isa::detect()) {
+            (Isa::Portable, _) | (_, Isa::Avx512) => true,
+            (Isa::Avx2, best) => best == Isa::Avx2,
+            (Isa::Avx512, _) => false,
+        }
     }
 }
 
 /// Four f64 lanes: the operations the kernels use.
 trait Lanes: Copy {
+    /// Whether the kernels may hold about twice as many of these in registers (32 registers
+    /// instead of 16): it selects larger tiles, not other arithmetic.
+    const WIDE: bool;
     fn zero() -> Self;
     /// Loads `s[0..4]`.
     fn load(s: &[f64]) -> Self;
@@ -59,6 +90,7 @@ trait Lanes: Copy {
 }
 
 impl Lanes for [f64; 4] {
+    const WIDE: bool = false;
     #[inline(always)]
     fn zero() -> Self {
         [0.0; 4]
@@ -113,105 +145,128 @@ impl Lanes for [f64; 4] {
 mod avx {
     use std::arch::x86_64::*;
 
-    /// AVX2 register; only used inside functions compiled with `avx2,fma` enabled.
-    #[derive(Clone, Copy)]
-    pub(super) struct Avx(__m256d);
+    /// An AVX2 register as [`Lanes`](super::Lanes) for the kernels compiled with `$wide`
+    /// (`false`: `avx2,fma`; `true`: `avx2,fma,avx512f,avx512vl`, 32 registers). The
+    /// operations are the same 256-bit intrinsics in both.
+    macro_rules! avx_lanes {
+        ($T:ident, $wide:expr) => {
+            #[derive(Clone, Copy)]
+            pub(super) struct $T(__m256d);
 
-    /// A lane-wise `fn $name(self, b) -> Self` on the AVX intrinsic `$op`.
-    macro_rules! binary {
-        ($name:ident, $op:ident) => {
-            #[inline(always)]
-            fn $name(self, b: Self) -> Self {
-                Avx(unsafe { $op(self.0, b.0) })
+            // SAFETY (all methods): only reached from functions compiled with the target
+            // features above, which run only when `Isa::detect` saw them; loads and stores are
+            // of slices checked to hold four elements.
+            impl super::Lanes for $T {
+                const WIDE: bool = $wide;
+                #[inline(always)]
+                fn zero() -> Self {
+                    $T(unsafe { _mm256_setzero_pd() })
+                }
+                #[inline(always)]
+                fn load(s: &[f64]) -> Self {
+                    assert!(s.len() >= 4);
+                    $T(unsafe { _mm256_loadu_pd(s.as_ptr()) })
+                }
+                #[inline(always)]
+                fn store(self, s: &mut [f64]) {
+                    assert!(s.len() >= 4);
+                    unsafe { _mm256_storeu_pd(s.as_mut_ptr(), self.0) }
+                }
+                #[inline(always)]
+                fn splat(v: f64) -> Self {
+                    $T(unsafe { _mm256_set1_pd(v) })
+                }
+                #[inline(always)]
+                fn fma(self, a: Self, b: Self) -> Self {
+                    $T(unsafe { _mm256_fmadd_pd(a.0, b.0, self.0) })
+                }
+                #[inline(always)]
+                fn add(self, b: Self) -> Self {
+                    $T(unsafe { _mm256_add_pd(self.0, b.0) })
+                }
+                #[inline(always)]
+                fn sub(self, b: Self) -> Self {
+                    $T(unsafe { _mm256_sub_pd(self.0, b.0) })
+                }
+                #[inline(always)]
+                fn mul(self, b: Self) -> Self {
+                    $T(unsafe { _mm256_mul_pd(self.0, b.0) })
+                }
+                #[inline(always)]
+                fn max(self, b: Self) -> Self {
+                    $T(unsafe { _mm256_max_pd(self.0, b.0) })
+                }
+                #[inline(always)]
+                fn min(self, b: Self) -> Self {
+                    $T(unsafe { _mm256_min_pd(self.0, b.0) })
+                }
+                #[inline(always)]
+                fn exp2_of_rounded(self) -> Self {
+                    $T(unsafe {
+                        let one = _mm256_set1_epi64x(1023);
+                        let bits = _mm256_add_epi64(_mm256_castpd_si256(self.0), one);
+                        _mm256_castsi256_pd(_mm256_slli_epi64::<52>(bits))
+                    })
+                }
+                #[inline(always)]
+                fn zero_where_below(self, x: Self, lim: f64) -> Self {
+                    // NLT_UQ: true where x ≥ lim or either is NaN, so NaN keeps `self`.
+                    $T(unsafe {
+                        let keep = _mm256_cmp_pd::<_CMP_NLT_UQ>(x.0, _mm256_set1_pd(lim));
+                        _mm256_and_pd(keep, self.0)
+                    })
+                }
             }
         };
     }
 
-    // SAFETY (all methods): only reached from `#[target_feature(enable = "avx2,fma")]`
-    // functions, which run only when `fast_path()` saw both features; loads and stores are
-    // of slices checked to hold four elements.
-    impl super::Lanes for Avx {
-        #[inline(always)]
-        fn zero() -> Self {
-            Avx(unsafe { _mm256_setzero_pd() })
-        }
-        #[inline(always)]
-        fn load(s: &[f64]) -> Self {
-            assert!(s.len() >= 4);
-            Avx(unsafe { _mm256_loadu_pd(s.as_ptr()) })
-        }
-        #[inline(always)]
-        fn store(self, s: &mut [f64]) {
-            assert!(s.len() >= 4);
-            unsafe { _mm256_storeu_pd(s.as_mut_ptr(), self.0) }
-        }
-        #[inline(always)]
-        fn splat(v: f64) -> Self {
-            Avx(unsafe { _mm256_set1_pd(v) })
-        }
-        #[inline(always)]
-        fn fma(self, a: Self, b: Self) -> Self {
-            Avx(unsafe { _mm256_fmadd_pd(a.0, b.0, self.0) })
-        }
-        binary!(add, _mm256_add_pd);
-        binary!(sub, _mm256_sub_pd);
-        binary!(mul, _mm256_mul_pd);
-        binary!(max, _mm256_max_pd);
-        binary!(min, _mm256_min_pd);
-        #[inline(always)]
-        fn exp2_of_rounded(self) -> Self {
-            Avx(unsafe {
-                let bits = _mm256_add_epi64(_mm256_castpd_si256(self.0), _mm256_set1_epi64x(1023));
-                _mm256_castsi256_pd(_mm256_slli_epi64::<52>(bits))
-            })
-        }
-        #[inline(always)]
-        fn zero_where_below(self, x: Self, lim: f64) -> Self {
-            // NLT_UQ: true where x ≥ lim or either is NaN, so NaN keeps `self`.
-            Avx(unsafe {
-                let keep = _mm256_cmp_pd::<_CMP_NLT_UQ>(x.0, _mm256_set1_pd(lim));
-                _mm256_and_pd(keep, self.0)
-            })
-        }
-    }
+    avx_lanes!(Avx, false);
+    avx_lanes!(Avx512, true);
 }
 
-/// Runs `$body` with `$V` bound to the fastest [`Lanes`] type: inside a function compiled for
-/// AVX2+FMA when `$fast`, else on `[f64; 4]`.
+/// Runs `$body` with `V` bound to the [`Lanes`] type of `$isa`, inside a function compiled for
+/// that instruction set.
 macro_rules! dispatch {
-    ($fast:expr, fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {{
+    ($isa:expr, fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {{
         #[inline(always)]
         fn generic<V: Lanes>($($arg: $ty),*) $body
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,fma")]
-        unsafe fn fast_impl($($arg: $ty),*) {
+        unsafe fn avx2_impl($($arg: $ty),*) {
             generic::<avx::Avx>($($arg),*)
+        }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+        unsafe fn avx512_impl($($arg: $ty),*) {
+            generic::<avx::Avx512>($($arg),*)
         }
         #[inline(never)]
         fn base_impl($($arg: $ty),*) {
             generic::<[f64; 4]>($($arg),*)
         }
-        #[cfg(target_arch = "x86_64")]
-        if $fast {
-            // SAFETY: `$fast` is only true when the CPU has AVX2 and FMA (`fast_path`).
-            unsafe { fast_impl($($arg),*) }
-        } else {
-            base_impl($($arg),*)
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            let _ = $fast;
-            base_impl($($arg),*)
+        match $isa {
+            // SAFETY: `Isa::Avx2` and `Isa::Avx512` are only used where `Isa::available` (the
+            // callers take `Isa::detect()`, the tests check `available`).
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2 => unsafe { avx2_impl($($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => unsafe { avx512_impl($($arg),*) },
+            _ => base_impl($($arg),*),
         }
     }};
 }
 
+/// Row and point tiles of [`whitened_norms`]: rows of `L⁻¹` per pass and 4-lane vectors of
+/// points (`4 ·` this many points) per pass, for 16 and for 32 registers.
+const NORM_TILE: (usize, usize) = (3, 4);
+const NORM_TILE_WIDE: (usize, usize) = (4, 4);
+
 /// E-step of one cluster on one block: `ss[j] = ‖M (x_j − μ)‖²` for the block's `BLOCK` points
 /// (`x`: one block, dimension-major), `M = L⁻¹` lower triangular (`d x d` row-major). Rows are
-/// taken two at a time on sixteen points; `ss` accumulates `y_0², y_1², …` in row order.
-/// `diff` (`d x BLOCK`) is scratch.
+/// taken a few at a time ([`NORM_TILE`]) on a few 4-lane vectors of points; `ss` accumulates
+/// `y_0², y_1², …` in row order. `diff` (`d x BLOCK`) is scratch.
 pub fn whitened_norms(
-    fast: bool,
+    isa: Isa,
     m: &[f64],
     mu: &[f64],
     d: usize,
@@ -221,7 +276,7 @@ pub fn whitened_norms(
 ) {
     assert!(m.len() >= d * d && mu.len() >= d && x.len() >= d * BLOCK && diff.len() >= d * BLOCK);
     dispatch!(
-        fast,
+        isa,
         fn k(m: &[f64], mu: &[f64], d: usize, x: &[f64], diff: &mut [f64], ss: &mut [f64; BLOCK]) {
             for a in 0..d {
                 let mua = V::splat(mu[a]);
@@ -231,46 +286,71 @@ pub fn whitened_norms(
                         .store(&mut diff[a * BLOCK + q..]);
                 }
             }
-            for h in (0..BLOCK).step_by(16) {
-                let mut s = [V::zero(); 4];
-                let mut a0 = 0;
-                while a0 < d {
-                    match d - a0 {
-                        1 => norm_rows::<V, 1>(m, d, a0, diff, h, &mut s),
-                        2 => norm_rows::<V, 2>(m, d, a0, diff, h, &mut s),
-                        _ => norm_rows::<V, 3>(m, d, a0, diff, h, &mut s),
-                    }
-                    a0 += 3;
-                }
-                for v in 0..4 {
-                    s[v].store(&mut ss[h + 4 * v..]);
-                }
+            const W: (usize, usize) = NORM_TILE_WIDE;
+            const N: (usize, usize) = NORM_TILE;
+            if V::WIDE {
+                norms::<V, { W.0 }, { W.1 }>(m, d, diff, ss)
+            } else {
+                norms::<V, { N.0 }, { N.1 }>(m, d, diff, ss)
             }
         }
     )
 }
 
-/// Rows `a0 … a0 + R − 1` of `y = M diff` on the sixteen points `h …` of the block, added to
-/// the norms as `s += y_a²` in ascending `a`. Each `y_a` is a chain of fused multiply-adds over
-/// `b = 0 … a` in ascending order; twelve chains (three rows by four 4-lane vectors) share each
-/// load of `diff` and cover the multiply-add latency.
+/// [`whitened_norms`] after the subtraction, `R` rows of `M` at a time on `NV` 4-lane vectors.
 #[inline(always)]
-fn norm_rows<V: Lanes, const R: usize>(
+fn norms<V: Lanes, const R: usize, const NV: usize>(
+    m: &[f64],
+    d: usize,
+    diff: &[f64],
+    ss: &mut [f64; BLOCK],
+) {
+    for h in (0..BLOCK).step_by(4 * NV) {
+        let mut s = [V::zero(); NV];
+        let mut a0 = 0;
+        while a0 < d {
+            // The last pass takes the rows that are left (R ≤ 6).
+            match (d - a0).min(R) {
+                1 => norm_rows::<V, 1, NV>(m, d, a0, diff, h, &mut s),
+                2 => norm_rows::<V, 2, NV>(m, d, a0, diff, h, &mut s),
+                3 => norm_rows::<V, 3, NV>(m, d, a0, diff, h, &mut s),
+                4 => norm_rows::<V, 4, NV>(m, d, a0, diff, h, &mut s),
+                5 => norm_rows::<V, 5, NV>(m, d, a0, diff, h, &mut s),
+                _ => norm_rows::<V, 6, NV>(m, d, a0, diff, h, &mut s),
+            }
+            a0 += R;
+        }
+        for (v, sv) in s.iter().enumerate() {
+            sv.store(&mut ss[h + 4 * v..]);
+        }
+    }
+}
+
+/// Rows `a0 … a0 + R − 1` of `y = M diff` on the `4 · NV` points `h …` of the block, added to
+/// the norms as `s += y_a²` in ascending `a`. Each `y_a` is a chain of fused multiply-adds over
+/// `b = 0 … a` in ascending order; `R · NV` chains share each load of `diff` and cover the
+/// multiply-add latency. (Subtracting `μ` inside this loop instead of storing `diff` measured
+/// slower with AVX2's sixteen registers and no faster with thirty-two.)
+#[inline(always)]
+fn norm_rows<V: Lanes, const R: usize, const NV: usize>(
     m: &[f64],
     d: usize,
     a0: usize,
     diff: &[f64],
     h: usize,
-    s: &mut [V; 4],
+    s: &mut [V; NV],
 ) {
-    let col = |b: usize| -> &[f64; 16] { diff[b * BLOCK + h..][..16].try_into().unwrap() };
-    let mut y = [[V::zero(); 4]; R];
+    let col = |b: usize| -> &[f64] { &diff[b * BLOCK + h..][..4 * NV] };
+    let mut y = [[V::zero(); NV]; R];
     for b in 0..=a0 {
-        let (c, l) = (
-            col(b),
-            std::array::from_fn::<V, R, _>(|r| V::splat(m[(a0 + r) * d + b])),
-        );
-        for v in 0..4 {
+        // Loops, not `array::from_fn`: its closure would not inherit the target features, and
+        // every intrinsic inside it would become a call.
+        let c = col(b);
+        let mut l = [V::zero(); R];
+        for r in 0..R {
+            l[r] = V::splat(m[(a0 + r) * d + b]);
+        }
+        for v in 0..NV {
             let db = V::load(&c[4 * v..]);
             for r in 0..R {
                 y[r][v] = y[r][v].fma(l[r], db);
@@ -281,7 +361,7 @@ fn norm_rows<V: Lanes, const R: usize>(
     for c in 1..R {
         let b = a0 + c;
         let cb = col(b);
-        for v in 0..4 {
+        for v in 0..NV {
             let db = V::load(&cb[4 * v..]);
             for r in c..R {
                 y[r][v] = y[r][v].fma(V::splat(m[(a0 + r) * d + b]), db);
@@ -289,7 +369,7 @@ fn norm_rows<V: Lanes, const R: usize>(
         }
     }
     for yr in &y {
-        for v in 0..4 {
+        for v in 0..NV {
             s[v] = s[v].fma(yr[v], yr[v]);
         }
     }
@@ -299,6 +379,11 @@ fn norm_rows<V: Lanes, const R: usize>(
 /// time (2 × 27 × 32 × 8 B = 13.8 KB of points and as much of weighted points for the arm's
 /// 27 dimensions).
 const GROUP: usize = 2;
+
+/// Second-moment tiles of [`moments`]: rows × columns of 4-lane sums held in registers, for 16
+/// and for 32 registers.
+const MOMENT_TILE: (usize, usize) = (2, 4);
+const MOMENT_TILE_WIDE: (usize, usize) = (4, 4);
 
 /// Scratch of the M-step's [`moments`]: the weighted points `w_p x_p` of one group of blocks,
 /// and the 4-lane sums of the second-moment tiles.
@@ -326,11 +411,12 @@ impl Default for Moments {
     }
 }
 
-/// Tiles of the lower triangle: row pairs `a0 = 0, 2, …` by column quads `b0 = 0, 4, … ≤ a0 + 1`.
-fn tile_count(d: usize) -> usize {
+/// Tiles of `tr` rows by `tc` columns covering the lower triangle: row groups `a0 = 0, tr, …`
+/// by column groups `b0 = 0, tc, … ≤` the group's last row.
+fn tile_count(d: usize, (tr, tc): (usize, usize)) -> usize {
     (0..d)
-        .step_by(2)
-        .map(|a0| ((a0 + 1).min(d - 1) + 1).div_ceil(4))
+        .step_by(tr)
+        .map(|a0| ((a0 + tr - 1).min(d - 1) + 1).div_ceil(tc))
         .sum()
 }
 
@@ -338,11 +424,12 @@ fn tile_count(d: usize) -> usize {
 /// zero) with weights `w` (`blocks · BLOCK`, padding zero): `s1[a] = Σ_p w_p x_pa` and, for
 /// `b ≤ a`, `xx[a * d + b] = Σ_p w_p x_pa x_pb` (upper triangle of `xx` untouched). Each sum
 /// runs over four lanes (`p mod 4`, ascending `p`) added at the end as `(l0 + l1) + (l2 + l3)`.
-/// The second moments are tiles of two rows by four columns (eight 4-lane sums in registers),
-/// visited once per [`GROUP`] of blocks, whose points and weighted points stay in L1.
+/// The second moments are tiles of a few rows by four columns ([`MOMENT_TILE`]; 4-lane sums in
+/// registers), visited once per [`GROUP`] of blocks, whose points and weighted points stay in
+/// L1.
 #[allow(clippy::too_many_arguments)]
 pub fn moments(
-    fast: bool,
+    isa: Isa,
     scratch: &mut Moments,
     d: usize,
     blocks: usize,
@@ -351,14 +438,14 @@ pub fn moments(
     s1: &mut [f64],
     xx: &mut [f64],
 ) {
-    moments_in_groups(fast, GROUP, scratch, d, blocks, x, w, s1, xx)
+    moments_in_groups(isa, GROUP, scratch, d, blocks, x, w, s1, xx)
 }
 
 /// [`moments`] with `group` blocks per visit of the tiles (the same sums in the same order for
 /// any `group`; the speed benchmark compares them).
 #[allow(clippy::too_many_arguments)]
 fn moments_in_groups(
-    fast: bool,
+    isa: Isa,
     group: usize,
     scratch: &mut Moments,
     d: usize,
@@ -379,10 +466,11 @@ fn moments_in_groups(
     z.resize(group * d * BLOCK, 0.0);
     lanes.clear();
     lanes.resize(d * 4, 0.0);
+    let sums = |(tr, tc): (usize, usize)| tile_count(d, (tr, tc)) * tr * tc * 4;
     tiles.clear();
-    tiles.resize(tile_count(d) * 32, 0.0);
+    tiles.resize(sums(MOMENT_TILE).max(sums(MOMENT_TILE_WIDE)), 0.0);
     dispatch!(
-        fast,
+        isa,
         fn k(
             group: usize,
             d: usize,
@@ -395,76 +483,130 @@ fn moments_in_groups(
             s1: &mut [f64],
             xx: &mut [f64],
         ) {
-            fn row(m: &[f64], i: usize) -> &[f64; BLOCK] {
-                m[i * BLOCK..(i + 1) * BLOCK].try_into().unwrap()
-            }
-            for g0 in (0..blocks).step_by(group) {
-                let g = (blocks - g0).min(group);
-                let xg = &x[g0 * d * BLOCK..(g0 + g) * d * BLOCK];
-                let wg = &w[g0 * BLOCK..(g0 + g) * BLOCK];
-                // z = w x, block by block, and the first moments.
-                for a in 0..d {
-                    let mut sa = V::load(&lanes[4 * a..]);
-                    for j in 0..g {
-                        let o = j * d * BLOCK + a * BLOCK;
-                        for q in (0..BLOCK).step_by(4) {
-                            let wq = V::load(&wg[j * BLOCK + q..]);
-                            let zq = V::zero().fma(wq, V::load(&xg[o + q..]));
-                            zq.store(&mut z[o + q..]);
-                            sa = sa.add(zq);
-                        }
-                    }
-                    sa.store(&mut lanes[4 * a..]);
-                }
-                let mut t = 0;
-                for a0 in (0..d).step_by(2) {
-                    let a1 = (a0 + 1).min(d - 1);
-                    for b0 in (0..=a1).step_by(4) {
-                        let tile = &mut tiles[t * 32..(t + 1) * 32];
-                        let mut acc: [V; 8] = std::array::from_fn(|r| V::load(&tile[4 * r..]));
-                        for j in 0..g {
-                            let (xb, zb) = (&xg[j * d * BLOCK..], &z[j * d * BLOCK..]);
-                            let xr: [&[f64; BLOCK]; 4] =
-                                std::array::from_fn(|c| row(xb, (b0 + c).min(d - 1)));
-                            let (zr0, zr1) = (row(zb, a0), row(zb, a1));
-                            for q in (0..BLOCK).step_by(4) {
-                                let z0 = V::load(&zr0[q..]);
-                                let z1 = V::load(&zr1[q..]);
-                                for c in 0..4 {
-                                    let xs = V::load(&xr[c][q..]);
-                                    acc[c] = acc[c].fma(z0, xs);
-                                    acc[4 + c] = acc[4 + c].fma(z1, xs);
-                                }
-                            }
-                        }
-                        for (r, o) in acc.iter().enumerate() {
-                            o.store(&mut tile[4 * r..]);
-                        }
-                        t += 1;
-                    }
-                }
-            }
-            for a in 0..d {
-                s1[a] = V::load(&lanes[4 * a..]).sum();
-            }
-            let mut t = 0;
-            for a0 in (0..d).step_by(2) {
-                let a1 = (a0 + 1).min(d - 1);
-                for b0 in (0..=a1).step_by(4) {
-                    for (r, a) in [a0, a1].into_iter().enumerate() {
-                        for c in 0..4 {
-                            let b = b0 + c;
-                            if (r == 0 || a1 != a0) && b <= a {
-                                let o = t * 32 + (r * 4 + c) * 4;
-                                xx[a * d + b] = V::load(&tiles[o..]).sum();
-                            }
-                        }
-                    }
-                    t += 1;
-                }
+            const W: (usize, usize) = MOMENT_TILE_WIDE;
+            const N: (usize, usize) = MOMENT_TILE;
+            if V::WIDE {
+                moment_tiles::<V, { W.0 }, { W.1 }>(group, d, blocks, x, w, z, lanes, tiles, s1, xx)
+            } else {
+                moment_tiles::<V, { N.0 }, { N.1 }>(group, d, blocks, x, w, z, lanes, tiles, s1, xx)
             }
         }
     )
+}
+
+/// One block's points added to a tile's sums: `acc[r][c] += z_r x_c` (fused) for every 4-lane
+/// vector of points in ascending order; on the diagonal (`DIAG`) only for `c ≤ r`.
+#[inline(always)]
+fn tile_block<V: Lanes, const TR: usize, const TC: usize, const DIAG: bool>(
+    acc: &mut [[V; TC]; TR],
+    zr: &[&[f64; BLOCK]; TR],
+    xr: &[&[f64; BLOCK]; TC],
+) {
+    for q in (0..BLOCK).step_by(4) {
+        // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
+        let mut zq = [V::zero(); TR];
+        for r in 0..TR {
+            zq[r] = V::load(&zr[r][q..]);
+        }
+        for c in 0..TC {
+            let xs = V::load(&xr[c][q..]);
+            for r in 0..TR {
+                if !DIAG || c <= r {
+                    acc[r][c] = acc[r][c].fma(zq[r], xs);
+                }
+            }
+        }
+    }
+}
+
+/// [`moments_in_groups`] on tiles of `TR` rows by `TC` columns.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(
+    group: usize,
+    d: usize,
+    blocks: usize,
+    x: &[f64],
+    w: &[f64],
+    z: &mut [f64],
+    lanes: &mut [f64],
+    tiles: &mut [f64],
+    s1: &mut [f64],
+    xx: &mut [f64],
+) {
+    fn row(m: &[f64], i: usize) -> &[f64; BLOCK] {
+        m[i * BLOCK..(i + 1) * BLOCK].try_into().unwrap()
+    }
+    let size = TR * TC * 4;
+    for g0 in (0..blocks).step_by(group) {
+        let g = (blocks - g0).min(group);
+        let xg = &x[g0 * d * BLOCK..(g0 + g) * d * BLOCK];
+        let wg = &w[g0 * BLOCK..(g0 + g) * BLOCK];
+        // z = w x, block by block, and the first moments.
+        for a in 0..d {
+            let mut sa = V::load(&lanes[4 * a..]);
+            for j in 0..g {
+                let o = j * d * BLOCK + a * BLOCK;
+                for q in (0..BLOCK).step_by(4) {
+                    let wq = V::load(&wg[j * BLOCK + q..]);
+                    let zq = V::zero().fma(wq, V::load(&xg[o + q..]));
+                    zq.store(&mut z[o + q..]);
+                    sa = sa.add(zq);
+                }
+            }
+            sa.store(&mut lanes[4 * a..]);
+        }
+        let mut t = 0;
+        for a0 in (0..d).step_by(TR) {
+            let last = (a0 + TR - 1).min(d - 1);
+            for b0 in (0..=last).step_by(TC) {
+                let tile = &mut tiles[t * size..(t + 1) * size];
+                // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
+                let mut acc = [[V::zero(); TC]; TR];
+                for r in 0..TR {
+                    for c in 0..TC {
+                        acc[r][c] = V::load(&tile[(r * TC + c) * 4..]);
+                    }
+                }
+                // A tile on the diagonal needs only its lower triangle (column ≤ row).
+                let diag = TR == TC && b0 == a0;
+                for j in 0..g {
+                    let (xb, zb) = (&xg[j * d * BLOCK..], &z[j * d * BLOCK..]);
+                    let xr: [&[f64; BLOCK]; TC] =
+                        std::array::from_fn(|c| row(xb, (b0 + c).min(d - 1)));
+                    let zr: [&[f64; BLOCK]; TR] =
+                        std::array::from_fn(|r| row(zb, (a0 + r).min(d - 1)));
+                    if diag {
+                        tile_block::<V, TR, TC, true>(&mut acc, &zr, &xr);
+                    } else {
+                        tile_block::<V, TR, TC, false>(&mut acc, &zr, &xr);
+                    }
+                }
+                for r in 0..TR {
+                    for c in 0..TC {
+                        acc[r][c].store(&mut tile[(r * TC + c) * 4..]);
+                    }
+                }
+                t += 1;
+            }
+        }
+    }
+    for a in 0..d {
+        s1[a] = V::load(&lanes[4 * a..]).sum();
+    }
+    let mut t = 0;
+    for a0 in (0..d).step_by(TR) {
+        let last = (a0 + TR - 1).min(d - 1);
+        for b0 in (0..=last).step_by(TC) {
+            for a in a0..=last {
+                for b in b0..(b0 + TC).min(a + 1) {
+                    let o = (t * TR * TC + (a - a0) * TC + (b - b0)) * 4;
+                    xx[a * d + b] = V::load(&tiles[o..]).sum();
+                }
+            }
+            t += 1;
+        }
+    }
 }
 
 /// Below this argument [`exp`] returns `+0`: `e^-600` ≈ 2.7e-261. Terms that small change no
@@ -527,10 +669,10 @@ fn load_or_neg_inf<V: Lanes>(s: &[f64], i: usize) -> V {
 }
 
 /// `e^x` of every element of `x` into `out` (same length), as the EM's [`exp`] computes it.
-pub fn exp_slice(fast: bool, x: &[f64], out: &mut [f64]) {
+pub fn exp_slice(isa: Isa, x: &[f64], out: &mut [f64]) {
     assert_eq!(x.len(), out.len());
     dispatch!(
-        fast,
+        isa,
         fn k(x: &[f64], out: &mut [f64]) {
             let mut buf = [0.0; 4];
             for i in (0..x.len()).step_by(4) {
@@ -548,7 +690,7 @@ pub fn exp_slice(fast: bool, x: &[f64], out: &mut [f64]) {
 /// (GPS's `max = −∞ → 0` gives the same `−∞`), then `l_ip −= lse[p]`. Lanes are points; each
 /// point's sum runs over `i` in ascending order.
 pub fn normalise_over_clusters(
-    fast: bool,
+    isa: Isa,
     l: &mut [f64],
     stride: usize,
     n: usize,
@@ -557,7 +699,7 @@ pub fn normalise_over_clusters(
 ) {
     assert!(n <= stride && l.len() >= (k.max(1) - 1) * stride + n && lse.len() >= n);
     dispatch!(
-        fast,
+        isa,
         fn kern(l: &mut [f64], stride: usize, n: usize, k: usize, lse: &mut [f64]) {
             let mut buf = [0.0; 4];
             for p in (0..n).step_by(4) {
@@ -592,11 +734,11 @@ pub fn normalise_over_clusters(
 /// `log Σ_p exp(l_p − m) + m`, `m` the largest value (`−∞` for an empty or all-`−∞` row, as
 /// GPS's `max = −∞ → 0` gives). The sum runs in four lanes (`p mod 4`, ascending `p`), added as
 /// `(l0 + l1) + (l2 + l3)`.
-pub fn logsum_points(fast: bool, l: &[f64]) -> f64 {
+pub fn logsum_points(isa: Isa, l: &[f64]) -> f64 {
     let mut out = 0.0;
     let sink = &mut out;
     dispatch!(
-        fast,
+        isa,
         fn k(l: &[f64], sink: &mut f64) {
             let mut m = V::splat(f64::MIN);
             for p in (0..l.len()).step_by(4) {
@@ -618,10 +760,10 @@ pub fn logsum_points(fast: bool, l: &[f64]) -> f64 {
 
 /// The M-step's weights of one cluster: `w[p] = exp(l[p] − c)` for `p < l.len()` (`+0` below
 /// `e^`[`EXP_FLOOR`]), `w[p] = 0` for the padding `l.len() ≤ p < w.len()`.
-pub fn weights(fast: bool, l: &[f64], c: f64, w: &mut [f64]) {
+pub fn weights(isa: Isa, l: &[f64], c: f64, w: &mut [f64]) {
     assert!(w.len() >= l.len());
     dispatch!(
-        fast,
+        isa,
         fn k(l: &[f64], c: f64, w: &mut [f64]) {
             let cv = V::splat(c);
             let mut buf = [0.0; 4];
@@ -650,7 +792,9 @@ pub fn mstep_flops(n: usize, d: usize, k: usize) -> f64 {
 
 /// One core's f64 multiply-add peak, to be timed by the caller: `rounds` rounds of 48
 /// independent fused multiply-adds (twelve 4-lane chains, enough to cover the FMA latency on two
-/// pipes) on the instantiation [`fast_path`] selects. Returns the flops done, 2 × 48 × `rounds`.
+/// pipes) on the AVX2 instantiation where the CPU has it (also on CPUs with AVX-512: the peak of
+/// the kernels' 4-lane instructions, not of 8-lane ones), else the portable one. Returns the
+/// flops done, 2 × 48 × `rounds`.
 pub fn fma_peak(rounds: usize) -> f64 {
     let mut out = 0.0;
     let sink = &mut out;
@@ -658,8 +802,12 @@ pub fn fma_peak(rounds: usize) -> f64 {
         std::hint::black_box(0.999_999_9),
         std::hint::black_box(1e-7),
     );
+    let isa = match Isa::detect() {
+        Isa::Avx512 => Isa::Avx2,
+        isa => isa,
+    };
     dispatch!(
-        fast_path(),
+        isa,
         fn k(rounds: usize, m: f64, c: f64, sink: &mut f64) {
             let mut acc = [V::zero(); 12];
             let (m, c) = (V::splat(m), V::splat(c));
@@ -696,52 +844,70 @@ mod tests {
         v.iter().map(|x| x.to_bits()).collect()
     }
 
+    /// Every instantiation this CPU runs, the portable one first; prints a note for the others.
+    fn isas() -> Vec<Isa> {
+        [Isa::Portable, Isa::Avx2, Isa::Avx512]
+            .into_iter()
+            .filter(|&isa| {
+                let ok = isa.available();
+                if !ok {
+                    println!("note: this CPU cannot run the {isa:?} instantiation; not tested");
+                }
+                ok
+            })
+            .collect()
+    }
+
     #[test]
-    fn whitened_norms_follow_their_documented_order_bit_for_bit_on_both_builds() {
+    fn whitened_norms_follow_their_documented_order_bit_for_bit_on_every_build() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        for d in [1, 2, 5, 27] {
+        for d in [1, 2, 3, 4, 5, 6, 7, 8, 13, 27] {
             let m = random_lower(&mut rng, d);
             let mu: Vec<f64> = (0..d).map(|_| rng.random_range(-1.0..1.0)).collect();
             let x: Vec<f64> = (0..d * BLOCK)
                 .map(|_| rng.random_range(-3.0..3.0))
                 .collect();
             let mut diff = vec![0.0; d * BLOCK];
-            let mut ss = [0.0; BLOCK];
-            whitened_norms(fast_path(), &m, &mu, d, &x, &mut diff, &mut ss);
-            for j in 0..BLOCK {
-                // The documented order: y_a a fused chain over ascending b from 0, the norm a
-                // fused chain over ascending a.
-                let mut norm = 0.0f64;
-                for a in 0..d {
-                    let mut y = 0.0f64;
-                    for b in 0..=a {
-                        y = m[a * d + b].mul_add(x[b * BLOCK + j] - mu[b], y);
+            for isa in isas() {
+                let mut ss = [0.0; BLOCK];
+                whitened_norms(isa, &m, &mu, d, &x, &mut diff, &mut ss);
+                for j in 0..BLOCK {
+                    // The documented order: y_a a fused chain over ascending b from 0, the norm
+                    // a fused chain over ascending a.
+                    let mut norm = 0.0f64;
+                    for a in 0..d {
+                        let mut y = 0.0f64;
+                        for b in 0..=a {
+                            y = m[a * d + b].mul_add(x[b * BLOCK + j] - mu[b], y);
+                        }
+                        norm = y.mul_add(y, norm);
                     }
-                    norm = y.mul_add(y, norm);
+                    assert_eq!(ss[j].to_bits(), norm.to_bits(), "{isa:?} d={d} j={j}");
                 }
-                assert_eq!(ss[j].to_bits(), norm.to_bits(), "d={d} j={j}");
             }
-            let mut ss2 = [0.0; BLOCK];
-            whitened_norms(false, &m, &mu, d, &x, &mut diff, &mut ss2);
-            assert_eq!(
-                bits(&ss),
-                bits(&ss2),
-                "d={d}: the two instantiations differ"
-            );
         }
     }
 
     #[test]
-    fn moments_follow_their_documented_order_bit_for_bit_on_both_builds() {
+    fn moments_follow_their_documented_order_bit_for_bit_on_every_build() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-        for (d, blocks) in [(1, 1), (2, 2), (5, 1), (27, 16)] {
+        for (d, blocks) in [
+            (1, 1),
+            (2, 2),
+            (3, 3),
+            (4, 1),
+            (5, 1),
+            (6, 2),
+            (9, 5),
+            (27, 16),
+        ] {
             let np = blocks * BLOCK;
             let x: Vec<f64> = (0..d * np).map(|_| rng.random_range(-2.0..2.0)).collect();
             let w: Vec<f64> = (0..np).map(|_| rng.random_range(0.0..1.0)).collect();
-            let run = |fast: bool| {
+            let run = |isa: Isa| {
                 let (mut s1, mut xx) = (vec![0.0; d], vec![f64::NAN; d * d]);
                 moments(
-                    fast,
+                    isa,
                     &mut Moments::new(),
                     d,
                     blocks,
@@ -752,7 +918,7 @@ mod tests {
                 );
                 (s1, xx)
             };
-            let (s1, xx) = run(fast_path());
+            let (s1, xx) = run(Isa::Portable);
             let at = |a: usize, p: usize| x[(p / BLOCK) * d * BLOCK + a * BLOCK + p % BLOCK];
             // The documented order: four lane sums over p ≡ j (mod 4) in ascending p, of the
             // rounded z_p = w_p x_pa, fused into the second moments; (l0 + l1) + (l2 + l3).
@@ -774,9 +940,11 @@ mod tests {
                     }
                 }
             }
-            let (s1b, xxb) = run(false);
-            assert_eq!(bits(&s1), bits(&s1b));
-            assert_eq!(bits(&xx), bits(&xxb));
+            for isa in isas() {
+                let (s1b, xxb) = run(isa);
+                assert_eq!(bits(&s1), bits(&s1b), "{isa:?} d={d}");
+                assert_eq!(bits(&xx), bits(&xxb), "{isa:?} d={d}");
+            }
         }
     }
 
@@ -786,7 +954,7 @@ mod tests {
     }
 
     #[test]
-    fn exp_is_within_two_ulp_of_libm_flushes_below_the_floor_and_both_builds_agree() {
+    fn exp_is_within_two_ulp_of_libm_flushes_below_the_floor_and_every_build_agrees() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let mut x: Vec<f64> = (0..20_000)
             .map(|i| match i % 4 {
@@ -808,7 +976,7 @@ mod tests {
         ]);
         x.extend((1..20).map(|n| -(n as f64 + 0.5) * std::f64::consts::LN_2));
         let mut y = vec![0.0; x.len()];
-        exp_slice(fast_path(), &x, &mut y);
+        exp_slice(Isa::Portable, &x, &mut y);
         let worst = x
             .iter()
             .zip(&y)
@@ -822,9 +990,15 @@ mod tests {
             worst.1
         );
         assert_eq!(y[20_000], 1.0, "e^0");
-        let mut y2 = vec![0.0; x.len()];
-        exp_slice(false, &x, &mut y2);
-        assert_eq!(bits(&y), bits(&y2), "the two instantiations differ");
+        for isa in isas() {
+            let mut y2 = vec![0.0; x.len()];
+            exp_slice(isa, &x, &mut y2);
+            assert_eq!(
+                bits(&y),
+                bits(&y2),
+                "{isa:?} differs from the portable build"
+            );
+        }
 
         let special = [
             EXP_FLOOR - 1e-9,
@@ -833,10 +1007,16 @@ mod tests {
             f64::NEG_INFINITY,
             f64::NAN,
         ];
-        let mut z = [1.0; 5];
-        exp_slice(fast_path(), &special, &mut z);
-        assert_eq!(bits(&z[..4]), bits(&[0.0; 4]), "below the floor: +0");
-        assert!(z[4].is_nan(), "NaN stays NaN");
+        for isa in isas() {
+            let mut z = [1.0; 5];
+            exp_slice(isa, &special, &mut z);
+            assert_eq!(
+                bits(&z[..4]),
+                bits(&[0.0; 4]),
+                "{isa:?} below the floor: +0"
+            );
+            assert!(z[4].is_nan(), "{isa:?}: NaN stays NaN");
+        }
     }
 
     /// GPS `logsum` written out (max-shifted, `−∞` max replaced by 0), on libm's `exp`.
@@ -849,7 +1029,7 @@ mod tests {
     }
 
     #[test]
-    fn responsibilities_match_gps_logsum_and_both_builds_agree_bit_for_bit() {
+    fn responsibilities_match_gps_logsum_and_every_build_agrees_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
         for (n, k) in [(1usize, 1usize), (5, 3), (37, 12), (64, 2)] {
             let stride = n.div_ceil(BLOCK) * BLOCK;
@@ -866,21 +1046,21 @@ mod tests {
                     l[(k - 1) * stride + p] -= 2000.0;
                 }
             }
-            let run = |fast: bool| {
+            let run = |isa: Isa| {
                 let mut l = l.clone();
                 let mut lse = vec![0.0; n];
-                normalise_over_clusters(fast, &mut l, stride, n, k, &mut lse);
+                normalise_over_clusters(isa, &mut l, stride, n, k, &mut lse);
                 let col: Vec<f64> = (0..k)
-                    .map(|i| logsum_points(fast, &l[i * stride..][..n]))
+                    .map(|i| logsum_points(isa, &l[i * stride..][..n]))
                     .collect();
                 let mut w = vec![f64::NAN; stride * k];
                 for i in 0..k {
                     let wi = &mut w[i * stride..(i + 1) * stride];
-                    weights(fast, &l[i * stride..][..n], col[i], wi);
+                    weights(isa, &l[i * stride..][..n], col[i], wi);
                 }
                 (l, lse, col, w)
             };
-            let (lr, lse, col, w) = run(fast_path());
+            let (lr, lse, col, w) = run(Isa::Portable);
             for p in 0..n {
                 let v: Vec<f64> = (0..k).map(|i| l[i * stride + p]).collect();
                 let want = logsum_ref(&v);
@@ -912,11 +1092,13 @@ mod tests {
                     }
                 }
             }
-            let (lr2, lse2, col2, w2) = run(false);
-            assert_eq!(bits(&lr), bits(&lr2));
-            assert_eq!(bits(&lse), bits(&lse2));
-            assert_eq!(bits(&col), bits(&col2));
-            assert_eq!(bits(&w), bits(&w2));
+            for isa in isas() {
+                let (lr2, lse2, col2, w2) = run(isa);
+                assert_eq!(bits(&lr), bits(&lr2), "{isa:?}");
+                assert_eq!(bits(&lse), bits(&lse2), "{isa:?}");
+                assert_eq!(bits(&col), bits(&col2), "{isa:?}");
+                assert_eq!(bits(&w), bits(&w2), "{isa:?}");
+            }
         }
     }
 
@@ -948,34 +1130,37 @@ mod tests {
         let (mut acc, mut s1, mut xx) = (Moments::new(), vec![0.0; d], vec![0.0; d * d]);
         let reps = 200;
         let peak = best(&mut || fma_peak(2_000_000));
-        let e = best(&mut || {
-            let mut ss = [0.0; BLOCK];
-            for _ in 0..reps {
-                for blk in 0..blocks {
-                    for _ in 0..k {
-                        let xb = &x[blk * d * BLOCK..];
-                        whitened_norms(fast_path(), &m, &mu, d, xb, &mut diff, &mut ss);
+        println!("peak {peak:.1} GFLOP/s");
+        for isa in isas().into_iter().filter(|&isa| isa != Isa::Portable) {
+            let e = best(&mut || {
+                let mut ss = [0.0; BLOCK];
+                for _ in 0..reps {
+                    for blk in 0..blocks {
+                        for _ in 0..k {
+                            let xb = &x[blk * d * BLOCK..];
+                            whitened_norms(isa, &m, &mu, d, xb, &mut diff, &mut ss);
+                        }
                     }
                 }
-            }
-            reps as f64 * estep_flops(blocks * BLOCK, d, k)
-        });
-        println!(
-            "peak {peak:.1} GFLOP/s; whitened_norms {e:.1} ({:.0} %)",
-            100.0 * e / peak
-        );
-        for group in [1, 2, 4, blocks] {
-            let mm = best(&mut || {
-                for _ in 0..reps * k {
-                    let (a, b) = (&mut s1, &mut xx);
-                    moments_in_groups(fast_path(), group, &mut acc, d, blocks, &x, &w, a, b);
-                }
-                (reps * k) as f64 * mstep_flops(blocks * BLOCK, d, 1)
+                reps as f64 * estep_flops(blocks * BLOCK, d, k)
             });
             println!(
-                "moments, {group} blocks per visit: {mm:.1} ({:.0} %)",
-                100.0 * mm / peak
+                "{isa:?}: whitened_norms {e:.1} GFLOP/s ({:.0} %)",
+                100.0 * e / peak
             );
+            for group in [1, 2, 4, blocks] {
+                let mm = best(&mut || {
+                    for _ in 0..reps * k {
+                        let (a, b) = (&mut s1, &mut xx);
+                        moments_in_groups(isa, group, &mut acc, d, blocks, &x, &w, a, b);
+                    }
+                    (reps * k) as f64 * mstep_flops(blocks * BLOCK, d, 1)
+                });
+                println!(
+                    "{isa:?}: moments, {group} blocks per visit: {mm:.1} GFLOP/s ({:.0} %)",
+                    100.0 * mm / peak
+                );
+            }
         }
     }
 }

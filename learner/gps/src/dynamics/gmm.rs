@@ -314,14 +314,14 @@ impl Gmm {
         if !loaded {
             self.ws.load(data);
         }
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         let ws = &mut self.ws;
         for blk in 0..ws.blocks {
             let (p0, xb) = (blk * BLOCK, &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK]);
             for i in 0..k {
                 let mut ss = [0.0; BLOCK];
                 let (minv, mu) = (self.minv.slice(i), &self.mu[i * d..(i + 1) * d]);
-                em_kernels::whitened_norms(fast, minv, mu, d, xb, &mut ws.diff, &mut ss);
+                em_kernels::whitened_norms(isa, minv, mu, d, xb, &mut ws.diff, &mut ss);
                 let base = c0 - self.half_logdet[i] + self.logmass[i];
                 let row = &mut ws.logobs[i * ws.stride + p0..][..BLOCK];
                 for (o, &s) in row.iter_mut().zip(&ss) {
@@ -411,7 +411,7 @@ impl Gmm {
             stop_itr: max_iterations,
         };
         let mut prevll = f64::NEG_INFINITY;
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         for itr in 0..max_iterations {
             self.estep(data, true)?;
             let Workspace {
@@ -424,7 +424,7 @@ impl Gmm {
             } = &mut self.ws;
             let stride = *stride;
             // Log responsibilities: logobs − logsum over clusters, in place.
-            em_kernels::normalise_over_clusters(fast, logobs, stride, n, k, rowlse);
+            em_kernels::normalise_over_clusters(isa, logobs, stride, n, k, rowlse);
             let ll: f64 = rowlse[..n].iter().sum();
             report.ll_trace.push(ll);
             if ll < prevll {
@@ -440,7 +440,7 @@ impl Gmm {
             prevll = ll;
 
             for i in 0..k {
-                collse[i] = em_kernels::logsum_points(fast, &logobs[i * stride..][..n]);
+                collse[i] = em_kernels::logsum_points(isa, &logobs[i * stride..][..n]);
             }
             let lm = logsum(collse[..k].iter().copied());
             for i in 0..k {
@@ -454,7 +454,7 @@ impl Gmm {
                     wi[..n].fill(1.0 / n as f64);
                     wi[n..].fill(0.0);
                 } else {
-                    em_kernels::weights(fast, &logobs[i * stride..][..n], collse[i], wi);
+                    em_kernels::weights(isa, &logobs[i * stride..][..n], collse[i], wi);
                 }
             }
             self.mstep();
@@ -466,14 +466,14 @@ impl Gmm {
     /// blocks.
     fn mstep(&mut self) {
         let (d, k) = (self.dim, self.k);
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         let ws = &mut self.ws;
         for i in 0..k {
             // μ_i = Σ_p w_pi x_p and the lower triangle of XX = Σ_p w_pi x_p x_pᵀ.
             let mu = &mut self.mu[i * d..(i + 1) * d];
             let w = &ws.w[i * ws.stride..(i + 1) * ws.stride];
             em_kernels::moments(
-                fast,
+                isa,
                 &mut ws.moments,
                 d,
                 ws.blocks,
@@ -566,18 +566,18 @@ impl Gmm {
         self.estep(pts, false)?;
         let n = pts.nrows();
         let k = self.k;
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         let Workspace {
             logobs,
             stride,
             rowlse,
             ..
         } = &mut self.ws;
-        em_kernels::normalise_over_clusters(fast, logobs, *stride, n, k, rowlse);
+        em_kernels::normalise_over_clusters(isa, logobs, *stride, n, k, rowlse);
         let ln_n = (n as f64).ln();
         for i in 0..k {
             self.last_logwts[i] =
-                em_kernels::logsum_points(fast, &logobs[i * *stride..][..n]) - ln_n;
+                em_kernels::logsum_points(isa, &logobs[i * *stride..][..n]) - ln_n;
         }
         Ok(())
     }
