@@ -72,6 +72,7 @@ trait Lanes: Copy {
     fn add(self, b: Self) -> Self;
     fn sub(self, b: Self) -> Self;
     fn mul(self, b: Self) -> Self;
+    fn div(self, b: Self) -> Self;
     /// `self > b ? self : b` in every lane (`b` where either is NaN, as `vmaxpd`).
     fn max(self, b: Self) -> Self;
     /// `self < b ? self : b` in every lane (`b` where either is NaN, as `vminpd`).
@@ -122,6 +123,10 @@ impl Lanes for [f64; 4] {
     #[inline(always)]
     fn mul(self, b: Self) -> Self {
         [0, 1, 2, 3].map(|j| self[j] * b[j])
+    }
+    #[inline(always)]
+    fn div(self, b: Self) -> Self {
+        [0, 1, 2, 3].map(|j| self[j] / b[j])
     }
     #[inline(always)]
     fn max(self, b: Self) -> Self {
@@ -191,6 +196,10 @@ mod avx {
                 #[inline(always)]
                 fn mul(self, b: Self) -> Self {
                     $T(unsafe { _mm256_mul_pd(self.0, b.0) })
+                }
+                #[inline(always)]
+                fn div(self, b: Self) -> Self {
+                    $T(unsafe { _mm256_div_pd(self.0, b.0) })
                 }
                 #[inline(always)]
                 fn max(self, b: Self) -> Self {
@@ -375,6 +384,46 @@ fn norm_rows<V: Lanes, const R: usize, const NV: usize>(
     }
 }
 
+/// `m = L⁻¹` for a lower-triangular `d x d` row-major `l`: row by row,
+/// `m[a, ..] = (e_a − Σ_{c<a} l[a, c] m[c, ..]) / l[a, a]`, each row an update by the rows
+/// above it in ascending `c`, over the columns `b ≤ c` where `m[c, b]` can be non-zero, a
+/// product and a subtraction (not fused) per element, then the division. Each element gets the
+/// operations of forward substitution on the columns of the identity, in the same order (the
+/// same bits), but the lanes of a row are independent, so it vectorises. Only the lower
+/// triangle of `m` is written.
+pub fn invert_lower(isa: Isa, l: &[f64], m: &mut [f64], d: usize) {
+    assert!(l.len() >= d * d && m.len() >= d * d);
+    dispatch!(
+        isa,
+        fn k(l: &[f64], m: &mut [f64], d: usize) {
+            for a in 0..d {
+                let (above, rest) = m.split_at_mut(a * d);
+                let row = &mut rest[..=a];
+                row.fill(0.0);
+                row[a] = 1.0;
+                for c in 0..a {
+                    let (lac, src) = (l[a * d + c], &above[c * d..=c * d + c]);
+                    let (lv, n4) = (V::splat(lac), (c + 1) / 4 * 4);
+                    for j in (0..n4).step_by(4) {
+                        let r = V::load(&row[j..]).sub(lv.mul(V::load(&src[j..])));
+                        r.store(&mut row[j..]);
+                    }
+                    for j in n4..=c {
+                        row[j] -= lac * src[j];
+                    }
+                }
+                let (laa, n4) = (l[a * d + a], (a + 1) / 4 * 4);
+                for j in (0..n4).step_by(4) {
+                    V::load(&row[j..]).div(V::splat(laa)).store(&mut row[j..]);
+                }
+                for r in &mut row[n4..] {
+                    *r /= laa;
+                }
+            }
+        }
+    )
+}
+
 /// Blocks of points whose weighted copies and second-moment sums the M-step keeps in L1 at a
 /// time (2 × 27 × 32 × 8 B = 13.8 KB of points and as much of weighted points for the arm's
 /// 27 dimensions).
@@ -463,12 +512,18 @@ fn moments_in_groups(
         s1: lanes,
         tiles,
     } = scratch;
-    z.resize(group * d * BLOCK, 0.0);
-    lanes.clear();
-    lanes.resize(d * 4, 0.0);
+    // No clearing: the first group starts every sum from zero.
     let sums = |(tr, tc): (usize, usize)| tile_count(d, (tr, tc)) * tr * tc * 4;
-    tiles.clear();
-    tiles.resize(sums(MOMENT_TILE).max(sums(MOMENT_TILE_WIDE)), 0.0);
+    let need = sums(MOMENT_TILE).max(sums(MOMENT_TILE_WIDE));
+    for (v, n) in [
+        (&mut *z, group * d * BLOCK),
+        (&mut *lanes, d * 4),
+        (&mut *tiles, need),
+    ] {
+        if v.len() < n {
+            v.resize(n, 0.0);
+        }
+    }
     dispatch!(
         isa,
         fn k(
@@ -544,7 +599,11 @@ fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(
         let wg = &w[g0 * BLOCK..(g0 + g) * BLOCK];
         // z = w x, block by block, and the first moments.
         for a in 0..d {
-            let mut sa = V::load(&lanes[4 * a..]);
+            let mut sa = if g0 == 0 {
+                V::zero()
+            } else {
+                V::load(&lanes[4 * a..])
+            };
             for j in 0..g {
                 let o = j * d * BLOCK + a * BLOCK;
                 for q in (0..BLOCK).step_by(4) {
@@ -563,9 +622,11 @@ fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(
                 let tile = &mut tiles[t * size..(t + 1) * size];
                 // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
                 let mut acc = [[V::zero(); TC]; TR];
-                for r in 0..TR {
-                    for c in 0..TC {
-                        acc[r][c] = V::load(&tile[(r * TC + c) * 4..]);
+                if g0 > 0 {
+                    for r in 0..TR {
+                        for c in 0..TC {
+                            acc[r][c] = V::load(&tile[(r * TC + c) * 4..]);
+                        }
                     }
                 }
                 // A tile on the diagonal needs only its lower triangle (column ≤ row).
