@@ -350,14 +350,16 @@ fn norm_rows<V: Lanes, const R: usize, const NV: usize>(
     s: &mut [V; NV],
 ) {
     let col = |b: usize| -> &[f64] { &diff[b * BLOCK + h..][..4 * NV] };
+    // Row a0 + r of M up to the diagonal, sliced once (no bounds check per element below).
+    let rows: [&[f64]; R] = std::array::from_fn(|r| &m[(a0 + r) * d..][..=a0 + r]);
     let mut y = [[V::zero(); NV]; R];
-    for b in 0..=a0 {
+    for (b, c) in diff.chunks_exact(BLOCK).take(a0 + 1).enumerate() {
+        let c = &c[h..h + 4 * NV];
         // Loops, not `array::from_fn`: its closure would not inherit the target features, and
         // every intrinsic inside it would become a call.
-        let c = col(b);
         let mut l = [V::zero(); R];
         for r in 0..R {
-            l[r] = V::splat(m[(a0 + r) * d + b]);
+            l[r] = V::splat(rows[r][b]);
         }
         for v in 0..NV {
             let db = V::load(&c[4 * v..]);
@@ -373,7 +375,7 @@ fn norm_rows<V: Lanes, const R: usize, const NV: usize>(
         for v in 0..NV {
             let db = V::load(&cb[4 * v..]);
             for r in c..R {
-                y[r][v] = y[r][v].fma(V::splat(m[(a0 + r) * d + b]), db);
+                y[r][v] = y[r][v].fma(V::splat(rows[r][b]), db);
             }
         }
     }
@@ -396,32 +398,178 @@ pub fn invert_lower(isa: Isa, l: &[f64], m: &mut [f64], d: usize) {
     dispatch!(
         isa,
         fn k(l: &[f64], m: &mut [f64], d: usize) {
-            for a in 0..d {
-                let (above, rest) = m.split_at_mut(a * d);
-                let row = &mut rest[..=a];
-                row.fill(0.0);
-                row[a] = 1.0;
-                for c in 0..a {
-                    let (lac, src) = (l[a * d + c], &above[c * d..=c * d + c]);
-                    let (lv, n4) = (V::splat(lac), (c + 1) / 4 * 4);
+            if d <= 4 * INV_VECS {
+                invert_rows_in_registers::<V>(l, m, d)
+            } else {
+                for a in 0..d {
+                    let (above, rest) = m.split_at_mut(a * d);
+                    let row = &mut rest[..=a];
+                    row.fill(0.0);
+                    row[a] = 1.0;
+                    for c in 0..a {
+                        let (lac, src) = (l[a * d + c], &above[c * d..=c * d + c]);
+                        let (lv, n4) = (V::splat(lac), (c + 1) / 4 * 4);
+                        for j in (0..n4).step_by(4) {
+                            let r = V::load(&row[j..]).sub(lv.mul(V::load(&src[j..])));
+                            r.store(&mut row[j..]);
+                        }
+                        for j in n4..=c {
+                            row[j] -= lac * src[j];
+                        }
+                    }
+                    let (laa, n4) = (l[a * d + a], (a + 1) / 4 * 4);
                     for j in (0..n4).step_by(4) {
-                        let r = V::load(&row[j..]).sub(lv.mul(V::load(&src[j..])));
-                        r.store(&mut row[j..]);
+                        V::load(&row[j..]).div(V::splat(laa)).store(&mut row[j..]);
                     }
-                    for j in n4..=c {
-                        row[j] -= lac * src[j];
+                    for r in &mut row[n4..] {
+                        *r /= laa;
                     }
-                }
-                let (laa, n4) = (l[a * d + a], (a + 1) / 4 * 4);
-                for j in (0..n4).step_by(4) {
-                    V::load(&row[j..]).div(V::splat(laa)).store(&mut row[j..]);
-                }
-                for r in &mut row[n4..] {
-                    *r /= laa;
                 }
             }
         }
     )
+}
+
+/// 4-lane vectors of a row that [`invert_lower`] keeps in registers (rows up to 32 long).
+const INV_VECS: usize = 8;
+
+/// [`invert_lower`] for `d ≤ 4 ·` [`INV_VECS`]: each row in registers (the row updates are a
+/// chain through memory otherwise, a store and a reload per step), the finished rows in a
+/// zero-padded copy. Whole vectors are updated: a lane `j > c` of the update by row `c` reads
+/// that row's `+0` above the diagonal and subtracts `l[a, c] · 0 = ±0` from its own `+0` (or
+/// the `1` of the diagonal), which leaves it unchanged for a finite `L`, so every element gets
+/// exactly the operations of the row-by-row statement.
+#[inline(always)]
+fn invert_rows_in_registers<V: Lanes>(l: &[f64], m: &mut [f64], d: usize) {
+    const W: usize = 4 * INV_VECS;
+    let mut done = [[0.0f64; W]; W];
+    for a in 0..d {
+        let mut acc = [V::zero(); INV_VECS];
+        let mut unit = [0.0; 4];
+        unit[a % 4] = 1.0;
+        for v in 0..INV_VECS {
+            if v == a / 4 {
+                acc[v] = V::load(&unit);
+            }
+        }
+        for c in 0..a {
+            let lv = V::splat(l[a * d + c]);
+            let src = &done[c];
+            for v in 0..INV_VECS {
+                if v <= c / 4 {
+                    acc[v] = acc[v].sub(lv.mul(V::load(&src[4 * v..])));
+                }
+            }
+        }
+        let laa = V::splat(l[a * d + a]);
+        for v in 0..INV_VECS {
+            if v <= a / 4 {
+                acc[v].div(laa).store(&mut done[a][4 * v..]);
+            }
+        }
+        m[a * d..=a * d + a].copy_from_slice(&done[a][..=a]);
+    }
+}
+
+/// Clusters whose forward substitutions [`small_norms`] interleaves (independent chains that
+/// cover the latency of each row's subtractions and division).
+const SMALL_CLUSTERS: usize = 4;
+
+/// The E-step of a handful of points (the dynamics fit's per-step prior queries): for every
+/// cluster `i < k` and every group `g` of four points, `y = L_i⁻¹ (x − μ_i)` by forward
+/// substitution and `ss[(i * groups + g) * 4 + j] = Σ_a y_a²` for the group's point `j`.
+/// `chol` holds the `k` lower Cholesky factors (`d x d` row-major each), `mu` the `k` means,
+/// `xt` the points in groups of four, dimension-major (`xt[(g * d + a) * 4 + j]`). The
+/// operations per point are those of the scalar forward substitution (reference BLAS `dtrsm`
+/// order): `y_a = x_a − μ_a`, then `y_a −= l_ab y_b` for `b = 0 … a − 1` (a product and a
+/// subtraction, not fused), `y_a /= l_aa`, and the norm `((y_0² + y_1²) + …)` in row order.
+/// Points are lanes; [`SMALL_CLUSTERS`] clusters at a time. `y` is scratch.
+#[allow(clippy::too_many_arguments)]
+pub fn small_norms(
+    isa: Isa,
+    chol: &[f64],
+    mu: &[f64],
+    d: usize,
+    k: usize,
+    xt: &[f64],
+    groups: usize,
+    y: &mut Vec<f64>,
+    ss: &mut [f64],
+) {
+    assert!(chol.len() >= k * d * d && mu.len() >= k * d && xt.len() >= groups * d * 4);
+    assert!(ss.len() >= k * groups * 4);
+    if y.len() < SMALL_CLUSTERS * d * 4 {
+        y.resize(SMALL_CLUSTERS * d * 4, 0.0);
+    }
+    dispatch!(
+        isa,
+        fn kern(
+            chol: &[f64],
+            mu: &[f64],
+            d: usize,
+            k: usize,
+            xt: &[f64],
+            groups: usize,
+            y: &mut [f64],
+            ss: &mut [f64],
+        ) {
+            for g in 0..groups {
+                let x = &xt[g * d * 4..(g + 1) * d * 4];
+                let mut i0 = 0;
+                while i0 < k {
+                    match (k - i0).min(SMALL_CLUSTERS) {
+                        1 => small_pass::<V, 1>(chol, mu, d, i0, x, y, groups, g, ss),
+                        2 => small_pass::<V, 2>(chol, mu, d, i0, x, y, groups, g, ss),
+                        3 => small_pass::<V, 3>(chol, mu, d, i0, x, y, groups, g, ss),
+                        _ => small_pass::<V, 4>(chol, mu, d, i0, x, y, groups, g, ss),
+                    }
+                    i0 += SMALL_CLUSTERS;
+                }
+            }
+        }
+    )
+}
+
+/// [`small_norms`] of the clusters `i0 … i0 + C − 1` on one group of four points.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn small_pass<V: Lanes, const C: usize>(
+    chol: &[f64],
+    mu: &[f64],
+    d: usize,
+    i0: usize,
+    x: &[f64],
+    y: &mut [f64],
+    groups: usize,
+    g: usize,
+    ss: &mut [f64],
+) {
+    let dd = d * d;
+    for a in 0..d {
+        let xa = V::load(&x[a * 4..]);
+        let mut acc = [V::zero(); C];
+        for c in 0..C {
+            acc[c] = xa.sub(V::splat(mu[(i0 + c) * d + a]));
+        }
+        for b in 0..a {
+            for c in 0..C {
+                let lab = V::splat(chol[(i0 + c) * dd + a * d + b]);
+                acc[c] = acc[c].sub(lab.mul(V::load(&y[(c * d + b) * 4..])));
+            }
+        }
+        for c in 0..C {
+            let laa = V::splat(chol[(i0 + c) * dd + a * d + a]);
+            acc[c].div(laa).store(&mut y[(c * d + a) * 4..]);
+        }
+    }
+    for c in 0..C {
+        let mut s = V::zero();
+        for a in 0..d {
+            let ya = V::load(&y[(c * d + a) * 4..]);
+            s = s.add(ya.mul(ya));
+        }
+        s.store(&mut ss[((i0 + c) * groups + g) * 4..]);
+    }
 }
 
 /// Blocks of points whose weighted copies and second-moment sums the M-step keeps in L1 at a
@@ -1005,6 +1153,44 @@ mod tests {
                 let (s1b, xxb) = run(isa);
                 assert_eq!(bits(&s1), bits(&s1b), "{isa:?} d={d}");
                 assert_eq!(bits(&xx), bits(&xxb), "{isa:?} d={d}");
+            }
+        }
+    }
+
+    #[test]
+    fn small_norms_follow_forward_substitution_bit_for_bit_on_every_build() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for (d, k, n) in [(1, 1, 1), (3, 2, 4), (5, 5, 7), (27, 12, 5), (27, 9, 13)] {
+            let chol: Vec<f64> = (0..k).flat_map(|_| random_lower(&mut rng, d)).collect();
+            let mu: Vec<f64> = (0..k * d).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let pts: Vec<f64> = (0..n * d).map(|_| rng.random_range(-3.0..3.0)).collect();
+            let groups = n.div_ceil(4);
+            let mut xt = vec![0.0; groups * d * 4];
+            for p in 0..n {
+                for a in 0..d {
+                    xt[((p / 4) * d + a) * 4 + p % 4] = pts[p * d + a];
+                }
+            }
+            for isa in isas() {
+                let (mut y, mut ss) = (Vec::new(), vec![f64::NAN; k * groups * 4]);
+                small_norms(isa, &chol, &mu, d, k, &xt, groups, &mut y, &mut ss);
+                for i in 0..k {
+                    let l = &chol[i * d * d..];
+                    for p in 0..n {
+                        // Forward substitution written out, then the norm in row order.
+                        let mut yv = vec![0.0; d];
+                        for a in 0..d {
+                            let mut acc = pts[p * d + a] - mu[i * d + a];
+                            for b in 0..a {
+                                acc -= l[a * d + b] * yv[b];
+                            }
+                            yv[a] = acc / l[a * d + a];
+                        }
+                        let want = yv.iter().fold(0.0, |s, v| s + v * v);
+                        let got = ss[(i * groups + p / 4) * 4 + p % 4];
+                        assert_eq!(got.to_bits(), want.to_bits(), "{isa:?} d={d} i={i} p={p}");
+                    }
+                }
             }
         }
     }

@@ -111,8 +111,11 @@ struct Workspace {
     collse: Vec<f64>,
     /// `D x D` row-major weighted second moment of one cluster (lower triangle).
     xx: Vec<f64>,
-    /// `N x D` row-major scratch of the small-N E-step.
+    /// The small-N E-step's points in groups of four, dimension-major
+    /// ([`em_kernels::small_norms`]), its scratch and its squared norms.
     small: Vec<f64>,
+    small_y: Vec<f64>,
+    small_ss: Vec<f64>,
 }
 
 impl Workspace {
@@ -129,6 +132,8 @@ impl Workspace {
             collse: Vec::new(),
             xx: vec![0.0; d * d],
             small: Vec::new(),
+            small_y: Vec::new(),
+            small_ss: Vec::new(),
         }
     }
 
@@ -309,50 +314,39 @@ impl Gmm {
     }
 
     /// E-step for a handful of points (the per-time-step prior queries): forward substitution
-    /// written out, four points at a time, subtracting in the same order as reference BLAS
-    /// `dtrsm`; a library triangular solve costs more in call overhead than in flops here.
+    /// with each cluster's Cholesky factor, in the same order as reference BLAS `dtrsm`, four
+    /// points per 4-lane vector ([`em_kernels::small_norms`]); a library triangular solve costs
+    /// more in call overhead than in flops here.
     fn estep_small(&mut self, data: MatRef<'_, f64>, c0: f64) {
         let (n, d, k) = (data.nrows(), self.dim, self.k);
-        let y = &mut self.ws.small;
-        y.clear();
-        y.resize(d * n, 0.0);
+        let groups = n.div_ceil(4);
+        let ws = &mut self.ws;
+        ws.small.clear();
+        ws.small.resize(groups * d * 4, 0.0);
+        for p in 0..n {
+            for a in 0..d {
+                ws.small[((p / 4) * d + a) * 4 + p % 4] = data[(p, a)];
+            }
+        }
+        if ws.small_ss.len() < k * groups * 4 {
+            ws.small_ss.resize(k * groups * 4, 0.0);
+        }
+        em_kernels::small_norms(
+            em_kernels::Isa::detect(),
+            &self.chol.data,
+            &self.mu,
+            d,
+            k,
+            &ws.small,
+            groups,
+            &mut ws.small_y,
+            &mut ws.small_ss,
+        );
         for i in 0..k {
-            let mu = &self.mu[i * d..(i + 1) * d];
-            let l = self.chol.slice(i);
+            let base = c0 - self.half_logdet[i];
             for p in 0..n {
-                for a in 0..d {
-                    y[p * d + a] = data[(p, a)] - mu[a];
-                }
-            }
-            let mut p0 = 0;
-            while p0 < n {
-                let m = (n - p0).min(4);
-                for a in 0..d {
-                    let lrow = &l[a * d..a * d + a];
-                    let mut acc = [0.0f64; 4];
-                    for j in 0..m {
-                        acc[j] = y[(p0 + j) * d + a];
-                    }
-                    for (b, &lb) in lrow.iter().enumerate() {
-                        for j in 0..m {
-                            acc[j] -= lb * y[(p0 + j) * d + b];
-                        }
-                    }
-                    let laa = l[a * d + a];
-                    for j in 0..m {
-                        y[(p0 + j) * d + a] = acc[j] / laa;
-                    }
-                }
-                p0 += m;
-            }
-            for p in 0..n {
-                let col = &y[p * d..(p + 1) * d];
-                let mut ss = 0.0;
-                for a in 0..d {
-                    ss += col[a] * col[a];
-                }
-                self.ws.logobs[i * self.ws.stride + p] =
-                    c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
+                let ss = ws.small_ss[(i * groups + p / 4) * 4 + p % 4];
+                ws.logobs[i * ws.stride + p] = base - 0.5 * ss + self.logmass[i];
             }
         }
     }
@@ -626,7 +620,7 @@ mod tests {
     #[test]
     fn invert_lower_equals_forward_substitution_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        for d in [1, 2, 4, 5, 7, 9, 27] {
+        for d in [1, 2, 4, 5, 7, 9, 27, 32, 33] {
             let mut l = vec![0.0; d * d];
             for a in 0..d {
                 for b in 0..a {
