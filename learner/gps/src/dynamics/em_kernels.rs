@@ -472,8 +472,9 @@ fn invert_rows_in_registers<V: Lanes>(l: &[f64], m: &mut [f64], d: usize) {
 }
 
 /// Clusters whose forward substitutions [`small_norms`] interleaves (independent chains that
-/// cover the latency of each row's subtractions and division).
+/// cover the latency of each row's subtractions and division), for 16 and for 32 registers.
 const SMALL_CLUSTERS: usize = 4;
+const SMALL_CLUSTERS_WIDE: usize = 8;
 
 /// The E-step of a handful of points (the dynamics fit's per-step prior queries): for every
 /// cluster `i < k` and every group `g` of four points, `y = L_i⁻¹ (x − μ_i)` by forward
@@ -483,7 +484,8 @@ const SMALL_CLUSTERS: usize = 4;
 /// operations per point are those of the scalar forward substitution (reference BLAS `dtrsm`
 /// order): `y_a = x_a − μ_a`, then `y_a −= l_ab y_b` for `b = 0 … a − 1` (a product and a
 /// subtraction, not fused), `y_a /= l_aa`, and the norm `((y_0² + y_1²) + …)` in row order.
-/// Points are lanes; [`SMALL_CLUSTERS`] clusters at a time. `y` is scratch.
+/// Points are lanes; [`SMALL_CLUSTERS`] clusters at a time (8 with 32 registers). `y` is
+/// scratch.
 #[allow(clippy::too_many_arguments)]
 pub fn small_norms(
     isa: Isa,
@@ -498,8 +500,9 @@ pub fn small_norms(
 ) {
     assert!(chol.len() >= k * d * d && mu.len() >= k * d && xt.len() >= groups * d * 4);
     assert!(ss.len() >= k * groups * 4);
-    if y.len() < SMALL_CLUSTERS * d * 4 {
-        y.resize(SMALL_CLUSTERS * d * 4, 0.0);
+    let most = SMALL_CLUSTERS.max(SMALL_CLUSTERS_WIDE);
+    if y.len() < most * d * 4 {
+        y.resize(most * d * 4, 0.0);
     }
     dispatch!(
         isa,
@@ -515,15 +518,24 @@ pub fn small_norms(
         ) {
             for g in 0..groups {
                 let x = &xt[g * d * 4..(g + 1) * d * 4];
+                let step = if V::WIDE {
+                    SMALL_CLUSTERS_WIDE
+                } else {
+                    SMALL_CLUSTERS
+                };
                 let mut i0 = 0;
                 while i0 < k {
-                    match (k - i0).min(SMALL_CLUSTERS) {
+                    match (k - i0).min(step) {
                         1 => small_pass::<V, 1>(chol, mu, d, i0, x, y, groups, g, ss),
                         2 => small_pass::<V, 2>(chol, mu, d, i0, x, y, groups, g, ss),
                         3 => small_pass::<V, 3>(chol, mu, d, i0, x, y, groups, g, ss),
-                        _ => small_pass::<V, 4>(chol, mu, d, i0, x, y, groups, g, ss),
+                        4 => small_pass::<V, 4>(chol, mu, d, i0, x, y, groups, g, ss),
+                        5 => small_pass::<V, 5>(chol, mu, d, i0, x, y, groups, g, ss),
+                        6 => small_pass::<V, 6>(chol, mu, d, i0, x, y, groups, g, ss),
+                        7 => small_pass::<V, 7>(chol, mu, d, i0, x, y, groups, g, ss),
+                        _ => small_pass::<V, 8>(chol, mu, d, i0, x, y, groups, g, ss),
                     }
-                    i0 += SMALL_CLUSTERS;
+                    i0 += step;
                 }
             }
         }
@@ -698,9 +710,10 @@ fn moments_in_groups(
 }
 
 /// One block's points added to a tile's sums: `acc[r][c] += z_r x_c` (fused) for every 4-lane
-/// vector of points in ascending order; on the diagonal (`DIAG`) only for `c ≤ r`.
+/// vector of points in ascending order, for the rows `r < ROWS` (the others are past `d`); on
+/// the diagonal (`DIAG`) only for `c ≤ r`.
 #[inline(always)]
-fn tile_block<V: Lanes, const TR: usize, const TC: usize, const DIAG: bool>(
+fn tile_block<V: Lanes, const TR: usize, const TC: usize, const DIAG: bool, const ROWS: usize>(
     acc: &mut [[V; TC]; TR],
     zr: &[&[f64; BLOCK]; TR],
     xr: &[&[f64; BLOCK]; TC],
@@ -714,7 +727,7 @@ fn tile_block<V: Lanes, const TR: usize, const TC: usize, const DIAG: bool>(
         for c in 0..TC {
             let xs = V::load(&xr[c][q..]);
             for r in 0..TR {
-                if !DIAG || c <= r {
+                if r < ROWS && (!DIAG || c <= r) {
                     acc[r][c] = acc[r][c].fma(zq[r], xs);
                 }
             }
@@ -754,10 +767,13 @@ fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(
             };
             for j in 0..g {
                 let o = j * d * BLOCK + a * BLOCK;
+                // Whole blocks sliced once: no bounds check per vector below.
+                let wj: &[f64; BLOCK] = wg[j * BLOCK..(j + 1) * BLOCK].try_into().unwrap();
+                let xj: &[f64; BLOCK] = xg[o..o + BLOCK].try_into().unwrap();
+                let zj: &mut [f64; BLOCK] = (&mut z[o..o + BLOCK]).try_into().unwrap();
                 for q in (0..BLOCK).step_by(4) {
-                    let wq = V::load(&wg[j * BLOCK + q..]);
-                    let zq = V::zero().fma(wq, V::load(&xg[o + q..]));
-                    zq.store(&mut z[o + q..]);
+                    let zq = V::zero().fma(V::load(&wj[q..]), V::load(&xj[q..]));
+                    zq.store(&mut zj[q..]);
                     sa = sa.add(zq);
                 }
             }
@@ -785,10 +801,17 @@ fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(
                         std::array::from_fn(|c| row(xb, (b0 + c).min(d - 1)));
                     let zr: [&[f64; BLOCK]; TR] =
                         std::array::from_fn(|r| row(zb, (a0 + r).min(d - 1)));
-                    if diag {
-                        tile_block::<V, TR, TC, true>(&mut acc, &zr, &xr);
-                    } else {
-                        tile_block::<V, TR, TC, false>(&mut acc, &zr, &xr);
+                    // The last row group may have fewer than TR rows (d not a multiple).
+                    let (a, z, x) = (&mut acc, &zr, &xr);
+                    match (diag, last + 1 - a0) {
+                        (true, 1) => tile_block::<V, TR, TC, true, 1>(a, z, x),
+                        (true, 2) => tile_block::<V, TR, TC, true, 2>(a, z, x),
+                        (true, 3) => tile_block::<V, TR, TC, true, 3>(a, z, x),
+                        (true, _) => tile_block::<V, TR, TC, true, TR>(a, z, x),
+                        (false, 1) => tile_block::<V, TR, TC, false, 1>(a, z, x),
+                        (false, 2) => tile_block::<V, TR, TC, false, 2>(a, z, x),
+                        (false, 3) => tile_block::<V, TR, TC, false, 3>(a, z, x),
+                        (false, _) => tile_block::<V, TR, TC, false, TR>(a, z, x),
                     }
                 }
                 for r in 0..TR {
