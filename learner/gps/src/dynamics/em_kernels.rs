@@ -542,7 +542,9 @@ pub fn small_norms(
     )
 }
 
-/// [`small_norms`] of the clusters `i0 … i0 + C − 1` on one group of four points.
+/// [`small_norms`] of the clusters `i0 … i0 + C − 1` on one group of four points. `y` holds
+/// the finished rows, the `C` clusters' vectors side by side (`y[(b * C + c) * 4 ..]`), so
+/// that each step reads one slice of known length.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn small_pass<V: Lanes, const C: usize>(
@@ -560,24 +562,26 @@ fn small_pass<V: Lanes, const C: usize>(
     for a in 0..d {
         let xa = V::load(&x[a * 4..]);
         let mut acc = [V::zero(); C];
+        let mut lrow: [&[f64]; C] = [&[]; C];
         for c in 0..C {
             acc[c] = xa.sub(V::splat(mu[(i0 + c) * d + a]));
+            lrow[c] = &chol[(i0 + c) * dd + a * d..][..=a];
         }
-        for b in 0..a {
+        let (done, cur) = y.split_at_mut(a * C * 4);
+        for (b, yb) in done.chunks_exact(C * 4).enumerate() {
             for c in 0..C {
-                let lab = V::splat(chol[(i0 + c) * dd + a * d + b]);
-                acc[c] = acc[c].sub(lab.mul(V::load(&y[(c * d + b) * 4..])));
+                let lab = V::splat(lrow[c][b]);
+                acc[c] = acc[c].sub(lab.mul(V::load(&yb[c * 4..])));
             }
         }
         for c in 0..C {
-            let laa = V::splat(chol[(i0 + c) * dd + a * d + a]);
-            acc[c].div(laa).store(&mut y[(c * d + a) * 4..]);
+            acc[c].div(V::splat(lrow[c][a])).store(&mut cur[c * 4..]);
         }
     }
     for c in 0..C {
         let mut s = V::zero();
-        for a in 0..d {
-            let ya = V::load(&y[(c * d + a) * 4..]);
+        for yb in y.chunks_exact(C * 4).take(d) {
+            let ya = V::load(&yb[c * 4..]);
             s = s.add(ya.mul(ya));
         }
         s.store(&mut ss[((i0 + c) * groups + g) * 4..]);
