@@ -26,7 +26,8 @@ pub enum Isa {
     /// 256-bit AVX2+FMA, sixteen registers.
     Avx2,
     /// The same 256-bit operations compiled with AVX-512F/VL: thirty-two registers, larger
-    /// tiles. Never 512-bit arithmetic (eight lanes would sum in another order).
+    /// tiles. The kernels' sums stay 4-lane (eight lanes would sum in another order); where the
+    /// compiler widens independent element-wise work it keeps each element's operations.
     Avx512,
 }
 
