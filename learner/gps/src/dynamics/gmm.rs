@@ -79,31 +79,6 @@ fn exp_or_zero(x: f64) -> f64 {
     }
 }
 
-/// `m = L⁻¹` for a lower-triangular `d x d` row-major `l`: row by row,
-/// `m[a, ..] = (e_a − Σ_{c<a} l[a, c] m[c, ..]) / l[a, a]`, each row an update by the rows
-/// above it in ascending `c`, over the columns `b ≤ c` where `m[c, b]` can be non-zero. Each
-/// element gets the products of forward substitution on the columns of the identity, in the
-/// same order (the same bits), but the lanes of a row are independent, so it vectorises.
-/// Only the lower triangle of `m` is written.
-fn invert_lower(l: &[f64], m: &mut [f64], d: usize) {
-    for a in 0..d {
-        let (above, rest) = m.split_at_mut(a * d);
-        let row = &mut rest[..=a];
-        row.fill(0.0);
-        row[a] = 1.0;
-        for c in 0..a {
-            let lac = l[a * d + c];
-            for (r, &mc) in row[..=c].iter_mut().zip(&above[c * d..=c * d + c]) {
-                *r -= lac * mc;
-            }
-        }
-        let laa = l[a * d + a];
-        for r in row.iter_mut() {
-            *r /= laa;
-        }
-    }
-}
-
 /// GPS `logsum` over an iterator: `log Σ exp(v − max) + max`, with `max = −∞` replaced by 0.
 #[inline]
 pub fn logsum(v: impl Iterator<Item = f64> + Clone) -> f64 {
@@ -136,8 +111,11 @@ struct Workspace {
     collse: Vec<f64>,
     /// `D x D` row-major weighted second moment of one cluster (lower triangle).
     xx: Vec<f64>,
-    /// `N x D` row-major scratch of the small-N E-step.
+    /// The small-N E-step's points in groups of four, dimension-major
+    /// ([`em_kernels::small_norms`]), its scratch and its squared norms.
     small: Vec<f64>,
+    small_y: Vec<f64>,
+    small_ss: Vec<f64>,
 }
 
 impl Workspace {
@@ -154,6 +132,8 @@ impl Workspace {
             collse: Vec::new(),
             xx: vec![0.0; d * d],
             small: Vec::new(),
+            small_y: Vec::new(),
+            small_ss: Vec::new(),
         }
     }
 
@@ -293,7 +273,8 @@ impl Gmm {
             }
             let l = self.chol.mat(i);
             self.half_logdet[i] = (0..self.dim).map(|j| l[(j, j)].ln()).sum();
-            invert_lower(self.chol.slice(i), self.minv.slice_mut(i), self.dim);
+            let (l, m) = (self.chol.slice(i), self.minv.slice_mut(i));
+            em_kernels::invert_lower(em_kernels::Isa::detect(), l, m, self.dim);
         }
         self.chol_valid = true;
         Ok(())
@@ -314,14 +295,14 @@ impl Gmm {
         if !loaded {
             self.ws.load(data);
         }
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         let ws = &mut self.ws;
         for blk in 0..ws.blocks {
             let (p0, xb) = (blk * BLOCK, &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK]);
             for i in 0..k {
                 let mut ss = [0.0; BLOCK];
                 let (minv, mu) = (self.minv.slice(i), &self.mu[i * d..(i + 1) * d]);
-                em_kernels::whitened_norms(fast, minv, mu, d, xb, &mut ws.diff, &mut ss);
+                em_kernels::whitened_norms(isa, minv, mu, d, xb, &mut ws.diff, &mut ss);
                 let base = c0 - self.half_logdet[i] + self.logmass[i];
                 let row = &mut ws.logobs[i * ws.stride + p0..][..BLOCK];
                 for (o, &s) in row.iter_mut().zip(&ss) {
@@ -333,50 +314,39 @@ impl Gmm {
     }
 
     /// E-step for a handful of points (the per-time-step prior queries): forward substitution
-    /// written out, four points at a time, subtracting in the same order as reference BLAS
-    /// `dtrsm`; a library triangular solve costs more in call overhead than in flops here.
+    /// with each cluster's Cholesky factor, in the same order as reference BLAS `dtrsm`, four
+    /// points per 4-lane vector ([`em_kernels::small_norms`]); a library triangular solve costs
+    /// more in call overhead than in flops here.
     fn estep_small(&mut self, data: MatRef<'_, f64>, c0: f64) {
         let (n, d, k) = (data.nrows(), self.dim, self.k);
-        let y = &mut self.ws.small;
-        y.clear();
-        y.resize(d * n, 0.0);
+        let groups = n.div_ceil(4);
+        let ws = &mut self.ws;
+        ws.small.clear();
+        ws.small.resize(groups * d * 4, 0.0);
+        for p in 0..n {
+            for a in 0..d {
+                ws.small[((p / 4) * d + a) * 4 + p % 4] = data[(p, a)];
+            }
+        }
+        if ws.small_ss.len() < k * groups * 4 {
+            ws.small_ss.resize(k * groups * 4, 0.0);
+        }
+        em_kernels::small_norms(
+            em_kernels::Isa::detect(),
+            &self.chol.data,
+            &self.mu,
+            d,
+            k,
+            &ws.small,
+            groups,
+            &mut ws.small_y,
+            &mut ws.small_ss,
+        );
         for i in 0..k {
-            let mu = &self.mu[i * d..(i + 1) * d];
-            let l = self.chol.slice(i);
+            let base = c0 - self.half_logdet[i];
             for p in 0..n {
-                for a in 0..d {
-                    y[p * d + a] = data[(p, a)] - mu[a];
-                }
-            }
-            let mut p0 = 0;
-            while p0 < n {
-                let m = (n - p0).min(4);
-                for a in 0..d {
-                    let lrow = &l[a * d..a * d + a];
-                    let mut acc = [0.0f64; 4];
-                    for j in 0..m {
-                        acc[j] = y[(p0 + j) * d + a];
-                    }
-                    for (b, &lb) in lrow.iter().enumerate() {
-                        for j in 0..m {
-                            acc[j] -= lb * y[(p0 + j) * d + b];
-                        }
-                    }
-                    let laa = l[a * d + a];
-                    for j in 0..m {
-                        y[(p0 + j) * d + a] = acc[j] / laa;
-                    }
-                }
-                p0 += m;
-            }
-            for p in 0..n {
-                let col = &y[p * d..(p + 1) * d];
-                let mut ss = 0.0;
-                for a in 0..d {
-                    ss += col[a] * col[a];
-                }
-                self.ws.logobs[i * self.ws.stride + p] =
-                    c0 - self.half_logdet[i] - 0.5 * ss + self.logmass[i];
+                let ss = ws.small_ss[(i * groups + p / 4) * 4 + p % 4];
+                ws.logobs[i * ws.stride + p] = base - 0.5 * ss + self.logmass[i];
             }
         }
     }
@@ -411,7 +381,7 @@ impl Gmm {
             stop_itr: max_iterations,
         };
         let mut prevll = f64::NEG_INFINITY;
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         for itr in 0..max_iterations {
             self.estep(data, true)?;
             let Workspace {
@@ -424,7 +394,7 @@ impl Gmm {
             } = &mut self.ws;
             let stride = *stride;
             // Log responsibilities: logobs − logsum over clusters, in place.
-            em_kernels::normalise_over_clusters(fast, logobs, stride, n, k, rowlse);
+            em_kernels::normalise_over_clusters(isa, logobs, stride, n, k, rowlse);
             let ll: f64 = rowlse[..n].iter().sum();
             report.ll_trace.push(ll);
             if ll < prevll {
@@ -440,7 +410,7 @@ impl Gmm {
             prevll = ll;
 
             for i in 0..k {
-                collse[i] = em_kernels::logsum_points(fast, &logobs[i * stride..][..n]);
+                collse[i] = em_kernels::logsum_points(isa, &logobs[i * stride..][..n]);
             }
             let lm = logsum(collse[..k].iter().copied());
             for i in 0..k {
@@ -454,7 +424,7 @@ impl Gmm {
                     wi[..n].fill(1.0 / n as f64);
                     wi[n..].fill(0.0);
                 } else {
-                    em_kernels::weights(fast, &logobs[i * stride..][..n], collse[i], wi);
+                    em_kernels::weights(isa, &logobs[i * stride..][..n], collse[i], wi);
                 }
             }
             self.mstep();
@@ -466,14 +436,14 @@ impl Gmm {
     /// blocks.
     fn mstep(&mut self) {
         let (d, k) = (self.dim, self.k);
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         let ws = &mut self.ws;
         for i in 0..k {
             // μ_i = Σ_p w_pi x_p and the lower triangle of XX = Σ_p w_pi x_p x_pᵀ.
             let mu = &mut self.mu[i * d..(i + 1) * d];
             let w = &ws.w[i * ws.stride..(i + 1) * ws.stride];
             em_kernels::moments(
-                fast,
+                isa,
                 &mut ws.moments,
                 d,
                 ws.blocks,
@@ -525,10 +495,12 @@ impl Gmm {
                 &random
             }
         };
-        let mut mu = vec![0.0; d];
+        let (mut mu, mut dv) = (vec![0.0; d], vec![0.0; d]);
+        let mut acc = vec![0.0; d * d];
+        let inv_k = 1.0 / k as f64;
         for i in 0..k {
             let members: Vec<usize> = (0..n).filter(|&p| cidx[p] == i).collect();
-            mu.iter_mut().for_each(|m| *m = 0.0);
+            mu.fill(0.0);
             for &p in &members {
                 for a in 0..d {
                     mu[a] += data[(p, a)];
@@ -536,20 +508,23 @@ impl Gmm {
             }
             let cnt = members.len() as f64;
             mu.iter_mut().for_each(|m| *m /= cnt);
-            let mut s = self.sigma.mat_mut(i);
-            s.fill(0.0);
+            // Σ_p d_p d_pᵀ in members' order, accumulated row-major in a plain slice (the rows
+            // vectorise); the same products and sums as element by element.
+            acc.fill(0.0);
             for &p in &members {
-                for a in 0..d {
-                    let da = data[(p, a)] - mu[a];
-                    for b in 0..d {
-                        s[(a, b)] += da * (data[(p, b)] - mu[b]);
+                for b in 0..d {
+                    dv[b] = data[(p, b)] - mu[b];
+                }
+                for (row, &da) in acc.chunks_exact_mut(d).zip(&dv) {
+                    for (s, &db) in row.iter_mut().zip(&dv) {
+                        *s += da * db;
                     }
                 }
             }
-            let inv_k = 1.0 / k as f64;
+            let mut s = self.sigma.mat_mut(i);
             for a in 0..d {
                 for b in 0..d {
-                    s[(a, b)] *= inv_k;
+                    s[(a, b)] = acc[a * d + b] * inv_k;
                 }
                 s[(a, a)] += 2e-6;
             }
@@ -566,18 +541,18 @@ impl Gmm {
         self.estep(pts, false)?;
         let n = pts.nrows();
         let k = self.k;
-        let fast = em_kernels::fast_path();
+        let isa = em_kernels::Isa::detect();
         let Workspace {
             logobs,
             stride,
             rowlse,
             ..
         } = &mut self.ws;
-        em_kernels::normalise_over_clusters(fast, logobs, *stride, n, k, rowlse);
+        em_kernels::normalise_over_clusters(isa, logobs, *stride, n, k, rowlse);
         let ln_n = (n as f64).ln();
         for i in 0..k {
             self.last_logwts[i] =
-                em_kernels::logsum_points(fast, &logobs[i * *stride..][..n]) - ln_n;
+                em_kernels::logsum_points(isa, &logobs[i * *stride..][..n]) - ln_n;
         }
         Ok(())
     }
@@ -645,7 +620,7 @@ mod tests {
     #[test]
     fn invert_lower_equals_forward_substitution_bit_for_bit() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        for d in [1, 2, 7, 27] {
+        for d in [1, 2, 4, 5, 7, 9, 27, 32, 33] {
             let mut l = vec![0.0; d * d];
             for a in 0..d {
                 for b in 0..a {
@@ -653,21 +628,29 @@ mod tests {
                 }
                 l[a * d + a] = rand::Rng::random_range(&mut rng, 0.5..2.0);
             }
-            let mut m = vec![f64::NAN; d * d];
-            invert_lower(&l, &mut m, d);
-            // Forward substitution on the columns of the identity, column by column.
-            for b in 0..d {
-                let mut col = vec![0.0; d];
-                for a in b..d {
-                    let mut s = if a == b { 1.0 } else { 0.0 };
-                    for c in b..a {
-                        s -= l[a * d + c] * col[c];
-                    }
-                    col[a] = s / l[a * d + a];
-                    assert_eq!(m[a * d + b].to_bits(), col[a].to_bits(), "d={d} ({a},{b})");
+            use em_kernels::Isa;
+            for isa in [Isa::Portable, Isa::Avx2, Isa::Avx512] {
+                if !isa.available() {
+                    println!("note: this CPU cannot run the {isa:?} instantiation; not tested");
+                    continue;
                 }
-                for a in 0..b {
-                    assert!(m[a * d + b].is_nan(), "upper triangle written");
+                let mut m = vec![f64::NAN; d * d];
+                em_kernels::invert_lower(isa, &l, &mut m, d);
+                // Forward substitution on the columns of the identity, column by column.
+                for b in 0..d {
+                    let mut col = vec![0.0; d];
+                    for a in b..d {
+                        let mut s = if a == b { 1.0 } else { 0.0 };
+                        for c in b..a {
+                            s -= l[a * d + c] * col[c];
+                        }
+                        col[a] = s / l[a * d + a];
+                        let (got, want) = (m[a * d + b].to_bits(), col[a].to_bits());
+                        assert_eq!(got, want, "{isa:?} d={d} ({a},{b})");
+                    }
+                    for a in 0..b {
+                        assert!(m[a * d + b].is_nan(), "upper triangle written");
+                    }
                 }
             }
         }
