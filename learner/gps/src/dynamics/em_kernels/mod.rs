@@ -1,6 +1,6 @@
 //! The dense arithmetic of the GMM's EM (docs/design.md §5 D33): the E-step's whitened squared
 //! distances `‖L⁻¹ (x − μ)‖²` and the M-step's weighted first and second moments `Σ_p w_p x_p`,
-//! `Σ_p w_p x_p x_pᵀ` (lower triangle only).
+//! `Σ_p w_p x_p x_pᵀ` (lower triangle only), and the clusters' Cholesky factors.
 //!
 //! Layout: points are **lanes**. The points are stored in blocks of [`BLOCK`], each block
 //! dimension-major (`x[blk * d * BLOCK + a * BLOCK + j]` = coordinate `a` of point
@@ -258,10 +258,12 @@ macro_rules! dispatch {
     }};
 }
 
+mod cholesky;
 mod estep;
 mod mstep;
 mod responsibilities;
 
+pub use cholesky::cholesky;
 pub use estep::{invert_lower, small_norms, whitened_norms};
 pub use mstep::{moments, Moments};
 pub use responsibilities::{exp_slice, logsum_points, normalise_over_clusters, weights, EXP_FLOOR};
@@ -329,12 +331,12 @@ mod tests {
         m
     }
 
-    fn bits(v: &[f64]) -> Vec<u64> {
+    pub(super) fn bits(v: &[f64]) -> Vec<u64> {
         v.iter().map(|x| x.to_bits()).collect()
     }
 
     /// Every instantiation this CPU runs, the portable one first; prints a note for the others.
-    fn isas() -> Vec<Isa> {
+    pub(super) fn isas() -> Vec<Isa> {
         [Isa::Portable, Isa::Avx2, Isa::Avx512]
             .into_iter()
             .filter(|&isa| {
