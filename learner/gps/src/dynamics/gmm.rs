@@ -411,7 +411,8 @@ impl Gmm {
             prevll = ll;
 
             for i in 0..k {
-                collse[i] = em_kernels::logsum_points(isa, &logobs[i * stride..][..n]);
+                let (li, wi) = (&logobs[i * stride..][..n], &mut w[i * stride..][..stride]);
+                collse[i] = em_kernels::logsum_points_weights(isa, li, wi);
             }
             let lm = logsum(collse[..k].iter().copied());
             for i in 0..k {
@@ -420,12 +421,10 @@ impl Gmm {
             }
             let small = 1.0 / k as f64 * 1e-4;
             for i in 0..k {
-                let wi = &mut w[i * stride..(i + 1) * stride];
                 if self.mass[i] < small {
+                    let wi = &mut w[i * stride..(i + 1) * stride];
                     wi[..n].fill(1.0 / n as f64);
                     wi[n..].fill(0.0);
-                } else {
-                    em_kernels::weights(isa, &logobs[i * stride..][..n], collse[i], wi);
                 }
             }
             self.mstep();
