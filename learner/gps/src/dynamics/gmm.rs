@@ -22,7 +22,7 @@ use rand::Rng;
 
 use crate::dynamics::em_kernels::{self, Moments, BLOCK};
 use crate::error::GpsError;
-use crate::linalg::{llt_lower, MatSeq, Scratch};
+use crate::linalg::MatSeq;
 
 /// Up to this many points the E-step uses its own small-N forward substitution.
 const SMALL_N: usize = 32;
@@ -194,7 +194,7 @@ pub struct Gmm {
     minv: MatSeq,
     half_logdet: Vec<f64>,
     chol_valid: bool,
-    scratch: Scratch,
+    chol_work: Vec<f64>,
     ws: Workspace,
 }
 
@@ -217,7 +217,7 @@ impl Gmm {
             minv: MatSeq::zeros(0, dim, dim),
             half_logdet: Vec::new(),
             chol_valid: false,
-            scratch: Scratch::for_llt(dim),
+            chol_work: Vec::new(),
             ws: Workspace::new(dim),
         }
     }
@@ -263,9 +263,10 @@ impl Gmm {
         if self.chol_valid {
             return Ok(());
         }
+        let isa = em_kernels::Isa::detect();
         for i in 0..self.k {
-            self.chol.slice_mut(i).copy_from_slice(self.sigma.slice(i));
-            if !llt_lower(self.chol.mat_mut(i), &mut self.scratch) {
+            let (sigma, l) = (self.sigma.slice(i), self.chol.slice_mut(i));
+            if !em_kernels::cholesky(isa, sigma, l, self.dim, &mut self.chol_work) {
                 return Err(GpsError::NotPositiveDefinite {
                     what: "GMM cluster covariance",
                     t: i,
@@ -274,7 +275,7 @@ impl Gmm {
             let l = self.chol.mat(i);
             self.half_logdet[i] = (0..self.dim).map(|j| l[(j, j)].ln()).sum();
             let (l, m) = (self.chol.slice(i), self.minv.slice_mut(i));
-            em_kernels::invert_lower(em_kernels::Isa::detect(), l, m, self.dim);
+            em_kernels::invert_lower(isa, l, m, self.dim);
         }
         self.chol_valid = true;
         Ok(())
@@ -410,7 +411,8 @@ impl Gmm {
             prevll = ll;
 
             for i in 0..k {
-                collse[i] = em_kernels::logsum_points(isa, &logobs[i * stride..][..n]);
+                let (li, wi) = (&logobs[i * stride..][..n], &mut w[i * stride..][..stride]);
+                collse[i] = em_kernels::logsum_points_weights(isa, li, wi);
             }
             let lm = logsum(collse[..k].iter().copied());
             for i in 0..k {
@@ -419,12 +421,10 @@ impl Gmm {
             }
             let small = 1.0 / k as f64 * 1e-4;
             for i in 0..k {
-                let wi = &mut w[i * stride..(i + 1) * stride];
                 if self.mass[i] < small {
+                    let wi = &mut w[i * stride..(i + 1) * stride];
                     wi[..n].fill(1.0 / n as f64);
                     wi[n..].fill(0.0);
-                } else {
-                    em_kernels::weights(isa, &logobs[i * stride..][..n], collse[i], wi);
                 }
             }
             self.mstep();

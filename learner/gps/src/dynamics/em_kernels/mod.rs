@@ -1,6 +1,6 @@
 //! The dense arithmetic of the GMM's EM (docs/design.md §5 D33): the E-step's whitened squared
 //! distances `‖L⁻¹ (x − μ)‖²` and the M-step's weighted first and second moments `Σ_p w_p x_p`,
-//! `Σ_p w_p x_p x_pᵀ` (lower triangle only).
+//! `Σ_p w_p x_p x_pᵀ` (lower triangle only), and the clusters' Cholesky factors.
 //!
 //! Layout: points are **lanes**. The points are stored in blocks of [`BLOCK`], each block
 //! dimension-major (`x[blk * d * BLOCK + a * BLOCK + j]` = coordinate `a` of point
@@ -258,13 +258,17 @@ macro_rules! dispatch {
     }};
 }
 
+mod cholesky;
 mod estep;
 mod mstep;
 mod responsibilities;
 
+pub use cholesky::cholesky;
 pub use estep::{invert_lower, small_norms, whitened_norms};
 pub use mstep::{moments, Moments};
-pub use responsibilities::{exp_slice, logsum_points, normalise_over_clusters, weights, EXP_FLOOR};
+pub use responsibilities::{
+    exp_slice, logsum_points, logsum_points_weights, normalise_over_clusters, EXP_FLOOR,
+};
 
 /// Flops of the E-step's dense arithmetic on `n` points, `k` clusters, dimension `d`, as
 /// [`whitened_norms`] does it (padding excluded; a multiply-add counted as two): per cluster and
@@ -329,12 +333,12 @@ mod tests {
         m
     }
 
-    fn bits(v: &[f64]) -> Vec<u64> {
+    pub(super) fn bits(v: &[f64]) -> Vec<u64> {
         v.iter().map(|x| x.to_bits()).collect()
     }
 
     /// Every instantiation this CPU runs, the portable one first; prints a note for the others.
-    fn isas() -> Vec<Isa> {
+    pub(super) fn isas() -> Vec<Isa> {
         [Isa::Portable, Isa::Avx2, Isa::Avx512]
             .into_iter()
             .filter(|&isa| {
@@ -577,14 +581,15 @@ mod tests {
                 let mut l = l.clone();
                 let mut lse = vec![0.0; n];
                 normalise_over_clusters(isa, &mut l, stride, n, k, &mut lse);
-                let col: Vec<f64> = (0..k)
-                    .map(|i| logsum_points(isa, &l[i * stride..][..n]))
-                    .collect();
                 let mut w = vec![f64::NAN; stride * k];
-                for i in 0..k {
-                    let wi = &mut w[i * stride..(i + 1) * stride];
-                    weights(isa, &l[i * stride..][..n], col[i], wi);
-                }
+                let col: Vec<f64> = (0..k)
+                    .map(|i| {
+                        let (li, wi) = (&l[i * stride..][..n], &mut w[i * stride..][..stride]);
+                        let c = logsum_points_weights(isa, li, wi);
+                        assert_eq!(c.to_bits(), logsum_points(isa, li).to_bits());
+                        c
+                    })
+                    .collect();
                 (l, lse, col, w)
             };
             let (lr, lse, col, w) = run(Isa::Portable);
@@ -606,15 +611,18 @@ mod tests {
                     (col[i] - want).abs() <= 1e-12 * want.abs().max(1.0),
                     "n={n} i={i}"
                 );
+                let top = row.iter().copied().fold(f64::MIN, f64::max);
                 for p in 0..stride {
                     let wp = w[i * stride + p];
                     if p >= n {
                         assert_eq!(wp.to_bits(), 0, "padding weighs +0");
-                    } else if row[p] - col[i] < EXP_FLOOR {
+                    } else if row[p] - top < EXP_FLOOR {
                         assert_eq!(wp.to_bits(), 0, "below the floor: +0");
                     } else {
+                        // exp(l − logsum); the reference's own argument is rounded to an ulp
+                        // of up to ~600, hence a relative tolerance, not a few ulp.
                         let want = (row[p] - col[i]).exp();
-                        assert!(ulps(wp, want) <= 2, "n={n} i={i} p={p}");
+                        assert!((wp - want).abs() <= 1e-12 * want, "n={n} i={i} p={p}");
                         assert!(wp.is_normal(), "no subnormal weight");
                     }
                 }

@@ -129,39 +129,51 @@ struct MomentsJob<'a>(
     &'a mut [f64],
 );
 
-/// One block's points added to a tile's sums: `acc[r][c] += z_r x_c` (fused) for every 4-lane
-/// vector of points in ascending order, for the rows `r < ROWS` (the others are past `d`); on
-/// the diagonal (`DIAG`) only for `c ≤ r`.
+/// The `g` blocks' points added to a tile's sums: `acc[r][c] += z_r x_c` (fused) for every
+/// 4-lane vector of points in ascending order, block after block, for the rows `r < ROWS` (the
+/// others are past `d`); on the diagonal (`DIAG`) only for `c <= r`. `zo`, `xo`: the tile's rows'
+/// and columns' offsets in a block of `zg`, `xg` (`d * BLOCK` apart).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn tile_block<V: Lanes, const TR: usize, const TC: usize, const DIAG: bool, const ROWS: usize>(
     acc: &mut [[V; TC]; TR],
-    zr: &[&[f64; BLOCK]; TR],
-    xr: &[&[f64; BLOCK]; TC],
+    zg: &[f64],
+    xg: &[f64],
+    zo: &[usize; TR],
+    xo: &[usize; TC],
+    g: usize,
+    stride: usize,
 ) {
-    for q in (0..BLOCK).step_by(4) {
-        // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
-        let mut zq = [V::zero(); TR];
-        for r in 0..TR {
-            zq[r] = V::load(&zr[r][q..]);
-        }
-        for c in 0..TC {
-            let xs = V::load(&xr[c][q..]);
+    let mut a = *acc;
+    for j in 0..g {
+        let (zb, xb) = (&zg[j * stride..], &xg[j * stride..]);
+        let zr: [&[f64; BLOCK]; TR] =
+            std::array::from_fn(|r| zb[zo[r]..zo[r] + BLOCK].try_into().unwrap());
+        let xr: [&[f64; BLOCK]; TC] =
+            std::array::from_fn(|c| xb[xo[c]..xo[c] + BLOCK].try_into().unwrap());
+        for q in (0..BLOCK).step_by(4) {
+            // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
+            let mut zq = [V::zero(); TR];
             for r in 0..TR {
-                if r < ROWS && (!DIAG || c <= r) {
-                    acc[r][c] = acc[r][c].fma(zq[r], xs);
+                zq[r] = V::load(&zr[r][q..]);
+            }
+            for c in 0..TC {
+                let xs = V::load(&xr[c][q..]);
+                for r in 0..TR {
+                    if r < ROWS && (!DIAG || c <= r) {
+                        a[r][c] = a[r][c].fma(zq[r], xs);
+                    }
                 }
             }
         }
     }
+    *acc = a;
 }
 
 /// [`moments`] on tiles of `TR` rows by `TC` columns.
 #[inline(always)]
 fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(job: MomentsJob<'_>) {
     let MomentsJob(group, d, blocks, x, w, z, lanes, tiles, s1, xx) = job;
-    fn row(m: &[f64], i: usize) -> &[f64; BLOCK] {
-        m[i * BLOCK..(i + 1) * BLOCK].try_into().unwrap()
-    }
     let size = TR * TC * 4;
     for g0 in (0..blocks).step_by(group) {
         let g = (blocks - g0).min(group);
@@ -204,24 +216,19 @@ fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(job: MomentsJob<'_>)
                 }
                 // A tile on the diagonal needs only its lower triangle (column ≤ row).
                 let diag = TR == TC && b0 == a0;
-                for j in 0..g {
-                    let (xb, zb) = (&xg[j * d * BLOCK..], &z[j * d * BLOCK..]);
-                    let xr: [&[f64; BLOCK]; TC] =
-                        std::array::from_fn(|c| row(xb, (b0 + c).min(d - 1)));
-                    let zr: [&[f64; BLOCK]; TR] =
-                        std::array::from_fn(|r| row(zb, (a0 + r).min(d - 1)));
-                    // The last row group may have fewer than TR rows (d not a multiple).
-                    let (a, z, x) = (&mut acc, &zr, &xr);
-                    match (diag, last + 1 - a0) {
-                        (true, 1) => tile_block::<V, TR, TC, true, 1>(a, z, x),
-                        (true, 2) => tile_block::<V, TR, TC, true, 2>(a, z, x),
-                        (true, 3) => tile_block::<V, TR, TC, true, 3>(a, z, x),
-                        (true, _) => tile_block::<V, TR, TC, true, TR>(a, z, x),
-                        (false, 1) => tile_block::<V, TR, TC, false, 1>(a, z, x),
-                        (false, 2) => tile_block::<V, TR, TC, false, 2>(a, z, x),
-                        (false, 3) => tile_block::<V, TR, TC, false, 3>(a, z, x),
-                        (false, _) => tile_block::<V, TR, TC, false, TR>(a, z, x),
-                    }
+                let xo: [usize; TC] = std::array::from_fn(|c| (b0 + c).min(d - 1) * BLOCK);
+                let zo: [usize; TR] = std::array::from_fn(|r| (a0 + r).min(d - 1) * BLOCK);
+                // The last row group may have fewer than TR rows (d not a multiple).
+                let (a, zg, st) = (&mut acc, &z[..g * d * BLOCK], d * BLOCK);
+                match (diag, last + 1 - a0) {
+                    (true, 1) => tile_block::<V, TR, TC, true, 1>(a, zg, xg, &zo, &xo, g, st),
+                    (true, 2) => tile_block::<V, TR, TC, true, 2>(a, zg, xg, &zo, &xo, g, st),
+                    (true, 3) => tile_block::<V, TR, TC, true, 3>(a, zg, xg, &zo, &xo, g, st),
+                    (true, _) => tile_block::<V, TR, TC, true, TR>(a, zg, xg, &zo, &xo, g, st),
+                    (false, 1) => tile_block::<V, TR, TC, false, 1>(a, zg, xg, &zo, &xo, g, st),
+                    (false, 2) => tile_block::<V, TR, TC, false, 2>(a, zg, xg, &zo, &xo, g, st),
+                    (false, 3) => tile_block::<V, TR, TC, false, 3>(a, zg, xg, &zo, &xo, g, st),
+                    (false, _) => tile_block::<V, TR, TC, false, TR>(a, zg, xg, &zo, &xo, g, st),
                 }
                 for r in 0..TR {
                     for c in 0..TC {

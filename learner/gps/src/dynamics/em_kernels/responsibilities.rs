@@ -132,43 +132,70 @@ pub fn normalise_over_clusters(
 /// `(l0 + l1) + (l2 + l3)`.
 pub fn logsum_points(isa: Isa, l: &[f64]) -> f64 {
     let mut out = 0.0;
-    let sink = &mut out;
+    let (sink, w) = (&mut out, &mut [][..]);
     dispatch!(
         isa,
-        fn k(l: &[f64], sink: &mut f64) {
-            let mut m = V::splat(f64::MIN);
-            for p in (0..l.len()).step_by(4) {
-                m = m.max(load_or_neg_inf(l, p));
-            }
-            let mut mb = [0.0; 4];
-            m.store(&mut mb);
-            let mx = mb[0].max(mb[1]).max(mb[2].max(mb[3]));
-            let mv = V::splat(mx);
-            let mut s = V::zero();
-            for p in (0..l.len()).step_by(4) {
-                s = s.add(exp(load_or_neg_inf::<V>(l, p).sub(mv)));
-            }
-            *sink = s.sum().ln() + mx;
+        fn k(l: &[f64], w: &mut [f64], sink: &mut f64) {
+            *sink = logsum_exps::<V, false>(l, w);
         }
     );
     out
 }
 
-/// The M-step's weights of one cluster: `w[p] = exp(l[p] − c)` for `p < l.len()` (`+0` below
-/// `e^`[`EXP_FLOOR`]), `w[p] = 0` for the padding `l.len() ≤ p < w.len()`.
-pub fn weights(isa: Isa, l: &[f64], c: f64, w: &mut [f64]) {
+/// [`logsum_points`] (the same value, the same bits) and, from the same pass's terms, the
+/// M-step's weights of the cluster: `w[p] = e_p · (1 / S)` with `e_p = exp(l_p − m)` the sum's
+/// terms (`+0` below `e^`[`EXP_FLOOR`]) and `S = Σ_p e_p`, that is `exp(l_p − logsum)` without a
+/// second `exp`; `w[p] = 0` for the padding `l.len() ≤ p < w.len()`.
+pub fn logsum_points_weights(isa: Isa, l: &[f64], w: &mut [f64]) -> f64 {
     assert!(w.len() >= l.len());
+    let mut out = 0.0;
+    let sink = &mut out;
     dispatch!(
         isa,
-        fn k(l: &[f64], c: f64, w: &mut [f64]) {
-            let cv = V::splat(c);
-            let mut buf = [0.0; 4];
-            for p in (0..l.len()).step_by(4) {
-                exp(load_or_neg_inf::<V>(l, p).sub(cv)).store(&mut buf);
-                let m = (l.len() - p).min(4);
-                w[p..p + m].copy_from_slice(&buf[..m]);
-            }
+        fn k(l: &[f64], w: &mut [f64], sink: &mut f64) {
+            *sink = logsum_exps::<V, true>(l, w);
         }
     );
     w[l.len()..].fill(0.0);
+    out
+}
+
+/// [`logsum_points`], and with `WEIGHTS` the weights of [`logsum_points_weights`] into `w`.
+#[inline(always)]
+fn logsum_exps<V: Lanes, const WEIGHTS: bool>(l: &[f64], w: &mut [f64]) -> f64 {
+    let mut m = V::splat(f64::MIN);
+    for p in (0..l.len()).step_by(4) {
+        m = m.max(load_or_neg_inf(l, p));
+    }
+    let mut mb = [0.0; 4];
+    m.store(&mut mb);
+    let mx = mb[0].max(mb[1]).max(mb[2].max(mb[3]));
+    let mv = V::splat(mx);
+    let mut s = V::zero();
+    let n4 = l.len() / 4 * 4;
+    for p in (0..l.len()).step_by(4) {
+        let e = exp(load_or_neg_inf::<V>(l, p).sub(mv));
+        s = s.add(e);
+        if WEIGHTS {
+            if p < n4 {
+                e.store(&mut w[p..]);
+            } else {
+                let mut buf = [0.0; 4];
+                e.store(&mut buf);
+                w[p..l.len()].copy_from_slice(&buf[..l.len() - p]);
+            }
+        }
+    }
+    let total = s.sum();
+    if WEIGHTS {
+        let r = 1.0 / total;
+        let rv = V::splat(r);
+        for p in (0..n4).step_by(4) {
+            V::load(&w[p..]).mul(rv).store(&mut w[p..]);
+        }
+        for v in &mut w[n4..l.len()] {
+            *v *= r;
+        }
+    }
+    total.ln() + mx
 }
