@@ -115,11 +115,16 @@ impl Discriminator {
             )));
         }
         let n = param_count(&sizes);
+        // θ̄ is checked as the weights are when the file holds one (it may be empty).
+        let average = Some(("params_average", &f.params_average)).filter(|(_, v)| !v.is_empty());
         for (name, v) in [
             ("params", &f.params),
             ("adam_m", &f.adam_m),
             ("adam_v", &f.adam_v),
-        ] {
+        ]
+        .into_iter()
+        .chain(average)
+        {
             if v.len() != n {
                 return Err(bad(format!(
                     "{name} has {} values, the net {sizes:?} has {n} parameters",
@@ -134,15 +139,6 @@ impl Discriminator {
             return Err(bad(
                 "params_average is given but config.param_average is 0 (off)".into(),
             ));
-        }
-        if !(f.params_average.is_empty() || f.params_average.len() == n) {
-            return Err(bad(format!(
-                "params_average has {} values, the net {sizes:?} has {n} parameters",
-                f.params_average.len()
-            )));
-        }
-        if let Some(i) = f.params_average.iter().position(|x| !x.is_finite()) {
-            return Err(bad(format!("params_average[{i}] is not finite")));
         }
         for (name, v) in [("params", &f.params), ("params_average", &f.params_average)] {
             if let Some(i) = v.iter().position(|x| x.abs() > MAX_ABS_PARAM) {
