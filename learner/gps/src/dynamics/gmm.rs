@@ -20,7 +20,7 @@
 use faer::{MatMut, MatRef};
 use rand::Rng;
 
-use crate::dynamics::em_kernels::{self, Moments, BLOCK};
+use crate::dynamics::em_kernels::{self, BLOCK, PANEL};
 use crate::error::GpsError;
 use crate::linalg::MatSeq;
 
@@ -98,8 +98,14 @@ struct Workspace {
     blocks: usize,
     /// `D x BLOCK` scratch of the E-step.
     diff: Vec<f64>,
-    /// One cluster's M-step sums.
-    moments: Moments,
+    /// The points' product rows in panels ([`em_kernels::products`]), formed once per EM run,
+    /// and a row's scratch.
+    prod: Vec<f64>,
+    prod_row: Vec<f64>,
+    /// The M-step's weights point-major (`N x K`) and its sums (`K x` panel columns,
+    /// [`em_kernels::weighted_sums`]).
+    wt: Vec<f64>,
+    sums: Vec<f64>,
     /// Log observation probabilities, then log responsibilities, cluster-major: cluster `i`'s
     /// value for point `p` at `logobs[i * stride + p]` (padding points after `N`).
     logobs: Vec<f64>,
@@ -109,8 +115,6 @@ struct Workspace {
     stride: usize,
     rowlse: Vec<f64>,
     collse: Vec<f64>,
-    /// `D x D` row-major weighted second moment of one cluster (lower triangle).
-    xx: Vec<f64>,
     /// The small-N E-step's points in groups of four, dimension-major
     /// ([`em_kernels::small_norms`]), its scratch and its squared norms.
     small: Vec<f64>,
@@ -124,13 +128,15 @@ impl Workspace {
             xb: Vec::new(),
             blocks: 0,
             diff: vec![0.0; d * BLOCK],
-            moments: Moments::new(),
+            prod: Vec::new(),
+            prod_row: Vec::new(),
+            wt: Vec::new(),
+            sums: Vec::new(),
             logobs: Vec::new(),
             w: Vec::new(),
             stride: 0,
             rowlse: Vec::new(),
             collse: Vec::new(),
-            xx: vec![0.0; d * d],
             small: Vec::new(),
             small_y: Vec::new(),
             small_ss: Vec::new(),
@@ -272,8 +278,7 @@ impl Gmm {
                     t: i,
                 });
             }
-            let l = self.chol.mat(i);
-            self.half_logdet[i] = (0..self.dim).map(|j| l[(j, j)].ln()).sum();
+            self.half_logdet[i] = em_kernels::half_log_det(self.chol.slice(i), self.dim);
             let (l, m) = (self.chol.slice(i), self.minv.slice_mut(i));
             em_kernels::invert_lower(isa, l, m, self.dim);
         }
@@ -373,6 +378,8 @@ impl Gmm {
         }
         self.ws.ensure(n, k);
         self.ws.load(data);
+        let ws = &mut self.ws;
+        em_kernels::products(&ws.xb, n, d, &mut ws.prod, &mut ws.prod_row);
         let mut report = EmReport {
             k,
             n_points: n,
@@ -427,40 +434,42 @@ impl Gmm {
                     wi[n..].fill(0.0);
                 }
             }
-            self.mstep();
+            self.mstep(n);
         }
         Ok(report)
     }
 
-    /// M-step for means and covariances from the weights in the workspace and the points in its
-    /// blocks.
-    fn mstep(&mut self) {
+    /// M-step for means and covariances from the weights in the workspace (`n` points) and the
+    /// points' product rows: all clusters' `μ_i = Σ_p w_pi x_p` and `XX_i = Σ_p w_pi x_p x_pᵀ`
+    /// (lower triangle) in one [`em_kernels::weighted_sums`].
+    fn mstep(&mut self, n: usize) {
         let (d, k) = (self.dim, self.k);
-        let isa = em_kernels::Isa::detect();
         let ws = &mut self.ws;
+        let panels = em_kernels::product_panels(d);
+        let cols = panels * PANEL;
+        ws.wt.resize(n * k, 0.0);
+        ws.sums.resize(k * cols, 0.0);
         for i in 0..k {
-            // μ_i = Σ_p w_pi x_p and the lower triangle of XX = Σ_p w_pi x_p x_pᵀ.
+            for (p, &wp) in ws.w[i * ws.stride..][..n].iter().enumerate() {
+                ws.wt[p * k + i] = wp;
+            }
+        }
+        let isa = em_kernels::Isa::detect();
+        em_kernels::weighted_sums(isa, n, k, &ws.wt, &ws.prod, panels, &mut ws.sums);
+        for i in 0..k {
+            let sums = &ws.sums[i * cols..(i + 1) * cols];
             let mu = &mut self.mu[i * d..(i + 1) * d];
-            let w = &ws.w[i * ws.stride..(i + 1) * ws.stride];
-            em_kernels::moments(
-                isa,
-                &mut ws.moments,
-                d,
-                ws.blocks,
-                &ws.xb,
-                w,
-                mu,
-                &mut ws.xx,
-            );
+            mu.copy_from_slice(&sums[..d]);
             let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
             for a in 0..d {
+                let xx = &sums[em_kernels::product_column(d, a, 0)..][..=a];
                 for b in 0..a {
                     // GPS: Σ = XX − μμᵀ, then 0.5 (Σ + Σᵀ); XX is symmetric by construction.
-                    let v = ws.xx[a * d + b] - mu[a] * mu[b];
+                    let v = xx[b] - mu[a] * mu[b];
                     s[(a, b)] = v;
                     s[(b, a)] = v;
                 }
-                s[(a, a)] = (ws.xx[a * d + a] - mu[a] * mu[a]) + 1e-6;
+                s[(a, a)] = (xx[a] - mu[a] * mu[a]) + 1e-6;
             }
         }
         self.chol_valid = false;

@@ -263,9 +263,11 @@ mod estep;
 mod mstep;
 mod responsibilities;
 
-pub use cholesky::cholesky;
+pub use cholesky::{cholesky, half_log_det};
 pub use estep::{invert_lower, small_norms, whitened_norms};
-pub use mstep::{moments, Moments};
+pub use mstep::{
+    product_column, product_columns, product_panels, products, weighted_sums, PANEL,
+};
 pub use responsibilities::{
     exp_slice, logsum_points, logsum_points_weights, normalise_over_clusters, EXP_FLOOR,
 };
@@ -277,8 +279,10 @@ pub fn estep_flops(n: usize, d: usize, k: usize) -> f64 {
     (n * k * (d + d * (d + 1) + 2 * d)) as f64
 }
 
-/// Flops of the M-step's dense arithmetic, as [`moments`] does it: per cluster and point,
-/// `d` weightings, `d` sums and `d(d+1)/2` multiply-adds of the second moment.
+/// Flops of the M-step's dense arithmetic, as [`weighted_sums`] does it: per cluster and point,
+/// `d` multiply-adds of the first moment and `d(d+1)/2` of the second (the padding columns of
+/// the last panel excluded, and the points' products, formed once per EM run by [`products`],
+/// not counted).
 pub fn mstep_flops(n: usize, d: usize, k: usize) -> f64 {
     (n * k * (2 * d + d * (d + 1))) as f64
 }
@@ -382,63 +386,78 @@ mod tests {
     }
 
     #[test]
-    fn moments_follow_their_documented_order_bit_for_bit_on_every_build() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-        for (d, blocks) in [
-            (1, 1),
-            (2, 2),
-            (3, 3),
-            (4, 1),
-            (5, 1),
-            (6, 2),
-            (9, 5),
-            (27, 16),
-        ] {
-            let np = blocks * BLOCK;
-            let x: Vec<f64> = (0..d * np).map(|_| rng.random_range(-2.0..2.0)).collect();
-            let w: Vec<f64> = (0..np).map(|_| rng.random_range(0.0..1.0)).collect();
-            let run = |isa: Isa| {
-                let (mut s1, mut xx) = (vec![0.0; d], vec![f64::NAN; d * d]);
-                moments(
-                    isa,
-                    &mut Moments::new(),
-                    d,
-                    blocks,
-                    &x,
-                    &w,
-                    &mut s1,
-                    &mut xx,
-                );
-                (s1, xx)
-            };
-            let (s1, xx) = run(Isa::Portable);
-            let at = |a: usize, p: usize| x[(p / BLOCK) * d * BLOCK + a * BLOCK + p % BLOCK];
-            // The documented order: four lane sums over p ≡ j (mod 4) in ascending p, of the
-            // rounded z_p = w_p x_pa, fused into the second moments; (l0 + l1) + (l2 + l3).
-            let lanes = |f: &dyn Fn(usize, f64) -> f64| {
-                let l: Vec<f64> = (0..4)
-                    .map(|j| (j..np).step_by(4).fold(0.0, |acc, p| f(p, acc)))
-                    .collect();
-                (l[0] + l[1]) + (l[2] + l[3])
-            };
-            for a in 0..d {
-                let s = lanes(&|p, acc| acc + w[p] * at(a, p));
-                assert_eq!(s1[a].to_bits(), s.to_bits(), "d={d} a={a}");
-                for b in 0..d {
-                    if b <= a {
-                        let s = lanes(&|p, acc| (w[p] * at(a, p)).mul_add(at(b, p), acc));
-                        assert_eq!(xx[a * d + b].to_bits(), s.to_bits(), "d={d} ({a},{b})");
-                    } else {
-                        assert!(xx[a * d + b].is_nan(), "upper triangle written");
+    fn products_hold_each_product_once_rounded_in_panels() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for (d, n) in [(1, 1), (2, 5), (3, 33), (5, 40), (27usize, 70usize)] {
+            let blocks = n.div_ceil(BLOCK);
+            let x: Vec<f64> = (0..blocks * d * BLOCK)
+                .map(|_| rng.random_range(-2.0..2.0))
+                .collect();
+            let (mut prod, mut row) = (vec![f64::NAN; 3], Vec::new());
+            products(&x, n, d, &mut prod, &mut row);
+            let panels = product_panels(d);
+            assert_eq!(prod.len(), panels * n * PANEL);
+            let at = |p: usize, c: usize| prod[((c / PANEL) * n + p) * PANEL + c % PANEL];
+            let xv = |p: usize, a: usize| x[(p / BLOCK) * d * BLOCK + a * BLOCK + p % BLOCK];
+            for p in 0..n {
+                for a in 0..d {
+                    assert_eq!(at(p, a).to_bits(), xv(p, a).to_bits());
+                    for b in 0..=a {
+                        let want = xv(p, a) * xv(p, b);
+                        assert_eq!(at(p, product_column(d, a, b)).to_bits(), want.to_bits());
                     }
+                }
+                for c in product_columns(d)..panels * PANEL {
+                    assert_eq!(at(p, c).to_bits(), 0, "padding +0");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn weighted_sums_follow_their_documented_order_bit_for_bit_on_every_build() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        for (d, n, k) in [
+            (1, 1, 1),
+            (2, 7, 2),
+            (3, 33, 3),
+            (4, 32, 5),
+            (5, 9, 7),
+            (6, 64, 13),
+            (9, 150, 20),
+            (27, 495usize, 12),
+        ] {
+            let blocks = n.div_ceil(BLOCK);
+            let x: Vec<f64> = (0..blocks * d * BLOCK)
+                .map(|_| rng.random_range(-2.0..2.0))
+                .collect();
+            let w: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
+            let (mut prod, mut row) = (Vec::new(), Vec::new());
+            products(&x, n, d, &mut prod, &mut row);
+            let panels = product_panels(d);
+            let cols = panels * PANEL;
+            let run = |isa: Isa| {
+                let mut out = vec![f64::NAN; k * cols];
+                weighted_sums(isa, n, k, &w, &prod, panels, &mut out);
+                out
+            };
+            let out = run(Isa::Portable);
+            // The documented order: ascending points from +0, one fused multiply-add each.
+            for i in 0..k {
+                for c in 0..cols {
+                    let pc = |p: usize| prod[((c / PANEL) * n + p) * PANEL + c % PANEL];
+                    let s = (0..n).fold(0.0f64, |acc, p| w[p * k + i].mul_add(pc(p), acc));
+                    assert_eq!(out[i * cols + c].to_bits(), s.to_bits(), "d={d} i={i} c={c}");
                 }
             }
             for isa in isas() {
-                let (s1b, xxb) = run(isa);
-                assert_eq!(bits(&s1), bits(&s1b), "{isa:?} d={d}");
-                assert_eq!(bits(&xx), bits(&xxb), "{isa:?} d={d}");
+                assert_eq!(bits(&out), bits(&run(isa)), "{isa:?} d={d} k={k}");
             }
         }
+        // No points: every sum is +0.
+        let mut out = vec![f64::NAN; 2 * PANEL];
+        weighted_sums(Isa::detect(), 0, 2, &[], &[], 1, &mut out);
+        assert!(out.iter().all(|v| v.to_bits() == 0));
     }
 
     #[test]
@@ -658,11 +677,7 @@ mod tests {
         let x: Vec<f64> = (0..blocks * d * BLOCK)
             .map(|_| rng.random_range(-3.0..3.0))
             .collect();
-        let w: Vec<f64> = (0..blocks * BLOCK)
-            .map(|_| rng.random_range(0.0..1.0))
-            .collect();
         let mut diff = vec![0.0; d * BLOCK];
-        let (mut s1, mut xx) = (vec![0.0; d], vec![0.0; d * d]);
         let reps = 200;
         let peak = best(&mut || fma_peak(2_000_000));
         println!("peak {peak:.1} GFLOP/s");
@@ -683,16 +698,25 @@ mod tests {
                 "{isa:?}: whitened_norms {e:.1} GFLOP/s ({:.0} %)",
                 100.0 * e / peak
             );
-            for group in [1, 2, 4, blocks] {
+            // The bench's problem, then the default prior's largest (19 samples, K = 20).
+            for (nb, k) in [(blocks, k), (59, 20)] {
+                let n = nb * BLOCK;
+                let x: Vec<f64> = (0..nb * d * BLOCK)
+                    .map(|_| rng.random_range(-3.0..3.0))
+                    .collect();
+                let wt: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
+                let (mut prod, mut row) = (Vec::new(), Vec::new());
+                products(&x, n, d, &mut prod, &mut row);
+                let panels = product_panels(d);
+                let mut out = vec![0.0; k * panels * PANEL];
                 let mm = best(&mut || {
-                    let mut acc = Moments::with_group(group);
-                    for _ in 0..reps * k {
-                        moments(isa, &mut acc, d, blocks, &x, &w, &mut s1, &mut xx);
+                    for _ in 0..reps {
+                        weighted_sums(isa, n, k, &wt, &prod, panels, &mut out);
                     }
-                    (reps * k) as f64 * mstep_flops(blocks * BLOCK, d, 1)
+                    reps as f64 * mstep_flops(n, d, k)
                 });
                 println!(
-                    "{isa:?}: moments, {group} blocks per visit: {mm:.1} GFLOP/s ({:.0} %)",
+                    "{isa:?}: weighted_sums, {n} points, K = {k}: {mm:.1} GFLOP/s ({:.0} %)",
                     100.0 * mm / peak
                 );
             }

@@ -1,258 +1,157 @@
-//! The M-step kernel: weighted first and second moments of the blocked points.
+//! The M-step kernel: every cluster's weighted first and second moments at once, as one dense
+//! product of the weights with the points' products (docs/design.md §5 D33).
+//!
+//! A point's **product row** holds its coordinates and the lower triangle of `x xᵀ`:
+//! column `a` is `x_a` (`a < d`), column [`product_column`]`(d, a, b)` is `x_a · x_b`
+//! (`b ≤ a`), rounded once. The points do not change during one EM run, so [`products`] forms
+//! the rows once per run and every M-step is then `S = Wᵀ P`: `S[i, c] = Σ_p w_pi P[p, c]`,
+//! `K` clusters by [`product_columns`] columns. That is a matrix product with whole tiles in
+//! registers, without the triangle's ragged edges or a weighted copy of the points per cluster.
 
 #[cfg(target_arch = "x86_64")]
 use super::avx;
 use super::{Isa, Lanes, BLOCK};
 
-/// Blocks of points whose weighted copies and second-moment sums the M-step keeps in L1 at a
-/// time (2 × 27 × 32 × 8 B = 13.8 KB of points and as much of weighted points for the arm's
-/// 27 dimensions).
-const GROUP: usize = 2;
+/// Columns of a panel of the product rows: two 4-lane vectors.
+pub const PANEL: usize = 8;
 
-/// Second-moment tiles of [`moments`]: rows × columns of 4-lane sums held in registers, for 16
-/// and for 32 registers.
-const MOMENT_TILE: (usize, usize) = (2, 4);
-const MOMENT_TILE_WIDE: (usize, usize) = (4, 4);
+/// Clusters whose sums [`weighted_sums`] holds in registers at a time: `ROWS × 2` 4-lane sums,
+/// for 16 and for 32 registers.
+const ROWS: usize = 6;
+const ROWS_WIDE: usize = 12;
 
-/// Scratch of the M-step's [`moments`]: the weighted points `w_p x_p` of one group of blocks,
-/// and the 4-lane sums of the second-moment tiles.
-pub struct Moments {
-    /// Blocks per visit of the tiles ([`GROUP`]; the same sums in the same order for any value,
-    /// the speed benchmark compares them).
-    group: usize,
-    z: Vec<f64>,
-    /// `d x 4` lane sums of `w x`.
-    s1: Vec<f64>,
-    tiles: Vec<f64>,
+/// Columns of a product row in dimension `d`: `d` coordinates and `d(d+1)/2` products.
+pub fn product_columns(d: usize) -> usize {
+    d + d * (d + 1) / 2
 }
 
-impl Moments {
-    /// Empty scratch; it grows to the largest dimension seen and is reused.
-    pub fn new() -> Self {
-        Self::with_group(GROUP)
-    }
+/// Panels of [`PANEL`] columns covering a product row (the last one zero-padded).
+pub fn product_panels(d: usize) -> usize {
+    product_columns(d).div_ceil(PANEL)
+}
 
-    /// Empty scratch that visits the tiles once per `group` blocks.
-    pub(super) fn with_group(group: usize) -> Self {
-        assert!(group >= 1);
-        Self {
-            group,
-            z: Vec::new(),
-            s1: Vec::new(),
-            tiles: Vec::new(),
+/// Column of `x_a · x_b` (`b ≤ a < d`) in a product row.
+pub fn product_column(d: usize, a: usize, b: usize) -> usize {
+    debug_assert!(b <= a && a < d);
+    d + a * (a + 1) / 2 + b
+}
+
+/// The product rows of the `n` points in the blocks `x` (module layout, dimension `d`) in
+/// panels: column `c` of point `p` at `prod[(c / PANEL) · n · PANEL + p · PANEL + c % PANEL]`,
+/// so that one panel is `n` consecutive runs of [`PANEL`] values. Padding columns are `+0`.
+/// `row` is scratch.
+pub fn products(x: &[f64], n: usize, d: usize, prod: &mut Vec<f64>, row: &mut Vec<f64>) {
+    assert!(x.len() >= n.div_ceil(BLOCK) * d * BLOCK);
+    let panels = product_panels(d);
+    // Every element is written below: no clearing of a reused buffer.
+    prod.resize(panels * n * PANEL, 0.0);
+    row.clear();
+    row.resize(panels * PANEL, 0.0);
+    for p in 0..n {
+        let xb = &x[(p / BLOCK) * d * BLOCK + p % BLOCK..];
+        for a in 0..d {
+            row[a] = xb[a * BLOCK];
+        }
+        let (coords, tri) = row.split_at_mut(d);
+        let mut off = 0;
+        for a in 0..d {
+            let xa = coords[a];
+            for (t, &xc) in tri[off..=off + a].iter_mut().zip(&coords[..=a]) {
+                *t = xa * xc;
+            }
+            off += a + 1;
+        }
+        for (j, src) in row.chunks_exact(PANEL).enumerate() {
+            prod[(j * n + p) * PANEL..][..PANEL].copy_from_slice(src);
         }
     }
 }
 
-impl Default for Moments {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-/// Tiles of `tr` rows by `tc` columns covering the lower triangle: row groups `a0 = 0, tr, …`
-/// by column groups `b0 = 0, tc, … ≤` the group's last row.
-fn tile_count(d: usize, (tr, tc): (usize, usize)) -> usize {
-    (0..d)
-        .step_by(tr)
-        .map(|a0| ((a0 + tr - 1).min(d - 1) + 1).div_ceil(tc))
-        .sum()
-}
-
-/// One cluster's M-step sums over the points `x` (`blocks` blocks of dimension `d`, padding
-/// zero) with weights `w` (`blocks · BLOCK`, padding zero): `s1[a] = Σ_p w_p x_pa` and, for
-/// `b ≤ a`, `xx[a * d + b] = Σ_p w_p x_pa x_pb` (upper triangle of `xx` untouched). Each sum
-/// runs over four lanes (`p mod 4`, ascending `p`) added at the end as `(l0 + l1) + (l2 + l3)`.
-/// The second moments are tiles of a few rows by four columns ([`MOMENT_TILE`]; 4-lane sums in
-/// registers), visited once per [`GROUP`] of blocks, whose points and weighted points stay in
-/// L1.
-#[allow(clippy::too_many_arguments)]
-pub fn moments(
+/// Every cluster's M-step sums: `out[i · cols + c] = Σ_p w[p · k + i] · P[p, c]` for the `k`
+/// clusters and every column `c < cols = panels · PANEL` of the product rows `prod`
+/// ([`products`] of `n` points). `w` holds the weights point-major (`n × k`). Each sum runs
+/// over the points in ascending order from `+0`, one fused multiply-add per point; the tiles
+/// (a few clusters by one panel) change which sums are in registers together, never the order
+/// of any one of them.
+pub fn weighted_sums(
     isa: Isa,
-    scratch: &mut Moments,
-    d: usize,
-    blocks: usize,
-    x: &[f64],
+    n: usize,
+    k: usize,
     w: &[f64],
-    s1: &mut [f64],
-    xx: &mut [f64],
+    prod: &[f64],
+    panels: usize,
+    out: &mut [f64],
 ) {
-    let group = scratch.group;
-    assert!(x.len() >= blocks * d * BLOCK && w.len() >= blocks * BLOCK);
-    assert!(s1.len() >= d && xx.len() >= d * d);
-    let Moments {
-        z,
-        s1: lanes,
-        tiles,
-        ..
-    } = scratch;
-    // No clearing: the first group starts every sum from zero.
-    let sums = |(tr, tc): (usize, usize)| tile_count(d, (tr, tc)) * tr * tc * 4;
-    let need = sums(MOMENT_TILE).max(sums(MOMENT_TILE_WIDE));
-    for (v, n) in [
-        (&mut *z, group * d * BLOCK),
-        (&mut *lanes, d * 4),
-        (&mut *tiles, need),
-    ] {
-        if v.len() < n {
-            v.resize(n, 0.0);
-        }
+    let cols = panels * PANEL;
+    assert!(w.len() >= n * k && prod.len() >= panels * n * PANEL && out.len() >= k * cols);
+    if n == 0 {
+        out[..k * cols].fill(0.0);
+        return;
     }
-    let job = MomentsJob(group, d, blocks, x, w, z, lanes, tiles, s1, xx);
     dispatch!(
         isa,
-        fn k(job: MomentsJob<'_>) {
-            const W: (usize, usize) = MOMENT_TILE_WIDE;
-            const N: (usize, usize) = MOMENT_TILE;
-            if V::WIDE {
-                moment_tiles::<V, { W.0 }, { W.1 }>(job)
-            } else {
-                moment_tiles::<V, { N.0 }, { N.1 }>(job)
+        fn kernel(n: usize, k: usize, w: &[f64], prod: &[f64], panels: usize, out: &mut [f64]) {
+            let cols = panels * PANEL;
+            let w = &w[..n * k];
+            for j in 0..panels {
+                let panel = &prod[j * n * PANEL..][..n * PANEL];
+                let mut i0 = 0;
+                while i0 < k {
+                    let left = k - i0;
+                    let r = left.min(if V::WIDE { ROWS_WIDE } else { ROWS });
+                    let t = Tile(panel, w, k, i0, out, cols, j * PANEL);
+                    match r {
+                        1 => tile::<V, 1>(t),
+                        2 => tile::<V, 2>(t),
+                        3 => tile::<V, 3>(t),
+                        4 => tile::<V, 4>(t),
+                        5 => tile::<V, 5>(t),
+                        6 => tile::<V, 6>(t),
+                        7 => tile::<V, 7>(t),
+                        8 => tile::<V, 8>(t),
+                        9 => tile::<V, 9>(t),
+                        10 => tile::<V, 10>(t),
+                        11 => tile::<V, 11>(t),
+                        _ => tile::<V, 12>(t),
+                    }
+                    i0 += r;
+                }
             }
         }
     )
 }
 
-/// The arguments of one [`moments`] call, handed to the instantiation that runs it:
-/// `group`, `d`, `blocks`, `x`, `w`, then the scratch `z`, `lanes`, `tiles` and the outputs `s1`,
-/// `xx`.
-struct MomentsJob<'a>(
-    usize,
-    usize,
-    usize,
+/// One tile's arguments: a panel of the products (`n × PANEL`), the weights (`n × k`), `k`, the
+/// tile's first cluster, the output, its row length and the panel's first column.
+struct Tile<'a>(
     &'a [f64],
     &'a [f64],
+    usize,
+    usize,
     &'a mut [f64],
-    &'a mut [f64],
-    &'a mut [f64],
-    &'a mut [f64],
-    &'a mut [f64],
+    usize,
+    usize,
 );
 
-/// The `g` blocks' points added to a tile's sums: `acc[r][c] += z_r x_c` (fused) for every
-/// 4-lane vector of points in ascending order, block after block, for the rows `r < ROWS` (the
-/// others are past `d`); on the diagonal (`DIAG`) only for `c <= r`. `zo`, `xo`: the tile's rows'
-/// and columns' offsets in a block of `zg`, `xg` (`d * BLOCK` apart).
+/// The sums of the clusters `i0 … i0 + R − 1` on one panel, in `R × 2` registers: per point,
+/// the panel's two vectors and the `R` weights broadcast, `2R` fused multiply-adds.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn tile_block<V: Lanes, const TR: usize, const TC: usize, const DIAG: bool, const ROWS: usize>(
-    acc: &mut [[V; TC]; TR],
-    zg: &[f64],
-    xg: &[f64],
-    zo: &[usize; TR],
-    xo: &[usize; TC],
-    g: usize,
-    stride: usize,
-) {
-    let mut a = *acc;
-    for j in 0..g {
-        let (zb, xb) = (&zg[j * stride..], &xg[j * stride..]);
-        let zr: [&[f64; BLOCK]; TR] =
-            std::array::from_fn(|r| zb[zo[r]..zo[r] + BLOCK].try_into().unwrap());
-        let xr: [&[f64; BLOCK]; TC] =
-            std::array::from_fn(|c| xb[xo[c]..xo[c] + BLOCK].try_into().unwrap());
-        for q in (0..BLOCK).step_by(4) {
-            // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
-            let mut zq = [V::zero(); TR];
-            for r in 0..TR {
-                zq[r] = V::load(&zr[r][q..]);
-            }
-            for c in 0..TC {
-                let xs = V::load(&xr[c][q..]);
-                for r in 0..TR {
-                    if r < ROWS && (!DIAG || c <= r) {
-                        a[r][c] = a[r][c].fma(zq[r], xs);
-                    }
-                }
-            }
+fn tile<V: Lanes, const R: usize>(t: Tile<'_>) {
+    let Tile(panel, w, k, i0, out, cols, c0) = t;
+    let mut acc = [[V::zero(); 2]; R];
+    for (pv, wp) in panel.chunks_exact(PANEL).zip(w.chunks_exact(k)) {
+        let wr: &[f64; R] = wp[i0..i0 + R].try_into().unwrap();
+        let (p0, p1) = (V::load(&pv[..4]), V::load(&pv[4..]));
+        // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
+        for r in 0..R {
+            let b = V::splat(wr[r]);
+            acc[r][0] = acc[r][0].fma(b, p0);
+            acc[r][1] = acc[r][1].fma(b, p1);
         }
     }
-    *acc = a;
-}
-
-/// [`moments`] on tiles of `TR` rows by `TC` columns.
-#[inline(always)]
-fn moment_tiles<V: Lanes, const TR: usize, const TC: usize>(job: MomentsJob<'_>) {
-    let MomentsJob(group, d, blocks, x, w, z, lanes, tiles, s1, xx) = job;
-    let size = TR * TC * 4;
-    for g0 in (0..blocks).step_by(group) {
-        let g = (blocks - g0).min(group);
-        let xg = &x[g0 * d * BLOCK..(g0 + g) * d * BLOCK];
-        let wg = &w[g0 * BLOCK..(g0 + g) * BLOCK];
-        // z = w x, block by block, and the first moments.
-        for a in 0..d {
-            let mut sa = if g0 == 0 {
-                V::zero()
-            } else {
-                V::load(&lanes[4 * a..])
-            };
-            for j in 0..g {
-                let o = j * d * BLOCK + a * BLOCK;
-                // Whole blocks sliced once: no bounds check per vector below.
-                let wj: &[f64; BLOCK] = wg[j * BLOCK..(j + 1) * BLOCK].try_into().unwrap();
-                let xj: &[f64; BLOCK] = xg[o..o + BLOCK].try_into().unwrap();
-                let zj: &mut [f64; BLOCK] = (&mut z[o..o + BLOCK]).try_into().unwrap();
-                for q in (0..BLOCK).step_by(4) {
-                    let zq = V::zero().fma(V::load(&wj[q..]), V::load(&xj[q..]));
-                    zq.store(&mut zj[q..]);
-                    sa = sa.add(zq);
-                }
-            }
-            sa.store(&mut lanes[4 * a..]);
-        }
-        let mut t = 0;
-        for a0 in (0..d).step_by(TR) {
-            let last = (a0 + TR - 1).min(d - 1);
-            for b0 in (0..=last).step_by(TC) {
-                let tile = &mut tiles[t * size..(t + 1) * size];
-                // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
-                let mut acc = [[V::zero(); TC]; TR];
-                if g0 > 0 {
-                    for r in 0..TR {
-                        for c in 0..TC {
-                            acc[r][c] = V::load(&tile[(r * TC + c) * 4..]);
-                        }
-                    }
-                }
-                // A tile on the diagonal needs only its lower triangle (column ≤ row).
-                let diag = TR == TC && b0 == a0;
-                let xo: [usize; TC] = std::array::from_fn(|c| (b0 + c).min(d - 1) * BLOCK);
-                let zo: [usize; TR] = std::array::from_fn(|r| (a0 + r).min(d - 1) * BLOCK);
-                // The last row group may have fewer than TR rows (d not a multiple).
-                let (a, zg, st) = (&mut acc, &z[..g * d * BLOCK], d * BLOCK);
-                match (diag, last + 1 - a0) {
-                    (true, 1) => tile_block::<V, TR, TC, true, 1>(a, zg, xg, &zo, &xo, g, st),
-                    (true, 2) => tile_block::<V, TR, TC, true, 2>(a, zg, xg, &zo, &xo, g, st),
-                    (true, 3) => tile_block::<V, TR, TC, true, 3>(a, zg, xg, &zo, &xo, g, st),
-                    (true, _) => tile_block::<V, TR, TC, true, TR>(a, zg, xg, &zo, &xo, g, st),
-                    (false, 1) => tile_block::<V, TR, TC, false, 1>(a, zg, xg, &zo, &xo, g, st),
-                    (false, 2) => tile_block::<V, TR, TC, false, 2>(a, zg, xg, &zo, &xo, g, st),
-                    (false, 3) => tile_block::<V, TR, TC, false, 3>(a, zg, xg, &zo, &xo, g, st),
-                    (false, _) => tile_block::<V, TR, TC, false, TR>(a, zg, xg, &zo, &xo, g, st),
-                }
-                for r in 0..TR {
-                    for c in 0..TC {
-                        acc[r][c].store(&mut tile[(r * TC + c) * 4..]);
-                    }
-                }
-                t += 1;
-            }
-        }
-    }
-    for a in 0..d {
-        s1[a] = V::load(&lanes[4 * a..]).sum();
-    }
-    let mut t = 0;
-    for a0 in (0..d).step_by(TR) {
-        let last = (a0 + TR - 1).min(d - 1);
-        for b0 in (0..=last).step_by(TC) {
-            for a in a0..=last {
-                for b in b0..(b0 + TC).min(a + 1) {
-                    let o = (t * TR * TC + (a - a0) * TC + (b - b0)) * 4;
-                    xx[a * d + b] = V::load(&tiles[o..]).sum();
-                }
-            }
-            t += 1;
-        }
+    for (r, a) in acc.iter().enumerate() {
+        let o = &mut out[(i0 + r) * cols + c0..][..PANEL];
+        a[0].store(&mut o[..4]);
+        a[1].store(&mut o[4..]);
     }
 }
