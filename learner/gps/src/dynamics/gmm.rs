@@ -96,8 +96,8 @@ struct Workspace {
     xb: Vec<f64>,
     /// Number of blocks in `xb`.
     blocks: usize,
-    /// `D x BLOCK` scratch of the E-step.
-    diff: Vec<f64>,
+    /// The E-step's per-cluster constant `c0 − ½ log det Σ_i + log mass_i`.
+    base: Vec<f64>,
     /// The points' product rows in panels ([`em_kernels::products`]), formed once per EM run,
     /// and a row's scratch.
     prod: Vec<f64>,
@@ -123,11 +123,11 @@ struct Workspace {
 }
 
 impl Workspace {
-    fn new(d: usize) -> Self {
+    fn new() -> Self {
         Self {
             xb: Vec::new(),
             blocks: 0,
-            diff: vec![0.0; d * BLOCK],
+            base: Vec::new(),
             prod: Vec::new(),
             prod_row: Vec::new(),
             wt: Vec::new(),
@@ -198,6 +198,10 @@ pub struct Gmm {
     chol: MatSeq,
     /// `L_i⁻¹` (lower triangular), `(K, D, D)`.
     minv: MatSeq,
+    /// The `L_i⁻¹` and `L_i⁻¹ μ_i` of all clusters packed for the E-step
+    /// ([`em_kernels::pack_whitening`]).
+    mt: Vec<f64>,
+    minv_mu: Vec<f64>,
     half_logdet: Vec<f64>,
     chol_valid: bool,
     chol_work: Vec<f64>,
@@ -221,10 +225,12 @@ impl Gmm {
             initialized: false,
             chol: MatSeq::zeros(0, dim, dim),
             minv: MatSeq::zeros(0, dim, dim),
+            mt: Vec::new(),
+            minv_mu: Vec::new(),
             half_logdet: Vec::new(),
             chol_valid: false,
             chol_work: Vec::new(),
-            ws: Workspace::new(dim),
+            ws: Workspace::new(),
         }
     }
 
@@ -282,6 +288,16 @@ impl Gmm {
             let (l, m) = (self.chol.slice(i), self.minv.slice_mut(i));
             em_kernels::invert_lower(isa, l, m, self.dim);
         }
+        let (d, k) = (self.dim, self.k);
+        em_kernels::pack_whitening(
+            isa,
+            &self.minv.data,
+            &self.mu,
+            d,
+            k,
+            &mut self.mt,
+            &mut self.minv_mu,
+        );
         self.chol_valid = true;
         Ok(())
     }
@@ -301,21 +317,22 @@ impl Gmm {
         if !loaded {
             self.ws.load(data);
         }
-        let isa = em_kernels::Isa::detect();
         let ws = &mut self.ws;
-        for blk in 0..ws.blocks {
-            let (p0, xb) = (blk * BLOCK, &ws.xb[blk * d * BLOCK..(blk + 1) * d * BLOCK]);
-            for i in 0..k {
-                let mut ss = [0.0; BLOCK];
-                let (minv, mu) = (self.minv.slice(i), &self.mu[i * d..(i + 1) * d]);
-                em_kernels::whitened_norms(isa, minv, mu, d, xb, &mut ws.diff, &mut ss);
-                let base = c0 - self.half_logdet[i] + self.logmass[i];
-                let row = &mut ws.logobs[i * ws.stride + p0..][..BLOCK];
-                for (o, &s) in row.iter_mut().zip(&ss) {
-                    *o = base - 0.5 * s;
-                }
-            }
-        }
+        ws.base.clear();
+        ws.base
+            .extend((0..k).map(|i| c0 - self.half_logdet[i] + self.logmass[i]));
+        em_kernels::whitened_norms(
+            em_kernels::Isa::detect(),
+            &self.mt,
+            &self.minv_mu,
+            &ws.base,
+            d,
+            k,
+            &ws.xb,
+            ws.blocks,
+            &mut ws.logobs,
+            ws.stride,
+        );
         Ok(())
     }
 
@@ -449,9 +466,9 @@ impl Gmm {
         let cols = panels * PANEL;
         ws.wt.resize(n * k, 0.0);
         ws.sums.resize(k * cols, 0.0);
-        for i in 0..k {
-            for (p, &wp) in ws.w[i * ws.stride..][..n].iter().enumerate() {
-                ws.wt[p * k + i] = wp;
+        for (i, wi) in ws.w.chunks(ws.stride).take(k).enumerate() {
+            for (row, &wp) in ws.wt.chunks_exact_mut(k).zip(&wi[..n]) {
+                row[i] = wp;
             }
         }
         let isa = em_kernels::Isa::detect();

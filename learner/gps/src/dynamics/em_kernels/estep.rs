@@ -5,123 +5,188 @@
 use super::avx;
 use super::{Isa, Lanes, BLOCK};
 
-/// Row and point tiles of [`whitened_norms`]: rows of `L⁻¹` per pass and 4-lane vectors of
-/// points (`4 ·` this many points) per pass, for 16 and for 32 registers.
-const NORM_TILE: (usize, usize) = (3, 4);
-const NORM_TILE_WIDE: (usize, usize) = (4, 4);
+/// Clusters × 4-lane vectors of points of [`whitened_norms`]'s tiles (a row's sums and the
+/// norms of `R · 4 NV` point-cluster pairs in registers), for 16 and for 32 registers.
+const NORM_TILE: (usize, usize) = (3, 2);
+const NORM_TILE_WIDE: (usize, usize) = (3, 4);
 
-/// E-step of one cluster on one block: `ss[j] = ‖M (x_j − μ)‖²` for the block's `BLOCK` points
-/// (`x`: one block, dimension-major), `M = L⁻¹` lower triangular (`d x d` row-major). Rows are
-/// taken a few at a time ([`NORM_TILE`]) on a few 4-lane vectors of points; `ss` accumulates
-/// `y_0², y_1², …` in row order. `diff` (`d x BLOCK`) is scratch.
-pub fn whitened_norms(
+/// The clusters' whitening packed for [`whitened_norms`]: from the `k` inverse Cholesky factors
+/// `minv` (`M_i = L_i⁻¹`, `d x d` row-major lower triangles) and the means `mu` (`k x d`),
+/// `mt[(a(a+1)/2 + b) · k + i] = M_i[a, b]` for `b ≤ a` (the clusters side by side, so a tile's
+/// clusters are neighbours) and `c[a · k + i] = (M_i μ_i)_a`, a fused multiply-add chain over
+/// `b = 0 … a` from `+0`.
+pub fn pack_whitening(
     isa: Isa,
-    m: &[f64],
+    minv: &[f64],
     mu: &[f64],
     d: usize,
-    x: &[f64],
-    diff: &mut [f64],
-    ss: &mut [f64; BLOCK],
+    k: usize,
+    mt: &mut Vec<f64>,
+    c: &mut Vec<f64>,
 ) {
-    assert!(m.len() >= d * d && mu.len() >= d && x.len() >= d * BLOCK && diff.len() >= d * BLOCK);
+    assert!(minv.len() >= k * d * d && mu.len() >= k * d);
+    mt.resize(d * (d + 1) / 2 * k, 0.0);
+    c.resize(d * k, 0.0);
+    let (mt, c) = (&mut mt[..], &mut c[..]);
+    // Dispatched for `mul_add`: a fused instruction where the CPU has one, not libm's `fma`
+    // (the same bits).
     dispatch!(
         isa,
-        fn k(m: &[f64], mu: &[f64], d: usize, x: &[f64], diff: &mut [f64], ss: &mut [f64; BLOCK]) {
-            for a in 0..d {
-                let mua = V::splat(mu[a]);
-                for q in (0..BLOCK).step_by(4) {
-                    V::load(&x[a * BLOCK + q..])
-                        .sub(mua)
-                        .store(&mut diff[a * BLOCK + q..]);
+        fn kern(minv: &[f64], mu: &[f64], d: usize, k: usize, mt: &mut [f64], c: &mut [f64]) {
+            for i in 0..k {
+                let (m, mui) = (&minv[i * d * d..(i + 1) * d * d], &mu[i * d..(i + 1) * d]);
+                let mut t = 0;
+                for a in 0..d {
+                    let row = &m[a * d..=a * d + a];
+                    let mut ca = 0.0f64;
+                    for (b, (&mab, &mub)) in row.iter().zip(mui).enumerate() {
+                        mt[(t + b) * k + i] = mab;
+                        ca = mab.mul_add(mub, ca);
+                    }
+                    c[a * k + i] = ca;
+                    t += a + 1;
                 }
             }
+        }
+    );
+}
+
+/// The E-step's log probabilities of every point under every cluster: for the `k` clusters and
+/// the points of the `blocks` blocks `x` (module layout), `out[i · stride + p] = base_i − ½ s`
+/// with `s = ‖M_i x_p − M_i μ_i‖²` (packed by [`pack_whitening`]): each coordinate
+/// `y_a = −c_a + Σ_{b ≤ a} M_i[a, b] x_b` is a fused multiply-add chain over ascending `b`
+/// starting from `−c_a`, and `s` a fused chain `y_a²` over ascending `a` from `+0`; the last
+/// step is one fused `base_i − ½ s`. Tiles of a few clusters by a few vectors of points
+/// ([`NORM_TILE`]) share each load of the points and of `M` across the tile and never change
+/// the order of a sum. Padding points get values too.
+#[allow(clippy::too_many_arguments)]
+pub fn whitened_norms(
+    isa: Isa,
+    mt: &[f64],
+    c: &[f64],
+    base: &[f64],
+    d: usize,
+    k: usize,
+    x: &[f64],
+    blocks: usize,
+    out: &mut [f64],
+    stride: usize,
+) {
+    assert!(mt.len() >= d * (d + 1) / 2 * k && c.len() >= d * k && base.len() >= k);
+    assert!(x.len() >= blocks * d * BLOCK && stride >= blocks * BLOCK);
+    assert!(k == 0 || out.len() >= (k - 1) * stride + blocks * BLOCK);
+    let job = NormJob(mt, c, base, d, k, x, blocks, out, stride);
+    dispatch!(
+        isa,
+        fn kern(job: NormJob<'_>) {
             const W: (usize, usize) = NORM_TILE_WIDE;
             const N: (usize, usize) = NORM_TILE;
             if V::WIDE {
-                norms::<V, { W.0 }, { W.1 }>(m, d, diff, ss)
+                norms::<V, { W.0 }, { W.1 }>(job)
             } else {
-                norms::<V, { N.0 }, { N.1 }>(m, d, diff, ss)
+                norms::<V, { N.0 }, { N.1 }>(job)
             }
         }
     )
 }
 
-/// [`whitened_norms`] after the subtraction, `R` rows of `M` at a time on `NV` 4-lane vectors.
+/// The arguments of one [`whitened_norms`] call: `mt`, `c`, `base`, `d`, `k`, `x`, `blocks`,
+/// `out`, `stride`.
+struct NormJob<'a>(
+    &'a [f64],
+    &'a [f64],
+    &'a [f64],
+    usize,
+    usize,
+    &'a [f64],
+    usize,
+    &'a mut [f64],
+    usize,
+);
+
+/// [`whitened_norms`] on tiles of up to `R` clusters by `NV` 4-lane vectors of points.
 #[inline(always)]
-fn norms<V: Lanes, const R: usize, const NV: usize>(
-    m: &[f64],
-    d: usize,
-    diff: &[f64],
-    ss: &mut [f64; BLOCK],
-) {
-    for h in (0..BLOCK).step_by(4 * NV) {
-        let mut s = [V::zero(); NV];
-        let mut a0 = 0;
-        while a0 < d {
-            // The last pass takes the rows that are left (R ≤ 6).
-            match (d - a0).min(R) {
-                1 => norm_rows::<V, 1, NV>(m, d, a0, diff, h, &mut s),
-                2 => norm_rows::<V, 2, NV>(m, d, a0, diff, h, &mut s),
-                3 => norm_rows::<V, 3, NV>(m, d, a0, diff, h, &mut s),
-                4 => norm_rows::<V, 4, NV>(m, d, a0, diff, h, &mut s),
-                5 => norm_rows::<V, 5, NV>(m, d, a0, diff, h, &mut s),
-                _ => norm_rows::<V, 6, NV>(m, d, a0, diff, h, &mut s),
+fn norms<V: Lanes, const R: usize, const NV: usize>(job: NormJob<'_>) {
+    let NormJob(mt, c, base, d, k, x, blocks, out, stride) = job;
+    for (blk, xb) in x.chunks_exact(d * BLOCK).take(blocks).enumerate() {
+        for h in (0..BLOCK).step_by(4 * NV) {
+            let p0 = blk * BLOCK + h;
+            let mut i0 = 0;
+            while i0 < k {
+                let r = (k - i0).min(R);
+                let t = NormTile(mt, c, base, d, k, i0, xb, h, out, stride, p0);
+                match r {
+                    1 => norm_tile::<V, 1, NV>(t),
+                    2 => norm_tile::<V, 2, NV>(t),
+                    _ => norm_tile::<V, R, NV>(t),
+                }
+                i0 += r;
             }
-            a0 += R;
-        }
-        for (v, sv) in s.iter().enumerate() {
-            sv.store(&mut ss[h + 4 * v..]);
         }
     }
 }
 
-/// Rows `a0 … a0 + R − 1` of `y = M diff` on the `4 · NV` points `h …` of the block, added to
-/// the norms as `s += y_a²` in ascending `a`. Each `y_a` is a chain of fused multiply-adds over
-/// `b = 0 … a` in ascending order; `R · NV` chains share each load of `diff` and cover the
-/// multiply-add latency. (Subtracting `μ` inside this loop instead of storing `diff` measured
-/// slower with AVX2's sixteen registers and no faster with thirty-two.)
+/// One tile's arguments: as [`NormJob`], then the tile's first cluster, the block, the tile's
+/// first point in the block and in `out`.
+struct NormTile<'a, 'b>(
+    &'a [f64],
+    &'a [f64],
+    &'a [f64],
+    usize,
+    usize,
+    usize,
+    &'a [f64],
+    usize,
+    &'b mut [f64],
+    usize,
+    usize,
+);
+
+/// The clusters `i0 … i0 + C − 1` on the `4 · NV` points `h …` of one block.
 #[inline(always)]
-fn norm_rows<V: Lanes, const R: usize, const NV: usize>(
-    m: &[f64],
-    d: usize,
-    a0: usize,
-    diff: &[f64],
-    h: usize,
-    s: &mut [V; NV],
-) {
-    let col = |b: usize| -> &[f64] { &diff[b * BLOCK + h..][..4 * NV] };
-    // Row a0 + r of M up to the diagonal, sliced once (no bounds check per element below).
-    let rows: [&[f64]; R] = std::array::from_fn(|r| &m[(a0 + r) * d..][..=a0 + r]);
-    let mut y = [[V::zero(); NV]; R];
-    for (b, c) in diff.chunks_exact(BLOCK).take(a0 + 1).enumerate() {
-        let c = &c[h..h + 4 * NV];
-        // Loops, not `array::from_fn`: its closure would not inherit the target features, and
-        // every intrinsic inside it would become a call.
-        let mut l = [V::zero(); R];
-        for r in 0..R {
-            l[r] = V::splat(rows[r][b]);
-        }
-        for v in 0..NV {
-            let db = V::load(&c[4 * v..]);
-            for r in 0..R {
-                y[r][v] = y[r][v].fma(l[r], db);
+fn norm_tile<V: Lanes, const C: usize, const NV: usize>(t: NormTile<'_, '_>) {
+    let NormTile(mt, c, base, d, k, i0, xb, h, out, stride, p0) = t;
+    let mut s = [[V::zero(); NV]; C];
+    let mut tri = 0;
+    for a in 0..d {
+        // Loops for the vectors, not `array::from_fn`: its closure would not inherit the
+        // target features, and every intrinsic inside it would become a call.
+        let mut y = [[V::zero(); NV]; C];
+        let ca: &[f64; C] = c[a * k + i0..][..C].try_into().unwrap();
+        for r in 0..C {
+            let v0 = V::splat(-ca[r]);
+            for v in 0..NV {
+                y[r][v] = v0;
             }
         }
-    }
-    // The triangle's corner: column a0 + c reaches rows c … R − 1.
-    for c in 1..R {
-        let b = a0 + c;
-        let cb = col(b);
-        for v in 0..NV {
-            let db = V::load(&cb[4 * v..]);
-            for r in c..R {
-                y[r][v] = y[r][v].fma(V::splat(rows[r][b]), db);
+        // Row a of every M, sliced once: no bounds check per element below.
+        let rows = &mt[tri * k..(tri + a + 1) * k];
+        for (mb, xc) in rows.chunks_exact(k).zip(xb.chunks_exact(BLOCK)) {
+            let m: &[f64; C] = mb[i0..i0 + C].try_into().unwrap();
+            let xc = &xc[h..h + 4 * NV];
+            let mut xv = [V::zero(); NV];
+            for v in 0..NV {
+                xv[v] = V::load(&xc[4 * v..]);
+            }
+            for r in 0..C {
+                let mv = V::splat(m[r]);
+                for v in 0..NV {
+                    y[r][v] = y[r][v].fma(mv, xv[v]);
+                }
             }
         }
+        for r in 0..C {
+            for v in 0..NV {
+                s[r][v] = s[r][v].fma(y[r][v], y[r][v]);
+            }
+        }
+        tri += a + 1;
     }
-    for yr in &y {
+    let half = V::splat(-0.5);
+    for r in 0..C {
+        let (b, o) = (V::splat(base[i0 + r]), &mut out[(i0 + r) * stride + p0..]);
         for v in 0..NV {
-            s[v] = s[v].fma(yr[v], yr[v]);
+            b.fma(half, s[r][v]).store(&mut o[4 * v..]);
         }
     }
 }

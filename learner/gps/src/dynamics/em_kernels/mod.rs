@@ -264,19 +264,18 @@ mod mstep;
 mod responsibilities;
 
 pub use cholesky::{cholesky, half_log_det};
-pub use estep::{invert_lower, small_norms, whitened_norms};
-pub use mstep::{
-    product_column, product_columns, product_panels, products, weighted_sums, PANEL,
-};
+pub use estep::{invert_lower, pack_whitening, small_norms, whitened_norms};
+pub use mstep::{product_column, product_columns, product_panels, products, weighted_sums, PANEL};
 pub use responsibilities::{
     exp_slice, logsum_points, logsum_points_weights, normalise_over_clusters, EXP_FLOOR,
 };
 
 /// Flops of the E-step's dense arithmetic on `n` points, `k` clusters, dimension `d`, as
 /// [`whitened_norms`] does it (padding excluded; a multiply-add counted as two): per cluster and
-/// point, `d` subtractions, `d(d+1)/2` multiply-adds of `L⁻¹ (x − μ)` and `d` of the norm.
+/// point, `d(d+1)/2` multiply-adds of `L⁻¹ x − L⁻¹ μ` and `d` of the norm (the final
+/// `base − ½ s` and the per-cluster `L⁻¹ μ` of [`pack_whitening`] not counted).
 pub fn estep_flops(n: usize, d: usize, k: usize) -> f64 {
-    (n * k * (d + d * (d + 1) + 2 * d)) as f64
+    (n * k * (d * (d + 1) + 2 * d)) as f64
 }
 
 /// Flops of the M-step's dense arithmetic, as [`weighted_sums`] does it: per cluster and point,
@@ -358,28 +357,53 @@ mod tests {
     #[test]
     fn whitened_norms_follow_their_documented_order_bit_for_bit_on_every_build() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        for d in [1, 2, 3, 4, 5, 6, 7, 8, 13, 27] {
-            let m = random_lower(&mut rng, d);
-            let mu: Vec<f64> = (0..d).map(|_| rng.random_range(-1.0..1.0)).collect();
-            let x: Vec<f64> = (0..d * BLOCK)
+        for (d, k, blocks) in [
+            (1, 1, 1),
+            (2, 2, 1),
+            (3, 4, 2),
+            (4, 5, 1),
+            (5, 7, 1),
+            (8, 3, 2),
+            (13, 11, 1),
+            (14, 11, 2),
+            (27usize, 12usize, 2usize),
+        ] {
+            let minv: Vec<f64> = (0..k).flat_map(|_| random_lower(&mut rng, d)).collect();
+            let mu: Vec<f64> = (0..k * d).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let base: Vec<f64> = (0..k).map(|_| rng.random_range(-30.0..0.0)).collect();
+            let x: Vec<f64> = (0..blocks * d * BLOCK)
                 .map(|_| rng.random_range(-3.0..3.0))
                 .collect();
-            let mut diff = vec![0.0; d * BLOCK];
+            let stride = blocks * BLOCK + 4;
             for isa in isas() {
-                let mut ss = [0.0; BLOCK];
-                whitened_norms(isa, &m, &mu, d, &x, &mut diff, &mut ss);
-                for j in 0..BLOCK {
-                    // The documented order: y_a a fused chain over ascending b from 0, the norm
-                    // a fused chain over ascending a.
-                    let mut norm = 0.0f64;
-                    for a in 0..d {
-                        let mut y = 0.0f64;
-                        for b in 0..=a {
-                            y = m[a * d + b].mul_add(x[b * BLOCK + j] - mu[b], y);
+                let (mut mt, mut c) = (Vec::new(), Vec::new());
+                pack_whitening(isa, &minv, &mu, d, k, &mut mt, &mut c);
+                let mut out = vec![f64::NAN; k * stride];
+                whitened_norms(isa, &mt, &c, &base, d, k, &x, blocks, &mut out, stride);
+                for i in 0..k {
+                    let m = &minv[i * d * d..];
+                    for p in 0..blocks * BLOCK {
+                        // The documented order: c_a = (M μ)_a a fused chain from +0, y_a a
+                        // fused chain over ascending b from −c_a, the norm a fused chain over
+                        // ascending a, then base − s/2 fused.
+                        let xp = |b: usize| x[(p / BLOCK) * d * BLOCK + b * BLOCK + p % BLOCK];
+                        let mut norm = 0.0f64;
+                        for a in 0..d {
+                            let ca =
+                                (0..=a).fold(0.0f64, |s, b| m[a * d + b].mul_add(mu[i * d + b], s));
+                            let y = (0..=a).fold(-ca, |s, b| m[a * d + b].mul_add(xp(b), s));
+                            norm = y.mul_add(y, norm);
                         }
-                        norm = y.mul_add(y, norm);
+                        let want = (-0.5f64).mul_add(norm, base[i]);
+                        let got = out[i * stride + p];
+                        assert_eq!(got.to_bits(), want.to_bits(), "{isa:?} d={d} i={i} p={p}");
                     }
-                    assert_eq!(ss[j].to_bits(), norm.to_bits(), "{isa:?} d={d} j={j}");
+                    assert!(
+                        out[i * stride + blocks * BLOCK..(i + 1) * stride]
+                            .iter()
+                            .all(|v| v.is_nan()),
+                        "nothing written past the blocks"
+                    );
                 }
             }
         }
@@ -447,7 +471,11 @@ mod tests {
                 for c in 0..cols {
                     let pc = |p: usize| prod[((c / PANEL) * n + p) * PANEL + c % PANEL];
                     let s = (0..n).fold(0.0f64, |acc, p| w[p * k + i].mul_add(pc(p), acc));
-                    assert_eq!(out[i * cols + c].to_bits(), s.to_bits(), "d={d} i={i} c={c}");
+                    assert_eq!(
+                        out[i * cols + c].to_bits(),
+                        s.to_bits(),
+                        "d={d} i={i} c={c}"
+                    );
                 }
             }
             for isa in isas() {
@@ -671,44 +699,35 @@ mod tests {
                 .fold(0.0, f64::max)
         };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let (d, blocks, k) = (27, 16, 12);
-        let m = random_lower(&mut rng, d);
-        let mu = vec![0.1; d];
-        let x: Vec<f64> = (0..blocks * d * BLOCK)
-            .map(|_| rng.random_range(-3.0..3.0))
-            .collect();
-        let mut diff = vec![0.0; d * BLOCK];
         let reps = 200;
         let peak = best(&mut || fma_peak(2_000_000));
         println!("peak {peak:.1} GFLOP/s");
-        for isa in isas().into_iter().filter(|&isa| isa != Isa::Portable) {
-            let e = best(&mut || {
-                let mut ss = [0.0; BLOCK];
-                for _ in 0..reps {
-                    for blk in 0..blocks {
-                        for _ in 0..k {
-                            let xb = &x[blk * d * BLOCK..];
-                            whitened_norms(isa, &m, &mu, d, xb, &mut diff, &mut ss);
-                        }
+        // The bench's problem, the default prior's largest (19 samples of T = 100, K = 20), and
+        // problem B's second iteration (dX = 6, dU = 2, 464 points, K = 11).
+        for (d, blocks, k) in [(27, 16, 12), (27, 59, 20), (14, 15, 11)] {
+            let n = blocks * BLOCK;
+            let minv: Vec<f64> = (0..k).flat_map(|_| random_lower(&mut rng, d)).collect();
+            let mu = vec![0.1; k * d];
+            let base = vec![-20.0; k];
+            let (mut mt, mut c) = (Vec::new(), Vec::new());
+            pack_whitening(Isa::detect(), &minv, &mu, d, k, &mut mt, &mut c);
+            let x: Vec<f64> = (0..blocks * d * BLOCK)
+                .map(|_| rng.random_range(-3.0..3.0))
+                .collect();
+            let wt: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
+            let (mut prod, mut row) = (Vec::new(), Vec::new());
+            products(&x, n, d, &mut prod, &mut row);
+            let panels = product_panels(d);
+            let mut out = vec![0.0; k * panels * PANEL];
+            let mut logobs = vec![0.0; k * n];
+            for isa in isas().into_iter().filter(|&isa| isa != Isa::Portable) {
+                let e = best(&mut || {
+                    for _ in 0..reps {
+                        let o = &mut logobs;
+                        whitened_norms(isa, &mt, &c, &base, d, k, &x, blocks, o, n);
                     }
-                }
-                reps as f64 * estep_flops(blocks * BLOCK, d, k)
-            });
-            println!(
-                "{isa:?}: whitened_norms {e:.1} GFLOP/s ({:.0} %)",
-                100.0 * e / peak
-            );
-            // The bench's problem, then the default prior's largest (19 samples, K = 20).
-            for (nb, k) in [(blocks, k), (59, 20)] {
-                let n = nb * BLOCK;
-                let x: Vec<f64> = (0..nb * d * BLOCK)
-                    .map(|_| rng.random_range(-3.0..3.0))
-                    .collect();
-                let wt: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
-                let (mut prod, mut row) = (Vec::new(), Vec::new());
-                products(&x, n, d, &mut prod, &mut row);
-                let panels = product_panels(d);
-                let mut out = vec![0.0; k * panels * PANEL];
+                    reps as f64 * estep_flops(n, d, k)
+                });
                 let mm = best(&mut || {
                     for _ in 0..reps {
                         weighted_sums(isa, n, k, &wt, &prod, panels, &mut out);
@@ -716,7 +735,9 @@ mod tests {
                     reps as f64 * mstep_flops(n, d, k)
                 });
                 println!(
-                    "{isa:?}: weighted_sums, {n} points, K = {k}: {mm:.1} GFLOP/s ({:.0} %)",
+                    "{isa:?}, d = {d}, {n} points, K = {k}: whitened_norms {e:.1} GFLOP/s \
+                     ({:.0} %), weighted_sums {mm:.1} GFLOP/s ({:.0} %)",
+                    100.0 * e / peak,
                     100.0 * mm / peak
                 );
             }

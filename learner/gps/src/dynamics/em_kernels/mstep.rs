@@ -142,7 +142,7 @@ fn tile<V: Lanes, const R: usize>(t: Tile<'_>) {
     for (pv, wp) in panel.chunks_exact(PANEL).zip(w.chunks_exact(k)) {
         let wr: &[f64; R] = wp[i0..i0 + R].try_into().unwrap();
         let (p0, p1) = (V::load(&pv[..4]), V::load(&pv[4..]));
-        // Loops for the vectors, not `array::from_fn` (see `norm_rows`).
+        // Loops for the vectors, not `array::from_fn` (see `norm_tile`).
         for r in 0..R {
             let b = V::splat(wr[r]);
             acc[r][0] = acc[r][0].fma(b, p0);

@@ -116,9 +116,18 @@ pub fn normalise_over_clusters(
                 }
                 let c = (n - p).min(4);
                 lse[p..p + c].copy_from_slice(&buf[..c]);
-                for i in 0..k {
-                    for (v, &b) in l[i * stride + p..i * stride + p + c].iter_mut().zip(&buf) {
-                        *v -= b;
+                if c == 4 {
+                    let bv = V::load(&buf);
+                    for i in 0..k {
+                        let li = &mut l[i * stride + p..][..4];
+                        V::load(li).sub(bv).store(li);
+                    }
+                } else {
+                    for i in 0..k {
+                        let li = &mut l[i * stride + p..][..c];
+                        for (v, &b) in li.iter_mut().zip(&buf) {
+                            *v -= b;
+                        }
                     }
                 }
             }
