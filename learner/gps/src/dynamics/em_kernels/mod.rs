@@ -18,6 +18,10 @@
 /// Points per block.
 pub const BLOCK: usize = 32;
 
+/// The mantissa bits of an f64, and the exponent field of 1.0.
+const MANTISSA: u64 = (1 << 52) - 1;
+const ONE_EXPONENT: u64 = 1023 << 52;
+
 /// Which instantiation of the kernels runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Isa {
@@ -83,6 +87,9 @@ trait Lanes: Copy {
     fn exp2_of_rounded(self) -> Self;
     /// `self` where `x` is not below `lim` (NaN included), else `+0`.
     fn zero_where_below(self, x: Self, lim: f64) -> Self;
+    /// `(e, m)` with `self = 2^e · m`, `m` in `[1, 2)`, for positive normal lanes (`e` as an
+    /// f64 integer): the exponent field less 1023, and the mantissa with the exponent of 1.
+    fn exponent_split(self) -> (Self, Self);
     /// `(l0 + l1) + (l2 + l3)`.
     fn sum(self) -> f64 {
         let mut o = [0.0; 4];
@@ -144,6 +151,13 @@ impl Lanes for [f64; 4] {
     #[inline(always)]
     fn zero_where_below(self, x: Self, lim: f64) -> Self {
         [0, 1, 2, 3].map(|j| if x[j] < lim { 0.0 } else { self[j] })
+    }
+    #[inline(always)]
+    fn exponent_split(self) -> (Self, Self) {
+        (
+            self.map(|v| ((v.to_bits() >> 52) as i64 - 1023) as f64),
+            self.map(|v| f64::from_bits(v.to_bits() & MANTISSA | ONE_EXPONENT)),
+        )
     }
 }
 
@@ -217,6 +231,22 @@ mod avx {
                         let keep = _mm256_cmp_pd::<_CMP_NLT_UQ>(x.0, _mm256_set1_pd(lim));
                         _mm256_and_pd(keep, self.0)
                     })
+                }
+                #[inline(always)]
+                fn exponent_split(self) -> (Self, Self) {
+                    // The exponent field as the integer bits of 2^52 + field, less 2^52 + 1023.
+                    const BIAS: f64 = 4_503_599_627_370_496.0 + 1023.0;
+                    unsafe {
+                        let bits = _mm256_castpd_si256(self.0);
+                        let field = _mm256_srli_epi64::<52>(bits);
+                        let big = _mm256_or_si256(field, _mm256_set1_epi64x(0x4330 << 48));
+                        let e = _mm256_sub_pd(_mm256_castsi256_pd(big), _mm256_set1_pd(BIAS));
+                        let m = _mm256_or_si256(
+                            _mm256_and_si256(bits, _mm256_set1_epi64x(super::MANTISSA as i64)),
+                            _mm256_set1_epi64x(super::ONE_EXPONENT as i64),
+                        );
+                        ($T(e), $T(_mm256_castsi256_pd(m)))
+                    }
                 }
             }
         };
@@ -598,6 +628,53 @@ mod tests {
     }
 
     /// GPS `logsum` written out (max-shifted, `−∞` max replaced by 0), on libm's `exp`.
+    #[test]
+    fn ln_is_within_one_ulp_of_libm_and_every_build_agrees() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let mut x: Vec<f64> = (0..4000).map(|_| rng.random_range(1.0..12.0)).collect();
+        x.extend((0..2000).map(|_| 10f64.powf(rng.random_range(-300.0..300.0))));
+        x.extend((0..1000).map(|_| rng.random_range(0.99..1.01)));
+        let sqrt2 = std::f64::consts::SQRT_2;
+        for v in [
+            1.0,
+            2.0,
+            0.5,
+            1e-300,
+            1e300,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            sqrt2,
+        ] {
+            x.extend(
+                [v, v.next_up(), v.next_down()]
+                    .iter()
+                    .filter(|w| w.is_normal()),
+            );
+        }
+        while x.len() % 4 != 0 {
+            x.push(1.0);
+        }
+        let mut want = vec![0.0; x.len()];
+        responsibilities::ln_slice(Isa::Portable, &x, &mut want);
+        for (&xi, &w) in x.iter().zip(&want) {
+            assert!(
+                ulps(w, xi.ln()) <= 1,
+                "ln({xi:e}) = {w:e}, libm {:e}",
+                xi.ln()
+            );
+        }
+        assert_eq!(
+            want[x.iter().position(|&v| v == 1.0).unwrap()].to_bits(),
+            0,
+            "ln 1 = +0"
+        );
+        for isa in isas() {
+            let mut got = vec![0.0; x.len()];
+            responsibilities::ln_slice(isa, &x, &mut got);
+            assert_eq!(bits(&got), bits(&want), "{isa:?}");
+        }
+    }
+
     fn logsum_ref(v: &[f64]) -> f64 {
         let mut m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if m == f64::NEG_INFINITY {

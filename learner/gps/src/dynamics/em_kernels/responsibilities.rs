@@ -51,6 +51,45 @@ fn exp<V: Lanes>(x: V) -> V {
     p.mul(t.exp2_of_rounded()).zero_where_below(x, EXP_FLOOR)
 }
 
+/// fdlibm's (`e_log.c`) minimax coefficients `Lg_i` of `R(z) = Σ_i Lg_i z^i` in
+/// `ln(1 + f) = 2s + s R(s²)`, `s = f / (2 + f)`, for `|s| ≤ 0.1716` (its error there is below
+/// 2^−58.45).
+const LOG_LG: [f64; 7] = [
+    6.666666666666735130e-01,
+    3.999999999940941908e-01,
+    2.857142874366239149e-01,
+    2.222219843214978396e-01,
+    1.818357216161805012e-01,
+    1.531383769920937332e-01,
+    1.479819860511658591e-01,
+];
+
+/// `ln x` in every lane for positive normal `x` (the log-sum-exp's sums, whose largest term is
+/// `e^0 = 1`), within one ulp of the correctly rounded value (tested), as fdlibm's `log`:
+/// `x = 2^e m` with `m` folded into `[√½, √2)`, `f = m − 1` (exact), `s = f / (2 + f)`,
+/// `ln x = e ln2_hi − ((f²/2 − (s (f²/2 + R) + e ln2_lo)) − f)` with `ln 2` in two parts.
+#[inline(always)]
+fn ln<V: Lanes>(x: V) -> V {
+    const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
+    let (e, m) = x.exponent_split();
+    // 1 where m ≥ √2 (then m / 2 and e + 1, both exact), else 0.
+    let up = V::splat(1.0).zero_where_below(m, std::f64::consts::SQRT_2);
+    let m = m.mul(V::splat(1.0).sub(V::splat(0.5).mul(up)));
+    let e = e.add(up);
+    let f = m.sub(V::splat(1.0));
+    let s = f.div(V::splat(2.0).add(f));
+    let z = s.mul(s);
+    let mut r = V::splat(LOG_LG[6]);
+    for &c in LOG_LG[..6].iter().rev() {
+        r = V::splat(c).fma(r, z);
+    }
+    let r = r.mul(z);
+    let hfsq = V::splat(0.5).mul(f).mul(f);
+    let t = e.mul(V::splat(LN2_LO)).fma(s, hfsq.add(r));
+    e.mul(V::splat(LN2_HI)).sub(hfsq.sub(t).sub(f))
+}
+
 /// Four values from `s[i..]`, lanes past `s.len()` filled with `−∞` (which [`exp`] maps to 0
 /// and a maximum ignores).
 #[inline(always)]
@@ -108,11 +147,17 @@ pub fn normalise_over_clusters(
                 for i in 0..k {
                     s = s.add(exp(load_or_neg_inf::<V>(row(i), p).sub(m)));
                 }
-                let (mut sb, mut mb) = ([0.0; 4], [0.0; 4]);
+                let mut sb = [0.0; 4];
                 s.store(&mut sb);
-                m.store(&mut mb);
-                for j in 0..4 {
-                    buf[j] = sb[j].ln() + mb[j];
+                if sb.iter().all(|v| v.is_normal() && *v > 0.0) {
+                    ln(s).add(m).store(&mut buf);
+                } else {
+                    // A point with every log probability −∞ (a sum of 0), or NaN: libm's `ln`.
+                    let mut mb = [0.0; 4];
+                    m.store(&mut mb);
+                    for j in 0..4 {
+                        buf[j] = sb[j].ln() + mb[j];
+                    }
                 }
                 let c = (n - p).min(4);
                 lse[p..p + c].copy_from_slice(&buf[..c]);
@@ -207,4 +252,18 @@ fn logsum_exps<V: Lanes, const WEIGHTS: bool>(l: &[f64], w: &mut [f64]) -> f64 {
         }
     }
     total.ln() + mx
+}
+
+/// [`ln`] of every element of `x` (a multiple of four long) into `out`, for the tests.
+#[cfg(test)]
+pub(super) fn ln_slice(isa: Isa, x: &[f64], out: &mut [f64]) {
+    assert!(x.len() == out.len() && x.len() % 4 == 0);
+    dispatch!(
+        isa,
+        fn k(x: &[f64], out: &mut [f64]) {
+            for (xi, oi) in x.chunks_exact(4).zip(out.chunks_exact_mut(4)) {
+                ln(V::load(xi)).store(oi);
+            }
+        }
+    )
 }
