@@ -466,12 +466,8 @@ impl Gmm {
         let cols = panels * PANEL;
         ws.wt.resize(n * k, 0.0);
         ws.sums.resize(k * cols, 0.0);
-        for (i, wi) in ws.w.chunks(ws.stride).take(k).enumerate() {
-            for (row, &wp) in ws.wt.chunks_exact_mut(k).zip(&wi[..n]) {
-                row[i] = wp;
-            }
-        }
         let isa = em_kernels::Isa::detect();
+        em_kernels::transpose_weights(isa, &ws.w, ws.stride, n, k, &mut ws.wt);
         em_kernels::weighted_sums(isa, n, k, &ws.wt, &ws.prod, panels, &mut ws.sums);
         for i in 0..k {
             let sums = &ws.sums[i * cols..(i + 1) * cols];

@@ -90,6 +90,8 @@ trait Lanes: Copy {
     /// `(e, m)` with `self = 2^e · m`, `m` in `[1, 2)`, for positive normal lanes (`e` as an
     /// f64 integer): the exponent field less 1023, and the mantissa with the exponent of 1.
     fn exponent_split(self) -> (Self, Self);
+    /// The 4 x 4 transpose: lane `j` of row `r` becomes lane `r` of row `j`.
+    fn transpose4(rows: [Self; 4]) -> [Self; 4];
     /// `(l0 + l1) + (l2 + l3)`.
     fn sum(self) -> f64 {
         let mut o = [0.0; 4];
@@ -151,6 +153,10 @@ impl Lanes for [f64; 4] {
     #[inline(always)]
     fn zero_where_below(self, x: Self, lim: f64) -> Self {
         [0, 1, 2, 3].map(|j| if x[j] < lim { 0.0 } else { self[j] })
+    }
+    #[inline(always)]
+    fn transpose4(r: [Self; 4]) -> [Self; 4] {
+        [0, 1, 2, 3].map(|j| [r[0][j], r[1][j], r[2][j], r[3][j]])
     }
     #[inline(always)]
     fn exponent_split(self) -> (Self, Self) {
@@ -233,6 +239,23 @@ mod avx {
                     })
                 }
                 #[inline(always)]
+                fn transpose4(r: [Self; 4]) -> [Self; 4] {
+                    unsafe {
+                        // [a0 b0 a2 b2], [a1 b1 a3 b3], [c0 d0 c2 d2], [c1 d1 c3 d3], then the
+                        // 128-bit halves paired.
+                        let t0 = _mm256_unpacklo_pd(r[0].0, r[1].0);
+                        let t1 = _mm256_unpackhi_pd(r[0].0, r[1].0);
+                        let t2 = _mm256_unpacklo_pd(r[2].0, r[3].0);
+                        let t3 = _mm256_unpackhi_pd(r[2].0, r[3].0);
+                        [
+                            $T(_mm256_permute2f128_pd::<0x20>(t0, t2)),
+                            $T(_mm256_permute2f128_pd::<0x20>(t1, t3)),
+                            $T(_mm256_permute2f128_pd::<0x31>(t0, t2)),
+                            $T(_mm256_permute2f128_pd::<0x31>(t1, t3)),
+                        ]
+                    }
+                }
+                #[inline(always)]
                 fn exponent_split(self) -> (Self, Self) {
                     // The exponent field as the integer bits of 2^52 + field, less 2^52 + 1023.
                     const BIAS: f64 = 4_503_599_627_370_496.0 + 1023.0;
@@ -295,7 +318,10 @@ mod responsibilities;
 
 pub use cholesky::{cholesky, half_log_det};
 pub use estep::{invert_lower, pack_whitening, small_norms, whitened_norms};
-pub use mstep::{product_column, product_columns, product_panels, products, weighted_sums, PANEL};
+pub use mstep::{
+    product_column, product_columns, product_panels, products, transpose_weights, weighted_sums,
+    PANEL,
+};
 pub use responsibilities::{
     exp_slice, logsum_points, logsum_points_weights, normalise_over_clusters, EXP_FLOOR,
 };
@@ -463,6 +489,34 @@ mod tests {
                 }
                 for c in product_columns(d)..panels * PANEL {
                     assert_eq!(at(p, c).to_bits(), 0, "padding +0");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn transpose_weights_moves_every_weight() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
+        for (n, k) in [
+            (1usize, 1usize),
+            (3, 2),
+            (4, 4),
+            (7, 5),
+            (33, 11),
+            (64, 12),
+            (45, 20),
+        ] {
+            let stride = n.div_ceil(BLOCK) * BLOCK;
+            let w: Vec<f64> = (0..k * stride)
+                .map(|_| rng.random_range(0.0..1.0))
+                .collect();
+            for isa in isas() {
+                let mut wt = vec![f64::NAN; n * k];
+                transpose_weights(isa, &w, stride, n, k, &mut wt);
+                for p in 0..n {
+                    for i in 0..k {
+                        assert_eq!(wt[p * k + i].to_bits(), w[i * stride + p].to_bits());
+                    }
                 }
             }
         }

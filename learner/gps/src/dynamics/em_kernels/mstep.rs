@@ -67,6 +67,40 @@ pub fn products(x: &[f64], n: usize, d: usize, prod: &mut Vec<f64>, row: &mut Ve
     }
 }
 
+/// The M-step's weights point-major: `wt[p · k + i] = w[i · stride + p]` for the `n` points and
+/// `k` clusters of the cluster-major `w` (rows `stride` apart), four clusters by four points at a
+/// time.
+pub fn transpose_weights(isa: Isa, w: &[f64], stride: usize, n: usize, k: usize, wt: &mut [f64]) {
+    assert!(n <= stride && (k == 0 || w.len() >= (k - 1) * stride + n) && wt.len() >= n * k);
+    dispatch!(
+        isa,
+        fn kern(w: &[f64], stride: usize, n: usize, k: usize, wt: &mut [f64]) {
+            let (k4, n4) = (k / 4 * 4, n / 4 * 4);
+            for i0 in (0..k4).step_by(4) {
+                for p0 in (0..n4).step_by(4) {
+                    let mut r = [V::zero(); 4];
+                    for (j, rj) in r.iter_mut().enumerate() {
+                        *rj = V::load(&w[(i0 + j) * stride + p0..]);
+                    }
+                    for (j, c) in V::transpose4(r).into_iter().enumerate() {
+                        c.store(&mut wt[(p0 + j) * k + i0..]);
+                    }
+                }
+                for p in n4..n {
+                    for i in i0..i0 + 4 {
+                        wt[p * k + i] = w[i * stride + p];
+                    }
+                }
+            }
+            for i in k4..k {
+                for (row, &wp) in wt.chunks_exact_mut(k).zip(&w[i * stride..][..n]) {
+                    row[i] = wp;
+                }
+            }
+        }
+    )
+}
+
 /// Every cluster's M-step sums: `out[i · cols + c] = Σ_p w[p · k + i] · P[p, c]` for the `k`
 /// clusters and every column `c < cols = panels · PANEL` of the product rows `prod`
 /// ([`products`] of `n` points). `w` holds the weights point-major (`n × k`). Each sum runs
