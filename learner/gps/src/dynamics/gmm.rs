@@ -99,9 +99,10 @@ struct Workspace {
     /// The E-step's per-cluster constant `c0 − ½ log det Σ_i + log mass_i`.
     base: Vec<f64>,
     /// The points' product rows in panels ([`em_kernels::products`]), formed once per EM run,
-    /// and a row's scratch.
+    /// and its scratch.
     prod: Vec<f64>,
-    prod_row: Vec<f64>,
+    prod_pairs: Vec<[usize; 2]>,
+    prod_ext: Vec<f64>,
     /// The M-step's weights point-major (`N x K`) and its sums (`K x` panel columns,
     /// [`em_kernels::weighted_sums`]).
     wt: Vec<f64>,
@@ -129,7 +130,8 @@ impl Workspace {
             blocks: 0,
             base: Vec::new(),
             prod: Vec::new(),
-            prod_row: Vec::new(),
+            prod_pairs: Vec::new(),
+            prod_ext: Vec::new(),
             wt: Vec::new(),
             sums: Vec::new(),
             logobs: Vec::new(),
@@ -396,7 +398,16 @@ impl Gmm {
         self.ws.ensure(n, k);
         self.ws.load(data);
         let ws = &mut self.ws;
-        em_kernels::products(&ws.xb, n, d, &mut ws.prod, &mut ws.prod_row);
+        let isa = em_kernels::Isa::detect();
+        em_kernels::products(
+            isa,
+            &ws.xb,
+            n,
+            d,
+            &mut ws.prod,
+            &mut ws.prod_pairs,
+            &mut ws.prod_ext,
+        );
         let mut report = EmReport {
             k,
             n_points: n,

@@ -473,22 +473,25 @@ mod tests {
             let x: Vec<f64> = (0..blocks * d * BLOCK)
                 .map(|_| rng.random_range(-2.0..2.0))
                 .collect();
-            let (mut prod, mut row) = (vec![f64::NAN; 3], Vec::new());
-            products(&x, n, d, &mut prod, &mut row);
             let panels = product_panels(d);
-            assert_eq!(prod.len(), panels * n * PANEL);
-            let at = |p: usize, c: usize| prod[((c / PANEL) * n + p) * PANEL + c % PANEL];
             let xv = |p: usize, a: usize| x[(p / BLOCK) * d * BLOCK + a * BLOCK + p % BLOCK];
-            for p in 0..n {
-                for a in 0..d {
-                    assert_eq!(at(p, a).to_bits(), xv(p, a).to_bits());
-                    for b in 0..=a {
-                        let want = xv(p, a) * xv(p, b);
-                        assert_eq!(at(p, product_column(d, a, b)).to_bits(), want.to_bits());
+            for isa in isas() {
+                let (mut prod, mut pairs) = (vec![f64::NAN; 3], Vec::new());
+                products(isa, &x, n, d, &mut prod, &mut pairs, &mut Vec::new());
+                assert_eq!(prod.len(), panels * n * PANEL);
+                let at = |p: usize, c: usize| prod[((c / PANEL) * n + p) * PANEL + c % PANEL];
+                for p in 0..n {
+                    for a in 0..d {
+                        assert_eq!(at(p, a).to_bits(), xv(p, a).to_bits(), "{isa:?}");
+                        for b in 0..=a {
+                            let want = xv(p, a) * xv(p, b);
+                            let got = at(p, product_column(d, a, b));
+                            assert_eq!(got.to_bits(), want.to_bits(), "{isa:?}");
+                        }
                     }
-                }
-                for c in product_columns(d)..panels * PANEL {
-                    assert_eq!(at(p, c).to_bits(), 0, "padding +0");
+                    for c in product_columns(d)..panels * PANEL {
+                        assert_eq!(at(p, c).to_bits(), 0, "{isa:?}: padding +0");
+                    }
                 }
             }
         }
@@ -541,7 +544,15 @@ mod tests {
                 .collect();
             let w: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
             let (mut prod, mut row) = (Vec::new(), Vec::new());
-            products(&x, n, d, &mut prod, &mut row);
+            products(
+                Isa::detect(),
+                &x,
+                n,
+                d,
+                &mut prod,
+                &mut row,
+                &mut Vec::new(),
+            );
             let panels = product_panels(d);
             let cols = panels * PANEL;
             let run = |isa: Isa| {
@@ -847,7 +858,15 @@ mod tests {
                 .collect();
             let wt: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
             let (mut prod, mut row) = (Vec::new(), Vec::new());
-            products(&x, n, d, &mut prod, &mut row);
+            products(
+                Isa::detect(),
+                &x,
+                n,
+                d,
+                &mut prod,
+                &mut row,
+                &mut Vec::new(),
+            );
             let panels = product_panels(d);
             let mut out = vec![0.0; k * panels * PANEL];
             let mut logobs = vec![0.0; k * n];

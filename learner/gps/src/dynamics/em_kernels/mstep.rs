@@ -39,32 +39,70 @@ pub fn product_column(d: usize, a: usize, b: usize) -> usize {
 /// The product rows of the `n` points in the blocks `x` (module layout, dimension `d`) in
 /// panels: column `c` of point `p` at `prod[(c / PANEL) · n · PANEL + p · PANEL + c % PANEL]`,
 /// so that one panel is `n` consecutive runs of [`PANEL`] values. Padding columns are `+0`.
-/// `row` is scratch.
-pub fn products(x: &[f64], n: usize, d: usize, prod: &mut Vec<f64>, row: &mut Vec<f64>) {
+/// Four points by four columns at a time: the columns' factors are rows of the block (four
+/// consecutive points each) or of ones and zeros, multiplied and transposed into the points'
+/// rows. `pairs` and `ext` (a block and its two extra rows) are scratch.
+pub fn products(
+    isa: Isa,
+    x: &[f64],
+    n: usize,
+    d: usize,
+    prod: &mut Vec<f64>,
+    pairs: &mut Vec<[usize; 2]>,
+    ext: &mut Vec<f64>,
+) {
     assert!(x.len() >= n.div_ceil(BLOCK) * d * BLOCK);
-    let panels = product_panels(d);
+    let cols = product_panels(d) * PANEL;
     // Every element is written below: no clearing of a reused buffer.
-    prod.resize(panels * n * PANEL, 0.0);
-    row.clear();
-    row.resize(panels * PANEL, 0.0);
-    for p in 0..n {
-        let xb = &x[(p / BLOCK) * d * BLOCK + p % BLOCK..];
-        for a in 0..d {
-            row[a] = xb[a * BLOCK];
-        }
-        let (coords, tri) = row.split_at_mut(d);
-        let mut off = 0;
-        for a in 0..d {
-            let xa = coords[a];
-            for (t, &xc) in tri[off..=off + a].iter_mut().zip(&coords[..=a]) {
-                *t = xa * xc;
+    prod.resize(cols * n, 0.0);
+    // The factors of each column as offsets of rows of `ext`: row `d` holds ones, `d + 1` zeros.
+    pairs.clear();
+    pairs.extend((0..d).map(|a| [a, d]));
+    pairs.extend((0..d).flat_map(|a| (0..=a).map(move |b| [a, b])));
+    pairs.resize(cols, [d + 1, d + 1]);
+    pairs.iter_mut().flatten().for_each(|a| *a *= BLOCK);
+    ext.resize((d + 2) * BLOCK, 0.0);
+    ext[d * BLOCK..(d + 1) * BLOCK].fill(1.0);
+    ext[(d + 1) * BLOCK..].fill(0.0);
+    let (prod, pairs, ext) = (&mut prod[..], &pairs[..], &mut ext[..]);
+    dispatch!(
+        isa,
+        fn kern(
+            x: &[f64],
+            n: usize,
+            d: usize,
+            prod: &mut [f64],
+            pairs: &[[usize; 2]],
+            ext: &mut [f64],
+        ) {
+            for (blk, xb) in x
+                .chunks_exact(d * BLOCK)
+                .take(n.div_ceil(BLOCK))
+                .enumerate()
+            {
+                ext[..d * BLOCK].copy_from_slice(xb);
+                let ext = &ext[..];
+                for q in (0..BLOCK).step_by(4) {
+                    let p0 = blk * BLOCK + q;
+                    if p0 >= n {
+                        break;
+                    }
+                    let m = (n - p0).min(4);
+                    for (c0, quad) in pairs.chunks_exact(4).enumerate() {
+                        let c0 = 4 * c0;
+                        let mut v = [V::zero(); 4];
+                        for (vj, &[a, b]) in v.iter_mut().zip(quad) {
+                            *vj = V::load(&ext[a + q..]).mul(V::load(&ext[b + q..]));
+                        }
+                        let panel = &mut prod[(c0 / PANEL) * n * PANEL + c0 % PANEL..];
+                        for (j, t) in V::transpose4(v).into_iter().enumerate().take(m) {
+                            t.store(&mut panel[(p0 + j) * PANEL..]);
+                        }
+                    }
+                }
             }
-            off += a + 1;
         }
-        for (j, src) in row.chunks_exact(PANEL).enumerate() {
-            prod[(j * n + p) * PANEL..][..PANEL].copy_from_slice(src);
-        }
-    }
+    );
 }
 
 /// The M-step's weights point-major: `wt[p · k + i] = w[i · stride + p]` for the `n` points and
