@@ -39,9 +39,10 @@ pub fn product_column(d: usize, a: usize, b: usize) -> usize {
 /// The product rows of the `n` points in the blocks `x` (module layout, dimension `d`) in
 /// panels: column `c` of point `p` at `prod[(c / PANEL) · n · PANEL + p · PANEL + c % PANEL]`,
 /// so that one panel is `n` consecutive runs of [`PANEL`] values. Padding columns are `+0`.
-/// Four points by four columns at a time: the columns' factors are rows of the block (four
-/// consecutive points each) or of ones and zeros, multiplied and transposed into the points'
-/// rows. `pairs` and `ext` (a block and its two extra rows) are scratch.
+/// Panel by panel (each written as one stream), four points by four columns at a time: the
+/// columns' factors are rows of the points' blocks, copied into `ext` with two extra rows of ones
+/// and zeros per block, multiplied and transposed into the points' rows. `pairs` and `ext` are
+/// scratch.
 pub fn products(
     isa: Isa,
     x: &[f64],
@@ -51,52 +52,44 @@ pub fn products(
     pairs: &mut Vec<[usize; 2]>,
     ext: &mut Vec<f64>,
 ) {
-    assert!(x.len() >= n.div_ceil(BLOCK) * d * BLOCK);
+    let blocks = n.div_ceil(BLOCK);
+    assert!(x.len() >= blocks * d * BLOCK);
     let cols = product_panels(d) * PANEL;
     // Every element is written below: no clearing of a reused buffer.
     prod.resize(cols * n, 0.0);
-    // The factors of each column as offsets of rows of `ext`: row `d` holds ones, `d + 1` zeros.
+    // The factors of each column as offsets of rows of an `ext` block: row `d` holds ones,
+    // `d + 1` zeros.
     pairs.clear();
     pairs.extend((0..d).map(|a| [a, d]));
     pairs.extend((0..d).flat_map(|a| (0..=a).map(move |b| [a, b])));
     pairs.resize(cols, [d + 1, d + 1]);
     pairs.iter_mut().flatten().for_each(|a| *a *= BLOCK);
-    ext.resize((d + 2) * BLOCK, 0.0);
-    ext[d * BLOCK..(d + 1) * BLOCK].fill(1.0);
-    ext[(d + 1) * BLOCK..].fill(0.0);
-    let (prod, pairs, ext) = (&mut prod[..], &pairs[..], &mut ext[..]);
+    let eb = (d + 2) * BLOCK;
+    ext.resize(blocks * eb, 0.0);
+    for (e, xb) in ext.chunks_exact_mut(eb).zip(x.chunks_exact(d * BLOCK)) {
+        e[..d * BLOCK].copy_from_slice(xb);
+        e[d * BLOCK..(d + 1) * BLOCK].fill(1.0);
+        e[(d + 1) * BLOCK..].fill(0.0);
+    }
+    let (prod, pairs, ext) = (&mut prod[..], &pairs[..], &ext[..]);
     dispatch!(
         isa,
-        fn kern(
-            x: &[f64],
-            n: usize,
-            d: usize,
-            prod: &mut [f64],
-            pairs: &[[usize; 2]],
-            ext: &mut [f64],
-        ) {
-            for (blk, xb) in x
-                .chunks_exact(d * BLOCK)
-                .take(n.div_ceil(BLOCK))
-                .enumerate()
+        fn kern(n: usize, d: usize, prod: &mut [f64], pairs: &[[usize; 2]], ext: &[f64]) {
+            let eb = (d + 2) * BLOCK;
+            for (pairs, panel) in pairs
+                .chunks_exact(PANEL)
+                .zip(prod.chunks_exact_mut(n * PANEL))
             {
-                ext[..d * BLOCK].copy_from_slice(xb);
-                let ext = &ext[..];
-                for q in (0..BLOCK).step_by(4) {
-                    let p0 = blk * BLOCK + q;
-                    if p0 >= n {
-                        break;
-                    }
+                for p0 in (0..n).step_by(4) {
+                    let (e, q) = (&ext[(p0 / BLOCK) * eb..][..eb], p0 % BLOCK);
                     let m = (n - p0).min(4);
-                    for (c0, quad) in pairs.chunks_exact(4).enumerate() {
-                        let c0 = 4 * c0;
+                    for (h, quad) in pairs.chunks_exact(4).enumerate() {
                         let mut v = [V::zero(); 4];
                         for (vj, &[a, b]) in v.iter_mut().zip(quad) {
-                            *vj = V::load(&ext[a + q..]).mul(V::load(&ext[b + q..]));
+                            *vj = V::load(&e[a + q..]).mul(V::load(&e[b + q..]));
                         }
-                        let panel = &mut prod[(c0 / PANEL) * n * PANEL + c0 % PANEL..];
                         for (j, t) in V::transpose4(v).into_iter().enumerate().take(m) {
-                            t.store(&mut panel[(p0 + j) * PANEL..]);
+                            t.store(&mut panel[(p0 + j) * PANEL + 4 * h..]);
                         }
                     }
                 }
