@@ -27,6 +27,16 @@ use crate::linalg::MatSeq;
 /// Up to this many points the E-step uses its own small-N forward substitution.
 const SMALL_N: usize = 32;
 
+/// The M-step forms the points' products once per EM run while they take at most this many
+/// bytes (so that they stay in a 2 MiB L2 cache across the M-steps), or when the run may take at
+/// least [`PRODUCTS_ONCE_ITERATIONS`] iterations (forming them is then paid back even from
+/// farther caches); otherwise it forms them per point inside every M-step
+/// ([`em_kernels::weighted_sums_direct`]; the same bits). Measured (docs/design.md §5 D33):
+/// LQR+GAIfO's 5 EM iterations on 990 points gain 1.3 ms per update by forming them per point,
+/// 44 iterations on 1881 points lose 9 ms.
+const PRODUCTS_ONCE_BYTES: usize = 2 << 20;
+const PRODUCTS_ONCE_ITERATIONS: usize = 20;
+
 /// How to assign points to clusters when EM (re)initialises.
 pub enum ClusterInit<'a> {
     /// Cluster index of every point (length N, values in `0..K`), e.g. a recorded
@@ -103,6 +113,11 @@ struct Workspace {
     prod: Vec<f64>,
     prod_pairs: Vec<[usize; 2]>,
     prod_ext: Vec<f64>,
+    /// Whether this EM run's M-steps use `prod` (else `rows` and `factors`).
+    prod_once: bool,
+    /// The points as rows and the panels' factors of [`em_kernels::weighted_sums_direct`].
+    rows: Vec<f64>,
+    factors: Vec<[[usize; 2]; 2]>,
     /// The M-step's weights point-major (`N x K`) and its sums (`K x` panel columns,
     /// [`em_kernels::weighted_sums`]).
     wt: Vec<f64>,
@@ -132,6 +147,9 @@ impl Workspace {
             prod: Vec::new(),
             prod_pairs: Vec::new(),
             prod_ext: Vec::new(),
+            prod_once: true,
+            rows: Vec::new(),
+            factors: Vec::new(),
             wt: Vec::new(),
             sums: Vec::new(),
             logobs: Vec::new(),
@@ -399,15 +417,18 @@ impl Gmm {
         self.ws.load(data);
         let ws = &mut self.ws;
         let isa = em_kernels::Isa::detect();
-        em_kernels::products(
-            isa,
-            &ws.xb,
-            n,
-            d,
-            &mut ws.prod,
-            &mut ws.prod_pairs,
-            &mut ws.prod_ext,
-        );
+        let cols = em_kernels::product_panels(d) * PANEL;
+        ws.prod_once = n * cols * std::mem::size_of::<f64>() <= PRODUCTS_ONCE_BYTES
+            || max_iterations >= PRODUCTS_ONCE_ITERATIONS;
+        if ws.prod_once {
+            let (prod, pairs, ext) = (&mut ws.prod, &mut ws.prod_pairs, &mut ws.prod_ext);
+            em_kernels::products(isa, &ws.xb, n, d, prod, pairs, ext);
+        } else {
+            em_kernels::point_rows(&ws.xb, n, d, &mut ws.rows);
+            if ws.factors.is_empty() {
+                ws.factors = em_kernels::direct_factors(d);
+            }
+        }
         let mut report = EmReport {
             k,
             n_points: n,
@@ -468,25 +489,42 @@ impl Gmm {
     }
 
     /// M-step for means and covariances from the weights in the workspace (`n` points) and the
-    /// points' product rows: all clusters' `μ_i = Σ_p w_pi x_p` and `XX_i = Σ_p w_pi x_p x_pᵀ`
-    /// (lower triangle) in one [`em_kernels::weighted_sums`].
+    /// points' products: all clusters' `μ_i = Σ_p w_pi x_p` and `XX_i = Σ_p w_pi x_p x_pᵀ`
+    /// (lower triangle) in one [`em_kernels::weighted_sums`], or, for large sets and short runs,
+    /// [`em_kernels::weighted_sums_direct`] ([`PRODUCTS_ONCE_BYTES`]).
     fn mstep(&mut self, n: usize) {
         let (d, k) = (self.dim, self.k);
         let ws = &mut self.ws;
         let panels = em_kernels::product_panels(d);
-        let cols = panels * PANEL;
+        let cols = if ws.prod_once {
+            panels * PANEL
+        } else {
+            ws.factors.len() * PANEL
+        };
         ws.wt.resize(n * k, 0.0);
         ws.sums.resize(k * cols, 0.0);
         let isa = em_kernels::Isa::detect();
         em_kernels::transpose_weights(isa, &ws.w, ws.stride, n, k, &mut ws.wt);
-        em_kernels::weighted_sums(isa, n, k, &ws.wt, &ws.prod, panels, &mut ws.sums);
+        let (wt, sums) = (&ws.wt, &mut ws.sums);
+        if ws.prod_once {
+            em_kernels::weighted_sums(isa, n, k, wt, &ws.prod, panels, sums);
+        } else {
+            em_kernels::weighted_sums_direct(isa, n, k, wt, &ws.rows, d, &ws.factors, sums);
+        }
+        let column = |a: usize| {
+            if ws.prod_once {
+                em_kernels::product_column(d, a, 0)
+            } else {
+                em_kernels::direct_column(d, a, 0)
+            }
+        };
         for i in 0..k {
             let sums = &ws.sums[i * cols..(i + 1) * cols];
             let mu = &mut self.mu[i * d..(i + 1) * d];
             mu.copy_from_slice(&sums[..d]);
             let mut s: MatMut<'_, f64> = self.sigma.mat_mut(i);
             for a in 0..d {
-                let xx = &sums[em_kernels::product_column(d, a, 0)..][..=a];
+                let xx = &sums[column(a)..][..=a];
                 for b in 0..a {
                     // GPS: Σ = XX − μμᵀ, then 0.5 (Σ + Σᵀ); XX is symmetric by construction.
                     let v = xx[b] - mu[a] * mu[b];
@@ -695,6 +733,46 @@ mod tests {
         assert_eq!(logsum(v.iter().copied()), f64::NEG_INFINITY);
         let v = [1000.0, 1000.0];
         assert!((logsum(v.iter().copied()) - (1000.0 + 2f64.ln())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn products_formed_once_or_per_m_step_give_the_same_bits() {
+        // 800 points of 27 dimensions: their products (2.6 MB) are formed per M-step in a
+        // 5-iteration run and once in a 20-iteration run. Two tight blobs make EM converge in
+        // both before the fifth iteration, so both runs do the same steps.
+        let (n, d) = (800, 27);
+        assert!(n * em_kernels::product_panels(d) * PANEL * 8 > PRODUCTS_ONCE_BYTES);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        let mut data = Mat::<f64>::zeros(n, d);
+        for p in 0..n {
+            let c = if p % 2 == 0 { -5.0 } else { 5.0 };
+            for a in 0..d {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                data[(p, a)] = c + 0.01 * z;
+            }
+        }
+        let idx: Vec<usize> = (0..n).map(|p| p % 2).collect();
+        let run = |its: usize| {
+            let mut g = Gmm::new(d);
+            let rep = g
+                .update(data.as_ref(), 2, its, ClusterInit::Given(&idx))
+                .unwrap();
+            (rep, g)
+        };
+        let ((ra, ga), (rb, gb)) = (
+            run(PRODUCTS_ONCE_ITERATIONS - 1),
+            run(PRODUCTS_ONCE_ITERATIONS),
+        );
+        assert!(
+            ra.stop != EmStop::MaxIterations && ra.stop_itr < 5,
+            "{ra:?}"
+        );
+        assert_eq!((ra.stop, ra.stop_itr), (rb.stop, rb.stop_itr));
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&ra.ll_trace), bits(&rb.ll_trace));
+        assert_eq!(bits(&ga.mu), bits(&gb.mu));
+        assert_eq!(bits(&ga.sigma.data), bits(&gb.sigma.data));
+        assert_eq!(bits(&ga.logmass), bits(&gb.logmass));
     }
 
     #[test]

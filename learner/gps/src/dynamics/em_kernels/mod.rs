@@ -319,8 +319,8 @@ mod responsibilities;
 pub use cholesky::{cholesky, half_log_det};
 pub use estep::{invert_lower, pack_whitening, small_norms, whitened_norms};
 pub use mstep::{
-    product_column, product_columns, product_panels, products, transpose_weights, weighted_sums,
-    PANEL,
+    direct_column, direct_factors, point_row_len, point_rows, product_column, product_columns,
+    product_panels, products, transpose_weights, weighted_sums, weighted_sums_direct, PANEL,
 };
 pub use responsibilities::{
     exp_slice, logsum_points, logsum_points_weights, normalise_over_clusters, EXP_FLOOR,
@@ -573,8 +573,24 @@ mod tests {
                     );
                 }
             }
+            let (mut rows, factors) = (Vec::new(), direct_factors(d));
+            point_rows(&x, n, d, &mut rows);
+            let dcols = factors.len() * PANEL;
             for isa in isas() {
                 assert_eq!(bits(&out), bits(&run(isa)), "{isa:?} d={d} k={k}");
+                // The products formed per point instead: the same bits in their own columns.
+                let mut direct = vec![f64::NAN; k * dcols];
+                weighted_sums_direct(isa, n, k, &w, &rows, d, &factors, &mut direct);
+                for i in 0..k {
+                    let (o, g) = (&out[i * cols..], &direct[i * dcols..]);
+                    for a in 0..d {
+                        assert_eq!(o[a].to_bits(), g[a].to_bits(), "{isa:?} d={d} i={i} a={a}");
+                        for b in 0..=a {
+                            let (pc, dc) = (product_column(d, a, b), direct_column(d, a, b));
+                            assert_eq!(o[pc].to_bits(), g[dc].to_bits(), "{isa:?} d={d} ({a},{b})");
+                        }
+                    }
+                }
             }
         }
         // No points: every sum is +0.
@@ -869,6 +885,9 @@ mod tests {
             );
             let panels = product_panels(d);
             let mut out = vec![0.0; k * panels * PANEL];
+            let (mut rows, factors) = (Vec::new(), direct_factors(d));
+            point_rows(&x, n, d, &mut rows);
+            let mut dout = vec![0.0; k * factors.len() * PANEL];
             let mut logobs = vec![0.0; k * n];
             for isa in isas().into_iter().filter(|&isa| isa != Isa::Portable) {
                 let e = best(&mut || {
@@ -884,11 +903,20 @@ mod tests {
                     }
                     reps as f64 * mstep_flops(n, d, k)
                 });
+                let md = best(&mut || {
+                    for _ in 0..reps {
+                        let o = &mut dout;
+                        weighted_sums_direct(isa, n, k, &wt, &rows, d, &factors, o);
+                    }
+                    reps as f64 * mstep_flops(n, d, k)
+                });
                 println!(
                     "{isa:?}, d = {d}, {n} points, K = {k}: whitened_norms {e:.1} GFLOP/s \
-                     ({:.0} %), weighted_sums {mm:.1} GFLOP/s ({:.0} %)",
+                     ({:.0} %), weighted_sums {mm:.1} GFLOP/s ({:.0} %), direct {md:.1} GFLOP/s \
+                     ({:.0} %)",
                     100.0 * e / peak,
-                    100.0 * mm / peak
+                    100.0 * mm / peak,
+                    100.0 * md / peak
                 );
             }
         }

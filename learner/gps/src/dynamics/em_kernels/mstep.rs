@@ -156,40 +156,28 @@ pub fn weighted_sums(
     dispatch!(
         isa,
         fn kernel(n: usize, k: usize, w: &[f64], prod: &[f64], panels: usize, out: &mut [f64]) {
-            let cols = panels * PANEL;
-            let w = &w[..n * k];
+            let (cols, w) = (panels * PANEL, &w[..n * k]);
             for j in 0..panels {
                 let panel = &prod[j * n * PANEL..][..n * PANEL];
-                let mut i0 = 0;
-                while i0 < k {
-                    let left = k - i0;
-                    let r = left.min(if V::WIDE { ROWS_WIDE } else { ROWS });
-                    let t = Tile(panel, w, k, i0, out, cols, j * PANEL);
-                    match r {
-                        1 => tile::<V, 1>(t),
-                        2 => tile::<V, 2>(t),
-                        3 => tile::<V, 3>(t),
-                        4 => tile::<V, 4>(t),
-                        5 => tile::<V, 5>(t),
-                        6 => tile::<V, 6>(t),
-                        7 => tile::<V, 7>(t),
-                        8 => tile::<V, 8>(t),
-                        9 => tile::<V, 9>(t),
-                        10 => tile::<V, 10>(t),
-                        11 => tile::<V, 11>(t),
-                        _ => tile::<V, 12>(t),
-                    }
-                    i0 += r;
-                }
+                tiles::<V>(Source::Panel(panel), w, k, &mut *out, cols, j * PANEL);
             }
         }
     )
 }
 
-/// One tile's arguments: a panel of the products (`n × PANEL`), the weights (`n × k`), `k`, the
-/// tile's first cluster, the output, its row length and the panel's first column.
+/// Where a tile's two vectors of products per point come from: a panel of [`products`]
+/// (`n × PANEL`), or the points' rows ([`point_rows`], row length) and the panel's two
+/// factor pairs ([`direct_factors`]).
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Panel(&'a [f64]),
+    Rows(&'a [f64], usize, [[usize; 2]; 2]),
+}
+
+/// One tile's arguments: the products' source, the weights (`n × k`), `k`, the tile's first
+/// cluster, the output, its row length and the panel's first column.
 struct Tile<'a>(
-    &'a [f64],
+    Source<'a>,
     &'a [f64],
     usize,
     usize,
@@ -199,19 +187,26 @@ struct Tile<'a>(
 );
 
 /// The sums of the clusters `i0 … i0 + R − 1` on one panel, in `R × 2` registers: per point,
-/// the panel's two vectors and the `R` weights broadcast, `2R` fused multiply-adds.
+/// the panel's two vectors (loaded, or formed as `x_a · x_b..b+4`) and the `R` weights
+/// broadcast, `2R` fused multiply-adds.
 #[inline(always)]
 fn tile<V: Lanes, const R: usize>(t: Tile<'_>) {
-    let Tile(panel, w, k, i0, out, cols, c0) = t;
+    let Tile(src, w, k, i0, out, cols, c0) = t;
     let mut acc = [[V::zero(); 2]; R];
-    for (pv, wp) in panel.chunks_exact(PANEL).zip(w.chunks_exact(k)) {
-        let wr: &[f64; R] = wp[i0..i0 + R].try_into().unwrap();
-        let (p0, p1) = (V::load(&pv[..4]), V::load(&pv[4..]));
-        // Loops for the vectors, not `array::from_fn` (see `norm_tile`).
-        for r in 0..R {
-            let b = V::splat(wr[r]);
-            acc[r][0] = acc[r][0].fma(b, p0);
-            acc[r][1] = acc[r][1].fma(b, p1);
+    match src {
+        Source::Panel(panel) => {
+            for (pv, wp) in panel.chunks_exact(PANEL).zip(w.chunks_exact(k)) {
+                let (p0, p1) = (V::load(&pv[..4]), V::load(&pv[4..]));
+                tile_step::<V, R>(&mut acc, &wp[i0..i0 + R], p0, p1);
+            }
+        }
+        Source::Rows(rows, rl, [[m0, b0], [m1, b1]]) => {
+            assert!(m0.max(m1) < rl && b0.max(b1) + 4 <= rl);
+            for (xp, wp) in rows.chunks_exact(rl).zip(w.chunks_exact(k)) {
+                let p0 = V::splat(xp[m0]).mul(V::load(&xp[b0..]));
+                let p1 = V::splat(xp[m1]).mul(V::load(&xp[b1..]));
+                tile_step::<V, R>(&mut acc, &wp[i0..i0 + R], p0, p1);
+            }
         }
     }
     for (r, a) in acc.iter().enumerate() {
@@ -219,4 +214,127 @@ fn tile<V: Lanes, const R: usize>(t: Tile<'_>) {
         a[0].store(&mut o[..4]);
         a[1].store(&mut o[4..]);
     }
+}
+
+/// One point's step of a tile: `acc[r] += w_r · (p0, p1)`.
+#[inline(always)]
+fn tile_step<V: Lanes, const R: usize>(acc: &mut [[V; 2]; R], w: &[f64], p0: V, p1: V) {
+    let wr: &[f64; R] = w.try_into().unwrap();
+    // Loops for the vectors, not `array::from_fn` (see `norm_tile`).
+    for r in 0..R {
+        let b = V::splat(wr[r]);
+        acc[r][0] = acc[r][0].fma(b, p0);
+        acc[r][1] = acc[r][1].fma(b, p1);
+    }
+}
+
+/// Runs [`tile`] over the clusters in tiles of up to 12 (32 registers) or 6 (16 registers).
+#[inline(always)]
+fn tiles<V: Lanes>(src: Source<'_>, w: &[f64], k: usize, out: &mut [f64], cols: usize, c0: usize) {
+    let mut i0 = 0;
+    while i0 < k {
+        let r = (k - i0).min(if V::WIDE { ROWS_WIDE } else { ROWS });
+        let t = Tile(src, w, k, i0, &mut *out, cols, c0);
+        match r {
+            1 => tile::<V, 1>(t),
+            2 => tile::<V, 2>(t),
+            3 => tile::<V, 3>(t),
+            4 => tile::<V, 4>(t),
+            5 => tile::<V, 5>(t),
+            6 => tile::<V, 6>(t),
+            7 => tile::<V, 7>(t),
+            8 => tile::<V, 8>(t),
+            9 => tile::<V, 9>(t),
+            10 => tile::<V, 10>(t),
+            11 => tile::<V, 11>(t),
+            _ => tile::<V, 12>(t),
+        }
+        i0 += r;
+    }
+}
+
+/// Row length of [`point_rows`] in dimension `d`: the coordinates padded to whole vectors, then
+/// a one, a zero and padding.
+pub fn point_row_len(d: usize) -> usize {
+    d.div_ceil(4) * 4 + 4
+}
+
+/// The `n` points of the blocks `x` as rows for [`weighted_sums_direct`]:
+/// `rows[p · rl + a] = x_pa` (`rl =` [`point_row_len`]), then `+0` up to whole vectors, `1` at
+/// `rl − 4` and `+0` after.
+pub fn point_rows(x: &[f64], n: usize, d: usize, rows: &mut Vec<f64>) {
+    assert!(x.len() >= n.div_ceil(BLOCK) * d * BLOCK);
+    let rl = point_row_len(d);
+    rows.clear();
+    rows.resize(n * rl, 0.0);
+    for (p, row) in rows.chunks_exact_mut(rl).enumerate() {
+        let xb = &x[(p / BLOCK) * d * BLOCK + p % BLOCK..];
+        for (a, v) in row[..d].iter_mut().enumerate() {
+            *v = xb[a * BLOCK];
+        }
+        row[rl - 4] = 1.0;
+    }
+}
+
+/// The panels of [`weighted_sums_direct`] in dimension `d`: two vectors of four columns each,
+/// a vector `[m, b]` being `x_m · x_b … x_{b+3}` of a point's row. First the coordinates
+/// (`m` the row's one), then row `a` of `x xᵀ` from `b = 0` in whole vectors (their columns
+/// past `a` are products too, never read), then a zero vector if the count is odd.
+pub fn direct_factors(d: usize) -> Vec<[[usize; 2]; 2]> {
+    let rl = point_row_len(d);
+    let (one, zero) = (rl - 4, rl - 3);
+    let mut v: Vec<[usize; 2]> = (0..d.div_ceil(4)).map(|u| [one, 4 * u]).collect();
+    for a in 0..d {
+        v.extend((0..(a + 1).div_ceil(4)).map(|u| [a, 4 * u]));
+    }
+    if v.len() % 2 == 1 {
+        v.push([zero, 0]);
+    }
+    v.chunks_exact(2).map(|c| [c[0], c[1]]).collect()
+}
+
+/// Column of `x_a · x_b` (`b ≤ a < d`) in the sums of [`weighted_sums_direct`]; the
+/// coordinates are columns `0 … d − 1` as in [`weighted_sums`].
+pub fn direct_column(d: usize, a: usize, b: usize) -> usize {
+    debug_assert!(b <= a && a < d);
+    4 * (d.div_ceil(4) + (0..a).map(|r| (r + 1).div_ceil(4)).sum::<usize>()) + b
+}
+
+/// [`weighted_sums`] without the products formed beforehand: each panel's two vectors are
+/// formed per point from the points' rows ([`point_rows`]) as `x_m · x_b..b+4`
+/// ([`direct_factors`]), the same rounded products, so every sum gets the same operations in
+/// the same order, the same bits (tested); the columns are laid out by [`direct_column`]
+/// (`out`: `k × 8 · factors.len()`). For sets whose products would not stay in cache: no
+/// memory beyond the rows, about a tenth more multiply-adds (the triangle's rows padded to
+/// whole vectors) and a multiplication per vector.
+#[allow(clippy::too_many_arguments)]
+pub fn weighted_sums_direct(
+    isa: Isa,
+    n: usize,
+    k: usize,
+    w: &[f64],
+    rows: &[f64],
+    d: usize,
+    factors: &[[[usize; 2]; 2]],
+    out: &mut [f64],
+) {
+    let (rl, cols) = (point_row_len(d), factors.len() * PANEL);
+    assert!(w.len() >= n * k && rows.len() >= n * rl && out.len() >= k * cols);
+    dispatch!(
+        isa,
+        fn kernel(
+            n: usize,
+            k: usize,
+            w: &[f64],
+            rows: &[f64],
+            rl: usize,
+            factors: &[[[usize; 2]; 2]],
+            out: &mut [f64],
+        ) {
+            let (w, rows, cols) = (&w[..n * k], &rows[..n * rl], factors.len() * PANEL);
+            for (j, &f) in factors.iter().enumerate() {
+                tiles::<V>(Source::Rows(rows, rl, f), w, k, &mut *out, cols, j * PANEL);
+            }
+        }
+    )
 }
