@@ -465,6 +465,32 @@ mod tests {
         }
     }
 
+    /// `n` random points of dimension `d` in blocks (coordinates in `±span`), random weights for
+    /// `k` clusters point-major, and the points' [`products`].
+    fn points_weights_products(
+        rng: &mut impl Rng,
+        d: usize,
+        n: usize,
+        k: usize,
+        span: f64,
+    ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let x: Vec<f64> = (0..n.div_ceil(BLOCK) * d * BLOCK)
+            .map(|_| rng.random_range(-span..span))
+            .collect();
+        let w: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
+        let mut prod = Vec::new();
+        products(
+            Isa::detect(),
+            &x,
+            n,
+            d,
+            &mut prod,
+            &mut Vec::new(),
+            &mut Vec::new(),
+        );
+        (x, w, prod)
+    }
+
     #[test]
     fn products_hold_each_product_once_rounded_in_panels() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
@@ -538,21 +564,7 @@ mod tests {
             (9, 150, 20),
             (27, 495usize, 12),
         ] {
-            let blocks = n.div_ceil(BLOCK);
-            let x: Vec<f64> = (0..blocks * d * BLOCK)
-                .map(|_| rng.random_range(-2.0..2.0))
-                .collect();
-            let w: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
-            let (mut prod, mut row) = (Vec::new(), Vec::new());
-            products(
-                Isa::detect(),
-                &x,
-                n,
-                d,
-                &mut prod,
-                &mut row,
-                &mut Vec::new(),
-            );
+            let (x, w, prod) = points_weights_products(&mut rng, d, n, k, 2.0);
             let panels = product_panels(d);
             let cols = panels * PANEL;
             let run = |isa: Isa| {
@@ -869,20 +881,7 @@ mod tests {
             let base = vec![-20.0; k];
             let (mut mt, mut c) = (Vec::new(), Vec::new());
             pack_whitening(Isa::detect(), &minv, &mu, d, k, &mut mt, &mut c);
-            let x: Vec<f64> = (0..blocks * d * BLOCK)
-                .map(|_| rng.random_range(-3.0..3.0))
-                .collect();
-            let wt: Vec<f64> = (0..n * k).map(|_| rng.random_range(0.0..1.0)).collect();
-            let (mut prod, mut row) = (Vec::new(), Vec::new());
-            products(
-                Isa::detect(),
-                &x,
-                n,
-                d,
-                &mut prod,
-                &mut row,
-                &mut Vec::new(),
-            );
+            let (x, wt, prod) = points_weights_products(&mut rng, d, n, k, 3.0);
             let panels = product_panels(d);
             let mut out = vec![0.0; k * panels * PANEL];
             let (mut rows, factors) = (Vec::new(), direct_factors(d));
