@@ -33,9 +33,11 @@ const SMALL_N: usize = 32;
 /// farther caches); otherwise it forms them per point inside every M-step
 /// ([`em_kernels::weighted_sums_direct`]; the same bits). Measured (docs/design.md §5 D33):
 /// LQR+GAIfO's 5 EM iterations on 990 points gain 1.3 ms per update by forming them per point,
-/// 44 iterations on 1881 points lose 9 ms.
+/// 44 iterations on 1881 points lose 9 ms. Beyond [`PRODUCTS_MAX_BYTES`] (about 20,000 points
+/// of 27 dimensions) they are always formed per point, so that the workspace stays bounded.
 const PRODUCTS_ONCE_BYTES: usize = 2 << 20;
 const PRODUCTS_ONCE_ITERATIONS: usize = 20;
+const PRODUCTS_MAX_BYTES: usize = 64 << 20;
 
 /// How to assign points to clusters when EM (re)initialises.
 pub enum ClusterInit<'a> {
@@ -418,8 +420,9 @@ impl Gmm {
         let ws = &mut self.ws;
         let isa = em_kernels::Isa::detect();
         let cols = em_kernels::product_panels(d) * PANEL;
-        ws.prod_once = n * cols * std::mem::size_of::<f64>() <= PRODUCTS_ONCE_BYTES
-            || max_iterations >= PRODUCTS_ONCE_ITERATIONS;
+        let bytes = n * cols * std::mem::size_of::<f64>();
+        ws.prod_once = bytes <= PRODUCTS_ONCE_BYTES
+            || (max_iterations >= PRODUCTS_ONCE_ITERATIONS && bytes <= PRODUCTS_MAX_BYTES);
         if ws.prod_once {
             let (prod, pairs, ext) = (&mut ws.prod, &mut ws.prod_pairs, &mut ws.prod_ext);
             em_kernels::products(isa, &ws.xb, n, d, prod, pairs, ext);

@@ -7,6 +7,8 @@
 //! the rows once per run and every M-step is then `S = Wᵀ P`: `S[i, c] = Σ_p w_pi P[p, c]`,
 //! `K` clusters by [`product_columns`] columns. That is a matrix product with whole tiles in
 //! registers, without the triangle's ragged edges or a weighted copy of the points per cluster.
+//! Where the rows would take megabytes and EM runs few iterations, [`weighted_sums_direct`]
+//! forms the same products per point inside the product instead (the same bits).
 
 #[cfg(target_arch = "x86_64")]
 use super::avx;
