@@ -441,7 +441,6 @@ impl Gmm {
             stop_itr: max_iterations,
         };
         let mut prevll = f64::NEG_INFINITY;
-        let isa = em_kernels::Isa::detect();
         for itr in 0..max_iterations {
             self.estep(data, true)?;
             let Workspace {

@@ -4,7 +4,7 @@
 
 #[cfg(target_arch = "x86_64")]
 use super::avx;
-use super::{Isa, Lanes};
+use super::{Isa, Lanes, MANTISSA, ONE_EXPONENT};
 
 /// 4-lane vectors of a column that [`cholesky`] keeps in registers (columns up to 32 long).
 const COL_VECS: usize = 8;
@@ -105,8 +105,6 @@ pub fn cholesky(isa: Isa, a: &[f64], l: &mut [f64], d: usize, work: &mut Vec<f64
 /// `ln Π m_j + E ln 2` carries at most `d` roundings of the product, as many as the sum of
 /// logarithms. A diagonal with a zero, subnormal or non-finite entry takes the sum of logarithms.
 pub fn half_log_det(l: &[f64], d: usize) -> f64 {
-    const MANT: u64 = (1 << 52) - 1;
-    const ONE: u64 = 1023 << 52;
     let diag = |j: usize| l[j * d + j];
     if !(0..d).all(|j| diag(j).is_normal() && diag(j) > 0.0) {
         return (0..d).map(|j| diag(j).ln()).sum();
@@ -115,9 +113,9 @@ pub fn half_log_det(l: &[f64], d: usize) -> f64 {
     for j in 0..d {
         let b = diag(j).to_bits();
         e += (b >> 52) as i64 - 1023;
-        let pm = (m * f64::from_bits((b & MANT) | ONE)).to_bits();
+        let pm = (m * f64::from_bits((b & MANTISSA) | ONE_EXPONENT)).to_bits();
         e += (pm >> 52) as i64 - 1023;
-        m = f64::from_bits((pm & MANT) | ONE);
+        m = f64::from_bits((pm & MANTISSA) | ONE_EXPONENT);
     }
     m.ln() + e as f64 * std::f64::consts::LN_2
 }

@@ -107,6 +107,8 @@ struct NormJob<'a>(
 /// [`whitened_norms`] on tiles of up to `R` clusters by `NV` 4-lane vectors of points.
 #[inline(always)]
 fn norms<V: Lanes, const R: usize, const NV: usize>(job: NormJob<'_>) {
+    // The match below has arms for tiles of up to three clusters.
+    const { assert!(R <= 3) };
     let NormJob(mt, c, base, d, k, x, blocks, out, stride) = job;
     for (blk, xb) in x.chunks_exact(d * BLOCK).take(blocks).enumerate() {
         for h in (0..BLOCK).step_by(4 * NV) {

@@ -151,10 +151,6 @@ pub fn weighted_sums(
 ) {
     let cols = panels * PANEL;
     assert!(w.len() >= n * k && prod.len() >= panels * n * PANEL && out.len() >= k * cols);
-    if n == 0 {
-        out[..k * cols].fill(0.0);
-        return;
-    }
     dispatch!(
         isa,
         fn kernel(n: usize, k: usize, w: &[f64], prod: &[f64], panels: usize, out: &mut [f64]) {
