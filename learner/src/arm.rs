@@ -80,19 +80,18 @@ mod tests {
     use ur5_shared::config::{SimConfig, TaskConfig};
     use ur5_shared::layout::{DU, DX};
     use ur5_shared::noise::Noise;
-    use ur5_shared::{GainStep, GainTable};
+    use ur5_shared::GainTable;
 
     /// A constant-goal table a = â_t = `goal_q` with covariance σ² I.
     fn hold_table(task: &TaskConfig, goal_q: [f64; DU], sigma: f64) -> Box<GainTable> {
         let mut table = GainTable::new_boxed();
         table.set_horizon(task.horizon).unwrap();
         for t in 0..task.horizon {
-            let mut step = GainStep::default();
-            step.a_hat = goal_q;
+            let mut step = table.step_mut(t);
+            step.a_hat.copy_from_slice(&goal_q);
             for j in 0..DU {
-                step.chol[j][j] = sigma;
+                step.set_l(j, j, sigma);
             }
-            table.set_step(t, &step);
         }
         table.seal();
         table

@@ -282,8 +282,10 @@ impl FaultCounts {
 /// Rejection reasons as counters (for the statistics and the JSON summary).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct RejectCounts {
-    /// `dx`/`du` differ from the build's layout.
+    /// `dx`/`du` of no task (a damaged header).
     pub dimensions: u64,
+    /// A valid table of another task's dimensions than the controller's layout.
+    pub layout_mismatch: u64,
     /// Horizon 0 or > MAX_HORIZON.
     pub horizon: u64,
     /// Checksum mismatch.
@@ -322,6 +324,7 @@ impl RejectCounts {
             Rejection::StaleVersion { .. } => &mut self.stale_version,
             Rejection::InvalidPolicy(_) => &mut self.invalid_policy,
             Rejection::ModeMismatch { .. } => &mut self.mode_mismatch,
+            Rejection::LayoutMismatch(_) => &mut self.layout_mismatch,
         };
         *c += 1;
     }
@@ -339,6 +342,7 @@ impl RejectCounts {
             + self.plan
             + self.invalid_policy
             + self.mode_mismatch
+            + self.layout_mismatch
     }
 }
 

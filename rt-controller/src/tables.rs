@@ -11,8 +11,9 @@
 //! is written by another process. A rejected table only ever overwrites the inactive half.
 
 use ur5_shared::config::ActionMode;
+use ur5_shared::layout::DimensionMismatch;
 use ur5_shared::{
-    GainBounds, GainTable, GainTableError, PolicyBounds, PolicyTable, PolicyTableError,
+    GainBounds, GainTable, GainTableError, PolicyBounds, PolicyTable, PolicyTableError, StateLayout,
 };
 
 /// Why a received table was not taken.
@@ -24,6 +25,9 @@ pub enum Rejection {
     /// [`PolicyTable::validate`] failed.
     #[error(transparent)]
     InvalidPolicy(#[from] PolicyTableError),
+    /// A valid table of another task's dimensions than the controller's layout.
+    #[error("{0}: learner and controller disagree about the task")]
+    LayoutMismatch(DimensionMismatch),
     /// A policy table's action mode is not the controller's `action_mode`.
     #[error("policy table version {version} acts in {table:?}, the controller in {expected:?} (action_mode): learner and controller disagree about the task")]
     ModeMismatch {
@@ -61,7 +65,9 @@ impl Rejection {
     pub fn is_task_mismatch(&self) -> bool {
         matches!(
             self,
-            Rejection::HorizonMismatch { .. } | Rejection::ModeMismatch { .. }
+            Rejection::HorizonMismatch { .. }
+                | Rejection::ModeMismatch { .. }
+                | Rejection::LayoutMismatch(_)
         )
     }
 }
@@ -130,16 +136,19 @@ pub struct TableBuffer {
     policy_bounds: PolicyBounds,
     horizon: usize,
     mode: ActionMode,
+    layout: StateLayout,
 }
 
 impl TableBuffer {
     /// Allocates all halves (setup). `horizon` is the episode length gain tables must have;
-    /// `mode` the action mode policy tables must have.
+    /// `mode` the action mode policy tables must have; `layout` the task whose dimensions
+    /// tables of both kinds must have.
     pub fn new(
         bounds: GainBounds,
         policy_bounds: PolicyBounds,
         horizon: usize,
         mode: ActionMode,
+        layout: StateLayout,
     ) -> Self {
         Self {
             halves: [GainTable::new_boxed(), GainTable::new_boxed()],
@@ -149,6 +158,7 @@ impl TableBuffer {
             policy_bounds,
             horizon,
             mode,
+            layout,
         }
     }
 
@@ -205,6 +215,9 @@ impl TableBuffer {
         let checked = table.validate(&self.policy_bounds);
         let t2 = now();
         checked?;
+        table
+            .check_layout(&self.layout)
+            .map_err(Rejection::LayoutMismatch)?;
         let mode = table.mode().expect("validated");
         if mode != self.mode {
             return Err(Rejection::ModeMismatch {
@@ -240,6 +253,9 @@ impl TableBuffer {
         let checked = table.validate(&self.bounds);
         let t2 = now();
         checked?;
+        table
+            .check_layout(&self.layout)
+            .map_err(Rejection::LayoutMismatch)?;
         if table.horizon() != self.horizon {
             return Err(Rejection::HorizonMismatch {
                 version: table.version,
@@ -267,6 +283,7 @@ mod tests {
             PolicyBounds::default(),
             horizon,
             ActionMode::GoalAngles,
+            StateLayout::REACH3,
         )
     }
 
@@ -280,13 +297,19 @@ mod tests {
     /// A policy table with one hidden layer of 4 whose output bias is `bias`.
     fn policy(version: u64, bias: f64) -> Box<PolicyTable> {
         let hidden = [4];
-        let n = ur5_shared::policy::flat_len(&hidden);
+        let n = ur5_shared::policy::flat_len(12, 3, &hidden);
         let mut theta = vec![0.0; n];
         theta[12..24].fill(1.0);
         theta[n - 4] = bias; // head 2's output bias
         let mut p = PolicyTable::new_boxed();
-        p.fill(version, ActionMode::GoalAngles, &hidden, &theta)
-            .unwrap();
+        p.fill(
+            version,
+            &StateLayout::REACH3,
+            ActionMode::GoalAngles,
+            &hidden,
+            &theta,
+        )
+        .unwrap();
         p
     }
 
@@ -342,7 +365,7 @@ mod tests {
         assert_eq!(b.active_version(), Some(2));
         // Policy → gains → policy: each flip lands in the other kind's inactive half.
         b.offer(&table(5, 100, 0.75), clock).unwrap();
-        assert_eq!(gains(&b).steps[0].a_hat, [0.75; 3]);
+        assert_eq!(gains(&b).step(0).a_hat, [0.75; 3]);
         b.offer_policy(&policy(6, -0.5), clock).unwrap();
         match b.active() {
             Some(Active::Policy(p)) => {
@@ -361,8 +384,9 @@ mod tests {
         t.set_horizon(horizon).unwrap();
         for s in 0..horizon {
             let st = t.step_mut(s);
-            st.a_hat = [a_hat; 3];
-            st.chol = [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]];
+            st.a_hat.copy_from_slice(&[a_hat; 3]);
+            st.chol
+                .copy_from_slice(&[0.1, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, 0.1]);
         }
         t.seal();
         t
@@ -392,39 +416,60 @@ mod tests {
 
         let mut counts = RejectCounts::default();
         let mut nan = table(2, 100, 0.5);
-        nan.steps[3].k_vec[1] = f64::NAN;
+        nan.step_mut(3).k_vec[1] = f64::NAN;
         nan.seal();
         let mut dims = table(3, 100, 0.5);
         dims.dx = 13;
         dims.seal();
         let mut sum = table(4, 100, 0.5);
-        sum.steps[0].a_hat[0] = 0.25;
+        sum.step_mut(0).a_hat[0] = 0.25;
+        // A valid table of the whole arm and a pose (dX = 30, dU = 6) is another task's.
+        let mut pose = GainTable::new_boxed_for(&StateLayout::POSE6);
+        pose.set_version(6);
+        pose.set_horizon(100).unwrap();
+        for s in 0..100 {
+            let mut st = pose.step_mut(s);
+            for i in 0..6 {
+                st.set_l(i, i, 0.1);
+            }
+        }
+        pose.seal();
         for (bad, field) in [
             (nan, "non_finite"),
             (dims, "dimensions"),
             (sum, "checksum"),
             (table(5, 50, 0.5), "horizon_mismatch"),
+            (pose, "layout_mismatch"),
         ] {
             let r = b.offer(&bad, clock).unwrap_err();
+            if field == "layout_mismatch" {
+                let msg = r.to_string();
+                assert!(
+                    msg.contains("dX = 30, dU = 6") && msg.contains("dX = 12, dU = 3"),
+                    "{msg}"
+                );
+                assert!(r.is_task_mismatch());
+            }
             counts.add(&r);
             assert_eq!(b.active_version(), Some(1), "{field}");
-            assert_eq!(gains(&b).steps[0].a_hat, [0.5; 3]);
+            assert_eq!(gains(&b).step(0).a_hat, [0.5; 3]);
         }
         assert_eq!(
             (
                 counts.non_finite,
                 counts.dimensions,
                 counts.checksum,
-                counts.horizon_mismatch
+                counts.horizon_mismatch,
+                counts.layout_mismatch
             ),
-            (1, 1, 1, 1)
+            (1, 1, 1, 1, 1)
         );
 
         assert!(matches!(
             b.offer(&table(7, 100, 0.75), clock),
             Ok(Offer::Swapped { .. })
         ));
-        assert_eq!(gains(&b).steps[99].a_hat, [0.75; 3]);
+        assert_eq!(gains(&b).step(99).a_hat, [0.75; 3]);
         let r = b.offer(&table(6, 100, 0.5), clock).unwrap_err();
         assert!(matches!(
             r,

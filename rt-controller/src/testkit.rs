@@ -11,7 +11,9 @@ use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::services::{self, ServiceNames};
-use ur5_shared::{ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, PolicyTable, DU, DX};
+use ur5_shared::{
+    ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, PolicyTable, StateLayout, DU, DX,
+};
 
 use crate::ports::SetupError;
 use crate::stats::Histogram;
@@ -160,15 +162,26 @@ pub fn constant_goal_table(
     q_goal: [f64; DU],
     sigma: f64,
 ) -> Box<GainTable> {
-    let mut t = GainTable::new_boxed();
+    constant_goal_table_for(&StateLayout::REACH3, version, horizon, &q_goal, sigma)
+}
+
+/// [`constant_goal_table`] for any layout: `q_goal` has dU entries.
+pub fn constant_goal_table_for(
+    layout: &StateLayout,
+    version: u64,
+    horizon: usize,
+    q_goal: &[f64],
+    sigma: f64,
+) -> Box<GainTable> {
+    let mut t = GainTable::new_boxed_for(layout);
     t.set_version(version);
     t.set_horizon(horizon)
         .expect("horizon within 1..=MAX_HORIZON");
     for s in 0..horizon {
-        let st = t.step_mut(s);
-        st.a_hat = q_goal;
-        for i in 0..DU {
-            st.chol[i][i] = sigma;
+        let mut st = t.step_mut(s);
+        st.a_hat.copy_from_slice(q_goal);
+        for i in 0..layout.du() {
+            st.set_l(i, i, sigma);
         }
     }
     t.seal();
@@ -188,7 +201,7 @@ pub fn random_policy_table(
 ) -> Box<PolicyTable> {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut theta = Vec::with_capacity(ur5_shared::policy::flat_len(hidden));
+    let mut theta = Vec::with_capacity(ur5_shared::policy::flat_len(DX, DU, hidden));
     theta.extend([0.0; DX]);
     theta.extend([1.0; DX]);
     for _ in 0..DU {
@@ -203,7 +216,13 @@ pub fn random_policy_table(
     }
     theta.extend([sigma.ln(); DU]);
     let mut p = PolicyTable::new_boxed();
-    p.fill(version, ActionMode::GoalAngles, hidden, &theta)
-        .expect("a policy within the table's limits");
+    p.fill(
+        version,
+        &StateLayout::REACH3,
+        ActionMode::GoalAngles,
+        hidden,
+        &theta,
+    )
+    .expect("a policy within the table's limits");
     p
 }

@@ -2,9 +2,10 @@
 //!
 //! One home for each fact; every other crate imports these from here:
 //!
-//! - [`layout`]: dimensions dX = 12, dU = 3, [`MAX_HORIZON`], the state layout and
+//! - [`layout`]: a task's state layout ([`StateLayout`]: dimensions, parts, names, index ranges),
+//!   the capacities [`MAX_DX`], [`MAX_DU`], [`MAX_HORIZON`] of every table and message, and
 //!   [`state_vector`], the single place a state vector is assembled.
-//! - [`gains`]: the gain table ([`GainTable`], ≈ 64 KB, `#[repr(C)]`, zero-copy), its checksum
+//! - [`gains`]: the gain table ([`GainTable`], ≈ 1 MB, `#[repr(C)]`, zero-copy), its checksum
 //!   and [`GainTable::validate`] against [`GainBounds`].
 //! - [`law`]: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε ([`controller_action`]),
 //!   used by both the real-time loop and the learner's rollouts.
@@ -55,9 +56,11 @@ pub mod status;
 pub mod table;
 
 pub use cost::{normalised_performance, task_cost, task_cost_from_distances, CostError};
-pub use gains::{GainBounds, GainEntry, GainField, GainStep, GainTable, GainTableError};
+pub use gains::{
+    GainBounds, GainEntry, GainField, GainStep, GainStepMut, GainTable, GainTableError,
+};
 pub use law::{controller_action, LawError, NO_NOISE};
-pub use layout::{state_vector, DU, DX, MAX_HORIZON};
+pub use layout::{state_vector, StateLayout, DU, DX, MAX_DU, MAX_DX, MAX_HORIZON};
 pub use model::UrModel;
 pub use msg::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind, StepSample};
 pub use plan::{EpisodePlan, PlanError};

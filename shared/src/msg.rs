@@ -17,13 +17,13 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::layout::{self, DU, DX, N_JOINTS};
+use crate::layout::{self, DU, DX, MAX_DU, MAX_DX, N_JOINTS};
 
 /// One executed step, published by the controller on `learner/samples` for the learner's
 /// dynamics fit and discriminator (docs/design.md §3.2; the dynamics use a_sent, §5 D18).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
-#[type_name("ur5_shared::StepSample.v2")]
+#[type_name("ur5_shared::StepSample.v3")]
 pub struct StepSample {
     /// Version of the gain table that computed `a`.
     pub table_version: u64,
@@ -37,15 +37,22 @@ pub struct StepSample {
     /// `a`: which publication of `table_version` the episode ran (`StepSample.v2`; v1 had no
     /// such field).
     pub table_epoch: u32,
+    /// State dimension dX: `s[..dx]` is the state (`StepSample.v3`; v2 had the reaching
+    /// task's fixed sizes).
+    pub dx: u32,
+    /// Action dimension dU: `a[..du]` and `a_sent[..du]` are the actions.
+    pub du: u32,
     /// Keeps the layout free of implicit padding; write 0.
     pub reserved: u32,
-    /// State s_t the action was computed from (layout of [`crate::layout`]).
-    pub s: [f64; DX],
+    /// State s_t the action was computed from, in `s[..dx]` (the task's layout,
+    /// [`crate::layout::StateLayout`]); the rest is 0.
+    pub s: [f64; MAX_DX],
     /// Action a_t as computed by [`crate::law::controller_action`], before the controller's
-    /// safety clamp (rad goal angles, or N·m in torque mode).
-    pub a: [f64; DU],
-    /// Action actually sent to the arm, after clamping to joint, velocity and effort limits.
-    pub a_sent: [f64; DU],
+    /// safety clamp (rad goal angles, or N·m in torque mode), in `a[..du]`.
+    pub a: [f64; MAX_DU],
+    /// Action actually sent to the arm, after clamping to joint, velocity and effort limits, in
+    /// `a_sent[..du]`.
+    pub a_sent: [f64; MAX_DU],
     /// `seq` of the [`ArmState`] s_t came from.
     pub state_seq: u64,
     /// `stamp_ns` of that [`ArmState`] (monotonic ns).
@@ -55,6 +62,47 @@ pub struct StepSample {
 }
 
 impl StepSample {
+    /// The state s_t (`s[..dx]`, clamped to the capacity).
+    pub fn state(&self) -> &[f64] {
+        &self.s[..(self.dx as usize).min(MAX_DX)]
+    }
+
+    /// The action a_t before the clamp (`a[..du]`, clamped to the capacity).
+    pub fn action(&self) -> &[f64] {
+        &self.a[..(self.du as usize).min(MAX_DU)]
+    }
+
+    /// The action sent (`a_sent[..du]`, clamped to the capacity).
+    pub fn action_sent(&self) -> &[f64] {
+        &self.a_sent[..(self.du as usize).min(MAX_DU)]
+    }
+
+    /// Sets `dx` and the state. Panics if `s` exceeds [`MAX_DX`].
+    pub fn set_state(&mut self, s: &[f64]) {
+        self.dx = s.len() as u32;
+        self.s[..s.len()].copy_from_slice(s);
+        self.s[s.len()..].fill(0.0);
+    }
+
+    /// Sets `du` and both actions (of equal length). Panics if they differ or exceed
+    /// [`MAX_DU`].
+    pub fn set_actions(&mut self, a: &[f64], a_sent: &[f64]) {
+        assert_eq!(a.len(), a_sent.len(), "a and a_sent of one step");
+        self.du = a.len() as u32;
+        self.a[..a.len()].copy_from_slice(a);
+        self.a[a.len()..].fill(0.0);
+        self.a_sent[..a.len()].copy_from_slice(a_sent);
+        self.a_sent[a.len()..].fill(0.0);
+    }
+
+    /// `self` with the state and both actions set ([`StepSample::set_state`],
+    /// [`StepSample::set_actions`]).
+    pub fn with_parts(mut self, s: &[f64], a: &[f64], a_sent: &[f64]) -> Self {
+        self.set_state(s);
+        self.set_actions(a, a_sent);
+        self
+    }
+
     /// Whether `a` included exploration noise.
     pub fn is_noisy(&self) -> bool {
         self.noise != 0
@@ -331,13 +379,25 @@ mod tests {
             ..StepSample::default()
         };
         assert!(sample.is_noisy() && !StepSample::default().is_noisy());
+        let mut sample = StepSample::default();
+        sample.set_state(&[1.0; 30]);
+        sample.set_actions(&[2.0; 6], &[3.0; 6]);
+        assert_eq!((sample.dx, sample.du), (30, 6));
+        assert_eq!(sample.state(), &[1.0; 30]);
+        assert_eq!(
+            (sample.action(), sample.action_sent()),
+            (&[2.0; 6][..], &[3.0; 6][..])
+        );
+        sample.set_state(&[4.0; 12]);
+        assert_eq!(sample.state(), &[4.0; 12]);
+        assert!(sample.s[12..].iter().all(|&v| v == 0.0));
     }
 
     #[test]
     fn payloads_have_no_implicit_padding() {
         assert_eq!(
             core::mem::size_of::<StepSample>(),
-            8 * 2 + 4 * 4 + 8 * (DX + 2 * DU) + 8 * 3
+            8 * 2 + 4 * 6 + 8 * (MAX_DX + 2 * MAX_DU) + 8 * 3
         );
         assert_eq!(core::mem::size_of::<ArmState>(), 8 * 4 + 8 * 12 + 4 * 2);
         assert_eq!(core::mem::size_of::<ArmCommand>(), 8 * 3 + 4 * 2 + 8 * 6);

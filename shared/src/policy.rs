@@ -10,17 +10,20 @@
 //! a = b(s) + μ(u) + σ ⊙ ε,   u = (s − m) ⊘ r,   ε ~ N(0, I_dU)
 //! ```
 //!
-//! with b(s) = q = s[0..3] (rad) in goal-angle mode and 0 in torque mode, m, r (dX each) the
+//! with b(s) = q = s[0..dU] (rad, the joint angles that open every layout,
+//! [`crate::layout::StateLayout::q`]) in goal-angle mode and 0 in torque mode, m, r (dX each) the
 //! input normalisation, σ = exp(log σ) (action unit, dU) and μ_j one tanh MLP per joint ("head"):
 //! `dX → h_1 → … → h_k → 1`, tanh on the hidden layers, a linear output. The policy is
 //! time-invariant: it acts at any t and for any horizon, and the goal enters only through the
-//! state (s[6..9] = ee − goal), so one table reaches any goal the controller is given.
+//! state (the tool points minus their targets), so one table reaches any goal the controller
+//! is given. dX and dU are the table's own (`dx`, `du`), those of a task's layout.
 //!
 //! # Parameter layout (θ, `params[..n_params]`, f64)
 //!
-//! `θ = [m (dX) | r (dX) | θ_μ0 | θ_μ1 | θ_μ2 | log σ (dU)]`; each head `θ_μj` holds its layers
+//! `θ = [m (dX) | r (dX) | θ_μ0 | … | θ_μ(dU−1) | log σ (dU)]`; each head `θ_μj` holds its layers
 //! in order, each layer `W_l` (row-major, `n_{l+1} × n_l`) then `b_l` (`n_{l+1}`). Its length is
-//! [`flat_len`]`(hidden)`: 15,198 values for the default `hidden = [64, 64]`. This is exactly
+//! [`flat_len`]`(dx, du, hidden)`: 15,198 values for the reaching task (dX = 12, dU = 3) and the
+//! default `hidden = [64, 64]`. This is exactly
 //! the learner's `imitation::mdgps::policy::GlobalPolicy::flat` and the `params` array of a
 //! policy file (docs/design.md §4.10).
 //!
@@ -45,7 +48,8 @@ use core::mem::MaybeUninit;
 
 use crate::config::ActionMode;
 use crate::kernels::{affine, dot, tanh_in_place};
-use crate::layout::{DU, DX, Q};
+use crate::law::LawError;
+use crate::layout::{DimensionMismatch, StateLayout, MAX_DX};
 use crate::plan::{EpisodePlan, PlanError};
 use crate::table::{self, HeaderBytes, Table};
 use iceoryx2::prelude::ZeroCopySend;
@@ -62,10 +66,10 @@ pub const POLICY_TABLE_BYTES: usize = core::mem::size_of::<PolicyTable>();
 
 const _: () = assert!(POLICY_TABLE_BYTES == 88 + 8 * MAX_POLICY_PARAMS);
 
-/// Parameters of one head with hidden widths `hidden`: Σ_l (n_l · n_{l+1} + n_{l+1}) over the
-/// layer sizes `[dX, hidden…, 1]`.
-pub fn head_len(hidden: &[usize]) -> usize {
-    let mut prev = DX;
+/// Parameters of one head with hidden widths `hidden` on a state of `dx` entries:
+/// Σ_l (n_l · n_{l+1} + n_{l+1}) over the layer sizes `[dX, hidden…, 1]`.
+pub fn head_len(dx: usize, hidden: &[usize]) -> usize {
+    let mut prev = dx;
     let mut n = 0;
     for &h in hidden.iter().chain(&[1]) {
         n += prev * h + h;
@@ -74,9 +78,10 @@ pub fn head_len(hidden: &[usize]) -> usize {
     n
 }
 
-/// Length of θ for heads of hidden widths `hidden` (module docs): `2 dX + dU · head + dU`.
-pub fn flat_len(hidden: &[usize]) -> usize {
-    2 * DX + DU * head_len(hidden) + DU
+/// Length of θ at dimensions `dx`, `du` for heads of hidden widths `hidden` (module docs):
+/// `2 dX + dU · head + dU`.
+pub fn flat_len(dx: usize, du: usize, hidden: &[usize]) -> usize {
+    2 * dx + du * head_len(dx, hidden) + du
 }
 
 /// The weights of a Gaussian MLP policy (module docs), as sent on `controller/policy`.
@@ -87,9 +92,9 @@ pub struct PolicyTable {
     /// Version, in the same increasing sequence as gain tables' (the controller takes the
     /// newest of either kind).
     pub version: u64,
-    /// State dimension; must equal [`DX`].
+    /// State dimension dX of the task's layout.
     pub dx: u32,
-    /// Action dimension; must equal [`DU`].
+    /// Action dimension dU of the task's layout.
     pub du: u32,
     /// 0: goal angles (a = q + μ + σ ε, rad); 1: torques (a = μ + σ ε, N·m).
     pub action_mode: u32,
@@ -120,6 +125,8 @@ impl fmt::Debug for PolicyTable {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("PolicyTable")
             .field("version", &self.version)
+            .field("dx", &self.dx)
+            .field("du", &self.du)
             .field("action_mode", &self.action_mode)
             .field(
                 "hidden",
@@ -174,8 +181,8 @@ impl fmt::Display for PolicyEntry {
 /// Why a policy table was rejected; each message names the field or θ entry and the limit.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum PolicyTableError {
-    /// `dx`/`du` differ from this build's.
-    #[error("policy table has dx = {dx}, du = {du}; this build expects dx = {DX}, du = {DU} (shared/src/layout.rs)")]
+    /// `dx`/`du` of no task ([`StateLayout::from_dims`]).
+    #[error("policy table has dx = {dx}, du = {du}, the dimensions of no task (dX = 2n + 6p and dU = n for n joints and p tool points; shared/src/layout.rs)")]
     WrongDimensions {
         /// Received dx.
         dx: u32,
@@ -365,7 +372,8 @@ impl Default for PolicyScratch {
 }
 
 impl PolicyTable {
-    /// A zeroed table on the heap with `dx`, `du` set (it does not validate until filled).
+    /// A zeroed table on the heap with the reaching task's `dx`, `du` (it does not validate
+    /// until filled).
     pub fn new_boxed() -> Box<PolicyTable> {
         table::new_boxed()
     }
@@ -375,12 +383,13 @@ impl PolicyTable {
         table::init_zeroed(slot)
     }
 
-    /// Fills a table from hidden widths and θ (version and mode as given; epoch 0 and the
-    /// default episode plan) and seals it. `Err` if the widths or θ's length exceed the
+    /// Fills a table from hidden widths and θ (version, layout and mode as given; epoch 0 and
+    /// the default episode plan) and seals it. `Err` if the widths or θ's length exceed the
     /// table's limits.
     pub fn fill(
         &mut self,
         version: u64,
+        layout: &StateLayout,
         mode: ActionMode,
         hidden: &[usize],
         theta: &[f64],
@@ -392,7 +401,8 @@ impl PolicyTable {
         if hidden.iter().any(|&h| h == 0 || h > MAX_WIDTH) {
             return Err(shape("a hidden width is outside the limits"));
         }
-        let expected = flat_len(hidden);
+        let (dx, du) = (layout.dx(), layout.du());
+        let expected = flat_len(dx, du, hidden);
         if expected > MAX_POLICY_PARAMS {
             return Err(shape(
                 "the hidden widths need more parameters than a table holds",
@@ -406,8 +416,8 @@ impl PolicyTable {
             });
         }
         self.version = version;
-        self.dx = DX as u32;
-        self.du = DU as u32;
+        self.dx = dx as u32;
+        self.du = du as u32;
         self.action_mode = mode_code(mode);
         self.n_hidden = hidden.len() as u32;
         self.hidden = [0; MAX_HIDDEN_LAYERS];
@@ -446,8 +456,18 @@ impl PolicyTable {
             .map(|&h| h as usize)
     }
 
+    /// The dimensions (dX, dU) as usize.
+    pub fn dims(&self) -> (usize, usize) {
+        (self.dx as usize, self.du as usize)
+    }
+
+    /// `Ok` if the table's dimensions are `layout`'s; otherwise the mismatch, naming both.
+    pub fn check_layout(&self, layout: &StateLayout) -> Result<(), DimensionMismatch> {
+        layout.check_dims("policy table", self.dx as usize, self.du as usize)
+    }
+
     fn head_len(&self) -> usize {
-        let mut prev = DX;
+        let mut prev = self.dx as usize;
         let mut n = 0;
         for h in self.hidden_widths().chain([1]) {
             n += prev * h + h;
@@ -474,15 +494,16 @@ impl PolicyTable {
     /// The part of θ that index `flat` belongs to.
     fn entry(&self, flat: usize) -> PolicyEntry {
         let head = self.head_len();
-        let (part, index) = if flat < DX {
+        let (dx, du) = self.dims();
+        let (part, index) = if flat < dx {
             (PolicyPart::InputMean, flat)
-        } else if flat < 2 * DX {
-            (PolicyPart::InputScale, flat - DX)
-        } else if flat < 2 * DX + DU * head {
-            let k = flat - 2 * DX;
+        } else if flat < 2 * dx {
+            (PolicyPart::InputScale, flat - dx)
+        } else if flat < 2 * dx + du * head {
+            let k = flat - 2 * dx;
             (PolicyPart::Head(k / head), k % head)
         } else {
-            (PolicyPart::LogStd, flat - 2 * DX - DU * head)
+            (PolicyPart::LogStd, flat - 2 * dx - du * head)
         };
         PolicyEntry { part, index, flat }
     }
@@ -492,7 +513,8 @@ impl PolicyTable {
     /// Allocation-free.
     pub fn validate(&self, bounds: &PolicyBounds) -> Result<(), PolicyTableError> {
         let version = self.version;
-        if self.dx as usize != DX || self.du as usize != DU {
+        let (dx, du) = self.dims();
+        if StateLayout::from_dims(dx, du).is_none() {
             return Err(PolicyTableError::WrongDimensions {
                 dx: self.dx,
                 du: self.du,
@@ -512,7 +534,7 @@ impl PolicyTable {
         if self.hidden[n_hidden..].iter().any(|&h| h != 0) {
             return shape("a hidden width after n_hidden is not 0");
         }
-        let expected = 2 * DX + DU * self.head_len() + DU;
+        let expected = 2 * dx + du * self.head_len() + du;
         if expected > MAX_POLICY_PARAMS {
             return shape("the hidden widths need more parameters than a table holds");
         }
@@ -547,13 +569,13 @@ impl PolicyTable {
                 value: theta[i],
             });
         }
-        let log_std_start = expected - DU;
+        let log_std_start = expected - du;
         for (i, &value) in theta.iter().enumerate() {
             // Written so that a NaN bound rejects.
-            let (ok, bound_name, bound) = if i < DX {
+            let (ok, bound_name, bound) = if i < dx {
                 let b = bounds.max_abs_input_mean;
                 (value.abs() <= b, "max_abs_input_mean", b)
-            } else if i < 2 * DX {
+            } else if i < 2 * dx {
                 let ok = value >= bounds.min_input_scale && value <= bounds.max_input_scale;
                 if value < bounds.min_input_scale {
                     (ok, "min_input_scale", bounds.min_input_scale)
@@ -581,35 +603,47 @@ impl PolicyTable {
 }
 
 /// Writes a = b(s) + μ(u(s)) + σ ⊙ ε into `a` (module docs), for a table that passed
-/// [`PolicyTable::validate`]. `s`: the state (layout of [`crate::layout`]); `eps`:
-/// standard-normal noise, [`crate::NO_NOISE`] for the mean; `scratch`: layer buffers. Pure
-/// apart from `scratch`, allocation-free, no panics for a validated table; the caller clamps
-/// `a` as for gain tables (docs/design.md §2.4).
+/// [`PolicyTable::validate`]. `s`: the state, dX entries (the table's task's layout,
+/// [`crate::layout::StateLayout`]); `eps`: standard-normal noise, at least dU entries,
+/// [`crate::NO_NOISE`] for the mean; `a`: dU entries; `scratch`: layer buffers. Pure apart from
+/// `scratch`, allocation-free, no panics for a validated table; arrays of other sizes are an
+/// error and leave `a` alone. The caller clamps `a` as for gain tables (docs/design.md §2.4).
 ///
 /// Operation order is that of the learner's `GlobalPolicy::mean_action` plus `σ ε` (the same
 /// [`crate::kernels`]), so both give the same bits (tested in `imitation`).
 pub fn policy_action(
     table: &PolicyTable,
-    s: &[f64; DX],
-    eps: &[f64; DU],
+    s: &[f64],
+    eps: &[f64],
     scratch: &mut PolicyScratch,
-    a: &mut [f64; DU],
-) {
+    a: &mut [f64],
+) -> Result<(), LawError> {
+    let (dx, du) = table.dims();
+    if s.len() != dx || eps.len() < du || a.len() != du || dx > MAX_DX {
+        return Err(LawError::WrongDimensions {
+            dx,
+            du,
+            s: s.len(),
+            eps: eps.len(),
+            a: a.len(),
+        });
+    }
     let theta = table.theta();
-    let (m, rest) = theta.split_at(DX);
-    let (r, heads) = rest.split_at(DX);
+    let (m, rest) = theta.split_at(dx);
+    let (r, heads) = rest.split_at(dx);
     let head = table.head_len();
-    let mut u = [0.0; DX];
-    for i in 0..DX {
+    let mut u = [0.0; MAX_DX];
+    let u = &mut u[..dx];
+    for i in 0..dx {
         u[i] = (s[i] - m[i]) / r[i];
     }
     let goal_angles = table.action_mode == 0;
-    for j in 0..DU {
+    for j in 0..du {
         let mut w = &heads[j * head..(j + 1) * head];
         // The two buffers trade roles by swapping the references, not their 2 KB contents.
         let (mut x, mut y) = (&mut scratch.x, &mut scratch.y);
-        x[..DX].copy_from_slice(&u);
-        let mut n_in = DX;
+        x[..dx].copy_from_slice(u);
+        let mut n_in = dx;
         for h in table.hidden_widths() {
             let (wl, rest) = w.split_at(h * n_in);
             let (bl, rest) = rest.split_at(h);
@@ -620,22 +654,25 @@ pub fn policy_action(
             w = rest;
         }
         let mu = dot(&w[..n_in], &x[..n_in]) + w[n_in];
-        let base = if goal_angles { s[Q.start + j] } else { 0.0 };
-        let log_std = heads[DU * head + j];
+        // The joint angles open every layout: s[q] = s[0..dU].
+        let base = if goal_angles { s[j] } else { 0.0 };
+        let log_std = heads[du * head + j];
         a[j] = (base + mu) + log_std.exp() * eps[j];
     }
+    Ok(())
 }
 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::layout::{DU, DX};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     /// A random valid table (weights in ±0.5, identity-like normalisation, σ = 0.1).
     pub(crate) fn random_policy(seed: u64, hidden: &[usize]) -> Box<PolicyTable> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let n = flat_len(hidden);
+        let n = flat_len(DX, DU, hidden);
         let mut theta: Vec<f64> = (0..n).map(|_| rng.random_range(-0.5..0.5)).collect();
         for v in &mut theta[DX..2 * DX] {
             *v = rng.random_range(0.5..2.0);
@@ -644,8 +681,14 @@ pub(crate) mod tests {
             *v = 0.1f64.ln();
         }
         let mut p = PolicyTable::new_boxed();
-        p.fill(seed + 1, ActionMode::GoalAngles, hidden, &theta)
-            .unwrap();
+        p.fill(
+            seed + 1,
+            &StateLayout::REACH3,
+            ActionMode::GoalAngles,
+            hidden,
+            &theta,
+        )
+        .unwrap();
         p
     }
 
@@ -660,9 +703,9 @@ pub(crate) mod tests {
 
     #[test]
     fn lengths_and_a_good_table() {
-        assert_eq!(flat_len(&[64, 64]), 15_198);
-        assert_eq!(flat_len(&[96, 96]), 31_998);
-        assert!(flat_len(&[96, 96]) <= MAX_POLICY_PARAMS);
+        assert_eq!(flat_len(DX, DU, &[64, 64]), 15_198);
+        assert_eq!(flat_len(DX, DU, &[96, 96]), 31_998);
+        assert!(flat_len(DX, DU, &[96, 96]) <= MAX_POLICY_PARAMS);
         let p = random_policy(1, &[64, 64]);
         p.validate(&PolicyBounds::default()).unwrap();
         random_policy(2, &[8])
@@ -744,12 +787,12 @@ pub(crate) mod tests {
     fn the_action_is_the_documented_law() {
         // One hidden layer of 2 written out by hand.
         let hidden = [2usize];
-        let mut theta = vec![0.0; flat_len(&hidden)];
+        let mut theta = vec![0.0; flat_len(DX, DU, &hidden)];
         for i in 0..DX {
             theta[i] = 0.1 * i as f64; // m
             theta[DX + i] = 2.0; // r
         }
-        let head = head_len(&hidden);
+        let head = head_len(DX, &hidden);
         assert_eq!(head, 2 * DX + 2 + 2 + 1);
         for j in 0..DU {
             let h = &mut theta[2 * DX + j * head..2 * DX + (j + 1) * head];
@@ -763,12 +806,19 @@ pub(crate) mod tests {
         let n = theta.len();
         theta[n - DU..].copy_from_slice(&[0.0, 0.5f64.ln(), 2.0f64.ln()]);
         let mut p = PolicyTable::new_boxed();
-        p.fill(9, ActionMode::GoalAngles, &hidden, &theta).unwrap();
+        p.fill(
+            9,
+            &StateLayout::REACH3,
+            ActionMode::GoalAngles,
+            &hidden,
+            &theta,
+        )
+        .unwrap();
         p.validate(&PolicyBounds::default()).unwrap();
         let s: [f64; DX] = core::array::from_fn(|i| 0.3 - 0.07 * i as f64);
         let eps = [1.0, -2.0, 0.5];
         let mut a = [0.0; DU];
-        policy_action(&p, &s, &eps, &mut PolicyScratch::default(), &mut a);
+        policy_action(&p, &s, &eps, &mut PolicyScratch::default(), &mut a).unwrap();
         let u: Vec<f64> = (0..DX).map(|i| (s[i] - 0.1 * i as f64) / 2.0).collect();
         let std = [1.0, 0.5, 2.0];
         for j in 0..DU {
@@ -782,9 +832,45 @@ pub(crate) mod tests {
         p.action_mode = 1;
         p.seal();
         let mut b = [0.0; DU];
-        policy_action(&p, &s, &eps, &mut PolicyScratch::default(), &mut b);
+        policy_action(&p, &s, &eps, &mut PolicyScratch::default(), &mut b).unwrap();
         for j in 0..DU {
             assert!((a[j] - s[j] - b[j]).abs() < 1e-14);
         }
+    }
+
+    /// The whole arm and a pose (dX = 30, dU = 6): heads with zero output layers give
+    /// a = q + σ ε on all six joints; arrays of the reaching task's sizes are refused.
+    #[test]
+    fn any_layout_acts_on_its_own_dimensions() {
+        let layout = StateLayout::POSE6;
+        let (dx, du) = (layout.dx(), layout.du());
+        let hidden = [4usize];
+        let n = flat_len(dx, du, &hidden);
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let mut theta: Vec<f64> = (0..n).map(|_| rng.random_range(-0.5..0.5)).collect();
+        theta[dx..2 * dx].fill(1.0);
+        let head = head_len(dx, &hidden);
+        for j in 0..du {
+            // The output layer (4 weights and the bias) at the end of each head: zero.
+            let end = 2 * dx + (j + 1) * head;
+            theta[end - 5..end].fill(0.0);
+        }
+        theta[n - du..].fill(0.5f64.ln());
+        let mut p = PolicyTable::new_boxed();
+        p.fill(1, &layout, ActionMode::GoalAngles, &hidden, &theta)
+            .unwrap();
+        p.validate(&PolicyBounds::default()).unwrap();
+        assert_eq!(p.dims(), (30, 6));
+        p.check_layout(&layout).unwrap();
+        assert!(p.check_layout(&StateLayout::REACH3).is_err());
+        let s: Vec<f64> = (0..dx).map(|i| 0.01 * i as f64).collect();
+        let eps = [1.0, -1.0, 2.0, 0.0, 0.5, -0.5];
+        let mut a = [0.0; 6];
+        policy_action(&p, &s, &eps, &mut PolicyScratch::default(), &mut a).unwrap();
+        for j in 0..du {
+            assert_eq!(a[j], s[j] + 0.5 * eps[j], "joint {j}");
+        }
+        let mut a3 = [0.0; 3];
+        assert!(policy_action(&p, &s[..12], &eps, &mut PolicyScratch::default(), &mut a3).is_err());
     }
 }

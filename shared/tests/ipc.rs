@@ -52,10 +52,9 @@ fn payloads_round_trip_through_iceoryx2() {
             table_version: 3,
             t: 99,
             noise: 1,
-            s: [0.5; DX],
-            a: [0.25; DU],
             ..StepSample::default()
-        },
+        }
+        .with_parts(&[0.5; DX], &[0.25; DU], &[0.2; DU]),
     );
     assert_eq!(
         ArmCommand::reset(1, 0, 0, [0.0; 3]).kind(),
@@ -84,10 +83,11 @@ fn gain_table_is_built_in_a_loaned_sample_and_validates_on_the_other_side() {
         table.set_version(version);
         table.set_horizon(MAX_HORIZON).unwrap();
         for t in 0..MAX_HORIZON {
-            let st = table.step_mut(t);
-            st.k_mat[1][7] = t as f64 * 0.01;
-            st.a_hat = [0.1, 0.2, version as f64];
-            st.chol = [[0.5, 0.0, 0.0], [0.1, 0.5, 0.0], [0.0, 0.1, 0.5]];
+            let mut st = table.step_mut(t);
+            st.set_k(1, 7, t as f64 * 0.01);
+            st.a_hat.copy_from_slice(&[0.1, 0.2, version as f64]);
+            st.chol
+                .copy_from_slice(&[0.5, 0.0, 0.0, 0.1, 0.5, 0.0, 0.0, 0.1, 0.5]);
         }
         table.seal();
         // SAFETY: init_zeroed initialised the payload.
@@ -98,7 +98,7 @@ fn gain_table_is_built_in_a_loaned_sample_and_validates_on_the_other_side() {
     let received = subscriber.receive().unwrap().expect("no table received");
     received.validate(&GainBounds::default()).unwrap();
     assert_eq!(received.version, 3);
-    assert_eq!(received.step(127).k_mat[1][7], 1.27);
+    assert_eq!(received.step(127).k(1, 7), 1.27);
     let mut buffer = GainTable::new_boxed();
     buffer.copy_from(&received);
     assert_eq!(*buffer, *received);

@@ -9,7 +9,7 @@ use std::cell::Cell;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::{
-    controller_action, state_vector, ArmState, GainBounds, GainTable, DU, DX, NO_NOISE,
+    controller_action, state_vector, ArmState, GainBounds, GainTable, StateLayout, NO_NOISE,
 };
 
 struct Counting;
@@ -59,23 +59,23 @@ fn heap_ops<R>(f: impl FnOnce() -> R) -> (u64, R) {
     (COUNT.with(|c| c.get()), r)
 }
 
-fn filled_table(seed: u64) -> Box<GainTable> {
+fn filled_table(layout: &StateLayout, seed: u64) -> Box<GainTable> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut table = GainTable::new_boxed();
+    let mut table = GainTable::new_boxed_for(layout);
     table.set_version(seed);
     table.set_horizon(100).unwrap();
     for t in 0..100 {
-        let st = table.step_mut(t);
-        for v in st.k_mat.as_flattened_mut() {
+        let mut st = table.step_mut(t);
+        for v in st.k_mat.iter_mut() {
             *v = rng.random_range(-1.0..1.0);
         }
-        for i in 0..DU {
+        for i in 0..layout.du() {
             st.k_vec[i] = rng.random_range(-1.0..1.0);
             st.a_hat[i] = rng.random_range(-1.0..1.0);
             for j in 0..i {
-                st.chol[i][j] = rng.random_range(-0.1..0.1);
+                st.set_l(i, j, rng.random_range(-0.1..0.1));
             }
-            st.chol[i][i] = 0.5;
+            st.set_l(i, i, 0.5);
         }
     }
     table.seal();
@@ -89,40 +89,45 @@ fn counter_sees_allocations() {
     assert!(n >= 1, "the counting allocator is not active");
 }
 
+/// At the reaching task's dimensions and at the whole arm's with a pose (dX = 30, dU = 6).
 #[test]
 fn controller_action_does_not_allocate() {
-    let table = filled_table(3);
-    let mut rng = ChaCha8Rng::seed_from_u64(4);
-    let states: Vec<[f64; DX]> = (0..1000)
-        .map(|_| core::array::from_fn(|_| rng.random_range(-2.0..2.0)))
-        .collect();
-    let noise: Vec<[f64; DU]> = (0..1000)
-        .map(|_| core::array::from_fn(|_| rng.random_range(-2.0..2.0)))
-        .collect();
-    let mut a = [0.0; DU];
-    let mut checksum = 0.0;
-    let (n, ()) = heap_ops(|| {
-        for rep in 0..100 {
-            for (k, (s, eps)) in states.iter().zip(&noise).enumerate() {
-                let t = (k + rep) % 100;
-                let eps = if k % 2 == 0 { eps } else { &NO_NOISE };
-                controller_action(&table, t, s, eps, &mut a).unwrap();
-                checksum += a[0];
+    for layout in [StateLayout::REACH3, StateLayout::POSE6] {
+        let (dx, du) = (layout.dx(), layout.du());
+        let table = filled_table(&layout, 3);
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let states: Vec<Vec<f64>> = (0..1000)
+            .map(|_| (0..dx).map(|_| rng.random_range(-2.0..2.0)).collect())
+            .collect();
+        let noise: Vec<Vec<f64>> = (0..1000)
+            .map(|_| (0..du).map(|_| rng.random_range(-2.0..2.0)).collect())
+            .collect();
+        let mut a = vec![0.0; du];
+        let mut checksum = 0.0;
+        let (n, ()) = heap_ops(|| {
+            for rep in 0..100 {
+                for (k, (s, eps)) in states.iter().zip(&noise).enumerate() {
+                    let t = (k + rep) % 100;
+                    let eps: &[f64] = if k % 2 == 0 { eps } else { &NO_NOISE };
+                    controller_action(&table, t, s, eps, &mut a).unwrap();
+                    checksum += a[0];
+                }
             }
-        }
-        // The error path does not allocate either.
-        assert!(controller_action(&table, 100, &states[0], &NO_NOISE, &mut a).is_err());
-    });
-    assert!(checksum.is_finite());
-    assert_eq!(
-        n, 0,
-        "controller_action allocated {n} times over 100 000 calls"
-    );
+            // The error paths do not allocate either.
+            assert!(controller_action(&table, 100, &states[0], &NO_NOISE, &mut a).is_err());
+            assert!(controller_action(&table, 0, &states[0][1..], &NO_NOISE, &mut a).is_err());
+        });
+        assert!(checksum.is_finite());
+        assert_eq!(
+            n, 0,
+            "controller_action allocated {n} times over 100 000 calls ({layout})"
+        );
+    }
 }
 
 #[test]
 fn table_handling_and_state_assembly_do_not_allocate() {
-    let incoming = filled_table(5);
+    let incoming = filled_table(&StateLayout::REACH3, 5);
     let mut buffers = [GainTable::new_boxed(), GainTable::new_boxed()];
     let bounds = GainBounds::default();
     let arm = ArmState {
@@ -139,7 +144,7 @@ fn table_handling_and_state_assembly_do_not_allocate() {
             assert_eq!(s, s2);
         }
         // Rejections build their error without formatting anything.
-        buffers[0].steps[7].chol[0][1] = 1.0;
+        buffers[0].step_mut(7).set_l(0, 1, 1.0);
         buffers[0].seal();
         assert!(buffers[0].validate(&bounds).is_err());
         buffers[1].version += 1;

@@ -288,9 +288,9 @@ pub fn reaching_table(
 ) -> Box<GainTable> {
     let mut t = rt_controller::testkit::constant_goal_table(version, horizon, q_goal, sigma);
     for s in 0..horizon {
-        let st = t.step_mut(s);
+        let mut st = t.step_mut(s);
         for i in 0..DU {
-            st.k_mat[i][i] = 0.5;
+            st.set_k(i, i, 0.5);
             st.s_hat[i] = q_goal[i];
         }
     }

@@ -25,7 +25,7 @@ use learner::io::table::load_table;
 use serde::Serialize;
 use ur5_shared::config::ArmLimits;
 use ur5_shared::noise::Noise;
-use ur5_shared::{controller_action, GainBounds, GainTable, DU, DX, NO_NOISE};
+use ur5_shared::{controller_action, GainBounds, GainTable, DU, DX};
 
 /// Noisy episodes per table version and noise-free ones per cycle: the controller's defaults,
 /// which the soak runs (`noisy_episodes`, `eval_episodes`).
@@ -84,7 +84,8 @@ pub fn scan_run(out: &Path) -> Scan {
         tables
             .entry(v)
             .or_insert_with(|| load_table(&learner::io::table::version_path(out, v), &bounds).ok())
-            .clone()
+            .as_ref()
+            .map(|(t, dt)| (t.boxed_clone(), *dt))
     };
     for path in &files {
         scan.files += 1;
@@ -242,7 +243,7 @@ pub fn explain(
         })
     };
     if !noisy {
-        return if matches(&mut || NO_NOISE, t_len) {
+        return if matches(&mut || [0.0; DU], t_len) {
             Ok(())
         } else {
             Err(format!("noise-free actions are not v{version}'s law"))

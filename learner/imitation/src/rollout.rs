@@ -16,7 +16,7 @@ use ur5_shared::config::{ActionMode, ArmLimits, TaskConfig};
 use ur5_shared::layout::{DU, DX, Q};
 use ur5_shared::noise::Noise;
 use ur5_shared::safety::clamp_action;
-use ur5_shared::{controller_action, GainTable, NO_NOISE};
+use ur5_shared::{controller_action, GainTable};
 
 use crate::ImitationError;
 
@@ -174,7 +174,7 @@ pub fn run_episode(
     for t in 0..horizon {
         let eps = match noise.as_deref_mut() {
             Some(n) => n.next(),
-            None => NO_NOISE,
+            None => [0.0; DU],
         };
         let mut a = policy.act(t, &s, &eps, mode);
         ep.u_policy.extend_from_slice(&a);

@@ -19,7 +19,7 @@ use std::path::Path;
 
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::{ACTION_NAMES, STATE_NAMES};
+use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -122,7 +122,7 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
         ));
     }
     let hidden: Vec<usize> = hidden.iter().map(|&h| h as usize).collect();
-    let params = f.f64_shaped("params", &[flat_len(&hidden) as u64])?;
+    let params = f.f64_shaped("params", &[flat_len(DX, DU, &hidden) as u64])?;
     let policy = GlobalPolicy::from_flat(&hidden, &params).map_err(|e| bad("params", e))?;
     let mode = match f.string("action_mode")?.as_str() {
         "goal_angles" => ActionMode::GoalAngles,

@@ -13,15 +13,16 @@
 //! | `plan_flags`, `plan_noise_stream` | () u64 | the episode plan (`ur5_shared::EpisodePlan`), written when it is not the default; absent: 0 |
 //! | `plan_goal` | (3,) f64 | the plan's goal (m), with the two above; absent: 0 |
 //! | `dt` | () f64 | control period (s) |
-//! | `state_names`, `action_names` | | layout |
+//! | `state_names`, `action_names` | | the layout's names (`ur5_shared::StateLayout`) |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
-//! Loading rebuilds the table, checks the stored checksum and runs `GainTable::validate`.
+//! dX and dU are the table's task's (K's shape): loading takes them from the file, refuses
+//! dimensions of no task naming them, rebuilds the table, checks the stored checksum and runs
+//! `GainTable::validate`. Whether they are the caller's task's is `GainTable::check_layout`.
 
 use std::path::{Path, PathBuf};
 
-use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
-use ur5_shared::{GainBounds, GainStep, GainTable};
+use ur5_shared::{GainBounds, GainStep, GainTable, StateLayout};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -32,23 +33,20 @@ pub const SCHEMA_VERSION: i64 = 2;
 /// The float arrays of the file layout (module docs) of `table`'s used steps: (name, shape,
 /// row-major values).
 pub fn table_arrays(table: &GainTable) -> Vec<(&'static str, Vec<u64>, Vec<f64>)> {
-    let steps = table.used_steps();
-    let t = steps.len() as u64;
-    let flat = |f: &dyn Fn(&GainStep) -> Vec<f64>| steps.iter().flat_map(f).collect::<Vec<f64>>();
+    let t = table.horizon();
+    let (dx, du) = table.dims();
+    let flat = |f: fn(GainStep<'_>) -> &[f64]| {
+        (0..t)
+            .flat_map(|i| f(table.step(i)).to_vec())
+            .collect::<Vec<f64>>()
+    };
+    let (t, dx, du) = (t as u64, dx as u64, du as u64);
     vec![
-        (
-            "K",
-            vec![t, DU as u64, DX as u64],
-            flat(&|s| s.k_mat.iter().flatten().copied().collect()),
-        ),
-        ("k", vec![t, DU as u64], flat(&|s| s.k_vec.to_vec())),
-        ("s_hat", vec![t, DX as u64], flat(&|s| s.s_hat.to_vec())),
-        ("a_hat", vec![t, DU as u64], flat(&|s| s.a_hat.to_vec())),
-        (
-            "L",
-            vec![t, DU as u64, DU as u64],
-            flat(&|s| s.chol.iter().flatten().copied().collect()),
-        ),
+        ("K", vec![t, du, dx], flat(|s| s.k_mat)),
+        ("k", vec![t, du], flat(|s| s.k_vec)),
+        ("s_hat", vec![t, dx], flat(|s| s.s_hat)),
+        ("a_hat", vec![t, du], flat(|s| s.a_hat)),
+        ("L", vec![t, du, du], flat(|s| s.chol)),
     ]
 }
 
@@ -79,8 +77,21 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
     }
     w.u64("checksum", &[], &[table.checksum])?;
     w.f64("dt", &[], &[dt])?;
-    w.strings("state_names", &STATE_NAMES)?;
-    w.strings("action_names", &ACTION_NAMES)?;
+    let (dx, du) = table.dims();
+    let layout = StateLayout::from_dims(dx, du).ok_or_else(|| NpzError::Bad {
+        path: path.to_path_buf(),
+        name: "K".into(),
+        why: format!("dx = {dx}, du = {du} are the dimensions of no task"),
+    })?;
+    let (state, action) = (layout.state_names(), layout.action_names());
+    w.strings(
+        "state_names",
+        &state.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
+    w.strings(
+        "action_names",
+        &action.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
     w.finish()?;
     Ok(())
 }
@@ -121,23 +132,21 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
     let bad = |name: &str, why: String| f.bad(name, why);
     let (shape, k_mat) = f.f64("K")?;
     let [t, du, dx] = shape[..] else {
+        return Err(bad("K", format!("shape {shape:?}, expected (T, dU, dX)")));
+    };
+    let Some(layout) = StateLayout::from_dims(dx as usize, du as usize) else {
         return Err(bad(
             "K",
-            format!("shape {shape:?}, expected (T, {DU}, {DX})"),
+            format!("shape {shape:?}: dX = {dx}, dU = {du} are the dimensions of no task (dX = 2n + 6p, dU = n for n joints and p tool points)"),
         ));
     };
-    if (du, dx) != (DU as u64, DX as u64) {
-        return Err(bad(
-            "K",
-            format!("shape {shape:?}, expected (T, {DU}, {DX})"),
-        ));
-    }
-    let k_vec = f.f64_shaped("k", &[t, DU as u64])?;
-    let s_hat = f.f64_shaped("s_hat", &[t, DX as u64])?;
-    let a_hat = f.f64_shaped("a_hat", &[t, DU as u64])?;
-    let chol = f.f64_shaped("L", &[t, DU as u64, DU as u64])?;
+    let k_vec = f.f64_shaped("k", &[t, du])?;
+    let s_hat = f.f64_shaped("s_hat", &[t, dx])?;
+    let a_hat = f.f64_shaped("a_hat", &[t, du])?;
+    let chol = f.f64_shaped("L", &[t, du, du])?;
     let dt = f.f64_shaped("dt", &[])?[0];
-    let mut table = GainTable::new_boxed();
+    let (dx, du) = (dx as usize, du as usize);
+    let mut table = GainTable::new_boxed_for(&layout);
     table
         .set_horizon(t as usize)
         .map_err(|e| bad("K", e.to_string()))?;
@@ -150,15 +159,14 @@ pub fn load_table(path: &Path, bounds: &GainBounds) -> Result<(Box<GainTable>, f
         table.plan.goal.copy_from_slice(&goal);
     }
     for ti in 0..t as usize {
-        let mut step = GainStep::default();
-        for i in 0..DU {
-            step.k_mat[i].copy_from_slice(&k_mat[(ti * DU + i) * DX..(ti * DU + i + 1) * DX]);
-            step.chol[i].copy_from_slice(&chol[(ti * DU + i) * DU..(ti * DU + i + 1) * DU]);
-        }
-        step.k_vec.copy_from_slice(&k_vec[ti * DU..(ti + 1) * DU]);
-        step.a_hat.copy_from_slice(&a_hat[ti * DU..(ti + 1) * DU]);
-        step.s_hat.copy_from_slice(&s_hat[ti * DX..(ti + 1) * DX]);
-        table.set_step(ti, &step);
+        let step = table.step_mut(ti);
+        step.k_mat
+            .copy_from_slice(&k_mat[ti * du * dx..(ti + 1) * du * dx]);
+        step.chol
+            .copy_from_slice(&chol[ti * du * du..(ti + 1) * du * du]);
+        step.k_vec.copy_from_slice(&k_vec[ti * du..(ti + 1) * du]);
+        step.a_hat.copy_from_slice(&a_hat[ti * du..(ti + 1) * du]);
+        step.s_hat.copy_from_slice(&s_hat[ti * dx..(ti + 1) * dx]);
     }
     table.checksum = f.u64_scalar("checksum")?;
     table
@@ -179,23 +187,23 @@ mod tests {
         table.set_horizon(4).unwrap();
         table.set_version(3);
         for t in 0..4 {
-            let mut s = GainStep::default();
-            s.k_mat[1][5] = 0.5 + t as f64;
-            s.k_vec = [0.1, -0.2, 0.3];
+            let mut s = table.step_mut(t);
+            s.set_k(1, 5, 0.5 + t as f64);
+            s.k_vec.copy_from_slice(&[0.1, -0.2, 0.3]);
             s.s_hat[7] = -0.4;
-            s.a_hat = [1.0, -1.5, 2.0];
-            s.chol = [[0.2, 0.0, 0.0], [0.01, 0.3, 0.0], [0.0, -0.02, 0.1]];
-            table.set_step(t, &s);
+            s.a_hat.copy_from_slice(&[1.0, -1.5, 2.0]);
+            s.chol
+                .copy_from_slice(&[0.2, 0.0, 0.0, 0.01, 0.3, 0.0, 0.0, -0.02, 0.1]);
         }
         table.seal();
         save_table(&path, &table, 0.1).unwrap();
         let (back, dt) = load_table(&path, &GainBounds::default()).unwrap();
         assert_eq!(dt, 0.1);
-        assert_eq!(back.used_steps(), table.used_steps());
+        assert_eq!(back.used_values(), table.used_values());
         assert_eq!(back.checksum, table.checksum);
 
         // A value changed without re-sealing: the checksum no longer matches.
-        let mut tampered = table.clone();
+        let mut tampered = table.boxed_clone();
         tampered.step_mut(2).k_vec[0] = 9.0;
         save_table(&path, &tampered, 0.1).unwrap();
         let e = load_table(&path, &GainBounds::default())
@@ -205,7 +213,7 @@ mod tests {
 
         // An episode plan round-trips (and is covered by the checksum); a file without one
         // (every file of an earlier build) reads as the default plan.
-        let mut planned = table.clone();
+        let mut planned = table.boxed_clone();
         planned.plan = ur5_shared::EpisodePlan::to_goal([-0.45, 0.15, 0.2]).with_noise_stream(4);
         planned.seal();
         assert_ne!(planned.checksum, table.checksum);
@@ -216,13 +224,50 @@ mod tests {
         let (back, _) = load_table(&path, &GainBounds::default()).unwrap();
         assert!(back.plan.is_default());
         // The plan changed in the file (here: dropped) fails the checksum.
-        let mut dropped = planned.clone();
+        let mut dropped = planned.boxed_clone();
         dropped.plan = ur5_shared::EpisodePlan::default();
         save_table(&path, &dropped, 0.1).unwrap();
         let e = load_table(&path, &GainBounds::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("checksum"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A table of another task (six joints and a pose) round-trips with its dimensions; a
+    /// file whose K has the dimensions of no task is refused naming them.
+    #[test]
+    fn any_layout_round_trips_and_impossible_dimensions_are_refused() {
+        let dir = std::env::temp_dir().join(format!("table-test-6-{}", std::process::id()));
+        let path = dir.join("t.npz");
+        let layout = StateLayout::POSE6;
+        let mut table = GainTable::new_boxed_for(&layout);
+        table.set_horizon(3).unwrap();
+        table.set_version(2);
+        for t in 0..3 {
+            let mut s = table.step_mut(t);
+            s.set_k(5, 29, 0.25 * t as f64);
+            for i in 0..6 {
+                s.set_l(i, i, 0.5);
+            }
+        }
+        table.seal();
+        save_table(&path, &table, 0.01).unwrap();
+        let (back, _) = load_table(&path, &GainBounds::default()).unwrap();
+        assert_eq!(back.dims(), (30, 6));
+        assert_eq!(*back, *table);
+        let e = back.check_layout(&StateLayout::REACH3).unwrap_err();
+        assert!(e.to_string().contains("dX = 30, dU = 6"), "{e}");
+
+        let mut w = NpzWriter::create(&path).unwrap();
+        w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
+        w.f64("K", &[1, 3, 13], &[0.0; 39]).unwrap();
+        w.finish().unwrap();
+        let e = load_table(&path, &GainBounds::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("dX = 13, dU = 3"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -4,8 +4,8 @@
 
 use imitation::rollout::Episode;
 use serde::Serialize;
-use ur5_shared::layout::{DU, DX};
-use ur5_shared::StepSample;
+use ur5_shared::layout::DimensionMismatch;
+use ur5_shared::{StateLayout, StepSample};
 
 /// Counts of what arrived.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -29,19 +29,24 @@ pub struct Counts {
 }
 
 /// Builds an [`Episode`] from the samples of one complete episode (t = 0 … T−1):
-/// `x` = s, `u` = a_sent (executed), `u_policy` = a; ε is not sent and stays empty.
+/// `x` = s, `u` = a_sent (executed), `u_policy` = a, at the samples' dimensions (those of the
+/// first; the [`Assembler`] lets only samples of its layout through); ε is not sent and stays
+/// empty.
 pub fn episode_from_samples(samples: &[StepSample]) -> Episode {
+    let (dx, du) = samples
+        .first()
+        .map_or((0, 0), |s| (s.state().len(), s.action().len()));
     let mut ep = Episode {
-        x: Vec::with_capacity(samples.len() * DX),
-        u: Vec::with_capacity(samples.len() * DU),
-        u_policy: Vec::with_capacity(samples.len() * DU),
+        x: Vec::with_capacity(samples.len() * dx),
+        u: Vec::with_capacity(samples.len() * du),
+        u_policy: Vec::with_capacity(samples.len() * du),
         eps: Vec::new(),
         noisy: samples.first().is_some_and(StepSample::is_noisy),
     };
     for s in samples {
-        ep.x.extend_from_slice(&s.s);
-        ep.u.extend_from_slice(&s.a_sent);
-        ep.u_policy.extend_from_slice(&s.a);
+        ep.x.extend_from_slice(s.state());
+        ep.u.extend_from_slice(s.action_sent());
+        ep.u_policy.extend_from_slice(s.action());
     }
     ep
 }
@@ -72,21 +77,31 @@ pub enum Assembled {
         /// Controller episode number.
         episode: u64,
     },
+    /// A sample of another task's dimensions than the learner's: a controller for another
+    /// task is on the stream.
+    WrongDimensions {
+        /// Controller episode number.
+        episode: u64,
+        /// The sample's dimensions against the learner's layout.
+        mismatch: DimensionMismatch,
+    },
 }
 
 /// Groups the sample stream into episodes.
 pub struct Assembler {
     horizon: usize,
+    layout: StateLayout,
     cur: Vec<StepSample>,
     gap: bool,
     mixed: bool,
 }
 
 impl Assembler {
-    /// For episodes of `horizon` steps.
-    pub fn new(horizon: usize) -> Self {
+    /// For episodes of `horizon` steps of the task of `layout`.
+    pub fn new(horizon: usize, layout: StateLayout) -> Self {
         Self {
             horizon,
+            layout,
             cur: Vec::with_capacity(horizon),
             gap: false,
             mixed: false,
@@ -122,6 +137,17 @@ impl Assembler {
     /// off by this sample, and this sample's own if it is the last step).
     pub fn push(&mut self, s: &StepSample) -> Vec<Assembled> {
         let mut out = Vec::new();
+        if let Err(mismatch) =
+            self.layout
+                .check_dims("a controller's sample", s.dx as usize, s.du as usize)
+        {
+            out.extend(self.close());
+            out.push(Assembled::WrongDimensions {
+                episode: s.episode,
+                mismatch,
+            });
+            return out;
+        }
         if let Some(last) = self.cur.last() {
             if s.episode != last.episode {
                 out.extend(self.close());
@@ -185,16 +211,36 @@ mod tests {
     /// are cut into partial episodes of at most T samples instead of piling up.
     #[test]
     fn a_stream_of_repeated_steps_is_cut_into_partial_episodes() {
-        let mut a = Assembler::new(5);
-        let s = StepSample {
+        let mut a = Assembler::new(5, StateLayout::REACH3);
+        let mut s = StepSample {
             t: 1,
             episode: 1,
             ..Default::default()
         };
+        s.set_state(&[0.0; 12]);
+        s.set_actions(&[0.0; 3], &[0.0; 3]);
         let out: Vec<Assembled> = (0..12).flat_map(|_| a.push(&s)).collect();
         assert_eq!(out.len(), 2, "{out:?}");
         assert!(out
             .iter()
             .all(|o| matches!(o, Assembled::Partial { have: 5, .. })));
+    }
+
+    /// A sample of another task's dimensions is named, never assembled into an episode.
+    #[test]
+    fn a_sample_of_another_task_is_refused_naming_both() {
+        let mut a = Assembler::new(5, StateLayout::REACH3);
+        let mut s = StepSample::default();
+        s.set_state(&[0.0; 30]);
+        s.set_actions(&[0.0; 6], &[0.0; 6]);
+        let out = a.push(&s);
+        let [Assembled::WrongDimensions { mismatch, .. }] = &out[..] else {
+            panic!("{out:?}");
+        };
+        let msg = mismatch.to_string();
+        assert!(
+            msg.contains("dX = 30, dU = 6") && msg.contains("dX = 12, dU = 3"),
+            "{msg}"
+        );
     }
 }

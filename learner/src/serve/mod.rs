@@ -111,6 +111,9 @@ impl Default for ServeOptions {
 /// What stopped `learner serve` or `learner policy serve`, or why it could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum ServeError {
+    /// A controller of another task (other dimensions) on the sample stream.
+    #[error("learner/samples")]
+    Peer(#[source] ur5_shared::layout::DimensionMismatch),
     /// A config file that does not parse as TOML.
     #[error("parsing {}", path.display())]
     Toml {
@@ -540,16 +543,14 @@ mod tests {
             episode,
             t,
             noise,
-            s: [t as f64; DX],
-            a: [1.0; DU],
-            a_sent: [0.5; DU],
             ..StepSample::default()
         }
+        .with_parts(&[t as f64; DX], &[1.0; DU], &[0.5; DU])
     }
 
     #[test]
     fn assembler_keeps_complete_episodes_and_discards_the_rest() {
-        let mut a = Assembler::new(3);
+        let mut a = Assembler::new(3, ur5_shared::StateLayout::REACH3);
         let mut got = Vec::new();
         // Starts mid-episode (a learner that joins late): partial.
         for s in [sample(0, 1, 1, 1), sample(0, 2, 1, 1)] {
@@ -581,6 +582,7 @@ mod tests {
                 } => format!("C{episode}v{version}"),
                 Assembled::Partial { episode, have } => format!("P{episode}:{have}"),
                 Assembled::Mixed { episode } => format!("M{episode}"),
+                Assembled::WrongDimensions { episode, .. } => format!("W{episode}"),
             })
             .collect();
         assert_eq!(kinds, ["P0:2", "C1v1", "P2:2", "C3v2", "M4", "P5:2"]);
@@ -682,8 +684,8 @@ mod tests {
         let table = &*table;
         let episode = |task: &TaskConfig, k: u64| {
             let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
-            let mut table = table.clone();
-            run_episode(&mut sim, task, &mut table, Some(&mut Noise::new(0, 1, k))).unwrap()
+            let mut table = table.boxed_clone();
+            run_episode(&mut sim, task, &mut *table, Some(&mut Noise::new(0, 1, k))).unwrap()
         };
         let publications = el.publications(0).unwrap();
         let r = Reference::of(&el, &publications[0], 1);
@@ -697,7 +699,7 @@ mod tests {
         let ep = run_episode(
             &mut sim,
             &cfg.task,
-            &mut table.clone(),
+            &mut *table.boxed_clone(),
             Some(&mut Noise::new(0, 1, 2)),
         )
         .unwrap();
@@ -707,7 +709,7 @@ mod tests {
         let other_seed = run_episode(
             &mut sim,
             &cfg.task,
-            &mut table.clone(),
+            &mut *table.boxed_clone(),
             Some(&mut Noise::new(7, 1, 0)),
         )
         .unwrap();
@@ -821,7 +823,7 @@ mod tests {
         crate::io::table::save_table(&path, first, 0.1).unwrap();
         assert_eq!(republication_epoch(&dir, 1, 4).unwrap(), 11);
         assert_eq!(republication_epoch(&dir, 1, 1).unwrap(), 8);
-        let mut last = first.clone();
+        let mut last = first.boxed_clone();
         last.epoch = u32::MAX - 2;
         crate::io::table::save_table(&path, &last, 0.1).unwrap();
         assert!(matches!(

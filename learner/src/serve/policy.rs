@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 use ur5_shared::layout::EE_MINUS_GOAL;
-use ur5_shared::{policy_action, PolicyScratch, PolicyTable, NO_NOISE};
+use ur5_shared::{policy_action, PolicyScratch, PolicyTable, MAX_DU, NO_NOISE};
 
 use super::ports::Ports;
 use super::ServeError;
@@ -118,9 +118,13 @@ fn collect(
         }
         let c = cur.as_mut().expect("set above");
         if !noisy {
-            let mut a = [0.0; 3];
-            policy_action(table, &sample.s, &NO_NOISE, &mut scratch, &mut a);
-            if a.map(f64::to_bits) != sample.a.map(f64::to_bits) {
+            let mut a = [0.0; MAX_DU];
+            let a = &mut a[..sample.action().len()];
+            let same = policy_action(table, sample.state(), &NO_NOISE, &mut scratch, a).is_ok()
+                && a.iter()
+                    .zip(sample.action())
+                    .all(|(x, y)| x.to_bits() == y.to_bits());
+            if !same {
                 c.5 += 1;
             }
         }

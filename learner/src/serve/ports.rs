@@ -126,12 +126,22 @@ impl Outgoing for PolicyTable {
 /// A table of either kind, as a learner with several goals publishes them (`learner serve
 /// --algo mdgps`: gain tables for the controllers' episodes, policy tables for the
 /// evaluations).
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub enum AnyTable {
     /// On `controller/gains`.
     Gain(Box<GainTable>),
     /// On `controller/policy`.
     Policy(Box<PolicyTable>),
+}
+
+impl Clone for AnyTable {
+    /// A copy on the heap (a gain table is too large for the stack).
+    fn clone(&self) -> Self {
+        match self {
+            AnyTable::Gain(t) => AnyTable::Gain(t.boxed_clone()),
+            AnyTable::Policy(p) => AnyTable::Policy(p.clone()),
+        }
+    }
 }
 
 impl AnyTable {

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use gps::policy::lin_gauss::LinGaussPolicy;
 use imitation::controller::to_gain_table;
 use imitation::rollout::Episode;
-use ur5_shared::{GainTable, StepSample};
+use ur5_shared::{GainTable, StateLayout, StepSample};
 
 use super::learner::{Publication, Run};
 use super::ports::Ports;
@@ -136,7 +136,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
             ports,
             start_version,
             t_len,
-            asm: Assembler::new(t_len),
+            asm: Assembler::new(t_len, StateLayout::REACH3),
             publications,
             at: 0,
             batch: Batch {
@@ -280,6 +280,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
                 self.bar.println(&format!("learner serve: discarded episode {episode}: table version or noise flag changed inside it"));
                 Ok(None)
             }
+            Assembled::WrongDimensions { mismatch, .. } => Err(ServeError::Peer(mismatch)),
         }
     }
 

@@ -251,7 +251,7 @@ impl TaskCheck {
             self.start_checked = true;
         }
         if let (true, Some(table)) = (check_dt, table) {
-            let mut table = Box::new(table.clone());
+            let mut table = table.boxed_clone();
             let mut noise = Noise::new(r.noise_seed, version, 0);
             let replay = run_episode(&mut sim, task, &mut *table, Some(&mut noise))
                 .map_err(ServeError::FirstEpisode)?;

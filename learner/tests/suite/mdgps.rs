@@ -33,7 +33,7 @@ fn tmp(name: &str) -> PathBuf {
 /// normalisation), so that every term of the Jacobian is exercised.
 fn random_policy(hidden: &[usize], seed: u64) -> GlobalPolicy {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let flat: Vec<f64> = (0..flat_len(hidden))
+    let flat: Vec<f64> = (0..flat_len(DX, DU, hidden))
         .map(|i| {
             if (DX..2 * DX).contains(&i) {
                 rng.random_range(0.2..2.0)
@@ -214,7 +214,7 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
     let dir = tmp("bad");
     let good = dir.join("good.npz");
     save_policy(&policy_file(), &good).unwrap();
-    let n = flat_len(&[8, 4]) as u64;
+    let n = flat_len(DX, DU, &[8, 4]) as u64;
     let mut nan = policy_file().policy.flat();
     nan[40] = f64::NAN;
     let mut neg = policy_file().policy.flat();

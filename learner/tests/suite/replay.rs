@@ -200,8 +200,8 @@ fn a_changed_episode_or_table_entry_is_the_first_difference() {
     let table_file = run.join("iter_001_table.npz");
     let (mut table, dt) =
         learner::io::table::load_table(&table_file, &ur5_shared::GainBounds::default()).unwrap();
-    let was = table.steps[4].k_vec[1];
-    table.steps[4].k_vec[1] = was + 0.5;
+    let was = table.step(4).k_vec[1];
+    table.step_mut(4).k_vec[1] = was + 0.5;
     save_table(&table_file, &table, dt).unwrap();
     rerecord(&run, &table_file);
     assert_eq!(

@@ -7,9 +7,7 @@ use std::io::Write;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
 use ur5_shared::safety::clamp_action;
-use ur5_shared::{
-    controller_action, policy_action, ArmCommand, ArmFaults, StepSample, DU, NO_NOISE,
-};
+use ur5_shared::{controller_action, policy_action, ArmCommand, ArmFaults, StepSample, DU};
 
 use super::wait::StateFreshness;
 use super::{Controller, ExitReason, Phase};
@@ -421,7 +419,7 @@ impl<A: ArmBackend> Controller<A> {
         let eps = if self.noisy {
             self.noise.next()
         } else {
-            NO_NOISE
+            [0.0; DU]
         };
         let mut a = [0.0; DU];
         let (ok, version, epoch) = match self.tables.active() {
@@ -430,10 +428,11 @@ impl<A: ArmBackend> Controller<A> {
                 table.version,
                 table.epoch,
             ),
-            Some(Active::Policy(table)) => {
-                policy_action(table, &s, &eps, &mut self.scratch, &mut a);
-                (true, table.version, table.epoch)
-            }
+            Some(Active::Policy(table)) => (
+                policy_action(table, &s, &eps, &mut self.scratch, &mut a).is_ok(),
+                table.version,
+                table.epoch,
+            ),
             None => {
                 self.abort_episode(Fault::NoTable);
                 return;
@@ -458,20 +457,19 @@ impl<A: ArmBackend> Controller<A> {
             ActionMode::Torque => ArmCommand::torques(seq, stamp, self.episode, sent),
         };
         self.send(cmd);
-        let sample = StepSample {
+        let mut sample = StepSample {
             table_version: version,
             episode: self.episode,
             t: t as u32,
             noise: self.noisy as u32,
             table_epoch: epoch,
-            reserved: 0,
-            s,
-            a,
-            a_sent: sent,
             state_seq: state.seq,
             state_stamp_ns: state.stamp_ns,
             command_stamp_ns: stamp,
+            ..StepSample::default()
         };
+        sample.set_state(&s);
+        sample.set_actions(&a, &sent);
         match self.ports.sample_pub.loan_uninit() {
             Ok(slot) => match slot.write_payload(sample).send() {
                 Ok(0) => self.stats.samples_unheard += 1,

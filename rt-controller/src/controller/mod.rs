@@ -313,6 +313,7 @@ impl<A: ArmBackend> Controller<A> {
                 cfg.policy_bounds,
                 cfg.task.horizon,
                 cfg.action_mode,
+                ur5_shared::StateLayout::REACH3,
             ),
             scratch: Box::default(),
             limits: cfg.limits(),

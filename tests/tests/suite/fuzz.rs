@@ -451,7 +451,7 @@ fn fuzz_ipc_payloads() {
     let one = std::mem::size_of::<StepSample>();
     let seed: Vec<u8> = (0..8).flat_map(|_| bytes_of(&seed_sample)).collect();
     fuzz("StepSample stream", seed, |bytes| {
-        let mut asm = learner::serve::assemble::Assembler::new(30);
+        let mut asm = learner::serve::assemble::Assembler::new(30, ur5_shared::StateLayout::REACH3);
         for chunk in bytes.chunks(one) {
             let s: StepSample = pod(chunk);
             let _ = asm.push(&s);

@@ -401,10 +401,13 @@ fn learning_over_ipc_equals_the_in_process_loop_bit_for_bit() {
         .unwrap();
         assert_eq!(got.version, v);
         assert_eq!(got.checksum, table.checksum, "table version {v}");
-        assert!(got.used_steps() == table.used_steps(), "table version {v}");
+        assert!(
+            got.used_values() == table.used_values(),
+            "table version {v}"
+        );
     }
     assert!(
-        tables[ITERATIONS].used_steps() != tables[0].used_steps(),
+        tables[ITERATIONS].used_values() != tables[0].used_values(),
         "the controller changed"
     );
     assert!(sim.running());
@@ -542,7 +545,10 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
         .unwrap();
         assert_eq!(got.version, v);
         assert_eq!(got.checksum, table.checksum, "table version {v}");
-        assert!(got.used_steps() == table.used_steps(), "table version {v}");
+        assert!(
+            got.used_values() == table.used_values(),
+            "table version {v}"
+        );
         // The critic checkpoints: same bytes (weights, normalisation, Adam, RNG position).
         let name = format!("iter_{i:03}_critic.json");
         assert_eq!(
@@ -551,7 +557,7 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
             "{name}"
         );
     }
-    assert!(tables[ITERATIONS].used_steps() != tables[0].used_steps());
+    assert!(tables[ITERATIONS].used_values() != tables[0].used_values());
     assert!(sim.running());
     assert_replays_equal(&out, &dir, ITERATIONS, ITERATIONS + 1);
     // --mcap: the run as one MCAP file (its reading back: learner/tests/suite/replay.rs).

@@ -185,16 +185,16 @@ fn lockstep_episodes_arrive_complete_in_order_with_the_controller_law() {
     // The noise-free episode executes exactly the shared controller law.
     for s in episode(samples, 2) {
         let mut a = [0.0; 3];
-        controller_action(&table, s.t as usize, &s.s, &NO_NOISE, &mut a).unwrap();
-        assert_eq!(a, s.a, "t = {}", s.t);
+        controller_action(&table, s.t as usize, s.state(), &NO_NOISE, &mut a).unwrap();
+        assert_eq!(a, s.action(), "t = {}", s.t);
     }
     // Noisy episodes do not.
     let differ = episode(samples, 0)
         .iter()
         .filter(|s| {
             let mut a = [0.0; 3];
-            controller_action(&table, s.t as usize, &s.s, &NO_NOISE, &mut a).unwrap();
-            a != s.a
+            controller_action(&table, s.t as usize, s.state(), &NO_NOISE, &mut a).unwrap();
+            a != s.action()
         })
         .count();
     assert_eq!(differ, T, "every noisy action differs from the mean");
@@ -290,13 +290,13 @@ fn bad_tables_are_rejected_counted_and_never_used() {
     });
 
     let mut nan = reaching_table(2, T, Q_GOAL, 0.02);
-    nan.steps[T / 2].k_mat[1][4] = f64::NAN;
+    nan.step_mut(T / 2).set_k(1, 4, f64::NAN);
     nan.seal();
     let mut dims = reaching_table(3, T, Q_GOAL, 0.02);
     dims.dx = 13;
     dims.seal();
     let mut checksum = reaching_table(4, T, Q_GOAL, 0.02);
-    checksum.steps[0].a_hat[0] += 0.5; // changed after sealing
+    checksum.step_mut(0).a_hat[0] += 0.5; // changed after sealing
     for bad in [nan, dims, checksum] {
         let e = learner.last_episode().unwrap();
         learner.publish(&bad);

@@ -13,7 +13,7 @@ use learner::io::table::save_table;
 use ur5_shared::config::{ActionMode, ArmLimits, TaskConfig};
 use ur5_shared::noise::Noise;
 use ur5_shared::safety::clamp_action;
-use ur5_shared::{controller_action, GainTable, DU, DX, NO_NOISE};
+use ur5_shared::{controller_action, GainTable, DU, DX};
 
 const T: usize = 30;
 const DT: f64 = 0.1;
@@ -30,7 +30,7 @@ fn episode(table: &GainTable, version: u64, k: Option<u64>) -> Episode {
     for t in 0..T {
         let mut s = [0.0; DX];
         s[..3].copy_from_slice(&q);
-        let e = noise.as_mut().map_or(NO_NOISE, |n| n.next());
+        let e = noise.as_mut().map_or([0.0; DU], |n| n.next());
         let mut a = [0.0; DU];
         controller_action(table, t, &s, &e, &mut a).unwrap();
         u_policy.extend(a);

@@ -24,6 +24,7 @@ use rand::Rng;
 use ur5_shared::config::ActionMode;
 use ur5_shared::layout::{DU, DX};
 use ur5_shared::policy::{PolicyTable, PolicyTableError};
+use ur5_shared::StateLayout;
 
 use crate::discriminator::Normalizer;
 use crate::ppo::policy::{GaussianMlpPolicy, PolicyWorkspace};
@@ -63,7 +64,7 @@ impl GlobalPolicy {
     /// Rebuilds a policy from its hidden widths and flat parameters (module docs); `Err` says
     /// what is wrong (length, non-finite value, non-positive scale).
     pub fn from_flat(hidden: &[usize], flat: &[f64]) -> Result<Self, String> {
-        let want = flat_len(hidden);
+        let want = flat_len(DX, DU, hidden);
         if flat.len() != want {
             return Err(format!(
                 "{} parameters, hidden widths {hidden:?} need {want}",
@@ -99,7 +100,7 @@ impl GlobalPolicy {
 
     /// The flat parameter vector (module docs).
     pub fn flat(&self) -> Vec<f64> {
-        let mut out = Vec::with_capacity(flat_len(&self.hidden));
+        let mut out = Vec::with_capacity(flat_len(DX, DU, &self.hidden));
         out.extend_from_slice(&self.norm.mean);
         out.extend_from_slice(&self.norm.std);
         let n = self.net.n_params();
@@ -118,7 +119,13 @@ impl GlobalPolicy {
         mode: ActionMode,
     ) -> Result<Box<PolicyTable>, PolicyTableError> {
         let mut table = PolicyTable::new_boxed();
-        table.fill(version, mode, &self.hidden, &self.flat())?;
+        table.fill(
+            version,
+            &StateLayout::REACH3,
+            mode,
+            &self.hidden,
+            &self.flat(),
+        )?;
         Ok(table)
     }
 
@@ -256,7 +263,7 @@ mod tests {
             *v += 1e-3 * (i % 7) as f64;
         }
         p = GlobalPolicy::from_flat(&[64, 64], &flat).unwrap();
-        assert_eq!(flat_len(&[64, 64]), 15_198);
+        assert_eq!(flat_len(DX, DU, &[64, 64]), 15_198);
         assert_eq!(p.flat(), flat);
         let e = GlobalPolicy::from_flat(&[64, 64], &flat[1..]).unwrap_err();
         assert!(e.contains("15197 parameters") && e.contains("15198"), "{e}");
@@ -297,7 +304,7 @@ mod tests {
                     };
                     let want = GlobalActor::new(&p, &mut ws).act(0, &s, &eps, mode);
                     let mut got = [f64::NAN; DU];
-                    policy_action(&table, &s, &eps, &mut scratch, &mut got);
+                    policy_action(&table, &s, &eps, &mut scratch, &mut got).unwrap();
                     assert_eq!(
                         got.map(f64::to_bits),
                         want.map(f64::to_bits),

@@ -17,6 +17,7 @@ use crate::demos::Demos;
 use crate::discriminator::Discriminator;
 use crate::iteration::LqrIteration;
 use crate::ImitationError;
+use ur5_shared::layout::{DU, DX};
 
 /// Iterations done (u64, 1).
 const ITERATION: &str = "mdgps.iteration";
@@ -100,7 +101,9 @@ impl Mdgps {
         }
         let iteration = snap.words(ITERATION, 1).map_err(refused)?[0];
         let hidden = run.cfg.policy.hidden.clone();
-        let flat = snap.real(POLICY, &[flat_len(&hidden)]).map_err(refused)?;
+        let flat = snap
+            .real(POLICY, &[flat_len(DX, DU, &hidden)])
+            .map_err(refused)?;
         let policy = GlobalPolicy::from_flat(&hidden, flat)
             .map_err(|e| refused(format!("{POLICY}: {e}")))?;
         run.opt.restore(snap).map_err(refused)?;

@@ -142,7 +142,8 @@ pub fn policy_action_alone(calls: usize) -> Percentiles {
     for i in 0..calls {
         s[i % ur5_shared::DX] += 1e-3;
         let t0 = ur5_shared::clock::monotonic_ns();
-        policy_action(&table, &s, &ur5_shared::NO_NOISE, &mut scratch, &mut a);
+        policy_action(&table, &s, &ur5_shared::NO_NOISE, &mut scratch, &mut a)
+            .expect("the reaching task's policy and arrays");
         h.record(ur5_shared::clock::monotonic_ns() - t0);
         std::hint::black_box(&a);
     }

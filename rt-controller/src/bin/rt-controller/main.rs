@@ -370,7 +370,7 @@ fn real_main() -> Result<i32> {
             let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy)?;
             let alone = bench::policy_action_alone(20_000);
             println!("rt-controller bench: {} + {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc; gain tables, then policy tables (heads 12-{}-1, {} parameters)", r.episodes, p.episodes, horizon,
-                bench::POLICY_HIDDEN.map(|h| h.to_string()).join("-"), ur5_shared::policy::flat_len(&bench::POLICY_HIDDEN));
+                bench::POLICY_HIDDEN.map(|h| h.to_string()).join("-"), ur5_shared::policy::flat_len(ur5_shared::DX, ur5_shared::DU, &bench::POLICY_HIDDEN));
             print_table(&[
                 ("gain table: tick compute (law + clamp + command + sample)", r.compute),
                 ("gain table: swap (copy 64 KB + flip)", r.swap),
