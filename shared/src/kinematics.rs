@@ -22,8 +22,8 @@
 //! origin of `wrist_3_link` is the DH flange (frame 6's origin). The end-effector point is that
 //! origin plus `ee_offset` expressed in `wrist_3_link`'s frame (`sim.ee_offset`). hil-sim's
 //! tests check this chain against the rapier3d multibody built from each URDF, and the
-//! velocity against finite differences of the point; this module's tests check it against the
-//! product of UR's DH matrices.
+//! velocity against finite differences of the point; this module's tests check it (the flange's
+//! position and orientation, and a tool point) against the product of UR's DH matrices.
 //!
 //! Nothing here allocates.
 
