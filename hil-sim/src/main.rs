@@ -28,10 +28,10 @@ use hil_sim::Ur5Sim;
     about = "Simulated UR arm (rapier3d multibody from a URDF) for LQR+GAIfO."
 )]
 struct Cli {
-    /// Arm model: ur3, ur5, ur10, ur3e, ur5e, ur10e, ur16e, ur20 or ur30 (default: the
-    /// config's `[sim] model`, else ur5). Brings the model's URDF and its default start pose,
-    /// goal, wrist lock, end-effector offset and servo gains (docs/ur.md); a config file that
-    /// names another model is refused.
+    /// Arm model: ur3, ur5, ur10, ur3e, ur5e, ur7e, ur10e, ur12e, ur16e, ur15, ur18, ur20 or ur30
+    /// (default: the config's `[sim] model`, else ur5). Brings the model's URDF and its default
+    /// start pose, goal, wrist lock, end-effector offset and servo gains (docs/ur.md); a config
+    /// file that names another model is refused.
     #[arg(long, global = true)]
     model: Option<UrModel>,
     #[command(subcommand)]

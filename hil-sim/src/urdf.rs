@@ -7,7 +7,9 @@
 //! - joint limits: [`UrModel::joint_limits`] (`ur_description`'s `joint_limits.yaml`);
 //! - inertials: `ur_description`'s `config/<model>/physical_parameters.yaml`
 //!   (UniversalRobots/Universal_Robots_ROS2_Description, BSD-3-Clause, commit 2221ec0f,
-//!   2024-10-14): link masses, centres of mass and inertia tensors, copied below; the base's
+//!   2024-10-14; for the models that commit lacks, the package's later commits 305c5cef
+//!   (UR7e), 9743c966 (UR12e), 2cb0bf15 (UR15), 6ffee81d (UR18)): link masses, centres of
+//!   mass and inertia tensors, copied below; each file's header names its sources; the base's
 //!   tensor is the package's solid cylinder (`links.base` radius and length). Each tensor is
 //!   written already rotated into the link frame (R I Rᵀ, R = the package's inertial rpy)
 //!   because rapier3d-urdf ignores `<inertial><origin rpy>` (UR5.md).
@@ -33,8 +35,12 @@ pub fn bundled_urdf(model: UrModel) -> &'static str {
         UrModel::Ur10 => include_str!("../urdf/ur10.urdf"),
         UrModel::Ur3e => include_str!("../urdf/ur3e.urdf"),
         UrModel::Ur5e => include_str!("../urdf/ur5e.urdf"),
+        UrModel::Ur7e => include_str!("../urdf/ur7e.urdf"),
         UrModel::Ur10e => include_str!("../urdf/ur10e.urdf"),
+        UrModel::Ur12e => include_str!("../urdf/ur12e.urdf"),
         UrModel::Ur16e => include_str!("../urdf/ur16e.urdf"),
+        UrModel::Ur15 => include_str!("../urdf/ur15.urdf"),
+        UrModel::Ur18 => include_str!("../urdf/ur18.urdf"),
         UrModel::Ur20 => include_str!("../urdf/ur20.urdf"),
         UrModel::Ur30 => include_str!("../urdf/ur30.urdf"),
     }
@@ -133,7 +139,19 @@ fn inertials(model: UrModel) -> Inertials {
                 link(0.365, [0.0, 0.0, -0.001159], [0.0, 0.0, 0.0], [9.890414008333333e-05, 0.0, 0.0, 9.890414008333333e-05, 0.0, 0.0001321171875]),
             ],
         },
-        UrModel::Ur10e => Inertials {
+        UrModel::Ur7e => Inertials {
+            base: (4.0, 0.06, 0.05),
+            links: [
+                link(3.761, [0.0, -0.00193, -0.02561], [FRAC_PI_2, 0.0, 0.0], [0.0070021, 0.00000073, -0.00001053, 0.00648091, 0.00049994, 0.00657286]),
+                link(8.058, [-0.2125, 0.0, 0.11336], [0.0, 0.0, 0.0], [0.01505885, -0.000054, 0.00000563, 0.33388086, -0.00000181, 0.33247207]),
+                link(2.846, [-0.2422, 0.0, 0.0265], [0.0, 0.0, 0.0], [0.00399632, -0.00001365, 0.00137272, 0.07879254, -0.0000066, 0.0784851]),
+                link(1.37, [0.0, -0.01634, -0.0018], [FRAC_PI_2, 0.0, 0.0], [0.00165491, -0.00000282, -0.00000438, 0.00135962, 0.00010157, 0.00126279]),
+                link(1.3, [0.0, 0.01634, -0.0018], [-FRAC_PI_2, 0.0, 0.0], [0.00135617, -0.00000274, 0.00000444, 0.00127827, -0.00005048, 0.00096614]),
+                link(0.365, [0.0, 0.0, -0.001159], [0.0, 0.0, 0.0], [0.00018694, 0.00000006, -0.00000017, 0.00018908, -0.00000092, 0.00025756]),
+            ],
+        },
+        // The UR12e's file is the UR10e's, number for number.
+        UrModel::Ur10e | UrModel::Ur12e => Inertials {
             base: (4.0, 0.075, 0.038),
             links: [
                 link(7.369, [0.021, -0.027, 0.0], [FRAC_PI_2, 0.0, 0.0], [0.03408, 2e-05, -0.00425, 0.03529, 8e-05, 0.02156]),
@@ -155,6 +173,31 @@ fn inertials(model: UrModel) -> Inertials {
                 link(0.907, [0.0, 0.0, -0.044], [0.0, 0.0, 0.0], [0.00117, 0.0, 0.0, 0.00118, 0.0, 0.00084]),
             ],
         },
+        UrModel::Ur15 | UrModel::Ur18 => {
+            let (upper_arm, forearm) = if model == UrModel::Ur15 {
+                (
+                    link(14.9255, [-0.228491, -0.000083, 0.192787], [0.0, 0.0, 0.0], [0.048202, 0.000232, -0.032135, 1.188499, -0.000017, 1.182771]),
+                    link(6.1015, [-0.210929, 0.000019, 0.070552], [0.0, 0.0, 0.0], [0.018481, -0.000005, 0.013601, 0.303502, 0.000003, 0.296843]),
+                )
+            } else {
+                (
+                    link(14.2009, [-0.166336, -0.000088, 0.190204], [0.0, 0.0, 0.0], [0.045094, 0.000179, -0.024705, 0.630805, -0.00002, 0.625724]),
+                    link(5.52, [-0.139248, 0.000021, 0.073101], [0.0, 0.0, 0.0], [0.016891, 0.0, 0.009081, 0.129732, 0.000003, 0.123451]),
+                )
+            };
+            // The two files share the shoulder and the wrists.
+            Inertials {
+                base: (4.0, 0.17, 0.1),
+                links: [
+                    link(9.9883, [0.000024, -0.025304, -0.033309], [FRAC_PI_2, 0.0, 0.0], [0.051334, 0.000025, -0.000016, 0.047702, 0.008805, 0.034263]),
+                    upper_arm,
+                    forearm,
+                    link(2.089, [0.000025, -0.016413, -0.019695], [FRAC_PI_2, 0.0, 0.0], [0.004339, 0.000019, 0.000001, 0.002548, 0.000706, 0.003912]),
+                    link(2.0869, [0.000025, 0.015886, -0.01996], [-FRAC_PI_2, 0.0, 0.0], [0.004288, 0.000017, -0.000003, 0.002566, -0.000716, 0.003927]),
+                    link(1.0666, [-0.000018, -0.000112, -0.053397], [0.0, 0.0, 0.0], [0.001406, -0.000003, 0.00001, 0.001404, -0.000024, 0.001002]),
+                ],
+            }
+        }
         UrModel::Ur20 => Inertials {
             base: (4.0, 0.075, 0.038),
             links: [
@@ -177,6 +220,63 @@ fn inertials(model: UrModel) -> Inertials {
                 link(0.926, [0.0, 0.0, -0.0293], [0.0, 0.0, 0.0], [0.00117, 0.0, 0.0, 0.00118, 0.0, 0.00084]),
             ],
         },
+    }
+}
+
+/// Where a model's numbers come from, as its URDF's header names them (module docs): the file
+/// with its DH values, its `physical_parameters.yaml` and its `joint_limits.yaml`, each with
+/// its package and commit when that is not the ROS 2 package's commit 2221ec0f.
+struct Sources {
+    kinematics: String,
+    inertials: String,
+    limits: String,
+}
+
+/// The ROS 1 description package (UR's own, for ROS 1), which has the newer models' kinematics.
+const ROS1: &str = "ROS 1 ur_description (ros-industrial/universal_robot, BSD)";
+
+fn sources(model: UrModel) -> Sources {
+    let n = model.name();
+    let (kinematics, inertials, limits) = match model {
+        UrModel::Ur7e => (
+            format!(
+                "config/{n}/default_kinematics.yaml,\n     \
+                 which is the UR5e's: {ROS1}\n     \
+                 links config/{n} to config/ur5e (commit 3be81362)"
+            ),
+            format!("config/{n}/physical_parameters.yaml (commit 305c5cef)"),
+            format!("config/{n}/joint_limits.yaml, the UR5e's by the link above"),
+        ),
+        UrModel::Ur12e | UrModel::Ur15 | UrModel::Ur18 => {
+            let (kin, phys, lim) = match model {
+                UrModel::Ur12e => ("2f339257", "9743c966", "at commit 49d2ca22"),
+                UrModel::Ur15 => (
+                    "499e728e",
+                    "2cb0bf15",
+                    "of the ROS 1 package at commit 499e728e",
+                ),
+                _ => ("34b13710", "6ffee81d", "at commit 272bdddb"),
+            };
+            (
+                format!(
+                    "config/{n}/default_kinematics.yaml;\n     \
+                     the values from {ROS1}\n     \
+                     ur_description/config/{n}/default_kinematics.yaml, commit {kin}"
+                ),
+                format!("config/{n}/physical_parameters.yaml (commit {phys})"),
+                format!("config/{n}/joint_limits.yaml {lim}"),
+            )
+        }
+        _ => (
+            format!("config/{n}/default_kinematics.yaml"),
+            format!("config/{n}/physical_parameters.yaml (commit 2221ec0f, 2024-10-14)"),
+            format!("config/{n}/joint_limits.yaml"),
+        ),
+    };
+    Sources {
+        kinematics,
+        inertials,
+        limits,
     }
 }
 
@@ -265,18 +365,19 @@ pub fn write_urdf(model: UrModel) -> String {
     let name = model.name();
     let mut out = String::new();
     let _ = writeln!(out, "<?xml version=\"1.0\"?>");
+    let src = sources(model);
     let _ = writeln!(
         out,
         "<!-- {} for hil-sim, written by hil-sim/src/urdf.rs (`write_urdf`) from public parameters:\n     \
          kinematics: Universal Robots' published DH table (d1 = {}, a2 = {}, a3 = {}, d4 = {},\n     \
          d5 = {}, d6 = {} m; alpha = pi/2, 0, 0, pi/2, -pi/2, 0) laid out with the joint origins of\n     \
          the ROS 2 ur_description package (UniversalRobots/Universal_Robots_ROS2_Description,\n     \
-         BSD-3-Clause, config/{name}/default_kinematics.yaml). Joint angles equal the DH angles (no\n     \
+         BSD-3-Clause, {}). Joint angles equal the DH angles (no\n     \
          offsets); the base_link frame is the DH base frame (z up); wrist_3_link's origin is the flange.\n     \
-         Inertials: ur_description config/{name}/physical_parameters.yaml (commit 2221ec0f, 2024-10-14):\n     \
+         Inertials: ur_description {}:\n     \
          masses, centres of mass, tensors; each tensor already rotated into its link frame\n     \
          (R I R^T with the package's inertial rpy) because rapier3d-urdf ignores inertial rpy.\n     \
-         Limits: ur_description config/{name}/joint_limits.yaml (position +-2 pi, elbow +-pi).\n     \
+         Limits: ur_description {} (position +-2 pi, elbow +-pi).\n     \
          No meshes and no collision shapes: the reaching task has no contacts. -->",
         name.to_uppercase(),
         num(dh.d[0]),
@@ -285,6 +386,9 @@ pub fn write_urdf(model: UrModel) -> String {
         num(dh.d[3]),
         num(dh.d[4]),
         num(dh.d[5]),
+        src.kinematics,
+        src.inertials,
+        src.limits,
     );
     let _ = writeln!(out, "<robot name=\"{name}\">");
     let (m, r, h) = inr.base;

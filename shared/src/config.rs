@@ -437,9 +437,11 @@ impl ServoConfig {
             UrModel::Ur3 => [30.0, 30.0, 6.3],
             UrModel::Ur10 => [530.0, 530.0, 110.0],
             UrModel::Ur3e => [31.0, 31.0, 6.3],
-            UrModel::Ur5e => [170.0, 170.0, 35.0],
-            UrModel::Ur10e => [550.0, 550.0, 110.0],
+            UrModel::Ur5e | UrModel::Ur7e => [170.0, 170.0, 35.0],
+            UrModel::Ur10e | UrModel::Ur12e => [550.0, 550.0, 110.0],
             UrModel::Ur16e => [300.0, 300.0, 49.0],
+            UrModel::Ur15 => [680.0, 680.0, 110.0],
+            UrModel::Ur18 => [320.0, 320.0, 46.0],
             UrModel::Ur20 => [1700.0, 1700.0, 290.0],
             UrModel::Ur30 => [880.0, 880.0, 140.0],
         };

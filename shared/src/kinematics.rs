@@ -22,8 +22,8 @@
 //! origin of `wrist_3_link` is the DH flange (frame 6's origin). The end-effector point is that
 //! origin plus `ee_offset` expressed in `wrist_3_link`'s frame (`sim.ee_offset`). hil-sim's
 //! tests check this chain against the rapier3d multibody built from each URDF, and the
-//! velocity against finite differences of the point; this module's tests check it against the
-//! product of UR's DH matrices.
+//! velocity against finite differences of the point; this module's tests check it (the flange's
+//! position and orientation, and a tool point) against the product of UR's DH matrices.
 //!
 //! Nothing here allocates.
 
@@ -211,30 +211,51 @@ mod tests {
         m
     }
 
+    /// Forward kinematics of every model against UR's DH table (issue 42's acceptance): the
+    /// flange's position (m) and orientation (rad: the angle of the rotation between
+    /// `wrist_3_link`'s frame and DH frame 6, which coincide), and a tool point off the flange,
+    /// over seeded random joint angles in (−π, π).
     #[test]
-    fn every_models_flange_is_the_product_of_its_dh_matrices() {
+    fn every_models_flange_pose_is_the_product_of_its_dh_matrices() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(27);
         for model in UrModel::ALL {
-            let k = UrKinematics::new(model, [0.0; 3]);
+            let tool = [0.03, -0.02, 0.15];
+            let (k, kt) = (
+                UrKinematics::new(model, [0.0; 3]),
+                UrKinematics::new(model, tool),
+            );
             let t = model.dh();
-            let mut worst = 0.0f64;
+            let (mut worst_p, mut worst_r, mut worst_tool) = (0.0f64, 0.0f64, 0.0f64);
             for _ in 0..200 {
                 let q: Joints6 = core::array::from_fn(|_| rng.random_range(-PI..PI));
-                let p = k.ee_point(&q);
                 let m = dh_product(&t, &q);
-                let err = (0..3)
-                    .map(|r| (p[r] - m[(r, 3)]).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                worst = worst.max(err);
-                // The last frame's z axis (the tool direction) is the DH frame 6's as well.
-                let z = k.frames(&q)[5].rotation * Vector3::z();
-                let zd = Vector3::new(m[(0, 2)], m[(1, 2)], m[(2, 2)]);
-                assert!((z - zd).norm() < 1e-9, "{model}: tool axis {z:?} vs {zd:?}");
+                let p = k.ee_point(&q);
+                let dp = (0..3).map(|r| (p[r] - m[(r, 3)]).powi(2)).sum::<f64>();
+                worst_p = worst_p.max(dp.sqrt());
+                // ‖R − R_dh‖_F = 2√2 sin(θ/2) for the angle θ between them (well conditioned
+                // at θ ≈ 0, unlike acos of the trace).
+                let r = k.frames(&q)[5].rotation.to_rotation_matrix().into_inner();
+                let dr = (r - m.fixed_view::<3, 3>(0, 0)).norm();
+                worst_r = worst_r.max(2.0 * (dr / (2.0 * core::f64::consts::SQRT_2)).asin());
+                let pt = kt.ee_point(&q);
+                let mt = m * nalgebra::Vector4::new(tool[0], tool[1], tool[2], 1.0);
+                let dt = (0..3).map(|r| (pt[r] - mt[r]).powi(2)).sum::<f64>();
+                worst_tool = worst_tool.max(dt.sqrt());
             }
-            eprintln!("{model}: max |flange − DH| = {worst:.2e} m");
-            assert!(worst <= 1e-6, "{model}: |flange − DH| = {worst:.3e} m");
+            eprintln!(
+                "{model}: max |flange − DH| = {worst_p:.2e} m, angle {worst_r:.2e} rad, \
+                 tool point {worst_tool:.2e} m"
+            );
+            assert!(worst_p <= 1e-6, "{model}: |flange − DH| = {worst_p:.3e} m");
+            assert!(
+                worst_r <= 1e-6,
+                "{model}: flange orientation off by {worst_r:.3e} rad"
+            );
+            assert!(
+                worst_tool <= 1e-6,
+                "{model}: tool point off by {worst_tool:.3e} m"
+            );
         }
     }
 

@@ -6,12 +6,22 @@
 //!   and dynamics" (universal-robots.com), as written in the ROS 2 description package
 //!   `UniversalRobots/Universal_Robots_ROS2_Description` (BSD-3-Clause),
 //!   `config/<model>/default_kinematics.yaml` (commit 2221ec0f, 2024-10-14), whose joint
-//!   origins are these tables laid out as URDF origins.
-//! - Joint limits: the same package's `config/<model>/joint_limits.yaml` (from the models' user
-//!   manuals and UR's "max. joint torques" article). The elbow's ±π is the package's limit (the
-//!   arm's own is ±2π, but the shoulder lift joint is in the way beyond ±π). The UR3's and
-//!   UR3e's wrist 3 turns without limit; ±2π is written here (the wrist is locked in this
-//!   project anyway).
+//!   origins are these tables laid out as URDF origins. The models that package's snapshot
+//!   lacks come from the same files in UR's ROS 1 description `ros-industrial/universal_robot`
+//!   (`ur_description`, BSD), `ur_description/config/<model>/default_kinematics.yaml`: UR12e
+//!   commit 2f339257, UR15 commit 499e728e, UR18 commit 34b13710. The UR7e's is the UR5e's and
+//!   the UR12e's the UR10e's: in that package `config/ur7e` is a link to `config/ur5e` and
+//!   `config/ur12e` one to `config/ur10e` (commit 3be81362).
+//! - Joint limits: the ROS 2 package's `config/<model>/joint_limits.yaml` (from the models' user
+//!   manuals and UR's "max. joint torques" article); UR12e and UR18 from its newer commits
+//!   49d2ca22 and 272bdddb, UR15 from the ROS 1 package (commit 499e728e), the UR7e's the
+//!   UR5e's (the link above). The elbow's ±π is the package's limit (the arm's own is ±2π, but
+//!   the shoulder lift joint is in the way beyond ±π). The UR3's and UR3e's wrist 3 turns
+//!   without limit; ±2π is written here (the wrist is locked in this project anyway).
+//! - Not here: the UR8 Long. Its kinematics are published (ROS 1 `ur_description`
+//!   `config/ur8long/default_kinematics.yaml`, commit 31e22940: d1 0.2186, a2 −0.8989,
+//!   a3 −0.7149, d4 0.1824, d5 0.1361, d6 0.1434 m), but no joint limits for it were found in
+//!   either package's stored files, and none are made up here.
 //!
 //! Convention (UR's, standard DH): T_i = Rz(θ_i) · Tz(d_i) · Tx(a_i) · Rx(α_i), base frame z up,
 //! θ_i = the joint angle reported by the robot (no offsets), α = (π/2, 0, 0, π/2, −π/2, 0) and
@@ -39,10 +49,18 @@ pub enum UrModel {
     Ur3e,
     /// UR5e, 5 kg, 850 mm.
     Ur5e,
+    /// UR7e, 7.5 kg, 850 mm (`ur_description` gives it the UR5e's kinematics and limits).
+    Ur7e,
     /// UR10e, 12.5 kg, 1300 mm.
     Ur10e,
+    /// UR12e, 12.5 kg, 1300 mm (`ur_description` gives it the UR10e's kinematics and limits).
+    Ur12e,
     /// UR16e, 16 kg, 900 mm.
     Ur16e,
+    /// UR15, 15 kg, 1300 mm.
+    Ur15,
+    /// UR18, 18 kg, 1000 mm.
+    Ur18,
     /// UR20, 20 kg, 1750 mm.
     Ur20,
     /// UR30, 30 kg, 1300 mm.
@@ -85,10 +103,12 @@ const fn dh(d1: f64, a2: f64, a3: f64, d4: f64, d5: f64, d6: f64) -> DhTable {
     }
 }
 
-/// 120°/s, 150°/s and 210°/s (rad/s), as `f64::to_radians` gives them.
+/// 120°/s, 150°/s, 210°/s, 240°/s and 300°/s (rad/s), as `f64::to_radians` gives them.
 const DEG120: f64 = 2.0943951023931953;
 const DEG150: f64 = 2.6179938779914944;
 const DEG210: f64 = 3.6651914291880923;
+const DEG240: f64 = 4.1887902047863905;
+const DEG300: f64 = 5.235987755982989;
 const TWO_PI: f64 = 2.0 * PI;
 
 /// ±2π on every joint but the elbow (±π), with the given speeds and torques.
@@ -103,14 +123,18 @@ const fn limits(velocity: [f64; 6], effort: [f64; 6]) -> JointLimits6 {
 
 impl UrModel {
     /// Every model, CB series first.
-    pub const ALL: [UrModel; 9] = [
+    pub const ALL: [UrModel; 13] = [
         UrModel::Ur3,
         UrModel::Ur5,
         UrModel::Ur10,
         UrModel::Ur3e,
         UrModel::Ur5e,
+        UrModel::Ur7e,
         UrModel::Ur10e,
+        UrModel::Ur12e,
         UrModel::Ur16e,
+        UrModel::Ur15,
+        UrModel::Ur18,
         UrModel::Ur20,
         UrModel::Ur30,
     ];
@@ -121,7 +145,8 @@ impl UrModel {
     }
 
     /// Whether the model is of the e-Series generation (PolyScope 5, 500 Hz): every model but
-    /// the CB-era UR3, UR5 and UR10 (the UR20 and UR30 run the e-Series controller).
+    /// the CB-era UR3, UR5 and UR10 (the UR15, UR18, UR20 and UR30 run the e-Series
+    /// controller).
     pub fn is_e_series(self) -> bool {
         !matches!(self, UrModel::Ur3 | UrModel::Ur5 | UrModel::Ur10)
     }
@@ -134,8 +159,12 @@ impl UrModel {
             UrModel::Ur10 => "ur10",
             UrModel::Ur3e => "ur3e",
             UrModel::Ur5e => "ur5e",
+            UrModel::Ur7e => "ur7e",
             UrModel::Ur10e => "ur10e",
+            UrModel::Ur12e => "ur12e",
             UrModel::Ur16e => "ur16e",
+            UrModel::Ur15 => "ur15",
+            UrModel::Ur18 => "ur18",
             UrModel::Ur20 => "ur20",
             UrModel::Ur30 => "ur30",
         }
@@ -148,9 +177,13 @@ impl UrModel {
             UrModel::Ur5 => dh(0.089159, -0.425, -0.39225, 0.10915, 0.09465, 0.0823),
             UrModel::Ur10 => dh(0.1273, -0.612, -0.5723, 0.163941, 0.1157, 0.0922),
             UrModel::Ur3e => dh(0.15185, -0.24355, -0.2132, 0.13105, 0.08535, 0.0921),
-            UrModel::Ur5e => dh(0.1625, -0.425, -0.3922, 0.1333, 0.0997, 0.0996),
-            UrModel::Ur10e => dh(0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655),
+            UrModel::Ur5e | UrModel::Ur7e => dh(0.1625, -0.425, -0.3922, 0.1333, 0.0997, 0.0996),
+            UrModel::Ur10e | UrModel::Ur12e => {
+                dh(0.1807, -0.6127, -0.57155, 0.17415, 0.11985, 0.11655)
+            }
             UrModel::Ur16e => dh(0.1807, -0.4784, -0.36, 0.17415, 0.11985, 0.11655),
+            UrModel::Ur15 => dh(0.2186, -0.6475, -0.5164, 0.1824, 0.1361, 0.1434),
+            UrModel::Ur18 => dh(0.2186, -0.475, -0.3389, 0.1824, 0.1361, 0.1434),
             UrModel::Ur20 => dh(0.2363, -0.862, -0.7287, 0.201, 0.1593, 0.1543),
             UrModel::Ur30 => dh(0.2363, -0.637, -0.5037, 0.201, 0.1593, 0.1543),
         }
@@ -167,16 +200,20 @@ impl UrModel {
                 [PI, PI, PI, TWO_PI, TWO_PI, TWO_PI],
                 [54.0, 54.0, 28.0, 9.0, 9.0, 9.0],
             ),
-            UrModel::Ur5 | UrModel::Ur5e => {
+            UrModel::Ur5 | UrModel::Ur5e | UrModel::Ur7e => {
                 limits([PI; 6], [150.0, 150.0, 150.0, 28.0, 28.0, 28.0])
             }
             UrModel::Ur10 => limits(
                 [DEG120, DEG120, PI, PI, PI, PI],
                 [330.0, 330.0, 150.0, 56.0, 56.0, 56.0],
             ),
-            UrModel::Ur10e | UrModel::Ur16e => limits(
+            UrModel::Ur10e | UrModel::Ur12e | UrModel::Ur16e => limits(
                 [DEG120, DEG120, PI, PI, PI, PI],
                 [330.0, 330.0, 150.0, 54.0, 54.0, 54.0],
+            ),
+            UrModel::Ur15 | UrModel::Ur18 => limits(
+                [PI, PI, DEG240, DEG300, DEG300, DEG300],
+                [433.0, 433.0, 204.0, 70.0, 70.0, 70.0],
             ),
             UrModel::Ur20 | UrModel::Ur30 => limits(
                 [DEG120, DEG120, DEG150, DEG210, DEG210, DEG210],
@@ -212,9 +249,11 @@ impl UrModel {
             UrModel::Ur5 => [-0.45, -0.25, 0.25],
             UrModel::Ur10 => [-0.62, -0.36, 0.35],
             UrModel::Ur3e => [-0.28, -0.22, 0.27],
-            UrModel::Ur5e => [-0.46, -0.28, 0.33],
-            UrModel::Ur10e => [-0.63, -0.37, 0.42],
+            UrModel::Ur5e | UrModel::Ur7e => [-0.46, -0.28, 0.33],
+            UrModel::Ur10e | UrModel::Ur12e => [-0.63, -0.37, 0.42],
             UrModel::Ur16e => [-0.46, -0.32, 0.42],
+            UrModel::Ur15 => [-0.63, -0.38, 0.54],
+            UrModel::Ur18 => [-0.47, -0.33, 0.48],
             UrModel::Ur20 => [-0.84, -0.46, 0.62],
             UrModel::Ur30 => [-0.63, -0.4, 0.54],
         }
@@ -242,7 +281,8 @@ impl std::fmt::Display for UrModel {
 /// A name that is not one of [`UrModel::ALL`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown UR model `{0}`: expected one of ur3, ur5, ur10, ur3e, ur5e, ur10e, ur16e, ur20, ur30"
+    "unknown UR model `{0}`: expected one of ur3, ur5, ur10, ur3e, ur5e, ur7e, ur10e, ur12e, \
+     ur16e, ur15, ur18, ur20, ur30"
 )]
 pub struct UnknownModel(pub String);
 
@@ -268,11 +308,15 @@ mod tests {
             assert_eq!(toml::Value::try_from(m).unwrap().as_str(), Some(m.name()));
         }
         assert_eq!(UrModel::default(), UrModel::Ur5);
-        let e = "ur7".parse::<UrModel>().unwrap_err();
+        let e = "ur8".parse::<UrModel>().unwrap_err();
         assert!(
-            e.to_string().contains("ur7") && e.to_string().contains("ur16e"),
+            e.to_string().contains("`ur8`") && e.to_string().contains("ur16e"),
             "{e}"
         );
+        // The message lists every model.
+        for m in UrModel::ALL {
+            assert!(e.to_string().contains(m.name()), "{m}: {e}");
+        }
     }
 
     #[test]
@@ -280,6 +324,8 @@ mod tests {
         assert_eq!(120f64.to_radians(), DEG120);
         assert_eq!(150f64.to_radians(), DEG150);
         assert_eq!(210f64.to_radians(), DEG210);
+        assert_eq!(240f64.to_radians(), DEG240);
+        assert_eq!(300f64.to_radians(), DEG300);
     }
 
     #[test]

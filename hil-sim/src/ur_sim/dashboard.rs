@@ -85,9 +85,10 @@ pub fn model_reply(model: ur5_shared::UrModel) -> String {
     model.name().trim_end_matches('e').to_ascii_uppercase()
 }
 
-/// `PolyscopeVersion`'s reply for `series`, e.g. "URSoftware 5.12.0.0 (hil-sim ur-sim)".
-pub fn polyscope_reply(series: Series) -> String {
-    let v = series.version();
+/// `PolyscopeVersion`'s reply for `series` driving `model`, e.g. "URSoftware 5.12.0.0
+/// (hil-sim ur-sim)".
+pub fn polyscope_reply(series: Series, model: ur5_shared::UrModel) -> String {
+    let v = series.version(model);
     format!(
         "URSoftware {}.{}.{}.{} (hil-sim ur-sim)",
         v.major, v.minor, v.bugfix, v.build
@@ -114,9 +115,9 @@ pub(crate) fn answer(ctx: &Arc<Ctx>, cmd: &str) -> (String, bool) {
         "quit" => return ("Disconnected".into(), true),
         "get robot model" => model_reply(ctx.model),
         "get serial number" => serial_reply(ctx.model, series),
-        "PolyscopeVersion" => polyscope_reply(series),
+        "PolyscopeVersion" => polyscope_reply(series, ctx.model),
         "version" if e_series => {
-            let v = series.version();
+            let v = series.version(ctx.model);
             format!("{}.{}.{}.{}", v.major, v.minor, v.bugfix, v.build)
         }
         "robotmode" => format!("Robotmode: {}", ctx.plant.lock().robot_mode.name()),

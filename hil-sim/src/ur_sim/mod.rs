@@ -79,12 +79,22 @@ impl Series {
         1.0 / self.cycle_s()
     }
 
-    /// The version the controller reports (a plausible release of each line).
-    pub fn version(self) -> ControllerVersion {
+    /// The version the controller driving `model` reports: a plausible release of each line
+    /// (5.12, 3.15.8), or on the e-Series the first release that runs `model` when that is
+    /// later (UR20 5.14, UR30 5.15, UR7e, UR12e and UR15 5.22, UR18 5.23: the minimum versions
+    /// of URSim per model in URCL's `scripts/start_ursim.sh`).
+    pub fn version(self, model: ur5_shared::UrModel) -> ControllerVersion {
+        use ur5_shared::UrModel;
         match self {
             Series::E => ControllerVersion {
                 major: 5,
-                minor: 12,
+                minor: match model {
+                    UrModel::Ur20 => 14,
+                    UrModel::Ur30 => 15,
+                    UrModel::Ur7e | UrModel::Ur12e | UrModel::Ur15 => 22,
+                    UrModel::Ur18 => 23,
+                    _ => 12,
+                },
                 bugfix: 0,
                 build: 0,
             },

@@ -231,7 +231,7 @@ impl Reader<'_> {
                 Ok(())
             }
             ClientMessage::GetUrcontrolVersion => self.reply(RobotMessage::UrcontrolVersion(
-                self.ctx.cfg.series.version(),
+                self.ctx.cfg.series.version(self.ctx.model),
             )),
             ClientMessage::SetupOutputs { frequency, names } => {
                 self.setup_outputs(frequency, names)

@@ -113,6 +113,37 @@ fn dashboard_replies_as_an_e_series_controller() {
     assert_eq!(sum.programs, 0);
 }
 
+/// The newer models answer with their own names (URSim's on PolyScope 5: "UR7" and "UR12" for
+/// the UR7e and UR12e, URCL's start_ursim.sh) and a controller version that runs them, the same
+/// over the dashboard and RTDE.
+#[test]
+fn dashboard_and_rtde_name_the_newer_models_and_a_version_that_runs_them() {
+    for (model, name, minor) in [
+        (UrModel::Ur7e, "UR7", 22),
+        (UrModel::Ur12e, "UR12", 22),
+        (UrModel::Ur15, "UR15", 22),
+        (UrModel::Ur18, "UR18", 23),
+        (UrModel::Ur20, "UR20", 14),
+        (UrModel::Ur30, "UR30", 15),
+    ] {
+        let sim = start(UrSimConfig::default(), model);
+        let mut d = dash(&sim);
+        assert_eq!(d.ask("get robot model"), name, "{model}");
+        let want = format!("5.{minor}.0.0");
+        assert_eq!(
+            d.ask("PolyscopeVersion"),
+            format!("URSoftware {want} (hil-sim ur-sim)"),
+            "{model}"
+        );
+        assert_eq!(d.ask("version"), want, "{model}");
+        let mut c = ur_protocol::client::Client::connect(sim.rtde_addr, DEADLINE).unwrap();
+        let v = c.controller_version().unwrap();
+        assert_eq!((v.major, v.minor), (5, minor), "{model}");
+        drop(c);
+        sim.stop();
+    }
+}
+
 #[test]
 fn dashboard_replies_as_a_cb3_controller() {
     let sim = start(

@@ -8,14 +8,15 @@ use hil_sim::Ur5Sim;
 use nalgebra::{Isometry3, Matrix4, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use ur5_shared::config::{ArmLimits, SimConfig, TaskConfig};
+use ur5_shared::config::{ArmLimits, ServoConfig, SimConfig, TaskConfig};
 use ur5_shared::kinematics::UrKinematics;
 use ur5_shared::UrModel;
 
 use crate::dynamics::{random_q, Arm};
 
-/// The flange from UR's DH convention, T = Π Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i), entry by entry.
-fn dh_flange(model: UrModel, q: &[f64; 6]) -> Vector3<f64> {
+/// The flange's pose from UR's DH convention, T = Π Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i), entry by
+/// entry.
+fn dh_pose(model: UrModel, q: &[f64; 6]) -> Matrix4<f64> {
     let t = model.dh();
     let mut m = Matrix4::identity();
     for i in 0..6 {
@@ -30,12 +31,17 @@ fn dh_flange(model: UrModel, q: &[f64; 6]) -> Vector3<f64> {
         );
         m *= ti;
     }
-    Vector3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)])
+    m
 }
 
-/// The origin of `wrist_3_link` from the URDF text alone: each joint's origin (xyz, then
+/// The flange's position from UR's DH convention ([`dh_pose`]).
+fn dh_flange(model: UrModel, q: &[f64; 6]) -> Vector3<f64> {
+    dh_pose(model, q).fixed_view::<3, 1>(0, 3).into_owned()
+}
+
+/// The pose of `wrist_3_link` from the URDF text alone: each joint's origin (xyz, then
 /// rpy = Rz·Ry·Rx), then its rotation about its axis, base to wrist 3.
-fn urdf_flange(text: &str, q: &[f64; 6]) -> Vector3<f64> {
+fn urdf_flange(text: &str, q: &[f64; 6]) -> Isometry3<f64> {
     let robot = urdf_rs::read_from_string(text).expect("the URDF parses");
     let names = [
         "shoulder_pan_joint",
@@ -60,7 +66,7 @@ fn urdf_flange(text: &str, q: &[f64; 6]) -> Vector3<f64> {
         );
         t = t * origin * rot;
     }
-    t.translation.vector
+    t
 }
 
 #[test]
@@ -125,18 +131,27 @@ fn the_hand_written_ur5_is_the_generators_ur5() {
     }
 }
 
+/// Each URDF's flange against its model's DH table: position (m) and orientation (rad; the
+/// frames coincide, ‖R − R_dh‖_F = 2√2 sin(θ/2)).
 #[test]
 fn every_urdfs_flange_is_its_models_dh_flange() {
     let mut rng = ChaCha8Rng::seed_from_u64(270);
     for model in UrModel::ALL {
         let text = bundled_urdf(model);
-        let mut worst = 0.0f64;
+        let (mut worst, mut worst_angle) = (0.0f64, 0.0f64);
         for _ in 0..100 {
             let q: [f64; 6] = core::array::from_fn(|_| rng.random_range(-3.1..3.1));
-            worst = worst.max((urdf_flange(text, &q) - dh_flange(model, &q)).norm());
+            let (u, d) = (urdf_flange(text, &q), dh_pose(model, &q));
+            worst = worst.max((u.translation.vector - dh_flange(model, &q)).norm());
+            let dr =
+                (u.rotation.to_rotation_matrix().into_inner() - d.fixed_view::<3, 3>(0, 0)).norm();
+            worst_angle = worst_angle.max(2.0 * (dr / (2.0 * std::f64::consts::SQRT_2)).asin());
         }
-        eprintln!("{model}: max |URDF flange − DH flange| = {worst:.2e} m");
+        eprintln!(
+            "{model}: max |URDF flange − DH flange| = {worst:.2e} m, angle {worst_angle:.2e} rad"
+        );
         assert!(worst <= 1e-6, "{model}: {worst:.3e} m");
+        assert!(worst_angle <= 1e-6, "{model}: {worst_angle:.3e} rad");
     }
 }
 
@@ -249,5 +264,46 @@ fn every_models_servo_holds_and_its_default_task_is_valid() {
             ArmLimits::for_model(model),
             "{model}: the URDF's limits are the model's"
         );
+    }
+}
+
+/// Each model's servo velocity gains are the UR5's scaled by the model's joint inertia at full
+/// reach, to two significant digits (the rule of `ServoConfig::for_model`, from the masses in
+/// the bundled URDF): upper arm, forearm and the three wrist links as point masses at |a2|/2,
+/// |a2| + |a3|/2 and |a2| + |a3| from the shoulder; forearm and wrists about the elbow.
+#[test]
+fn every_models_servo_gains_follow_its_inertia() {
+    let inertia = |model: UrModel| {
+        let robot = urdf_rs::read_from_string(bundled_urdf(model)).unwrap();
+        let mass = |name: &str| {
+            let link = robot.links.iter().find(|l| l.name == name).expect(name);
+            link.inertial.mass.value
+        };
+        let t = model.dh();
+        let (a2, a3) = (t.a[1].abs(), t.a[2].abs());
+        let (upper, fore) = (mass("upper_arm_link"), mass("forearm_link"));
+        let wrists = mass("wrist_1_link") + mass("wrist_2_link") + mass("wrist_3_link");
+        let shoulder = upper * (a2 / 2.0).powi(2)
+            + fore * (a2 + a3 / 2.0).powi(2)
+            + wrists * (a2 + a3).powi(2);
+        let elbow = fore * (a3 / 2.0).powi(2) + wrists * a3 * a3;
+        [shoulder, shoulder, elbow]
+    };
+    let (ur5, ur5_gain) = (
+        inertia(UrModel::Ur5),
+        ServoConfig::for_model(UrModel::Ur5).velocity_gain,
+    );
+    for model in UrModel::ALL {
+        let (i, gain) = (inertia(model), ServoConfig::for_model(model).velocity_gain);
+        for j in 0..3 {
+            let exact = ur5_gain[j] * i[j] / ur5[j];
+            let unit = 10f64.powf(exact.log10().floor() - 1.0);
+            let want = (exact / unit).round() * unit;
+            assert!(
+                (gain[j] - want).abs() <= 1e-9 * want,
+                "{model} joint {j}: gain {}, the rule gives {want} ({exact:.1})",
+                gain[j]
+            );
+        }
     }
 }

@@ -721,6 +721,56 @@ fn ur_backend_checks_the_robots_model_over_the_dashboard() {
     s2.stop();
 }
 
+/// Every model on its own controller (ur-sim with the model's URDF and generation): its
+/// dashboard answers name it to the `ur` backend, whose model check and RTDE setup accept it;
+/// the UR7e, which answers "UR7", is not taken for the UR5e it shares its kinematics with.
+#[test]
+fn ur_backend_accepts_every_model_on_its_own_controller() {
+    for model in UrModel::ALL {
+        let series = if model.is_e_series() {
+            Series::E
+        } else {
+            Series::Cb3
+        };
+        let cfg = UrSimConfig {
+            series,
+            rtde_port: 0,
+            secondary_port: 0,
+            dashboard_port: Some(0),
+            lockstep: true,
+            ..UrSimConfig::default()
+        };
+        let s = ur_sim::spawn(
+            &TaskConfig::for_model(model),
+            &SimConfig::for_model(model),
+            &cfg,
+        )
+        .expect("ur-sim starts");
+        let ok = UrConfig {
+            model,
+            check_model: true,
+            ..ur_cfg(&s, UrSeries::Auto)
+        };
+        let u = UrSession::connect(&ok, TIMEOUT).unwrap_or_else(|e| panic!("{model}: {e}"));
+        assert_eq!(u.cycle_s, series.cycle_s(), "{model}");
+        drop(u);
+        if model == UrModel::Ur7e {
+            let e = UrSession::connect(
+                &UrConfig {
+                    model: UrModel::Ur5e,
+                    ..ok
+                },
+                TIMEOUT,
+            )
+            .err()
+            .expect("a UR5e config on a UR7e");
+            assert!(matches!(e, UrSetupError::ModelMismatch { .. }), "{e}");
+            assert!(e.to_string().contains("a ur7e"), "{e}");
+        }
+        s.stop();
+    }
+}
+
 #[test]
 fn ur_backend_brings_up_a_powered_off_arm_when_asked() {
     let s = sim(UrSimConfig {
