@@ -111,19 +111,8 @@ fn check_export_target(input: &Path, out: &Path, format: Format) -> anyhow::Resu
         out.display(),
         input.display()
     );
-    if format == Format::Lerobot && out.is_dir() {
-        let mut entries = std::fs::read_dir(out)
-            .with_context(|| format!("reading {}", out.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()));
-        if let Some(first) = entries.next() {
-            anyhow::bail!(
-                "{} already holds files (e.g. {}): a LeRobot export goes into a new or empty \
-                 folder, so that no older data file is read back with the new dataset; delete \
-                 it or choose another folder",
-                out.display(),
-                first.display()
-            );
-        }
+    if format == Format::Lerobot {
+        check_lerobot_target(out)?;
     }
     anyhow::ensure!(
         format == Format::Lerobot || !out.is_dir(),
@@ -131,6 +120,27 @@ fn check_export_target(input: &Path, out: &Path, format: Format) -> anyhow::Resu
         out.display(),
         if format == Format::Csv { "CSV" } else { "MCAP" }
     );
+    Ok(())
+}
+
+/// A LeRobot dataset goes into a new or empty folder: data files of an older dataset left
+/// beside the new `meta/info.json` would be read back with it (`dataset export`, `record`).
+pub(crate) fn check_lerobot_target(out: &Path) -> anyhow::Result<()> {
+    if !out.is_dir() {
+        return Ok(());
+    }
+    let mut entries = std::fs::read_dir(out)
+        .with_context(|| format!("reading {}", out.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()));
+    if let Some(first) = entries.next() {
+        anyhow::bail!(
+            "{} already holds files (e.g. {}): a LeRobot export goes into a new or empty \
+             folder, so that no older data file is read back with the new dataset; delete it or \
+             choose another folder",
+            out.display(),
+            first.display()
+        );
+    }
     Ok(())
 }
 
