@@ -374,6 +374,16 @@ pub const TREMOR_HZ: (f64, f64) = (8.0, 12.0);
 /// How far from the start pose a person puts the arm back (rad, each active joint, uniform).
 pub const RETURN_SPREAD_RAD: f64 = 2e-3;
 
+/// The most rows a generated file may have (about 100 MB of CSV): 120 motions at 1 kHz, 1204
+/// at the default 100 Hz.
+pub const MAX_ROWS: usize = 1_000_000;
+
+/// The longest a file of `motions` reaches can last (s): every draw at its maximum.
+fn longest_s(motions: usize) -> f64 {
+    let rest = 1.0 + REST_EXTRA_S.1;
+    rest + motions as f64 * (2.0 * REACH_S.1 + CORRECTION_S.1 + 2.0 * rest)
+}
+
 /// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on τ ∈ [0, 1] (Flash & Hogan 1985).
 fn min_jerk(tau: f64) -> f64 {
     let t = tau.clamp(0.0, 1.0);
@@ -432,6 +442,31 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     if cfg.motions == 0 {
         return Err(bad("--motions 0: at least 1".into()));
     }
+    // Bounded before anything is allocated: the longest file these settings can give.
+    let longest_s = longest_s(cfg.motions);
+    if longest_s * cfg.rate_hz > MAX_ROWS as f64 {
+        return Err(bad(format!(
+            "--motions {} at --rate {} Hz: up to {:.0} rows ({longest_s:.0} s of reaches), more \
+             than {MAX_ROWS}: fewer motions or a lower rate",
+            cfg.motions,
+            cfg.rate_hz,
+            longest_s * cfg.rate_hz
+        )));
+    }
+    let limits = cfg.model.joint_limits();
+    let pose = UrKinematics::six(&cfg.start_q, &cfg.wrist_q);
+    for (j, &q) in pose.iter().enumerate() {
+        if !(q >= limits.lower[j] && q <= limits.upper[j]) {
+            return Err(bad(format!(
+                "the start pose's joint {j} ({}) at {q} rad is outside the {}'s limits \
+                 [{}, {}] rad",
+                if j < 3 { "task.start_q" } else { "sim.wrist_q" },
+                cfg.model,
+                limits.lower[j],
+                limits.upper[j]
+            )));
+        }
+    }
     if !(cfg.goal_half_side >= 0.0 && cfg.goal_half_side <= 0.1) {
         return Err(bad(format!(
             "goal region half side {} m: 0 to 0.1 m",
@@ -485,7 +520,6 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     let mut from = start;
     let mut t0 = 0.0;
     let mut row: u64 = 0;
-    let limits = cfg.model.joint_limits();
     for &(dur, to, moving) in &segments {
         let end = t0 + dur;
         loop {
@@ -540,6 +574,33 @@ mod tests {
             rate_hz: 100.0,
             seed,
         }
+    }
+
+    /// Settings that would allocate without bound, and a start pose outside the limits, are
+    /// refused before anything is generated, naming the setting.
+    #[test]
+    fn generation_is_bounded_and_names_a_bad_start_pose() {
+        let e = generate(&GenConfig {
+            motions: 200_000,
+            rate_hz: 1000.0,
+            ..gen(1)
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("--motions 200000") && e.contains("fewer motions"),
+            "{e}"
+        );
+        let longest = longest_s(120) * 1000.0;
+        assert!(longest <= MAX_ROWS as f64 && longest_s(121) * 1000.0 > MAX_ROWS as f64);
+        let mut far = gen(1);
+        far.start_q[2] = 7.0;
+        let e = generate(&far).unwrap_err().to_string();
+        assert!(
+            e.contains("joint 2 (task.start_q) at 7 rad") && e.contains("ur5e's limits"),
+            "{e}"
+        );
+        assert!(!e.contains("line"), "{e}");
     }
 
     #[test]

@@ -59,6 +59,10 @@ pub struct SweepPlan {
 pub enum PlanError {
     #[error("--shards must be at least 1")]
     NoShards,
+    #[error("--shards {0}: at most {MAX_SHARDS} (Slurm's default MaxArraySize; the merge job names every shard's folder on one command line)")]
+    TooManyShards(usize),
+    #[error("the merge job's command line would be {0} bytes, more than the {MAX_COMMAND_BYTES} a command line may safely hold: fewer --shards or a shorter DIR")]
+    MergeTooLong(usize),
     #[error("--parallel must be at least 1")]
     NoParallel,
     #[error("--time `{0}`: expected HH:MM:SS, e.g. 01:30:00")]
@@ -70,6 +74,14 @@ pub enum PlanError {
     #[error("`{0}`: not an image or claim name (letters, digits and - . _ / : @)")]
     K8sName(String),
 }
+
+/// The most shards a sweep may have: Slurm's default `MaxArraySize` (1001) takes array indices
+/// up to 1000, and the merge job lists every shard's folder.
+pub const MAX_SHARDS: usize = 1000;
+
+/// The longest command line a generated script may run (bytes): half of Linux's usual
+/// `ARG_MAX` (2 MiB), the other half left to the environment.
+pub const MAX_COMMAND_BYTES: usize = 1 << 20;
 
 /// Checks an `HH:MM:SS` time limit (hours any number of digits; minutes and seconds < 60).
 pub fn check_time(t: &str) -> Result<(), PlanError> {
@@ -123,6 +135,9 @@ impl SweepPlan {
         if self.shards == 0 {
             return Err(PlanError::NoShards);
         }
+        if self.shards > MAX_SHARDS {
+            return Err(PlanError::TooManyShards(self.shards));
+        }
         if self.parallel == 0 || self.cpus == 0 {
             return Err(PlanError::NoParallel);
         }
@@ -136,6 +151,10 @@ impl SweepPlan {
             if !p.is_absolute() {
                 return Err(PlanError::Relative(p.clone()));
             }
+        }
+        let merge = self.merge_cmd()?.len();
+        if merge > MAX_COMMAND_BYTES {
+            return Err(PlanError::MergeTooLong(merge));
         }
         Ok(())
     }
@@ -581,6 +600,14 @@ mod tests {
         let mut p = plan();
         p.dir = "rel/dir".into();
         assert_eq!(p.validate(), Err(PlanError::Relative("rel/dir".into())));
+        // Shards without bound: a merge command no shell could run.
+        let mut p = plan();
+        p.shards = 1_000_000;
+        assert_eq!(p.validate(), Err(PlanError::TooManyShards(1_000_000)));
+        p.shards = MAX_SHARDS;
+        p.validate().unwrap();
+        p.dir = format!("/{}", "d".repeat(2000)).into();
+        assert!(matches!(p.validate(), Err(PlanError::MergeTooLong(n)) if n > MAX_COMMAND_BYTES));
         for t in ["1:00", "01:60:00", "aa:00:00", "01:5:00", ""] {
             assert!(check_time(t).is_err(), "{t}");
         }
