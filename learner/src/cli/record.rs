@@ -240,11 +240,23 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         )?;
     }
     let addr = std::net::SocketAddr::from((host, args.rtde_port));
-    let mut rtde = Observer::connect(addr, timeout).with_context(|| {
-        format!(
-            "connecting to RTDE at {host}:{} (the robot's RTDE port is 30004)",
-            args.rtde_port
-        )
+    let mut rtde = Observer::connect(addr, timeout).map_err(|e| {
+        let wrong_port = matches!(
+            e,
+            ClientError::Frame { .. }
+                | ClientError::Decode { .. }
+                | ClientError::Unexpected { .. }
+                | ClientError::NoProtocol
+        );
+        anyhow::Error::new(e).context(if wrong_port {
+            format!(
+                "{addr} answers, but not in RTDE: wrong --rtde-port? (a UR's RTDE port is \
+                 30004; 29999 is its dashboard server, 30001-30003 its primary and secondary \
+                 interfaces)"
+            )
+        } else {
+            format!("connecting to RTDE at {addr}")
+        })
     })?;
     // The arm's package rate from its own clock: the median step of 25 consecutive packages'
     // timestamps, so that a package the controller skipped (a loaded machine, a busy network)

@@ -180,8 +180,35 @@ fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::
     Ok(())
 }
 
+/// A resumed folder must hold a run of the algorithm asked for: said before anything reads
+/// the demonstrations or the checkpoints, which differ in kind between algorithms (a folder of
+/// goals for MDGPS, `mdgps.iteration` in its states).
+fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
+    let Some(dir) = &args.resume else {
+        return Ok(());
+    };
+    let algo = match args.algo {
+        Algo::LqrGaifo => "lqr-gaifo",
+        Algo::Mdgps => "mdgps",
+        Algo::GaifoPpo => "gaifo-ppo",
+    };
+    if let Some(m) = manifest::read(dir)? {
+        anyhow::ensure!(
+            m.algo == algo,
+            "{} holds a `learner {}` {} run, not {algo}: resume it with --algo {} and its own \
+             --demos, or start a new run in another --out",
+            dir.display(),
+            m.command,
+            m.algo,
+            m.algo
+        );
+    }
+    Ok(())
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    check_resumed_algo(&args)?;
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
     }

@@ -36,7 +36,9 @@ fn ur5e_sim(dir: &Path, playback: bool, faults: Faults) -> UrSimHandle {
     .expect("ur-sim")
 }
 
-/// `learner record` on `sim` for a UR5e (T = 50) into `dir/out`, with `extra` arguments.
+/// `learner record` on `sim` for a UR5e (T = 50, from a config file unless `extra` gives
+/// `--model`) into `dir/out`, with `extra` arguments (`--rtde-port DASHBOARD`: the dashboard's
+/// port).
 fn record(sim: &UrSimHandle, dir: &Path, label: &str, extra: &[&str]) -> Proc {
     let port = sim.rtde_addr.port().to_string();
     let dashboard = sim.dashboard_addr.expect("dashboard").port().to_string();
@@ -47,15 +49,24 @@ fn record(sim: &UrSimHandle, dir: &Path, label: &str, extra: &[&str]) -> Proc {
         "record",
         "--ur",
         "127.0.0.1",
-        "--rtde-port",
-        &port,
         "--dashboard-port",
         &dashboard,
-        "--config",
-        &cfg,
         "--json",
     ];
-    args.extend_from_slice(extra);
+    if !extra.contains(&"--rtde-port") {
+        args.extend(["--rtde-port", port.as_str()]);
+    }
+    // --model and the config's [sim] model must agree: no config with --model.
+    if !extra.contains(&"--model") {
+        args.extend(["--config", cfg.as_str()]);
+    }
+    args.extend(extra.iter().map(|a| {
+        if *a == "DASHBOARD" {
+            dashboard.as_str()
+        } else {
+            a
+        }
+    }));
     Proc::spawn("learner", label, &args, dir)
 }
 
@@ -170,13 +181,12 @@ fn the_recorder_checks_its_output_before_it_records() {
 }
 
 /// A robot whose clock stops (with no --max-time-s: it never ends otherwise), whose joint reads
-/// NaN or 100 rad, or which is another model than the recording's: each ends the recording
-/// with an error naming it; a robot stream that cannot be trusted after the start is never
-/// recorded from.
+/// NaN or 100 rad, an RTDE port that is the dashboard's, or a robot of another model than the
+/// recording's: each ends the recording with an error naming it.
 #[test]
 fn the_recorder_names_a_robot_it_cannot_trust() {
     let dir = scratch("rec-faults");
-    let cases: [(Faults, &[&str], &[&str]); 4] = [
+    let cases: [(Faults, &[&str], &[&str]); 5] = [
         (
             Faults {
                 frozen_clock_after: 200,
@@ -203,6 +213,14 @@ fn the_recorder_names_a_robot_it_cannot_trust() {
         ),
         (
             Faults::default(),
+            &["--rtde-port", "DASHBOARD"],
+            &[
+                "answers, but not in RTDE: wrong --rtde-port?",
+                "29999 is its dashboard",
+            ],
+        ),
+        (
+            Faults::default(),
             &["--model", "ur5"],
             &[
                 "the robot says it is a UR5 on URSoftware 5",
@@ -216,24 +234,7 @@ fn the_recorder_names_a_robot_it_cannot_trust() {
         let out = dir.join(format!("out{i}")).display().to_string();
         let mut args = vec!["--out", out.as_str()];
         args.extend_from_slice(extra);
-        let p = if extra.is_empty() {
-            record(&sim, &dir, "record", &args)
-        } else {
-            // --model and the config's [sim] model must agree: no config here.
-            let port = sim.rtde_addr.port().to_string();
-            let dashboard = sim.dashboard_addr.expect("dashboard").port().to_string();
-            let mut all = vec![
-                "record",
-                "--ur",
-                "127.0.0.1",
-                "--rtde-port",
-                &port,
-                "--dashboard-port",
-                &dashboard,
-            ];
-            all.extend_from_slice(&args);
-            Proc::spawn("learner", "record", &all, &dir)
-        };
+        let p = record(&sim, &dir, "record", &args);
         let (code, log) = finish(p);
         sim.stop();
         assert_eq!(code, Some(1), "case {i}: {log}");
