@@ -265,8 +265,14 @@ pub struct Player {
     kin: UrKinematics,
     /// The file's name, for messages.
     pub name: String,
-    /// Arm time (s) of the file's t = 0, once started ([`Player::start`]).
-    started_at: Option<f64>,
+    /// Whether the file has started ([`Player::start`]).
+    started: bool,
+    /// File time (s): the arm time the file has played for.
+    file_s: f64,
+    /// Arm time (s) of the last [`Player::start`] or [`Player::advance`].
+    last: f64,
+    /// Whether the arm is held (not RUNNING, or a stop in force): it rests where the file is.
+    held: bool,
     ended: bool,
 }
 
@@ -290,7 +296,10 @@ impl Player {
             playback,
             kin: UrKinematics::new(model, ee_offset),
             name,
-            started_at: None,
+            started: false,
+            file_s: 0.0,
+            last: 0.0,
+            held: false,
             ended: false,
         }
     }
@@ -298,12 +307,32 @@ impl Player {
     /// Starts the file at arm time `time` (s), if not started yet: until then the arm rests at
     /// the first row's pose.
     pub fn start(&mut self, time: f64) {
-        self.started_at.get_or_insert(time);
+        if !self.started {
+            self.started = true;
+            self.last = time;
+        }
     }
 
-    /// File time (s) at arm time `time`: before the start, before the first row.
-    fn file_time(&self, time: f64) -> f64 {
-        self.started_at.map_or(f64::NEG_INFINITY, |t0| time - t0)
+    /// Arm time goes on to `time` (s): the file plays on only while `moves` (freedrive needs
+    /// the arm powered, its brakes released and no stop in force); otherwise the arm holds
+    /// where the file is.
+    pub fn advance(&mut self, time: f64, moves: bool) {
+        if self.started {
+            if moves {
+                self.file_s += time - self.last;
+            }
+            self.last = time;
+        }
+        self.held = !moves;
+    }
+
+    /// File time (s): before the start, before the first row.
+    fn file_time(&self) -> f64 {
+        if self.started {
+            self.file_s
+        } else {
+            f64::NEG_INFINITY
+        }
     }
 
     /// The first row's active joints (rad): where the arm starts.
@@ -312,16 +341,19 @@ impl Player {
         [q[0], q[1], q[2]]
     }
 
-    /// The arm at arm time `time` (s).
-    pub fn state(&self, time: f64) -> PlayedState {
-        let (q, qd) = self.playback.at(self.file_time(time));
+    /// The arm now (at rest while it is held).
+    pub fn state(&self) -> PlayedState {
+        let (q, mut qd) = self.playback.at(self.file_time());
+        if self.held {
+            qd = [0.0; 6];
+        }
         let (ee, ee_vel) = self.kin.ee_point_velocity(&q, &qd);
         PlayedState { q, qd, ee, ee_vel }
     }
 
-    /// Once, at the first arm time `time` (s) past the last row: the message that says so.
-    pub fn end_message(&mut self, time: f64) -> Option<String> {
-        if self.ended || self.file_time(time) < self.playback.duration() {
+    /// Once, when the file has played past its last row: the message that says so.
+    pub fn end_message(&mut self) -> Option<String> {
+        if self.ended || self.file_time() < self.playback.duration() {
             return None;
         }
         self.ended = true;
@@ -659,24 +691,34 @@ mod tests {
         assert!((qd[0] - 1.0).abs() < 1e-12 && (qd[5] - 2.0).abs() < 1e-12);
         assert_eq!(p.at(5.0), (p.q[1], [0.0; 6]));
         let mut player = Player::new(p, UrModel::Ur5, [0.0; 3], "f".into());
+        player.advance(3.0, true);
         assert_eq!(
-            player.state(3.0).q,
+            player.state().q,
             player.playback.q[0],
             "waits for its start"
         );
-        assert_eq!(player.end_message(3.0), None);
+        assert_eq!(player.end_message(), None);
         player.start(1.0);
         player.start(2.0);
+        player.advance(1.05, true);
         assert!(
-            (player.state(1.05).q[0] - 0.05).abs() < 1e-12,
+            (player.state().q[0] - 0.05).abs() < 1e-12,
             "started once, at 1 s"
         );
-        assert_eq!(player.end_message(1.05), None);
+        assert_eq!(player.end_message(), None);
+        // Held (powered off, braked, stopped): the file waits, the arm rests.
+        player.advance(1.5, false);
+        assert!((player.state().q[0] - 0.05).abs() < 1e-12);
+        assert_eq!(player.state().qd, [0.0; 6]);
+        assert_eq!(player.end_message(), None);
+        player.advance(1.525, true);
+        assert!((player.state().q[0] - 0.075).abs() < 1e-12, "plays on");
+        player.advance(1.575, true);
         assert!(player
-            .end_message(1.125)
+            .end_message()
             .unwrap()
             .contains("holds its last pose"));
-        assert_eq!(player.end_message(1.25), None, "said once");
+        assert_eq!(player.end_message(), None, "said once");
     }
 
     #[test]
