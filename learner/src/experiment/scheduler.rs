@@ -250,22 +250,36 @@ impl SweepPlan {
         Ok(s)
     }
 
-    /// `learner experiment merge DIR/shard_1 … DIR/shard_N --out DIR/merged`, quoted.
+    /// `learner experiment merge DIR/shard_1 … DIR/shard_N`, quoted (`--out` to add).
     fn merge_cmd(&self) -> Result<String, PlanError> {
         let shards: Vec<String> = (1..=self.shards)
             .map(|k| path_str(&self.dir.join(format!("shard_{k}"))).map(str::to_string))
             .collect::<Result<_, _>>()?;
-        let merged = self.dir.join("merged");
         let mut w: Vec<&str> = vec![path_str(&self.learner)?, "experiment", "merge"];
         w.extend(shards.iter().map(String::as_str));
-        w.extend(["--out", path_str(&merged)?]);
         words(w)
+    }
+
+    /// The shell lines of the merge job: into a temporary folder that then replaces
+    /// `DIR/merged`, the merge job's own output, so a retried merge job ends with the same
+    /// files (`experiment merge` itself never replaces results it did not write).
+    fn merge_body(&self) -> Result<String, PlanError> {
+        let dir = quote(path_str(&self.dir)?)?;
+        Ok(format!(
+            "OUT={dir}/merged\n\
+             TMP={dir}/.merged.$$.${{HOSTNAME:-host}}\n\
+             rm -rf \"$TMP\"\n\
+             {cmd} --out \"$TMP\"\n\
+             rm -rf \"$OUT\"\n\
+             mv -T \"$TMP\" \"$OUT\"\n",
+            cmd = self.merge_cmd()?,
+        ))
     }
 
     /// `merge.sbatch`: joins every shard into `DIR/merged/`.
     pub fn slurm_merge(&self) -> Result<String, PlanError> {
         let mut s = self.header(&format!("{}-merge", self.experiment), "logs/merge-%j.out")?;
-        let _ = writeln!(s, "{}", self.merge_cmd()?);
+        s.push_str(&self.merge_body()?);
         Ok(s)
     }
 
@@ -356,7 +370,7 @@ impl SweepPlan {
         ));
         jobs.push((
             "k8s-merge.yaml".into(),
-            job(&format!("{e}-merge"), "", &p.merge_cmd()?),
+            job(&format!("{e}-merge"), "", &p.merge_body()?),
         ));
         Ok(jobs)
     }
@@ -505,9 +519,9 @@ mod tests {
         assert!(
             m.contains(
                 "merge '/shared/sweep one/shard_1' '/shared/sweep one/shard_2' \
-                        '/shared/sweep one/shard_3' '/shared/sweep one/shard_4' --out \
-                        '/shared/sweep one/merged'"
-            ),
+                        '/shared/sweep one/shard_3' '/shared/sweep one/shard_4' --out \"$TMP\"\n"
+            ) && m.contains("OUT='/shared/sweep one'/merged\n")
+                && m.contains("mv -T \"$TMP\" \"$OUT\"\n"),
             "{m}"
         );
         let sub = p.slurm_submit().unwrap();

@@ -292,6 +292,27 @@ echo "$(( $(wc -l < "$calls") + 100 ));local"
         "2 variants x 2 seeds x 2 iterations"
     );
     assert_eq!(merged, rows_without_times(&whole.join("comparison.csv")));
+    // A retried merge job ends with the same files: it replaces its own output (through a
+    // temporary folder, none left), which `experiment merge` alone would refuse to.
+    let again = std::process::Command::new("bash")
+        .arg(sweep.join("merge.sbatch"))
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    assert!(
+        again.status.success(),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    assert_eq!(
+        rows_without_times(&sweep.join("merged/comparison.csv")),
+        merged
+    );
+    assert!(std::fs::read_dir(&sweep).unwrap().all(|e| !e
+        .unwrap()
+        .file_name()
+        .to_string_lossy()
+        .starts_with(".merged.")));
     // Without --submit: the sbatch lines, nothing run.
     let again = dir.join("printed");
     let (ok, printed, err) =
