@@ -194,18 +194,20 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
             Ok(())
         }
         DatasetCmd::Check(a) => {
-            let model = crate::io::demos::model_of(&a.demos)?.unwrap_or_default();
+            let recorded = crate::io::demos::model_of(&a.demos)?;
+            let model = recorded.unwrap_or_default();
             let sim = ur5_shared::config::SimConfig::for_model(model);
             let d = crate::io::demos::load_checked(&a.demos, &sim)?;
             let summary = serde_json::json!({"command": "dataset check", "demos": a.demos,
-                "model": model, "count": d.count, "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal,
-                "start_q_rad": d.start_q, "cost_random": d.cost_random, "cost_expert": d.cost_expert});
+                "model": model, "model_recorded": recorded.is_some(), "count": d.count,
+                "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal, "start_q_rad": d.start_q,
+                "cost_random": d.cost_random, "cost_expert": d.cost_expert});
             if a.json {
                 println!("{summary}");
             } else {
                 eprintln!(
                     "{}: {} demonstrations of T = {} at dt = {} s, goal {:?} m, start {:?} rad, \
-                     C_random {:.4}, C_expert {:.4}: consistent with the {model}",
+                     C_random {:.4}, C_expert {:.4}: consistent with the {model}{}",
                     a.demos.display(),
                     d.count,
                     d.horizon,
@@ -213,7 +215,17 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
                     d.goal,
                     d.start_q,
                     d.cost_random,
-                    d.cost_expert
+                    d.cost_expert,
+                    if recorded.is_some() {
+                        String::new()
+                    } else {
+                        format!(
+                            ", assumed: the file names no arm model, and another arm's \
+                             demonstrations can pass the {model}'s checks (end-effector points \
+                             within 1 cm); train with the [sim] model of the arm they were \
+                             recorded on"
+                        )
+                    }
                 );
             }
             Ok(())

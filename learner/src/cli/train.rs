@@ -166,6 +166,21 @@ fn demos_file(
     Ok((s.demos, true))
 }
 
+/// Demonstrations that name no arm model (a CSV, a LeRobot dataset without the model field)
+/// are taken to be the `[sim]` model's; their joint angles cannot tell another arm apart, so
+/// the run says so.
+fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
+    if crate::io::demos::model_of(path)?.is_none() {
+        eprintln!(
+            "note: {} names no arm model: taken to be the {} ([sim] model), which cannot be \
+             checked; if they were recorded on another arm, set [sim] model to it",
+            path.display(),
+            sim.model
+        );
+    }
+    Ok(())
+}
+
 /// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
 /// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
 /// records into because it is there.
@@ -228,6 +243,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         let pre = Manifest::new("train", "gaifo-ppo", pcfg.seed, None, &pcfg)?;
         let (path, claimed) = demos_file(&args, pcfg.seed, &pcfg.sim, &pre)?;
         let demos = crate::io::demos::load_checked(&path, &pcfg.sim)?;
+        warn_unrecorded_model(&path, &pcfg.sim)?;
         let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&path), &pcfg)?;
         // Claimed already: the folder holds only its run.json, replaced now.
         let force = args.force || claimed;
@@ -263,6 +279,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let pre = Manifest::new("train", "lqr-gaifo", cfg.seed, None, &cfg)?;
     let (path, claimed) = demos_file(&args, cfg.seed, &cfg.sim, &pre)?;
     let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
+    warn_unrecorded_model(&path, &cfg.sim)?;
     let m = Manifest::new("train", "lqr-gaifo", cfg.seed, Some(&path), &cfg)?;
     let claim = match args.resume {
         Some(_) => Claim::Resume,

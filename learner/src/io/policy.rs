@@ -12,14 +12,16 @@
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
-//! Loading checks the schema, the layout names, every shape (P against `hidden`), finiteness
-//! and the input scale's sign, naming the file and array at fault.
+//! Loading checks the schema, the layout names, every shape (P against `hidden`), finiteness,
+//! the input scale's sign and the controller's bounds (`PolicyBounds`: |weight| ≤ 1e4, …),
+//! naming the file and array at fault.
 
 use std::path::Path;
 
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use ur5_shared::config::ActionMode;
 use ur5_shared::layout::{ACTION_NAMES, STATE_NAMES};
+use ur5_shared::PolicyBounds;
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -134,6 +136,17 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
             ))
         }
     };
+    // The bounds the real-time controller holds a policy to: what it would refuse is not
+    // evaluated or served either.
+    policy
+        .to_table(0, mode)
+        .and_then(|t| t.validate(&PolicyBounds::default()))
+        .map_err(|e| {
+            bad(
+                "params",
+                format!("{e}: not a trained policy's (the controller refuses it)"),
+            )
+        })?;
     let start_q: [f64; 3] = f
         .f64_shaped("start_q", &[3])?
         .try_into()

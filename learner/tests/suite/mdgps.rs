@@ -219,10 +219,13 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
     nan[40] = f64::NAN;
     let mut neg = policy_file().policy.flat();
     neg[DX + 1] = -1.0;
+    let mut huge = policy_file().policy.flat();
+    huge[40] = 1e300;
     let cases: Vec<(&str, Option<(Vec<u64>, Vec<f64>)>, &str)> = vec![
         ("params", Some((vec![n - 1], vec![0.1; n as usize - 1]))),
         ("params", Some((vec![n], nan))),
         ("params", Some((vec![n], neg))),
+        ("params", Some((vec![n], huge))),
         ("hidden", Some((vec![2], vec![8.0, 0.0]))),
         ("hidden", Some((vec![1, 2], vec![8.0, 4.0]))),
         ("schema_version", Some((vec![], vec![2.0]))),
@@ -236,6 +239,7 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
         "expected [",
         "not finite",
         "r[1]",
+        "max_abs_weight",
         "width 0",
         "expected (H,)",
         "this program reads 1",
