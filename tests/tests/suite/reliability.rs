@@ -611,6 +611,21 @@ fn cases(dir: &Path) -> Vec<Case> {
             ]),
         },
         Case {
+            class: "C3",
+            what: "`[arm.ros2] command_topic = \"/a//b\"`",
+            bin: "rt-controller",
+            args: s(&[
+                "run",
+                "--config",
+                &write(
+                    dir,
+                    "topic.toml",
+                    "mode = \"real_time\"\npacing = \"arm\"\n[arm]\nbackend = \"ros2\"\n\
+                     [arm.ros2]\ncommand_topic = \"/a//b\"\n",
+                ),
+            ]),
+        },
+        Case {
             class: "3",
             what: "controller config `[bounds] max_abs_k_mat = nan`",
             bin: "rt-controller",
