@@ -111,6 +111,34 @@ fn the_recorder_keeps_what_was_taught_when_the_robot_goes() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Ctrl-C (SIGINT) after the first demonstration: the recording stops, and the finished
+/// demonstrations (as many as it says) are written.
+#[test]
+fn the_recorder_keeps_what_was_taught_when_it_is_interrupted() {
+    let dir = scratch("rec-int");
+    generate_reaches(UrModel::Ur5e, 3, 4, &dir);
+    let sim = ur5e_sim(&dir, true, Faults::default());
+    let out = dir.join("out").display().to_string();
+    let p = record(&sim, &dir, "record", &["--episodes", "5", "--out", &out]);
+    let t0 = Instant::now();
+    while !p.log().contains("demonstration 1/5") {
+        assert!(t0.elapsed() < LONG, "no demonstration:\n{}", p.log());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    p.signal(libc::SIGINT);
+    let (code, log) = finish(p);
+    sim.stop();
+    assert_eq!(code, Some(1), "{log}");
+    let n = (1..=3)
+        .find(|n| log.contains(&format!("stopped after {n} of 5 demonstrations")))
+        .unwrap_or_else(|| panic!("{log}"));
+    assert!(log.contains("interrupted (SIGINT or SIGTERM)"), "{log}");
+    let demos = learner::io::demos::load(&dir.join("out/demos.npz")).unwrap();
+    assert_eq!(demos.count, n, "{log}");
+    assert!(!dir.join("out/.recording").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The output is checked before anything is recorded: a path that cannot be a folder, a
 /// LeRobot folder holding an older dataset's data file, a folder another recorder is writing
 /// into (refused, naming it) or one a killed recorder left (named as such). None of them
