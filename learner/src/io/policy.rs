@@ -9,6 +9,7 @@
 //! | `dt` | () f64 | control period (s) |
 //! | `horizon` | () u64 | T of the training episodes (the policy itself is time-invariant) |
 //! | `seed`, `iterations` | () u64 | the training run's seed and MDGPS iterations |
+//! | `model` | str | the arm it was trained on (`ur5e`, …; absent in files written before: the UR5) |
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
@@ -21,7 +22,7 @@ use std::path::Path;
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use ur5_shared::config::ActionMode;
 use ur5_shared::layout::{ACTION_NAMES, STATE_NAMES};
-use ur5_shared::PolicyBounds;
+use ur5_shared::{PolicyBounds, UrModel};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -49,6 +50,8 @@ pub struct PolicyFile {
     pub seed: u64,
     /// MDGPS iterations it was trained for.
     pub iterations: u64,
+    /// The arm it was trained on: its kinematics and limits are the policy's world.
+    pub model: UrModel,
 }
 
 fn mode_name(mode: ActionMode) -> &'static str {
@@ -72,6 +75,7 @@ pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
     w.u64("horizon", &[], &[p.horizon as u64])?;
     w.u64("seed", &[], &[p.seed])?;
     w.u64("iterations", &[], &[p.iterations])?;
+    w.string("model", p.model.name())?;
     w.strings("state_names", &STATE_NAMES)?;
     w.strings("action_names", &ACTION_NAMES)?;
     w.finish()?;
@@ -162,6 +166,14 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
     if horizon < 2 {
         return Err(bad("horizon", format!("{horizon}: must be >= 2 steps")));
     }
+    // Files written before policies carried a model were all made on the UR5.
+    let model = if has("model") {
+        let name = f.string("model")?;
+        name.parse::<UrModel>()
+            .map_err(|e| bad("model", e.to_string()))?
+    } else {
+        UrModel::Ur5
+    };
     Ok(PolicyFile {
         policy,
         mode,
@@ -170,5 +182,6 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
         horizon: horizon as usize,
         seed: f.u64_scalar("seed")?,
         iterations: f.u64_scalar("iterations")?,
+        model,
     })
 }

@@ -22,6 +22,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{ActionMode, TaskConfig};
 use ur5_shared::layout::{DU, DX};
+use ur5_shared::UrModel;
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mdgps-test-{}-{name}", std::process::id()));
@@ -166,6 +167,7 @@ fn policy_file() -> PolicyFile {
         horizon: 100,
         seed: u64::MAX - 3,
         iterations: 20,
+        model: UrModel::Ur5,
     }
 }
 
@@ -192,7 +194,7 @@ fn edit(src: &Path, dst: &Path, name: &str, new: Option<(&[u64], &[f64])>) {
             continue;
         }
         match n.as_str() {
-            "state_names" | "action_names" | "action_mode" => {
+            "state_names" | "action_names" | "action_mode" | "model" => {
                 let s = f.strings(&n).unwrap();
                 let r: Vec<&str> = s.iter().map(String::as_str).collect();
                 w.strings(&n, &r).unwrap();
@@ -404,6 +406,30 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
     let d = v["result"]["final_distance_m"].as_f64().unwrap();
     assert!(d > 0.1 && d.is_finite(), "{v}");
     assert_eq!(v["result"]["steps"], 5);
+    assert_eq!(v["result"]["model"], "ur5");
+    // A policy of another arm runs on its own arm (its kinematics), said in the summary;
+    // one whose model this build does not know is refused naming it.
+    let p5e = dir.join("policy_ur5e.npz");
+    save_policy(
+        &PolicyFile {
+            model: UrModel::Ur5e,
+            ..f.clone()
+        },
+        &p5e,
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(["policy", "eval", "--policy", p5e.to_str().unwrap()])
+        .args(["--goal", "-0.45,-0.25,0.25", "--json"])
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["result"]["model"], "ur5e", "{v}");
+    let d5e = v["result"]["final_distance_m"].as_f64().unwrap();
+    assert!(
+        (d5e - d).abs() > 1e-3,
+        "the UR5e's kinematics: {d5e} vs {d}"
+    );
 
     // Errors name their cause: one step (no task cost).
     let eval = |policy: &std::path::Path, extra: &[&str]| {
