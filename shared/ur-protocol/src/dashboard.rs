@@ -66,8 +66,12 @@ impl RobotIdentity {
 /// (`None` for a name this project does not know).
 pub fn robot_model(reply: &str, e_series: bool) -> Option<UrModel> {
     let base = reply.trim().to_ascii_lowercase();
-    // The UR20 and UR30 exist only on the e-Series controller and carry no "e".
-    let name = if e_series && !matches!(base.as_str(), "ur20" | "ur30") {
+    // An e-Series controller leaves the "e" out ("UR5" for a UR5e; URSim runs the UR7e and
+    // UR12e as "UR7" and "UR12" on PolyScope 5, "UR7e" and "UR12e" on PolyScope X: URCL's
+    // start_ursim.sh). The UR15, UR18, UR20 and UR30 exist only on the e-Series controller and
+    // carry no "e".
+    let bare = !base.ends_with('e') && !matches!(base.as_str(), "ur15" | "ur18" | "ur20" | "ur30");
+    let name = if e_series && bare {
         format!("{base}e")
     } else {
         base
@@ -224,9 +228,11 @@ mod tests {
         assert_eq!(robot_model("UR20", true), Some(UrModel::Ur20));
         assert_eq!(robot_model("UR30", true), Some(UrModel::Ur30));
         assert_eq!(robot_model("UR10", false), Some(UrModel::Ur10));
-        // A UR16 on a CB3, a UR20 on a CB3, an unknown model: no such arm.
+        assert_eq!(robot_model("UR5e", true), Some(UrModel::Ur5e));
+        // A UR16 on a CB3, a UR20 on a CB3, unknown models: no such arm.
         assert_eq!(robot_model("UR16", false), None);
         assert_eq!(robot_model("UR20", false), None);
-        assert_eq!(robot_model("UR7", true), None);
+        assert_eq!(robot_model("UR8LONG", true), None);
+        assert_eq!(robot_model("UR99", true), None);
     }
 }
