@@ -404,7 +404,31 @@ fn real_main() -> Result<i32> {
                 limits: Some(c.limits()),
                 ..c
             };
-            print!("{}", toml::to_string(&c)?);
+            // [arm.ur]'s keys a configuration carries only when set (so that other
+            // configurations print and hash as before): written out under its header.
+            let u = &c.arm.ur;
+            let mut ur = toml::Table::new();
+            ur.insert("model".into(), u.model.name().into());
+            ur.insert("dashboard_port".into(), i64::from(u.dashboard_port).into());
+            ur.insert("check_model".into(), u.check_model.into());
+            ur.insert("bring_up".into(), u.bring_up.into());
+            ur.insert(
+                "recover_protective_stop".into(),
+                u.recover_protective_stop.into(),
+            );
+            ur.insert(
+                "servoj_lookahead_time_s".into(),
+                u.servoj_lookahead_time_s.into(),
+            );
+            ur.insert("servoj_gain".into(), u.servoj_gain.into());
+            let printed = toml::Value::try_from(u)?;
+            ur.retain(|k, _| !printed.as_table().is_some_and(|t| t.contains_key(k)));
+            let text = toml::to_string(&c)?.replacen(
+                "[arm.ur]\n",
+                &format!("[arm.ur]\n{}", toml::to_string(&ur)?),
+                1,
+            );
+            print!("{text}");
             // The sections a configuration carries only when they differ from their defaults
             // (so that other configurations print and hash as before): written out here too.
             let mut arm = toml::Table::new();
