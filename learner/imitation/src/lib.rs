@@ -7,6 +7,8 @@
 //! - [`discriminator`]: the WGAN-GP critic D(s, s') (MLP, Adam, persistence), step 3;
 //! - [`critic`]: its one trainer (refit at iteration 0, the per-iteration update, checkpoint),
 //!   owned by each of LQR+GAIfO, MDGPS and GAIfO (PPO);
+//! - [`settings`]: the settings the learners share (the critic's, LQR+GAIfO's that MDGPS runs
+//!   per condition, the count bound), below all of them so that none imports another's;
 //! - [`cost`]: the true task cost ([`cost::task`], the expert's) and the composite cost
 //!   C_t(s, a) = D(s, F_t [s; a] + f_t) with its expansion ([`cost::composite`]), steps 4–5;
 //! - [`iteration`]: step 6 shared by both LQR learners (cost averaging, step size, KL-bounded
@@ -37,5 +39,6 @@ pub mod learn;
 pub mod mdgps;
 pub mod ppo;
 pub mod rollout;
+pub mod settings;
 
 pub use error::ImitationError;
