@@ -16,6 +16,7 @@
 //! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
 //! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`]; its log row
 //!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
+//! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor and MDGPS's global policy;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
@@ -37,6 +38,7 @@ pub mod iteration;
 pub mod iteration_log;
 pub mod learn;
 pub mod mdgps;
+pub mod mlp_policy;
 pub mod ppo;
 pub mod rollout;
 pub mod settings;

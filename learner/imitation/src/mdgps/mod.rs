@@ -541,7 +541,7 @@ impl Mdgps {
                     let s = ep.state(t);
                     let mut a = [0.0; DU];
                     pol.act(t, &s, &[0.0; DU], &mut a);
-                    let base = crate::ppo::rollout::action_base(mode, &s);
+                    let base = crate::mlp_policy::action_base(mode, &s);
                     let prc = pol.inv_pol_covar.slice(t);
                     out.states.push(s);
                     out.offsets.push(std::array::from_fn(|j| a[j] - base[j]));
