@@ -80,7 +80,8 @@ enum Cmd {
     },
     /// Physics throughput: steps per second for 10 s of simulated time at the physics rate (best
     /// and median of --reps runs, as ../shared/tools/mujoco_ur5.py reports MuJoCo's best of 5),
-    /// and 100-step episodes per second.
+    /// and 100-step episodes per second. Beside MuJoCo on a six-joint UR5e in one command:
+    /// scripts/sim-reference/bench_mujoco.py.
     Bench {
         /// Active joints: 3 (wrist locked, merged into the forearm) or 6.
         #[arg(long, default_value_t = 3)]

@@ -29,9 +29,10 @@ pub const GRAVITY: f64 = 9.81;
 /// What the arm's sensors report (before or after sensor noise).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Observation {
-    /// Active joint angles (rad).
+    /// Angles of the first three active joints (rad); a six-joint arm's wrist:
+    /// [`Ur5Sim::arm_joints`].
     pub q: [f64; N_JOINTS],
-    /// Active joint velocities (rad/s).
+    /// Velocities of the first three active joints (rad/s).
     pub qd: [f64; N_JOINTS],
     /// End-effector point (m, base frame).
     pub ee_pos: [f64; 3],

@@ -6,6 +6,6 @@ mod dynamics;
 mod inspect_cli;
 mod models;
 mod servoj;
-mod six;
 mod sim;
+mod six;
 mod ur_sim;
