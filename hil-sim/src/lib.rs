@@ -3,9 +3,10 @@
 //!
 //! - [`urdf`]: the bundled URDF of every UR model and the generator that writes them;
 //! - [`model`]: the URDF (the model's bundled one or a user file) parsed by `urdf-rs`, checked,
-//!   wrist joints locked;
-//! - [`sim`]: the rapier3d multibody built by `rapier3d-urdf`, its physics loop, the 12-dim
-//!   state of the task, the perturbation knobs of the stand-in "physical arm";
+//!   wrist joints locked (three active joints, the default) or active (six);
+//! - [`sim`]: the rapier3d multibody built by `rapier3d-urdf` (three or six active joints), its
+//!   physics loop, the 12-dim state of the task, the flange's pose (UR's p[x, y, z, rx, ry,
+//!   rz]), the perturbation knobs of the stand-in "physical arm";
 //! - [`servo`]: the arm's own joint servo for goal-angle actions;
 //! - [`serve`]: the arm behind `arm/state` / `arm/command` over iceoryx2 (`hil-sim serve`);
 //! - [`ur_sim`]: the arm behind a UR controller's RTDE and secondary interfaces

@@ -54,19 +54,23 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Print one JSON object: model, ee_pos (m, the flange's: no end-effector offset unless
-    /// the model's default has one), ee_vel (m/s), qdd (rad/s², one physics substep under raw
-    /// torques τ, servo bypassed, gravity on), wrist_q (rad), ee_link, urdf.
+    /// Print one JSON object: model, joints (3 or 6 active), q (rad, all six), ee_pos (m, the
+    /// flange's: no end-effector offset unless the model's default has one), ee_vel (m/s),
+    /// flange_pose (UR's p[x, y, z, rx, ry, rz] of the flange, wrist_3_link's frame: m and a
+    /// rotation vector in rad, base frame, as the teach pendant shows it), qdd (rad/s², one
+    /// physics substep under raw torques τ, servo bypassed, gravity on), wrist_q (rad),
+    /// ee_link, urdf.
     Inspect {
-        /// Joint angles q1,q2,q3 (rad).
-        #[arg(long, value_parser = parse3, allow_hyphen_values = true)]
-        q: [f64; 3],
-        /// Joint velocities (rad/s).
-        #[arg(long, value_parser = parse3, allow_hyphen_values = true, default_value = "0,0,0")]
-        qd: [f64; 3],
-        /// Raw joint torques (N·m).
-        #[arg(long, value_parser = parse3, allow_hyphen_values = true, default_value = "0,0,0")]
-        tau: [f64; 3],
+        /// Joint angles (rad): q1,q2,q3 (wrist locked at the model's wrist_q) or q1,…,q6 (all
+        /// six joints active).
+        #[arg(long, value_parser = parse_joints, allow_hyphen_values = true)]
+        q: JointValues,
+        /// Joint velocities (rad/s), as many as --q (default: zeros).
+        #[arg(long, value_parser = parse_joints, allow_hyphen_values = true)]
+        qd: Option<JointValues>,
+        /// Raw joint torques (N·m), as many as --q (default: zeros).
+        #[arg(long, value_parser = parse_joints, allow_hyphen_values = true)]
+        tau: Option<JointValues>,
         /// Physics substep (s) for qdd.
         #[arg(long, default_value_t = 1e-4)]
         substep: f64,
@@ -76,8 +80,12 @@ enum Cmd {
     },
     /// Physics throughput: steps per second for 10 s of simulated time at the physics rate (best
     /// and median of --reps runs, as ../shared/tools/mujoco_ur5.py reports MuJoCo's best of 5),
-    /// and 100-step episodes per second.
+    /// and 100-step episodes per second. Beside MuJoCo on a six-joint UR5e in one command:
+    /// scripts/sim-reference/bench_mujoco.py.
     Bench {
+        /// Active joints: 3 (wrist locked, merged into the forearm) or 6.
+        #[arg(long, default_value_t = 3)]
+        joints: usize,
         /// Episodes to time.
         #[arg(long, default_value_t = 5)]
         episodes: usize,
@@ -369,10 +377,11 @@ fn run() -> Result<()> {
             urdf,
         } => inspect(model.unwrap_or_default(), q, qd, tau, substep, urdf),
         Cmd::Bench {
+            joints,
             episodes,
             reps,
             json,
-        } => bench(model.unwrap_or_default(), episodes, reps, json),
+        } => bench(model.unwrap_or_default(), joints, episodes, reps, json),
         Cmd::Serve {
             config,
             prefix,
@@ -597,50 +606,84 @@ fn demo(config: Option<PathBuf>, model: Option<UrModel>, goals: &str, json: bool
     Ok(())
 }
 
+/// One value per joint, 3 or 6 (one command-line argument).
+#[derive(Clone, Debug)]
+struct JointValues(Vec<f64>);
+
+/// Comma-separated joint values: 3 or 6 finite numbers.
+fn parse_joints(s: &str) -> Result<JointValues, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    if v.len() != 3 && v.len() != 6 {
+        return Err(format!(
+            "expected 3 or 6 comma-separated numbers, got {}",
+            v.len()
+        ));
+    }
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err("values must be finite".into());
+    }
+    Ok(JointValues(v))
+}
+
 fn inspect(
     model: UrModel,
-    q: [f64; 3],
-    qd: [f64; 3],
-    tau: [f64; 3],
+    q: JointValues,
+    qd: Option<JointValues>,
+    tau: Option<JointValues>,
     substep: f64,
     urdf: Option<PathBuf>,
 ) -> Result<()> {
+    let q = q.0;
+    let n = q.len();
+    let qd = qd.map_or_else(|| vec![0.0; n], |v| v.0);
+    let tau = tau.map_or_else(|| vec![0.0; n], |v| v.0);
+    anyhow::ensure!(
+        qd.len() == n && tau.len() == n,
+        "--q has {n} values, --qd {} and --tau {}: give as many of each",
+        qd.len(),
+        tau.len()
+    );
     let sim_cfg = SimConfig {
         urdf,
         physics_dt: substep,
         substeps: 1,
         ..SimConfig::for_model(model)
     };
-    let mut sim = Ur5Sim::new(sim_cfg, substep)?;
+    let mut sim = Ur5Sim::with_joints(sim_cfg, substep, n)?;
     // Every input within the arm's limits, so that every output is a number.
-    let limits = sim.limits();
-    for j in 0..3 {
-        let name = &sim.model().active[j].name;
+    for j in 0..n {
+        let l = sim.model().joint(j);
+        let name = &l.name;
         anyhow::ensure!(
-            q[j] >= limits.lower[j] && q[j] <= limits.upper[j],
+            q[j] >= l.lower && q[j] <= l.upper,
             "--q: joint `{name}` at {:?} rad is outside its limits [{}, {}]",
             q[j],
-            limits.lower[j],
-            limits.upper[j]
+            l.lower,
+            l.upper
         );
         anyhow::ensure!(
-            qd[j].abs() <= limits.velocity[j],
+            qd[j].abs() <= l.velocity,
             "--qd: joint `{name}` at {:?} rad/s is beyond its speed limit {} rad/s",
             qd[j],
-            limits.velocity[j]
+            l.velocity
         );
         anyhow::ensure!(
-            tau[j].abs() <= limits.effort[j],
+            tau[j].abs() <= l.effort,
             "--tau: joint `{name}` at {:?} N·m is beyond its effort limit {} N·m",
             tau[j],
-            limits.effort[j]
+            l.effort
         );
     }
-    sim.set_joint_state(q, qd);
+    sim.set_joint_state_all(&q, &qd);
     let obs = sim.true_observation();
-    let qdd = sim.joint_acceleration(q, qd, tau);
+    let (q6, _) = sim.arm_joints();
+    let flange = hil_sim::sim::ur_pose(&sim.ee_frame_pose());
+    let qdd = sim.joint_acceleration_all(&q, &qd, &tau)[..n].to_vec();
     anyhow::ensure!(
-        obs.ee_pos.iter().chain(&obs.ee_vel).chain(&qdd).all(|v| v.is_finite()),
+        obs.ee_pos.iter().chain(&obs.ee_vel).chain(&qdd).chain(&flange).all(|v| v.is_finite()),
         "the model gives non-finite results at this state (ee_pos {:?}, ee_vel {:?}, qdd {:?}): check the URDF's inertias and origins",
         obs.ee_pos,
         obs.ee_vel,
@@ -650,7 +693,8 @@ fn inspect(
     println!(
         "{}",
         serde_json::json!({
-            "model": model.name(), "ee_pos": obs.ee_pos, "ee_vel": obs.ee_vel, "qdd": qdd, "wrist_q": m.wrist_q,
+            "model": model.name(), "joints": n, "q": q6, "ee_pos": obs.ee_pos, "ee_vel": obs.ee_vel,
+            "flange_pose": flange, "qdd": qdd, "wrist_q": m.wrist_q,
             "wrist_joints": m.wrist_joints, "ee_link": m.ee_link, "ee_offset": m.ee_offset,
             "urdf": m.source.display().to_string(),
         })
@@ -658,19 +702,36 @@ fn inspect(
     Ok(())
 }
 
-fn bench(model: UrModel, episodes: usize, reps: usize, json: bool) -> Result<()> {
+fn bench(model: UrModel, joints: usize, episodes: usize, reps: usize, json: bool) -> Result<()> {
     let task = TaskConfig::for_model(model);
-    let mut sim = Ur5Sim::new(SimConfig::for_model(model), task.dt)?;
+    let mut sim = Ur5Sim::with_joints(SimConfig::for_model(model), task.dt, joints)?;
+    let wrist = sim.model().wrist_q;
+    // The goal of every joint at time t (s): the three-joint bench's goals, and at six joints
+    // the wrist swinging ±0.3 rad about its rest angles.
+    let goal = |t: f64| {
+        let s = t.sin();
+        [
+            0.5 * s,
+            -1.5 + 0.3 * s,
+            1.8 - 0.3 * s,
+            wrist[0] + 0.3 * s,
+            wrist[1] - 0.3 * s,
+            wrist[2] + 0.3 * s,
+        ]
+    };
+    let start: Vec<f64> = {
+        let s = task.start_q;
+        [s[0], s[1], s[2], wrist[0], wrist[1], wrist[2]][..joints].to_vec()
+    };
     let physics_dt = sim.config().physics_dt;
     // 10 s of simulated time, servo tracking a moving goal; the same run `reps` times.
     let steps = (10.0 / task.dt).round() as usize;
     let mut rates = Vec::with_capacity(reps.max(1));
     for _ in 0..reps.max(1) {
-        sim.reset(task.start_q, task.goal)?;
+        sim.reset_all(&start, task.goal)?;
         let t0 = Instant::now();
         for i in 0..steps {
-            let s = (i as f64 * task.dt).sin();
-            sim.step([0.5 * s, -1.5 + 0.3 * s, 1.8 - 0.3 * s]);
+            sim.step_all(&goal(i as f64 * task.dt)[..joints]);
         }
         rates.push(10.0 / physics_dt / t0.elapsed().as_secs_f64());
     }
@@ -681,14 +742,13 @@ fn bench(model: UrModel, episodes: usize, reps: usize, json: bool) -> Result<()>
 
     let t0 = Instant::now();
     for e in 0..episodes {
-        sim.reset(task.start_q, task.goal)?;
+        sim.reset_all(&start, task.goal)?;
         for i in 0..task.horizon {
-            let s = ((i + e) as f64 * task.dt).sin();
-            sim.step([0.5 * s, -1.5 + 0.3 * s, 1.8 - 0.3 * s]);
+            sim.step_all(&goal((i + e) as f64 * task.dt)[..joints]);
         }
     }
     let ep_per_s = episodes as f64 / t0.elapsed().as_secs_f64();
-    println!("| measure | value |");
+    println!("| measure ({model}, {joints} active joints) | value |");
     println!("|---|---|");
     println!(
         "| physics steps/s (dt = {physics_dt} s, servo on), best of {} runs of 10 s | {steps_per_s:.0} |",
@@ -700,7 +760,9 @@ fn bench(model: UrModel, episodes: usize, reps: usize, json: bool) -> Result<()>
     if json {
         println!(
             "{}",
-            serde_json::json!({"command": "bench", "physics_steps_per_s": steps_per_s,
+            serde_json::json!({"command": "bench", "model": model.name(), "joints": joints,
+                "physics_dt_s": physics_dt, "substeps": sim.config().substeps,
+                "physics_steps_per_s": steps_per_s,
                 "median_physics_steps_per_s": median_steps_per_s, "runs": rates.len(), "real_time_factor": rt_factor,
                 "episodes_per_s": ep_per_s})
         );

@@ -4,9 +4,11 @@
 //! - the three active joints ([`ur5_shared::layout::ACTIVE_JOINTS`]) must exist and be revolute
 //!   with limits; their limits are read from the URDF (rapier ignores effort and velocity limits,
 //!   so the simulator enforces them itself);
-//! - every other movable joint (the UR5's wrist) is locked at its configured angle by turning it
-//!   into a fixed joint whose origin absorbs the rotation, so the rapier multibody has exactly
-//!   three degrees of freedom;
+//! - with three active joints (the default), every other movable joint (the UR5's wrist) is
+//!   locked at its configured angle by turning it into a fixed joint whose origin absorbs the
+//!   rotation, so the rapier multibody has exactly three degrees of freedom; with six
+//!   ([`ArmModel::load_joints`]) the wrist joints are active too (revolute with limits, checked
+//!   like the others) and nothing is locked;
 //! - link masses and inertias are scaled by the mass perturbation (the nominal copy is kept for
 //!   the arm's own gravity compensation).
 
@@ -53,11 +55,18 @@ pub struct ArmModel {
     pub locked: Robot,
     /// Where the URDF came from.
     pub source: PathBuf,
-    /// Active joints in layout order (shoulder pan, shoulder lift, elbow).
+    /// The first three active joints in layout order (shoulder pan, shoulder lift, elbow).
     pub active: [JointLimits; N_JOINTS],
-    /// Names of the locked (wrist) joints in chain order.
+    /// How many joints move: 3 (wrist locked) or 6 (the wrist joints active too).
+    pub n_active: usize,
+    /// Limits of the three wrist joints in chain order, as written in the URDF (checked only
+    /// with six active joints; a locked wrist's limits are not used).
+    pub wrist_limits: Vec<JointLimits>,
+    /// Names of the wrist joints in chain order: locked with three active joints, active (after
+    /// [`Self::active`]) with six.
     pub wrist_joints: Vec<String>,
-    /// Angles the wrist joints are locked at (rad).
+    /// Angles the wrist joints are locked at with three active joints; with six, where the
+    /// wrist rests when only three angles are given (rad).
     pub wrist_q: [f64; 3],
     /// Link whose origin plus [`Self::ee_offset`] is the end-effector point.
     pub ee_link: String,
@@ -66,13 +75,26 @@ pub struct ArmModel {
 }
 
 impl ArmModel {
-    /// Loads a URDF file (or the bundled URDF of `model` when `path` is `None`) and checks it.
+    /// Loads a URDF file (or the bundled URDF of `model` when `path` is `None`) and checks it,
+    /// with three active joints (the wrist locked at `wrist_q`).
     pub fn load(
         path: Option<&Path>,
         model: UrModel,
         wrist_q: [f64; 3],
         ee_link: &str,
         ee_offset: [f64; 3],
+    ) -> Result<Self, SimError> {
+        Self::load_joints(path, model, wrist_q, ee_link, ee_offset, N_JOINTS)
+    }
+
+    /// [`Self::load`] with `joints` active joints: 3 (wrist locked) or 6 (wrist active).
+    pub fn load_joints(
+        path: Option<&Path>,
+        model: UrModel,
+        wrist_q: [f64; 3],
+        ee_link: &str,
+        ee_offset: [f64; 3],
+        joints: usize,
     ) -> Result<Self, SimError> {
         let (text, source) = match path {
             Some(p) => (
@@ -87,10 +109,10 @@ impl ArmModel {
                 crate::urdf::bundled_urdf_path(model),
             ),
         };
-        Self::from_str(&text, source, wrist_q, ee_link, ee_offset)
+        Self::from_str_joints(&text, source, wrist_q, ee_link, ee_offset, joints)
     }
 
-    /// Parses and checks URDF text; `source` is only used in messages.
+    /// Parses and checks URDF text with three active joints; `source` is only used in messages.
     pub fn from_str(
         text: &str,
         source: PathBuf,
@@ -98,6 +120,24 @@ impl ArmModel {
         ee_link: &str,
         ee_offset: [f64; 3],
     ) -> Result<Self, SimError> {
+        Self::from_str_joints(text, source, wrist_q, ee_link, ee_offset, N_JOINTS)
+    }
+
+    /// [`Self::from_str`] with `joints` active joints: 3 (wrist locked) or 6 (wrist active).
+    pub fn from_str_joints(
+        text: &str,
+        source: PathBuf,
+        wrist_q: [f64; 3],
+        ee_link: &str,
+        ee_offset: [f64; 3],
+        joints: usize,
+    ) -> Result<Self, SimError> {
+        if joints != 3 && joints != 6 {
+            return Err(SimError::BadJoint {
+                name: "<joints>".into(),
+                why: format!("{joints} active joints: the simulator moves 3 (wrist locked) or 6"),
+            });
+        }
         let parse_error = |message: String| SimError::UrdfParse {
             path: source.clone(),
             message,
@@ -131,29 +171,7 @@ impl ArmModel {
                     available: joint_names(),
                 }
             })?;
-            if j.joint_type != JointType::Revolute {
-                return Err(SimError::BadJoint {
-                    name: name.into(),
-                    why: "must be revolute".into(),
-                });
-            }
-            let l = &j.limit;
-            if !(l.lower < l.upper && l.effort > 0.0 && l.velocity > 0.0) {
-                return Err(SimError::BadJoint {
-                    name: name.into(),
-                    why: format!(
-                        "needs lower < upper and positive effort and velocity limits, got lower {} upper {} effort {} velocity {}",
-                        l.lower, l.upper, l.effort, l.velocity
-                    ),
-                });
-            }
-            active.push(JointLimits {
-                name: name.into(),
-                lower: l.lower,
-                upper: l.upper,
-                effort: l.effort,
-                velocity: l.velocity,
-            });
+            active.push(active_limits(j)?);
         }
 
         if !urdf.links.iter().any(|l| l.name == ee_link) {
@@ -166,10 +184,12 @@ impl ArmModel {
             check_inertial(link)?;
         }
 
-        // Lock every movable joint that is not active, in chain order from the root.
+        // The movable joints that are not among the first three, in chain order from the root:
+        // the wrist, locked (three active joints) or active (six).
         let order = chain_order(&urdf)?;
         let mut locked = urdf.clone();
         let mut wrist_joints = Vec::new();
+        let mut wrist_limits = Vec::new();
         for ji in order {
             let j = &urdf.joints[ji];
             if ACTIVE_JOINTS.contains(&j.name.as_str()) || j.joint_type == JointType::Fixed {
@@ -192,9 +212,20 @@ impl ArmModel {
                 });
             }
             wrist_joints.push(j.name.clone());
-            let lj = &mut locked.joints[ji];
-            lj.origin = lock_origin(&j.origin, j.axis.xyz.0, wrist_q[k]);
-            lj.joint_type = JointType::Fixed;
+            if joints == N_JOINTS {
+                let lj = &mut locked.joints[ji];
+                lj.origin = lock_origin(&j.origin, j.axis.xyz.0, wrist_q[k]);
+                lj.joint_type = JointType::Fixed;
+                wrist_limits.push(JointLimits {
+                    name: j.name.clone(),
+                    lower: j.limit.lower,
+                    upper: j.limit.upper,
+                    effort: j.limit.effort,
+                    velocity: j.limit.velocity,
+                });
+            } else {
+                wrist_limits.push(active_limits(j)?);
+            }
         }
         if wrist_joints.len() != wrist_q.len() {
             return Err(SimError::BadJoint {
@@ -212,11 +243,23 @@ impl ArmModel {
             locked,
             source,
             active: active.try_into().expect("three active joints"),
+            n_active: joints,
+            wrist_limits,
             wrist_joints,
             wrist_q,
             ee_link: ee_link.into(),
             ee_offset,
         })
+    }
+
+    /// Limits of active joint `j` (layout order: the three of [`Self::active`], then the wrist
+    /// joints when six are active).
+    pub fn joint(&self, j: usize) -> &JointLimits {
+        if j < N_JOINTS {
+            &self.active[j]
+        } else {
+            &self.wrist_limits[j - N_JOINTS]
+        }
     }
 
     /// The locked robot with every link's mass and inertia multiplied by `scale` (the base is
@@ -286,6 +329,34 @@ impl ArmModel {
         }
         reach
     }
+}
+
+/// The limits of joint `j`, which must be revolute with lower < upper and positive effort and
+/// velocity limits to be active.
+fn active_limits(j: &urdf_rs::Joint) -> Result<JointLimits, SimError> {
+    if j.joint_type != JointType::Revolute {
+        return Err(SimError::BadJoint {
+            name: j.name.clone(),
+            why: "must be revolute".into(),
+        });
+    }
+    let l = &j.limit;
+    if !(l.lower < l.upper && l.effort > 0.0 && l.velocity > 0.0) {
+        return Err(SimError::BadJoint {
+            name: j.name.clone(),
+            why: format!(
+                "needs lower < upper and positive effort and velocity limits, got lower {} upper {} effort {} velocity {}",
+                l.lower, l.upper, l.effort, l.velocity
+            ),
+        });
+    }
+    Ok(JointLimits {
+        name: j.name.clone(),
+        lower: l.lower,
+        upper: l.upper,
+        effort: l.effort,
+        velocity: l.velocity,
+    })
 }
 
 /// Largest URDF text accepted (bytes). A robot description is kilobytes; ours is 9 kB.

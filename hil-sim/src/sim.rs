@@ -16,8 +16,11 @@ use ur5_shared::layout::N_JOINTS;
 
 use std::sync::Arc;
 
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use ur5_shared::kinematics::Joints6;
+
 use crate::model::ArmModel;
-use crate::servo::servo_torque;
+use crate::servo::{joint_servo_torque, wrist_velocity_gain};
 use crate::SimError;
 
 /// Standard gravity (m/s²), along −z of the base frame.
@@ -26,9 +29,10 @@ pub const GRAVITY: f64 = 9.81;
 /// What the arm's sensors report (before or after sensor noise).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Observation {
-    /// Active joint angles (rad).
+    /// Angles of the first three active joints (rad); a six-joint arm's wrist:
+    /// [`Ur5Sim::arm_joints`].
     pub q: [f64; N_JOINTS],
-    /// Active joint velocities (rad/s).
+    /// Velocities of the first three active joints (rad/s).
     pub qd: [f64; N_JOINTS],
     /// End-effector point (m, base frame).
     pub ee_pos: [f64; 3],
@@ -108,7 +112,14 @@ impl Pristine {
     }
 }
 
-/// The simulated arm.
+/// Most joints the simulator moves (the whole UR arm).
+pub const MAX_JOINTS: usize = 6;
+
+/// The simulated arm: three active joints with the wrist locked ([`Ur5Sim::new`]), or all six
+/// ([`Ur5Sim::with_joints`]). The three-joint API (`reset`, `step`, `joint_state`, …, arrays of
+/// three) drives the first three joints; with six active joints it holds the wrist at
+/// `sim.wrist_q`. The `*_all` API takes and gives every active joint (slices of length
+/// [`Ur5Sim::joints`], or arrays of six whose first `joints()` entries are the active ones).
 pub struct Ur5Sim {
     model: ArmModel,
     cfg: SimConfig,
@@ -119,7 +130,13 @@ pub struct Ur5Sim {
     /// not depend on the ones before it (docs/design.md §5 D29).
     pristine: Arc<Pristine>,
     mb: MultibodyIndex,
-    dofs: [ActiveDof; N_JOINTS],
+    /// Active joints: 3 or 6.
+    n: usize,
+    /// The active joints' degrees of freedom (first `n` entries).
+    dofs: [ActiveDof; MAX_JOINTS],
+    /// Velocity-loop gains of the active joints (N·m·s/rad): `servo.velocity_gain`, then the
+    /// model's wrist gains ([`wrist_velocity_gain`]).
+    velocity_gain: [f64; MAX_JOINTS],
     /// (multibody link id, nominal mass kg) of every moving link, for gravity compensation.
     nominal_masses: Vec<(usize, f64)>,
     /// Multibody link and body that carry the end-effector link (after merging, the forearm).
@@ -128,15 +145,17 @@ pub struct Ur5Sim {
     /// The end-effector point in that link's frame (m): `ee_offset` moved through the locked
     /// joints between the end-effector link and its carrier.
     ee_point: Vec3,
+    /// Pose of the end-effector link's frame (no offset) in its carrier's frame.
+    ee_frame: Isometry3<f64>,
     rng: ChaCha8Rng,
     /// Action waiting one control period when `latency_steps == 1`.
-    pending: Option<[f64; N_JOINTS]>,
-    /// Action the servo (or torque mode) currently executes.
-    current: [f64; N_JOINTS],
+    pending: Option<[f64; MAX_JOINTS]>,
+    /// Action the servo (or torque mode) currently executes (first `n` entries).
+    current: [f64; MAX_JOINTS],
     /// Torques applied in the last physics step (N·m, after clamping and actuator noise).
-    last_tau: [f64; N_JOINTS],
+    last_tau: [f64; MAX_JOINTS],
     /// Largest |τ| per joint since the last reset (N·m).
-    max_abs_tau: [f64; N_JOINTS],
+    max_abs_tau: [f64; MAX_JOINTS],
     goal: [f64; 3],
     time: f64,
     /// Step through rapier's whole pipeline even when the multibody could step alone
@@ -147,17 +166,28 @@ pub struct Ur5Sim {
 }
 
 impl Ur5Sim {
-    /// Builds the arm. `control_dt` (s) is how long each action is held (the paper: 0.1 s); it
-    /// must be a whole number of physics steps.
+    /// Builds the arm with three active joints, the wrist locked at `sim.wrist_q`.
+    /// `control_dt` (s) is how long each action is held (the paper: 0.1 s); it must be a whole
+    /// number of physics steps.
     pub fn new(cfg: SimConfig, control_dt: f64) -> Result<Self, SimError> {
+        Self::with_joints(cfg, control_dt, N_JOINTS)
+    }
+
+    /// Builds the arm with `joints` active joints: 3 (as [`Ur5Sim::new`]) or 6 (every joint of
+    /// the URDF moves; no link is merged into another). At six the wrist joints' servo gains
+    /// are [`wrist_velocity_gain`] of the model, and the perturbation's per-joint damping and
+    /// friction (three values) act on the first three joints only.
+    pub fn with_joints(cfg: SimConfig, control_dt: f64, joints: usize) -> Result<Self, SimError> {
         cfg.validate()?;
-        let model = ArmModel::load(
+        let model = ArmModel::load_joints(
             cfg.urdf.as_deref(),
             cfg.model,
             cfg.wrist_q,
             &cfg.ee_link,
             cfg.ee_offset,
+            joints,
         )?;
+        let n = model.n_active;
         let ratio = control_dt / cfg.physics_dt;
         if !(control_dt > 0.0 && (ratio - ratio.round()).abs() < 1e-9 && ratio.round() >= 1.0) {
             return Err(SimError::Config(ur5_shared::config::ConfigError::Invalid {
@@ -228,8 +258,8 @@ impl Ur5Sim {
             .expect("multibody")
             .forward_kinematics(&world.bodies, true);
 
-        let mut dofs = Vec::with_capacity(N_JOINTS);
-        for limits in &model.active {
+        let mut dofs = Vec::with_capacity(MAX_JOINTS);
+        for limits in (0..n).map(|j| model.joint(j)) {
             let ji = joint_names
                 .iter()
                 .position(|n| *n == limits.name)
@@ -247,7 +277,17 @@ impl Ur5Sim {
                 child_body: jh.link2,
             });
         }
-        let dofs: [ActiveDof; N_JOINTS] = dofs.try_into().expect("three active joints");
+        let unused = dofs[0];
+        dofs.resize(MAX_JOINTS, unused);
+        let dofs: [ActiveDof; MAX_JOINTS] = dofs.try_into().expect("six entries");
+        let wrist_gain = wrist_velocity_gain(cfg.model);
+        let velocity_gain: [f64; MAX_JOINTS] = core::array::from_fn(|j| {
+            if j < N_JOINTS {
+                cfg.servo.velocity_gain[j]
+            } else {
+                wrist_gain[j - N_JOINTS]
+            }
+        });
 
         let mut nominal_masses = Vec::new();
         for (li, name) in link_names.iter().enumerate() {
@@ -268,6 +308,7 @@ impl Ur5Sim {
         let (ee_carrier, ee_in_carrier) = model
             .carrier_of(&model.ee_link)
             .expect("ee link was checked");
+        let ee_frame = ee_in_carrier;
         let ee_point = ee_in_carrier * nalgebra::Point3::from(cfg.ee_offset);
         let ee_point = Vec3::new(ee_point.x as f32, ee_point.y as f32, ee_point.z as f32);
         let ee_index = link_names
@@ -283,11 +324,11 @@ impl Ur5Sim {
                 .get_multibody_mut(mb)
                 .expect("multibody");
 
-            if multibody.ndofs() != N_JOINTS {
+            if multibody.ndofs() != n {
                 return Err(SimError::BadJoint {
                     name: "<multibody>".into(),
                     why: format!(
-                        "the multibody has {} degrees of freedom, expected {N_JOINTS}",
+                        "the multibody has {} degrees of freedom, expected {n}",
                         multibody.ndofs()
                     ),
                 });
@@ -295,7 +336,7 @@ impl Ur5Sim {
             // UR5.md: rapier puts 0.1 N·m·s/rad on every multibody joint by default; the nominal arm
             // has none. Damping and dry friction are perturbation knobs.
             multibody.damping_mut().fill(0.0);
-            for (j, d) in dofs.iter().enumerate() {
+            for (j, d) in dofs.iter().enumerate().take(N_JOINTS) {
                 multibody.damping_mut()[d.dof] = cfg.perturbation.joint_damping[j] as f32;
                 multibody.frictions_mut()[d.dof] = cfg.perturbation.joint_friction[j] as f32;
             }
@@ -311,22 +352,25 @@ impl Ur5Sim {
             world,
             pristine,
             mb,
+            n,
             dofs,
+            velocity_gain,
             nominal_masses,
             ee_link,
             ee_body,
             ee_point,
+            ee_frame,
             rng,
             pending: None,
-            current: [0.0; N_JOINTS],
-            last_tau: [0.0; N_JOINTS],
-            max_abs_tau: [0.0; N_JOINTS],
+            current: [0.0; MAX_JOINTS],
+            last_tau: [0.0; MAX_JOINTS],
+            max_abs_tau: [0.0; MAX_JOINTS],
             goal: [0.0; 3],
             time: 0.0,
             pipeline_only: false,
             step_counts: (0, 0),
         };
-        sim.set_joint_state([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        sim.set_joint_state_all(&[0.0; MAX_JOINTS][..n], &[0.0; MAX_JOINTS][..n]);
         sim.pristine = Arc::new(Pristine::take(&sim.world));
         Ok(sim)
     }
@@ -344,8 +388,8 @@ impl Ur5Sim {
             rng: ChaCha8Rng::seed_from_u64(self.cfg.perturbation.seed),
             ..*self
         };
-        (sim.pending, sim.current, sim.goal, sim.time) = (None, [0.0; N_JOINTS], [0.0; 3], 0.0);
-        (sim.last_tau, sim.max_abs_tau) = ([0.0; N_JOINTS], [0.0; N_JOINTS]);
+        (sim.pending, sim.current, sim.goal, sim.time) = (None, [0.0; MAX_JOINTS], [0.0; 3], 0.0);
+        (sim.last_tau, sim.max_abs_tau) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
         sim.step_counts = (0, 0);
         sim
     }
@@ -383,7 +427,12 @@ impl Ur5Sim {
         self.rng.set_word_pos(pos);
     }
 
-    /// Limits of the active joints as written in the URDF, for the action clamp
+    /// How many joints move: 3 (wrist locked) or 6.
+    pub fn joints(&self) -> usize {
+        self.n
+    }
+
+    /// Limits of the first three active joints as written in the URDF, for the action clamp
     /// (`ur5_shared::safety::clamp_action`).
     pub fn limits(&self) -> ur5_shared::config::ArmLimits {
         let a = &self.model.active;
@@ -410,14 +459,26 @@ impl Ur5Sim {
         self.goal
     }
 
-    /// Torques applied in the last physics step (N·m).
+    /// Torques applied in the last physics step to the first three joints (N·m).
     pub fn last_torque(&self) -> [f64; N_JOINTS] {
-        self.last_tau
+        first3(&self.last_tau)
     }
 
-    /// Largest |τ| per joint applied since the last reset (N·m).
+    /// Largest |τ| per joint of the first three applied since the last reset (N·m).
     pub fn max_abs_torque(&self) -> [f64; N_JOINTS] {
+        first3(&self.max_abs_tau)
+    }
+
+    /// Largest |τ| per active joint since the last reset (N·m; first [`Ur5Sim::joints`]
+    /// entries).
+    pub fn max_abs_torque_all(&self) -> [f64; MAX_JOINTS] {
         self.max_abs_tau
+    }
+
+    /// `q` (three joint values) extended to every active joint: the wrist at `sim.wrist_q`.
+    fn extend(&self, q: &[f64; N_JOINTS]) -> [f64; MAX_JOINTS] {
+        let w = self.model.wrist_q;
+        [q[0], q[1], q[2], w[0], w[1], w[2]]
     }
 
     /// Starts an episode: puts the arm at rest at `start_q` and sets the goal. The physics
@@ -425,12 +486,23 @@ impl Ur5Sim {
     /// episode's motion does not depend on what ran before (docs/design.md §5 D29). Re-seeds
     /// nothing: the perturbation RNG runs on across episodes unless [`Ur5Sim::reseed`] is
     /// called, so a run replays as a whole.
+    ///
+    /// With six active joints the wrist starts (and is held by the servo) at `sim.wrist_q`.
     pub fn reset(
         &mut self,
         start_q: [f64; N_JOINTS],
         goal: [f64; 3],
     ) -> Result<Observation, SimError> {
-        for (j, l) in self.model.active.iter().enumerate() {
+        let q = self.extend(&start_q);
+        self.reset_all(&q[..self.n], goal)
+    }
+
+    /// [`Ur5Sim::reset`] with the angles of every active joint (`start_q.len()` =
+    /// [`Ur5Sim::joints`], rad).
+    pub fn reset_all(&mut self, start_q: &[f64], goal: [f64; 3]) -> Result<Observation, SimError> {
+        self.check_len(start_q.len());
+        for j in 0..self.n {
+            let l = self.model.joint(j);
             if !(start_q[j].is_finite() && start_q[j] >= l.lower && start_q[j] <= l.upper) {
                 return Err(SimError::OutOfLimits {
                     joint: l.name.clone(),
@@ -442,14 +514,14 @@ impl Ur5Sim {
         }
         self.check_goal(goal)?;
         self.world = self.pristine.world();
-        self.set_joint_state(start_q, [0.0; N_JOINTS]);
+        self.set_joint_state_all(start_q, &[0.0; MAX_JOINTS][..self.n]);
         self.goal = goal;
         self.pending = None;
-        self.current = match self.cfg.mode {
-            ActionMode::GoalAngles => start_q,
-            ActionMode::Torque => [0.0; N_JOINTS],
-        };
-        self.max_abs_tau = [0.0; N_JOINTS];
+        self.current = [0.0; MAX_JOINTS];
+        if self.cfg.mode == ActionMode::GoalAngles {
+            self.current[..self.n].copy_from_slice(start_q);
+        }
+        self.max_abs_tau = [0.0; MAX_JOINTS];
         self.time = 0.0;
         Ok(self.observe())
     }
@@ -481,8 +553,23 @@ impl Ur5Sim {
     /// the servo tracks it at the physics rate. In torque mode it is joint torques (N·m),
     /// clamped to the effort limits. Non-finite actions are replaced by a hold of the current
     /// goal (or zero torque). With one-step latency the arm executes the previous action.
+    ///
+    /// With six active joints the wrist's goal is `sim.wrist_q` (torque mode: zero torque).
     pub fn step(&mut self, action: [f64; N_JOINTS]) -> Observation {
-        let action = self.sanitize(action);
+        let a = match self.cfg.mode {
+            ActionMode::GoalAngles => self.extend(&action),
+            ActionMode::Torque => [action[0], action[1], action[2], 0.0, 0.0, 0.0],
+        };
+        self.step_all(&a[..self.n])
+    }
+
+    /// [`Ur5Sim::step`] with an action for every active joint (`action.len()` =
+    /// [`Ur5Sim::joints`]).
+    pub fn step_all(&mut self, action: &[f64]) -> Observation {
+        self.check_len(action.len());
+        let mut a = [0.0; MAX_JOINTS];
+        a[..self.n].copy_from_slice(action);
+        let action = self.sanitize(a);
         let applied = if self.cfg.perturbation.latency_steps == 1 {
             let prev = self.pending.replace(action);
             prev.unwrap_or(self.current)
@@ -496,11 +583,21 @@ impl Ur5Sim {
         self.observe()
     }
 
-    fn sanitize(&self, mut a: [f64; N_JOINTS]) -> [f64; N_JOINTS] {
-        if a.iter().any(|v| !v.is_finite()) {
+    /// Panics unless `len` is the number of active joints (a caller's bug, like a slice index).
+    fn check_len(&self, len: usize) {
+        assert_eq!(
+            len, self.n,
+            "{len} joint values for an arm with {} active joints",
+            self.n
+        );
+    }
+
+    fn sanitize(&self, mut a: [f64; MAX_JOINTS]) -> [f64; MAX_JOINTS] {
+        if a[..self.n].iter().any(|v| !v.is_finite()) {
             return self.current;
         }
-        for (j, l) in self.model.active.iter().enumerate() {
+        for j in 0..self.n {
+            let l = self.model.joint(j);
             a[j] = match self.cfg.mode {
                 ActionMode::GoalAngles => a[j].clamp(l.lower, l.upper),
                 ActionMode::Torque => a[j].clamp(-l.effort, l.effort),
@@ -511,34 +608,46 @@ impl Ur5Sim {
 
     /// One physics step with the current action.
     fn physics_step(&mut self) {
-        let (q, qd) = self.joint_state();
+        let (q, qd) = self.joint_state_all();
         let mut tau = match self.cfg.mode {
             ActionMode::GoalAngles => {
-                let tau_g = self.gravity_torque();
-                let limits =
-                    [0, 1, 2].map(|j| (self.model.active[j].effort, self.model.active[j].velocity));
-                servo_torque(&self.cfg.servo, &limits, q, qd, self.current, tau_g)
+                let tau_g = self.gravity_torque_all();
+                let mut tau = [0.0; MAX_JOINTS];
+                for (j, t) in tau.iter_mut().enumerate().take(self.n) {
+                    let l = self.model.joint(j);
+                    *t = joint_servo_torque(
+                        &self.cfg.servo,
+                        self.velocity_gain[j],
+                        (l.effort, l.velocity),
+                        q[j],
+                        qd[j],
+                        self.current[j],
+                        tau_g[j],
+                    );
+                }
+                tau
             }
             ActionMode::Torque => self.current,
         };
         let noise = self.cfg.perturbation.actuator_noise_std;
-        for (j, t) in tau.iter_mut().enumerate() {
+        for (j, t) in tau.iter_mut().enumerate().take(self.n) {
             if noise > 0.0 {
                 let n: f64 = StandardNormal.sample(&mut self.rng);
                 *t += noise * n;
             }
-            let e = self.model.active[j].effort;
+            let e = self.model.joint(j).effort;
             *t = t.clamp(-e, e);
         }
         self.apply_torque_and_step(tau);
     }
 
-    /// Applies raw joint torques (N·m, not clamped) for one physics step.
-    fn apply_torque_and_step(&mut self, tau: [f64; N_JOINTS]) {
+    /// Applies raw joint torques (N·m, not clamped; first [`Ur5Sim::joints`] entries) for one
+    /// physics step.
+    fn apply_torque_and_step(&mut self, tau: [f64; MAX_JOINTS]) {
         for rb in self.world.bodies.iter_mut() {
             rb.1.reset_torques(false);
         }
-        for (j, d) in self.dofs.iter().enumerate() {
+        for (j, d) in self.dofs.iter().enumerate().take(self.n) {
             // A joint torque is an equal and opposite couple on child and parent (UR5.md).
             let child = &self.world.bodies[d.child_body];
             let axis = self.axis_world(j, child);
@@ -601,13 +710,30 @@ impl Ur5Sim {
             .expect("multibody")
     }
 
-    /// True joint angles and velocities (no sensor noise).
+    /// True angles and velocities of the first three joints (no sensor noise).
     pub fn joint_state(&self) -> ([f64; N_JOINTS], [f64; N_JOINTS]) {
+        let (q, qd) = self.joint_state_all();
+        (first3(&q), first3(&qd))
+    }
+
+    /// All six joints of the arm (rad, rad/s; layout order): the active ones' true values, and
+    /// a locked wrist at `sim.wrist_q` at rest. What an arm reports for its six joints.
+    pub fn arm_joints(&self) -> (Joints6, Joints6) {
+        let (mut q, qd) = self.joint_state_all();
+        if self.n == N_JOINTS {
+            q[N_JOINTS..].copy_from_slice(&self.model.wrist_q);
+        }
+        (q, qd)
+    }
+
+    /// True angles and velocities of the active joints (first [`Ur5Sim::joints`] entries; the
+    /// others 0).
+    pub fn joint_state_all(&self) -> ([f64; MAX_JOINTS], [f64; MAX_JOINTS]) {
         let mb = self.multibody();
         let v = mb.generalized_velocity();
-        let mut q = [0.0; N_JOINTS];
-        let mut qd = [0.0; N_JOINTS];
-        for (j, d) in self.dofs.iter().enumerate() {
+        let mut q = [0.0; MAX_JOINTS];
+        let mut qd = [0.0; MAX_JOINTS];
+        for (j, d) in self.dofs.iter().enumerate().take(self.n) {
             // Revolute joints from rapier3d-urdf rotate about the joint frame's x axis.
             q[j] = mb.link(d.link).expect("link").joint().coords()[3] as f64;
             qd[j] = v[d.dof] as f64;
@@ -616,9 +742,18 @@ impl Ur5Sim {
     }
 
     /// Puts the arm at joint angles `q` (rad) with velocities `qd` (rad/s) and updates every
-    /// link pose and Jacobian.
+    /// link pose and Jacobian. With six active joints the wrist goes to `sim.wrist_q`, at rest.
     pub fn set_joint_state(&mut self, q: [f64; N_JOINTS], qd: [f64; N_JOINTS]) {
-        let (q0, _) = self.joint_state();
+        let (q, qd) = (self.extend(&q), [qd[0], qd[1], qd[2], 0.0, 0.0, 0.0]);
+        self.set_joint_state_all(&q[..self.n], &qd[..self.n]);
+    }
+
+    /// [`Ur5Sim::set_joint_state`] for every active joint (slices of length
+    /// [`Ur5Sim::joints`]).
+    pub fn set_joint_state_all(&mut self, q: &[f64], qd: &[f64]) {
+        self.check_len(q.len());
+        self.check_len(qd.len());
+        let (q0, _) = self.joint_state_all();
         let mb = self
             .world
             .multibody_joints
@@ -626,7 +761,7 @@ impl Ur5Sim {
             .expect("multibody");
         let mut disp = vec![0.0f32; mb.ndofs()];
         let mut vel = mb.generalized_velocity_mut();
-        for (j, d) in self.dofs.iter().enumerate() {
+        for (j, d) in self.dofs.iter().enumerate().take(self.n) {
             disp[d.dof] = (q[j] - q0[j]) as f32;
             vel[d.dof] = qd[j] as f32;
         }
@@ -640,14 +775,20 @@ impl Ur5Sim {
         }
     }
 
-    /// Gravity torque of the nominal model at the current pose (N·m): the torque that holds
-    /// the nominal arm still, τ_g = −Σ_i J_com,iᵀ m_i g over the moving links.
+    /// Gravity torque of the nominal model at the current pose on the first three joints (N·m).
     pub fn gravity_torque(&self) -> [f64; N_JOINTS] {
+        first3(&self.gravity_torque_all())
+    }
+
+    /// Gravity torque of the nominal model at the current pose (N·m, first
+    /// [`Ur5Sim::joints`] entries): the torque that holds the nominal arm still,
+    /// τ_g = −Σ_i J_com,iᵀ m_i g over the moving links.
+    pub fn gravity_torque_all(&self) -> [f64; MAX_JOINTS] {
         let mb = self.multibody();
-        let mut tau = [0.0; N_JOINTS];
+        let mut tau = [0.0; MAX_JOINTS];
         for &(link, mass) in &self.nominal_masses {
             let jac = mb.body_jacobian(link);
-            for (j, d) in self.dofs.iter().enumerate() {
+            for (j, d) in self.dofs.iter().enumerate().take(self.n) {
                 // Row 2 is the z component of the COM's linear velocity.
                 tau[j] += mass * GRAVITY * jac[(2, d.dof)] as f64;
             }
@@ -655,9 +796,27 @@ impl Ur5Sim {
         tau
     }
 
+    /// Pose of the end-effector link's frame (`sim.ee_link`, no offset; the default
+    /// `wrist_3_link` is the flange) in the base frame, from rapier's f32 link pose.
+    pub fn ee_frame_pose(&self) -> Isometry3<f64> {
+        let pose = *self
+            .multibody()
+            .link(self.ee_link)
+            .expect("ee link")
+            .local_to_world();
+        let (t, r) = (pose.translation, pose.rotation);
+        let link = Isometry3::from_parts(
+            Translation3::new(t.x as f64, t.y as f64, t.z as f64),
+            UnitQuaternion::new_normalize(nalgebra::Quaternion::new(
+                r.w as f64, r.x as f64, r.y as f64, r.z as f64,
+            )),
+        );
+        link * self.ee_frame
+    }
+
     /// The true observation (no sensor noise).
     pub fn true_observation(&self) -> Observation {
-        let (q, qd) = self.joint_state();
+        let (q, qd) = self.joint_state_all();
         let mb = self.multibody();
         let pose = *mb.link(self.ee_link).expect("ee link").local_to_world();
         let ee = pose.transform_point(self.ee_point);
@@ -666,7 +825,7 @@ impl Ur5Sim {
         let mut v = [0.0f64; 3];
         let mut w = [0.0f64; 3];
         for r in 0..3 {
-            for (j, d) in self.dofs.iter().enumerate() {
+            for (j, d) in self.dofs.iter().enumerate().take(self.n) {
                 v[r] += jac[(r, d.dof)] as f64 * qd[j];
                 w[r] += jac[(r + 3, d.dof)] as f64 * qd[j];
             }
@@ -683,8 +842,8 @@ impl Ur5Sim {
             v[2] + w[0] * r[1] - w[1] * r[0],
         ];
         Observation {
-            q,
-            qd,
+            q: first3(&q),
+            qd: first3(&qd),
             ee_pos: [ee.x as f64, ee.y as f64, ee.z as f64],
             ee_vel,
         }
@@ -722,13 +881,62 @@ impl Ur5Sim {
     ) -> [f64; N_JOINTS] {
         self.set_joint_state(q, qd);
         let (_, v0) = self.joint_state();
-        self.apply_torque_and_step(tau);
+        self.apply_torque_and_step([tau[0], tau[1], tau[2], 0.0, 0.0, 0.0]);
         let (_, v1) = self.joint_state();
         [0, 1, 2].map(|j| (v1[j] - v0[j]) / self.cfg.physics_dt)
     }
 
-    /// Advances one physics step under raw joint torques (N·m, servo bypassed, not clamped).
-    pub fn step_torque_raw(&mut self, tau: [f64; N_JOINTS]) {
-        self.apply_torque_and_step(tau);
+    /// [`Ur5Sim::joint_acceleration`] for every active joint (slices of length
+    /// [`Ur5Sim::joints`]; the result's first `joints()` entries, rad/s²).
+    pub fn joint_acceleration_all(
+        &mut self,
+        q: &[f64],
+        qd: &[f64],
+        tau: &[f64],
+    ) -> [f64; MAX_JOINTS] {
+        self.check_len(tau.len());
+        self.set_joint_state_all(q, qd);
+        let (_, v0) = self.joint_state_all();
+        let mut t = [0.0; MAX_JOINTS];
+        t[..self.n].copy_from_slice(tau);
+        self.apply_torque_and_step(t);
+        let (_, v1) = self.joint_state_all();
+        core::array::from_fn(|j| (v1[j] - v0[j]) / self.cfg.physics_dt)
     }
+
+    /// Advances one physics step under raw torques on the first three joints (N·m, servo
+    /// bypassed, not clamped; a six-joint arm's wrist gets none).
+    pub fn step_torque_raw(&mut self, tau: [f64; N_JOINTS]) {
+        self.apply_torque_and_step([tau[0], tau[1], tau[2], 0.0, 0.0, 0.0]);
+    }
+}
+
+/// The first three entries.
+fn first3(a: &[f64; MAX_JOINTS]) -> [f64; N_JOINTS] {
+    [a[0], a[1], a[2]]
+}
+
+/// The rotation vector of `r` (rad; axis times angle, angle in [0, π]): the orientation part of
+/// UR's pose p[x, y, z, rx, ry, rz] as the teach pendant and RTDE's `actual_TCP_pose` give it.
+/// From the unit quaternion (w ≥ 0) as 2 atan2(|v|, w) v/|v|, accurate at every angle.
+pub fn rotation_vector(r: &UnitQuaternion<f64>) -> [f64; 3] {
+    let q = r.quaternion();
+    let (w, v) = if q.w < 0.0 {
+        (-q.w, -q.imag())
+    } else {
+        (q.w, q.imag())
+    };
+    let s = v.norm();
+    if s == 0.0 {
+        return [0.0; 3];
+    }
+    let k = 2.0 * s.atan2(w) / s;
+    [k * v.x, k * v.y, k * v.z]
+}
+
+/// UR's pose p[x, y, z, rx, ry, rz] (m, rad; base frame) of `pose`.
+pub fn ur_pose(pose: &Isometry3<f64>) -> [f64; 6] {
+    let t = pose.translation.vector;
+    let r = rotation_vector(&pose.rotation);
+    [t.x, t.y, t.z, r[0], r[1], r[2]]
 }

@@ -7,4 +7,5 @@ mod inspect_cli;
 mod models;
 mod servoj;
 mod sim;
+mod six;
 mod ur_sim;
