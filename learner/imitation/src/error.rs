@@ -68,3 +68,19 @@ pub(crate) fn check_arm_and_gps(
     traj_opt.validate()?;
     Ok(())
 }
+
+/// Each case, applied to `C::default()`, must make `validate` fail with a message naming the
+/// case (the settings types' `validate` tests).
+#[cfg(test)]
+#[allow(clippy::type_complexity)]
+pub(crate) fn assert_each_refused_naming<C: Default>(
+    cases: Vec<(&str, Box<dyn Fn(&mut C)>)>,
+    validate: impl Fn(&C) -> Result<(), ImitationError>,
+) {
+    for (name, set) in cases {
+        let mut c = C::default();
+        set(&mut c);
+        let e = validate(&c).expect_err(name).to_string();
+        assert!(e.contains(name), "{name}: {e}");
+    }
+}

@@ -589,11 +589,6 @@ mod validate_tests {
             ("kl_step", Box::new(|c| c.algorithm.kl_step = -1.0)),
             ("max_clusters", Box::new(|c| c.prior.max_clusters = 0)),
         ];
-        for (name, set) in cases {
-            let mut c = ExpertConfig::default();
-            set(&mut c);
-            let e = c.validate().expect_err(name).to_string();
-            assert!(e.contains(name), "{name}: {e}");
-        }
+        crate::error::assert_each_refused_naming(cases, ExpertConfig::validate);
     }
 }

@@ -48,7 +48,16 @@ pub struct CriticSettings<'a> {
     pub discriminator: &'a DiscriminatorConfig,
 }
 
-impl CriticSettings<'_> {
+impl<'a> CriticSettings<'a> {
+    /// The settings `critic_updates`, `critic_lr_half_life` and `[discriminator]` of a learner.
+    pub fn new(updates: usize, lr_half_life: f64, discriminator: &'a DiscriminatorConfig) -> Self {
+        Self {
+            updates,
+            lr_half_life,
+            discriminator,
+        }
+    }
+
     /// Refuses settings that cannot work, naming the setting (by its key) and its range.
     pub fn validate(&self) -> Result<(), ImitationError> {
         crate::error::check_counts(&[("critic_updates", self.updates, 1)], MAX_COUNT)
@@ -158,11 +167,11 @@ impl GaifoConfig {
 
     /// The critic's settings.
     pub fn critic(&self) -> CriticSettings<'_> {
-        CriticSettings {
-            updates: self.critic_updates,
-            lr_half_life: self.critic_lr_half_life,
-            discriminator: &self.discriminator,
-        }
+        CriticSettings::new(
+            self.critic_updates,
+            self.critic_lr_half_life,
+            &self.discriminator,
+        )
     }
 
     /// Checks every setting's range before anything is allocated or run.
@@ -233,11 +242,6 @@ mod tests {
                 Box::new(|c| c.critic_lr_half_life = -2.0),
             ),
         ];
-        for (name, set) in cases {
-            let mut c = GaifoConfig::default();
-            set(&mut c);
-            let e = c.validate().expect_err(name).to_string();
-            assert!(e.contains(name), "{name}: {e}");
-        }
+        crate::error::assert_each_refused_naming(cases, GaifoConfig::validate);
     }
 }

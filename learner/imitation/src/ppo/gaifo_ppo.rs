@@ -101,11 +101,11 @@ impl GaifoPpoConfig {
 
     /// The critic's settings.
     pub fn critic(&self) -> CriticSettings<'_> {
-        CriticSettings {
-            updates: self.critic_updates,
-            lr_half_life: self.critic_lr_half_life,
-            discriminator: &self.discriminator,
-        }
+        CriticSettings::new(
+            self.critic_updates,
+            self.critic_lr_half_life,
+            &self.discriminator,
+        )
     }
 
     /// Refuses settings that cannot work, naming the setting and its range (counts up to
@@ -307,12 +307,7 @@ mod tests {
             ("epochs", Box::new(|c| c.ppo.epochs = 1_000_000_000)),
             ("minibatch", Box::new(|c| c.ppo.minibatch = 0)),
         ];
-        for (name, set) in cases {
-            let mut c = GaifoPpoConfig::default();
-            set(&mut c);
-            let e = c.validate().expect_err(name).to_string();
-            assert!(e.contains(name), "{name}: {e}");
-        }
+        crate::error::assert_each_refused_naming(cases, GaifoPpoConfig::validate);
     }
 
     /// The task-cost rewards of an episode add up to −C(τ) + 0·d_0 (`ur5_shared::cost`).
