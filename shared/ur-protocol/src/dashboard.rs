@@ -229,9 +229,16 @@ mod tests {
         assert_eq!(robot_model("UR30", true), Some(UrModel::Ur30));
         assert_eq!(robot_model("UR10", false), Some(UrModel::Ur10));
         assert_eq!(robot_model("UR5e", true), Some(UrModel::Ur5e));
-        // A UR16 on a CB3, a UR20 on a CB3, unknown models: no such arm.
+        // The newer models (URSim's names for them on PolyScope 5: URCL's start_ursim.sh).
+        assert_eq!(robot_model("UR7", true), Some(UrModel::Ur7e));
+        assert_eq!(robot_model("UR12", true), Some(UrModel::Ur12e));
+        assert_eq!(robot_model("UR7e", true), Some(UrModel::Ur7e));
+        assert_eq!(robot_model("UR15", true), Some(UrModel::Ur15));
+        assert_eq!(robot_model("UR18", true), Some(UrModel::Ur18));
+        // A UR16, UR20 or UR15 on a CB3, unknown models: no such arm.
         assert_eq!(robot_model("UR16", false), None);
         assert_eq!(robot_model("UR20", false), None);
+        assert_eq!(robot_model("UR15", false), None);
         assert_eq!(robot_model("UR8LONG", true), None);
         assert_eq!(robot_model("UR99", true), None);
     }
