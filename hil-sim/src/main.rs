@@ -284,7 +284,7 @@ struct PlaybackGenArgs {
     /// Rows per second of the file (Hz, 10 to 1000).
     #[arg(long, default_value_t = 100.0)]
     rate: f64,
-    /// Output file.
+    /// Output file (new: an existing one is never replaced).
     #[arg(long, value_name = "FILE.csv")]
     out: PathBuf,
 }
@@ -414,9 +414,23 @@ fn playback_gen(args: PlaybackGenArgs, model: Option<UrModel>) -> Result<()> {
         rate_hz: args.rate,
         seed: args.seed,
     };
+    // Checked before generating (a file, a FIFO or a device is never replaced), and again by
+    // the write itself (another process may create it meanwhile).
+    let exists = |out: &std::path::Path| {
+        anyhow::anyhow!(
+            "--out {} exists: playback-gen writes a new file and never replaces one (a file, a \
+             FIFO, a device); delete it or choose another --out",
+            out.display()
+        )
+    };
+    if std::fs::symlink_metadata(&args.out).is_ok() {
+        return Err(exists(&args.out));
+    }
     let p = generate(&cfg)?;
-    ur5_shared::atomic_file::write(&args.out, p.to_csv().as_bytes())
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    match ur5_shared::atomic_file::write_new(&args.out, p.to_csv().as_bytes()) {
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Err(exists(&args.out)),
+        r => r.with_context(|| format!("writing {}", args.out.display()))?,
+    }
     println!(
         "{}",
         serde_json::json!({"command": "playback-gen", "model": cfg.model, "rows": p.t.len(),

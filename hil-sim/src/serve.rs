@@ -232,29 +232,34 @@ impl Arm {
             .iter()
             .chain(&cmd.reset_pose)
             .all(|v| v.is_finite());
+        // The active joints' values; a command for another number of joints is refused.
+        let joints = |v: &[f64]| <[f64; N_JOINTS]>::try_from(v).ok();
+        let (values, reset_pose) = (joints(cmd.values()), joints(cmd.reset_pose()));
         match cmd.kind() {
             _ if !finite => self.reject(ArmFaults::NON_FINITE_COMMAND),
-            Ok(CommandKind::Reset) => {
-                self.summary.resets += 1;
-                match self.sim.reset(cmd.reset_pose, self.task.goal) {
-                    Ok(_) => self.held = Held::Hold(cmd.reset_pose),
-                    Err(e) => {
-                        eprintln!("hil-sim serve: reset refused: {e}");
-                        self.reject(ArmFaults::UNKNOWN_COMMAND);
-                    }
-                }
-            }
             Ok(CommandKind::Hold) => {
                 self.summary.holds += 1;
                 if !matches!(self.held, Held::Hold(_)) {
                     self.held = self.hold_here();
                 }
             }
+            Ok(_) if cmd.joints as usize != N_JOINTS => self.reject(ArmFaults::WRONG_JOINTS),
+            Ok(CommandKind::Reset) => {
+                let reset_pose = reset_pose.expect("N_JOINTS values");
+                self.summary.resets += 1;
+                match self.sim.reset(reset_pose, self.task.goal) {
+                    Ok(_) => self.held = Held::Hold(reset_pose),
+                    Err(e) => {
+                        eprintln!("hil-sim serve: reset refused: {e}");
+                        self.reject(ArmFaults::UNKNOWN_COMMAND);
+                    }
+                }
+            }
             Ok(CommandKind::GoalAngles) if mode == ActionMode::GoalAngles => {
-                self.held = Held::Action(cmd.values)
+                self.held = Held::Action(values.expect("N_JOINTS values"))
             }
             Ok(CommandKind::Torques) if mode == ActionMode::Torque => {
-                self.held = Held::Action(cmd.values)
+                self.held = Held::Action(values.expect("N_JOINTS values"))
             }
             Ok(_) | Err(_) => self.reject(ArmFaults::UNKNOWN_COMMAND),
         }
@@ -287,8 +292,7 @@ impl Arm {
     ) {
         let s = &mut self.state;
         s.seq += 1;
-        s.q = obs.q;
-        s.qd = obs.qd;
+        s.set_joints(&obs.q, &obs.qd);
         s.ee_pos = obs.ee_pos;
         s.ee_vel = obs.ee_vel;
         let mut status = ArmStatus::READY;

@@ -2,13 +2,19 @@
 //! recording rule"): demonstrations cut from a UR's stream of joint states while a person
 //! guides the arm (freedrive) or any program moves it.
 //!
-//! **The rule.** The arm is *at rest* while every joint is slower than [`REST_SPEED`]. The
-//! first rest of at least [`REST_S`] defines the *start pose* (the mean pose of that rest). A
-//! demonstration *starts* when the arm leaves a rest of at least [`REST_S`] within
-//! [`NEAR_START`] of the start pose (its first step is the last resting sample) and *ends* once
-//! the arm has rested [`REST_S`] elsewhere. A motion that comes back to rest near the start
-//! pose is not a demonstration (the person gave up); nor is a motion from anywhere else (e.g.
-//! the way back to the start pose).
+//! **The rule.** A package is *still* when the end-effector point (forward kinematics of its
+//! six joints) moved at most [`REST_TRAVEL_M`] along each base axis over the last
+//! [`REST_WINDOW_S`]: a displacement over a window, not a speed, so that the tremor of a hand
+//! holding the arm (0.1–1 mm at 8–12 Hz, speeds of a deliberate motion's order) does not hide a
+//! rest. A *rest* is a run of still packages; it began at the start of its first package's
+//! window. The first rest of at least [`REST_S`] defines the *start pose* (the mean pose of
+//! that rest). A demonstration *starts* when the arm leaves a rest of at least [`REST_S`]
+//! within [`NEAR_START`] of the start pose (its first package is the first of the window in
+//! which the motion was seen, still at rest) and *ends* once the arm has rested [`REST_S`]
+//! elsewhere. A motion that comes back to rest near the start pose is not a demonstration (the
+//! person gave up); nor is a motion from anywhere else (e.g. the way back to the start pose).
+//! Poses are compared by their joints' mean over the window (a tremor averaged out). While it
+//! waits, the recorder says what for and what it measures ([`Segmenter::status`]).
 //!
 //! **To T steps.** A demonstration is resampled at the control period (t_k = onset + k dt,
 //! joint angles and velocities linearly interpolated between the arm's packages by their
@@ -25,21 +31,27 @@
 //! for any imported demonstrations (`io::foreign`): the demonstrations' mean task cost, and the
 //! expert's random initial controller run on the task in the simulator.
 
+use std::collections::VecDeque;
+
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::layout::{state_vector, DX};
+use ur5_shared::UrModel;
 
 use imitation::demos::Demos;
 
 use crate::io::foreign::{to_demos, DERIVED_SEED};
 use crate::io::lerobot::{TaskMeta, Trajectories};
 
-/// Why recorded demonstrations cannot be turned into the learner's.
+/// Why a recording cannot be turned into the learner's demonstrations, or why it stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
     /// Nothing was recorded (no segment was taken for a demonstration).
     #[error("no demonstrations were recorded")]
     NoDemonstrations,
+    /// A package the recorder cannot trust.
+    #[error(transparent)]
+    Measured(#[from] MeasuredFault),
     /// The demonstrations checked against the arm.
     #[error(transparent)]
     Demos(#[from] crate::io::demos::DemosError),
@@ -48,15 +60,60 @@ pub enum RecordError {
     Io(#[from] crate::io::IoError),
 }
 
-/// Joint speed below which the arm counts as at rest (rad/s, every joint): above a held arm's
-/// tremor, well below a deliberate motion's speed (tenths of rad/s).
-pub const REST_SPEED: f64 = 0.05;
+/// A measured joint state no arm in working order sends (a fault of the robot or of its
+/// controller, or another arm model than the recorder was told): recording stops there.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum MeasuredFault {
+    /// `actual_q` or `actual_qd` not finite.
+    #[error("at arm time {t} s the robot measured a non-finite joint state: joint {joint} actual_q = {q} rad, actual_qd = {qd} rad/s; a fault of the robot or its controller (not of the network): see the robot's log")]
+    NonFinite {
+        /// Arm time (s).
+        t: f64,
+        /// Joint index 0..6.
+        joint: usize,
+        /// Its angle (rad).
+        q: f64,
+        /// Its speed (rad/s).
+        qd: f64,
+    },
+    /// A joint's `actual_q` outside the model's limits by more than [`LIMIT_MARGIN_RAD`].
+    #[error("at arm time {t} s the robot measured joint {joint} at {q} rad, outside the {model}'s limits {lower} ..= {upper} rad: check --model (or [sim] model) against the robot, and the robot's joint readings")]
+    OutsideLimits {
+        /// Arm time (s).
+        t: f64,
+        /// Joint index 0..6.
+        joint: usize,
+        /// Its angle (rad).
+        q: f64,
+        /// Lower limit (rad).
+        lower: f64,
+        /// Upper limit (rad).
+        upper: f64,
+        /// The model whose limits these are.
+        model: UrModel,
+    },
+}
+
+/// A measured joint may be this far (rad) outside its limit (a servo's overshoot at a limit)
+/// before the package counts as a fault; the controller's margin for the same check.
+pub const LIMIT_MARGIN_RAD: f64 = 0.05;
+
+/// How long the end-effector point's travel is measured over to tell a rest from a motion
+/// (s of arm time): two periods of the slowest physiological tremor (8 Hz).
+pub const REST_WINDOW_S: f64 = 0.25;
+
+/// Largest travel of the end-effector point within [`REST_WINDOW_S`] of an arm at rest (m,
+/// its range along each base axis): a hand's tremor moves a held arm by 0.1–1 mm at 8–12 Hz
+/// (a range of up to 2 mm), a deliberate motion by centimetres in that time (this bound is a
+/// steady 12 mm/s).
+pub const REST_TRAVEL_M: f64 = 0.003;
 
 /// How long a rest starts or ends a demonstration (s of arm time).
 pub const REST_S: f64 = 1.0;
 
-/// How close to the start pose a rest starts a demonstration (rad, every joint): the
-/// tolerance imported demonstrations are checked with (`io::demos::CONSISTENCY_TOLERANCE`).
+/// How close to the start pose a rest starts a demonstration (rad, every joint, the joints'
+/// mean over [`REST_WINDOW_S`]): the tolerance imported demonstrations are checked with
+/// (`io::demos::CONSISTENCY_TOLERANCE`).
 pub const NEAR_START: f64 = 0.01;
 
 /// How far the wrist may be from the learner's wrist lock (rad, each wrist joint).
@@ -75,9 +132,44 @@ pub struct Sample {
 }
 
 impl Sample {
-    fn at_rest(&self) -> bool {
-        self.qd.iter().all(|v| v.abs() < REST_SPEED)
+    /// Refuses a package no arm sends: a joint angle or speed not finite, or an angle outside
+    /// `model`'s limits by more than [`LIMIT_MARGIN_RAD`].
+    pub fn check(&self, model: UrModel) -> Result<(), MeasuredFault> {
+        let limits = model.joint_limits();
+        for j in 0..6 {
+            let (q, qd) = (self.q[j], self.qd[j]);
+            if !q.is_finite() || !qd.is_finite() {
+                return Err(MeasuredFault::NonFinite {
+                    t: self.t,
+                    joint: j,
+                    q,
+                    qd,
+                });
+            }
+            let (lower, upper) = (limits.lower[j], limits.upper[j]);
+            if q < lower - LIMIT_MARGIN_RAD || q > upper + LIMIT_MARGIN_RAD {
+                return Err(MeasuredFault::OutsideLimits {
+                    t: self.t,
+                    joint: j,
+                    q,
+                    lower,
+                    upper,
+                    model,
+                });
+            }
+        }
+        Ok(())
     }
+}
+
+/// A demonstration as the stream gave it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Taught {
+    /// Its packages, from the first of the window in which the motion was seen to the one
+    /// that completed the final rest.
+    pub samples: Vec<Sample>,
+    /// Arm time the final rest began (s): the motion's end.
+    pub motion_end: f64,
 }
 
 /// What the stream said, per [`Segmenter::push`].
@@ -85,9 +177,8 @@ impl Sample {
 pub enum Event {
     /// The start pose is known (the first rest).
     StartPose(Joints6),
-    /// A demonstration: its packages from the last resting one before the motion to the one
-    /// that completed the final rest.
-    Demonstration(Vec<Sample>),
+    /// A demonstration.
+    Demonstration(Taught),
     /// A motion that is not a demonstration, and why.
     Discarded {
         /// Arm time the motion started (s).
@@ -97,14 +188,101 @@ pub enum Event {
     },
 }
 
+/// What the recorder waits for ([`Status`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Waiting {
+    /// The first rest, which sets the start pose.
+    StartPose,
+    /// A motion from the start pose, where the arm rests.
+    Motion,
+    /// The end of the demonstration under way: a rest away from the start pose.
+    End,
+    /// A rest at the start pose (the arm is elsewhere, or moves from elsewhere).
+    Start,
+}
+
+/// What the recorder waits for and what it measures, for its messages while it waits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Status {
+    /// What it waits for.
+    pub waiting: Waiting,
+    /// The end-effector point's travel over the last [`REST_WINDOW_S`] (m; NaN until the
+    /// stream spans that long).
+    pub travel_m: f64,
+    /// How long the arm has rested (s of arm time; 0 while it moves).
+    pub rest_s: f64,
+    /// How long the demonstration under way has lasted (s of arm time).
+    pub demonstration_s: f64,
+    /// The largest difference of a joint (window mean) from the start pose (rad), once known.
+    pub from_start_rad: Option<f64>,
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let rest = format!(
+            "a rest is the end-effector point within {:.0} mm over every {} s for {REST_S} s",
+            REST_TRAVEL_M * 1e3,
+            REST_WINDOW_S
+        );
+        match self.waiting {
+            Waiting::StartPose => write!(
+                f,
+                "waiting for the first rest, which sets the start pose ({rest})"
+            )?,
+            Waiting::Motion => write!(
+                f,
+                "at the start pose: waiting for a motion (the end-effector point moving more \
+                 than {:.0} mm in {REST_WINDOW_S} s)",
+                REST_TRAVEL_M * 1e3
+            )?,
+            Waiting::End => write!(
+                f,
+                "demonstration under way for {:.1} s: waiting for its end, a rest away from the \
+                 start pose ({rest})",
+                self.demonstration_s
+            )?,
+            Waiting::Start => write!(
+                f,
+                "waiting for a rest at the start pose (every joint within {NEAR_START} rad of it; \
+                 {rest})"
+            )?,
+        }
+        if self.travel_m.is_nan() {
+            write!(
+                f,
+                "; measuring (less than {REST_WINDOW_S} s of packages so far)"
+            )?;
+        } else {
+            write!(
+                f,
+                "; the end-effector point moved {:.1} mm in the last {REST_WINDOW_S} s",
+                self.travel_m * 1e3
+            )?;
+        }
+        if self.rest_s > 0.0 {
+            write!(f, ", at rest for {:.1} s", self.rest_s)?;
+        }
+        if let (Some(d), Waiting::Start | Waiting::Motion) = (self.from_start_rad, self.waiting) {
+            write!(f, ", {d:.3} rad from the start pose")?;
+        }
+        Ok(())
+    }
+}
+
 /// Cuts a stream of packages into demonstrations by the rule of the module docs.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Segmenter {
+    kin: UrKinematics,
     start: Option<Joints6>,
+    /// The packages of the last [`REST_WINDOW_S`] and the one before, with their end-effector
+    /// points (m).
+    window: VecDeque<(Sample, [f64; 3])>,
+    /// The end-effector point's travel over the window (m; NaN while it spans less).
+    travel: f64,
     /// Packages kept: the current rest's, or since a demonstration's onset.
     buf: Vec<Sample>,
-    /// Index in `buf` of the current rest's first package.
-    rest_from: Option<usize>,
+    /// The current rest: the arm time it began (s) and the index in `buf` of its first package.
+    rest: Option<(f64, usize)>,
     /// Whether a demonstration is under way (it starts at `buf[0]`).
     moving: bool,
     /// Whether the last package ended a qualifying rest near the start pose.
@@ -119,45 +297,125 @@ fn max_diff(a: &Joints6, b: &Joints6) -> f64 {
 }
 
 impl Segmenter {
+    /// A segmenter for an arm of kinematics `kin` (its end-effector point measures rests).
+    pub fn new(kin: UrKinematics) -> Self {
+        Self {
+            kin,
+            start: None,
+            window: VecDeque::new(),
+            travel: f64::NAN,
+            buf: Vec::new(),
+            rest: None,
+            moving: false,
+            armed: false,
+        }
+    }
+
     /// The start pose, once known.
     pub fn start_pose(&self) -> Option<Joints6> {
         self.start
     }
 
+    /// The mean joint angles over the window (rad): a tremor averaged out.
+    fn window_mean(&self) -> Joints6 {
+        let n = self.window.len() as f64;
+        core::array::from_fn(|j| self.window.iter().map(|(s, _)| s.q[j]).sum::<f64>() / n)
+    }
+
+    /// What it waits for and what it measures.
+    pub fn status(&self) -> Status {
+        let now = self.window.back().map_or(0.0, |(s, _)| s.t);
+        let waiting = match (self.start, self.moving, self.armed) {
+            (None, _, _) => Waiting::StartPose,
+            (Some(_), true, _) => Waiting::End,
+            (Some(_), false, true) => Waiting::Motion,
+            (Some(_), false, false) => Waiting::Start,
+        };
+        Status {
+            waiting,
+            travel_m: self.travel,
+            rest_s: self.rest.map_or(0.0, |(begin, _)| now - begin),
+            demonstration_s: if self.moving {
+                now - self.buf[0].t
+            } else {
+                0.0
+            },
+            from_start_rad: self
+                .start
+                .filter(|_| !self.window.is_empty())
+                .map(|p| max_diff(&self.window_mean(), &p)),
+        }
+    }
+
+    /// The robot stopped the arm (a protective stop, an emergency stop, the arm not running:
+    /// `why` says which, at arm time `at`): a demonstration under way is cut short, not taught,
+    /// and is discarded; the rest and the window start again once the robot runs.
+    pub fn interrupt(&mut self, at: f64, why: &str) -> Option<Event> {
+        let event = self.moving.then(|| Event::Discarded {
+            at: self.buf[0].t,
+            why: format!("{why} at t = {at:.2} s cut it short"),
+        });
+        self.window.clear();
+        self.travel = f64::NAN;
+        self.buf.clear();
+        self.rest = None;
+        self.moving = false;
+        self.armed = false;
+        event
+    }
+
     /// Takes the next package (in time order) and says what it completed, if anything.
     pub fn push(&mut self, s: Sample) -> Option<Event> {
-        if let Some(last) = self.buf.last() {
+        if let Some((last, _)) = self.window.back() {
             if s.t <= last.t {
                 return None; // a repeat (or out of order): nothing new
             }
         }
-        if !s.at_rest() {
-            self.rest_from = None;
+        self.window.push_back((s, self.kin.ee_point(&s.q)));
+        while self.window.len() > 2 && self.window[1].0.t <= s.t - REST_WINDOW_S {
+            self.window.pop_front();
+        }
+        self.travel = if s.t - self.window[0].0.t >= REST_WINDOW_S {
+            (0..3)
+                .map(|k| {
+                    let (lo, hi) = self
+                        .window
+                        .iter()
+                        .fold((f64::MAX, f64::MIN), |(lo, hi), w| {
+                            (lo.min(w.1[k]), hi.max(w.1[k]))
+                        });
+                    hi - lo
+                })
+                .fold(0.0, f64::max)
+        } else {
+            f64::NAN
+        };
+        if !(self.travel <= REST_TRAVEL_M) {
+            self.rest = None;
             if self.armed && !self.moving {
-                // Onset: the demonstration starts at the last resting package.
-                let last = *self.buf.last().expect("armed after a rest");
+                // Onset: the motion began within the window, whose first package still rests
+                // at the start pose: the demonstration starts there.
                 self.buf.clear();
-                self.buf.push(last);
+                self.buf.extend(self.window.iter().map(|(w, _)| *w));
                 self.moving = true;
-            }
-            self.armed = false;
-            if self.moving {
+            } else if self.moving {
                 self.buf.push(s);
             } else {
                 self.buf.clear();
             }
+            self.armed = false;
             return None;
         }
-        if self.rest_from.is_none() {
+        if self.rest.is_none() {
             if !self.moving {
                 self.buf.clear();
             }
-            self.rest_from = Some(self.buf.len());
+            // The window of the first still package was still: the rest began at its start.
+            self.rest = Some((self.window[0].0.t, self.buf.len()));
         }
         self.buf.push(s);
-        let from = self.rest_from.expect("set");
-        let rest_s = s.t - self.buf[from].t;
-        if rest_s < REST_S {
+        let (begin, from) = self.rest.expect("set");
+        if s.t - begin < REST_S {
             return None;
         }
         let mut event = None;
@@ -173,7 +431,7 @@ impl Segmenter {
                 mean
             }
         };
-        let near = max_diff(&s.q, &start) <= NEAR_START;
+        let near = max_diff(&self.window_mean(), &start) <= NEAR_START;
         if self.moving {
             self.moving = false;
             let at = self.buf[0].t;
@@ -183,18 +441,21 @@ impl Segmenter {
                     why: "it came back to rest at the start pose".into(),
                 }
             } else {
-                Event::Demonstration(std::mem::take(&mut self.buf))
+                Event::Demonstration(Taught {
+                    samples: std::mem::take(&mut self.buf),
+                    motion_end: begin,
+                })
             });
-            // Keep only this rest's last package, as a new rest.
+            // Keep only this rest's last package, as the rest goes on.
             self.buf.clear();
             self.buf.push(s);
-            self.rest_from = Some(0);
+            self.rest = Some((begin, 0));
         } else if self.buf.len() > 1 {
-            // Waiting: the rest's first and last packages are all that matter.
+            // Waiting: the rest's first package and the newest are all that matter.
             let first = self.buf[from];
             self.buf.clear();
             self.buf.extend([first, s]);
-            self.rest_from = Some(0);
+            self.rest = Some((begin, 0));
         }
         self.armed = near;
         event
@@ -216,34 +477,26 @@ fn interpolate(samples: &[Sample], t: f64) -> (Joints6, Joints6) {
 
 /// A demonstration as T steps of the control period `dt` (module docs), six joints each, or
 /// why it cannot be one.
-pub fn resample(
-    demo: &[Sample],
-    dt: f64,
-    horizon: usize,
-) -> Result<Vec<(Joints6, Joints6)>, String> {
-    if demo.len() < 2 {
+pub fn resample(demo: &Taught, dt: f64, horizon: usize) -> Result<Vec<(Joints6, Joints6)>, String> {
+    let samples = &demo.samples;
+    if samples.len() < 2 {
         return Err("fewer than 2 packages".into());
     }
-    let onset = demo[0].t;
-    // The motion ends where the final rest began: the last moving package's successor.
-    let rest_start = demo
-        .iter()
-        .rposition(|s| !s.at_rest())
-        .map_or(onset, |k| demo[(k + 1).min(demo.len() - 1)].t);
+    let onset = samples[0].t;
     let span = (horizon - 1) as f64 * dt;
-    if rest_start - onset > span {
+    if demo.motion_end - onset > span {
         return Err(format!(
             "its motion took {:.2} s, longer than the horizon's (T − 1) dt = {span:.2} s: move \
              faster, or raise task.horizon",
-            rest_start - onset
+            demo.motion_end - onset
         ));
     }
-    let end = demo.last().expect("2 packages");
+    let end = samples.last().expect("2 packages");
     Ok((0..horizon)
         .map(|k| {
             let t = onset + k as f64 * dt;
             if t <= end.t {
-                interpolate(demo, t)
+                interpolate(samples, t)
             } else {
                 (end.q, [0.0; 6])
             }
@@ -343,7 +596,7 @@ pub fn to_recorded_demos(
 
 /// [`resample`], then the wrist against `sim.wrist_q` ([`WRIST_TOLERANCE`]).
 pub fn steps_checked(
-    demo: &[Sample],
+    demo: &Taught,
     task: &TaskConfig,
     sim: &SimConfig,
 ) -> Result<Vec<(Joints6, Joints6)>, String> {
@@ -377,8 +630,23 @@ mod tests {
         0.0,
     ];
 
-    /// A stream at `rate` Hz: rest at A for `r0` s, a smooth move to B in 1 s, rest `r1` s.
-    fn stream(rate: f64, a: [f64; 3], b: [f64; 3], t0: f64, r0: f64, r1: f64) -> Vec<Sample> {
+    /// A hand's tremor on the active joints: amplitude (rad, each joint) and frequency (Hz).
+    #[derive(Clone, Copy)]
+    struct Tremor {
+        rad: f64,
+        hz: f64,
+    }
+
+    /// A stream at `rate` Hz: rest at A for `r0` s, a smooth move to B in 1 s, rest `r1` s;
+    /// `tremor` throughout, rests included.
+    fn stream_with(
+        rate: f64,
+        a: [f64; 3],
+        b: [f64; 3],
+        t0: f64,
+        (r0, r1): (f64, f64),
+        tremor: Option<Tremor>,
+    ) -> Vec<Sample> {
         let dt = 1.0 / rate;
         let n = ((r0 + 1.0 + r1) * rate) as usize;
         (0..n)
@@ -391,8 +659,11 @@ mod tests {
                 } else {
                     0.0
                 };
-                let q: [f64; 3] = core::array::from_fn(|j| a[j] + s * (b[j] - a[j]));
-                let qd: [f64; 3] = core::array::from_fn(|j| ds * (b[j] - a[j]));
+                let w = 2.0 * std::f64::consts::PI * tremor.map_or(0.0, |tr| tr.hz);
+                let amp = tremor.map_or(0.0, |tr| tr.rad);
+                let (tq, tqd) = (amp * (w * (t0 + t)).sin(), amp * w * (w * (t0 + t)).cos());
+                let q: [f64; 3] = core::array::from_fn(|j| a[j] + s * (b[j] - a[j]) + tq);
+                let qd: [f64; 3] = core::array::from_fn(|j| ds * (b[j] - a[j]) + tqd);
                 Sample {
                     t: t0 + t,
                     q: UrKinematics::six(&q, &W),
@@ -402,9 +673,27 @@ mod tests {
             .collect()
     }
 
+    fn stream(rate: f64, a: [f64; 3], b: [f64; 3], t0: f64, r0: f64, r1: f64) -> Vec<Sample> {
+        stream_with(rate, a, b, t0, (r0, r1), None)
+    }
+
+    fn kin() -> UrKinematics {
+        let sim = SimConfig::default();
+        UrKinematics::new(sim.model, sim.ee_offset)
+    }
+
     fn run(samples: &[Sample]) -> Vec<Event> {
-        let mut seg = Segmenter::default();
+        let mut seg = Segmenter::new(kin());
         samples.iter().filter_map(|s| seg.push(*s)).collect()
+    }
+
+    fn demonstrations(ev: &[Event]) -> Vec<&Taught> {
+        ev.iter()
+            .filter_map(|e| match e {
+                Event::Demonstration(d) => Some(d),
+                _ => None,
+            })
+            .collect()
     }
 
     #[test]
@@ -421,19 +710,22 @@ mod tests {
             assert!(
                 matches!(ev[0], Event::StartPose(p) if max_diff(&p, &UrKinematics::six(&a, &W)) < 1e-12)
             );
-            let demos: Vec<&Vec<Sample>> = ev
-                .iter()
-                .filter_map(|e| match e {
-                    Event::Demonstration(d) => Some(d),
-                    _ => None,
-                })
-                .collect();
+            let demos = demonstrations(&ev);
             assert_eq!(demos.len(), 1, "{rate} Hz: {ev:?}");
             let d = demos[0];
-            // From the last resting package before the motion (which starts at t = 1.5 s and
-            // passes REST_SPEED 14 ms later) to 1 s of final rest.
-            assert!(d[0].t >= 1.5 && d[0].t <= 1.514 + 1.0 / rate, "{}", d[0].t);
-            assert!(d[0].at_rest() && !d[1].at_rest());
+            // From the first package of the window in which the motion (from t = 1.5 s) was
+            // seen, still at the start pose, to 1 s of final rest; the motion ends at 2.5 s.
+            let t_first = d.samples[0].t;
+            assert!(
+                t_first >= 1.5 - REST_WINDOW_S - 2.0 / rate && t_first <= 1.5,
+                "{t_first}"
+            );
+            assert_eq!(d.samples[0].q, UrKinematics::six(&a, &W));
+            assert!(
+                d.motion_end > 2.5 - REST_WINDOW_S && d.motion_end <= 2.5,
+                "{}",
+                d.motion_end
+            );
             let task = TaskConfig {
                 dt: 0.1,
                 horizon: 30,
@@ -453,7 +745,7 @@ mod tests {
             assert!(e.contains("longer than the horizon"), "{e}");
             // A wrist that moved.
             let mut bent = d.clone();
-            bent.iter_mut().for_each(|s| s.q[4] += 0.05);
+            bent.samples.iter_mut().for_each(|s| s.q[4] += 0.05);
             let e = steps_checked(&bent, &task, &SimConfig::default()).unwrap_err();
             assert!(e.contains("wrist 2") && e.contains("sim.wrist_q"), "{e}");
         }
@@ -471,6 +763,131 @@ mod tests {
                 .any(|e| matches!(e, Event::Discarded { why, .. } if why.contains("start pose"))),
             "{ev:?}"
         );
-        assert!(!ev.iter().any(|e| matches!(e, Event::Demonstration(_))));
+        assert!(demonstrations(&ev).is_empty());
+    }
+
+    /// A reach the robot stopped (a protective stop) is not a demonstration, though the arm
+    /// then rests away from the start pose; the next reach from the start pose is one.
+    #[test]
+    fn a_reach_cut_short_by_a_stop_is_not_a_demonstration() {
+        let (a, b) = ([0.0, -2.0, 2.4], [0.3, -1.4, 2.1]);
+        let first = stream(500.0, a, b, 0.0, 1.5, 1.5);
+        let mut seg = Segmenter::new(kin());
+        let mut ev = Vec::new();
+        for s in &first {
+            // The robot stops the arm in the middle of the reach.
+            if (1.9..2.0).contains(&s.t) {
+                ev.extend(seg.interrupt(s.t, "a protective stop (safety mode PROTECTIVE_STOP)"));
+            } else {
+                ev.extend(seg.push(*s));
+            }
+        }
+        assert!(demonstrations(&ev).is_empty(), "{ev:?}");
+        assert!(
+            ev.iter().any(|e| matches!(e, Event::Discarded { why, .. }
+                if why.contains("PROTECTIVE_STOP") && why.contains("cut it short"))),
+            "{ev:?}"
+        );
+        // Back to the start pose (not a demonstration), then a whole reach: one.
+        let t1 = first.last().unwrap().t + 0.002;
+        let mut rest = stream(500.0, b, a, t1, 0.0, 1.5);
+        let t2 = rest.last().unwrap().t + 0.002;
+        rest.extend(stream(500.0, a, b, t2, 0.5, 1.5));
+        ev.clear();
+        ev.extend(rest.iter().filter_map(|s| seg.push(*s)));
+        assert_eq!(demonstrations(&ev).len(), 1, "{ev:?}");
+    }
+
+    /// A held arm trembles (0.1–1 mm at the end-effector point, 8–12 Hz), rests included: the
+    /// rests still cut the same demonstration as without tremor, though the tremor's joint
+    /// speeds exceed the instantaneous rule's 0.05 rad/s. While it waits, the recorder says
+    /// what for and what it measures.
+    #[test]
+    fn a_tremor_does_not_hide_a_rest() {
+        let (a, b) = ([0.0, -2.0, 2.4], [0.3, -1.4, 2.1]);
+        let k = kin();
+        // The end-effector point's displacement per rad of all three active joints together.
+        let p0 = k.ee_point(&UrKinematics::six(&a, &W));
+        let p1 = k.ee_point(&UrKinematics::six(&a.map(|v| v + 1e-6), &W));
+        let gain = (0..3).map(|i| (p1[i] - p0[i]).powi(2)).sum::<f64>().sqrt() / 1e-6;
+        let task = TaskConfig {
+            dt: 0.1,
+            horizon: 30,
+            ..TaskConfig::default()
+        };
+        let mut fastest = 0.0f64;
+        for (mm, hz) in [
+            (0.1, 8.0),
+            (0.1, 12.0),
+            (1.0, 8.0),
+            (1.0, 12.0),
+            (1.0, 10.0),
+        ] {
+            let tremor = Tremor {
+                rad: mm * 1e-3 / gain,
+                hz,
+            };
+            let s = stream_with(500.0, a, b, 0.0, (1.5, 1.5), Some(tremor));
+            // The tremor is as large as said at the end-effector point.
+            let range = (0..3)
+                .map(|i| {
+                    let v = s[..500].iter().map(|x| k.ee_point(&x.q)[i]);
+                    v.clone().fold(f64::MIN, f64::max) - v.fold(f64::MAX, f64::min)
+                })
+                .fold(0.0, f64::max);
+            assert!(range <= 2.0 * mm * 1e-3 * 1.01, "{mm} mm: range {range}");
+            fastest = fastest.max(s[..500].iter().map(|x| x.qd[0].abs()).fold(0.0, f64::max));
+            let mut seg = Segmenter::new(k);
+            let mut ev = Vec::new();
+            let mut said = Vec::new();
+            for x in &s {
+                ev.extend(seg.push(*x));
+                if ((x.t * 500.0).round() as u64) % 250 == 0 {
+                    said.push(seg.status().to_string());
+                }
+            }
+            let demos = demonstrations(&ev);
+            assert_eq!(demos.len(), 1, "{mm} mm at {hz} Hz: {ev:?}");
+            let steps = steps_checked(demos[0], &task, &SimConfig::default()).unwrap();
+            let (first, last) = (steps[0].0, steps[29].0);
+            assert!(max_diff(&first, &UrKinematics::six(&a, &W)) < 2.0 * tremor.rad + 1e-9);
+            assert!(max_diff(&last, &UrKinematics::six(&b, &W)) < 2.0 * tremor.rad + 1e-9);
+            // What it said while it waited: the first rest, then a motion from the start pose,
+            // then the demonstration's end; each with the measured travel.
+            let joined = said.join("\n");
+            for want in [
+                "waiting for the first rest",
+                "at the start pose: waiting for a motion",
+                "demonstration under way",
+                "mm in the last 0.25 s",
+            ] {
+                assert!(joined.contains(want), "{want}:\n{joined}");
+            }
+        }
+        assert!(fastest > 0.05, "the tremor's speed {fastest} rad/s");
+    }
+
+    #[test]
+    fn a_package_no_arm_sends_is_named() {
+        let ok = Sample {
+            t: 3.0,
+            q: UrKinematics::six(&[0.0, -2.0, 2.4], &W),
+            qd: [0.0; 6],
+        };
+        ok.check(UrModel::Ur5e).unwrap();
+        let mut nan = ok;
+        nan.q[2] = f64::NAN;
+        let e = nan.check(UrModel::Ur5e).unwrap_err().to_string();
+        assert!(
+            e.contains("joint 2") && e.contains("NaN") && e.contains("3 s"),
+            "{e}"
+        );
+        let mut far = ok;
+        far.q[0] = 100.0;
+        let e = far.check(UrModel::Ur5e).unwrap_err().to_string();
+        assert!(
+            e.contains("joint 0 at 100 rad") && e.contains("ur5e"),
+            "{e}"
+        );
     }
 }

@@ -4,6 +4,7 @@
 use std::net::{IpAddr, SocketAddr};
 
 use ur_protocol::client::ClientError;
+use ur_protocol::clock::ClockFault;
 use ur_protocol::rtde::ControllerVersion;
 
 use crate::config::UrSeries;
@@ -102,22 +103,9 @@ pub enum StreamFault {
         /// Tolerance (rad).
         margin: f64,
     },
-    /// `timestamp` decreased.
-    #[error("the robot's clock went backwards: RTDE timestamp {ts} s after {prev} s; its packages cannot be trusted (restart the robot's controller)")]
-    ClockBackwards {
-        /// The new timestamp (s).
-        ts: f64,
-        /// The one before (s).
-        prev: f64,
-    },
-    /// `timestamp` did not advance over many packages.
-    #[error("the robot's clock is frozen: RTDE timestamp {ts} s in {packages} packages in a row; its packages cannot be trusted (restart the robot's controller)")]
-    ClockFrozen {
-        /// The timestamp (s).
-        ts: f64,
-        /// Packages with it.
-        packages: u64,
-    },
+    /// The robot's clock (`timestamp`) went backwards or stands still.
+    #[error(transparent)]
+    Clock(#[from] ur_protocol::clock::ClockFault),
 }
 
 impl StreamFault {
@@ -126,8 +114,8 @@ impl StreamFault {
         match self {
             StreamFault::NonFinite { .. } => "the robot measured a non-finite joint angle or speed (a fault of the robot, not of the network; see arm.stream_fault)",
             StreamFault::OutsideLimits { .. } => "the robot measured a joint angle outside [limits] (see arm.stream_fault)",
-            StreamFault::ClockBackwards { .. } => "the robot's clock (RTDE timestamp) went backwards (see arm.stream_fault)",
-            StreamFault::ClockFrozen { .. } => "the robot's clock (RTDE timestamp) is frozen (see arm.stream_fault)",
+            StreamFault::Clock(ClockFault::Backwards { .. }) => "the robot's clock (RTDE timestamp) went backwards (see arm.stream_fault)",
+            StreamFault::Clock(ClockFault::Frozen { .. }) => "the robot's clock (RTDE timestamp) is frozen (see arm.stream_fault)",
         }
     }
 }

@@ -161,8 +161,8 @@ impl LiveView {
             episode,
             table_version,
             ee: s.ee_pos,
-            q: s.q,
-            qd: s.qd,
+            q: core::array::from_fn(|j| s.q[j]),
+            qd: core::array::from_fn(|j| s.qd[j]),
         });
     }
 

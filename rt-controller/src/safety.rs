@@ -26,6 +26,8 @@ pub enum Fault {
     NonFiniteAction,
     /// No valid table.
     NoTable,
+    /// The arm reports another number of active joints than the task's.
+    WrongJoints,
 }
 
 impl Fault {
@@ -37,6 +39,7 @@ impl Fault {
             Fault::NonFiniteState => "non-finite arm state",
             Fault::NonFiniteAction => "non-finite action",
             Fault::NoTable => "no valid gain table",
+            Fault::WrongJoints => "the arm reports another number of joints than the task has",
         }
     }
 }
@@ -60,11 +63,12 @@ pub fn hold_command(
 ) -> ArmCommand {
     match (mode, fresh) {
         (ActionMode::GoalAngles, _) => {
-            let goal = core::array::from_fn(|j| q_safe[j].clamp(lim.lower[j], lim.upper[j]));
+            let goal: [f64; N_JOINTS] =
+                core::array::from_fn(|j| q_safe[j].clamp(lim.lower[j], lim.upper[j]));
             ArmCommand::goal_angles(seq, stamp_ns, episode, goal)
         }
         (ActionMode::Torque, Some((q, qd))) => {
-            let tau = core::array::from_fn(|j| {
+            let tau: [f64; N_JOINTS] = core::array::from_fn(|j| {
                 (safety.hold_kp[j] * (q_safe[j] - q[j]) - safety.hold_kd[j] * qd[j])
                     .clamp(-lim.effort[j], lim.effort[j])
             });
@@ -94,7 +98,7 @@ mod tests {
             6,
         );
         assert_eq!(c.kind(), Ok(CommandKind::GoalAngles));
-        assert_eq!(c.values, [0.1, -1.0, std::f64::consts::PI]);
+        assert_eq!(c.values(), [0.1, -1.0, std::f64::consts::PI]);
         assert_eq!((c.seq, c.stamp_ns, c.episode), (4, 5, 6));
         let c = hold_command(
             ActionMode::Torque,
@@ -107,7 +111,7 @@ mod tests {
             0,
         );
         assert_eq!(c.kind(), Ok(CommandKind::Torques));
-        assert_eq!(c.values, [200.0 * 0.1, -20.0, 0.0]);
+        assert_eq!(c.values(), [200.0 * 0.1, -20.0, 0.0]);
         let c = hold_command(ActionMode::Torque, &l, &s, &[0.1, 0.0, 0.0], None, 1, 0, 0);
         assert_eq!(c.kind(), Ok(CommandKind::Hold));
     }

@@ -255,6 +255,8 @@ pub struct FaultCounts {
     pub non_finite_action: u64,
     /// [`Fault::NoTable`].
     pub no_table: u64,
+    /// [`Fault::WrongJoints`].
+    pub wrong_joints: u64,
 }
 
 impl FaultCounts {
@@ -266,6 +268,7 @@ impl FaultCounts {
             Fault::NonFiniteState => self.non_finite_state += 1,
             Fault::NonFiniteAction => self.non_finite_action += 1,
             Fault::NoTable => self.no_table += 1,
+            Fault::WrongJoints => self.wrong_joints += 1,
         }
     }
 
@@ -276,6 +279,7 @@ impl FaultCounts {
             + self.non_finite_state
             + self.non_finite_action
             + self.no_table
+            + self.wrong_joints
     }
 }
 

@@ -9,7 +9,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::layout::{MAX_JOINTS, N_JOINTS};
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{
     ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, PolicyTable, StateLayout, DU, DX,
@@ -92,6 +92,7 @@ pub fn run_kinematic_arm_with(
     };
     let mut state = ArmState {
         status: ArmStatus::READY,
+        joints: N_JOINTS as u32,
         ..ArmState::default()
     };
     let publish = |state: &mut ArmState| {
@@ -131,8 +132,7 @@ pub fn run_kinematic_arm_with(
         match cmd.kind() {
             Ok(CommandKind::Reset) => {
                 report.resets += 1;
-                state.q = cmd.reset_pose;
-                state.qd = [0.0; N_JOINTS];
+                state.set_joints(cmd.reset_pose(), &[0.0; N_JOINTS]);
             }
             Ok(CommandKind::GoalAngles) => {
                 for j in 0..DU {
@@ -143,9 +143,9 @@ pub fn run_kinematic_arm_with(
             }
             Ok(CommandKind::Hold) => {
                 report.holds += 1;
-                state.qd = [0.0; N_JOINTS];
+                state.qd = [0.0; MAX_JOINTS];
             }
-            Ok(CommandKind::Torques) | Err(_) => state.qd = [0.0; N_JOINTS],
+            Ok(CommandKind::Torques) | Err(_) => state.qd = [0.0; MAX_JOINTS],
         }
         state.episode = cmd.episode;
         state.last_command_seq = cmd.seq;

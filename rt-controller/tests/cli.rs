@@ -108,6 +108,14 @@ fn print_config_lists_every_option_and_parses_back() {
         "[arm.ros2]",
         "[live_view]",
         "[live_view.qos]",
+        // [arm.ur]'s keys a configuration carries only when set.
+        "model = \"ur5\"",
+        "dashboard_port = 29999",
+        "check_model = true",
+        "bring_up = false",
+        "recover_protective_stop = false",
+        "servoj_lookahead_time_s",
+        "servoj_gain",
     ] {
         assert!(text.contains(key), "missing {key}:\n{text}");
     }

@@ -29,6 +29,31 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     commit(&tmp, path)
 }
 
+/// Writes `bytes` to `path` atomically as a new file: never replaces what is there (a file,
+/// a FIFO, a device; error kind `AlreadyExists`, also when another process creates `path`
+/// meanwhile), since the complete temporary file is hard-linked to the final name, which fails
+/// when the name exists. The error names the file at fault.
+pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    if std::fs::symlink_metadata(path).is_ok() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!("{} exists", path.display()),
+        ));
+    }
+    let tmp = temporary_path(path);
+    let named = |e: std::io::Error, p: &Path| {
+        std::io::Error::new(e.kind(), format!("{}: {e}", p.display()))
+    };
+    let mut f = File::create(&tmp).map_err(|e| named(e, &tmp))?;
+    f.write_all(bytes).map_err(|e| named(e, &tmp))?;
+    f.sync_all().map_err(|e| named(e, &tmp))?;
+    drop(f);
+    let linked = std::fs::hard_link(&tmp, path).map_err(|e| named(e, path));
+    std::fs::remove_file(&tmp).ok();
+    linked?;
+    sync_parent(path)
+}
+
 /// Renames the complete, synced file `tmp` to `path` and syncs their folder.
 pub fn commit(tmp: &Path, path: &Path) -> std::io::Result<()> {
     std::fs::rename(tmp, path).map_err(|e| {
@@ -68,6 +93,19 @@ mod tests {
         assert!(!temporary_path(&p).exists());
         let e = write(&dir.join("missing/b.json"), b"x").unwrap_err();
         assert!(e.to_string().contains("missing/b.json.tmp"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_new_file_never_replaces_one() {
+        let dir = std::env::temp_dir().join(format!("atomic-new-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.csv");
+        write_new(&p, b"one").unwrap();
+        let e = write_new(&p, b"two").unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::AlreadyExists, "{e}");
+        assert_eq!(std::fs::read(&p).unwrap(), b"one");
+        assert!(!temporary_path(&p).exists());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

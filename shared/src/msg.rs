@@ -17,7 +17,7 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::layout::{self, DU, DX, MAX_DU, MAX_DX, N_JOINTS};
+use crate::layout::{DimensionMismatch, StateLayout, DX, MAX_DU, MAX_DX, MAX_JOINTS};
 
 /// One executed step, published by the controller on `learner/samples` for the learner's
 /// dynamics fit and discriminator (docs/design.md §3.2; the dynamics use a_sent, §5 D18).
@@ -156,6 +156,9 @@ impl ArmFaults {
     pub const PHYSICS: ArmFaults = ArmFaults(1 << 4);
     /// The real arm's driver reported an error or protective stop.
     pub const DRIVER: ArmFaults = ArmFaults(1 << 5);
+    /// A command for another number of joints than the arm's active ones; it was ignored and
+    /// the arm holds.
+    pub const WRONG_JOINTS: ArmFaults = ArmFaults(1 << 6);
 
     /// Any fault bit is set.
     pub fn any(self) -> bool {
@@ -175,7 +178,7 @@ impl ArmFaults {
 /// per physics step in lockstep, as the arm chooses).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
-#[type_name("ur5_shared::ArmState.v1")]
+#[type_name("ur5_shared::ArmState.v2")]
 pub struct ArmState {
     /// Message sequence number of this publisher (from 1).
     pub seq: u64,
@@ -185,10 +188,10 @@ pub struct ArmState {
     pub episode: u64,
     /// `seq` of the last [`ArmCommand`] applied (0 = none yet).
     pub last_command_seq: u64,
-    /// Joint angles q (rad), active joints in layout order.
-    pub q: [f64; N_JOINTS],
-    /// Joint velocities q̇ (rad/s).
-    pub qd: [f64; N_JOINTS],
+    /// Joint angles q (rad) of the active joints in `q[..joints]`, base to wrist; the rest 0.
+    pub q: [f64; MAX_JOINTS],
+    /// Joint velocities q̇ (rad/s) in `qd[..joints]`.
+    pub qd: [f64; MAX_JOINTS],
     /// End-effector point (m, arm base frame).
     pub ee_pos: [f64; 3],
     /// End-effector linear velocity (m/s, arm base frame).
@@ -197,12 +200,72 @@ pub struct ArmState {
     pub status: ArmStatus,
     /// Fault bits.
     pub faults: ArmFaults,
+    /// Active joints n, 1..=[`MAX_JOINTS`] (`ArmState.v2`; v1 had the reaching task's 3 in
+    /// arrays of 3).
+    pub joints: u32,
+    /// Keeps the layout free of implicit padding; write 0.
+    pub reserved: u32,
 }
 
 impl ArmState {
-    /// The state vector s for `goal` (m, arm base frame); see [`layout::state_vector`].
+    /// A state of the joints `q` (rad) and `qd` (rad/s), n each, the end-effector point
+    /// `ee_pos` (m) and its velocity `ee_vel` (m/s); the rest default. Panics if n exceeds
+    /// [`MAX_JOINTS`] or the lengths differ.
+    pub fn of_joints(q: &[f64], qd: &[f64], ee_pos: [f64; 3], ee_vel: [f64; 3]) -> Self {
+        let mut s = Self {
+            ee_pos,
+            ee_vel,
+            ..Self::default()
+        };
+        s.set_joints(q, qd);
+        s
+    }
+
+    /// Sets `joints` and the joint angles and velocities (the rest of the arrays 0). Panics if
+    /// n exceeds [`MAX_JOINTS`] or the lengths differ.
+    pub fn set_joints(&mut self, q: &[f64], qd: &[f64]) {
+        assert_eq!(q.len(), qd.len(), "q and q̇ of the same joints");
+        let n = q.len();
+        self.joints = n as u32;
+        self.q = [0.0; MAX_JOINTS];
+        self.qd = [0.0; MAX_JOINTS];
+        self.q[..n].copy_from_slice(q);
+        self.qd[..n].copy_from_slice(qd);
+    }
+
+    /// The active joints' angles `q[..joints]` (clamped to the capacity).
+    pub fn q(&self) -> &[f64] {
+        &self.q[..(self.joints as usize).min(MAX_JOINTS)]
+    }
+
+    /// The active joints' velocities `qd[..joints]` (clamped to the capacity).
+    pub fn qd(&self) -> &[f64] {
+        &self.qd[..(self.joints as usize).min(MAX_JOINTS)]
+    }
+
+    /// `Ok` if the arm's active joints are `layout`'s; otherwise the mismatch, naming both (an
+    /// arm reports joints, not a state: its dimensions are those of the layout with its
+    /// joints).
+    pub fn check_layout(&self, layout: &StateLayout) -> Result<(), DimensionMismatch> {
+        let n = self.joints as usize;
+        let dx = (2 * n + 6 * layout.tool_points()) as usize;
+        layout.check_dims("the arm's state", dx, n)
+    }
+
+    /// The state vector s of the reaching task ([`StateLayout::REACH3`]) for `goal` (m, arm
+    /// base frame), through [`StateLayout::fill_state`]. Reads the first three joints: call it
+    /// for an arm whose [`ArmState::check_layout`] passed.
     pub fn state_vector(&self, goal: &[f64; 3]) -> [f64; DX] {
-        layout::state_vector(&self.q, &self.qd, &self.ee_pos, &self.ee_vel, goal)
+        let mut s = [0.0; DX];
+        StateLayout::REACH3.fill_state(
+            &self.q[..3],
+            &self.qd[..3],
+            &[self.ee_pos],
+            &[self.ee_vel],
+            &[*goal],
+            &mut s,
+        );
+        s
     }
 }
 
@@ -241,7 +304,7 @@ impl TryFrom<u32> for CommandKind {
 /// A command to the arm on `arm/command`, one per control period.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
-#[type_name("ur5_shared::ArmCommand.v1")]
+#[type_name("ur5_shared::ArmCommand.v2")]
 pub struct ArmCommand {
     /// Message sequence number of this publisher (from 1).
     pub seq: u64,
@@ -253,10 +316,18 @@ pub struct ArmCommand {
     pub kind: u32,
     /// Keeps the layout free of implicit padding; write 0.
     pub reserved: u32,
-    /// Goal joint angles (rad) or joint torques (N·m), active joints in layout order.
-    pub values: [f64; DU],
-    /// For [`CommandKind::Reset`]: start pose q (rad), reached at rest (q̇ = 0). Otherwise 0.
-    pub reset_pose: [f64; N_JOINTS],
+    /// Goal joint angles (rad) or joint torques (N·m) of the active joints in
+    /// `values[..joints]`, base to wrist; the rest 0.
+    pub values: [f64; MAX_DU],
+    /// For [`CommandKind::Reset`]: start pose q (rad) in `reset_pose[..joints]`, reached at
+    /// rest (q̇ = 0). Otherwise 0.
+    pub reset_pose: [f64; MAX_JOINTS],
+    /// Joints n the command is for, 1..=[`MAX_JOINTS`]; an arm with other active joints
+    /// ignores it and holds ([`ArmFaults::WRONG_JOINTS`]). 0 in a hold (any arm holds).
+    /// (`ArmCommand.v2`; v1 had the reaching task's 3 in arrays of 3.)
+    pub joints: u32,
+    /// Keeps the layout free of implicit padding; write 0.
+    pub reserved2: u32,
 }
 
 impl ArmCommand {
@@ -275,28 +346,41 @@ impl ArmCommand {
         Self::new(seq, stamp_ns, episode, CommandKind::Hold)
     }
 
-    /// Servo towards goal joint angles `q_goal` (rad).
-    pub fn goal_angles(seq: u64, stamp_ns: u64, episode: u64, q_goal: [f64; DU]) -> Self {
-        Self {
-            values: q_goal,
-            ..Self::new(seq, stamp_ns, episode, CommandKind::GoalAngles)
-        }
+    /// Servo towards goal joint angles `q_goal` (rad, one per active joint). Panics past
+    /// [`MAX_JOINTS`].
+    pub fn goal_angles(seq: u64, stamp_ns: u64, episode: u64, q_goal: impl AsRef<[f64]>) -> Self {
+        Self::new(seq, stamp_ns, episode, CommandKind::GoalAngles).with_values(q_goal.as_ref())
     }
 
-    /// Apply joint torques `tau` (N·m).
-    pub fn torques(seq: u64, stamp_ns: u64, episode: u64, tau: [f64; DU]) -> Self {
-        Self {
-            values: tau,
-            ..Self::new(seq, stamp_ns, episode, CommandKind::Torques)
-        }
+    /// Apply joint torques `tau` (N·m, one per active joint). Panics past [`MAX_JOINTS`].
+    pub fn torques(seq: u64, stamp_ns: u64, episode: u64, tau: impl AsRef<[f64]>) -> Self {
+        Self::new(seq, stamp_ns, episode, CommandKind::Torques).with_values(tau.as_ref())
     }
 
-    /// Reset to the start pose `q0` (rad) at rest.
-    pub fn reset(seq: u64, stamp_ns: u64, episode: u64, q0: [f64; N_JOINTS]) -> Self {
-        Self {
-            reset_pose: q0,
-            ..Self::new(seq, stamp_ns, episode, CommandKind::Reset)
-        }
+    /// Reset to the start pose `q0` (rad, one per active joint) at rest. Panics past
+    /// [`MAX_JOINTS`].
+    pub fn reset(seq: u64, stamp_ns: u64, episode: u64, q0: impl AsRef<[f64]>) -> Self {
+        let q0 = q0.as_ref();
+        let mut c = Self::new(seq, stamp_ns, episode, CommandKind::Reset);
+        c.joints = q0.len() as u32;
+        c.reset_pose[..q0.len()].copy_from_slice(q0);
+        c
+    }
+
+    fn with_values(mut self, v: &[f64]) -> Self {
+        self.joints = v.len() as u32;
+        self.values[..v.len()].copy_from_slice(v);
+        self
+    }
+
+    /// The command's values `values[..joints]` (clamped to the capacity).
+    pub fn values(&self) -> &[f64] {
+        &self.values[..(self.joints as usize).min(MAX_DU)]
+    }
+
+    /// The reset pose `reset_pose[..joints]` (clamped to the capacity).
+    pub fn reset_pose(&self) -> &[f64] {
+        &self.reset_pose[..(self.joints as usize).min(MAX_JOINTS)]
     }
 
     /// The decoded kind; an unknown value is an error (the arm then holds).
@@ -315,15 +399,19 @@ mod tests {
         let c = ArmCommand::goal_angles(3, 100, 2, [0.1, -0.2, 0.3]);
         assert_eq!(c.kind(), Ok(CommandKind::GoalAngles));
         assert_eq!((c.seq, c.stamp_ns, c.episode), (3, 100, 2));
-        assert_eq!(c.values, [0.1, -0.2, 0.3]);
+        assert_eq!(c.values(), [0.1, -0.2, 0.3]);
+        assert_eq!(c.joints, 3);
+        let six = ArmCommand::goal_angles(3, 100, 2, [0.5; 6]);
+        assert_eq!((six.joints, six.values()), (6, &[0.5; 6][..]));
+        assert_eq!(six.values[6], 0.0);
         assert_eq!(
             ArmCommand::torques(1, 0, 0, [1.0; 3]).kind(),
             Ok(CommandKind::Torques)
         );
         let r = ArmCommand::reset(4, 0, 5, [0.0, -1.5, 2.0]);
         assert_eq!(r.kind(), Ok(CommandKind::Reset));
-        assert_eq!(r.reset_pose, [0.0, -1.5, 2.0]);
-        assert_eq!(r.values, [0.0; 3]);
+        assert_eq!(r.reset_pose(), [0.0, -1.5, 2.0]);
+        assert_eq!(r.values(), [0.0; 3]);
         assert_eq!(ArmCommand::hold(1, 0, 0).kind(), Ok(CommandKind::Hold));
         // A zeroed command decodes as Hold.
         assert_eq!(ArmCommand::default().kind(), Ok(CommandKind::Hold));
@@ -347,12 +435,23 @@ mod tests {
     #[test]
     fn arm_state_assembles_the_layout() {
         let st = ArmState {
-            q: [1.0, 2.0, 3.0],
-            qd: [4.0, 5.0, 6.0],
-            ee_pos: [0.5, 0.25, 1.0],
-            ee_vel: [10.0, 11.0, 12.0],
-            ..ArmState::default()
+            ..ArmState::of_joints(
+                &[1.0, 2.0, 3.0],
+                &[4.0, 5.0, 6.0],
+                [0.5, 0.25, 1.0],
+                [10.0, 11.0, 12.0],
+            )
         };
+        st.check_layout(&StateLayout::REACH3).unwrap();
+        let e = st
+            .check_layout(&StateLayout::new(6, 1).unwrap())
+            .unwrap_err();
+        assert!(e.to_string().contains("dX = 12, dU = 3"), "{e}");
+        assert!(e.to_string().contains("dX = 18, dU = 6"), "{e}");
+        let six = ArmState::of_joints(&[0.1; 6], &[0.2; 6], [0.0; 3], [0.0; 3]);
+        assert_eq!((six.q(), six.qd()), (&[0.1; 6][..], &[0.2; 6][..]));
+        assert!(six.check_layout(&StateLayout::REACH3).is_err());
+        six.check_layout(&StateLayout::new(6, 1).unwrap()).unwrap();
         let goal = [0.25, 0.25, 0.5];
         let s = st.state_vector(&goal);
         assert_eq!(s[Q], [1.0, 2.0, 3.0]);
@@ -399,7 +498,13 @@ mod tests {
             core::mem::size_of::<StepSample>(),
             8 * 2 + 4 * 6 + 8 * (MAX_DX + 2 * MAX_DU) + 8 * 3
         );
-        assert_eq!(core::mem::size_of::<ArmState>(), 8 * 4 + 8 * 12 + 4 * 2);
-        assert_eq!(core::mem::size_of::<ArmCommand>(), 8 * 3 + 4 * 2 + 8 * 6);
+        assert_eq!(
+            core::mem::size_of::<ArmState>(),
+            8 * 4 + 8 * (2 * MAX_JOINTS + 6) + 4 * 4
+        );
+        assert_eq!(
+            core::mem::size_of::<ArmCommand>(),
+            8 * 3 + 4 * 2 + 8 * (MAX_DU + MAX_JOINTS) + 4 * 2
+        );
     }
 }

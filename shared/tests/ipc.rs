@@ -35,9 +35,12 @@ fn payloads_round_trip_through_iceoryx2() {
     let state = ArmState {
         seq: 1,
         stamp_ns: 123,
-        q: [0.1, -1.2, 2.0],
-        ee_pos: [0.4, 0.1, 0.3],
-        ..ArmState::default()
+        ..ArmState::of_joints(
+            &[0.1, -1.2, 2.0, 0.3, 0.4, 0.5],
+            &[0.0; 6],
+            [0.4, 0.1, 0.3],
+            [0.0; 3],
+        )
     };
     round_trip(&node, &names.arm_state().unwrap(), state);
     round_trip(

@@ -242,6 +242,16 @@ pub enum UrSimError {
     /// A playback file that cannot be played.
     #[error(transparent)]
     Playback(#[from] playback::PlaybackError),
+    /// Two of its servers given one port.
+    #[error("{a} and {b} are both port {port}: each server needs its own (0 takes any free port)")]
+    SamePort {
+        /// One server's option.
+        a: &'static str,
+        /// The other's.
+        b: &'static str,
+        /// The port.
+        port: u16,
+    },
     /// A playback in lockstep.
     #[error(
         "--playback needs the real-time clock: in lockstep the arm moves only on a program's \
@@ -524,6 +534,23 @@ pub fn spawn(
     }
     ur5_shared::config::check_time_compression(cfg.time_compression)
         .map_err(UrSimError::TimeCompression)?;
+    let ports = [
+        ("rtde_port (--rtde-port)", Some(cfg.rtde_port)),
+        (
+            "secondary_port (--secondary-port)",
+            Some(cfg.secondary_port),
+        ),
+        ("dashboard_port (--dashboard-port)", cfg.dashboard_port),
+    ];
+    for (i, (a, pa)) in ports.iter().enumerate() {
+        for (b, pb) in &ports[i + 1..] {
+            if let (Some(port), Some(q)) = (*pa, *pb) {
+                if port != 0 && port == q {
+                    return Err(UrSimError::SamePort { a, b, port });
+                }
+            }
+        }
+    }
     let dt = cfg.series.cycle_s();
     let player = match &cfg.playback {
         Some(_) if cfg.lockstep => return Err(UrSimError::PlaybackLockstep),

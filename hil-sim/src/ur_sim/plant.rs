@@ -208,9 +208,13 @@ impl Arm {
     /// Advances one arm cycle under the goal and refreshes the snapshot. Returns a violation
     /// if the arm ended outside its joint limits (the caller raises a protective stop).
     pub fn step(&mut self) -> Option<Violation> {
-        if self.playback.is_some() {
+        if let Some(p) = self.playback.as_mut() {
             // Freedrive: the hand moves the arm; the physics and the servo goal stand still.
+            // A hand moves it only while it is powered, its brakes released and no stop holds
+            // it.
             self.cycle += 1;
+            let moves = self.robot_mode == RobotMode::Running && self.safety == SafetyMode::Normal;
+            p.advance(self.cycle as f64 * self.dt, moves);
             self.refresh();
             return None;
         }
@@ -281,7 +285,7 @@ impl Arm {
         s.target_speed_fraction = 1.0;
         s.actual_execution_time = 0.1;
         if let Some(p) = &self.playback {
-            let played = p.state(s.timestamp);
+            let played = p.state();
             s.actual_q = played.q;
             s.actual_qd = played.qd;
             s.target_q = played.q;
@@ -314,8 +318,7 @@ impl Arm {
 
     /// Once, when a loaded playback has passed its last row: the message that says so.
     pub fn playback_end_message(&mut self) -> Option<String> {
-        let time = self.cycle as f64 * self.dt;
-        self.playback.as_mut()?.end_message(time)
+        self.playback.as_mut()?.end_message()
     }
 }
 

@@ -265,8 +265,14 @@ pub struct Player {
     kin: UrKinematics,
     /// The file's name, for messages.
     pub name: String,
-    /// Arm time (s) of the file's t = 0, once started ([`Player::start`]).
-    started_at: Option<f64>,
+    /// Whether the file has started ([`Player::start`]).
+    started: bool,
+    /// File time (s): the arm time the file has played for.
+    file_s: f64,
+    /// Arm time (s) of the last [`Player::start`] or [`Player::advance`].
+    last: f64,
+    /// Whether the arm is held (not RUNNING, or a stop in force): it rests where the file is.
+    held: bool,
     ended: bool,
 }
 
@@ -290,7 +296,10 @@ impl Player {
             playback,
             kin: UrKinematics::new(model, ee_offset),
             name,
-            started_at: None,
+            started: false,
+            file_s: 0.0,
+            last: 0.0,
+            held: false,
             ended: false,
         }
     }
@@ -298,12 +307,32 @@ impl Player {
     /// Starts the file at arm time `time` (s), if not started yet: until then the arm rests at
     /// the first row's pose.
     pub fn start(&mut self, time: f64) {
-        self.started_at.get_or_insert(time);
+        if !self.started {
+            self.started = true;
+            self.last = time;
+        }
     }
 
-    /// File time (s) at arm time `time`: before the start, before the first row.
-    fn file_time(&self, time: f64) -> f64 {
-        self.started_at.map_or(f64::NEG_INFINITY, |t0| time - t0)
+    /// Arm time goes on to `time` (s): the file plays on only while `moves` (freedrive needs
+    /// the arm powered, its brakes released and no stop in force); otherwise the arm holds
+    /// where the file is.
+    pub fn advance(&mut self, time: f64, moves: bool) {
+        if self.started {
+            if moves {
+                self.file_s += time - self.last;
+            }
+            self.last = time;
+        }
+        self.held = !moves;
+    }
+
+    /// File time (s): before the start, before the first row.
+    fn file_time(&self) -> f64 {
+        if self.started {
+            self.file_s
+        } else {
+            f64::NEG_INFINITY
+        }
     }
 
     /// The first row's active joints (rad): where the arm starts.
@@ -312,16 +341,19 @@ impl Player {
         [q[0], q[1], q[2]]
     }
 
-    /// The arm at arm time `time` (s).
-    pub fn state(&self, time: f64) -> PlayedState {
-        let (q, qd) = self.playback.at(self.file_time(time));
+    /// The arm now (at rest while it is held).
+    pub fn state(&self) -> PlayedState {
+        let (q, mut qd) = self.playback.at(self.file_time());
+        if self.held {
+            qd = [0.0; 6];
+        }
         let (ee, ee_vel) = self.kin.ee_point_velocity(&q, &qd);
         PlayedState { q, qd, ee, ee_vel }
     }
 
-    /// Once, at the first arm time `time` (s) past the last row: the message that says so.
-    pub fn end_message(&mut self, time: f64) -> Option<String> {
-        if self.ended || self.file_time(time) < self.playback.duration() {
+    /// Once, when the file has played past its last row: the message that says so.
+    pub fn end_message(&mut self) -> Option<String> {
+        if self.ended || self.file_time() < self.playback.duration() {
             return None;
         }
         self.ended = true;
@@ -373,6 +405,16 @@ pub const TREMOR_RAD: f64 = 2e-4;
 pub const TREMOR_HZ: (f64, f64) = (8.0, 12.0);
 /// How far from the start pose a person puts the arm back (rad, each active joint, uniform).
 pub const RETURN_SPREAD_RAD: f64 = 2e-3;
+
+/// The most rows a generated file may have (about 100 MB of CSV): 120 motions at 1 kHz, 1204
+/// at the default 100 Hz.
+pub const MAX_ROWS: usize = 1_000_000;
+
+/// The longest a file of `motions` reaches can last (s): every draw at its maximum.
+fn longest_s(motions: usize) -> f64 {
+    let rest = 1.0 + REST_EXTRA_S.1;
+    rest + motions as f64 * (2.0 * REACH_S.1 + CORRECTION_S.1 + 2.0 * rest)
+}
 
 /// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on τ ∈ [0, 1] (Flash & Hogan 1985).
 fn min_jerk(tau: f64) -> f64 {
@@ -432,6 +474,31 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     if cfg.motions == 0 {
         return Err(bad("--motions 0: at least 1".into()));
     }
+    // Bounded before anything is allocated: the longest file these settings can give.
+    let longest_s = longest_s(cfg.motions);
+    if longest_s * cfg.rate_hz > MAX_ROWS as f64 {
+        return Err(bad(format!(
+            "--motions {} at --rate {} Hz: up to {:.0} rows ({longest_s:.0} s of reaches), more \
+             than {MAX_ROWS}: fewer motions or a lower rate",
+            cfg.motions,
+            cfg.rate_hz,
+            longest_s * cfg.rate_hz
+        )));
+    }
+    let limits = cfg.model.joint_limits();
+    let pose = UrKinematics::six(&cfg.start_q, &cfg.wrist_q);
+    for (j, &q) in pose.iter().enumerate() {
+        if !(q >= limits.lower[j] && q <= limits.upper[j]) {
+            return Err(bad(format!(
+                "the start pose's joint {j} ({}) at {q} rad is outside the {}'s limits \
+                 [{}, {}] rad",
+                if j < 3 { "task.start_q" } else { "sim.wrist_q" },
+                cfg.model,
+                limits.lower[j],
+                limits.upper[j]
+            )));
+        }
+    }
     if !(cfg.goal_half_side >= 0.0 && cfg.goal_half_side <= 0.1) {
         return Err(bad(format!(
             "goal region half side {} m: 0 to 0.1 m",
@@ -485,7 +552,6 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     let mut from = start;
     let mut t0 = 0.0;
     let mut row: u64 = 0;
-    let limits = cfg.model.joint_limits();
     for &(dur, to, moving) in &segments {
         let end = t0 + dur;
         loop {
@@ -540,6 +606,33 @@ mod tests {
             rate_hz: 100.0,
             seed,
         }
+    }
+
+    /// Settings that would allocate without bound, and a start pose outside the limits, are
+    /// refused before anything is generated, naming the setting.
+    #[test]
+    fn generation_is_bounded_and_names_a_bad_start_pose() {
+        let e = generate(&GenConfig {
+            motions: 200_000,
+            rate_hz: 1000.0,
+            ..gen(1)
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("--motions 200000") && e.contains("fewer motions"),
+            "{e}"
+        );
+        let longest = longest_s(120) * 1000.0;
+        assert!(longest <= MAX_ROWS as f64 && longest_s(121) * 1000.0 > MAX_ROWS as f64);
+        let mut far = gen(1);
+        far.start_q[2] = 7.0;
+        let e = generate(&far).unwrap_err().to_string();
+        assert!(
+            e.contains("joint 2 (task.start_q) at 7 rad") && e.contains("ur5e's limits"),
+            "{e}"
+        );
+        assert!(!e.contains("line"), "{e}");
     }
 
     #[test]
@@ -598,24 +691,34 @@ mod tests {
         assert!((qd[0] - 1.0).abs() < 1e-12 && (qd[5] - 2.0).abs() < 1e-12);
         assert_eq!(p.at(5.0), (p.q[1], [0.0; 6]));
         let mut player = Player::new(p, UrModel::Ur5, [0.0; 3], "f".into());
+        player.advance(3.0, true);
         assert_eq!(
-            player.state(3.0).q,
+            player.state().q,
             player.playback.q[0],
             "waits for its start"
         );
-        assert_eq!(player.end_message(3.0), None);
+        assert_eq!(player.end_message(), None);
         player.start(1.0);
         player.start(2.0);
+        player.advance(1.05, true);
         assert!(
-            (player.state(1.05).q[0] - 0.05).abs() < 1e-12,
+            (player.state().q[0] - 0.05).abs() < 1e-12,
             "started once, at 1 s"
         );
-        assert_eq!(player.end_message(1.05), None);
+        assert_eq!(player.end_message(), None);
+        // Held (powered off, braked, stopped): the file waits, the arm rests.
+        player.advance(1.5, false);
+        assert!((player.state().q[0] - 0.05).abs() < 1e-12);
+        assert_eq!(player.state().qd, [0.0; 6]);
+        assert_eq!(player.end_message(), None);
+        player.advance(1.525, true);
+        assert!((player.state().q[0] - 0.075).abs() < 1e-12, "plays on");
+        player.advance(1.575, true);
         assert!(player
-            .end_message(1.125)
+            .end_message()
             .unwrap()
             .contains("holds its last pose"));
-        assert_eq!(player.end_message(1.25), None, "said once");
+        assert_eq!(player.end_message(), None, "said once");
     }
 
     #[test]

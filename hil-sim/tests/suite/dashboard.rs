@@ -346,3 +346,98 @@ fn dashboard_unlocks_a_protective_stop_5_s_of_arm_time_after_it() {
     let sum = sim.stop();
     assert_eq!((sum.protective_stops, sum.programs), (1, 2), "{sum:?}");
 }
+
+/// Freedrive needs a powered arm with its brakes released: a playback does not move an arm
+/// that is powered off (it waits where the file is, at rest) and plays on once `power on` and
+/// `brake release` have made it RUNNING. Real time at 10 times; the assertions are on arm time.
+#[test]
+fn a_playback_moves_the_arm_only_while_it_runs() {
+    let dir = std::env::temp_dir().join(format!("ur-sim-playback-off-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("reach.csv");
+    let w = "-1.5707963267948966,1.5707963267948966,0";
+    // 1 s from q0 = 0 to 0.1 rad, a row every 0.1 s.
+    let rows: String = (0..=10)
+        .map(|k| format!("{},{},-2,2.4,{w}\n", k as f64 * 0.1, k as f64 * 0.01))
+        .collect();
+    std::fs::write(&csv, format!("t,q0,q1,q2,q3,q4,q5\n{rows}")).unwrap();
+    let sim = ur_sim::spawn(
+        &TaskConfig::default(),
+        &SimConfig::default(),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            dashboard_port: Some(0),
+            time_compression: 10.0,
+            start_powered_off: true,
+            playback: Some(csv),
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim starts");
+    let (mut c, recipe) = Client::ready(sim.rtde_addr);
+    let t0 = c.state(&recipe).unwrap().timestamp;
+    // Powered off for 2 s of arm time: where the file starts, at rest.
+    loop {
+        let s = c.state(&recipe).unwrap();
+        assert_eq!(s.robot_mode, RobotMode::PowerOff.code());
+        assert_eq!(
+            (s.actual_q[0], s.actual_qd[0]),
+            (0.0, 0.0),
+            "at {} s",
+            s.timestamp
+        );
+        if s.timestamp > t0 + 2.0 {
+            break;
+        }
+    }
+    let mut d = dash(&sim);
+    assert_eq!(d.ask("power on"), "Powering on");
+    assert_eq!(d.ask("brake release"), "Brake releasing");
+    // Running: the file plays (1 s), then the arm holds its last row.
+    let deadline = Instant::now() + DEADLINE;
+    let t1 = loop {
+        let s = c.state(&recipe).unwrap();
+        if s.robot_mode == RobotMode::Running.code() {
+            break s.timestamp;
+        }
+        assert!(Instant::now() < deadline, "never RUNNING");
+    };
+    let last = loop {
+        let s = c.state(&recipe).unwrap();
+        if s.timestamp > t1 + 2.0 {
+            break s;
+        }
+    };
+    assert!(
+        (last.actual_q[0] - 0.1).abs() < 1e-12,
+        "{:?}",
+        last.actual_q
+    );
+    sim.stop();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Two of ur-sim's servers on one port are refused, naming both options (was the OS's
+/// "Address already in use" naming neither).
+#[test]
+fn two_servers_on_one_port_are_named() {
+    let e = ur_sim::spawn(
+        &TaskConfig::default(),
+        &SimConfig::default(),
+        &UrSimConfig {
+            rtde_port: 30977,
+            secondary_port: 30977,
+            ..UrSimConfig::default()
+        },
+    )
+    .err()
+    .expect("refused")
+    .to_string();
+    assert!(
+        e.contains(
+            "rtde_port (--rtde-port) and secondary_port (--secondary-port) are both port 30977"
+        ),
+        "{e}"
+    );
+}

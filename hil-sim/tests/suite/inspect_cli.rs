@@ -99,3 +99,72 @@ fn inspect_prints_the_flange_of_the_model_asked_for() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `hil-sim playback-gen` writes a new file and never replaces one: an existing CSV or a FIFO
+/// is refused, untouched, before anything is generated; so are settings that would allocate
+/// without bound and a start pose outside the limits, naming the setting.
+#[cfg(unix)]
+#[test]
+fn playback_gen_never_replaces_a_file_and_bounds_its_output() {
+    let dir = std::env::temp_dir().join(format!("hil-sim-playback-gen-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let gen = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_hil-sim"))
+            .arg("playback-gen")
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let csv = dir.join("reaches.csv");
+    let csv_s = csv.to_str().unwrap();
+    let (code, err) = gen(&["--motions", "1", "--out", csv_s]);
+    assert_eq!(code, Some(0), "{err}");
+    let first = std::fs::read(&csv).unwrap();
+    let (code, err) = gen(&["--motions", "1", "--seed", "2", "--out", csv_s]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("exists") && err.contains("never replaces"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&csv).unwrap(), first);
+    let fifo = dir.join("fifo");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    let (code, err) = gen(&["--motions", "1", "--out", fifo.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+    let big = dir.join("big.csv");
+    let (code, err) = gen(&[
+        "--motions",
+        "200000",
+        "--rate",
+        "1000",
+        "--out",
+        big.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("fewer motions or a lower rate"), "{err}");
+    assert!(!big.exists());
+    let cfg = dir.join("far.toml");
+    std::fs::write(&cfg, "[task]\nstart_q = [0.0, -1.5, 4.0]\n").unwrap();
+    let (code, err) = gen(&[
+        "--config",
+        cfg.to_str().unwrap(),
+        "--out",
+        big.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("joint 2 (task.start_q) at 4 rad") && !err.contains("line"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

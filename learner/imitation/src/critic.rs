@@ -23,6 +23,7 @@ use crate::cost::composite::D_IN;
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, DiscriminatorConfig, Normalizer, TrainStats, Workspace};
 use crate::rollout::Episode;
+use crate::settings::CriticSettings;
 use crate::ImitationError;
 
 /// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row (`count · (T − 1)` ×
@@ -118,6 +119,18 @@ impl Critic {
             half_life: 0.0,
             seed,
         })
+    }
+
+    /// The critic of a learner with critic settings `settings` and run seed `seed`: [`Critic::new`]
+    /// on `settings.discriminator`, on the schedule `settings.updates`,
+    /// `settings.lr_half_life` ([`Critic::with_schedule`]).
+    pub fn from_settings(
+        expert: Mat<f64>,
+        settings: CriticSettings<'_>,
+        seed: u64,
+    ) -> Result<Self, ImitationError> {
+        Ok(Self::new(expert, settings.discriminator, seed)?
+            .with_schedule(settings.updates, settings.lr_half_life))
     }
 
     /// This critic with `updates` WGAN-GP calls per iteration (at least 1) and a learning-rate

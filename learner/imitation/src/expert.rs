@@ -76,7 +76,7 @@ pub struct ExpertConfig {
 impl ExpertConfig {
     /// Refuses settings that cannot work, naming the setting and its range
     /// (docs/reliability.md): counts in their ranges up to
-    /// [`crate::gaifo::GaifoConfig::MAX_COUNT`] (samples ≥ 2 for the dynamics fit), `init_var` in (0, 10] rad², the cost weights finite and ≥ 0 with
+    /// [`crate::settings::MAX_COUNT`] (samples ≥ 2 for the dynamics fit), `init_var` in (0, 10] rad², the cost weights finite and ≥ 0 with
     /// α > 0, the square's half side in (0, 1] m, then the task, the arm and GPS's settings.
     pub fn validate(&self) -> Result<(), ImitationError> {
         crate::error::check_counts(
@@ -87,7 +87,7 @@ impl ExpertConfig {
                 ("random_episodes", self.random_episodes, 1),
                 ("demos", self.demos, 1),
             ],
-            crate::gaifo::GaifoConfig::MAX_COUNT,
+            crate::settings::MAX_COUNT,
         )
         .map_err(ImitationError::Config)?;
         let c = &self.cost;

@@ -31,7 +31,6 @@ use std::time::Instant;
 use faer::Mat;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 
@@ -40,156 +39,18 @@ use crate::cost::composite::{CompositeCost, CompositeWorkspace};
 use crate::cpu::thread_cpu_s;
 use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
-use crate::discriminator::{
-    AdamConfig, Discriminator, DiscriminatorConfig, PenaltySpace, TrainStats,
-};
+use crate::discriminator::{Discriminator, TrainStats};
 use crate::iteration::LqrIteration;
 pub use crate::iteration_log::GaifoLog;
 use crate::learn::{Learn, LinGaussLearn};
 use crate::rollout::{Arms, Episode, SampleList};
+/// LQR+GAIfO's settings; they live in [`crate::settings`] because MDGPS runs each of its
+/// conditions with them and GAIfO (PPO) takes its shared values from them.
+pub use crate::settings::GaifoConfig;
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
-use gps::algorithm::AlgorithmConfig;
-use gps::dynamics::lr_prior::LrPriorConfig;
-use gps::dynamics::prior_gmm::PriorGmmConfig;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::snapshot::Snapshot;
-use gps::traj_opt::lqr::TrajOptConfig;
-
-/// Settings of an LQR+GAIfO run (TOML: `learner train --config FILE`). The task (goal, start
-/// pose, T, dt) comes from the demonstrations file.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct GaifoConfig {
-    /// The simulated arm of in-process runs (docs/design.md §2).
-    pub sim: SimConfig,
-    /// Noisy episodes per iteration N; paper §5: 5 (docs/design.md §1.3 step 1).
-    pub samples: usize,
-    /// Iterations to run (docs/design.md §1.3).
-    pub iterations: usize,
-    /// Initial controller: hold the start pose with this exploration variance, rad²
-    /// (docs/design.md §5 D11).
-    pub init_var: f64,
-    /// `Discriminator::train` calls per iteration, each `discriminator.n_critic` Adam steps
-    /// (docs/design.md §5 D6).
-    pub critic_updates: usize,
-    /// Half-life of the critic's learning rate, iterations: iteration i trains at
-    /// `discriminator.adam.lr · 2^(−i / h)`; 0 keeps it constant (docs/design.md §5 D25).
-    pub critic_lr_half_life: f64,
-    /// GPS step-size adaptation; off: the critic's cost changes every iteration
-    /// (docs/design.md §5 D5).
-    pub adapt_step: bool,
-    /// Project the samples' mean ∇²D per step on the PSD cone before the chain rule
-    /// (docs/design.md §5 D3, D4).
-    pub psd_hessian: bool,
-    /// The critic: 2 × 32 tanh, Adam 3e-3 / β1 0.5, 100 steps of batch 16 per call, gradient
-    /// penalty in normalised inputs (docs/design.md §5 D6–D8, D25).
-    pub discriminator: DiscriminatorConfig,
-    /// Seed of every random draw of the run: noise, GMM, critic (docs/design.md §3.7).
-    pub seed: u64,
-    /// GPS algorithm settings; KL step 0.2 per time step (docs/design.md §1.3 step 6).
-    pub algorithm: AlgorithmConfig,
-    /// GPS dynamics prior on the last 10 trajectories with ≤ 5 EM iterations, for the
-    /// learner-time budget (docs/design.md §5 D9).
-    pub prior: PriorGmmConfig,
-    /// GPS dynamics fit (docs/design.md §1.3 step 2).
-    pub fit: LrPriorConfig,
-    /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
-    pub traj_opt: TrajOptConfig,
-}
-
-impl Default for GaifoConfig {
-    fn default() -> Self {
-        Self {
-            sim: SimConfig::default(),
-            samples: 5,
-            iterations: 20,
-            init_var: 0.05,
-            critic_updates: 1,
-            // 40 (25 before): on the five workspace goals × 10 seeds every run stays within
-            // 1.5 cm from iteration 20 (49 of 50 with 25; docs/design.md §5 D37).
-            critic_lr_half_life: 40.0,
-            adapt_step: false,
-            psd_hessian: true,
-            discriminator: DiscriminatorConfig {
-                hidden: vec![32, 32],
-                n_critic: 100,
-                adam: AdamConfig {
-                    lr: 3e-3,
-                    beta1: 0.5,
-                    beta2: 0.9,
-                    eps: 1e-8,
-                },
-                batch_size: 16,
-                penalty_space: PenaltySpace::Normalised,
-                // 1 cm, with the raw inputs kept beside the warped ones: on five workspace
-                // goals the final distance at iterations 20 / 50 fell from 9.4 / 4.6 mm to
-                // 5.4 / 1.1 mm (docs/design.md §5 D36).
-                near_goal_scale: 0.01,
-                near_goal_keep_raw: true,
-                ..DiscriminatorConfig::default()
-            },
-            seed: 0,
-            algorithm: AlgorithmConfig::default(),
-            prior: PriorGmmConfig {
-                max_samples: 11,
-                max_iterations: 5,
-                ..PriorGmmConfig::default()
-            },
-            fit: LrPriorConfig::default(),
-            traj_opt: TrajOptConfig::default(),
-        }
-    }
-}
-
-impl GaifoConfig {
-    /// Largest accepted `samples`, `iterations`, `critic_updates` (the critic's own bounds:
-    /// [`DiscriminatorConfig::validate`]): far above any use, low enough that a typo cannot ask
-    /// for terabytes up front.
-    pub const MAX_COUNT: usize = DiscriminatorConfig::MAX_COUNT;
-
-    /// Checks every setting's range before anything is allocated or run.
-    pub fn validate(&self) -> Result<(), ImitationError> {
-        let bad = |name: &str, v: &dyn std::fmt::Debug, allowed: &str| {
-            Err(ImitationError::Config(format!(
-                "{name} = {v:?}: must be {allowed}"
-            )))
-        };
-        let count = |n: usize| (1..=Self::MAX_COUNT).contains(&n);
-        let allowed = format!("in 1..={}", Self::MAX_COUNT);
-        if self.samples < 2 || self.samples > Self::MAX_COUNT {
-            return bad(
-                "samples",
-                &self.samples,
-                &format!("in 2..={} (the dynamics fit needs 2)", Self::MAX_COUNT),
-            );
-        }
-        if !count(self.iterations) {
-            return bad("iterations", &self.iterations, &allowed);
-        }
-        if !count(self.critic_updates) {
-            return bad("critic_updates", &self.critic_updates, &allowed);
-        }
-        if !(self.init_var.is_finite() && self.init_var > 0.0 && self.init_var <= 10.0) {
-            return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
-        }
-        if !(self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0) {
-            return bad(
-                "critic_lr_half_life",
-                &self.critic_lr_half_life,
-                "finite and >= 0 (0 = constant)",
-            );
-        }
-        self.discriminator.validate()?;
-        crate::error::check_arm_and_gps(
-            &self.sim,
-            &self.algorithm,
-            &self.prior,
-            &self.fit,
-            &self.traj_opt,
-        )
-    }
-}
 
 /// The state of an LQR+GAIfO run; [`LqrGaifo::learn`] runs steps 2–6 of Algorithm 1.
 pub struct LqrGaifo {
@@ -206,8 +67,7 @@ impl LqrGaifo {
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let critic = Critic::new(expert_transitions(&demos), &cfg.discriminator, cfg.seed)?
-            .with_schedule(cfg.critic_updates, cfg.critic_lr_half_life);
+        let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),
@@ -418,47 +278,5 @@ impl Learn for LqrGaifo {
 impl LinGaussLearn for LqrGaifo {
     fn policy(&self) -> &LinGaussPolicy {
         self.lqr.policy()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn settings_that_cannot_work_are_refused_naming_the_setting() {
-        assert!(GaifoConfig::default().validate().is_ok());
-        let cases: Vec<(&str, Box<dyn Fn(&mut GaifoConfig)>)> = vec![
-            ("kl_step", Box::new(|c| c.algorithm.kl_step = -1.0)),
-            ("kl_step", Box::new(|c| c.algorithm.kl_step = f64::NAN)),
-            ("init_var", Box::new(|c| c.init_var = 1e300)),
-            ("min_eta/max_eta", Box::new(|c| c.traj_opt.max_eta = 1e-9)),
-            ("max_clusters", Box::new(|c| c.prior.max_clusters = 0)),
-            ("regularization", Box::new(|c| c.fit.regularization = -1.0)),
-            (
-                "critic_updates",
-                Box::new(|c| c.critic_updates = 1_000_000_000),
-            ),
-            (
-                "n_critic/batch_size",
-                Box::new(|c| c.discriminator.batch_size = 1_000_000_000),
-            ),
-            (
-                "hidden",
-                Box::new(|c| c.discriminator.hidden = vec![1_000_000_000]),
-            ),
-            ("samples", Box::new(|c| c.samples = 1_000_000_000)),
-            ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
-            (
-                "critic_lr_half_life",
-                Box::new(|c| c.critic_lr_half_life = -2.0),
-            ),
-        ];
-        for (name, set) in cases {
-            let mut c = GaifoConfig::default();
-            set(&mut c);
-            let e = c.validate().expect_err(name).to_string();
-            assert!(e.contains(name), "{name}: {e}");
-        }
     }
 }

@@ -7,6 +7,8 @@
 //! - [`discriminator`]: the WGAN-GP critic D(s, s') (MLP, Adam, persistence), step 3;
 //! - [`critic`]: its one trainer (refit at iteration 0, the per-iteration update, checkpoint),
 //!   owned by each of LQR+GAIfO, MDGPS and GAIfO (PPO);
+//! - [`settings`]: the settings the learners share (the critic's, LQR+GAIfO's that MDGPS runs
+//!   per condition, the count bound), below all of them so that none imports another's;
 //! - [`cost`]: the true task cost ([`cost::task`], the expert's) and the composite cost
 //!   C_t(s, a) = D(s, F_t [s; a] + f_t) with its expansion ([`cost::composite`]), steps 4–5;
 //! - [`iteration`]: step 6 shared by both LQR learners (cost averaging, step size, KL-bounded
@@ -14,6 +16,7 @@
 //! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
 //! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`]; its log row
 //!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
+//! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor and MDGPS's global policy;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
@@ -35,7 +38,9 @@ pub mod iteration;
 pub mod iteration_log;
 pub mod learn;
 pub mod mdgps;
+pub mod mlp_policy;
 pub mod ppo;
 pub mod rollout;
+pub mod settings;
 
 pub use error::ImitationError;

@@ -111,19 +111,8 @@ fn check_export_target(input: &Path, out: &Path, format: Format) -> anyhow::Resu
         out.display(),
         input.display()
     );
-    if format == Format::Lerobot && out.is_dir() {
-        let mut entries = std::fs::read_dir(out)
-            .with_context(|| format!("reading {}", out.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()));
-        if let Some(first) = entries.next() {
-            anyhow::bail!(
-                "{} already holds files (e.g. {}): a LeRobot export goes into a new or empty \
-                 folder, so that no older data file is read back with the new dataset; delete \
-                 it or choose another folder",
-                out.display(),
-                first.display()
-            );
-        }
+    if format == Format::Lerobot {
+        check_lerobot_target(out)?;
     }
     anyhow::ensure!(
         format == Format::Lerobot || !out.is_dir(),
@@ -131,6 +120,27 @@ fn check_export_target(input: &Path, out: &Path, format: Format) -> anyhow::Resu
         out.display(),
         if format == Format::Csv { "CSV" } else { "MCAP" }
     );
+    Ok(())
+}
+
+/// A LeRobot dataset goes into a new or empty folder: data files of an older dataset left
+/// beside the new `meta/info.json` would be read back with it (`dataset export`, `record`).
+pub(crate) fn check_lerobot_target(out: &Path) -> anyhow::Result<()> {
+    if !out.is_dir() {
+        return Ok(());
+    }
+    let mut entries = std::fs::read_dir(out)
+        .with_context(|| format!("reading {}", out.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()));
+    if let Some(first) = entries.next() {
+        anyhow::bail!(
+            "{} already holds files (e.g. {}): a LeRobot export goes into a new or empty \
+             folder, so that no older data file is read back with the new dataset; delete it or \
+             choose another folder",
+            out.display(),
+            first.display()
+        );
+    }
     Ok(())
 }
 
@@ -184,18 +194,20 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
             Ok(())
         }
         DatasetCmd::Check(a) => {
-            let model = crate::io::demos::model_of(&a.demos)?.unwrap_or_default();
+            let recorded = crate::io::demos::model_of(&a.demos)?;
+            let model = recorded.unwrap_or_default();
             let sim = ur5_shared::config::SimConfig::for_model(model);
             let d = crate::io::demos::load_checked(&a.demos, &sim)?;
             let summary = serde_json::json!({"command": "dataset check", "demos": a.demos,
-                "model": model, "count": d.count, "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal,
-                "start_q_rad": d.start_q, "cost_random": d.cost_random, "cost_expert": d.cost_expert});
+                "model": model, "model_recorded": recorded.is_some(), "count": d.count,
+                "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal, "start_q_rad": d.start_q,
+                "cost_random": d.cost_random, "cost_expert": d.cost_expert});
             if a.json {
                 println!("{summary}");
             } else {
                 eprintln!(
                     "{}: {} demonstrations of T = {} at dt = {} s, goal {:?} m, start {:?} rad, \
-                     C_random {:.4}, C_expert {:.4}: consistent with the {model}",
+                     C_random {:.4}, C_expert {:.4}: consistent with the {model}{}",
                     a.demos.display(),
                     d.count,
                     d.horizon,
@@ -203,7 +215,17 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
                     d.goal,
                     d.start_q,
                     d.cost_random,
-                    d.cost_expert
+                    d.cost_expert,
+                    if recorded.is_some() {
+                        String::new()
+                    } else {
+                        format!(
+                            ", assumed: the file names no arm model, and another arm's \
+                             demonstrations can pass the {model}'s checks (end-effector points \
+                             within 1 cm); train with the [sim] model of the arm they were \
+                             recorded on"
+                        )
+                    }
                 );
             }
             Ok(())

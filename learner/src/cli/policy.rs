@@ -10,6 +10,7 @@ use serde::Serialize;
 use imitation::mdgps::policy::GlobalActor;
 use imitation::rollout::run_episode;
 use ur5_shared::config::{parse_triple, SimConfig, TaskConfig};
+use ur5_shared::UrModel;
 
 use crate::arm::SimArm;
 use crate::io::policy::load_policy;
@@ -87,6 +88,8 @@ pub struct EvalSummary {
     pub final_distance_m: f64,
     /// Task cost C(τ) of the episode (m, docs/design.md §1.6).
     pub task_cost: f64,
+    /// The arm it ran on: the policy file's.
+    pub model: UrModel,
 }
 
 /// Runs `learner policy`.
@@ -95,8 +98,10 @@ pub fn run(cmd: PolicyCmd) -> anyhow::Result<()> {
         PolicyCmd::Eval(args) => {
             let s = eval(&args)?;
             eprintln!(
-                "policy {} to goal {:?}: final distance {:.4} m, task cost {:.4} ({} steps)",
+                "policy {} on the {} to goal {:?}: final distance {:.4} m, task cost {:.4} ({} \
+                 steps)",
                 s.policy.display(),
+                s.model,
                 s.goal,
                 s.final_distance_m,
                 s.task_cost,
@@ -172,9 +177,10 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
         "--steps {}: an episode needs at least 2 steps (its task cost is undefined for 1)",
         task.horizon
     );
+    // The policy's own arm: its kinematics and limits are the policy's world.
     let sim = SimConfig {
         mode: file.mode,
-        ..SimConfig::default()
+        ..SimConfig::for_model(file.model)
     };
     let mut arm = SimArm::new(sim, task.dt).context("building the simulated arm")?;
     let mut ws = file.policy.workspace();
@@ -197,5 +203,6 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
         steps: task.horizon,
         final_distance_m: ep.final_distance(),
         task_cost: ep.task_cost(),
+        model: file.model,
     })
 }

@@ -2,18 +2,24 @@
 //! ([`crate::record`]). The RTDE client is the shared one (`ur_protocol::client`), used as an
 //! observer: no program is sent.
 
+use std::io::Write;
 use std::net::Ipv4Addr;
-use std::path::PathBuf;
-use std::time::Duration;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::UrModel;
 
 use ur_protocol::client::{check_modes, Client, ClientError};
-use ur_protocol::{OutputRecipe, RobotState};
+use ur_protocol::clock::ClockWatch;
+use ur_protocol::dashboard::Dashboard;
+use ur_protocol::modes::{robot_mode_name, safety_mode_name};
+use ur_protocol::{OutputRecipe, RobotMode, RobotState, SafetyMode};
 
 use crate::record::{steps_checked, to_recorded_demos, Event, Sample, Segmenter};
 
@@ -35,6 +41,14 @@ pub struct RecordArgs {
     /// RTDE port of the robot.
     #[arg(long, default_value_t = 30004)]
     pub rtde_port: u16,
+    /// The robot's dashboard-server port: the recorder asks the robot's model there and refuses
+    /// another than the one it records for (its kinematics give the end-effector point).
+    #[arg(long, default_value_t = 29999)]
+    pub dashboard_port: u16,
+    /// Record without asking the robot's model (a robot whose dashboard server cannot be
+    /// reached): the kinematics are --model's, unchecked.
+    #[arg(long)]
+    pub no_check_model: bool,
     /// Demonstrations to record; recording stops after the last.
     #[arg(long, default_value_t = 5)]
     pub episodes: usize,
@@ -52,8 +66,9 @@ pub struct RecordArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "npz")]
     pub format: RecordFormat,
-    /// Give up (with an error) after this much arm time (s) without all the demonstrations
-    /// (0: never).
+    /// Stop after this much time (s) without all the demonstrations, arm time (the robot's
+    /// clock) or wall time, whichever passes first (0: never); the finished demonstrations are
+    /// kept, and the exit is an error.
     #[arg(long, default_value_t = 0.0)]
     pub max_time_s: f64,
     /// Print a one-line JSON summary at the end (stdout).
@@ -96,6 +111,110 @@ fn load_config(args: &RecordArgs) -> anyhow::Result<RecordConfig> {
     Ok(cfg)
 }
 
+/// The folder of a recording, claimed before anything is recorded (so that a path that cannot
+/// take it fails first, and a second recorder on one `--out` is refused rather than replacing
+/// the first one's demonstrations): the claim is the file `OUT/.recording` (created
+/// exclusively, naming the process), deleted when the recorder ends.
+struct Claim {
+    dir: PathBuf,
+    file: PathBuf,
+    /// Whether the recorder created `dir` (an empty one is removed again).
+    created: bool,
+}
+
+/// The claim file's name inside `--out`.
+const CLAIM: &str = ".recording";
+
+impl Claim {
+    fn take(dir: &Path, format: RecordFormat) -> anyhow::Result<Self> {
+        let file = dir.join(CLAIM);
+        let held = || -> anyhow::Error {
+            let who = std::fs::read_to_string(&file).unwrap_or_default();
+            let pid: Option<i32> = who.split_whitespace().nth(1).and_then(|p| p.parse().ok());
+            // SAFETY: kill with signal 0 only asks whether the process exists.
+            let alive = pid.is_some_and(|p| p > 0 && unsafe { libc::kill(p, 0) } == 0);
+            if alive {
+                anyhow::anyhow!(
+                    "{} is being recorded into by another `learner record` ({}): two recorders \
+                     on one --out would replace each other's demonstrations; choose another --out",
+                    dir.display(),
+                    who.trim()
+                )
+            } else {
+                anyhow::anyhow!(
+                    "{} holds {} ({}), left by a recorder that no longer runs (killed?): its \
+                     demonstrations were not written; delete the file and record again",
+                    dir.display(),
+                    file.display(),
+                    who.trim()
+                )
+            }
+        };
+        anyhow::ensure!(
+            !dir.exists() || dir.is_dir(),
+            "--out {} is a file: give a folder (the recording goes into it)",
+            dir.display()
+        );
+        if file.exists() {
+            return Err(held());
+        }
+        match format {
+            RecordFormat::Npz => {
+                let out = dir.join("demos.npz");
+                anyhow::ensure!(
+                    !out.exists(),
+                    "{} exists: record into another --out (recordings are never overwritten)",
+                    out.display()
+                );
+            }
+            RecordFormat::Lerobot => super::dataset::check_lerobot_target(dir)?,
+        }
+        let created = !dir.exists();
+        crate::io::create_dir(dir)?;
+        let mut f = match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&file)
+        {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Err(held()),
+            Err(e) => {
+                return Err(e).with_context(|| format!("creating {}", file.display()));
+            }
+        };
+        let since = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        writeln!(f, "pid {} since Unix time {since}", std::process::id())
+            .with_context(|| format!("writing {}", file.display()))?;
+        Ok(Self {
+            dir: dir.to_owned(),
+            file,
+            created,
+        })
+    }
+}
+
+impl Drop for Claim {
+    fn drop(&mut self) {
+        std::fs::remove_file(&self.file).ok();
+        if self.created {
+            // Only if nothing was written into it.
+            std::fs::remove_dir(&self.dir).ok();
+        }
+    }
+}
+
+/// SIGINT or SIGTERM arrived: the recording stops and keeps its finished demonstrations.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::Relaxed);
+}
+
+/// A status line at least this often while nothing happens (s of arm time).
+const STATUS_EVERY_S: f64 = 5.0;
+
 /// Runs `learner record`.
 pub fn run(args: RecordArgs) -> anyhow::Result<()> {
     let cfg = load_config(&args)?;
@@ -111,127 +230,115 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         "--max-time-s {}: a time in s (0: never)",
         args.max_time_s
     );
-    let out_file = args.out.join("demos.npz");
-    match args.format {
-        RecordFormat::Npz => anyhow::ensure!(
-            !out_file.exists(),
-            "{} exists: record into another --out (recordings are never overwritten)",
-            out_file.display()
-        ),
-        RecordFormat::Lerobot => anyhow::ensure!(
-            !args.out.join("meta").exists(),
-            "{} holds a dataset: record into another --out (recordings are never overwritten)",
-            args.out.display()
-        ),
-    }
+    let claim = Claim::take(&args.out, args.format)?;
     let timeout = Duration::from_secs(10);
+    if !args.no_check_model {
+        check_model(
+            std::net::SocketAddr::from((host, args.dashboard_port)),
+            cfg.sim.model,
+            timeout,
+        )?;
+    }
     let addr = std::net::SocketAddr::from((host, args.rtde_port));
-    let mut rtde = Observer::connect(addr, timeout)
-        .with_context(|| format!("connecting to RTDE at {host}:{}", args.rtde_port))?;
+    let mut rtde = Observer::connect(addr, timeout).map_err(|e| {
+        let wrong_port = matches!(
+            e,
+            ClientError::Frame { .. }
+                | ClientError::Decode { .. }
+                | ClientError::Unexpected { .. }
+                | ClientError::NoProtocol
+        );
+        anyhow::Error::new(e).context(if wrong_port {
+            format!(
+                "{addr} answers, but not in RTDE: wrong --rtde-port? (a UR's RTDE port is \
+                 30004; 29999 is its dashboard server, 30001-30003 its primary and secondary \
+                 interfaces)"
+            )
+        } else {
+            format!("connecting to RTDE at {addr}")
+        })
+    })?;
     // The arm's package rate from its own clock: the median step of 25 consecutive packages'
     // timestamps, so that a package the controller skipped (a loaded machine, a busy network)
     // does not halve it.
+    let mut clock = ClockWatch::new(rtde.state.timestamp);
     let rate = 1.0 / {
         let mut steps = Vec::with_capacity(25);
         let mut a = rtde.state.timestamp;
         for _ in 0..25 {
             let b = rtde.next_state()?.timestamp;
+            clock.check(b)?;
             steps.push(b - a);
             a = b;
         }
         steps.sort_by(f64::total_cmp);
         steps[steps.len() / 2]
     };
+    anyhow::ensure!(
+        rate.is_finite() && rate > 0.0,
+        "the robot's clock (RTDE timestamp) advanced by a median of {} s per package: its \
+         packages cannot be timed (restart the robot's controller)",
+        1.0 / rate
+    );
     eprintln!(
         "recording {} demonstrations of T = {} steps of {} s from {host}:{} (packages at about \
-         {rate:.0} Hz): rest at the start pose for {} s, move, rest at the end for {} s",
+         {rate:.0} Hz) into {}: rest at the start pose for {} s, move, rest at the end for {} s; \
+         Ctrl-C stops and keeps the finished demonstrations",
         args.episodes,
         cfg.task.horizon,
         cfg.task.dt,
         args.rtde_port,
+        args.out.display(),
         crate::record::REST_S,
         crate::record::REST_S
     );
-    let mut seg = Segmenter::default();
-    let mut kept = Vec::new();
-    let mut skipped = 0usize;
-    let t_begin = rtde.state.timestamp;
-    while kept.len() < args.episodes {
-        let s = rtde.next_state().with_context(|| {
-            format!(
-                "reading RTDE after {} of {} demonstrations",
-                kept.len(),
-                args.episodes
-            )
-        })?;
-        if args.max_time_s > 0.0 && s.timestamp - t_begin > args.max_time_s {
-            anyhow::bail!(
-                "{} s of arm time passed with {} of {} demonstrations recorded (--max-time-s)",
-                args.max_time_s,
-                kept.len(),
-                args.episodes
-            );
-        }
-        let sample = Sample {
-            t: s.timestamp,
-            q: s.actual_q,
-            qd: s.actual_qd,
-        };
-        match seg.push(sample) {
-            None => {}
-            Some(Event::StartPose(p)) => eprintln!(
-                "start pose at t = {:.2} s: {:?} rad",
-                sample.t,
-                p.map(|v| (v * 1e4).round() / 1e4)
-            ),
-            Some(Event::Discarded { at, why }) => {
-                skipped += 1;
-                eprintln!("a motion at t = {at:.2} s is not a demonstration: {why}");
-            }
-            Some(Event::Demonstration(d)) => match steps_checked(&d, &cfg.task, &cfg.sim) {
-                Ok(steps) => {
-                    let (q, _) = steps.last().expect("T ≥ 2");
-                    let kin =
-                        ur5_shared::kinematics::UrKinematics::new(cfg.sim.model, cfg.sim.ee_offset);
-                    let ee = kin.ee_point(q);
-                    kept.push(steps);
-                    eprintln!(
-                        "demonstration {}/{}: from t = {:.2} s, {} packages, ends at ({:.4}, {:.4}, {:.4}) m",
-                        kept.len(),
-                        args.episodes,
-                        d[0].t,
-                        d.len(),
-                        ee[0],
-                        ee[1],
-                        ee[2]
-                    );
-                }
-                Err(why) => {
-                    skipped += 1;
-                    eprintln!("skipped the motion from t = {:.2} s: {why}", d[0].t);
-                }
-            },
-        }
+    STOP.store(false, Ordering::Relaxed);
+    // SAFETY: the handler only stores to an atomic.
+    unsafe {
+        libc::signal(
+            libc::SIGINT,
+            on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+        libc::signal(
+            libc::SIGTERM,
+            on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
     }
-    let start = seg
-        .start_pose()
-        .expect("a demonstration needs the start pose");
-    let (demos, report) = to_recorded_demos(&kept, &start, &cfg.task, &cfg.sim)?;
-    crate::io::create_dir(&args.out)?;
+    let kin = UrKinematics::new(cfg.sim.model, cfg.sim.ee_offset);
+    let mut rec = Recording {
+        seg: Segmenter::new(kin),
+        kept: Vec::new(),
+        skipped: 0,
+    };
+    let stopped = rec.run(&mut rtde, &mut clock, &args, &cfg).err();
+    let finished = rec.kept.len();
+    let Some(start) = rec.seg.start_pose().filter(|_| finished > 0) else {
+        drop(claim);
+        return Err(stopped
+            .unwrap_or_else(|| anyhow::anyhow!("no demonstrations were recorded"))
+            .context(format!(
+                "no demonstration was finished, nothing written to {}",
+                args.out.display()
+            )));
+    };
+    let (demos, report) = to_recorded_demos(&rec.kept, &start, &cfg.task, &cfg.sim)?;
     let written = match args.format {
         RecordFormat::Npz => {
-            crate::io::demos::save(&demos, &out_file)?;
-            out_file
+            let f = args.out.join("demos.npz");
+            crate::io::demos::save(&demos, &f)?;
+            f
         }
         RecordFormat::Lerobot => {
             crate::io::lerobot::export(&crate::io::foreign::from_demos(&demos), &args.out)?;
             args.out.clone()
         }
     };
+    drop(claim);
     eprintln!(
-        "done: {} demonstrations -> {}; start_q {:?} rad, goal ({:.4}, {:.4}, {:.4}) m (spread: \
-         max {:.4} m, rms {:.4} m from it); C_expert {:.4}, C_random {:.4}; {skipped} motions \
+        "{}: {} demonstrations -> {}; start_q {:?} rad, goal ({:.4}, {:.4}, {:.4}) m (spread: \
+         max {:.4} m, rms {:.4} m from it); C_expert {:.4}, C_random {:.4}; {} motions \
          not kept",
+        if stopped.is_some() { "kept" } else { "done" },
         report.episodes,
         written.display(),
         report.start_q,
@@ -241,16 +348,186 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         report.goal_spread_max_m,
         report.goal_spread_rms_m,
         report.cost_expert,
-        report.cost_random
+        report.cost_random,
+        rec.skipped
     );
     if args.json {
         println!(
             "{}",
             serde_json::json!({"command": "record", "model": cfg.sim.model, "out": written,
-                "rate_hz": rate, "skipped": skipped, "report": report})
+                "rate_hz": rate, "skipped": rec.skipped, "complete": stopped.is_none(),
+                "report": report})
         );
     }
+    match stopped {
+        None => Ok(()),
+        Some(e) => Err(e.context(format!(
+            "the recording stopped after {finished} of {} demonstrations; the {finished} \
+             finished ones are saved in {} (record the rest into another --out)",
+            args.episodes,
+            written.display()
+        ))),
+    }
+}
+
+/// Refuses a robot of another model than `model` (the one whose kinematics the recording
+/// uses), asking its dashboard server at `addr` as the controller's `ur` arm does.
+fn check_model(
+    addr: std::net::SocketAddr,
+    model: UrModel,
+    timeout: Duration,
+) -> anyhow::Result<()> {
+    let id = Dashboard::connect(addr, timeout)
+        .and_then(|mut d| d.identity())
+        .with_context(|| {
+            format!(
+                "asking the robot's model (to check --model {model}): pass --dashboard-port (29999 \
+                 on a UR), or --no-check-model to record with {model}'s kinematics unchecked"
+            )
+        })?;
+    let found = id.model();
+    anyhow::ensure!(
+        found == Some(model),
+        "recording for a {model} (--model or [sim] model), but the robot says it is a {} on {}, \
+         that is {}: its end-effector points would be computed with the wrong kinematics; \
+         record with --model {}",
+        id.robot,
+        id.polyscope,
+        found.map_or(
+            "a model this project does not know".to_string(),
+            |m| format!("a {m}")
+        ),
+        found.map_or("<the robot's model>", UrModel::name)
+    );
     Ok(())
+}
+
+/// A recording under way: the segmenter and what it has kept.
+struct Recording {
+    seg: Segmenter,
+    /// The finished demonstrations, as T steps each.
+    kept: Vec<Vec<(Joints6, Joints6)>>,
+    /// Motions not kept.
+    skipped: usize,
+}
+
+impl Recording {
+    /// Reads packages until `args.episodes` demonstrations are kept; an error says why it
+    /// stopped before (what was kept stays in `self`).
+    fn run(
+        &mut self,
+        rtde: &mut Observer,
+        clock: &mut ClockWatch,
+        args: &RecordArgs,
+        cfg: &RecordConfig,
+    ) -> anyhow::Result<()> {
+        let kin = UrKinematics::new(cfg.sim.model, cfg.sim.ee_offset);
+        let t_begin = rtde.state.timestamp;
+        let wall_begin = Instant::now();
+        let mut said = (t_begin, self.seg.status().waiting);
+        let mut stopped_since = None;
+        while self.kept.len() < args.episodes {
+            anyhow::ensure!(
+                !STOP.load(Ordering::Relaxed),
+                "interrupted (SIGINT or SIGTERM)"
+            );
+            let wall = wall_begin.elapsed().as_secs_f64();
+            anyhow::ensure!(
+                args.max_time_s == 0.0 || wall <= args.max_time_s,
+                "{} s of wall time passed (--max-time-s) while the robot's clock advanced {:.1} \
+                 s",
+                args.max_time_s,
+                rtde.state.timestamp - t_begin
+            );
+            let s = match rtde.next_state() {
+                Ok(s) => s,
+                Err(_) if STOP.load(Ordering::Relaxed) => {
+                    anyhow::bail!("interrupted (SIGINT or SIGTERM)")
+                }
+                Err(e) => return Err(e).context("reading the robot's RTDE stream"),
+            };
+            clock.check(s.timestamp)?;
+            anyhow::ensure!(
+                args.max_time_s == 0.0 || s.timestamp - t_begin <= args.max_time_s,
+                "{} s of arm time passed (--max-time-s)",
+                args.max_time_s
+            );
+            let (robot, safety) = (s.robot_mode, s.safety_mode);
+            if robot != RobotMode::Running.code() || safety != SafetyMode::Normal.code() {
+                // The robot stopped the arm: a reach under way was cut short, not taught.
+                let why = format!(
+                    "the robot stopping the arm (robot mode {}, safety mode {})",
+                    robot_mode_name(robot),
+                    safety_mode_name(safety)
+                );
+                let t = s.timestamp;
+                if let Some(Event::Discarded { at, why }) = self.seg.interrupt(t, &why) {
+                    self.skipped += 1;
+                    eprintln!("a motion at t = {at:.2} s is not a demonstration: {why}");
+                }
+                if stopped_since.is_none() {
+                    eprintln!("t = {t:.2} s: {why}; waiting for RUNNING and NORMAL");
+                    stopped_since = Some(t);
+                }
+                continue;
+            }
+            if let Some(t) = stopped_since.take() {
+                eprintln!(
+                    "t = {:.2} s: the robot runs again (stopped since t = {t:.2} s)",
+                    s.timestamp
+                );
+            }
+            let sample = Sample {
+                t: s.timestamp,
+                q: s.actual_q,
+                qd: s.actual_qd,
+            };
+            sample.check(cfg.sim.model)?;
+            let event = self.seg.push(sample);
+            let status = self.seg.status();
+            if event.is_some() {
+                said = (sample.t, status.waiting);
+            } else if status.waiting != said.1 || sample.t - said.0 >= STATUS_EVERY_S {
+                eprintln!("t = {:.2} s: {status}", sample.t);
+                said = (sample.t, status.waiting);
+            }
+            match event {
+                None => {}
+                Some(Event::StartPose(p)) => eprintln!(
+                    "start pose at t = {:.2} s: {:?} rad; waiting for a motion from it",
+                    sample.t,
+                    p.map(|v| (v * 1e4).round() / 1e4)
+                ),
+                Some(Event::Discarded { at, why }) => {
+                    self.skipped += 1;
+                    eprintln!("a motion at t = {at:.2} s is not a demonstration: {why}");
+                }
+                Some(Event::Demonstration(d)) => match steps_checked(&d, &cfg.task, &cfg.sim) {
+                    Ok(steps) => {
+                        let (q, _) = steps.last().expect("T ≥ 2");
+                        let ee = kin.ee_point(q);
+                        self.kept.push(steps);
+                        eprintln!(
+                            "demonstration {}/{}: from t = {:.2} s, {} packages, ends at ({:.4}, \
+                             {:.4}, {:.4}) m",
+                            self.kept.len(),
+                            args.episodes,
+                            d.samples[0].t,
+                            d.samples.len(),
+                            ee[0],
+                            ee[1],
+                            ee[2]
+                        );
+                    }
+                    Err(why) => {
+                        self.skipped += 1;
+                        eprintln!("skipped the motion from t = {:.2} s: {why}", d.samples[0].t);
+                    }
+                },
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The outputs a recording reads (the modes for the check that the arm runs).

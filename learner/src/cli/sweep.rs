@@ -122,7 +122,9 @@ pub fn write(
         for p in plan.write_k8s(&args.image, &args.claim)? {
             eprintln!("wrote {}", p.display());
         }
-        println!("bash {}", plan.dir.join("submit-k8s.sh").display());
+        // Quoted: the line is meant to be pasted into a shell.
+        let submit = plan.dir.join("submit-k8s.sh").display().to_string();
+        println!("bash {}", crate::experiment::scheduler::quote(&submit)?);
         return Ok(());
     }
     let files = plan.write_slurm()?;

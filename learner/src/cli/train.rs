@@ -166,6 +166,21 @@ fn demos_file(
     Ok((s.demos, true))
 }
 
+/// Demonstrations that name no arm model (a CSV, a LeRobot dataset without the model field)
+/// are taken to be the `[sim]` model's; their joint angles cannot tell another arm apart, so
+/// the run says so.
+fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
+    if crate::io::demos::model_of(path)?.is_none() {
+        eprintln!(
+            "note: {} names no arm model: taken to be the {} ([sim] model), which cannot be \
+             checked; if they were recorded on another arm, set [sim] model to it",
+            path.display(),
+            sim.model
+        );
+    }
+    Ok(())
+}
+
 /// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
 /// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
 /// records into because it is there.
@@ -180,8 +195,35 @@ fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::
     Ok(())
 }
 
+/// A resumed folder must hold a run of the algorithm asked for: said before anything reads
+/// the demonstrations or the checkpoints, which differ in kind between algorithms (a folder of
+/// goals for MDGPS, `mdgps.iteration` in its states).
+fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
+    let Some(dir) = &args.resume else {
+        return Ok(());
+    };
+    let algo = match args.algo {
+        Algo::LqrGaifo => "lqr-gaifo",
+        Algo::Mdgps => "mdgps",
+        Algo::GaifoPpo => "gaifo-ppo",
+    };
+    if let Some(m) = manifest::read(dir)? {
+        anyhow::ensure!(
+            m.algo == algo,
+            "{} holds a `learner {}` {} run, not {algo}: resume it with --algo {} and its own \
+             --demos, or start a new run in another --out",
+            dir.display(),
+            m.command,
+            m.algo,
+            m.algo
+        );
+    }
+    Ok(())
+}
+
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    check_resumed_algo(&args)?;
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
     }
@@ -201,6 +243,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         let pre = Manifest::new("train", "gaifo-ppo", pcfg.seed, None, &pcfg)?;
         let (path, claimed) = demos_file(&args, pcfg.seed, &pcfg.sim, &pre)?;
         let demos = crate::io::demos::load_checked(&path, &pcfg.sim)?;
+        warn_unrecorded_model(&path, &pcfg.sim)?;
         let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&path), &pcfg)?;
         // Claimed already: the folder holds only its run.json, replaced now.
         let force = args.force || claimed;
@@ -236,6 +279,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let pre = Manifest::new("train", "lqr-gaifo", cfg.seed, None, &cfg)?;
     let (path, claimed) = demos_file(&args, cfg.seed, &cfg.sim, &pre)?;
     let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
+    warn_unrecorded_model(&path, &cfg.sim)?;
     let m = Manifest::new("train", "lqr-gaifo", cfg.seed, Some(&path), &cfg)?;
     let claim = match args.resume {
         Some(_) => Claim::Resume,

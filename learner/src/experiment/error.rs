@@ -23,6 +23,20 @@ pub enum ExperimentError {
         /// What the OS said.
         source: std::io::Error,
     },
+    /// An output folder that already holds an experiment's results (merge writes into a new
+    /// folder or one without them; it never replaces results it did not write).
+    #[error(
+        "{} already holds {}: `experiment merge` never replaces results it did not write; \
+         merge into a new folder (--out), or delete them",
+        dir.display(),
+        file.display()
+    )]
+    Occupied {
+        /// The output folder.
+        dir: std::path::PathBuf,
+        /// The first of its results found.
+        file: std::path::PathBuf,
+    },
     /// A run over IPC that failed or did not finish; the message names its log.
     #[error("{0}")]
     Ipc(String),

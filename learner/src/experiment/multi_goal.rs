@@ -224,6 +224,7 @@ pub fn run_mdgps(
         horizon: base.horizon,
         seed,
         iterations: cfg.iterations as u64,
+        model: c.lqr_gaifo.sim.model,
     };
     save_policy(&file, &out.join(format!("policy_seed{seed}.npz")))?;
     Ok(MethodRun {

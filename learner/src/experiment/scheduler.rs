@@ -59,6 +59,10 @@ pub struct SweepPlan {
 pub enum PlanError {
     #[error("--shards must be at least 1")]
     NoShards,
+    #[error("--shards {0}: at most {MAX_SHARDS} (Slurm's default MaxArraySize; the merge job names every shard's folder on one command line)")]
+    TooManyShards(usize),
+    #[error("the merge job's command line would be {0} bytes, more than the {MAX_COMMAND_BYTES} a command line may safely hold: fewer --shards or a shorter DIR")]
+    MergeTooLong(usize),
     #[error("--parallel must be at least 1")]
     NoParallel,
     #[error("--time `{0}`: expected HH:MM:SS, e.g. 01:30:00")]
@@ -70,6 +74,14 @@ pub enum PlanError {
     #[error("`{0}`: not an image or claim name (letters, digits and - . _ / : @)")]
     K8sName(String),
 }
+
+/// The most shards a sweep may have: Slurm's default `MaxArraySize` (1001) takes array indices
+/// up to 1000, and the merge job lists every shard's folder.
+pub const MAX_SHARDS: usize = 1000;
+
+/// The longest command line a generated script may run (bytes): half of Linux's usual
+/// `ARG_MAX` (2 MiB), the other half left to the environment.
+pub const MAX_COMMAND_BYTES: usize = 1 << 20;
 
 /// Checks an `HH:MM:SS` time limit (hours any number of digits; minutes and seconds < 60).
 pub fn check_time(t: &str) -> Result<(), PlanError> {
@@ -123,6 +135,9 @@ impl SweepPlan {
         if self.shards == 0 {
             return Err(PlanError::NoShards);
         }
+        if self.shards > MAX_SHARDS {
+            return Err(PlanError::TooManyShards(self.shards));
+        }
         if self.parallel == 0 || self.cpus == 0 {
             return Err(PlanError::NoParallel);
         }
@@ -136,6 +151,10 @@ impl SweepPlan {
             if !p.is_absolute() {
                 return Err(PlanError::Relative(p.clone()));
             }
+        }
+        let merge = self.merge_cmd()?.len();
+        if merge > MAX_COMMAND_BYTES {
+            return Err(PlanError::MergeTooLong(merge));
         }
         Ok(())
     }
@@ -231,22 +250,36 @@ impl SweepPlan {
         Ok(s)
     }
 
-    /// `learner experiment merge DIR/shard_1 … DIR/shard_N --out DIR/merged`, quoted.
+    /// `learner experiment merge DIR/shard_1 … DIR/shard_N`, quoted (`--out` to add).
     fn merge_cmd(&self) -> Result<String, PlanError> {
         let shards: Vec<String> = (1..=self.shards)
             .map(|k| path_str(&self.dir.join(format!("shard_{k}"))).map(str::to_string))
             .collect::<Result<_, _>>()?;
-        let merged = self.dir.join("merged");
         let mut w: Vec<&str> = vec![path_str(&self.learner)?, "experiment", "merge"];
         w.extend(shards.iter().map(String::as_str));
-        w.extend(["--out", path_str(&merged)?]);
         words(w)
+    }
+
+    /// The shell lines of the merge job: into a temporary folder that then replaces
+    /// `DIR/merged`, the merge job's own output, so a retried merge job ends with the same
+    /// files (`experiment merge` itself never replaces results it did not write).
+    fn merge_body(&self) -> Result<String, PlanError> {
+        let dir = quote(path_str(&self.dir)?)?;
+        Ok(format!(
+            "OUT={dir}/merged\n\
+             TMP={dir}/.merged.$$.${{HOSTNAME:-host}}\n\
+             rm -rf \"$TMP\"\n\
+             {cmd} --out \"$TMP\"\n\
+             rm -rf \"$OUT\"\n\
+             mv -T \"$TMP\" \"$OUT\"\n",
+            cmd = self.merge_cmd()?,
+        ))
     }
 
     /// `merge.sbatch`: joins every shard into `DIR/merged/`.
     pub fn slurm_merge(&self) -> Result<String, PlanError> {
         let mut s = self.header(&format!("{}-merge", self.experiment), "logs/merge-%j.out")?;
-        let _ = writeln!(s, "{}", self.merge_cmd()?);
+        s.push_str(&self.merge_body()?);
         Ok(s)
     }
 
@@ -337,7 +370,7 @@ impl SweepPlan {
         ));
         jobs.push((
             "k8s-merge.yaml".into(),
-            job(&format!("{e}-merge"), "", &p.merge_cmd()?),
+            job(&format!("{e}-merge"), "", &p.merge_body()?),
         ));
         Ok(jobs)
     }
@@ -486,9 +519,9 @@ mod tests {
         assert!(
             m.contains(
                 "merge '/shared/sweep one/shard_1' '/shared/sweep one/shard_2' \
-                        '/shared/sweep one/shard_3' '/shared/sweep one/shard_4' --out \
-                        '/shared/sweep one/merged'"
-            ),
+                        '/shared/sweep one/shard_3' '/shared/sweep one/shard_4' --out \"$TMP\"\n"
+            ) && m.contains("OUT='/shared/sweep one'/merged\n")
+                && m.contains("mv -T \"$TMP\" \"$OUT\"\n"),
             "{m}"
         );
         let sub = p.slurm_submit().unwrap();
@@ -581,6 +614,14 @@ mod tests {
         let mut p = plan();
         p.dir = "rel/dir".into();
         assert_eq!(p.validate(), Err(PlanError::Relative("rel/dir".into())));
+        // Shards without bound: a merge command no shell could run.
+        let mut p = plan();
+        p.shards = 1_000_000;
+        assert_eq!(p.validate(), Err(PlanError::TooManyShards(1_000_000)));
+        p.shards = MAX_SHARDS;
+        p.validate().unwrap();
+        p.dir = format!("/{}", "d".repeat(2000)).into();
+        assert!(matches!(p.validate(), Err(PlanError::MergeTooLong(n)) if n > MAX_COMMAND_BYTES));
         for t in ["1:00", "01:60:00", "aa:00:00", "01:5:00", ""] {
             assert!(check_time(t).is_err(), "{t}");
         }

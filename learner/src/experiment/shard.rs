@@ -13,7 +13,7 @@ use crate::error::ensure;
 use crate::io::IoError;
 use serde::{Deserialize, Serialize};
 
-use super::summary::write_outputs;
+use super::summary::{results_files, write_outputs};
 use super::{Job, Run, SummaryRow};
 use crate::io::log::GaifoRow;
 
@@ -327,6 +327,16 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<(Vec<Run>, Vec<SummaryRow>)
             meta.jobs_total
         ))
     );
+    if let Some(file) = results_files(&meta.experiment)
+        .iter()
+        .map(|f| out.join(f))
+        .find(|p| std::fs::symlink_metadata(p).is_ok())
+    {
+        return Err(ExperimentError::Occupied {
+            dir: out.to_owned(),
+            file,
+        });
+    }
     let runs: Vec<Run> = all.into_iter().map(|(_, r)| r).collect();
     let rows = write_outputs(&meta.experiment, &meta.title, &runs, out)?;
     if super::goals::at_several_goals(&runs) {

@@ -330,6 +330,20 @@ pub fn csv_header() -> String {
     format!("experiment,variant,{CSV_HEADER}")
 }
 
+/// The files an experiment's results are, in its output folder: [`write_outputs`]'s and
+/// `goals::write_precision`'s.
+pub fn results_files(name: &str) -> [String; 7] {
+    [
+        format!("{name}.csv"),
+        format!("{name}.png"),
+        "summary.txt".into(),
+        "summary.json".into(),
+        "precision.txt".into(),
+        "reach.txt".into(),
+        "spread.csv".into(),
+    ]
+}
+
 /// Writes `<name>.csv`, `<name>.png`, `summary.txt` and `summary.json` into `out`; returns
 /// the summary.
 pub fn write_outputs(

@@ -188,7 +188,9 @@ impl Manifest {
         cmp("command", &self.command, &other.command);
         cmp("algorithm", &self.algo, &other.algo);
         cmp("seed", &self.seed.to_string(), &other.seed.to_string());
-        cmp("settings hash", &self.config_hash, &other.config_hash);
+        if !self.same_settings_but_iterations(other) {
+            cmp("settings hash", &self.config_hash, &other.config_hash);
+        }
         if self.demos_hash != other.demos_hash {
             d.push(format!(
                 "demonstrations {} (hash {}) there, {} (hash {}) now",
@@ -196,6 +198,30 @@ impl Manifest {
             ));
         }
         d
+    }
+
+    /// Whether the two runs' settings differ at most in their iterations: the hash leaves out
+    /// the top-level `iterations`, and MDGPS's, nested in its `lqr_gaifo` settings, are
+    /// compared here on the settings in full (which both manifests of a resume hold), so that
+    /// an MDGPS run extends as an LQR+GAIfO run does while recorded hashes stay as they were.
+    fn same_settings_but_iterations(&self, other: &Self) -> bool {
+        if self.config_hash == other.config_hash {
+            return true;
+        }
+        let strip = |v: &serde_json::Value| {
+            let mut v = v.clone();
+            if let Some(m) = v.as_object_mut() {
+                m.remove("iterations");
+                if let Some(inner) = m.get_mut("lqr_gaifo").and_then(|i| i.as_object_mut()) {
+                    inner.remove("iterations");
+                }
+            }
+            v
+        };
+        match (&self.settings, &other.settings) {
+            (Some(a), Some(b)) => strip(a) == strip(b),
+            _ => false,
+        }
     }
 
     /// The run's settings as `C`, checked against [`Manifest::config_hash`] (the settings
@@ -491,6 +517,22 @@ mod tests {
         // More iterations: the same run.
         let more = serde_json::json!({"iterations": 40, "kl": 1.0});
         claim(&dir, &manifest(0, &more), Claim::Resume).unwrap();
+        // So for MDGPS, whose iterations are LQR+GAIfO's settings' (other settings still
+        // differ).
+        let mdgps = |iterations: u64, kl: f64| {
+            let s = serde_json::json!({"lqr_gaifo": {"iterations": iterations, "kl": 1.0},
+                "kl_step": kl});
+            Manifest::new("train", "mdgps", 0, None, &s).unwrap()
+        };
+        let mdir = tmp("mdgps");
+        claim(&mdir, &mdgps(2, 1.0), Claim::New { force: false }).unwrap();
+        std::fs::write(mdir.join("mdgps_log.csv"), "x").unwrap();
+        claim(&mdir, &mdgps(5, 1.0), Claim::Resume).unwrap();
+        let e = claim(&mdir, &mdgps(5, 0.5), Claim::Resume)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("settings hash"), "{e}");
+        std::fs::remove_dir_all(&mdir).ok();
         assert!(cut.iter().all(|f| !f.exists()), "cut writes deleted");
         assert!(dir
             .join("episodes")

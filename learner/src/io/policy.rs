@@ -9,17 +9,20 @@
 //! | `dt` | () f64 | control period (s) |
 //! | `horizon` | () u64 | T of the training episodes (the policy itself is time-invariant) |
 //! | `seed`, `iterations` | () u64 | the training run's seed and MDGPS iterations |
+//! | `model` | str | the arm it was trained on (`ur5e`, …; absent in files written before: the UR5) |
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
-//! Loading checks the schema, the layout names, every shape (P against `hidden`), finiteness
-//! and the input scale's sign, naming the file and array at fault.
+//! Loading checks the schema, the layout names, every shape (P against `hidden`), finiteness,
+//! the input scale's sign and the controller's bounds (`PolicyBounds`: |weight| ≤ 1e4, …),
+//! naming the file and array at fault.
 
 use std::path::Path;
 
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use ur5_shared::config::ActionMode;
 use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
+use ur5_shared::{PolicyBounds, UrModel};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -47,6 +50,8 @@ pub struct PolicyFile {
     pub seed: u64,
     /// MDGPS iterations it was trained for.
     pub iterations: u64,
+    /// The arm it was trained on: its kinematics and limits are the policy's world.
+    pub model: UrModel,
 }
 
 fn mode_name(mode: ActionMode) -> &'static str {
@@ -70,6 +75,7 @@ pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
     w.u64("horizon", &[], &[p.horizon as u64])?;
     w.u64("seed", &[], &[p.seed])?;
     w.u64("iterations", &[], &[p.iterations])?;
+    w.string("model", p.model.name())?;
     w.strings("state_names", &STATE_NAMES)?;
     w.strings("action_names", &ACTION_NAMES)?;
     w.finish()?;
@@ -134,6 +140,17 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
             ))
         }
     };
+    // The bounds the real-time controller holds a policy to: what it would refuse is not
+    // evaluated or served either.
+    policy
+        .to_table(0, mode)
+        .and_then(|t| t.validate(&PolicyBounds::default()))
+        .map_err(|e| {
+            bad(
+                "params",
+                format!("{e}: not a trained policy's (the controller refuses it)"),
+            )
+        })?;
     let start_q: [f64; 3] = f
         .f64_shaped("start_q", &[3])?
         .try_into()
@@ -149,6 +166,14 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
     if horizon < 2 {
         return Err(bad("horizon", format!("{horizon}: must be >= 2 steps")));
     }
+    // Files written before policies carried a model were all made on the UR5.
+    let model = if has("model") {
+        let name = f.string("model")?;
+        name.parse::<UrModel>()
+            .map_err(|e| bad("model", e.to_string()))?
+    } else {
+        UrModel::Ur5
+    };
     Ok(PolicyFile {
         policy,
         mode,
@@ -157,5 +182,6 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
         horizon: horizon as usize,
         seed: f.u64_scalar("seed")?,
         iterations: f.u64_scalar("iterations")?,
+        model,
     })
 }

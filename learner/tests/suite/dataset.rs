@@ -596,8 +596,21 @@ fn a_ur5e_recording_exported_to_lerobot_checks_and_trains_as_a_ur5e() {
     assert!(ok, "{err}");
     let summary: serde_json::Value = serde_json::from_str(out.trim()).expect(&out);
     assert_eq!(
-        (&summary["model"], &summary["count"]),
-        (&"ur5e".into(), &2.into())
+        (
+            &summary["model"],
+            &summary["count"],
+            &summary["model_recorded"]
+        ),
+        (&"ur5e".into(), &2.into(), &true.into())
+    );
+    // A CSV names no model: what it is checked against is said to be assumed.
+    let csv = dir.join("d.csv");
+    let (ok, err) = learner(&["dataset", "export", "--format", "csv", &s(&npz), &s(&csv)]);
+    assert!(ok, "{err}");
+    let (ok, err) = learner(&["dataset", "check", &s(&csv)]);
+    assert!(
+        !ok || (err.contains("consistent with the ur5, assumed: the file names no arm model")),
+        "{err}"
     );
     let e = learner::error::line(
         &learner::io::demos::load_checked(&lr, &SimConfig::default()).unwrap_err(),

@@ -22,6 +22,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{ActionMode, TaskConfig};
 use ur5_shared::layout::{DU, DX};
+use ur5_shared::UrModel;
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mdgps-test-{}-{name}", std::process::id()));
@@ -166,6 +167,7 @@ fn policy_file() -> PolicyFile {
         horizon: 100,
         seed: u64::MAX - 3,
         iterations: 20,
+        model: UrModel::Ur5,
     }
 }
 
@@ -192,7 +194,7 @@ fn edit(src: &Path, dst: &Path, name: &str, new: Option<(&[u64], &[f64])>) {
             continue;
         }
         match n.as_str() {
-            "state_names" | "action_names" | "action_mode" => {
+            "state_names" | "action_names" | "action_mode" | "model" => {
                 let s = f.strings(&n).unwrap();
                 let r: Vec<&str> = s.iter().map(String::as_str).collect();
                 w.strings(&n, &r).unwrap();
@@ -219,10 +221,13 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
     nan[40] = f64::NAN;
     let mut neg = policy_file().policy.flat();
     neg[DX + 1] = -1.0;
+    let mut huge = policy_file().policy.flat();
+    huge[40] = 1e300;
     let cases: Vec<(&str, Option<(Vec<u64>, Vec<f64>)>, &str)> = vec![
         ("params", Some((vec![n - 1], vec![0.1; n as usize - 1]))),
         ("params", Some((vec![n], nan))),
         ("params", Some((vec![n], neg))),
+        ("params", Some((vec![n], huge))),
         ("hidden", Some((vec![2], vec![8.0, 0.0]))),
         ("hidden", Some((vec![1, 2], vec![8.0, 4.0]))),
         ("schema_version", Some((vec![], vec![2.0]))),
@@ -236,6 +241,7 @@ fn bad_policy_files_are_refused_naming_file_and_array() {
         "expected [",
         "not finite",
         "r[1]",
+        "max_abs_weight",
         "width 0",
         "expected (H,)",
         "this program reads 1",
@@ -400,6 +406,30 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
     let d = v["result"]["final_distance_m"].as_f64().unwrap();
     assert!(d > 0.1 && d.is_finite(), "{v}");
     assert_eq!(v["result"]["steps"], 5);
+    assert_eq!(v["result"]["model"], "ur5");
+    // A policy of another arm runs on its own arm (its kinematics), said in the summary;
+    // one whose model this build does not know is refused naming it.
+    let p5e = dir.join("policy_ur5e.npz");
+    save_policy(
+        &PolicyFile {
+            model: UrModel::Ur5e,
+            ..f.clone()
+        },
+        &p5e,
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_learner"))
+        .args(["policy", "eval", "--policy", p5e.to_str().unwrap()])
+        .args(["--goal", "-0.45,-0.25,0.25", "--json"])
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["result"]["model"], "ur5e", "{v}");
+    let d5e = v["result"]["final_distance_m"].as_f64().unwrap();
+    assert!(
+        (d5e - d).abs() > 1e-3,
+        "the UR5e's kinematics: {d5e} vs {d}"
+    );
 
     // Errors name their cause: one step (no task cost).
     let eval = |policy: &std::path::Path, extra: &[&str]| {

@@ -62,6 +62,20 @@ fn shards_merged_equal_the_unsharded_run() {
         v
     };
     assert_eq!(untimed(&mrows), untimed(&rows));
+    // Merge never replaces results it did not write: another experiment's folder, a shard's
+    // own folder, or its own earlier merge; each untouched.
+    for occupied in [&whole, &parts[0], &merged] {
+        let before = std::fs::read(occupied.join("comparison.csv")).unwrap();
+        let e = merge(&parts, occupied).unwrap_err().to_string();
+        assert!(
+            e.contains("already holds") && e.contains("comparison.csv") && e.contains("--out"),
+            "{e}"
+        );
+        assert_eq!(
+            std::fs::read(occupied.join("comparison.csv")).unwrap(),
+            before
+        );
+    }
     // A missing part is refused, naming it; so is a part given twice, with its folders.
     let e = merge(&parts[..3], &dir.join("bad"))
         .unwrap_err()
@@ -278,6 +292,27 @@ echo "$(( $(wc -l < "$calls") + 100 ));local"
         "2 variants x 2 seeds x 2 iterations"
     );
     assert_eq!(merged, rows_without_times(&whole.join("comparison.csv")));
+    // A retried merge job ends with the same files: it replaces its own output (through a
+    // temporary folder, none left), which `experiment merge` alone would refuse to.
+    let again = std::process::Command::new("bash")
+        .arg(sweep.join("merge.sbatch"))
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    assert!(
+        again.status.success(),
+        "{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+    assert_eq!(
+        rows_without_times(&sweep.join("merged/comparison.csv")),
+        merged
+    );
+    assert!(std::fs::read_dir(&sweep).unwrap().all(|e| !e
+        .unwrap()
+        .file_name()
+        .to_string_lossy()
+        .starts_with(".merged.")));
     // Without --submit: the sbatch lines, nothing run.
     let again = dir.join("printed");
     let (ok, printed, err) =
@@ -318,10 +353,40 @@ echo "$(( $(wc -l < "$calls") + 100 ));local"
             "at least 1",
         ),
         (vec!["experiment", "comparison", "--submit"], "--slurm"),
+        (
+            vec![
+                "experiment",
+                "comparison",
+                "--slurm",
+                "/tmp/x-never",
+                "--shards",
+                "1000000",
+            ],
+            "at most 1000",
+        ),
     ] {
         let (ok, err) = common::learner(&bad);
         assert!(!ok && err.contains(why), "{bad:?}: {err}");
     }
     assert!(!std::path::Path::new("/tmp/x-never").exists());
+    // The printed Kubernetes submit line is quoted: pasted into a shell, a folder name with
+    // `$(…)` in it runs nothing.
+    let odd = dir.join("k8s $(touch pwned) 'q'");
+    let (ok, printed, err) =
+        common::learner_output(&[&exp[..], &["--k8s", odd.to_str().unwrap()]].concat());
+    assert!(ok, "{err}");
+    let line = printed.lines().last().unwrap();
+    let echoed = std::process::Command::new("bash")
+        .arg("-c")
+        .arg(line.replacen("bash ", "printf %s ", 1))
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&echoed.stdout),
+        odd.join("submit-k8s.sh").display().to_string(),
+        "{line}"
+    );
+    assert!(!dir.join("pwned").exists(), "{line}");
     std::fs::remove_dir_all(&dir).ok();
 }

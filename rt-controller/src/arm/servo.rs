@@ -139,17 +139,24 @@ impl Servo {
         self.last_command_seq = cmd.seq;
         self.episode = cmd.episode;
         let hold_here = UrKinematics::six(&[here[0], here[1], here[2]], wrist_q);
-        let in_limits = |q: &[f64; N_JOINTS]| {
-            (0..N_JOINTS)
-                .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
+        // The active joints' values of a command for them (None: for another number of
+        // joints, refused as out of limits are).
+        let active = |v: &[f64]| <[f64; N_JOINTS]>::try_from(v).ok();
+        let in_limits = |q: Option<[f64; N_JOINTS]>| {
+            q.filter(|q| {
+                (0..N_JOINTS)
+                    .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
+            })
         };
         let (goal, ok) = match cmd.kind() {
-            Ok(CommandKind::GoalAngles) if in_limits(&cmd.values) => {
-                (UrKinematics::six(&cmd.values, wrist_q), true)
+            Ok(CommandKind::GoalAngles) if in_limits(active(cmd.values())).is_some() => {
+                let q = in_limits(active(cmd.values())).expect("checked");
+                (UrKinematics::six(&q, wrist_q), true)
             }
             Ok(CommandKind::Hold) => (hold_here, true),
-            Ok(CommandKind::Reset) if in_limits(&cmd.reset_pose) => {
-                let to = UrKinematics::six(&cmd.reset_pose, wrist_q);
+            Ok(CommandKind::Reset) if in_limits(active(cmd.reset_pose())).is_some() => {
+                let q = in_limits(active(cmd.reset_pose())).expect("checked");
+                let to = UrKinematics::six(&q, wrist_q);
                 match &mut self.motion {
                     // The same reset again (the controller's retry): it goes on.
                     Motion::Reset { to: t, seq, .. } if *t == to => *seq = cmd.seq,
@@ -225,12 +232,9 @@ pub(crate) fn arm_state(
         stamp_ns: monotonic_ns(),
         episode,
         last_command_seq,
-        q: [q[0], q[1], q[2]],
-        qd: [qd[0], qd[1], qd[2]],
-        ee_pos,
-        ee_vel,
         status,
         faults: ArmFaults::default(),
+        ..ArmState::of_joints(&q[..N_JOINTS], &qd[..N_JOINTS], ee_pos, ee_vel)
     }
 }
 

@@ -119,13 +119,43 @@ pub(super) fn is_live_view_default(c: &LiveViewConfig) -> bool {
     *c == LiveViewConfig::default()
 }
 
-/// A ROS topic name: not empty after its leading slash, no whitespace.
+/// Longest topic name ROS 2 takes (rmw's `RMW_TOPIC_MAX_NAME_LENGTH`, 255 less the 8 of the
+/// DDS prefix `rt/`…).
+const MAX_TOPIC_LEN: usize = 247;
+
+/// A ROS 2 topic name as rmw validates a full one (`rmw_validate_full_topic_name`), its leading
+/// slash optional (a name relative to the root namespace): tokens of letters, digits and `_`,
+/// none empty (no `//`, no trailing `/`) and none starting with a digit. A name DDS carries but
+/// no ROS node can subscribe to would only end in "no publisher".
 pub(super) fn check_topic(key: &'static str, topic: &str) -> Result<(), ConfigError> {
-    if topic.trim_start_matches('/').is_empty() || topic.contains(char::is_whitespace) {
-        return Err(ConfigError::Invalid {
+    let bad = |why: &str| {
+        Err(ConfigError::Invalid {
             key,
-            why: format!("`{topic}` is not a ROS topic name"),
-        });
+            why: format!("`{topic}` is not a ROS 2 topic name: {why}"),
+        })
+    };
+    let name = topic.strip_prefix('/').unwrap_or(topic);
+    if name.is_empty() {
+        return bad("it is empty");
+    }
+    if topic.len() > MAX_TOPIC_LEN {
+        return bad(&format!("longer than {MAX_TOPIC_LEN} characters"));
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '/'))
+    {
+        return bad(&format!(
+            "`{c}` is not allowed (letters, digits, `_` and `/` only)"
+        ));
+    }
+    for token in name.split('/') {
+        if token.is_empty() {
+            return bad("an empty token (`//` or a trailing `/`)");
+        }
+        if token.starts_with(|c: char| c.is_ascii_digit()) {
+            return bad(&format!("the token `{token}` starts with a digit"));
+        }
     }
     Ok(())
 }
@@ -197,5 +227,43 @@ impl LiveViewConfig {
             );
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topic_names_are_checked_as_ros_2_does() {
+        for ok in [
+            "/joint_states",
+            "joint_states",
+            "/forward_position_controller/commands",
+            "/io_and_status_controller/robot_mode",
+            "/a_1/b2",
+        ] {
+            check_topic("t", ok).unwrap();
+        }
+        for (bad, why) in [
+            ("/a//b", "empty token"),
+            ("/1abc", "starts with a digit"),
+            ("/a/2b", "starts with a digit"),
+            ("/a/", "trailing"),
+            ("/", "empty"),
+            ("", "empty"),
+            ("/a b", "` ` is not allowed"),
+            ("/a-b", "`-` is not allowed"),
+            ("~/a", "`~` is not allowed"),
+        ] {
+            let e = check_topic("arm.ros2.command_topic", bad)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("arm.ros2.command_topic") && e.contains(why),
+                "{bad}: {e}"
+            );
+        }
+        assert!(check_topic("t", &format!("/{}", "a".repeat(MAX_TOPIC_LEN))).is_err());
     }
 }

@@ -6,6 +6,7 @@ use std::io::Write;
 
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
+use ur5_shared::layout::{MAX_JOINTS, N_JOINTS};
 use ur5_shared::safety::clamp_action;
 use ur5_shared::{controller_action, policy_action, ArmCommand, ArmFaults, StepSample, DU};
 
@@ -40,7 +41,7 @@ impl<A: ArmBackend> Controller<A> {
     pub(super) fn send_hold(&mut self) {
         let seq = self.next_seq();
         let fresh = self.stale_since_ns.is_none() && self.have_state;
-        let (q, qd) = (self.latest.q, self.latest.qd);
+        let (q, qd) = (active(&self.latest.q), active(&self.latest.qd));
         let cmd = hold_command(
             self.cfg.action_mode,
             &self.limits,
@@ -97,6 +98,9 @@ impl<A: ArmBackend> Controller<A> {
         let s = &self.latest;
         if s.faults.any() {
             return Some(Fault::ArmFault);
+        }
+        if s.joints as usize != N_JOINTS {
+            return Some(Fault::WrongJoints);
         }
         let finite =
             s.q.iter()
@@ -206,7 +210,7 @@ impl<A: ArmBackend> Controller<A> {
                         self.abort_episode(f);
                         return None;
                     }
-                    self.last_safe_q = self.latest.q;
+                    self.last_safe_q = active(&self.latest.q);
                     self.phase = Phase::Running { t: 0 };
                     self.tick(0);
                 } else if freshness == StateFreshness::Stale && self.cfg.mode == Mode::Lockstep {
@@ -447,7 +451,7 @@ impl<A: ArmBackend> Controller<A> {
             self.cfg.action_mode,
             &self.limits,
             self.cfg.task.dt,
-            &state.q,
+            &active(&state.q),
             &mut sent,
         );
         let seq = self.next_seq();
@@ -485,7 +489,7 @@ impl<A: ArmBackend> Controller<A> {
         self.stats.ticks += 1;
         self.stats.saturated_ticks += saturated as u64;
         self.used_state_seq = state.seq;
-        self.last_safe_q = state.q;
+        self.last_safe_q = active(&state.q);
         let next = t + 1;
         if next >= self.cfg.task.horizon {
             self.stats.episodes_completed += 1;
@@ -540,4 +544,11 @@ impl<A: ArmBackend> Controller<A> {
         self.stats.compute_episode.clear();
         self.stats.wake_episode.clear();
     }
+}
+
+/// The first [`N_JOINTS`] entries of an arm message's joint array (the task's active joints;
+/// `check_state` has checked the arm's joint count).
+#[inline]
+pub(super) fn active(v: &[f64; MAX_JOINTS]) -> [f64; N_JOINTS] {
+    core::array::from_fn(|j| v[j])
 }

@@ -332,7 +332,7 @@ impl<A: ArmBackend> Controller<A> {
             waiting_newer: false,
             noisy: false,
             goal: cfg.task.goal,
-            last_safe_q: latest.q,
+            last_safe_q: episode::active(&latest.q),
             have_state: true,
             used_state_seq: 0,
             latest,

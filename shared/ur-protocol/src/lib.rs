@@ -10,8 +10,11 @@
 //! - [`modes`]: robot, safety and control modes with their names;
 //! - [`script`]: the header of the project's robot-side URScript program (its marker and the
 //!   reverse address the driver substitutes);
+//! - [`clock`]: the robot's clock (RTDE `timestamp`) checked package by package;
 //! - [`client`]: a blocking RTDE client over a `TcpStream` (setup, recording, tests; it
-//!   allocates, unlike everything above).
+//!   allocates, unlike everything above);
+//! - [`dashboard`]: a blocking client of the dashboard server (TCP 29999): modes, the robot's
+//!   model (it allocates too).
 //!
 //! Everything on the wire is big-endian. Decoding and encoding in the steady state (data
 //! packages, reverse commands, the stream decoder) work on caller-owned buffers and never
@@ -20,6 +23,8 @@
 //! No decode path panics on any input.
 
 pub mod client;
+pub mod clock;
+pub mod dashboard;
 pub mod modes;
 pub mod recipe;
 pub mod reverse;

@@ -468,10 +468,11 @@ fn fuzz_ipc_payloads() {
         let mut sim = sim.borrow_mut();
         match c.kind() {
             Ok(ur5_shared::CommandKind::Reset) if finite => {
-                sim.reset(c.reset_pose, [0.4, 0.1, 0.4]).is_ok()
+                let pose = core::array::from_fn(|j| c.reset_pose[j]);
+                sim.reset(pose, [0.4, 0.1, 0.4]).is_ok()
             }
             Ok(ur5_shared::CommandKind::GoalAngles) if finite => {
-                sim.step(c.values);
+                sim.step(core::array::from_fn(|j| c.values[j]));
                 true
             }
             _ => false,

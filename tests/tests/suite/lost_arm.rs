@@ -43,9 +43,8 @@ struct DyingArm {
 impl DyingArm {
     fn new(dies_at: u64, death: Death) -> Self {
         let state = ArmState {
-            q: [0.0, -1.57, 1.57],
             status: ArmStatus::READY,
-            ..ArmState::default()
+            ..ArmState::of_joints(&[0.0, -1.57, 1.57], &[0.0; 3], [0.0; 3], [0.0; 3])
         };
         Self {
             state,

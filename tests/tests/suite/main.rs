@@ -13,6 +13,7 @@ mod mdgps_ipc;
 mod peer_status;
 mod policy_run;
 mod processes;
+mod recorder;
 mod reliability;
 mod resume_ipc;
 mod resume_kill;

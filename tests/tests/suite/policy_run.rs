@@ -57,6 +57,7 @@ fn the_controller_runs_a_policy_table_to_a_goal_given_on_the_command_line() {
             horizon: T,
             seed: 21,
             iterations: 0,
+            model: ur5_shared::UrModel::Ur5,
         },
         &file,
     )

@@ -374,7 +374,7 @@ fn killing_the_sim_makes_the_controller_hold_and_report() {
     assert!(!after.is_empty(), "no command after the last sample");
     for c in after {
         assert_eq!(c.kind(), Ok(CommandKind::GoalAngles), "{c:?}");
-        assert_eq!(c.values[..], last.s[..3], "hold at the last safe pose");
+        assert_eq!(c.values(), &last.state()[..3], "hold at the last safe pose");
     }
     cleanup_dead_nodes();
 }

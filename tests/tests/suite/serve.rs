@@ -89,8 +89,8 @@ impl Driver {
     }
 }
 
-fn close(a: &[f64; 3], b: &[f64; 3], tol: f64) -> bool {
-    (0..3).all(|j| (a[j] - b[j]).abs() <= tol)
+fn close(a: &[f64], b: &[f64], tol: f64) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol)
 }
 
 #[test]
@@ -106,7 +106,7 @@ fn lockstep_serve_answers_each_command_once_and_reports_bad_ones() {
     let mut d = Driver::new(&prefix);
     let first = d.wait_state(&mut sim, "the initial state", |_| true);
     assert!(
-        close(&first.q, &[0.0, -2.0, 2.4], 1e-5),
+        close(first.q(), &[0.0, -2.0, 2.4], 1e-5),
         "starts at task.start_q: {:?}",
         first.q
     );
@@ -117,7 +117,7 @@ fn lockstep_serve_answers_each_command_once_and_reports_bad_ones() {
     let pose = [0.2, -1.5, 2.0];
     let s = d.command(&mut sim, |seq| ArmCommand::reset(seq, 0, 7, pose));
     assert!(
-        close(&s.q, &pose, 1e-5) && close(&s.qd, &[0.0; 3], 1e-9),
+        close(s.q(), &pose, 1e-5) && close(s.qd(), &[0.0; 3], 1e-9),
         "reset: {s:?}"
     );
     assert_eq!(s.episode, 7);
@@ -152,16 +152,23 @@ fn lockstep_serve_answers_each_command_once_and_reports_bad_ones() {
         ArmCommand::goal_angles(seq, 0, 7, [f64::NAN, -1.5, 2.0])
     });
     assert!(s.faults.contains(ArmFaults::NON_FINITE_COMMAND));
+    // A command for six joints to an arm with three active: refused, held, named.
+    let s = d.command(&mut sim, |seq| {
+        ArmCommand::goal_angles(seq, 0, 7, [0.3, -1.5, 2.0, 0.0, 0.0, 0.0])
+    });
+    assert!(s.faults.contains(ArmFaults::WRONG_JOINTS), "{s:?}");
+    assert!(s.status.contains(ArmStatus::HOLDING));
+    assert_eq!(s.joints, 3);
     let s = d.command(&mut sim, |seq| ArmCommand {
         kind: 9,
         ..ArmCommand::hold(seq, 0, 7)
     });
     assert!(s.faults.contains(ArmFaults::UNKNOWN_COMMAND));
-    let before = s.q;
+    let before = s.q().to_vec();
     let s = d.command(&mut sim, |seq| ArmCommand::hold(seq, 0, 7));
     assert!(s.status.contains(ArmStatus::HOLDING));
     assert!(
-        close(&s.q, &before, 0.02),
+        close(s.q(), &before, 0.02),
         "holds its pose: {:?} → {:?}",
         before,
         s.q
@@ -178,11 +185,11 @@ fn lockstep_serve_answers_each_command_once_and_reports_bad_ones() {
     let (code, out) = sim.wait(LONG);
     assert_eq!(code, Some(0), "log:\n{}", sim.log());
     let j = json_summary(&out, &sim.log());
-    assert_eq!(j["commands"], 8);
+    assert_eq!(j["commands"], 9);
     assert_eq!(j["resets"], 2);
     assert_eq!(j["holds"], 1);
-    assert_eq!(j["rejected_commands"], 4);
-    assert_eq!(j["states"], 9, "the initial state plus one per command");
+    assert_eq!(j["rejected_commands"], 5);
+    assert_eq!(j["states"], 10, "the initial state plus one per command");
 }
 
 #[test]

@@ -26,6 +26,30 @@ const T: usize = 50;
 /// LQR+GAIfO iterations (the arm-model measurements' count).
 const ITERATIONS: usize = 20;
 
+/// `hil-sim playback-gen` writes `motions` human-like reaches (seed `seed`) of model `m` to
+/// `dir/reaches.csv`.
+pub(crate) fn generate_reaches(m: UrModel, motions: usize, seed: u64, dir: &Path) {
+    let out = dir.join("reaches.csv").display().to_string();
+    let (n, seed) = (motions.to_string(), seed.to_string());
+    let gen = run_ok(
+        "hil-sim",
+        "playback-gen",
+        &[
+            "--model",
+            m.name(),
+            "playback-gen",
+            "--motions",
+            &n,
+            "--seed",
+            &seed,
+            "--out",
+            &out,
+        ],
+        dir,
+    );
+    assert_eq!(gen["motions"], motions);
+}
+
 fn run_ok(name: &str, label: &str, args: &[&str], dir: &Path) -> serde_json::Value {
     let mut p = Proc::spawn(name, label, args, dir);
     let (code, out) = p.wait(LONG);
@@ -188,24 +212,8 @@ fn record_played_back(
     dir: &Path,
 ) -> (imitation::demos::Demos, f64) {
     let d = |p: &str| dir.join(p).display().to_string();
-    let (model, n, seed) = (m.name(), motions.to_string(), seed.to_string());
-    let gen = run_ok(
-        "hil-sim",
-        "playback-gen",
-        &[
-            "--model",
-            model,
-            "playback-gen",
-            "--motions",
-            &n,
-            "--seed",
-            &seed,
-            "--out",
-            &d("reaches.csv"),
-        ],
-        dir,
-    );
-    assert_eq!(gen["motions"], motions);
+    let (model, n) = (m.name(), motions.to_string());
+    generate_reaches(m, motions, seed, dir);
 
     // The recorder reads every package it is sent.
     let sim = ur_sim::spawn(
@@ -217,11 +225,14 @@ fn record_played_back(
             series,
             time_compression: 10.0,
             playback: Some(dir.join("reaches.csv")),
+            // The recorder asks the robot's model there.
+            dashboard_port: Some(0),
             ..UrSimConfig::default()
         },
     )
     .expect("ur-sim plays");
     let port = sim.rtde_addr.port().to_string();
+    let dashboard = sim.dashboard_addr.expect("dashboard").port().to_string();
     let rec_cfg = write_config(
         dir,
         "record.toml",
@@ -236,6 +247,8 @@ fn record_played_back(
             "127.0.0.1",
             "--rtde-port",
             &port,
+            "--dashboard-port",
+            &dashboard,
             "--episodes",
             &n,
             "--config",

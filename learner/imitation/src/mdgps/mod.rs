@@ -45,10 +45,10 @@ use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
 use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{Normalizer, TrainStats};
-use crate::gaifo::GaifoConfig;
 use crate::iteration::LqrIteration;
 use crate::learn::Learn;
 use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
+use crate::settings::GaifoConfig;
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
 use gps::policy::lin_gauss::LinGaussPolicy;
@@ -204,8 +204,7 @@ impl Mdgps {
         }
         let g = &cfg.lqr_gaifo;
         let expert = stack(&demos.iter().map(expert_transitions).collect::<Vec<_>>());
-        let critic = Critic::new(expert, &g.discriminator, g.seed)?
-            .with_schedule(g.critic_updates, g.critic_lr_half_life);
+        let critic = Critic::from_settings(expert, g.critic(), g.seed)?;
         let mut conds = Vec::with_capacity(demos.len());
         for (m, d) in demos.into_iter().enumerate() {
             let task = d.task()?;
@@ -542,7 +541,7 @@ impl Mdgps {
                     let s = ep.state(t);
                     let mut a = [0.0; DU];
                     pol.act(t, &s, &[0.0; DU], &mut a);
-                    let base = crate::ppo::rollout::action_base(mode, &s);
+                    let base = crate::mlp_policy::action_base(mode, &s);
                     let prc = pol.inv_pol_covar.slice(t);
                     out.states.push(s);
                     out.offsets.push(std::array::from_fn(|j| a[j] - base[j]));

@@ -27,8 +27,7 @@ use ur5_shared::policy::{PolicyTable, PolicyTableError};
 use ur5_shared::StateLayout;
 
 use crate::discriminator::Normalizer;
-use crate::ppo::policy::{GaussianMlpPolicy, PolicyWorkspace};
-use crate::ppo::rollout::action_base;
+use crate::mlp_policy::{action_base, GaussianMlpPolicy, PolicyWorkspace};
 use crate::rollout::Policy;
 
 /// Length of the flat parameter vector for mean heads of hidden widths `hidden` (the policy

@@ -70,7 +70,7 @@ impl PolicyOptConfig {
                 ("policy.batch_size", self.batch_size, 1),
                 ("policy.steps", self.steps, 1),
             ],
-            crate::gaifo::GaifoConfig::MAX_COUNT,
+            crate::settings::MAX_COUNT,
         )
         .map_err(ImitationError::Config)?;
         self.adam

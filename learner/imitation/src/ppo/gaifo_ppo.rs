@@ -27,10 +27,10 @@ use super::{Ppo, PpoConfig, UpdateStats};
 use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, DiscriminatorConfig};
-use crate::gaifo::GaifoConfig;
 use crate::iteration_log::GaifoLog;
 use crate::learn::Learn;
 use crate::rollout::{Arms, Episode};
+use crate::settings::{CriticSettings, GaifoConfig, MAX_COUNT};
 use crate::ImitationError;
 
 /// Settings of a GAIfO (PPO) run. Everything the two algorithms share has LQR+GAIfO's value
@@ -99,28 +99,28 @@ impl GaifoPpoConfig {
         }
     }
 
-    /// Refuses settings that cannot work, naming the setting and its range (counts as
-    /// [`GaifoConfig::MAX_COUNT`]; the critic as [`DiscriminatorConfig::validate`]; PPO as
+    /// The critic's settings.
+    pub fn critic(&self) -> CriticSettings<'_> {
+        CriticSettings {
+            updates: self.critic_updates,
+            lr_half_life: self.critic_lr_half_life,
+            discriminator: &self.discriminator,
+        }
+    }
+
+    /// Refuses settings that cannot work, naming the setting and its range (counts up to
+    /// [`MAX_COUNT`]; the critic as [`CriticSettings::validate`]; PPO as
     /// [`PpoConfig::validate`]).
     pub fn validate(&self) -> Result<(), ImitationError> {
         crate::error::check_counts(
             &[
                 ("samples", self.samples, 1),
                 ("iterations", self.iterations, 1),
-                ("critic_updates", self.critic_updates, 1),
             ],
-            GaifoConfig::MAX_COUNT,
+            MAX_COUNT,
         )
-        .and_then(|()| {
-            crate::error::check_reals(&[(
-                "critic_lr_half_life",
-                self.critic_lr_half_life,
-                self.critic_lr_half_life.is_finite() && self.critic_lr_half_life >= 0.0,
-                "finite and >= 0 (0 = constant)",
-            )])
-        })
         .map_err(ImitationError::Config)?;
-        self.discriminator.validate()?;
+        self.critic().validate()?;
         self.sim
             .validate()
             .map_err(|e| ImitationError::Config(e.to_string()))?;
@@ -165,8 +165,7 @@ impl GaifoPpo {
     pub fn new(cfg: GaifoPpoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let critic = Critic::new(expert_transitions(&demos), &cfg.discriminator, cfg.seed)?
-            .with_schedule(cfg.critic_updates, cfg.critic_lr_half_life);
+        let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
         let ppo = Ppo::new(cfg.ppo.clone(), cfg.sim.mode, cfg.seed ^ 0x5050_4f00) // "PPO"
             .map_err(ImitationError::Ppo)?;
         Ok(Self {

@@ -16,8 +16,8 @@
 
 use ur5_shared::layout::{DU, DX};
 
-use super::policy::{ActorCritic, ActorCriticWorkspace};
 use super::PpoConfig;
+use crate::mlp_policy::{ActorCritic, ActorCriticWorkspace};
 
 /// PPO's training data of one iteration: one row per transition.
 #[derive(Clone, Debug, Default, PartialEq)]

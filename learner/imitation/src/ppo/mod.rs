@@ -3,9 +3,9 @@
 //! `r_t = −D(s_t, s_{t+1})` from the same WGAN-GP critic as LQR+GAIfO, with 5 episodes per
 //! iteration like LQR+GAIfO (docs/design.md §1.5).
 //!
-//! - [`policy`]: π(Δ|s) = N(μ(s), diag σ²), μ from tanh MLPs of the 12-dim state, log σ
-//!   learned and state-independent; V(s) the same MLP. Both reuse
-//!   [`crate::discriminator::mlp::Mlp`].
+//! - [`policy`] ([`crate::mlp_policy`], below this module because MDGPS's global policy is the
+//!   same): π(Δ|s) = N(μ(s), diag σ²), μ from tanh MLPs of the 12-dim state, log σ learned and
+//!   state-independent; V(s) the same MLP. Both reuse [`crate::discriminator::mlp::Mlp`].
 //! - [`rollout`]: episodes of that policy through `shared::safety::clamp_action`; the action
 //!   is an offset from the current joint angles.
 //! - [`gae`], [`loss`]: advantages and the clipped-surrogate loss with its exact gradient.
@@ -16,8 +16,9 @@
 pub mod gae;
 pub mod gaifo_ppo;
 pub mod loss;
-pub mod policy;
 pub mod rollout;
+
+pub use crate::mlp_policy as policy;
 
 use rand::seq::SliceRandom;
 use rand::SeedableRng;

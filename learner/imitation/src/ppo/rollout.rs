@@ -12,18 +12,10 @@
 use ur5_shared::config::{ActionMode, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 
-use super::policy::{GaussianMlpPolicy, PolicyWorkspace};
+use crate::mlp_policy::action_base;
+use crate::mlp_policy::{GaussianMlpPolicy, PolicyWorkspace};
 use crate::rollout::{execute, Actors, Arms, Episode, Policy};
 use crate::ImitationError;
-
-/// What the policy's offset is added to: the joint angles `s[0..DU]` in goal-angle mode, 0 in
-/// torque mode.
-pub fn action_base(mode: ActionMode, s: &[f64; DX]) -> [f64; DU] {
-    match mode {
-        ActionMode::GoalAngles => std::array::from_fn(|j| s[ur5_shared::layout::Q.start + j]),
-        ActionMode::Torque => [0.0; DU],
-    }
-}
 
 /// The unclamped offset Δ_t = u_policy_t − base(s_t) of step `t` of `ep`.
 pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> [f64; DU] {

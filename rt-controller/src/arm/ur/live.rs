@@ -7,6 +7,7 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::time::Duration;
 
+use ur_protocol::clock::ClockWatch;
 use ur_protocol::modes::{robot_mode_name, safety_mode_name};
 use ur_protocol::rtde::Protocol;
 use ur_protocol::{FrameDecoder, OutputRecipe, RobotMessage, RobotState};
@@ -39,10 +40,6 @@ pub use crate::arm::servo::{RESET_SETTLE_MAX_S, RESET_TOL_Q, RESET_TOL_QD};
 /// A measured active joint may be this far (rad) outside `[limits]` (a servo's overshoot at a
 /// limit) before the state counts as a fault ([`StreamFault::OutsideLimits`]).
 pub const MEASURED_LIMIT_MARGIN_RAD: f64 = 0.05;
-/// This many packages in a row with the same `timestamp` are a frozen arm clock
-/// ([`StreamFault::ClockFrozen`]; 0.1 s of an e-Series, 0.4 s of a CB3). One repeat is normal
-/// (a package sent twice).
-pub const FROZEN_CLOCK_PACKAGES: u64 = 50;
 
 /// What the `ur` arm did in the loop (the summary's `arm` field).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -143,9 +140,8 @@ struct Live {
     reverse_closed_ts: f64,
     /// The controller's joint limits (measured states are checked against them).
     limits: ArmLimits,
-    /// The previous package's `timestamp` (s) and how many packages in a row repeated it.
-    prev_ts: f64,
-    same_ts: u64,
+    /// The robot's clock over the packages ([`ur_protocol::clock`]).
+    clock: ClockWatch,
     stream_fault: Option<StreamFault>,
     counts: Counts,
     cycle_ns: Histogram,
@@ -281,8 +277,7 @@ impl ArmBackend for UrArm {
             reverse_closed_ns: 0,
             reverse_closed_ts: 0.0,
             limits: self.limits.clone(),
-            prev_ts: ts,
-            same_ts: 0,
+            clock: ClockWatch::new(ts),
             stream_fault: None,
             counts: Counts::default(),
             cycle_ns: Histogram::new(),
@@ -525,22 +520,7 @@ impl Live {
     /// The newest package against the limits and the previous package's clock.
     fn check_stream(&mut self) -> Result<(), StreamFault> {
         check_measured(&self.robot, &self.limits)?;
-        let (ts, prev) = (self.robot.timestamp, self.prev_ts);
-        if ts < prev {
-            return Err(StreamFault::ClockBackwards { ts, prev });
-        }
-        if ts == prev {
-            self.same_ts += 1;
-            if self.same_ts >= FROZEN_CLOCK_PACKAGES {
-                return Err(StreamFault::ClockFrozen {
-                    ts,
-                    packages: self.same_ts + 1,
-                });
-            }
-        } else {
-            self.same_ts = 0;
-        }
-        self.prev_ts = ts;
+        self.clock.check(self.robot.timestamp)?;
         Ok(())
     }
 

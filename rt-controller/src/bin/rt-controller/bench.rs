@@ -150,6 +150,44 @@ pub fn policy_action_alone(calls: usize) -> Percentiles {
     h.summary()
 }
 
+/// [`ur5_shared::controller_action`] alone on a warm cache at `layout`'s dimensions: `calls`
+/// calls on one seeded random gain table of T = 100 (t cycling) and a moving state, each timed
+/// (ns). The loop's tick adds the state assembly, clamp, command and sample to this; it shows
+/// what the six-joint pose task's larger K (6 × 30 against 3 × 12) costs the law.
+pub fn controller_action_alone(layout: &ur5_shared::StateLayout, calls: usize) -> Percentiles {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let (dx, du) = (layout.dx(), layout.du());
+    let mut table = ur5_shared::GainTable::new_boxed_for(layout);
+    table.set_version(1);
+    table.set_horizon(100).expect("T = 100");
+    for t in 0..100 {
+        let mut st = table.step_mut(t);
+        st.k_mat
+            .iter_mut()
+            .chain(st.k_vec.iter_mut())
+            .chain(st.s_hat.iter_mut())
+            .for_each(|v| *v = rng.random_range(-1.0..1.0));
+        for i in 0..du {
+            st.set_l(i, i, 0.1);
+        }
+    }
+    table.seal();
+    let mut h = rt_controller::stats::Histogram::new();
+    let mut s = [0.1; ur5_shared::MAX_DX];
+    let mut a = [0.0; ur5_shared::MAX_DU];
+    let eps = [0.5; ur5_shared::MAX_DU];
+    for i in 0..calls {
+        s[i % dx] += 1e-3;
+        let t0 = ur5_shared::clock::monotonic_ns();
+        ur5_shared::controller_action(&table, i % 100, &s[..dx], &eps[..du], &mut a[..du])
+            .expect("the table's own dimensions");
+        h.record(ur5_shared::clock::monotonic_ns() - t0);
+        std::hint::black_box(&a);
+    }
+    h.summary()
+}
+
 /// Publishes table version 1, then a new version whenever an episode starts (seen on
 /// `learner/samples`), so that every boundary swaps.
 fn learner_stand_in(

@@ -369,11 +369,15 @@ fn real_main() -> Result<i32> {
                 .transpose()?;
             let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy)?;
             let alone = bench::policy_action_alone(20_000);
+            let law3 = bench::controller_action_alone(&ur5_shared::StateLayout::REACH3, 20_000);
+            let law6 = bench::controller_action_alone(&ur5_shared::StateLayout::POSE6, 20_000);
             println!("rt-controller bench: {} + {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc; gain tables, then policy tables (heads 12-{}-1, {} parameters)", r.episodes, p.episodes, horizon,
                 bench::POLICY_HIDDEN.map(|h| h.to_string()).join("-"), ur5_shared::policy::flat_len(ur5_shared::DX, ur5_shared::DU, &bench::POLICY_HIDDEN));
             print_table(&[
                 ("gain table: tick compute (law + clamp + command + sample)", r.compute),
-                ("gain table: swap (copy 64 KB + flip)", r.swap),
+                ("gain table: swap (copy used part + flip)", r.swap),
+                ("gain table: the law alone, 3 joints and a point (dX 12, dU 3)", law3),
+                ("gain table: the law alone, 6 joints and a pose (dX 30, dU 6)", law6),
                 ("gain table: validation", r.validate),
                 ("gain table: intake (receive + copy + validate + flip)", r.intake),
                 ("gain table: IPC round trip state → command", r.round_trip),
@@ -389,7 +393,7 @@ fn real_main() -> Result<i32> {
                 print_table(&[("gain table: DDS round trip joint state → command", d)]);
             }
             if json {
-                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone, "ros2_round_trip": ros2}));
+                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone, "law_alone_reach3": law3, "law_alone_pose6": law6, "ros2_round_trip": ros2}));
             }
             Ok(0)
         }
@@ -400,7 +404,31 @@ fn real_main() -> Result<i32> {
                 limits: Some(c.limits()),
                 ..c
             };
-            print!("{}", toml::to_string(&c)?);
+            // [arm.ur]'s keys a configuration carries only when set (so that other
+            // configurations print and hash as before): written out under its header.
+            let u = &c.arm.ur;
+            let mut ur = toml::Table::new();
+            ur.insert("model".into(), u.model.name().into());
+            ur.insert("dashboard_port".into(), i64::from(u.dashboard_port).into());
+            ur.insert("check_model".into(), u.check_model.into());
+            ur.insert("bring_up".into(), u.bring_up.into());
+            ur.insert(
+                "recover_protective_stop".into(),
+                u.recover_protective_stop.into(),
+            );
+            ur.insert(
+                "servoj_lookahead_time_s".into(),
+                u.servoj_lookahead_time_s.into(),
+            );
+            ur.insert("servoj_gain".into(), u.servoj_gain.into());
+            let printed = toml::Value::try_from(u)?;
+            ur.retain(|k, _| !printed.as_table().is_some_and(|t| t.contains_key(k)));
+            let text = toml::to_string(&c)?.replacen(
+                "[arm.ur]\n",
+                &format!("[arm.ur]\n{}", toml::to_string(&ur)?),
+                1,
+            );
+            print!("{text}");
             // The sections a configuration carries only when they differ from their defaults
             // (so that other configurations print and hash as before): written out here too.
             let mut arm = toml::Table::new();

@@ -1,6 +1,7 @@
-//! The PPO baseline's networks: a Gaussian policy π(Δ|s) = N(μ(s), diag(σ²)) with a
-//! state-independent learned log σ, and a value function V(s), all built from the one tanh MLP
-//! of [`crate::discriminator::mlp`].
+//! The Gaussian MLP policy π(Δ|s) = N(μ(s), diag(σ²)) with a state-independent learned log σ,
+//! and the value function V(s) beside it, all built from the one tanh MLP of
+//! [`crate::discriminator::mlp`]. Below the learners that use it: GAIfO (PPO)'s actor and
+//! value function, and MDGPS's global policy (whose mean is this policy's on normalised states).
 //!
 //! That MLP has a scalar output, so the mean is `DU` of them, one per joint (`μ_j(s)`, no
 //! shared trunk). Stable-baselines3's `MlpPolicy` shares nothing between policy and value
@@ -13,6 +14,7 @@
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use ur5_shared::config::ActionMode;
 use ur5_shared::layout::{DU, DX};
 
 use crate::discriminator::mlp::{Mlp, MlpWorkspace};
@@ -20,8 +22,17 @@ use crate::discriminator::mlp::{Mlp, MlpWorkspace};
 /// `½ ln 2π`.
 pub const HALF_LN_2PI: f64 = 0.918_938_533_204_672_8;
 
-/// Gaussian MLP policy over the action offset Δ ∈ R^DU (rad in goal-angle mode; see
-/// [`super::rollout`]).
+/// What the policy's offset is added to: the joint angles `s[0..DU]` in goal-angle mode, 0 in
+/// torque mode.
+pub fn action_base(mode: ActionMode, s: &[f64; DX]) -> [f64; DU] {
+    match mode {
+        ActionMode::GoalAngles => std::array::from_fn(|j| s[ur5_shared::layout::Q.start + j]),
+        ActionMode::Torque => [0.0; DU],
+    }
+}
+
+/// Gaussian MLP policy over the action offset Δ ∈ R^DU (rad in goal-angle mode, added to
+/// [`action_base`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GaussianMlpPolicy {
     heads: Vec<Mlp>,

@@ -1,0 +1,243 @@
+//! The settings the learners share, below all of them, so that no learner imports another's
+//! (docs/design.md §1.7):
+//!
+//! - [`MAX_COUNT`]: the bound on every count setting (episodes, iterations, updates);
+//! - [`CriticSettings`]: the critic D(s, s') and its schedule as LQR+GAIfO, MDGPS and GAIfO (PPO)
+//!   hold it, checked and built into each one's [`crate::critic::Critic`] in one place;
+//! - [`GaifoConfig`]: a linear-Gaussian controller improved by KL-bounded LQR on the critic's
+//!   composite cost: the settings of an LQR+GAIfO run, and of each MDGPS condition (MDGPS's
+//!   `[lqr_gaifo]` table); GAIfO (PPO) takes the values it shares with LQR+GAIfO from them
+//!   (`GaifoPpoConfig::from_gaifo`, docs/design.md §5 D14).
+//!
+//! The task (goal, start pose, T, dt) is not a setting of these learners: it comes with the
+//! demonstrations ([`crate::demos::Demos::task`]).
+//!
+//! The critic's keys stay fields of each learner's settings (`critic_updates`,
+//! `critic_lr_half_life`, `[discriminator]` at the top of the file), not a flattened struct:
+//! serde's `flatten` buffers the values, and TOML's errors then lose the key path ("... in
+//! discriminator.adam", docs/reliability.md class 6); [`CriticSettings`] is a view of those
+//! fields.
+
+use serde::{Deserialize, Serialize};
+use ur5_shared::config::SimConfig;
+
+use crate::discriminator::{AdamConfig, DiscriminatorConfig, PenaltySpace};
+use crate::ImitationError;
+use gps::algorithm::AlgorithmConfig;
+use gps::dynamics::lr_prior::LrPriorConfig;
+use gps::dynamics::prior_gmm::PriorGmmConfig;
+use gps::traj_opt::lqr::TrajOptConfig;
+
+/// Largest accepted count setting of every learner (`samples`, `iterations`,
+/// `critic_updates`, …; the critic's own bounds: [`DiscriminatorConfig::validate`]): far above
+/// any use, low enough that a typo cannot ask for terabytes up front.
+pub const MAX_COUNT: usize = DiscriminatorConfig::MAX_COUNT;
+
+/// The critic of an imitation learner and its schedule (docs/design.md §1.3 step 3): a view of
+/// the learner's settings `critic_updates`, `critic_lr_half_life` and `[discriminator]`
+/// ([`GaifoConfig::critic`], `GaifoPpoConfig::critic`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CriticSettings<'a> {
+    /// `Discriminator::train` calls per iteration, each `discriminator.n_critic` Adam steps
+    /// (docs/design.md §5 D6).
+    pub updates: usize,
+    /// Half-life of the critic's learning rate, iterations: iteration i trains at
+    /// `discriminator.adam.lr · 2^(−i / h)`; 0 keeps it constant (docs/design.md §5 D25).
+    pub lr_half_life: f64,
+    /// The critic's net, optimiser and input warp.
+    pub discriminator: &'a DiscriminatorConfig,
+}
+
+impl CriticSettings<'_> {
+    /// Refuses settings that cannot work, naming the setting (by its key) and its range.
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        crate::error::check_counts(&[("critic_updates", self.updates, 1)], MAX_COUNT)
+            .and_then(|()| {
+                crate::error::check_reals(&[(
+                    "critic_lr_half_life",
+                    self.lr_half_life,
+                    self.lr_half_life.is_finite() && self.lr_half_life >= 0.0,
+                    "finite and >= 0 (0 = constant)",
+                )])
+            })
+            .map_err(ImitationError::Config)?;
+        Ok(self.discriminator.validate()?)
+    }
+}
+
+/// Settings of an LQR+GAIfO run (TOML: `learner train --config FILE`), and of each condition
+/// of an MDGPS run (its `[lqr_gaifo]` table). The task (goal, start pose, T, dt) comes from the
+/// demonstrations file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GaifoConfig {
+    /// The simulated arm of in-process runs (docs/design.md §2).
+    pub sim: SimConfig,
+    /// Noisy episodes per iteration N; paper §5: 5 (docs/design.md §1.3 step 1).
+    pub samples: usize,
+    /// Iterations to run (docs/design.md §1.3).
+    pub iterations: usize,
+    /// Initial controller: hold the start pose with this exploration variance, rad²
+    /// (docs/design.md §5 D11).
+    pub init_var: f64,
+    /// `Discriminator::train` calls per iteration, each `discriminator.n_critic` Adam steps
+    /// (docs/design.md §5 D6).
+    pub critic_updates: usize,
+    /// Half-life of the critic's learning rate, iterations: iteration i trains at
+    /// `discriminator.adam.lr · 2^(−i / h)`; 0 keeps it constant (docs/design.md §5 D25).
+    pub critic_lr_half_life: f64,
+    /// GPS step-size adaptation; off: the critic's cost changes every iteration
+    /// (docs/design.md §5 D5).
+    pub adapt_step: bool,
+    /// Project the samples' mean ∇²D per step on the PSD cone before the chain rule
+    /// (docs/design.md §5 D3, D4).
+    pub psd_hessian: bool,
+    /// The critic: 2 × 32 tanh, Adam 3e-3 / β1 0.5, 100 steps of batch 16 per call, gradient
+    /// penalty in normalised inputs (docs/design.md §5 D6–D8, D25).
+    pub discriminator: DiscriminatorConfig,
+    /// Seed of every random draw of the run: noise, GMM, critic (docs/design.md §3.7).
+    pub seed: u64,
+    /// GPS algorithm settings; KL step 0.2 per time step (docs/design.md §1.3 step 6).
+    pub algorithm: AlgorithmConfig,
+    /// GPS dynamics prior on the last 10 trajectories with ≤ 5 EM iterations, for the
+    /// learner-time budget (docs/design.md §5 D9).
+    pub prior: PriorGmmConfig,
+    /// GPS dynamics fit (docs/design.md §1.3 step 2).
+    pub fit: LrPriorConfig,
+    /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
+    pub traj_opt: TrajOptConfig,
+}
+
+impl Default for GaifoConfig {
+    fn default() -> Self {
+        Self {
+            sim: SimConfig::default(),
+            samples: 5,
+            iterations: 20,
+            init_var: 0.05,
+            critic_updates: 1,
+            // 40 (25 before): on the five workspace goals × 10 seeds every run stays within
+            // 1.5 cm from iteration 20 (49 of 50 with 25; docs/design.md §5 D37).
+            critic_lr_half_life: 40.0,
+            adapt_step: false,
+            psd_hessian: true,
+            discriminator: DiscriminatorConfig {
+                hidden: vec![32, 32],
+                n_critic: 100,
+                adam: AdamConfig {
+                    lr: 3e-3,
+                    beta1: 0.5,
+                    beta2: 0.9,
+                    eps: 1e-8,
+                },
+                batch_size: 16,
+                penalty_space: PenaltySpace::Normalised,
+                // 1 cm, with the raw inputs kept beside the warped ones: on five workspace
+                // goals the final distance at iterations 20 / 50 fell from 9.4 / 4.6 mm to
+                // 5.4 / 1.1 mm (docs/design.md §5 D36).
+                near_goal_scale: 0.01,
+                near_goal_keep_raw: true,
+                ..DiscriminatorConfig::default()
+            },
+            seed: 0,
+            algorithm: AlgorithmConfig::default(),
+            prior: PriorGmmConfig {
+                max_samples: 11,
+                max_iterations: 5,
+                ..PriorGmmConfig::default()
+            },
+            fit: LrPriorConfig::default(),
+            traj_opt: TrajOptConfig::default(),
+        }
+    }
+}
+
+impl GaifoConfig {
+    /// [`MAX_COUNT`], under the name the application uses.
+    pub const MAX_COUNT: usize = MAX_COUNT;
+
+    /// The critic's settings.
+    pub fn critic(&self) -> CriticSettings<'_> {
+        CriticSettings {
+            updates: self.critic_updates,
+            lr_half_life: self.critic_lr_half_life,
+            discriminator: &self.discriminator,
+        }
+    }
+
+    /// Checks every setting's range before anything is allocated or run.
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        let bad = |name: &str, v: &dyn std::fmt::Debug, allowed: &str| {
+            Err(ImitationError::Config(format!(
+                "{name} = {v:?}: must be {allowed}"
+            )))
+        };
+        if self.samples < 2 || self.samples > MAX_COUNT {
+            return bad(
+                "samples",
+                &self.samples,
+                &format!("in 2..={MAX_COUNT} (the dynamics fit needs 2)"),
+            );
+        }
+        if !(1..=MAX_COUNT).contains(&self.iterations) {
+            return bad(
+                "iterations",
+                &self.iterations,
+                &format!("in 1..={MAX_COUNT}"),
+            );
+        }
+        if !(self.init_var.is_finite() && self.init_var > 0.0 && self.init_var <= 10.0) {
+            return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
+        }
+        self.critic().validate()?;
+        crate::error::check_arm_and_gps(
+            &self.sim,
+            &self.algorithm,
+            &self.prior,
+            &self.fit,
+            &self.traj_opt,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_that_cannot_work_are_refused_naming_the_setting() {
+        assert!(GaifoConfig::default().validate().is_ok());
+        let cases: Vec<(&str, Box<dyn Fn(&mut GaifoConfig)>)> = vec![
+            ("kl_step", Box::new(|c| c.algorithm.kl_step = -1.0)),
+            ("kl_step", Box::new(|c| c.algorithm.kl_step = f64::NAN)),
+            ("init_var", Box::new(|c| c.init_var = 1e300)),
+            ("min_eta/max_eta", Box::new(|c| c.traj_opt.max_eta = 1e-9)),
+            ("max_clusters", Box::new(|c| c.prior.max_clusters = 0)),
+            ("regularization", Box::new(|c| c.fit.regularization = -1.0)),
+            (
+                "critic_updates",
+                Box::new(|c| c.critic_updates = 1_000_000_000),
+            ),
+            (
+                "n_critic/batch_size",
+                Box::new(|c| c.discriminator.batch_size = 1_000_000_000),
+            ),
+            (
+                "hidden",
+                Box::new(|c| c.discriminator.hidden = vec![1_000_000_000]),
+            ),
+            ("samples", Box::new(|c| c.samples = 1_000_000_000)),
+            ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
+            (
+                "critic_lr_half_life",
+                Box::new(|c| c.critic_lr_half_life = -2.0),
+            ),
+        ];
+        for (name, set) in cases {
+            let mut c = GaifoConfig::default();
+            set(&mut c);
+            let e = c.validate().expect_err(name).to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        }
+    }
+}
