@@ -229,6 +229,10 @@ struct UrSimArgs {
     /// --time-compression plays it faster.
     #[arg(long, value_name = "FILE.csv")]
     playback: Option<PathBuf>,
+    /// Active joints: 3 (the wrist locked at the model's wrist_q; servoj's wrist targets are
+    /// ignored with a warning) or 6 (servoj moves all six joints).
+    #[arg(long, default_value_t = 3)]
+    joints: usize,
 }
 
 /// Options of `hil-sim ros2-sim` (see `hil_sim::ros2_sim`).
@@ -330,6 +334,7 @@ impl UrSimArgs {
                 text_only: self.fault_text_only,
             },
             playback: self.playback.clone(),
+            joints: self.joints,
         })
     }
 }

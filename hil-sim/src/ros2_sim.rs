@@ -25,7 +25,6 @@ use ur5_ros2::{
     Float64MultiArray, Header, JointState, Network, Node, RobotMode, SafetyMode, Time, TopicQos,
 };
 use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
-use ur5_shared::layout::N_JOINTS;
 
 use crate::ur_sim::plant::{Arm, Phase};
 use crate::{SimError, Ur5Sim};
@@ -281,10 +280,13 @@ fn run(mut arm: Arm, mut io: Io, cfg: &Ros2SimConfig, stop: &AtomicBool, c: &Cou
             if m.data.len() < 6 || arm.safety != ur_protocol::SafetyMode::Normal {
                 c.ignored.fetch_add(1, Ordering::Relaxed);
             } else {
-                goal = Some([m.data[0], m.data[1], m.data[2]]);
+                // All six: an arm with a locked wrist ignores the wrist's (`Arm::set_goal`).
+                goal = Some([
+                    m.data[0], m.data[1], m.data[2], m.data[3], m.data[4], m.data[5],
+                ]);
             }
         }
-        let mut violation = goal.and_then(|q: [f64; N_JOINTS]| {
+        let mut violation = goal.and_then(|q: [f64; 6]| {
             let v = arm.check_target(&q).err();
             if v.is_none() {
                 arm.set_goal(q);

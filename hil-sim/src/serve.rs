@@ -27,6 +27,7 @@ use iceoryx2::prelude::*;
 use serde::{Deserialize, Serialize};
 use ur5_shared::clock::{monotonic_ns, sleep_until_ns};
 use ur5_shared::config::{ActionMode, ConfigError, SimConfig, TaskConfig};
+use ur5_shared::kinematics::Joints6;
 use ur5_shared::layout::N_JOINTS;
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind};
@@ -64,6 +65,17 @@ pub struct ServeConfig {
     pub hold_damping: [f64; N_JOINTS],
     /// Stop after this many commands (0 = until SIGINT/SIGTERM); for scripted runs.
     pub max_commands: u64,
+    /// Active joints of the served arm: 3 (the wrist locked at `sim.wrist_q`) or 6; states carry
+    /// that many joints and commands for another number are refused (`WRONG_JOINTS`). At six,
+    /// reset poses and goals have six values; the torque-mode hold damps the wrist with its
+    /// servo's velocity gains (`hil_sim::servo::wrist_velocity_gain`). Left out when
+    /// serialised at 3.
+    #[serde(skip_serializing_if = "is_three")]
+    pub joints: usize,
+}
+
+fn is_three(n: &usize) -> bool {
+    *n == 3
 }
 
 impl Default for ServeConfig {
@@ -76,6 +88,7 @@ impl Default for ServeConfig {
             command_timeout_s: 1.0,
             hold_damping: [20.0, 20.0, 5.0],
             max_commands: 0,
+            joints: 3,
         }
     }
 }
@@ -192,15 +205,25 @@ impl Ur5Sim {
         let (_, qd) = self.joint_state();
         core::array::from_fn(|j| g[j] - damping[j] * qd[j])
     }
+
+    /// [`Ur5Sim::hold_torque`] of every active joint (first [`Ur5Sim::joints`] entries): the
+    /// wrist joints damped with their servo's velocity gains.
+    pub fn hold_torque_all(&self, damping: &[f64; N_JOINTS]) -> Joints6 {
+        let g = self.gravity_torque_all();
+        let (_, qd) = self.joint_state_all();
+        let w = crate::servo::wrist_velocity_gain(self.config().model);
+        let d = [damping[0], damping[1], damping[2], w[0], w[1], w[2]];
+        core::array::from_fn(|j| g[j] - d[j] * qd[j])
+    }
 }
 
 /// The command in force (zero-order hold).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Held {
-    /// Goal angles (rad) or torques (N·m), per the sim's mode.
-    Action([f64; N_JOINTS]),
+    /// Goal angles (rad) or torques (N·m), per the sim's mode (first `joints()` entries).
+    Action(Joints6),
     /// Holding: goal-angle mode at these angles; torque mode by gravity torque.
-    Hold([f64; N_JOINTS]),
+    Hold(Joints6),
 }
 
 struct Arm {
@@ -218,7 +241,7 @@ struct Arm {
 
 impl Arm {
     fn hold_here(&self) -> Held {
-        Held::Hold(self.sim.joint_state().0)
+        Held::Hold(self.sim.joint_state_all().0)
     }
 
     /// Applies one command to what is held; resets happen at once.
@@ -233,7 +256,14 @@ impl Arm {
             .chain(&cmd.reset_pose)
             .all(|v| v.is_finite());
         // The active joints' values; a command for another number of joints is refused.
-        let joints = |v: &[f64]| <[f64; N_JOINTS]>::try_from(v).ok();
+        let n = self.sim.joints();
+        let joints = |v: &[f64]| {
+            (v.len() == n).then(|| {
+                let mut a = [0.0; 6];
+                a[..n].copy_from_slice(v);
+                a
+            })
+        };
         let (values, reset_pose) = (joints(cmd.values()), joints(cmd.reset_pose()));
         match cmd.kind() {
             _ if !finite => self.reject(ArmFaults::NON_FINITE_COMMAND),
@@ -243,11 +273,11 @@ impl Arm {
                     self.held = self.hold_here();
                 }
             }
-            Ok(_) if cmd.joints as usize != N_JOINTS => self.reject(ArmFaults::WRONG_JOINTS),
+            Ok(_) if cmd.joints as usize != n => self.reject(ArmFaults::WRONG_JOINTS),
             Ok(CommandKind::Reset) => {
-                let reset_pose = reset_pose.expect("N_JOINTS values");
+                let reset_pose = reset_pose.expect("n values");
                 self.summary.resets += 1;
-                match self.sim.reset(reset_pose, self.task.goal) {
+                match self.sim.reset_all(&reset_pose[..n], self.task.goal) {
                     Ok(_) => self.held = Held::Hold(reset_pose),
                     Err(e) => {
                         eprintln!("hil-sim serve: reset refused: {e}");
@@ -256,10 +286,10 @@ impl Arm {
                 }
             }
             Ok(CommandKind::GoalAngles) if mode == ActionMode::GoalAngles => {
-                self.held = Held::Action(values.expect("N_JOINTS values"))
+                self.held = Held::Action(values.expect("n values"))
             }
             Ok(CommandKind::Torques) if mode == ActionMode::Torque => {
-                self.held = Held::Action(values.expect("N_JOINTS values"))
+                self.held = Held::Action(values.expect("n values"))
             }
             Ok(_) | Err(_) => self.reject(ArmFaults::UNKNOWN_COMMAND),
         }
@@ -278,10 +308,10 @@ impl Arm {
         let action = match (self.held, self.sim.config().mode) {
             (Held::Action(a), _) => a,
             (Held::Hold(q), ActionMode::GoalAngles) => q,
-            (Held::Hold(_), ActionMode::Torque) => self.sim.hold_torque(&self.cfg.hold_damping),
+            (Held::Hold(_), ActionMode::Torque) => self.sim.hold_torque_all(&self.cfg.hold_damping),
         };
         self.summary.sim_time_s += self.period_s;
-        self.sim.step(action)
+        self.sim.step_all(&action[..self.sim.joints()])
     }
 
     fn publish(
@@ -290,9 +320,15 @@ impl Arm {
         obs: &Observation,
         extra: ArmFaults,
     ) {
+        // The first three joints as measured (sensor noise included), a six-joint arm's wrist
+        // as it is (the perturbation's sensor noise covers three joints).
+        let n = self.sim.joints();
+        let (mut q, mut qd) = self.sim.joint_state_all();
+        q[..N_JOINTS].copy_from_slice(&obs.q);
+        qd[..N_JOINTS].copy_from_slice(&obs.qd);
         let s = &mut self.state;
         s.seq += 1;
-        s.set_joints(&obs.q, &obs.qd);
+        s.set_joints(&q[..n], &qd[..n]);
         s.ee_pos = obs.ee_pos;
         s.ee_vel = obs.ee_vel;
         let mut status = ArmStatus::READY;
@@ -302,10 +338,9 @@ impl Arm {
         s.status = status;
         let mut faults = self.command_faults;
         faults.insert(extra);
-        let finite = obs
-            .q
+        let finite = q
             .iter()
-            .chain(&obs.qd)
+            .chain(&qd)
             .chain(&obs.ee_pos)
             .chain(&obs.ee_vel)
             .all(|v| v.is_finite());
@@ -336,7 +371,7 @@ pub fn serve(
         ServeMode::Lockstep => task.dt,
         ServeMode::RealTime => cfg.state_period_s,
     };
-    let sim = Ur5Sim::new(sim_cfg.clone(), period_s)?;
+    let sim = Ur5Sim::with_joints(sim_cfg.clone(), period_s, cfg.joints)?;
     let _role = services::RoleLock::acquire(&cfg.prefix, "arm")?;
     let names = ServiceNames::new(&cfg.prefix);
     let node = NodeBuilder::new()
@@ -361,7 +396,7 @@ pub fn serve(
         sim,
         task: task.clone(),
         cfg: cfg.clone(),
-        held: Held::Hold(task.start_q),
+        held: Held::Hold([0.0; 6]), // set below, after the reset
         state: ArmState::default(),
         summary: ServeSummary {
             command: "serve",
@@ -371,6 +406,9 @@ pub fn serve(
         period_s,
     };
     let obs = arm.sim.reset(task.start_q, task.goal)?;
+    // Hold the start pose as given (not as the f32 physics rounds it); a wrist at its rest.
+    let (q, w) = (task.start_q, arm.sim.model().wrist_q);
+    arm.held = Held::Hold([q[0], q[1], q[2], w[0], w[1], w[2]]);
     arm.publish(&publisher, &obs, ArmFaults::default());
     let done = |arm: &Arm| {
         stop.load(Ordering::Relaxed)

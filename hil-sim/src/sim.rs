@@ -464,6 +464,11 @@ impl Ur5Sim {
         first3(&self.last_tau)
     }
 
+    /// Torques applied in the last physics step to the six joints (N·m; a locked wrist's 0).
+    pub fn last_torque_all(&self) -> Joints6 {
+        self.last_tau
+    }
+
     /// Largest |τ| per joint of the first three applied since the last reset (N·m).
     pub fn max_abs_torque(&self) -> [f64; N_JOINTS] {
         first3(&self.max_abs_tau)

@@ -180,6 +180,15 @@ pub struct UrSimConfig {
     pub faults: Faults,
     /// A playback file moving the arm as by hand (freedrive; [`playback`]); real time only.
     pub playback: Option<std::path::PathBuf>,
+    /// Active joints of the simulated arm: 3 (the wrist locked at `sim.wrist_q`; servoj's wrist
+    /// targets are ignored with a warning) or 6 (servoj moves all six). Left out when
+    /// serialised at 3.
+    #[serde(skip_serializing_if = "is_three")]
+    pub joints: usize,
+}
+
+fn is_three(n: &usize) -> bool {
+    *n == 3
 }
 
 impl Default for UrSimConfig {
@@ -197,6 +206,7 @@ impl Default for UrSimConfig {
             time_compression: 1.0,
             faults: Faults::default(),
             playback: None,
+            joints: 3,
         }
     }
 }
@@ -552,7 +562,7 @@ pub fn spawn(
         )),
         None => None,
     };
-    let sim = Ur5Sim::new(sim_cfg.clone(), dt)?;
+    let sim = Ur5Sim::with_joints(sim_cfg.clone(), dt, cfg.joints)?;
     let start_q = player
         .as_ref()
         .map_or(task.start_q, playback::Player::start_active);

@@ -6,6 +6,7 @@
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
+use ur5_shared::kinematics::Joints6;
 use ur5_shared::layout::N_JOINTS;
 use ur_protocol::state::runtime_state;
 use ur_protocol::{RobotMode, RobotState, SafetyMode};
@@ -55,13 +56,14 @@ pub struct ServojFilter {
     a_smooth: f64,
     /// Per-cycle factor of the tracking.
     a_track: f64,
-    smoothed: [f64; N_JOINTS],
-    commanded: [f64; N_JOINTS],
+    smoothed: Joints6,
+    commanded: Joints6,
 }
 
 impl ServojFilter {
-    /// At rest at `q` (rad), for `lookahead_time_s` (s), `gain` (1/s) and arm cycle `dt` (s).
-    pub fn new(lookahead_time_s: f64, gain: f64, dt: f64, q: [f64; N_JOINTS]) -> Self {
+    /// At rest at `q` (rad, six joints), for `lookahead_time_s` (s), `gain` (1/s) and arm
+    /// cycle `dt` (s).
+    pub fn new(lookahead_time_s: f64, gain: f64, dt: f64, q: Joints6) -> Self {
         Self {
             a_smooth: 1.0 - (-dt / lookahead_time_s).exp(),
             a_track: 1.0 - (-dt * gain).exp(),
@@ -71,8 +73,8 @@ impl ServojFilter {
     }
 
     /// One arm cycle toward `target` (rad): the position servo's goal.
-    pub fn step(&mut self, target: &[f64; N_JOINTS]) -> [f64; N_JOINTS] {
-        for j in 0..N_JOINTS {
+    pub fn step(&mut self, target: &Joints6) -> Joints6 {
+        for j in 0..6 {
             self.smoothed[j] += self.a_smooth * (target[j] - self.smoothed[j]);
             self.commanded[j] += self.a_track * (self.smoothed[j] - self.commanded[j]);
         }
@@ -87,8 +89,8 @@ pub struct Arm {
     pub cycle: u64,
     /// Arm cycle (s): 0.002 (e-Series) or 0.008 (CB3).
     pub dt: f64,
-    /// Servo goal of the active joints (rad).
-    goal: [f64; N_JOINTS],
+    /// Servo goal of the six joints (rad); a locked wrist's entries are its lock angles.
+    goal: Joints6,
     /// Program phase.
     pub phase: Phase,
     /// Incremented per program start, so a stale program thread cannot act on a new one.
@@ -121,11 +123,12 @@ impl Arm {
         dt: f64,
     ) -> Result<Self, crate::SimError> {
         sim.reset(start_q, goal_point)?;
+        let goal = sim.arm_joints().0;
         let mut arm = Self {
             sim,
             cycle: 0,
             dt,
-            goal: start_q,
+            goal,
             phase: Phase::Idle,
             program: 0,
             safety: SafetyMode::Normal,
@@ -139,9 +142,10 @@ impl Arm {
         Ok(arm)
     }
 
-    /// Checks a servo target of the active joints against the URDF limits.
-    pub fn check_target(&self, q: &[f64; N_JOINTS]) -> Result<(), Violation> {
-        for (j, l) in self.sim.model().active.iter().enumerate() {
+    /// Checks a servo target (six joints, rad) of the active joints against the URDF limits.
+    pub fn check_target(&self, q: &Joints6) -> Result<(), Violation> {
+        for j in 0..self.sim.joints() {
+            let l = self.sim.model().joint(j);
             if !(q[j].is_finite() && q[j] >= l.lower && q[j] <= l.upper) {
                 return Err(Violation(format!(
                     "joint `{}` target {} rad is outside its limits [{}, {}]",
@@ -157,26 +161,33 @@ impl Arm {
         self.sim.model().wrist_q
     }
 
-    /// Sets the servo goal (SERVOJ target of the active joints, rad).
-    pub fn set_goal(&mut self, q: [f64; N_JOINTS]) {
-        self.goal = q;
+    /// Active joints: 3 (wrist locked) or 6.
+    pub fn joints(&self) -> usize {
+        self.sim.joints()
+    }
+
+    /// Sets the servo goal of the active joints (SERVOJ target, six joints, rad; a locked
+    /// wrist's targets are ignored).
+    pub fn set_goal(&mut self, q: Joints6) {
+        let n = self.sim.joints();
+        self.goal[..n].copy_from_slice(&q[..n]);
     }
 
     /// Holds where the arm is now.
     pub fn hold_here(&mut self) {
-        self.goal = self.sim.joint_state().0;
+        self.goal = self.sim.arm_joints().0;
     }
 
-    /// Where the active joints are (rad).
-    pub fn q(&self) -> [f64; N_JOINTS] {
-        self.sim.joint_state().0
+    /// Where the six joints are (rad; a locked wrist at its lock angles).
+    pub fn q(&self) -> Joints6 {
+        self.sim.arm_joints().0
     }
 
     /// Starts `stopj`: the goal becomes the point where a deceleration of
     /// [`STOPJ_DECELERATION`] would bring each joint to rest; the servo decelerates toward it.
     pub fn begin_stop(&mut self) {
         if self.phase == Phase::Running {
-            let (q, qd) = self.sim.joint_state();
+            let (q, qd) = self.sim.arm_joints();
             self.goal =
                 core::array::from_fn(|j| q[j] + qd[j] * qd[j].abs() / (2.0 * STOPJ_DECELERATION));
             self.phase = Phase::Stopping;
@@ -207,12 +218,13 @@ impl Arm {
             self.refresh();
             return None;
         }
+        let n = self.sim.joints();
         match (self.phase, self.servoj.as_mut()) {
-            (Phase::Running, Some(f)) => self.sim.step(f.step(&self.goal)),
-            _ => self.sim.step(self.goal),
+            (Phase::Running, Some(f)) => self.sim.step_all(&f.step(&self.goal)[..n]),
+            _ => self.sim.step_all(&self.goal[..n]),
         };
         self.cycle += 1;
-        let (q, qd) = self.sim.joint_state();
+        let (q, qd) = self.sim.arm_joints();
         if self.phase == Phase::Stopping && qd.iter().all(|v| v.abs() < AT_REST) {
             self.goal = q;
             self.phase = Phase::Idle;
@@ -220,11 +232,8 @@ impl Arm {
         self.refresh();
         // The sim clamps goals to the limits; an overshoot beyond them is a violation.
         let margin = 1e-3;
-        self.sim
-            .model()
-            .active
-            .iter()
-            .enumerate()
+        (0..n)
+            .map(|j| (j, self.sim.model().joint(j)))
             .find_map(|(j, l)| {
                 (!(q[j] >= l.lower - margin && q[j] <= l.upper + margin)).then(|| {
                     Violation(format!(
@@ -245,16 +254,14 @@ impl Arm {
     /// Recomputes the snapshot after a change of modes (the dashboard's commands).
     pub fn refresh(&mut self) {
         let obs = self.sim.true_observation();
-        let w = self.sim.model().wrist_q;
-        let six =
-            |a: [f64; N_JOINTS], wrist: [f64; 3]| [a[0], a[1], a[2], wrist[0], wrist[1], wrist[2]];
+        let (q, qd) = self.sim.arm_joints();
         let s = &mut self.snapshot;
         s.timestamp = self.cycle as f64 * self.dt;
-        s.actual_q = six(obs.q, w);
-        s.actual_qd = six(obs.qd, [0.0; 3]);
-        s.target_q = six(self.goal, w);
+        s.actual_q = q;
+        s.actual_qd = qd;
+        s.target_q = self.goal;
         // Joint torques (N·m) stand in for currents: the sim has no motor model.
-        s.actual_current = six(self.sim.last_torque(), [0.0; 3]);
+        s.actual_current = self.sim.last_torque_all();
         // Position of the project's end-effector point; its orientation is not modelled.
         s.actual_tcp_pose = [obs.ee_pos[0], obs.ee_pos[1], obs.ee_pos[2], 0.0, 0.0, 0.0];
         s.actual_tcp_speed = [obs.ee_vel[0], obs.ee_vel[1], obs.ee_vel[2], 0.0, 0.0, 0.0];
@@ -368,10 +375,10 @@ mod tests {
         let dt = 0.002;
         // Smoothing alone (a gain so high the tracking is immediate): 1 − 1/e of a step after
         // one lookahead time.
-        let mut f = ServojFilter::new(0.1, 1e9, dt, [0.0; N_JOINTS]);
-        let mut y = [0.0; N_JOINTS];
+        let mut f = ServojFilter::new(0.1, 1e9, dt, [0.0; 6]);
+        let mut y = [0.0; 6];
         for _ in 0..50 {
-            y = f.step(&[1.0, 2.0, -1.0]);
+            y = f.step(&[1.0, 2.0, -1.0, 0.5, 0.0, 3.0]);
         }
         let e = 1.0 - (-1.0f64).exp();
         assert!(
@@ -380,10 +387,10 @@ mod tests {
         );
         // Each setting converges to the target and stays between start and target.
         for (l, g) in [(0.03, 100.0), (0.2, 2000.0), (0.03, 2000.0)] {
-            let mut f = ServojFilter::new(l, g, 0.008, [0.0; N_JOINTS]);
+            let mut f = ServojFilter::new(l, g, 0.008, [0.0; 6]);
             let mut last = 0.0;
             for _ in 0..1000 {
-                let y = f.step(&[1.0; N_JOINTS])[0];
+                let y = f.step(&[1.0; 6])[0];
                 assert!(y >= last && y <= 1.0, "monotone: {l} {g}");
                 last = y;
             }

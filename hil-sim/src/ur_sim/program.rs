@@ -284,13 +284,13 @@ fn command_loop(ctx: &Ctx, generation: u64, mut s: TcpStream) -> End {
                     q,
                     ..
                 }) => {
-                    let target = [q[0], q[1], q[2]];
+                    let target = [q[0], q[1], q[2], q[3], q[4], q[5]];
                     if let Err(v) = arm.check_target(&target) {
                         end = Some(End::ProtectiveStop);
                         return Err(Violation(v.0));
                     }
                     let w = arm.wrist_q();
-                    if (0..3).any(|k| (q[3 + k] - w[k]).abs() > 1e-3) {
+                    if arm.joints() == 3 && (0..3).any(|k| (q[3 + k] - w[k]).abs() > 1e-3) {
                         wrist_off = Some(([q[3], q[4], q[5]], w));
                     }
                     arm.set_goal(target);

@@ -730,3 +730,58 @@ fn ur_a_stopped_and_continued_ur_sim_keeps_its_rtde_clients() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("Interrupted"), "{err}");
 }
+
+/// `ur-sim` with six active joints: servoj moves the wrist too, and RTDE reports all six
+/// joints where the shared kinematics put them; a three-joint `ur-sim` keeps its wrist locked
+/// under the same targets.
+#[test]
+fn ur_six_joint_servoj_moves_the_wrist() {
+    for joints in [6, 3] {
+        let cfg = UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            lockstep: true,
+            joints,
+            ..UrSimConfig::default()
+        };
+        let sim = ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg)
+            .expect("ur-sim starts");
+        let mut c = Client::connect(sim.rtde_addr);
+        assert!(c.negotiate(2));
+        let recipe = c.setup(NAMES).expect("usable recipe");
+        assert!(c.start());
+        let s0 = c.state(&recipe).unwrap();
+        let w = SimConfig::default().wrist_q;
+        let start_q = TaskConfig::default().start_q;
+        let target = [
+            start_q[0] + 0.2,
+            start_q[1] + 0.1,
+            start_q[2] - 0.1,
+            w[0] + 0.4,
+            w[1] - 0.3,
+            w[2] + 0.5,
+        ];
+        let mut rev = run_program(&sim);
+        let mut last = s0;
+        for _ in 0..1000 {
+            let cmd = ReverseCommand {
+                timeout_ms: 5_000,
+                q: target,
+                mode: ControlMode::Servoj,
+            };
+            rev.write_all(&cmd.encode().unwrap()).unwrap();
+            last = c.state(&recipe).unwrap();
+        }
+        let err: Vec<f64> = (0..6)
+            .map(|j| (last.actual_q[j] - target[j]).abs())
+            .collect();
+        if joints == 6 {
+            assert!(err.iter().all(|e| *e < 1e-3), "six joints: {err:?}");
+        } else {
+            assert!(err[..3].iter().all(|e| *e < 1e-3), "arm: {err:?}");
+            for k in 0..3 {
+                assert_eq!(last.actual_q[3 + k], w[k], "the locked wrist stays");
+            }
+        }
+    }
+}

@@ -192,6 +192,52 @@ fn lockstep_serve_answers_each_command_once_and_reports_bad_ones() {
     assert_eq!(j["states"], 10, "the initial state plus one per command");
 }
 
+/// `[serve] joints = 6`: states carry six joints, a six-joint reset and goal move the wrist,
+/// and a three-joint command is refused naming the joint count.
+#[test]
+fn lockstep_serve_with_six_joints_moves_the_wrist() {
+    let prefix = unique_prefix("serve-six");
+    let dir = scratch("serve-six");
+    let config = write_config(&dir, "six.toml", "[serve]\njoints = 6\n");
+    let mut sim = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &["serve", "--config", &config, "--prefix", &prefix],
+        &dir,
+    );
+    let mut d = Driver::new(&prefix);
+    let first = d.wait_state(&mut sim, "the initial state", |_| true);
+    let w = [
+        -std::f64::consts::FRAC_PI_2,
+        std::f64::consts::FRAC_PI_2,
+        0.0,
+    ];
+    assert_eq!(first.joints, 6);
+    assert!(
+        close(first.q(), &[0.0, -2.0, 2.4, w[0], w[1], w[2]], 1e-5),
+        "starts at task.start_q, the wrist at sim.wrist_q: {:?}",
+        first.q
+    );
+    d.wait_for_arm_subscriber();
+    let pose = [0.2, -1.5, 2.0, -1.2, 1.3, 0.4];
+    let s = d.command(&mut sim, |seq| ArmCommand::reset(seq, 0, 1, pose));
+    assert!(close(s.q(), &pose, 1e-5) && !s.faults.any(), "reset: {s:?}");
+    let goal = [0.2, -1.5, 2.0, -1.0, 1.1, 0.6];
+    let mut s = s;
+    for _ in 0..30 {
+        s = d.command(&mut sim, |seq| ArmCommand::goal_angles(seq, 0, 1, goal));
+    }
+    assert!(close(s.q(), &goal, 1e-3), "reaches the goal: {:?}", s.q);
+    let s = d.command(&mut sim, |seq| {
+        ArmCommand::goal_angles(seq, 0, 1, [0.3, -1.5, 2.0])
+    });
+    assert!(s.faults.contains(ArmFaults::WRONG_JOINTS), "{s:?}");
+    assert!(s.status.contains(ArmStatus::HOLDING) && s.joints == 6);
+    sim.signal(libc::SIGTERM);
+    let (code, _) = sim.wait(LONG);
+    assert_eq!(code, Some(0), "log:\n{}", sim.log());
+}
+
 #[test]
 fn real_time_serve_holds_the_last_command_and_reports_a_stale_one() {
     let prefix = unique_prefix("serve-rt");
