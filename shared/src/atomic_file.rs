@@ -18,15 +18,22 @@ pub fn temporary_path(path: &Path) -> PathBuf {
 
 /// Writes `bytes` to `path` atomically (module docs). The error names the file at fault.
 pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = write_temporary(path, bytes)?;
+    commit(&tmp, path)
+}
+
+/// The error `e` naming the file `p`.
+fn named(e: std::io::Error, p: &Path) -> std::io::Error {
+    std::io::Error::new(e.kind(), format!("{}: {e}", p.display()))
+}
+
+/// Writes `bytes` to `path`'s temporary file and syncs it; returns the temporary's path.
+fn write_temporary(path: &Path, bytes: &[u8]) -> std::io::Result<PathBuf> {
     let tmp = temporary_path(path);
-    let named = |e: std::io::Error, p: &Path| {
-        std::io::Error::new(e.kind(), format!("{}: {e}", p.display()))
-    };
     let mut f = File::create(&tmp).map_err(|e| named(e, &tmp))?;
     f.write_all(bytes).map_err(|e| named(e, &tmp))?;
     f.sync_all().map_err(|e| named(e, &tmp))?;
-    drop(f);
-    commit(&tmp, path)
+    Ok(tmp)
 }
 
 /// Writes `bytes` to `path` atomically as a new file: never replaces what is there (a file,
@@ -40,14 +47,7 @@ pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
             format!("{} exists", path.display()),
         ));
     }
-    let tmp = temporary_path(path);
-    let named = |e: std::io::Error, p: &Path| {
-        std::io::Error::new(e.kind(), format!("{}: {e}", p.display()))
-    };
-    let mut f = File::create(&tmp).map_err(|e| named(e, &tmp))?;
-    f.write_all(bytes).map_err(|e| named(e, &tmp))?;
-    f.sync_all().map_err(|e| named(e, &tmp))?;
-    drop(f);
+    let tmp = write_temporary(path, bytes)?;
     let linked = std::fs::hard_link(&tmp, path).map_err(|e| named(e, path));
     std::fs::remove_file(&tmp).ok();
     linked?;

@@ -44,6 +44,27 @@ pub enum LawError {
     },
 }
 
+/// `Ok` if `s` has `dx` entries, `eps` at least `du` and `a` exactly `du` (and `dx` is within
+/// [`crate::layout::MAX_DX`]): the arrays a controller law of those dimensions reads and writes.
+pub(crate) fn check_arrays(
+    dx: usize,
+    du: usize,
+    s: &[f64],
+    eps: &[f64],
+    a: &[f64],
+) -> Result<(), LawError> {
+    if s.len() != dx || eps.len() < du || a.len() != du || dx > crate::layout::MAX_DX {
+        return Err(LawError::WrongDimensions {
+            dx,
+            du,
+            s: s.len(),
+            eps: eps.len(),
+            a: a.len(),
+        });
+    }
+    Ok(())
+}
+
 /// Writes a = K_t (s − ŝ_t) + k_t + â_t + L_t ε into `a`.
 ///
 /// - `table`: a table that passed [`GainTable::validate`] (this function checks only t and
@@ -79,15 +100,7 @@ pub fn controller_action(
             version: table.version,
         });
     }
-    if s.len() != dx || eps.len() < du || a.len() != du {
-        return Err(LawError::WrongDimensions {
-            dx,
-            du,
-            s: s.len(),
-            eps: eps.len(),
-            a: a.len(),
-        });
-    }
+    check_arrays(dx, du, s, eps, a)?;
     let step = table.step(t);
     let mut ds = [0.0; crate::layout::MAX_DX];
     let ds = &mut ds[..dx];

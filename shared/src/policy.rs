@@ -619,15 +619,7 @@ pub fn policy_action(
     a: &mut [f64],
 ) -> Result<(), LawError> {
     let (dx, du) = table.dims();
-    if s.len() != dx || eps.len() < du || a.len() != du || dx > MAX_DX {
-        return Err(LawError::WrongDimensions {
-            dx,
-            du,
-            s: s.len(),
-            eps: eps.len(),
-            a: a.len(),
-        });
-    }
+    crate::law::check_arrays(dx, du, s, eps, a)?;
     let theta = table.theta();
     let (m, rest) = theta.split_at(dx);
     let (r, heads) = rest.split_at(dx);
