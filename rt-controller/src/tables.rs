@@ -162,6 +162,11 @@ impl TableBuffer {
         }
     }
 
+    /// The task's layout every table must have (and the arm's joints with it).
+    pub fn layout(&self) -> &StateLayout {
+        &self.layout
+    }
+
     /// The active controller, if any table was ever accepted.
     #[inline]
     pub fn active(&self) -> Option<Active<'_>> {

@@ -24,7 +24,7 @@
 //! controller can keep two of them (double buffer) allocated once. Build one with
 //! [`GainTable::new_boxed`] (heap, no stack temporary) or in place with
 //! [`GainTable::init_zeroed`] (e.g. in a loaned iceoryx2 sample), set its dimensions
-//! ([`GainTable::set_dims`]), fill the steps, then [`GainTable::seal`]. A receiver calls
+//! ([`GainTable::set_layout`]), fill the steps, then [`GainTable::seal`]. A receiver calls
 //! [`GainTable::validate`] and checks the dimensions against its task
 //! ([`GainTable::check_layout`]) before using it.
 //!
@@ -528,8 +528,7 @@ impl GainTable {
     /// A zeroed table on the heap for `layout`'s dimensions.
     pub fn new_boxed_for(layout: &StateLayout) -> Box<GainTable> {
         let mut t = Self::new_boxed();
-        t.dx = layout.dx() as u32;
-        t.du = layout.du() as u32;
+        t.set_layout(layout);
         t
     }
 

@@ -248,7 +248,7 @@ impl ArmState {
     /// joints).
     pub fn check_layout(&self, layout: &StateLayout) -> Result<(), DimensionMismatch> {
         let n = self.joints as usize;
-        let dx = (2 * n + 6 * layout.tool_points()) as usize;
+        let dx = 2 * n + 6 * layout.tool_points();
         layout.check_dims("the arm's state", dx, n)
     }
 
@@ -256,16 +256,14 @@ impl ArmState {
     /// base frame), through [`StateLayout::fill_state`]. Reads the first three joints: call it
     /// for an arm whose [`ArmState::check_layout`] passed.
     pub fn state_vector(&self, goal: &[f64; 3]) -> [f64; DX] {
-        let mut s = [0.0; DX];
-        StateLayout::REACH3.fill_state(
-            &self.q[..3],
-            &self.qd[..3],
-            &[self.ee_pos],
-            &[self.ee_vel],
-            &[*goal],
-            &mut s,
-        );
-        s
+        let (q, qd) = (&self.q, &self.qd);
+        crate::layout::state_vector(
+            &[q[0], q[1], q[2]],
+            &[qd[0], qd[1], qd[2]],
+            &self.ee_pos,
+            &self.ee_vel,
+            goal,
+        )
     }
 }
 

@@ -16,7 +16,7 @@ use crate::dynamics::{random_q, Arm};
 
 /// The flange's pose from UR's DH convention, T = Π Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i), entry by
 /// entry.
-fn dh_pose(model: UrModel, q: &[f64; 6]) -> Matrix4<f64> {
+pub(crate) fn dh_pose(model: UrModel, q: &[f64; 6]) -> Matrix4<f64> {
     let t = model.dh();
     let mut m = Matrix4::identity();
     for i in 0..6 {

@@ -11,32 +11,14 @@
 use hil_sim::servo::wrist_velocity_gain;
 use hil_sim::sim::{rotation_vector, MAX_JOINTS};
 use hil_sim::Ur5Sim;
-use nalgebra::{Matrix3, Matrix4, Matrix6, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::kinematics::UrKinematics;
 use ur5_shared::UrModel;
 
-/// The flange's pose from UR's DH convention, T = Π Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i), entry by
-/// entry (as `models.rs`).
-fn dh_pose(model: UrModel, q: &[f64; 6]) -> Matrix4<f64> {
-    let t = model.dh();
-    let mut m = Matrix4::identity();
-    for i in 0..6 {
-        let (st, ct) = q[i].sin_cos();
-        let (sa, ca) = t.alpha[i].sin_cos();
-        #[rustfmt::skip]
-        let ti = Matrix4::new(
-            ct, -st * ca,  st * sa, t.a[i] * ct,
-            st,  ct * ca, -ct * sa, t.a[i] * st,
-            0.0,      sa,       ca,      t.d[i],
-            0.0,     0.0,      0.0,         1.0,
-        );
-        m *= ti;
-    }
-    m
-}
+use crate::models::dh_pose;
 
 /// The angle (rad) of the rotation between two rotation matrices.
 fn angle_between(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {

@@ -139,23 +139,18 @@ impl Servo {
         self.last_command_seq = cmd.seq;
         self.episode = cmd.episode;
         let hold_here = UrKinematics::six(&[here[0], here[1], here[2]], wrist_q);
-        // The active joints' values of a command for them (None: for another number of
-        // joints, refused as out of limits are).
-        let active = |v: &[f64]| <[f64; N_JOINTS]>::try_from(v).ok();
-        let in_limits = |q: Option<[f64; N_JOINTS]>| {
-            q.filter(|q| {
+        // The active joints' values of a command for them within their limits (None: for
+        // another number of joints, refused as out of limits are).
+        let valid = |v: &[f64]| {
+            <[f64; N_JOINTS]>::try_from(v).ok().filter(|q| {
                 (0..N_JOINTS)
                     .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
             })
         };
-        let (goal, ok) = match cmd.kind() {
-            Ok(CommandKind::GoalAngles) if in_limits(active(cmd.values())).is_some() => {
-                let q = in_limits(active(cmd.values())).expect("checked");
-                (UrKinematics::six(&q, wrist_q), true)
-            }
-            Ok(CommandKind::Hold) => (hold_here, true),
-            Ok(CommandKind::Reset) if in_limits(active(cmd.reset_pose())).is_some() => {
-                let q = in_limits(active(cmd.reset_pose())).expect("checked");
+        let (goal, ok) = match (cmd.kind(), valid(cmd.values()), valid(cmd.reset_pose())) {
+            (Ok(CommandKind::GoalAngles), Some(q), _) => (UrKinematics::six(&q, wrist_q), true),
+            (Ok(CommandKind::Hold), ..) => (hold_here, true),
+            (Ok(CommandKind::Reset), _, Some(q)) => {
                 let to = UrKinematics::six(&q, wrist_q);
                 match &mut self.motion {
                     // The same reset again (the controller's retry): it goes on.

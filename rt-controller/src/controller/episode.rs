@@ -99,7 +99,7 @@ impl<A: ArmBackend> Controller<A> {
         if s.faults.any() {
             return Some(Fault::ArmFault);
         }
-        if s.joints as usize != N_JOINTS {
+        if s.check_layout(self.tables.layout()).is_err() {
             return Some(Fault::WrongJoints);
         }
         let finite =
