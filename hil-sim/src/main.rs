@@ -408,7 +408,7 @@ fn playback_gen(args: PlaybackGenArgs, model: Option<UrModel>) -> Result<()> {
     let file = load(args.config.clone(), model)?;
     let cfg = GenConfig {
         model: file.sim.model,
-        start_q: file.task.start_q,
+        start_q: file.task.start_arm_joints(),
         wrist_q: file.sim.wrist_q,
         ee_offset: file.sim.ee_offset,
         goal: file.task.goal,
@@ -568,7 +568,7 @@ fn demo(config: Option<PathBuf>, model: Option<UrModel>, goals: &str, json: bool
         .map_err(anyhow::Error::msg)
         .context("--goals")?;
     let mut sim = Ur5Sim::new(cfg.sim.clone(), cfg.task.dt)?;
-    let mut obs = sim.reset(cfg.task.start_q, cfg.task.goal)?;
+    let mut obs = sim.reset(cfg.task.start_arm_joints(), cfg.task.goal)?;
     let dist = |o: &hil_sim::Observation, g: [f64; 3]| {
         ((o.ee_pos[0] - g[0]).powi(2) + (o.ee_pos[1] - g[1]).powi(2) + (o.ee_pos[2] - g[2]).powi(2))
             .sqrt()

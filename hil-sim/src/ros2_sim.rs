@@ -197,7 +197,7 @@ pub fn spawn(
     let dt = 1.0 / cfg.rate_hz;
     let mut arm = Arm::new(
         Ur5Sim::new(sim_cfg.clone(), dt)?,
-        task.start_q,
+        task.start_arm_joints(),
         task.goal,
         dt,
     )?;

@@ -405,9 +405,9 @@ pub fn serve(
         command_faults: ArmFaults::default(),
         period_s,
     };
-    let obs = arm.sim.reset(task.start_q, task.goal)?;
+    let obs = arm.sim.reset(task.start_arm_joints(), task.goal)?;
     // Hold the start pose as given (not as the f32 physics rounds it); a wrist at its rest.
-    let (q, w) = (task.start_q, arm.sim.model().wrist_q);
+    let (q, w) = (task.start_arm_joints(), arm.sim.model().wrist_q);
     arm.held = Held::Hold([q[0], q[1], q[2], w[0], w[1], w[2]]);
     arm.publish(&publisher, &obs, ArmFaults::default());
     let done = |arm: &Arm| {

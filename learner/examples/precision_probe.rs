@@ -82,8 +82,8 @@ fn fresh_critic(
             diff.chunks(3).map(|c| format!("{:.2}", c.iter().map(|v| v * v).sum::<f64>().sqrt())).collect::<Vec<_>>());
     }
     let t_len = eval.horizon();
-    let end = eval.state(t_len - 1);
-    let demo_end = run.demos().state(0, t_len - 1);
+    let end = eval.reach3_state(t_len - 1);
+    let demo_end = run.demos().reach3_state(0, t_len - 1);
     for k in 0..steps / 100 {
         let st = d.train(expert.as_ref(), ctrl.as_ref(), &mut ws)?;
         if (k + 1) % (steps / 1000).max(1) == 0 {
@@ -112,7 +112,7 @@ fn main() -> anyhow::Result<()> {
     cfg.seed = seed;
     cfg.iterations = iters;
     let t_len = demos.horizon;
-    let demo_end = demos.state(0, t_len - 1);
+    let demo_end = demos.reach3_state(0, t_len - 1);
     let mut run = LqrGaifo::new(cfg, demos)?;
     let arm = arm_for(&run)?;
     println!("it  eval_mm  noisy_mm(mean sd)  sd_end_mrad  D(eval)-D(demo)  dD/dr(eval)  dD/dr(demo)  W1     eta");
@@ -136,7 +136,7 @@ fn main() -> anyhow::Result<()> {
                 fresh_critic(&run, &noisy, eval, steps)?;
             }
         }
-        let end = eval.state(t_len - 1);
+        let end = eval.reach3_state(t_len - 1);
         let (d_eval, s_eval) = critic_at_rest(&run, &end);
         let (d_demo, s_demo) = critic_at_rest(&run, &demo_end);
         if log.iteration == 0 || log.iteration + 1 == iters {

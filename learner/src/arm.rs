@@ -7,22 +7,43 @@
 use hil_sim::{SimError, Ur5Sim};
 use imitation::rollout::{Arm, Arms};
 use imitation::ImitationError;
-use ur5_shared::config::{ActionMode, ArmLimits, SimConfig};
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::config::{ActionMode, ArmLimits, SimConfig, TaskConfig};
+use ur5_shared::layout::{StateLayout, MAX_JOINTS, MAX_TOOL_POINTS};
 
-/// hil-sim's arm and the goal of the episode it runs.
+/// hil-sim's arm and the task of the episode it runs: its layout, tool points and their
+/// targets.
 pub struct SimArm {
     sim: Ur5Sim,
-    goal: [f64; 3],
+    layout: StateLayout,
+    offsets: [[f64; 3]; MAX_TOOL_POINTS],
+    targets: [[f64; 3]; MAX_TOOL_POINTS],
 }
 
 impl SimArm {
-    /// The simulated arm of `cfg` at control period `dt` (s).
+    /// The simulated arm of `cfg` at control period `dt` (s) with the wrist locked (three
+    /// active joints).
     pub fn new(cfg: SimConfig, dt: f64) -> Result<Self, SimError> {
-        Ok(Self {
-            sim: Ur5Sim::new(cfg, dt)?,
-            goal: [0.0; 3],
-        })
+        Self::with_joints(cfg, dt, 3)
+    }
+
+    /// The simulated arm of `cfg` at control period `dt` (s) with `joints` active joints (3 or
+    /// 6; `TaskConfig::joints`).
+    pub fn with_joints(cfg: SimConfig, dt: f64, joints: usize) -> Result<Self, SimError> {
+        Ok(Self::around(Ur5Sim::with_joints(cfg, dt, joints)?))
+    }
+
+    /// The simulated arm for `task` (its control period and active joints).
+    pub fn for_task(cfg: SimConfig, task: &TaskConfig) -> Result<Self, SimError> {
+        Self::with_joints(cfg, task.dt, task.joints)
+    }
+
+    fn around(sim: Ur5Sim) -> Self {
+        Self {
+            sim,
+            layout: StateLayout::REACH3,
+            offsets: [[0.0; 3]; MAX_TOOL_POINTS],
+            targets: [[0.0; 3]; MAX_TOOL_POINTS],
+        }
     }
 
     /// The simulator.
@@ -34,6 +55,29 @@ impl SimArm {
     pub fn sim_mut(&mut self) -> &mut Ur5Sim {
         &mut self.sim
     }
+
+    /// The state of the arm now, in the layout of the last reset, into `s` (dX).
+    fn observe(&mut self, s: &mut [f64]) {
+        let (n, p) = (self.layout.joints(), self.layout.tool_points());
+        let (mut q, mut qd) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+        let mut points = [[0.0; 3]; MAX_TOOL_POINTS];
+        let mut velocities = [[0.0; 3]; MAX_TOOL_POINTS];
+        self.sim.observe_points(
+            &self.offsets[..p],
+            &mut q[..n],
+            &mut qd[..n],
+            &mut points[..p],
+            &mut velocities[..p],
+        );
+        self.layout.fill_state(
+            &q[..n],
+            &qd[..n],
+            &points[..p],
+            &velocities[..p],
+            &self.targets[..p],
+            s,
+        );
+    }
 }
 
 /// Episode k of version v under run seed s runs on a fresh copy of this arm (`Ur5Sim::fresh`)
@@ -43,25 +87,39 @@ impl Arms for SimArm {
     fn episode_arm(&self, seed: u64, version: u64, k: u64) -> Result<Box<dyn Arm>, ImitationError> {
         let mut sim = self.sim.fresh();
         sim.reseed(ur5_shared::noise::episode_seed(seed, version, k));
-        Ok(Box::new(SimArm {
-            sim,
-            goal: [0.0; 3],
-        }))
+        Ok(Box::new(SimArm::around(sim)))
     }
 }
 
 impl Arm for SimArm {
-    fn reset(&mut self, start_q: [f64; DU], goal: [f64; 3]) -> Result<[f64; DX], ImitationError> {
-        let obs = self
-            .sim
-            .reset(start_q, goal)
+    fn reset(&mut self, task: &TaskConfig, s: &mut [f64]) -> Result<(), ImitationError> {
+        let layout = task.layout();
+        if layout.joints() != self.sim.joints() {
+            return Err(ImitationError::Arm(Box::new(SimError::Config(
+                ur5_shared::config::ConfigError::Invalid {
+                    key: "task.joints",
+                    why: format!(
+                        "the task moves {} joints, the simulated arm {}",
+                        layout.joints(),
+                        self.sim.joints()
+                    ),
+                },
+            ))));
+        }
+        self.sim
+            .restart(&task.start_q, task.goal)
             .map_err(|e| ImitationError::Arm(Box::new(e)))?;
-        self.goal = goal;
-        Ok(obs.state(&goal))
+        let p = layout.tool_points();
+        self.layout = layout;
+        self.offsets[..p].copy_from_slice(task.tool_offsets());
+        self.targets[..p].copy_from_slice(&task.targets());
+        self.observe(s);
+        Ok(())
     }
 
-    fn step(&mut self, a: [f64; DU]) -> [f64; DX] {
-        self.sim.step(a).state(&self.goal)
+    fn step(&mut self, a: &[f64], s: &mut [f64]) {
+        self.sim.advance(a);
+        self.observe(s);
     }
 
     fn mode(&self) -> ActionMode {
@@ -104,7 +162,7 @@ mod tests {
             ..TaskConfig::default()
         };
         let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
-        let mut table = hold_table(&task, task.start_q, 0.2);
+        let mut table = hold_table(&task, task.start_arm_joints(), 0.2);
         let ep = run_episode(&mut sim, &task, &mut *table, None).unwrap();
         assert_eq!(ep.horizon(), 20);
         let last = ep.state(19);

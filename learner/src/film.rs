@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use plotters::prelude::*;
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::kinematics::UrKinematics;
-use ur5_shared::layout::{DX, Q};
+use ur5_shared::layout::StateLayout;
 
 use crate::io::IoError;
 use crate::plot::{register_font, write_png, PlotError, PALETTE};
@@ -29,14 +29,24 @@ pub struct Motion {
     pub chain: Vec<[[f64; 3]; 8]>,
 }
 
-/// The chain points of every state in `states` ((T, dX), row-major) on the arm of `sim`.
-pub fn chain_of_states(states: &[f64], sim: &SimConfig) -> Vec<[[f64; 3]; 8]> {
+/// The chain points of every state in `states` ((T, dX), row-major, layout `layout`) on the
+/// arm of `sim` (a three-joint task's wrist at `sim.wrist_q`).
+pub fn chain_of_states(
+    states: &[f64],
+    layout: &StateLayout,
+    sim: &SimConfig,
+) -> Vec<[[f64; 3]; 8]> {
     let k = UrKinematics::new(sim.model, sim.ee_offset);
     states
-        .chunks(DX)
+        .chunks(layout.dx())
         .map(|s| {
-            let q: [f64; 3] = s[Q].try_into().expect("3");
-            k.chain_points(&UrKinematics::six(&q, &sim.wrist_q))
+            let q = &s[layout.q()];
+            let six = if q.len() >= 6 {
+                core::array::from_fn(|j| q[j])
+            } else {
+                UrKinematics::six(&[q[0], q[1], q[2]], &sim.wrist_q)
+            };
+            k.chain_points(&six)
         })
         .collect()
 }
@@ -47,7 +57,7 @@ pub fn rerun_table(table_path: &Path, task: &TaskConfig, sim: &SimConfig) -> Res
     let (mut table, _) =
         crate::io::table::load_table(table_path, &ur5_shared::GainBounds::default())
             .map_err(IoError::from)?;
-    let mut arm = crate::arm::SimArm::new(sim.clone(), task.dt)?;
+    let mut arm = crate::arm::SimArm::for_task(sim.clone(), task)?;
     let ep = imitation::rollout::run_episode(&mut arm, task, &mut *table, None)?;
     Ok(ep.x)
 }
@@ -64,11 +74,11 @@ pub fn run_motions(dir: &Path, demos: &Path, count: usize) -> Result<(Vec<Motion
     let expert_states = if expert_table.is_file() {
         rerun_table(&expert_table, &task, &sim)?
     } else {
-        d.states[..d.horizon * DX].to_vec()
+        d.states[..d.horizon * task.layout().dx()].to_vec()
     };
     motions.push(Motion {
         label: "expert".into(),
-        chain: chain_of_states(&expert_states, &sim),
+        chain: chain_of_states(&expert_states, &task.layout(), &sim),
     });
     let mut iters: Vec<(usize, PathBuf)> = std::fs::read_dir(dir)
         .map_err(IoError::file("reading", dir))?
@@ -104,7 +114,7 @@ pub fn run_motions(dir: &Path, demos: &Path, count: usize) -> Result<(Vec<Motion
         let (k, path) = &iters[i];
         motions.push(Motion {
             label: format!("imitator, {k} iterations"),
-            chain: chain_of_states(&rerun_table(path, &task, &sim)?, &sim),
+            chain: chain_of_states(&rerun_table(path, &task, &sim)?, &task.layout(), &sim),
         });
     }
     Ok((motions, d.goal, d.dt))

@@ -573,7 +573,7 @@ pub fn to_recorded_demos(
         dt: task.dt,
         task: Some(TaskMeta {
             goal,
-            start_q,
+            start_q: start_q.into(),
             seed: DERIVED_SEED,
             cost_random: None,
             cost_expert: None,

@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 
 use imitation::controller::to_gain_table;
-use imitation::cost::composite::D_IN;
 use imitation::demos::Demos;
 use imitation::discriminator::Discriminator;
 use imitation::expert::{
@@ -140,7 +139,7 @@ impl From<NpzError> for RunError {
 /// The in-process arm of `learner`'s model of it (`Learn::sim_config`) at the task's control
 /// period.
 pub fn arm_for<L: Learn + ?Sized>(learner: &L) -> Result<SimArm, RunError> {
-    SimArm::new(learner.sim_config().clone(), learner.task().dt).map_err(RunError::Arm)
+    SimArm::for_task(learner.sim_config().clone(), learner.task()).map_err(RunError::Arm)
 }
 
 /// What a run saves before every iteration so that it can be resumed (in process, `learner
@@ -280,7 +279,8 @@ pub fn resume(
     demos: Demos,
     dir: &Path,
 ) -> Result<(LqrGaifo, Option<u128>), RunError> {
-    let (snap, disc, arm, state_path) = load_checkpoint(dir, "lqr.iteration")?;
+    let d_in = 2 * demos.layout().dx();
+    let (snap, disc, arm, state_path) = load_checkpoint(dir, "lqr.iteration", d_in)?;
     let run =
         LqrGaifo::from_snapshot(cfg, demos, &snap, disc).map_err(|source| RunError::Restore {
             path: state_path,
@@ -299,7 +299,8 @@ pub fn resume_mdgps(
     demos: Vec<Demos>,
     dir: &Path,
 ) -> Result<(Mdgps, Option<u128>), RunError> {
-    let (snap, disc, arm, state_path) = load_checkpoint(dir, "mdgps.iteration")?;
+    let d_in = 2 * demos.first().map_or(0, |d| d.layout().dx());
+    let (snap, disc, arm, state_path) = load_checkpoint(dir, "mdgps.iteration", d_in)?;
     let run =
         Mdgps::from_snapshot(cfg, demos, &snap, disc).map_err(|source| RunError::Restore {
             path: state_path,
@@ -314,6 +315,7 @@ pub fn resume_mdgps(
 fn load_checkpoint(
     dir: &Path,
     iteration_key: &str,
+    d_in: usize,
 ) -> Result<
     (
         gps::snapshot::Snapshot,
@@ -349,7 +351,7 @@ fn load_checkpoint(
             })
         }
     };
-    let disc = Discriminator::load(&critic_path, D_IN).map_err(|source| RunError::Critic {
+    let disc = Discriminator::load(&critic_path, d_in).map_err(|source| RunError::Critic {
         path: critic_path,
         source,
     })?;
@@ -564,14 +566,14 @@ pub fn expert(
     cfg: &ExpertConfig,
     progress: impl FnMut(&IterationLog),
 ) -> Result<ExpertRun, RunError> {
-    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).map_err(RunError::Arm)?;
+    let arm = SimArm::for_task(cfg.sim.clone(), &cfg.task).map_err(RunError::Arm)?;
     Ok(train_expert(cfg, &arm, progress)?)
 }
 
 /// Records `cfg.demos` demonstrations of `run`'s best controller on a fresh in-process arm
 /// ([`imitation::expert::record_demos`]).
 pub fn demos(cfg: &ExpertConfig, run: &ExpertRun) -> Result<Demos, RunError> {
-    let arm = SimArm::new(cfg.sim.clone(), cfg.task.dt).map_err(RunError::Arm)?;
+    let arm = SimArm::for_task(cfg.sim.clone(), &cfg.task).map_err(RunError::Arm)?;
     Ok(record_demos(cfg, &arm, &run.policy, run.cost_random)?)
 }
 
@@ -586,6 +588,9 @@ pub struct ExpertSummary {
     pub eval_cost: f64,
     /// Its final end-effector distance (m).
     pub final_distance: f64,
+    /// Its final orientation error of the tool (degrees; `ur5_shared::pose`): pose goals only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub final_orientation_error_deg: Option<f64>,
     /// Mean task cost of the random (initial) controller.
     pub cost_random: f64,
     /// Mean task cost of the recorded demonstrations.
@@ -629,6 +634,10 @@ pub fn train_and_record(
         iterations: run.log.len(),
         eval_cost: run.eval.task_cost(),
         final_distance: run.eval.final_distance(),
+        final_orientation_error_deg: run
+            .eval
+            .final_orientation_error(&cfg.task.targets())
+            .map(f64::to_degrees),
         cost_random: run.cost_random,
         cost_demos: demos.cost_expert,
         cost_ratio: run.eval.task_cost() / run.cost_random,

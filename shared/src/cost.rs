@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! C(τ) = d_n + Σ_{i=0..n} (i/n) d_i,    d_i = ‖ee_i − goal‖ (m),  n = T − 1
+//! (a pose goal: d_i = ‖(e_1, e_2, e_3)‖, the three tool points' errors together)
 //! ```
 //!
 //! over the T states of an episode: the final distance counts twice, earlier distances with a
@@ -14,7 +15,7 @@
 //! undefined), a non-finite distance, or C_random == C_expert (the scale is undefined).
 //! Nothing here allocates.
 
-use crate::layout::{DX, EE_MINUS_GOAL};
+use crate::layout::{StateLayout, DX, EE_MINUS_GOAL};
 
 /// Why a cost could not be computed.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -65,6 +66,24 @@ pub fn task_cost_from_states(states: &[[f64; DX]]) -> Result<f64, CostError> {
         norm3(e[0], e[1], e[2])
     });
     task_cost_iter(d, states.len())
+}
+
+/// The distance d of state `s` (layout `layout`) to the goal (m): the norm of every tool
+/// point's position minus its target together, ‖(e_1, …, e_p)‖ (GPS's `CostFK` on several
+/// points); for a point goal ‖ee − goal‖.
+pub fn goal_distance(layout: &StateLayout, s: &[f64]) -> f64 {
+    let mut d2 = 0.0;
+    for v in &s[layout.points()] {
+        d2 += v * v;
+    }
+    d2.sqrt()
+}
+
+/// C(τ) from the states `x` ((T, dX) row-major, layout `layout`): d_i = [`goal_distance`].
+pub fn task_cost_of_states(layout: &StateLayout, x: &[f64]) -> Result<f64, CostError> {
+    let dx = layout.dx();
+    let d = x.chunks_exact(dx).map(|s| goal_distance(layout, s));
+    task_cost_iter(d, x.len() / dx)
 }
 
 fn distance(p: &[f64; 3], goal: &[f64; 3]) -> f64 {

@@ -181,6 +181,16 @@ impl StateLayout {
         points: 3,
     };
 
+    /// The layout of the task whose state has `dx` entries: a task moves 3 or 6 joints and
+    /// has one tool point (a point goal) or three (a pose goal, six joints only), and their
+    /// dX (12, 18, 30) differ; `None` for any other `dx`.
+    pub fn of_task_state(dx: usize) -> Option<Self> {
+        [(3, 1), (6, 1), (6, 3)]
+            .into_iter()
+            .map(|(joints, points)| Self { joints, points })
+            .find(|l| l.dx() == dx)
+    }
+
     /// The layout of `joints` active joints and `points` tool points.
     pub fn new(joints: usize, points: usize) -> Result<Self, LayoutError> {
         if !(1..=MAX_JOINTS).contains(&joints) {

@@ -22,6 +22,8 @@
 //! - [`model`]: the UR arm models ([`UrModel`]): DH tables, joint limits, default tasks.
 //! - [`kinematics`]: a UR arm's end-effector point and velocity from joint angles (f64, no
 //!   simulator), for arms that report joint states only.
+//! - [`joints`]: per-joint values of run-time length ([`joints::Joints`], 3 or 6 joints).
+//! - [`pose`]: UR's tool pose p[x, y, z, rx, ry, rz], tool points and the orientation error.
 //! - [`cost`]: the task cost C(τ) and normalised performance.
 //! - [`noise`]: seeded exploration noise ε, per (run seed, table version, episode).
 //! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
@@ -40,6 +42,7 @@ pub mod clock;
 pub mod config;
 pub mod cost;
 pub mod gains;
+pub mod joints;
 pub mod kernels;
 pub mod kinematics;
 pub mod law;
@@ -49,6 +52,7 @@ pub mod msg;
 pub mod noise;
 pub mod plan;
 pub mod policy;
+pub mod pose;
 pub mod report;
 pub mod safety;
 pub mod services;

@@ -4,7 +4,7 @@
 //!
 //! The generator of episode k of table version v (k counts the episodes run with that version,
 //! from 0) is ChaCha8 seeded with [`episode_seed`]`(seed, v, k)`; ε_t is three successive
-//! `StandardNormal` draws (rand_distr 0.5) at t = 0, 1, …. Noise-free episodes draw nothing.
+//! `StandardNormal` draws (rand_distr 0.5; dU of them) at t = 0, 1, …. Noise-free episodes draw nothing.
 
 use crate::layout::DU;
 use rand::SeedableRng;
@@ -51,10 +51,19 @@ impl Noise {
         self.rng = ChaCha8Rng::seed_from_u64(episode_seed(seed, version, k));
     }
 
-    /// Next ε.
+    /// Next ε of the three-joint task.
     #[inline]
     pub fn next(&mut self) -> [f64; DU] {
         core::array::from_fn(|_| StandardNormal.sample(&mut self.rng))
+    }
+
+    /// Next ε of any task: `eps.len()` (dU) successive draws, so that at dU = 3 it is
+    /// [`Noise::next`].
+    #[inline]
+    pub fn next_into(&mut self, eps: &mut [f64]) {
+        for e in eps {
+            *e = StandardNormal.sample(&mut self.rng);
+        }
     }
 }
 

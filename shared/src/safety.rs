@@ -6,20 +6,25 @@
 //! current angles; torques clamped to the effort limits).
 
 use crate::config::{ActionMode, ArmLimits};
-use crate::layout::N_JOINTS;
 
-/// Clamps `a` in place for an arm at joint angles `q` (rad) with control period `dt` (s).
-/// Returns `true` if any entry changed. A non-finite entry is replaced by a hold: `q[j]` in
-/// goal-angle mode, 0 N·m in torque mode. Allocation-free.
+/// Clamps `a` (dU entries) in place for an arm at joint angles `q` (rad, dU entries) with
+/// control period `dt` (s), against the first dU joints' `limits`. Returns `true` if any
+/// entry changed. A non-finite entry is replaced by a hold: `q[j]` in goal-angle mode, 0 N·m in
+/// torque mode. Allocation-free. Panics if `q` and `a` differ in length or the limits cover
+/// fewer joints (a programming error: all come from one task's layout).
 pub fn clamp_action(
     mode: ActionMode,
     limits: &ArmLimits,
     dt: f64,
-    q: &[f64; N_JOINTS],
-    a: &mut [f64; N_JOINTS],
+    q: &[f64],
+    a: &mut [f64],
 ) -> bool {
+    assert!(
+        q.len() == a.len() && limits.joints() >= a.len(),
+        "one limit, angle and action per joint"
+    );
     let mut changed = false;
-    for j in 0..N_JOINTS {
+    for j in 0..a.len() {
         let before = a[j];
         let v = match mode {
             ActionMode::GoalAngles => {

@@ -434,15 +434,28 @@ impl Ur5Sim {
         self.n
     }
 
-    /// Limits of the first three active joints as written in the URDF, for the action clamp
+    /// Limits of the active joints (3 or 6) as written in the URDF, for the action clamp
     /// (`ur5_shared::safety::clamp_action`).
     pub fn limits(&self) -> ur5_shared::config::ArmLimits {
         let a = &self.model.active;
+        let w = &self.model.wrist_limits;
+        let joint = |j: usize| {
+            if j < N_JOINTS {
+                &a[j]
+            } else {
+                &w[j - N_JOINTS]
+            }
+        };
+        let of = |f: fn(&crate::model::JointLimits) -> f64| {
+            let v: [f64; MAX_JOINTS] =
+                core::array::from_fn(|j| if j < self.n { f(joint(j)) } else { 0.0 });
+            ur5_shared::joints::Joints::from_slice(&v[..self.n])
+        };
         ur5_shared::config::ArmLimits {
-            lower: [0, 1, 2].map(|j| a[j].lower),
-            upper: [0, 1, 2].map(|j| a[j].upper),
-            velocity: [0, 1, 2].map(|j| a[j].velocity),
-            effort: [0, 1, 2].map(|j| a[j].effort),
+            lower: of(|l| l.lower),
+            upper: of(|l| l.upper),
+            velocity: of(|l| l.velocity),
+            effort: of(|l| l.effort),
         }
     }
 
@@ -507,6 +520,13 @@ impl Ur5Sim {
     /// [`Ur5Sim::reset`] with the angles of every active joint (`start_q.len()` =
     /// [`Ur5Sim::joints`], rad).
     pub fn reset_all(&mut self, start_q: &[f64], goal: [f64; 3]) -> Result<Observation, SimError> {
+        self.restart(start_q, goal)?;
+        Ok(self.observe())
+    }
+
+    /// [`Ur5Sim::reset_all`] without the observation (read it with
+    /// [`Ur5Sim::observe_points`]); `goal` is checked against the arm's reach.
+    pub fn restart(&mut self, start_q: &[f64], goal: [f64; 3]) -> Result<(), SimError> {
         self.check_len(start_q.len());
         for j in 0..self.n {
             let l = self.model.joint(j);
@@ -530,7 +550,7 @@ impl Ur5Sim {
         }
         self.max_abs_tau = [0.0; MAX_JOINTS];
         self.time = 0.0;
-        Ok(self.observe())
+        Ok(())
     }
 
     /// Rejects a goal that is not finite or farther from the shoulder than the arm reaches.
@@ -573,6 +593,13 @@ impl Ur5Sim {
     /// [`Ur5Sim::step`] with an action for every active joint (`action.len()` =
     /// [`Ur5Sim::joints`]).
     pub fn step_all(&mut self, action: &[f64]) -> Observation {
+        self.advance(action);
+        self.observe()
+    }
+
+    /// [`Ur5Sim::step_all`] without the observation (read it with
+    /// [`Ur5Sim::observe_points`]).
+    pub fn advance(&mut self, action: &[f64]) {
         self.check_len(action.len());
         let mut a = [0.0; MAX_JOINTS];
         a[..self.n].copy_from_slice(action);
@@ -587,11 +614,10 @@ impl Ur5Sim {
         for _ in 0..self.physics_steps_per_control {
             self.physics_step();
         }
-        self.observe()
     }
 
     /// Panics unless `len` is the number of active joints (a caller's bug, like a slice index).
-    fn check_len(&self, len: usize) {
+    pub(super) fn check_len(&self, len: usize) {
         assert_eq!(
             len, self.n,
             "{len} joint values for an arm with {} active joints",

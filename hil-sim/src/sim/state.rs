@@ -127,12 +127,23 @@ impl Ur5Sim {
         link * self.ee_frame
     }
 
-    /// The true observation (no sensor noise).
-    pub fn true_observation(&self) -> Observation {
-        let (q, qd) = self.joint_state_all();
+    /// True position (m) and linear velocity (m/s), base frame, of the tool point `offset`
+    /// (m, end-effector link frame, added to `sim.ee_offset`): the end-effector point at offset
+    /// 0. From the multibody's link pose (f32) and the body Jacobian of the carrier link: the
+    /// Jacobian gives the carrier's centre-of-mass velocity v and angular velocity ω; the
+    /// point moves at v + ω × (p − c).
+    fn tool_point(&self, offset: &[f64; 3], qd: &[f64; MAX_JOINTS]) -> ([f64; 3], [f64; 3]) {
         let mb = self.multibody();
         let pose = *mb.link(self.ee_link).expect("ee link").local_to_world();
-        let ee = pose.transform_point(self.ee_point);
+        let local = if *offset == [0.0; 3] {
+            self.ee_point
+        } else {
+            let o = &self.cfg.ee_offset;
+            let p = self.ee_frame
+                * nalgebra::Point3::new(o[0] + offset[0], o[1] + offset[1], o[2] + offset[2]);
+            Vec3::new(p.x as f32, p.y as f32, p.z as f32)
+        };
+        let ee = pose.transform_point(local);
         let com = pose.transform_point(self.world.bodies[self.ee_body].local_center_of_mass());
         let jac = mb.body_jacobian(self.ee_link);
         let mut v = [0.0f64; 3];
@@ -143,21 +154,36 @@ impl Ur5Sim {
                 w[r] += jac[(r + 3, d.dof)] as f64 * qd[j];
             }
         }
-        // The Jacobian gives the COM velocity; shift it to the end-effector point: v + ω × r.
         let r = [
             (ee.x - com.x) as f64,
             (ee.y - com.y) as f64,
             (ee.z - com.z) as f64,
         ];
-        let ee_vel = [
+        let vel = [
             v[0] + w[1] * r[2] - w[2] * r[1],
             v[1] + w[2] * r[0] - w[0] * r[2],
             v[2] + w[0] * r[1] - w[1] * r[0],
         ];
+        ([ee.x as f64, ee.y as f64, ee.z as f64], vel)
+    }
+
+    /// True positions (m, base frame) of the tool points at `offsets` (m, end-effector link
+    /// frame, relative to the end-effector point), into `out` (one per offset).
+    pub fn true_points(&self, offsets: &[[f64; 3]], out: &mut [[f64; 3]]) {
+        let (_, qd) = self.joint_state_all();
+        for (o, p) in offsets.iter().zip(out.iter_mut()) {
+            *p = self.tool_point(o, &qd).0;
+        }
+    }
+
+    /// The true observation (no sensor noise).
+    pub fn true_observation(&self) -> Observation {
+        let (q, qd) = self.joint_state_all();
+        let (ee_pos, ee_vel) = self.tool_point(&[0.0; 3], &qd);
         Observation {
             q: first3(&q),
             qd: first3(&qd),
-            ee_pos: [ee.x as f64, ee.y as f64, ee.z as f64],
+            ee_pos,
             ee_vel,
         }
     }
@@ -165,22 +191,69 @@ impl Ur5Sim {
     /// What the arm's sensors report: the true observation plus the configured sensor noise.
     pub fn observe(&mut self) -> Observation {
         let mut o = self.true_observation();
+        let (mut points, mut velocities) = ([o.ee_pos], [o.ee_vel]);
+        self.add_sensor_noise(&mut o.q, &mut o.qd, &mut points, &mut velocities);
+        (o.ee_pos, o.ee_vel) = (points[0], velocities[0]);
+        o
+    }
+
+    /// What the sensors report for a task: the angles `q` and velocities `qd` of every active
+    /// joint ([`Ur5Sim::joints`] each), and the positions (m) and linear velocities (m/s),
+    /// base frame, of the tool points at `offsets` (m, end-effector link frame, relative to the
+    /// end-effector point; one per entry of `points` and `velocities`), with the configured
+    /// sensor noise drawn in that order (joints, then points: for three joints and the one
+    /// point at offset 0 the draws of [`Ur5Sim::observe`]).
+    pub fn observe_points(
+        &mut self,
+        offsets: &[[f64; 3]],
+        q: &mut [f64],
+        qd: &mut [f64],
+        points: &mut [[f64; 3]],
+        velocities: &mut [[f64; 3]],
+    ) {
+        self.check_len(q.len());
+        self.check_len(qd.len());
+        assert!(offsets.len() == points.len() && offsets.len() == velocities.len());
+        let (q_all, qd_all) = self.joint_state_all();
+        q.copy_from_slice(&q_all[..self.n]);
+        qd.copy_from_slice(&qd_all[..self.n]);
+        for ((o, p), v) in offsets
+            .iter()
+            .zip(points.iter_mut())
+            .zip(velocities.iter_mut())
+        {
+            (*p, *v) = self.tool_point(o, &qd_all);
+        }
+        self.add_sensor_noise(q, qd, points, velocities);
+    }
+
+    /// Adds the configured sensor noise, in this order: angles, velocities, points, point
+    /// velocities (each value one `StandardNormal` draw when its level is > 0).
+    fn add_sensor_noise(
+        &mut self,
+        q: &mut [f64],
+        qd: &mut [f64],
+        points: &mut [[f64; 3]],
+        velocities: &mut [[f64; 3]],
+    ) {
         let p = &self.cfg.perturbation;
-        let groups: [(&mut [f64; 3], f64); 4] = [
-            (&mut o.q, p.sensor_noise_q_std),
-            (&mut o.qd, p.sensor_noise_qd_std),
-            (&mut o.ee_pos, p.sensor_noise_ee_std),
-            (&mut o.ee_vel, p.sensor_noise_ee_std),
-        ];
-        for (vals, std) in groups {
+        let (sq, sqd, see) = (
+            p.sensor_noise_q_std,
+            p.sensor_noise_qd_std,
+            p.sensor_noise_ee_std,
+        );
+        let mut draw = |vals: &mut [f64], std: f64| {
             if std > 0.0 {
                 for v in vals.iter_mut() {
                     let n: f64 = StandardNormal.sample(&mut self.rng);
                     *v += std * n;
                 }
             }
-        }
-        o
+        };
+        draw(q, sq);
+        draw(qd, sqd);
+        draw(points.as_flattened_mut(), see);
+        draw(velocities.as_flattened_mut(), see);
     }
 
     /// Joint accelerations (rad/s²) over one physics step from state (q, q̇) under raw joint

@@ -565,7 +565,7 @@ pub fn spawn(
     let sim = Ur5Sim::with_joints(sim_cfg.clone(), dt, cfg.joints)?;
     let start_q = player
         .as_ref()
-        .map_or(task.start_q, playback::Player::start_active);
+        .map_or(task.start_arm_joints(), playback::Player::start_active);
     let mut arm = Arm::new(sim, start_q, task.goal, dt)?;
     if let Some(p) = player {
         arm.load_playback(p);

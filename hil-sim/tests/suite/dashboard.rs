@@ -196,7 +196,7 @@ fn dashboard_power_and_brakes_change_the_robot_mode_and_gate_the_program() {
     assert_eq!(rtde_robot_mode(&sim), RobotMode::Running.code());
     // Now the program runs; `stop` stops it (stopj), `power off` ends it.
     let mut rev = run_program(&sim);
-    let start_q = TaskConfig::default().start_q;
+    let start_q = TaskConfig::default().start_arm_joints();
     servoj(&mut rev, start_q, 5_000);
     let s = c.state(&recipe).unwrap();
     assert_eq!(s.runtime_state, runtime_state::PLAYING);
@@ -333,7 +333,7 @@ fn dashboard_unlocks_a_protective_stop_5_s_of_arm_time_after_it() {
     assert_eq!(d.ask("safetystatus"), "Safetystatus: NORMAL");
     // Unlocked, the program can run again.
     let mut rev = run_program(&sim);
-    servoj(&mut rev, TaskConfig::default().start_q, 5_000);
+    servoj(&mut rev, TaskConfig::default().start_arm_joints(), 5_000);
     let t0 = Instant::now();
     loop {
         assert!(t0.elapsed() < DEADLINE);

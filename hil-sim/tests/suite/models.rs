@@ -251,9 +251,11 @@ fn every_models_servo_holds_and_its_default_task_is_valid() {
             sag < 1e-3,
             "{model}: servo sags {sag:.2e} rad at full reach"
         );
-        let obs = sim.reset(task.start_q, task.goal).unwrap();
-        let start = UrKinematics::new(model, [0.0; 3])
-            .ee_point(&UrKinematics::six(&task.start_q, &model.default_wrist_q()));
+        let obs = sim.reset(task.start_arm_joints(), task.goal).unwrap();
+        let start = UrKinematics::new(model, [0.0; 3]).ee_point(&UrKinematics::six(
+            &task.start_arm_joints(),
+            &model.default_wrist_q(),
+        ));
         assert!(
             (Vector3::from(obs.ee_pos) - Vector3::from(start)).norm() < 1e-6,
             "{model}"

@@ -124,7 +124,7 @@ fn shared_kinematics_match_the_simulated_arm() {
 fn state_vector_follows_the_layout() {
     let mut sim = Ur5Sim::new(SimConfig::default(), 0.1).unwrap();
     let task = TaskConfig::default();
-    sim.reset(task.start_q, task.goal).unwrap();
+    sim.reset(task.start_arm_joints(), task.goal).unwrap();
     let obs = sim.step([0.3, -1.5, 1.9]);
     let s = obs.state(&task.goal);
     assert_eq!(&s[Q], &obs.q);
@@ -219,7 +219,7 @@ fn torque_mode_clamps_to_effort_limits() {
     };
     let task = TaskConfig::default();
     let mut sim = Ur5Sim::new(cfg, task.dt).unwrap();
-    sim.reset(task.start_q, task.goal).unwrap();
+    sim.reset(task.start_arm_joints(), task.goal).unwrap();
     sim.step([500.0, -500.0, 20.0]);
     assert_eq!(sim.last_torque(), [150.0, -150.0, 20.0]);
 }
@@ -233,7 +233,7 @@ fn run_perturbed(seed: u64) -> Vec<[f64; 12]> {
     let mut sim = Ur5Sim::new(cfg, task.dt).unwrap();
     let mut out = Vec::new();
     for episode in 0..2 {
-        sim.reset(task.start_q, task.goal).unwrap();
+        sim.reset(task.start_arm_joints(), task.goal).unwrap();
         for t in 0..15 {
             let x = (t + episode) as f64 * 0.1;
             out.push(
@@ -275,7 +275,7 @@ fn perturbations_change_the_dynamics() {
             task.dt,
         )
         .unwrap();
-        sim.reset(task.start_q, task.goal).unwrap();
+        sim.reset(task.start_arm_joints(), task.goal).unwrap();
         let mut o = sim.step([0.5, -1.2, 1.5]);
         for _ in 0..3 {
             o = sim.step([0.5, -1.2, 1.5]);
@@ -310,12 +310,12 @@ fn perturbations_change_the_dynamics() {
 fn non_finite_actions_hold_the_previous_goal() {
     let task = TaskConfig::default();
     let mut sim = Ur5Sim::new(SimConfig::default(), task.dt).unwrap();
-    sim.reset(task.start_q, task.goal).unwrap();
+    sim.reset(task.start_arm_joints(), task.goal).unwrap();
     let obs = sim.step([f64::NAN, 0.0, 0.0]);
     assert!(
         obs.q
             .iter()
-            .zip(task.start_q)
+            .zip(task.start_arm_joints())
             .all(|(q, q0)| (q - q0).abs() < 1e-3),
         "{:?}",
         obs.q
@@ -385,9 +385,13 @@ fn bad_inputs_give_clear_errors() {
 
     // Goal outside reach, non-finite goal, start pose beyond a joint limit.
     let mut sim = Ur5Sim::new(SimConfig::default(), task.dt).unwrap();
-    let e = sim.reset(task.start_q, [2.0, 0.0, 0.5]).unwrap_err();
+    let e = sim
+        .reset(task.start_arm_joints(), [2.0, 0.0, 0.5])
+        .unwrap_err();
     assert!(matches!(e, SimError::GoalOutOfReach { .. }), "{e}");
-    assert!(sim.reset(task.start_q, [f64::NAN, 0.0, 0.5]).is_err());
+    assert!(sim
+        .reset(task.start_arm_joints(), [f64::NAN, 0.0, 0.5])
+        .is_err());
     let e = sim.reset([0.0, -1.0, 3.5], task.goal).unwrap_err();
     assert!(matches!(e, SimError::OutOfLimits { .. }), "{e}");
 
@@ -489,7 +493,7 @@ fn an_episode_does_not_depend_on_the_arm_history() {
     let episode = |sim: &mut Ur5Sim| -> Vec<u64> {
         sim.reseed(7);
         let mut bits = Vec::new();
-        let o = sim.reset(task.start_q, task.goal).unwrap();
+        let o = sim.reset(task.start_arm_joints(), task.goal).unwrap();
         bits.extend(o.q.iter().chain(&o.ee_pos).map(|v| v.to_bits()));
         for k in 0..15 {
             let a = [0.1 * k as f64, -1.5 + 0.02 * k as f64, 1.8];
@@ -518,7 +522,7 @@ fn an_episode_does_not_depend_on_the_arm_history() {
         // Another stream draws other noise, so the test sees the perturbation noise.
         if !nominal {
             fresh.reseed(8);
-            let o = fresh.reset(task.start_q, task.goal).unwrap();
+            let o = fresh.reset(task.start_arm_joints(), task.goal).unwrap();
             assert_ne!(
                 o.q[0].to_bits(),
                 reference[0],
@@ -583,7 +587,7 @@ fn the_direct_step_equals_the_pipeline_step() {
             let mut bits = Vec::new();
             for episode in 0..2 {
                 sim.reseed(episode);
-                sim.reset(task.start_q, task.goal).unwrap();
+                sim.reset(task.start_arm_joints(), task.goal).unwrap();
                 for k in 0..30 {
                     let a = if torque {
                         // Spin the elbow past +π (its limit), everything else held loosely.

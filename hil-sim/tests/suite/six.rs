@@ -327,7 +327,7 @@ fn six_joint_servo_tracks_and_holds_every_joint() {
             .fold(0.0, f64::max);
         assert!(sag < 1e-3, "{model}: sags {sag:.2e} rad");
         // The three-joint API: the wrist stays at rest.
-        sim.reset(task.start_q, task.goal).unwrap();
+        sim.reset(task.start_arm_joints(), task.goal).unwrap();
         for _ in 0..10 {
             sim.step([s[0] + 0.2, s[1], s[2]]);
         }

@@ -210,7 +210,7 @@ fn ur_lockstep_servoj_moves_the_arm_and_a_silent_controller_stops_it() {
     assert!(c.start());
 
     let s0 = c.state(&recipe).unwrap();
-    let start_q = TaskConfig::default().start_q;
+    let start_q = TaskConfig::default().start_arm_joints();
     assert!(dist(&s0.actual_q, start_q) < 1e-5, "{:?}", s0.actual_q);
     assert_eq!(s0.robot_mode, 7, "RUNNING");
     assert_eq!(s0.safety_mode, SafetyMode::Normal.code());
@@ -552,7 +552,7 @@ fn ur_real_time_servoj_and_the_watchdog_stop() {
     let sim = ur_sim::spawn(&TaskConfig::default(), &SimConfig::default(), &cfg).unwrap();
     let (mut c, recipe) = Client::ready(sim.rtde_addr);
     let s0 = c.state(&recipe).unwrap();
-    let start_q = TaskConfig::default().start_q;
+    let start_q = TaskConfig::default().start_arm_joints();
     let target = [start_q[0] + 0.2, start_q[1], start_q[2]];
     let mut rev = run_program(&sim);
     let mut last = s0;
@@ -752,7 +752,7 @@ fn ur_six_joint_servoj_moves_the_wrist() {
         assert!(c.start());
         let s0 = c.state(&recipe).unwrap();
         let w = SimConfig::default().wrist_q;
-        let start_q = TaskConfig::default().start_q;
+        let start_q = TaskConfig::default().start_arm_joints();
         let target = [
             start_q[0] + 0.2,
             start_q[1] + 0.1,

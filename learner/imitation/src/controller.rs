@@ -4,21 +4,22 @@
 
 use gps::policy::lin_gauss::LinGaussPolicy;
 use ur5_shared::config::TaskConfig;
-use ur5_shared::layout::{DU, DX};
 use ur5_shared::{GainTable, StateLayout, MAX_DU};
 
 use crate::ImitationError;
 
 /// The initial controller: goal angles = start pose, Σ = init_var · I.
 pub fn init_hold(task: &TaskConfig, init_var: f64) -> LinGaussPolicy {
-    let mut pol = LinGaussPolicy::zeros(task.horizon, DX, DU);
+    let layout = task.layout();
+    let (dx, du) = (layout.dx(), layout.du());
+    let mut pol = LinGaussPolicy::zeros(task.horizon, dx, du);
     let sd = init_var.sqrt();
     for t in 0..task.horizon {
         pol.k.slice_mut(t).copy_from_slice(&task.start_q);
-        for j in 0..DU {
-            pol.pol_covar.slice_mut(t)[j * DU + j] = init_var;
-            pol.chol_pol_covar.slice_mut(t)[j * DU + j] = sd;
-            pol.inv_pol_covar.slice_mut(t)[j * DU + j] = 1.0 / init_var;
+        for j in 0..du {
+            pol.pol_covar.slice_mut(t)[j * du + j] = init_var;
+            pol.chol_pol_covar.slice_mut(t)[j * du + j] = sd;
+            pol.inv_pol_covar.slice_mut(t)[j * du + j] = 1.0 / init_var;
         }
     }
     pol

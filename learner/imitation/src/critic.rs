@@ -16,26 +16,24 @@
 
 use std::path::Path;
 
-use faer::Mat;
-use ur5_shared::layout::DX;
-
-use crate::cost::composite::D_IN;
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, DiscriminatorConfig, Normalizer, TrainStats, Workspace};
 use crate::rollout::Episode;
 use crate::settings::CriticSettings;
 use crate::ImitationError;
+use faer::Mat;
 
 /// Expert transitions [s_t; s_{t+1}] of every demonstration, one per row (`count · (T − 1)` ×
 /// 2 dX).
 pub fn expert_transitions(demos: &Demos) -> Mat<f64> {
     let rows = demos.count * (demos.horizon - 1);
-    Mat::from_fn(rows, D_IN, |r, c| {
+    let dx = demos.layout().dx();
+    Mat::from_fn(rows, 2 * dx, |r, c| {
         let (d, t) = (r / (demos.horizon - 1), r % (demos.horizon - 1));
-        if c < DX {
+        if c < dx {
             demos.state(d, t)[c]
         } else {
-            demos.state(d, t + 1)[c - DX]
+            demos.state(d, t + 1)[c - dx]
         }
     })
 }
@@ -45,13 +43,14 @@ pub fn expert_transitions(demos: &Demos) -> Mat<f64> {
 pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
     let t_len = episodes[0].horizon();
     let rows = episodes.len() * (t_len - 1);
-    Mat::from_fn(rows, D_IN, |r, c| {
+    let dx = episodes[0].dx();
+    Mat::from_fn(rows, 2 * dx, |r, c| {
         let (i, t) = (r / (t_len - 1), r % (t_len - 1));
         let ep = &episodes[i];
-        if c < DX {
-            ep.x[t * DX + c]
+        if c < dx {
+            ep.x[t * dx + c]
         } else {
-            ep.x[(t + 1) * DX + c - DX]
+            ep.x[(t + 1) * dx + c - dx]
         }
     })
 }
@@ -73,7 +72,7 @@ pub fn refit_critic(
     dcfg: &DiscriminatorConfig,
 ) -> Result<Discriminator, ImitationError> {
     let (ne, nc) = (expert.nrows(), controller.nrows());
-    let both = Mat::from_fn(ne + nc, D_IN, |r, c| {
+    let both = Mat::from_fn(ne + nc, expert.ncols(), |r, c| {
         if r < ne {
             expert[(r, c)]
         } else {
@@ -81,7 +80,7 @@ pub fn refit_critic(
         }
     });
     let norm = Normalizer::from_data(dcfg.warp_rows(both.as_ref()).as_ref())?;
-    Ok(Discriminator::new(D_IN, dcfg.clone(), norm)?)
+    Ok(Discriminator::new(expert.ncols(), dcfg.clone(), norm)?)
 }
 
 /// The critic of a run: the discriminator trained against the expert transitions on its
@@ -109,7 +108,7 @@ impl Critic {
         seed: u64,
     ) -> Result<Self, ImitationError> {
         let norm = Normalizer::from_data(dcfg.warp_rows(expert.as_ref()).as_ref())?;
-        let disc = Discriminator::new(D_IN, critic_config(dcfg, seed), norm)?;
+        let disc = Discriminator::new(expert.ncols(), critic_config(dcfg, seed), norm)?;
         Ok(Self {
             ws: disc.workspace(),
             expert,
@@ -192,15 +191,16 @@ impl Critic {
     /// Rewards `r_t = −D(s_t, s_{t+1})` of every transition of every episode (`[episode][t]`,
     /// T − 1 each).
     pub fn rewards(&mut self, episodes: &[Episode]) -> Vec<Vec<f64>> {
-        let mut x = [0.0; D_IN];
+        let mut x = vec![0.0; self.disc.input_dim()];
         let (disc, ws) = (self.averaged.as_ref().unwrap_or(&self.disc), &mut self.ws);
         episodes
             .iter()
             .map(|ep| {
+                let dx = ep.dx();
                 (0..ep.horizon() - 1)
                     .map(|t| {
-                        x[..DX].copy_from_slice(&ep.x[t * DX..(t + 1) * DX]);
-                        x[DX..].copy_from_slice(&ep.x[(t + 1) * DX..(t + 2) * DX]);
+                        x[..dx].copy_from_slice(ep.state(t));
+                        x[dx..].copy_from_slice(ep.state(t + 1));
                         -disc.value(&x, ws)
                     })
                     .collect()
@@ -218,7 +218,7 @@ impl Critic {
     /// [`Discriminator::load`]): refused unless it was trained with this critic's settings
     /// (`dcfg`, the one given to [`Critic::new`]) and seed.
     pub fn restore(&mut self, disc: Discriminator) -> Result<(), ImitationError> {
-        if disc.config() != self.disc.config() || disc.input_dim() != D_IN {
+        if disc.config() != self.disc.config() || disc.input_dim() != self.disc.input_dim() {
             return Err(ImitationError::Checkpoint(format!(
                 "the critic was trained with other [discriminator] settings or another seed than \
                  this run's (seed {}): resume with the run's own --config and --seed",
@@ -235,6 +235,9 @@ impl Critic {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::layout::DX;
+
+    const D_IN: usize = 2 * DX;
 
     /// `rows` transitions of a seeded, non-degenerate pseudo-random walk offset by `shift`.
     fn transitions(rows: usize, shift: f64) -> Mat<f64> {

@@ -3,7 +3,8 @@
 //! docs/design.md §4).
 
 use ur5_shared::config::TaskConfig;
-use ur5_shared::layout::DX;
+use ur5_shared::joints::Joints;
+use ur5_shared::layout::StateLayout;
 use ur5_shared::UrModel;
 
 use crate::ImitationError;
@@ -22,10 +23,14 @@ pub struct Demos {
     pub count: usize,
     /// Horizon T.
     pub horizon: usize,
-    /// Goal point (m).
+    /// Goal point of the tool centre point (m).
     pub goal: [f64; 3],
-    /// Start pose (rad).
-    pub start_q: [f64; 3],
+    /// Goal pose (UR's p[x, y, z, rx, ry, rz]) of a pose task, `None` for a point goal.
+    pub goal_pose: Option<[f64; 6]>,
+    /// The pose task's tool points (m, flange frame; `TaskConfig::tool_points`).
+    pub tool_points: [[f64; 3]; 3],
+    /// Start pose (rad), one angle per active joint.
+    pub start_q: Joints,
     /// Control period (s).
     pub dt: f64,
     /// Seed of the recording run.
@@ -37,19 +42,39 @@ pub struct Demos {
 }
 
 impl Demos {
-    /// State t of demonstration d.
-    pub fn state(&self, d: usize, t: usize) -> [f64; DX] {
-        let i = (d * self.horizon + t) * DX;
-        self.states[i..i + DX].try_into().expect("dX")
+    /// The layout of the demonstrations' states: their task's
+    /// ([`TaskConfig::layout`]).
+    pub fn layout(&self) -> StateLayout {
+        let points = if self.goal_pose.is_some() { 3 } else { 1 };
+        StateLayout::new(self.start_q.len(), points).expect("validated demonstrations")
     }
 
-    /// The task the demonstrations were recorded on (goal, start pose, T, dt), checked.
+    /// State t of demonstration d (dX).
+    pub fn state(&self, d: usize, t: usize) -> &[f64] {
+        let dx = self.layout().dx();
+        let i = (d * self.horizon + t) * dx;
+        &self.states[i..i + dx]
+    }
+
+    /// State t of demonstration d of a three-joint point task (dX = 12), for the learners
+    /// that take that task only; panics on another layout.
+    pub fn reach3_state(&self, d: usize, t: usize) -> [f64; ur5_shared::layout::DX] {
+        self.state(d, t)
+            .try_into()
+            .expect("a three-joint task's state")
+    }
+
+    /// The task the demonstrations were recorded on (joints, goal, start pose, T, dt),
+    /// checked.
     pub fn task(&self) -> Result<TaskConfig, ImitationError> {
         let task = TaskConfig {
             dt: self.dt,
             horizon: self.horizon,
+            joints: self.start_q.len(),
             start_q: self.start_q,
             goal: self.goal,
+            goal_pose: self.goal_pose,
+            tool_points: self.tool_points,
         };
         task.validate().map_err(ImitationError::Task)?;
         Ok(task)

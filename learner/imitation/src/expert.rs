@@ -10,7 +10,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX};
 use ur5_shared::noise::Noise;
 
 use crate::controller::{init_hold, to_gain_table};
@@ -294,8 +293,8 @@ impl ExpertLearner {
             cfg.fit.clone(),
             cfg.traj_opt.clone(),
             t_len,
-            DX,
-            DU,
+            cfg.task.layout().dx(),
+            cfg.task.layout().du(),
             n,
             rng_gmm,
         );
@@ -470,8 +469,9 @@ pub fn record_demos(
 ) -> Result<Demos, ImitationError> {
     let task = &cfg.task;
     let table = to_gain_table(policy, 0);
-    let mut states = Vec::with_capacity(cfg.demos * task.horizon * DX);
-    let mut actions = Vec::with_capacity(cfg.demos * task.horizon * DU);
+    let layout = task.layout();
+    let mut states = Vec::with_capacity(cfg.demos * task.horizon * layout.dx());
+    let mut actions = Vec::with_capacity(cfg.demos * task.horizon * layout.du());
     let mut total = 0.0;
     let seed = cfg.seed ^ SEED_DEMOS;
     let episodes = run_episodes(
@@ -496,6 +496,8 @@ pub fn record_demos(
         count: cfg.demos,
         horizon: task.horizon,
         goal: task.goal,
+        goal_pose: task.goal_pose,
+        tool_points: task.tool_points,
         start_q: task.start_q,
         dt: task.dt,
         seed: cfg.seed,

@@ -32,7 +32,6 @@ use faer::Mat;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX};
 
 use crate::controller::init_hold;
 use crate::cost::composite::{CompositeCost, CompositeWorkspace};
@@ -74,8 +73,8 @@ impl LqrGaifo {
             cfg.fit.clone(),
             cfg.traj_opt.clone(),
             task.horizon,
-            DX,
-            DU,
+            task.layout().dx(),
+            task.layout().du(),
             cfg.samples,
             ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x474d_4d00),
         );

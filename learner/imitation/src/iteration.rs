@@ -10,7 +10,6 @@ use gps::algorithm::update::Learner;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::snapshot::Snapshot;
 use gps::traj_opt::pilqr::{PilqrReport, StepRule, TrajOptMethod};
-use ur5_shared::layout::{DU, DX};
 
 use crate::cost::Cost;
 use crate::rollout::{Episode, SampleList};
@@ -173,8 +172,8 @@ impl LqrIteration {
             &self.derivs,
             samples.n,
             self.pol.t,
-            DX,
-            DU,
+            self.pol.dx,
+            self.pol.du,
             &mut learner.info.cc,
             &mut learner.info.cv,
             &mut learner.info.cm,

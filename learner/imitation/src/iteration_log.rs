@@ -6,7 +6,6 @@ use serde::Serialize;
 use crate::demos::Demos;
 use crate::discriminator::TrainStats;
 use crate::rollout::Episode;
-use ur5_shared::layout::DX;
 
 /// Per-iteration log (progress line and CSV row).
 #[derive(Clone, Debug, Serialize)]
@@ -77,15 +76,16 @@ impl Default for GaifoLog {
 /// of coordinate i over all demonstrated states (all demonstrations and steps; σ_i = 1 where
 /// it is below 1e-6). Uses the states only, as imitation from observation may: a controller
 /// whose episodes come to rest where the demonstrations do scores near 0. Shapes: states of
-/// dX = 12 (docs/design.md §2).
+/// the demonstrations' dX (docs/design.md §2).
 pub fn demo_gap(episodes: &[Episode], demos: &Demos) -> f64 {
     let (n, t_last) = (demos.count * demos.horizon, demos.horizon - 1);
-    let mut mean = [0.0; DX];
-    let mut end = [0.0; DX];
+    let dx = demos.layout().dx();
+    let mut mean = vec![0.0; dx];
+    let mut end = vec![0.0; dx];
     for d in 0..demos.count {
         for t in 0..demos.horizon {
             let s = demos.state(d, t);
-            for i in 0..DX {
+            for i in 0..dx {
                 mean[i] += s[i] / n as f64;
                 if t == t_last {
                     end[i] += s[i] / demos.count as f64;
@@ -93,19 +93,22 @@ pub fn demo_gap(episodes: &[Episode], demos: &Demos) -> f64 {
             }
         }
     }
-    let mut var = [0.0; DX];
+    let mut var = vec![0.0; dx];
     for d in 0..demos.count {
         for t in 0..demos.horizon {
             let s = demos.state(d, t);
-            for i in 0..DX {
+            for i in 0..dx {
                 var[i] += (s[i] - mean[i]) * (s[i] - mean[i]) / n as f64;
             }
         }
     }
-    let sigma = var.map(|v| if v.sqrt() < 1e-6 { 1.0 } else { v.sqrt() });
+    let sigma: Vec<f64> = var
+        .iter()
+        .map(|v| if v.sqrt() < 1e-6 { 1.0 } else { v.sqrt() })
+        .collect();
     let gaps = episodes.iter().map(|e| {
         let s = e.state(e.horizon() - 1);
-        (0..DX)
+        (0..dx)
             .map(|i| ((s[i] - end[i]) / sigma[i]).powi(2))
             .sum::<f64>()
             .sqrt()
@@ -170,6 +173,7 @@ impl GaifoLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::layout::DX;
 
     /// Two demonstrations of T = 2: coordinate i takes the values 0, 2 (first) and 0, 0
     /// (second) so its spread over the four states is σ = √0.75 and the mean final state 1.
@@ -185,7 +189,9 @@ mod tests {
             count: 2,
             horizon: 2,
             goal: [0.0; 3],
-            start_q: [0.0; 3],
+            goal_pose: None,
+            tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
+            start_q: [0.0; 3].into(),
             dt: 0.05,
             seed: 0,
             cost_random: 1.0,
@@ -197,6 +203,7 @@ mod tests {
         let mut x = vec![0.0; 2 * DX];
         x[DX..].copy_from_slice(&s_last);
         Episode {
+            layout: ur5_shared::StateLayout::REACH3,
             x,
             u: vec![0.0; 6],
             u_policy: vec![0.0; 6],

@@ -13,16 +13,18 @@
 
 use rayon::prelude::*;
 use ur5_shared::config::{ActionMode, ArmLimits, TaskConfig};
-use ur5_shared::layout::{DU, DX, Q};
+use ur5_shared::layout::{StateLayout, MAX_DU};
 use ur5_shared::noise::Noise;
 use ur5_shared::safety::clamp_action;
 use ur5_shared::{controller_action, GainTable};
 
 use crate::ImitationError;
 
-/// One episode: T states and the T actions taken in them.
+/// One episode: T states and the T actions taken in them, in the layout of its task.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Episode {
+    /// The task's state layout (dX, dU, where the joints and tool points are).
+    pub layout: StateLayout,
     /// States s_0 … s_{T−1}, (T, dX) row-major.
     pub x: Vec<f64>,
     /// Actions as executed by the arm (after the clamp), (T, dU) row-major. The dynamics are
@@ -39,25 +41,73 @@ pub struct Episode {
 impl Episode {
     /// Horizon T.
     pub fn horizon(&self) -> usize {
-        self.x.len() / DX
+        self.x.len() / self.layout.dx()
     }
 
-    /// State at step t.
-    pub fn state(&self, t: usize) -> [f64; DX] {
-        self.x[t * DX..(t + 1) * DX].try_into().expect("dX")
+    /// State dimension dX.
+    pub fn dx(&self) -> usize {
+        self.layout.dx()
     }
 
-    /// Task cost C(τ) of the episode (`ur5_shared::cost`).
+    /// Action dimension dU.
+    pub fn du(&self) -> usize {
+        self.layout.du()
+    }
+
+    /// State at step t (dX).
+    pub fn state(&self, t: usize) -> &[f64] {
+        let dx = self.layout.dx();
+        &self.x[t * dx..(t + 1) * dx]
+    }
+
+    /// State at step t of a three-joint point task (dX = 12), for the learners whose MLP
+    /// policies take that task only (GAIfO (PPO), MDGPS); panics on another layout, which
+    /// those learners refuse when they are built.
+    pub fn reach3_state(&self, t: usize) -> [f64; ur5_shared::layout::DX] {
+        self.state(t)
+            .try_into()
+            .expect("a three-joint task's state")
+    }
+
+    /// Executed action at step t (dU).
+    pub fn action(&self, t: usize) -> &[f64] {
+        let du = self.layout.du();
+        &self.u[t * du..(t + 1) * du]
+    }
+
+    /// Task cost C(τ) of the episode (`ur5_shared::cost`): of the tool points' distance to
+    /// their targets.
     pub fn task_cost(&self) -> f64 {
-        let states: Vec<[f64; DX]> = (0..self.horizon()).map(|t| self.state(t)).collect();
-        ur5_shared::cost::task_cost_from_states(&states).unwrap_or(f64::INFINITY)
+        ur5_shared::cost::task_cost_of_states(&self.layout, &self.x).unwrap_or(f64::INFINITY)
     }
 
-    /// Final end-effector distance to the goal (m).
+    /// Final distance of the tool centre point (the first tool point) to its goal (m).
     pub fn final_distance(&self) -> f64 {
         let s = self.state(self.horizon() - 1);
-        let e = &s[ur5_shared::layout::EE_MINUS_GOAL];
+        let e = &s[self.layout.point(0)];
         (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+    }
+
+    /// Final orientation error of the tool (rad, `ur5_shared::pose::orientation_error`) for
+    /// the tool points' `targets` (m, base frame; `TaskConfig::targets`); `None` unless the
+    /// task has a pose goal (three tool points).
+    pub fn final_orientation_error(&self, targets: &[[f64; 3]]) -> Option<f64> {
+        if self.layout.tool_points() != 3 || targets.len() != 3 {
+            return None;
+        }
+        let s = self.state(self.horizon() - 1);
+        let mut points = [[0.0; 3]; 3];
+        let mut goals = [[0.0; 3]; 3];
+        for i in 0..3 {
+            let e = &s[self.layout.point(i)];
+            goals[i] = targets[i];
+            points[i] = [
+                e[0] + targets[i][0],
+                e[1] + targets[i][1],
+                e[2] + targets[i][2],
+            ];
+        }
+        ur5_shared::pose::orientation_error(&points, &goals)
     }
 }
 
@@ -85,11 +135,13 @@ impl SampleList {
 
 /// An arm an episode runs on, one control period (`TaskConfig::dt`) per [`Arm::step`].
 pub trait Arm {
-    /// Puts the arm at rest at `start_q` (rad) with goal point `goal` (m, base frame) and
-    /// returns the state s_0 (layout `ur5_shared::layout`).
-    fn reset(&mut self, start_q: [f64; DU], goal: [f64; 3]) -> Result<[f64; DX], ImitationError>;
-    /// Executes action `a` (already clamped) for one control period; returns the next state.
-    fn step(&mut self, a: [f64; DU]) -> [f64; DX];
+    /// Puts the arm at rest at the task's start pose (`task.start_q`, rad) with the tool
+    /// points' targets of its goal (`TaskConfig::targets`) and writes the state s_0 (layout
+    /// `task.layout()`) into `s`.
+    fn reset(&mut self, task: &TaskConfig, s: &mut [f64]) -> Result<(), ImitationError>;
+    /// Executes action `a` (dU, already clamped) for one control period; writes the next
+    /// state into `s` (dX).
+    fn step(&mut self, a: &[f64], s: &mut [f64]);
     /// What actions are (goal joint angles or torques).
     fn mode(&self) -> ActionMode;
     /// The limits the action clamp enforces.
@@ -115,9 +167,10 @@ pub trait Actors: Sync {
 pub trait Policy {
     /// Steps the policy can act for (a gain table's horizon).
     fn horizon(&self) -> usize;
-    /// The action (before the clamp) at step `t` in state `s` with exploration noise `eps`
-    /// (zeros for a noise-free episode) on an arm whose actions are `mode`.
-    fn act(&mut self, t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU];
+    /// Writes into `a` (dU) the action (before the clamp) at step `t` in state `s` (dX) with
+    /// exploration noise `eps` (dU; zeros for a noise-free episode) on an arm whose actions
+    /// are `mode`.
+    fn act(&mut self, t: usize, s: &[f64], eps: &[f64], mode: ActionMode, a: &mut [f64]);
 }
 
 /// A gain table as a policy: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε of
@@ -127,10 +180,8 @@ impl Policy for &GainTable {
         GainTable::horizon(self)
     }
 
-    fn act(&mut self, t: usize, s: &[f64; DX], eps: &[f64; DU], _: ActionMode) -> [f64; DU] {
-        let mut a = [0.0; DU];
-        controller_action(self, t, s, eps, &mut a).expect("t < horizon");
-        a
+    fn act(&mut self, t: usize, s: &[f64], eps: &[f64], _: ActionMode, a: &mut [f64]) {
+        controller_action(self, t, s, eps, a).expect("t < horizon, the table's dims");
     }
 }
 
@@ -139,9 +190,9 @@ impl Policy for GainTable {
         GainTable::horizon(self)
     }
 
-    fn act(&mut self, t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
+    fn act(&mut self, t: usize, s: &[f64], eps: &[f64], mode: ActionMode, a: &mut [f64]) {
         let mut shared: &GainTable = self;
-        shared.act(t, s, eps, mode)
+        shared.act(t, s, eps, mode, a)
     }
 }
 
@@ -153,37 +204,43 @@ impl Actors for GainTable {
 }
 
 /// Runs one episode of `min(task.horizon, policy.horizon())` steps from `task.start_q` towards
-/// `task.goal`, drawing ε ~ N(0, I) from `noise` when it is given (otherwise ε = 0).
+/// the task's goal, in the task's layout, drawing ε ~ N(0, I) from `noise` when it is given
+/// (otherwise ε = 0).
 pub fn run_episode(
     arm: &mut dyn Arm,
     task: &TaskConfig,
     policy: &mut dyn Policy,
     mut noise: Option<&mut Noise>,
 ) -> Result<Episode, ImitationError> {
+    let layout = task.layout();
+    let (dx, du) = (layout.dx(), layout.du());
     let horizon = task.horizon.min(policy.horizon());
     let limits = arm.limits();
     let mode = arm.mode();
-    let mut s = arm.reset(task.start_q, task.goal)?;
+    let mut s = vec![0.0; dx];
+    arm.reset(task, &mut s)?;
     let mut ep = Episode {
-        x: Vec::with_capacity(horizon * DX),
-        u: Vec::with_capacity(horizon * DU),
-        u_policy: Vec::with_capacity(horizon * DU),
-        eps: Vec::with_capacity(horizon * DU),
+        layout,
+        x: Vec::with_capacity(horizon * dx),
+        u: Vec::with_capacity(horizon * du),
+        u_policy: Vec::with_capacity(horizon * du),
+        eps: Vec::with_capacity(horizon * du),
         noisy: noise.is_some(),
     };
+    let (mut eps, mut a) = ([0.0; MAX_DU], [0.0; MAX_DU]);
+    let (eps, a) = (&mut eps[..du], &mut a[..du]);
     for t in 0..horizon {
-        let eps = match noise.as_deref_mut() {
-            Some(n) => n.next(),
-            None => [0.0; DU],
-        };
-        let mut a = policy.act(t, &s, &eps, mode);
-        ep.u_policy.extend_from_slice(&a);
-        let q: [f64; DU] = s[Q].try_into().expect("dU joint angles");
-        clamp_action(mode, &limits, task.dt, &q, &mut a);
+        match noise.as_deref_mut() {
+            Some(n) => n.next_into(eps),
+            None => eps.fill(0.0),
+        }
+        policy.act(t, &s, eps, mode, a);
+        ep.u_policy.extend_from_slice(a);
+        clamp_action(mode, &limits, task.dt, &s[layout.q()], a);
         ep.x.extend_from_slice(&s);
-        ep.u.extend_from_slice(&a);
-        ep.eps.extend_from_slice(&eps);
-        s = arm.step(a);
+        ep.u.extend_from_slice(a);
+        ep.eps.extend_from_slice(eps);
+        arm.step(a, &mut s);
     }
     Ok(ep)
 }

@@ -47,9 +47,12 @@ pub(super) fn train_with_progress(c: &ExpertConfig, out: &Path) -> anyhow::Resul
 
 /// The expert's closing line: its best cost, final distance and the `demos` recorded.
 pub(super) fn print_done(s: &ExpertSummary, demos: usize) {
+    let orientation = s
+        .final_orientation_error_deg
+        .map_or(String::new(), |e| format!(", orientation error {e:.3}°"));
     eprintln!(
-        "done: best eval cost {:.4} ({:.1} % of the random policy's {:.4}), final distance {:.4} m; \
-         {} demos (mean cost {:.4}) in {}",
+        "done: best eval cost {:.4} ({:.1} % of the random policy's {:.4}), final distance {:.4} m\
+         {orientation}; {} demos (mean cost {:.4}) in {}",
         s.eval_cost,
         100.0 * s.cost_ratio,
         s.cost_random,

@@ -166,8 +166,9 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
     let task = TaskConfig {
         dt: file.dt,
         horizon: args.steps.unwrap_or(file.horizon),
-        start_q: file.start_q,
+        start_q: file.start_q.into(),
         goal: args.goal,
+        ..TaskConfig::default()
     };
     task.validate()
         .with_context(|| format!("--goal {:?} / --steps {}", args.goal, task.horizon))?;

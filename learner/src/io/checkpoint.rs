@@ -9,7 +9,6 @@ use gps::linalg::MatSeq;
 use gps::policy::lin_gauss::LinGaussPolicy;
 use gps::snapshot::Snapshot;
 use imitation::rollout::Episode;
-use ur5_shared::layout::{DU, DX};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -43,12 +42,12 @@ pub fn save_checkpoint(path: &Path, c: &ExpertCheckpoint, seed: u64) -> Result<(
     w.u64("seed", &[], &[seed])?;
     if let Some((pol, ep)) = &c.best {
         write_policy(&mut w, "best_", pol)?;
-        let (t, du) = (ep.horizon() as u64, DU as u64);
-        w.f64("best_x", &[t, DX as u64], &ep.x)?;
+        let (t, du) = (ep.horizon() as u64, ep.du() as u64);
+        w.f64("best_x", &[t, ep.dx() as u64], &ep.x)?;
         w.f64("best_u", &[t, du], &ep.u)?;
         w.f64("best_u_policy", &[t, du], &ep.u_policy)?;
         // Episodes assembled from the controller's samples carry no noise (empty).
-        w.f64("best_eps", &[(ep.eps.len() / DU) as u64, du], &ep.eps)?;
+        w.f64("best_eps", &[ep.eps.len() as u64 / du, du], &ep.eps)?;
         w.u64("best_noisy", &[], &[u64::from(ep.noisy)])?;
         w.u64("since_best", &[], &[c.since_best as u64])?;
     }
@@ -78,10 +77,10 @@ fn read_policy(f: &NpzFile, prefix: &str) -> Result<LinGaussPolicy, NpzError> {
             format!("shape {shape:?}, expected (T, dU, dX)"),
         ));
     };
-    if (du, dx) != (DU as u64, DX as u64) {
+    if ur5_shared::StateLayout::from_dims(dx as usize, du as usize).is_none() {
         return Err(f.bad(
             &format!("{prefix}K"),
-            format!("shape {shape:?}, expected (T, {DU}, {DX})"),
+            format!("shape {shape:?}: (dU, dX) = ({du}, {dx}) is no task's (3 or 6 joints, 1 or 3 tool points)"),
         ));
     }
     let (tn, dun) = (t as usize, du as usize);
@@ -91,9 +90,9 @@ fn read_policy(f: &NpzFile, prefix: &str) -> Result<LinGaussPolicy, NpzError> {
     };
     let pol = LinGaussPolicy {
         t: tn,
-        dx: DX,
-        du: DU,
-        gain: MatSeq::from_vec(tn, dun, DX, gain),
+        dx: dx as usize,
+        du: dun,
+        gain: MatSeq::from_vec(tn, dun, dx as usize, gain),
         k: MatSeq::from_vec(tn, dun, 1, f.f64_shaped(&format!("{prefix}k"), &[t, du])?),
         pol_covar: seq("pol_covar", du)?,
         chol_pol_covar: seq("chol_pol_covar", du)?,
@@ -114,9 +113,11 @@ pub fn load_checkpoint(path: &Path) -> Result<ExpertCheckpoint, NpzError> {
     let cost_random = f.f64_shaped("cost_random", &[])?[0];
     let (best, since_best) = if f.names().iter().any(|n| n == "best_K") {
         let best = read_policy(&f, "best_")?;
-        let (t, du) = (best.t as u64, DU as u64);
+        let (t, du) = (best.t as u64, best.du as u64);
+        let layout = ur5_shared::StateLayout::from_dims(best.dx, best.du).expect("checked");
         let ep = Episode {
-            x: f.f64_shaped("best_x", &[t, DX as u64])?,
+            layout,
+            x: f.f64_shaped("best_x", &[t, best.dx as u64])?,
             u: f.f64_shaped("best_u", &[t, du])?,
             u_policy: f.f64_shaped("best_u_policy", &[t, du])?,
             eps: match f.f64("best_eps")? {

@@ -5,8 +5,10 @@
 //! |---|---|---|
 //! | `states` | (D, T, dX) f64 | s_t of each demonstration (layout: `state_names`) |
 //! | `actions_diagnostic` | (D, T, dU) f64 | actions the expert took; never used for imitation |
-//! | `goal` | (3,) f64 | goal point (m, base frame) |
-//! | `start_q` | (3,) f64 | start pose (rad) |
+//! | `goal` | (3,) f64 | goal point of the tool centre point (m, base frame) |
+//! | `start_q` | (n,) f64 | start pose (rad), one angle per active joint (3 or 6) |
+//! | `goal_pose` | (6,) f64 | a pose task's goal, UR's p[x, y, z, rx, ry, rz] (absent: a point goal) |
+//! | `tool_points` | (3, 3) f64 | a pose task's tool points (m, flange frame; with `goal_pose`) |
 //! | `dt` | () f64 | control period (s) |
 //! | `seed` | () u64 | seed of the run that recorded them |
 //! | `cost_random`, `cost_expert` | () f64 | mean task cost of the random policy / of these demos |
@@ -14,16 +16,17 @@
 //! | `model` | (1,) str | the arm model they were made on (`"ur5e"`; absent: `"ur5"`) |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
-//! Loading checks every shape, the dimensions and layout, and that every number is finite,
-//! and says exactly what is wrong.
+//! The task's layout (`ur5_shared::StateLayout`: joints from `start_q`, tool points from
+//! `goal_pose`) fixes dX and dU; a file whose arrays or names disagree with it is refused,
+//! naming both. Loading checks every shape, the dimensions and layout, and that every number is
+//! finite, and says exactly what is wrong.
 
 use std::path::Path;
-
-use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
 use imitation::demos::Demos;
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
+use super::task_arrays::{read_task, write_task};
 use super::IoError;
 use crate::error::ensure;
 
@@ -31,6 +34,9 @@ use crate::error::ensure;
 /// each error names the array, the demonstration, the step and the value, and says what to do.
 #[derive(Debug, thiserror::Error)]
 pub enum DemosError {
+    /// The demonstrations' task (joints, goal, tool points) is not a valid one.
+    #[error("the demonstrations' task: {0}")]
+    Task(String),
     /// Demonstrations made on another arm model than the config's.
     #[error(
         "demonstrations {} were made on a {made_on}, the config's arm is a {config}: set \
@@ -73,7 +79,7 @@ pub enum DemosError {
         /// Step.
         step: usize,
         /// The state's name.
-        name: &'static str,
+        name: String,
         /// The value.
         value: f64,
     },
@@ -176,19 +182,33 @@ pub const SCHEMA_VERSION: i64 = 1;
 /// Writes `demos` to `path` (atomically).
 pub fn save(demos: &Demos, path: &Path) -> Result<(), NpzError> {
     let d = demos;
+    let layout = d.layout();
     let (n, t) = (d.count as u64, d.horizon as u64);
+    let (dx, du) = (layout.dx() as u64, layout.du() as u64);
     let mut w = NpzWriter::create(path)?;
     w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
-    w.f64("states", &[n, t, DX as u64], &d.states)?;
-    w.f64("actions_diagnostic", &[n, t, DU as u64], &d.actions)?;
-    w.f64("goal", &[3], &d.goal)?;
-    w.f64("start_q", &[3], &d.start_q)?;
+    w.f64("states", &[n, t, dx], &d.states)?;
+    w.f64("actions_diagnostic", &[n, t, du], &d.actions)?;
+    write_task(
+        &mut w,
+        &d.goal,
+        &d.start_q,
+        d.goal_pose.as_ref(),
+        &d.tool_points,
+    )?;
     w.f64("dt", &[], &[d.dt])?;
     w.u64("seed", &[], &[d.seed])?;
     w.f64("cost_random", &[], &[d.cost_random])?;
     w.f64("cost_expert", &[], &[d.cost_expert])?;
-    w.strings("state_names", &STATE_NAMES)?;
-    w.strings("action_names", &ACTION_NAMES)?;
+    let (states, actions) = (layout.state_names(), layout.action_names());
+    w.strings(
+        "state_names",
+        &states.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
+    w.strings(
+        "action_names",
+        &actions.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
     w.string("model", d.model.name())?;
     w.finish()?;
     Ok(())
@@ -198,24 +218,30 @@ pub fn save(demos: &Demos, path: &Path) -> Result<(), NpzError> {
 pub fn load(path: &Path) -> Result<Demos, NpzError> {
     let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
     let bad = |name: &str, why: String| f.bad(name, why);
+    let task = read_task(&f)?;
+    let layout = task.layout;
+    let (dx_want, du_want) = (layout.dx() as u64, layout.du() as u64);
     let names = f.strings("state_names")?;
-    if names != STATE_NAMES {
+    if names != layout.state_names() {
         return Err(bad(
             "state_names",
-            format!("{names:?} is not this project's state layout {STATE_NAMES:?}"),
+            format!(
+                "{names:?} is not the state layout of a task with {layout} ({:?})",
+                layout.state_names()
+            ),
         ));
     }
     let (shape, states) = f.f64("states")?;
     let [d, t, dx] = shape[..] else {
         return Err(bad(
             "states",
-            format!("shape {shape:?}, expected (D, T, {DX})"),
+            format!("shape {shape:?}, expected (D, T, {dx_want})"),
         ));
     };
-    if dx != DX as u64 {
+    if dx != dx_want {
         return Err(bad(
             "states",
-            format!("state dimension {dx}, expected dX = {DX}"),
+            format!("state dimension {dx}, but the file's task ({layout}) has dX = {dx_want}"),
         ));
     }
     if d == 0 || t < 2 {
@@ -224,11 +250,8 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
             format!("{d} demonstrations of {t} steps: need at least 1 of at least 2 steps"),
         ));
     }
-    let actions = f.f64_shaped("actions_diagnostic", &[d, t, DU as u64])?;
+    let actions = f.f64_shaped("actions_diagnostic", &[d, t, du_want])?;
     let scalar = |name: &str| -> Result<f64, NpzError> { Ok(f.f64_shaped(name, &[])?[0]) };
-    let vec3 = |name: &str| -> Result<[f64; 3], NpzError> {
-        Ok(f.f64_shaped(name, &[3])?.try_into().expect("3"))
-    };
     // Files written before demonstrations carried a model were all made on the UR5.
     let model = if f.names().iter().any(|n| n == "model") {
         let name = f.string("model")?;
@@ -241,8 +264,10 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
         model,
         count: d as usize,
         horizon: t as usize,
-        goal: vec3("goal")?,
-        start_q: vec3("start_q")?,
+        goal: task.goal,
+        goal_pose: task.goal_pose,
+        tool_points: task.tool_points,
+        start_q: task.start_q,
         dt: scalar("dt")?,
         seed: f.u64_scalar("seed")?,
         cost_random: scalar("cost_random")?,
@@ -268,9 +293,14 @@ pub fn load(path: &Path) -> Result<Demos, NpzError> {
         .goal
         .iter()
         .chain(demos.start_q.iter())
+        .chain(demos.goal_pose.iter().flatten())
+        .chain(demos.tool_points.iter().flatten())
         .any(|v| !v.is_finite())
     {
-        return Err(bad("goal", "goal and start_q must be finite".into()));
+        return Err(bad(
+            "goal",
+            "goal, start_q, goal_pose and tool_points must be finite".into(),
+        ));
     }
     Ok(demos)
 }
@@ -348,7 +378,8 @@ pub const SPEED_LIMIT_FACTOR: f64 = 2.0;
 /// forward kinematics at the demonstrated joint angles. Each error names the array, the
 /// demonstration, the step and the value.
 pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> Result<(), DemosError> {
-    use ur5_shared::layout::{EE_MINUS_GOAL, Q, QD};
+    let layout = d.layout();
+    let (n, p) = (layout.joints(), layout.tool_points());
     ur5_shared::config::check_dt(d.dt).map_err(DemosError::Dt)?;
     ensure!(
         d.cost_random.is_finite() && d.cost_expert.is_finite() && d.cost_expert < d.cost_random,
@@ -359,17 +390,20 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> Resu
     );
     check_finite(d)?;
     check_period(d)?;
-    let mut arm = hil_sim::Ur5Sim::new(sim.clone(), d.dt)?;
+    let task = d.task().map_err(|e| DemosError::Task(e.to_string()))?;
+    let (offsets, targets) = (task.tool_offsets(), task.targets());
+    let mut arm = hil_sim::Ur5Sim::with_joints(sim.clone(), d.dt, n)?;
     arm.check_goal(d.goal)?;
     let limits = arm.limits();
     let tol = CONSISTENCY_TOLERANCE;
+    let mut fk = [[0.0; 3]; ur5_shared::layout::MAX_TOOL_POINTS];
+    let zeros = [0.0; ur5_shared::layout::MAX_JOINTS];
     for i in 0..d.count {
         for t in 0..d.horizon {
-            let s = &d.states[(i * d.horizon + t) * DX..(i * d.horizon + t + 1) * DX];
+            let s = d.state(i, t);
             let at = format!("states[{i}, {t}]");
-            let q: [f64; 3] = s[Q].try_into().expect("3");
-            let qd: [f64; 3] = s[QD].try_into().expect("3");
-            for j in 0..3 {
+            let (q, qd) = (&s[layout.q()], &s[layout.qd()]);
+            for j in 0..n {
                 ensure!(
                     q[j] >= limits.lower[j] - tol && q[j] <= limits.upper[j] + tol,
                     DemosError::JointLimit {
@@ -402,13 +436,16 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> Resu
                     );
                 }
             }
-            arm.set_joint_state(q, [0.0; 3]);
-            let fk = arm.true_observation().ee_pos;
-            let e = &s[EE_MINUS_GOAL];
-            let err = (0..3)
-                .map(|k| (e[k] + d.goal[k] - fk[k]).powi(2))
-                .sum::<f64>()
-                .sqrt();
+            arm.set_joint_state_all(q, &zeros[..n]);
+            arm.true_points(offsets, &mut fk[..p]);
+            let mut err = 0.0f64;
+            for (k, target) in targets.iter().enumerate() {
+                let e = &s[layout.point(k)];
+                let d2 = (0..3)
+                    .map(|c| (e[c] + target[c] - fk[k][c]).powi(2))
+                    .sum::<f64>();
+                err = err.max(d2.sqrt());
+            }
             ensure!(err <= tol, DemosError::Kinematics { at, err, tol });
         }
     }
@@ -416,23 +453,25 @@ pub fn check_against_arm(d: &Demos, sim: &ur5_shared::config::SimConfig) -> Resu
 }
 
 /// Every state and action value finite; the error names the demonstration, the step and the
-/// state's name ([`ur5_shared::layout::STATE_NAMES`]).
+/// state's name ([`StateLayout::state_name`]).
 fn check_finite(d: &Demos) -> Result<(), DemosError> {
+    let layout = d.layout();
+    let (dx, du) = (layout.dx(), layout.du());
     if let Some(k) = d.states.iter().position(|v| !v.is_finite()) {
-        let (row, c) = (k / DX, k % DX);
+        let (row, c) = (k / dx, k % dx);
         return Err(DemosError::StateNotFinite {
             demo: row / d.horizon,
             step: row % d.horizon,
-            name: STATE_NAMES[c],
+            name: layout.state_name(c),
             value: d.states[k],
         });
     }
     if let Some(k) = d.actions.iter().position(|v| !v.is_finite()) {
-        let row = k / DU;
+        let row = k / du;
         return Err(DemosError::ActionNotFinite {
             demo: row / d.horizon,
             step: row % d.horizon,
-            joint: k % DU,
+            joint: k % du,
             value: d.actions[k],
         });
     }
@@ -451,14 +490,15 @@ pub const PERIOD_CONSISTENCY: (f64, f64) = (0.5, 3.0);
 /// ([`PERIOD_CONSISTENCY`]); skipped for demonstrations that barely move (Σ|q̇| dt < 1e-3
 /// rad, nothing to tell from).
 fn check_period(d: &Demos) -> Result<(), DemosError> {
-    use ur5_shared::layout::{Q, QD};
+    let layout = d.layout();
+    let (q, qd) = (layout.q(), layout.qd());
     let (mut moved, mut said) = (0.0, 0.0);
     for i in 0..d.count {
         for t in 0..d.horizon.saturating_sub(1) {
-            let s = &d.states[(i * d.horizon + t) * DX..][..2 * DX];
-            for j in 0..3 {
-                moved += (s[DX + Q.start + j] - s[Q.start + j]).abs();
-                said += s[QD.start + j].abs() * d.dt;
+            let (s, next) = (d.state(i, t), d.state(i, t + 1));
+            for j in 0..layout.joints() {
+                moved += (next[q.start + j] - s[q.start + j]).abs();
+                said += s[qd.start + j].abs() * d.dt;
             }
         }
     }
@@ -481,6 +521,7 @@ fn check_period(d: &Demos) -> Result<(), DemosError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
     fn sample() -> Demos {
         let (d, t) = (2, 5);
@@ -491,7 +532,9 @@ mod tests {
             horizon: t,
             model: ur5_shared::UrModel::Ur5,
             goal: [-0.4, -0.2, 0.3],
-            start_q: [0.0, -2.0, 2.4],
+            goal_pose: None,
+            tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
+            start_q: [0.0, -2.0, 2.4].into(),
             dt: 0.1,
             seed: 11,
             cost_random: 20.0,
@@ -563,6 +606,46 @@ mod tests {
         save(&demos, &path).unwrap();
         assert_eq!(load(&path).unwrap(), demos);
 
+        // A pose task's demonstrations (six joints, three tool points) round-trip with their
+        // dimensions; named as another task's layout when the states do not fit it.
+        let pose = Demos {
+            states: (0..2 * 5 * 30).map(|i| i as f64 * 1e-3).collect(),
+            actions: vec![0.1; 2 * 5 * 6],
+            goal: [-0.4, -0.2, 0.3],
+            goal_pose: Some([-0.4, -0.2, 0.3, 3.0, 0.5, -0.2]),
+            start_q: [0.0, -2.0, 2.4, -1.5, 1.5, 0.0].into(),
+            ..sample()
+        };
+        save(&pose, &path).unwrap();
+        assert_eq!(load(&path).unwrap(), pose);
+        let wrong = Demos {
+            goal_pose: None,
+            ..pose.clone()
+        };
+        let mut w = NpzWriter::create(&path).unwrap();
+        w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
+        write_task(
+            &mut w,
+            &wrong.goal,
+            &wrong.start_q,
+            None,
+            &wrong.tool_points,
+        )
+        .unwrap();
+        let names = ur5_shared::StateLayout::new(6, 1).unwrap().state_names();
+        w.strings(
+            "state_names",
+            &names.iter().map(String::as_str).collect::<Vec<_>>(),
+        )
+        .unwrap();
+        w.f64("states", &[2, 5, 30], &pose.states).unwrap();
+        w.finish().unwrap();
+        let e = load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("state dimension 30") && e.contains("(6 joints, 1 tool point) has dX = 18"),
+            "{e}"
+        );
+
         // Non-finite state.
         let mut nan = sample();
         nan.states[17] = f64::NAN;
@@ -576,22 +659,29 @@ mod tests {
         // Wrong state dimension: write a (2, 5, 11) array by hand.
         let mut w = NpzWriter::create(&path).unwrap();
         w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
+        w.f64("start_q", &[3], &[0.0, -2.0, 2.4]).unwrap();
+        w.f64("goal", &[3], &[-0.4, -0.2, 0.3]).unwrap();
         w.strings("state_names", &STATE_NAMES).unwrap();
         w.f64("states", &[2, 5, 11], &vec![0.0; 110]).unwrap();
         w.finish().unwrap();
         let e = load(&path).unwrap_err().to_string();
-        assert!(e.contains("state dimension 11, expected dX = 12"), "{e}");
+        assert!(
+            e.contains("state dimension 11") && e.contains("(3 joints, 1 tool point) has dX = 12"),
+            "{e}"
+        );
 
         // Missing array.
         let mut w = NpzWriter::create(&path).unwrap();
         w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
         w.finish().unwrap();
         let e = load(&path).unwrap_err().to_string();
-        assert!(e.contains("no array `state_names`"), "{e}");
+        assert!(e.contains("no array `start_q`"), "{e}");
 
         // Action array of the wrong size.
         let mut w = NpzWriter::create(&path).unwrap();
         w.i64("schema_version", &[], &[SCHEMA_VERSION]).unwrap();
+        w.f64("start_q", &[3], &[0.0, -2.0, 2.4]).unwrap();
+        w.f64("goal", &[3], &[-0.4, -0.2, 0.3]).unwrap();
         w.strings("state_names", &STATE_NAMES).unwrap();
         w.f64("states", &[2, 5, 12], &vec![0.0; 120]).unwrap();
         w.f64("actions_diagnostic", &[2, 4, 3], &vec![0.0; 24])

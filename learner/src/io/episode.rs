@@ -12,7 +12,8 @@
 //! | `episode` | () u64 | the controller's episode number |
 //! | `noisy` | () u64 | 1 with exploration noise, 0 for the noise-free evaluation episode |
 //! | `task_cost` | () f64 | C(τ) (`ur5_shared::cost`) |
-//! | `goal`, `start_q` | (3,) f64 | goal point (m), start pose (rad) |
+//! | `goal`, `start_q` | (3,), (n,) f64 | goal point (m), start pose (rad; one angle per active joint) |
+//! | `goal_pose`, `tool_points` | (6,), (3, 3) f64 | a pose task's goal and tool points (as in [`super::demos`]) |
 //! | `dt` | () f64 | control period (s) |
 //! | `seed` | () u64 | run seed (the exploration noise of episode k of version v is `ur5_shared::noise::Noise::new(seed, v, k)`) |
 //! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
@@ -21,7 +22,6 @@
 use std::path::{Path, PathBuf};
 
 use ur5_shared::config::TaskConfig;
-use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 use super::IoError;
@@ -52,11 +52,12 @@ pub fn save_episode(
     task: &TaskConfig,
 ) -> Result<(), NpzError> {
     let t = ep.horizon() as u64;
+    let (dx, du) = (ep.dx() as u64, ep.du() as u64);
     let mut w = NpzWriter::create(path)?;
     w.i64("schema_version", &[], &[SCHEMA_VERSION])?;
-    w.f64("states", &[1, t, DX as u64], &ep.x)?;
-    w.f64("actions", &[1, t, DU as u64], &ep.u)?;
-    w.f64("actions_policy", &[1, t, DU as u64], &ep.u_policy)?;
+    w.f64("states", &[1, t, dx], &ep.x)?;
+    w.f64("actions", &[1, t, du], &ep.u)?;
+    w.f64("actions_policy", &[1, t, du], &ep.u_policy)?;
     w.u64("table_version", &[], &[origin.table_version])?;
     if origin.table_epoch != 0 {
         w.u64("table_epoch", &[], &[u64::from(origin.table_epoch)])?;
@@ -64,12 +65,24 @@ pub fn save_episode(
     w.u64("episode", &[], &[origin.episode])?;
     w.u64("noisy", &[], &[ep.noisy as u64])?;
     w.f64("task_cost", &[], &[ep.task_cost()])?;
-    w.f64("goal", &[3], &task.goal)?;
-    w.f64("start_q", &[3], &task.start_q)?;
+    super::task_arrays::write_task(
+        &mut w,
+        &task.goal,
+        &task.start_q,
+        task.goal_pose.as_ref(),
+        &task.tool_points,
+    )?;
     w.f64("dt", &[], &[task.dt])?;
     w.u64("seed", &[], &[origin.seed])?;
-    w.strings("state_names", &STATE_NAMES)?;
-    w.strings("action_names", &ACTION_NAMES)?;
+    let (states, actions) = (ep.layout.state_names(), ep.layout.action_names());
+    w.strings(
+        "state_names",
+        &states.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
+    w.strings(
+        "action_names",
+        &actions.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
     w.finish()?;
     Ok(())
 }
@@ -129,23 +142,26 @@ impl EpisodeRecorder {
 pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
     let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
     let bad = |name: &str, why: String| f.bad(name, why);
+    let layout = super::task_arrays::read_task(&f)?.layout;
+    let (want_dx, du) = (layout.dx() as u64, layout.du() as u64);
     let (shape, x) = f.f64("states")?;
     let [1, t, dx] = shape[..] else {
         return Err(bad(
             "states",
-            format!("shape {shape:?}, expected (1, T, {DX})"),
+            format!("shape {shape:?}, expected (1, T, {want_dx})"),
         ));
     };
-    if dx != DX as u64 || t == 0 {
+    if dx != want_dx || t == 0 {
         return Err(bad(
             "states",
-            format!("shape {shape:?}, expected (1, T, {DX})"),
+            format!("shape {shape:?}, expected (1, T, {want_dx}) for a task with {layout}"),
         ));
     }
     let ep = Episode {
+        layout,
         x,
-        u: f.f64_shaped("actions", &[1, t, DU as u64])?,
-        u_policy: f.f64_shaped("actions_policy", &[1, t, DU as u64])?,
+        u: f.f64_shaped("actions", &[1, t, du])?,
+        u_policy: f.f64_shaped("actions_policy", &[1, t, du])?,
         eps: Vec::new(),
         noisy: f.u64_scalar("noisy")? != 0,
     };
@@ -184,20 +200,22 @@ pub fn recorded_episodes(folder: &Path) -> Result<Vec<(PathBuf, Episode, Episode
 pub fn load_episode_task(path: &Path) -> Result<TaskConfig, NpzError> {
     let f = NpzFile::open_schema(path, SCHEMA_VERSION)?;
     let (shape, _) = f.f64("states")?;
-    let vec3 = |name: &str| -> Result<[f64; 3], NpzError> {
-        Ok(f.f64_shaped(name, &[3])?.try_into().expect("3"))
-    };
+    let task = super::task_arrays::read_task(&f)?;
     Ok(TaskConfig {
         dt: f.f64_shaped("dt", &[])?[0],
         horizon: shape.get(1).copied().unwrap_or(0) as usize,
-        start_q: vec3("start_q")?,
-        goal: vec3("goal")?,
+        joints: task.start_q.len(),
+        start_q: task.start_q,
+        goal: task.goal,
+        goal_pose: task.goal_pose,
+        tool_points: task.tool_points,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::layout::{DU, DX};
 
     #[test]
     fn round_trip() {
@@ -205,6 +223,7 @@ mod tests {
         let path = dir.join("e.npz");
         let t = 4;
         let ep = Episode {
+            layout: ur5_shared::StateLayout::REACH3,
             x: (0..t * DX).map(|i| i as f64 * 0.1).collect(),
             u: (0..t * DU).map(|i| -(i as f64)).collect(),
             u_policy: (0..t * DU).map(|i| i as f64 + 0.5).collect(),

@@ -279,7 +279,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
             arm.set_joint_state(q, [0.0; 3]);
             let ee = arm.true_observation().ee_pos;
             let e = &s0[EE_MINUS_GOAL];
-            ([ee[0] - e[0], ee[1] - e[1], ee[2] - e[2]], q, seed)
+            ([ee[0] - e[0], ee[1] - e[1], ee[2] - e[2]], q.into(), seed)
         }
     };
     let task = TaskConfig {
@@ -287,6 +287,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
         horizon: traj.horizon,
         start_q,
         goal,
+        ..TaskConfig::default()
     };
     task.validate().map_err(IoError::TrajectoryTask)?;
     let known = traj.task.as_ref();
@@ -295,8 +296,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
         None => {
             let mut total = 0.0;
             for ep in traj.states.chunks(traj.horizon * DX) {
-                let s: Vec<[f64; DX]> = ep.chunks(DX).map(|s| s.try_into().expect("dX")).collect();
-                total += ur5_shared::cost::task_cost_from_states(&s)?;
+                total += ur5_shared::cost::task_cost_of_states(&task.layout(), ep)?;
             }
             total / traj.count as f64
         }
@@ -325,6 +325,8 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
         count: traj.count,
         horizon: traj.horizon,
         goal,
+        goal_pose: None,
+        tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
         start_q,
         dt: traj.dt,
         seed,

@@ -77,8 +77,9 @@ pub enum LeRobotError {
 pub struct TaskMeta {
     /// Goal point (m, base frame).
     pub goal: [f64; 3],
-    /// Start pose (rad).
-    pub start_q: [f64; 3],
+    /// Start pose (rad), one angle per active joint (the joint-state formats carry the
+    /// three-joint task's).
+    pub start_q: ur5_shared::joints::Joints,
     /// Seed of the recording run.
     pub seed: u64,
     /// Mean task cost of the random policy, when known.

@@ -14,6 +14,7 @@ pub mod npz;
 pub mod policy;
 pub mod run_mcap;
 pub mod table;
+pub mod task_arrays;
 
 use std::path::{Path, PathBuf};
 

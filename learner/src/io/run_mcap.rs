@@ -273,6 +273,16 @@ impl RunMcap {
             self.put("/table", ns(0), t.message())?;
         }
         let (e, noisy) = (origin.episode, ep.noisy);
+        if ep.layout != ur5_shared::StateLayout::REACH3 {
+            return Err(IoError::content(
+                path,
+                format!(
+                    "an episode of a task with {}: the MCAP export writes the three-joint \
+                     point task's messages only",
+                    ep.layout
+                ),
+            ));
+        }
         for t in 0..ep.horizon() {
             let s = ep.state(t);
             let (sec, nsec) = (ns(t) / 1_000_000_000, ns(t) % 1_000_000_000);

@@ -83,7 +83,7 @@ pub enum ReplayError {
         /// Step.
         step: usize,
         /// The state's name.
-        name: &'static str,
+        name: String,
         /// The value.
         value: f64,
     },

@@ -189,12 +189,12 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayEr
     // A non-finite value would surface deep in the dynamics fit (a covariance that is not
     // positive definite); name the file, step and state instead.
     for (path, ep, _) in &episodes {
-        let dx = ur5_shared::layout::DX;
+        let dx = ep.dx();
         if let Some(k) = ep.x.iter().position(|v| !v.is_finite()) {
             return Err(ReplayError::StateNotFinite {
                 path: path.clone(),
                 step: k / dx,
-                name: ur5_shared::layout::STATE_NAMES[k % dx],
+                name: ep.layout.state_name(k % dx),
                 value: ep.x[k],
             });
         }

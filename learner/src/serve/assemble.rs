@@ -36,7 +36,9 @@ pub fn episode_from_samples(samples: &[StepSample]) -> Episode {
     let (dx, du) = samples
         .first()
         .map_or((0, 0), |s| (s.state().len(), s.action().len()));
+    let layout = ur5_shared::StateLayout::from_dims(dx, du).unwrap_or_default();
     let mut ep = Episode {
+        layout,
         x: Vec::with_capacity(samples.len() * dx),
         u: Vec::with_capacity(samples.len() * du),
         u_policy: Vec::with_capacity(samples.len() * du),

@@ -620,6 +620,7 @@ mod tests {
         let mut best = pol.clone();
         best.k.data[2] = -0.5;
         let ep = imitation::rollout::Episode {
+            layout: ur5_shared::StateLayout::REACH3,
             x: (0..5 * DX).map(|i| i as f64 * 0.01).collect(),
             u: vec![0.5; 5 * DU],
             u_policy: vec![0.25; 5 * DU],
@@ -747,7 +748,7 @@ mod tests {
             .episode(&half_dt, (5, 0), &r, 0.01)
             .unwrap();
         let e = err(TaskConfig {
-            start_q: [0.05, -2.0, 2.4],
+            start_q: [0.05, -2.0, 2.4].into(),
             ..cfg.task.clone()
         });
         assert!(e.contains("start_q and goal"), "{e}");

@@ -9,7 +9,7 @@
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
-use ur5_shared::layout::EE_MINUS_GOAL;
+use ur5_shared::layout::StateLayout;
 use ur5_shared::{policy_action, PolicyScratch, PolicyTable, MAX_DU, NO_NOISE};
 
 use super::ports::Ports;
@@ -129,7 +129,9 @@ fn collect(
             }
         }
         c.3 = t + 1;
-        c.4 = sample.s[EE_MINUS_GOAL]
+        let layout =
+            StateLayout::from_dims(sample.state().len(), sample.action().len()).unwrap_or_default();
+        c.4 = sample.state()[layout.point(0)]
             .iter()
             .map(|v| v * v)
             .sum::<f64>()

@@ -3,7 +3,7 @@
 
 use imitation::rollout::{run_episode, Arm, Episode};
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX, MAX_HORIZON};
+use ur5_shared::layout::{MAX_DU, MAX_HORIZON};
 use ur5_shared::noise::Noise;
 use ur5_shared::services::ServiceNames;
 use ur5_shared::{GainTable, StepSample};
@@ -61,11 +61,12 @@ pub(super) fn validate(
 /// about the control period for slow motion, larger for a fast servo; `None` without motion.
 pub fn motion_per_step(ep: &Episode) -> Option<f64> {
     let (mut num, mut den) = (0.0, 0.0);
+    let (q, qd) = (ep.layout.q(), ep.layout.qd());
     for t in 0..ep.horizon().saturating_sub(1) {
         let (a, b) = (ep.state(t), ep.state(t + 1));
-        for j in 0..DU {
-            let v = 0.5 * (a[DU + j] + b[DU + j]);
-            num += (b[j] - a[j]) * v;
+        for j in 0..ep.du() {
+            let v = 0.5 * (a[qd.start + j] + b[qd.start + j]);
+            num += (b[q.start + j] - a[q.start + j]) * v;
             den += v * v;
         }
     }
@@ -173,16 +174,15 @@ impl TaskCheck {
     ) -> Result<(), ServeError> {
         let version = r.version;
         let s0 = ep.state(0);
-        let got: [f64; DU] = ep.u_policy[..DU]
-            .try_into()
-            .expect("an episode has dU actions per step");
+        let du = ep.du();
+        let got = &ep.u_policy[..du];
         let seed = r.seed;
         // k beyond N + 1 only if episodes were lost before this one; allow a few.
         let matches = (0..=4 * (r.samples as u64 + 1)).any(|k| {
-            let eps = Noise::new(r.noise_seed, version, k).next();
-            let mut a = [0.0; DU];
-            ur5_shared::controller_action(table, 0, &s0, &eps, &mut a).is_ok()
-                && (0..DU).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
+            let (mut eps, mut a) = ([0.0; MAX_DU], [0.0; MAX_DU]);
+            Noise::new(r.noise_seed, version, k).next_into(&mut eps[..du]);
+            ur5_shared::controller_action(table, 0, s0, &eps[..du], &mut a[..du]).is_ok()
+                && (0..du).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
         });
         ensure!(
             matches,
@@ -223,15 +223,24 @@ impl TaskCheck {
             return Ok(());
         }
         let task = r.task;
-        let mut sim = SimArm::new(r.sim.clone(), task.dt).map_err(ServeError::Model)?;
+        let mut sim = SimArm::for_task(r.sim.clone(), task).map_err(ServeError::Model)?;
         if check_start {
-            // Joint angles and end effector minus goal (velocities: sensor noise only).
-            let want = sim
-                .reset(task.start_q, task.goal)
-                .map_err(ServeError::ModelReset)?;
-            let parts = |s: &[f64; DX]| [s[0], s[1], s[2], s[6], s[7], s[8]];
-            let (got, want) = (parts(&ep.state(0)), parts(&want));
-            let diff = (0..6).map(|i| (got[i] - want[i]).abs()).fold(0.0, f64::max);
+            // Joint angles and tool points minus targets (velocities: sensor noise only).
+            let layout = task.layout();
+            let mut want = vec![0.0; layout.dx()];
+            sim.reset(task, &mut want).map_err(ServeError::ModelReset)?;
+            let parts = |s: &[f64]| -> Vec<f64> {
+                s[layout.q()]
+                    .iter()
+                    .chain(&s[layout.points()])
+                    .copied()
+                    .collect()
+            };
+            let (got, want) = (parts(ep.state(0)), parts(&want));
+            let n = layout.joints();
+            let diff = (0..got.len().min(want.len()))
+                .map(|i| (got[i] - want[i]).abs())
+                .fold(0.0, f64::max);
             ensure!(
                 diff <= tolerance,
                 ServeError::TaskMismatch(format!(
@@ -239,10 +248,10 @@ impl TaskCheck {
                  minus goal {:.4?} m; the task's start is {:.4?} rad, {:.4?} m (start_q {:?}, \
                  goal {:?}): they differ by {diff:.3e} > serve.task_tolerance = {tolerance}; run \
                  rt-controller and hil-sim with the [task] start_q and goal of {}",
-                    &got[..3],
-                    &got[3..],
-                    &want[..3],
-                    &want[3..],
+                    &got[..n],
+                    &got[n..],
+                    &want[..n],
+                    &want[n..],
                     task.start_q,
                     task.goal,
                     r.source

@@ -53,7 +53,9 @@ fn synthetic() -> Demos {
         count: d,
         horizon: t,
         goal: [-0.4, -0.2, 0.3],
-        start_q: [0.0, -2.0, 2.4],
+        goal_pose: None,
+        tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
+        start_q: [0.0, -2.0, 2.4].into(),
         dt: 0.1,
         seed: 4,
         cost_random: 20.5,
@@ -383,6 +385,7 @@ fn recorded_episodes_export_with_their_actions() {
     let mut states = Vec::new();
     for k in 0..3u64 {
         let ep = Episode {
+            layout: ur5_shared::StateLayout::REACH3,
             x: (0..4 * DX)
                 .map(|i| (i as f64 + 100.0 * k as f64) * 0.01)
                 .collect(),

@@ -259,6 +259,8 @@ fn fake_demos(task: &TaskConfig) -> Demos {
         count: 2,
         horizon: task.horizon,
         goal: task.goal,
+        goal_pose: None,
+        tool_points: task.tool_points,
         start_q: task.start_q,
         dt: task.dt,
         seed: 5,

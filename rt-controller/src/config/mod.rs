@@ -719,8 +719,10 @@ mod tests {
 
     #[test]
     fn the_limits_default_to_the_models_own() {
-        let bits =
-            |l: &ArmLimits| [l.lower, l.upper, l.velocity, l.effort].map(|v| v.map(f64::to_bits));
+        let bits = |l: &ArmLimits| {
+            [l.lower, l.upper, l.velocity, l.effort]
+                .map(|v| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>())
+        };
         // A UR10e without [limits]: the UR10e's, valid.
         let c: ControllerConfig = toml::from_str("[arm.ur]\nmodel = \"ur10e\"").unwrap();
         let ur10e = ArmLimits::for_model(ur5_shared::UrModel::Ur10e);

@@ -52,7 +52,7 @@ fn the_controller_runs_a_policy_table_to_a_goal_given_on_the_command_line() {
         &PolicyFile {
             policy: policy.clone(),
             mode: ActionMode::GoalAngles,
-            start_q: task.start_q,
+            start_q: task.start_arm_joints(),
             dt: task.dt,
             horizon: T,
             seed: 21,

@@ -150,7 +150,7 @@ fn ros2_controller_runs_episodes_on_ros2_sim_with_joints_matched_by_name() {
     }
     // Each episode starts at the start pose and reaches toward the goal (the shoulder pan
     // joint is the controller's first and the driver's last: a mix-up would not).
-    let start = TaskConfig::default().start_q;
+    let start = TaskConfig::default().start_arm_joints();
     for e in 0..3 {
         let first = samples[e * 20].2;
         let last = samples[e * 20 + 19].2;

@@ -25,7 +25,7 @@ const SEED: u64 = 4;
 fn episode(table: &GainTable, version: u64, k: Option<u64>) -> Episode {
     let task = TaskConfig::default();
     let mut noise = k.map(|k| Noise::new(SEED, version, k));
-    let mut q = task.start_q;
+    let mut q = task.start_arm_joints();
     let (mut x, mut u, mut u_policy, mut eps) = (vec![], vec![], vec![], vec![]);
     for t in 0..T {
         let mut s = [0.0; DX];
@@ -47,6 +47,7 @@ fn episode(table: &GainTable, version: u64, k: Option<u64>) -> Episode {
         q = a;
     }
     Episode {
+        layout: ur5_shared::StateLayout::REACH3,
         x,
         u,
         u_policy,

@@ -136,7 +136,7 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
              rtde_port = {}\nsecondary_port = {}\ndashboard_port = {dashboard}\nreverse_port = 0\n\
              receive_timeout_ms = 1000\n",
             demos.dt,
-            f(demos.start_q),
+            f(demos.start_q.as_slice().try_into().unwrap()),
             f(demos.goal),
             run_sim.rtde_addr.port(),
             run_sim.secondary_addr.port()

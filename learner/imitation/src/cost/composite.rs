@@ -17,7 +17,7 @@
 //! projects the per-step mean of ∇²D on the PSD cone before the chain rule.
 
 use faer::Mat;
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::layout::{MAX_DU, MAX_DX};
 
 use super::Cost;
 use crate::discriminator::{Discriminator, Workspace};
@@ -38,9 +38,11 @@ pub struct CompositeWorkspace {
     h_mean: Mat<f64>,
 }
 
-/// Input dimension of the discriminator: a transition [s; s'].
-pub const D_IN: usize = 2 * DX;
-const DY: usize = DX + DU;
+/// Input dimension of the discriminator of a task with state dimension `dx`: a transition
+/// [s; s'].
+pub fn d_in(dx: usize) -> usize {
+    2 * dx
+}
 
 impl CompositeWorkspace {
     /// Sets [`Self::psd`].
@@ -49,20 +51,20 @@ impl CompositeWorkspace {
         self
     }
 
-    /// Scratch for `disc`.
+    /// Scratch for `disc` (a critic on [s; s'], 2 dX inputs).
     pub fn new(disc: &Discriminator) -> Self {
-        assert_eq!(
-            disc.input_dim(),
-            D_IN,
+        let n = disc.input_dim();
+        assert!(
+            n % 2 == 0,
             "the discriminator must take [s; s'] (2 dX inputs)"
         );
         Self {
             psd: false,
             disc: disc.workspace(),
-            x: vec![0.0; D_IN],
-            g: vec![0.0; D_IN],
-            h: Mat::zeros(D_IN, D_IN),
-            h_mean: Mat::zeros(D_IN, D_IN),
+            x: vec![0.0; n],
+            g: vec![0.0; n],
+            h: Mat::zeros(n, n),
+            h_mean: Mat::zeros(n, n),
         }
     }
 }
@@ -77,22 +79,24 @@ fn predicted_transition(
     a: &[f64],
     x: &mut [f64],
 ) {
-    x[..DX].copy_from_slice(s);
+    let (dx, du) = (dyn_.dx, dyn_.du);
+    let dy = dx + du;
+    x[..dx].copy_from_slice(s);
     if t + 1 >= horizon {
-        x[DX..].copy_from_slice(s);
+        x[dx..].copy_from_slice(s);
         return;
     }
     let f = dyn_.fm.slice(t);
     let fv = dyn_.fv.slice(t);
-    for i in 0..DX {
+    for i in 0..dx {
         let mut v = fv[i];
-        for j in 0..DX {
-            v += f[i * DY + j] * s[j];
+        for j in 0..dx {
+            v += f[i * dy + j] * s[j];
         }
-        for j in 0..DU {
-            v += f[i * DY + DX + j] * a[j];
+        for j in 0..du {
+            v += f[i * dy + dx + j] * a[j];
         }
-        x[DX + i] = v;
+        x[dx + i] = v;
     }
 }
 
@@ -105,23 +109,25 @@ fn compose_gradient(
     lx: &mut [f64],
     lu: &mut [f64],
 ) {
+    let (dx, du) = (dyn_.dx, dyn_.du);
+    let dy = dx + du;
     if t + 1 >= horizon {
-        for i in 0..DX {
-            lx[i] = g[i] + g[DX + i];
+        for i in 0..dx {
+            lx[i] = g[i] + g[dx + i];
         }
         lu.fill(0.0);
         return;
     }
     let f = dyn_.fm.slice(t);
-    for c in 0..DY {
-        let mut v = if c < DX { g[c] } else { 0.0 };
-        for k in 0..DX {
-            v += f[k * DY + c] * g[DX + k];
+    for c in 0..dy {
+        let mut v = if c < dx { g[c] } else { 0.0 };
+        for k in 0..dx {
+            v += f[k * dy + c] * g[dx + k];
         }
-        if c < DX {
+        if c < dx {
             lx[c] = v;
         } else {
-            lu[c - DX] = v;
+            lu[c - dx] = v;
         }
     }
 }
@@ -138,50 +144,52 @@ fn compose_hessian(
     luu: &mut [f64],
     lux: &mut [f64],
 ) {
+    let (dx, du) = (dyn_.dx, dyn_.du);
+    let (dy, n_in) = (dx + du, 2 * dx);
     luu.fill(0.0);
     lux.fill(0.0);
     if t + 1 >= horizon {
-        for i in 0..DX {
-            for j in 0..DX {
-                lxx[i * DX + j] = h[(i, j)] + h[(i, DX + j)] + h[(DX + i, j)] + h[(DX + i, DX + j)];
+        for i in 0..dx {
+            for j in 0..dx {
+                lxx[i * dx + j] = h[(i, j)] + h[(i, dx + j)] + h[(dx + i, j)] + h[(dx + i, dx + j)];
             }
         }
         return;
     }
     let f = dyn_.fm.slice(t);
-    // HM = h M (2dX × DY), M = [[I, 0]; F_t].
-    let mut hm = [[0.0; DY]; D_IN];
-    for (r, row) in hm.iter_mut().enumerate() {
-        for (c, v) in row.iter_mut().enumerate() {
-            let mut acc = if c < DX { h[(r, c)] } else { 0.0 };
-            for k in 0..DX {
-                acc += h[(r, DX + k)] * f[k * DY + c];
+    // HM = h M (2dX × dY), M = [[I, 0]; F_t]; row-major scratch of at most 2 MAX_DX × MAX_DY.
+    let mut hm = [0.0; 2 * MAX_DX * (MAX_DX + MAX_DU)];
+    for r in 0..n_in {
+        for c in 0..dy {
+            let mut acc = if c < dx { h[(r, c)] } else { 0.0 };
+            for k in 0..dx {
+                acc += h[(r, dx + k)] * f[k * dy + c];
             }
-            *v = acc;
+            hm[r * dy + c] = acc;
         }
     }
     // Mᵀ (HM): row i of Mᵀ is e_i (i < dX) in the first block plus F_t[:, i] in the second.
-    let mut hess = [[0.0; DY]; DY];
-    for (i, row) in hess.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            let mut acc = if i < DX { hm[i][j] } else { 0.0 };
-            for k in 0..DX {
-                acc += f[k * DY + i] * hm[DX + k][j];
+    let mut hess = [0.0; (MAX_DX + MAX_DU) * (MAX_DX + MAX_DU)];
+    for i in 0..dy {
+        for j in 0..dy {
+            let mut acc = if i < dx { hm[i * dy + j] } else { 0.0 };
+            for k in 0..dx {
+                acc += f[k * dy + i] * hm[(dx + k) * dy + j];
             }
-            *v = acc;
+            hess[i * dy + j] = acc;
         }
     }
-    for i in 0..DX {
-        for j in 0..DX {
-            lxx[i * DX + j] = 0.5 * (hess[i][j] + hess[j][i]);
+    for i in 0..dx {
+        for j in 0..dx {
+            lxx[i * dx + j] = 0.5 * (hess[i * dy + j] + hess[j * dy + i]);
         }
     }
-    for i in 0..DU {
-        for j in 0..DU {
-            luu[i * DU + j] = 0.5 * (hess[DX + i][DX + j] + hess[DX + j][DX + i]);
+    for i in 0..du {
+        for j in 0..du {
+            luu[i * du + j] = 0.5 * (hess[(dx + i) * dy + dx + j] + hess[(dx + j) * dy + dx + i]);
         }
-        for j in 0..DX {
-            lux[i * DX + j] = 0.5 * (hess[DX + i][j] + hess[j][DX + i]);
+        for j in 0..dx {
+            lux[i * dx + j] = 0.5 * (hess[(dx + i) * dy + j] + hess[j * dy + dx + i]);
         }
     }
 }
@@ -257,10 +265,11 @@ impl Cost for CompositeCost<'_> {
         out.clear();
         for ep in episodes {
             let t_len = ep.horizon();
+            let dx = ep.dx();
             for t in 0..t_len {
                 let next = (t + 1).min(t_len - 1);
-                self.ws.x[..DX].copy_from_slice(&ep.x[t * DX..(t + 1) * DX]);
-                self.ws.x[DX..].copy_from_slice(&ep.x[next * DX..(next + 1) * DX]);
+                self.ws.x[..dx].copy_from_slice(ep.state(t));
+                self.ws.x[dx..].copy_from_slice(ep.state(next));
                 out.push(self.disc.value(&self.ws.x, &mut self.ws.disc));
             }
         }
@@ -284,14 +293,15 @@ pub fn composite_cost_derivs(
 ) {
     let n = episodes.len();
     let t_len = episodes[0].horizon();
-    out.resize(n, t_len, DX, DU);
+    let (dx, du) = (dyn_.dx, dyn_.du);
+    out.resize(n, t_len, dx, du);
     for t in 0..t_len {
         if ws.psd {
             ws.h_mean.fill(0.0);
         }
         for (i, ep) in episodes.iter().enumerate() {
             let nt = i * t_len + t;
-            let (s, a) = (&ep.x[t * DX..(t + 1) * DX], &ep.u[t * DU..(t + 1) * DU]);
+            let (s, a) = (ep.state(t), ep.action(t));
             predicted_transition(dyn_, t, t_len, s, a, &mut ws.x);
             out.l[nt] = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
             compose_gradient(
@@ -299,8 +309,8 @@ pub fn composite_cost_derivs(
                 t,
                 t_len,
                 &ws.g,
-                &mut out.lx[nt * DX..(nt + 1) * DX],
-                &mut out.lu[nt * DU..(nt + 1) * DU],
+                &mut out.lx[nt * dx..(nt + 1) * dx],
+                &mut out.lu[nt * du..(nt + 1) * du],
             );
             if ws.psd {
                 ws.h_mean += &ws.h;
@@ -310,9 +320,9 @@ pub fn composite_cost_derivs(
                     t,
                     t_len,
                     &ws.h,
-                    &mut out.lxx[nt * DX * DX..(nt + 1) * DX * DX],
-                    &mut out.luu[nt * DU * DU..(nt + 1) * DU * DU],
-                    &mut out.lux[nt * DU * DX..(nt + 1) * DU * DX],
+                    &mut out.lxx[nt * dx * dx..(nt + 1) * dx * dx],
+                    &mut out.luu[nt * du * du..(nt + 1) * du * du],
+                    &mut out.lux[nt * du * dx..(nt + 1) * du * dx],
                 );
             }
         }
@@ -324,18 +334,18 @@ pub fn composite_cost_derivs(
                 t,
                 t_len,
                 &ws.h_mean,
-                &mut out.lxx[t * DX * DX..(t + 1) * DX * DX],
-                &mut out.luu[t * DU * DU..(t + 1) * DU * DU],
-                &mut out.lux[t * DU * DX..(t + 1) * DU * DX],
+                &mut out.lxx[t * dx * dx..(t + 1) * dx * dx],
+                &mut out.luu[t * du * du..(t + 1) * du * du],
+                &mut out.lux[t * du * dx..(t + 1) * du * dx],
             );
             for i in 1..n {
                 let nt = i * t_len + t;
                 out.lxx
-                    .copy_within(t * DX * DX..(t + 1) * DX * DX, nt * DX * DX);
+                    .copy_within(t * dx * dx..(t + 1) * dx * dx, nt * dx * dx);
                 out.luu
-                    .copy_within(t * DU * DU..(t + 1) * DU * DU, nt * DU * DU);
+                    .copy_within(t * du * du..(t + 1) * du * du, nt * du * du);
                 out.lux
-                    .copy_within(t * DU * DX..(t + 1) * DU * DX, nt * DU * DX);
+                    .copy_within(t * du * dx..(t + 1) * du * dx, nt * du * dx);
             }
         }
     }
@@ -344,6 +354,10 @@ pub fn composite_cost_derivs(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::layout::{DU, DX};
+
+    const DY: usize = DX + DU;
+    const D_IN: usize = 2 * DX;
     use crate::discriminator::{DiscriminatorConfig, Normalizer};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -469,6 +483,10 @@ mod tests {
 #[cfg(test)]
 mod psd_tests {
     use super::*;
+    use ur5_shared::layout::{StateLayout, DU, DX};
+
+    const DY: usize = DX + DU;
+    const D_IN: usize = 2 * DX;
     use crate::discriminator::{DiscriminatorConfig, Normalizer};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -520,6 +538,7 @@ mod psd_tests {
                     (0..len).map(|_| rng.random_range(-1.0..1.0)).collect()
                 };
                 Episode {
+                    layout: StateLayout::REACH3,
                     x: draw(horizon * DX),
                     u: draw(horizon * DU),
                     u_policy: vec![0.0; horizon * DU],

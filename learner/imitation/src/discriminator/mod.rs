@@ -33,15 +33,29 @@ use faer::{Mat, MatMut, MatRef};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use ur5_shared::layout::{DX, EE_MINUS_GOAL};
+use std::ops::Range;
 
-/// Inputs added by [`DiscriminatorConfig::near_goal_keep_raw`]: the three end-effector-minus-goal
-/// coordinates of s and of s'.
-const RAW_COPIES: usize = 6;
+use ur5_shared::layout::{StateLayout, MAX_DX};
 
-/// The transition input that extra net input `k` (0..6) copies: x[6..9] then x[dX+6..dX+9].
-fn raw_copy(k: usize) -> usize {
-    (k / 3) * DX + EE_MINUS_GOAL.start + k % 3
+/// The tool-point inputs (each point's position minus its target, `StateLayout::points`) of a
+/// state within a transition of `d` inputs [s; s'] (d = 2 dX of a task,
+/// `StateLayout::of_task_state`), and dX; `None` for another `d`.
+fn point_inputs(d: usize) -> Option<(Range<usize>, usize)> {
+    let layout = StateLayout::of_task_state(d / 2).filter(|_| d % 2 == 0)?;
+    Some((layout.points(), layout.dx()))
+}
+
+/// Inputs added by [`DiscriminatorConfig::near_goal_keep_raw`] to a transition of `d` inputs:
+/// the tool-point inputs of s and of s' (six for a point goal).
+fn raw_copies(d: usize) -> usize {
+    point_inputs(d).map_or(0, |(p, _)| 2 * p.len())
+}
+
+/// The transition input that extra net input `k` copies: the tool-point inputs of s, then
+/// those of s' (a point goal: x[6..9] then x[dX+6..dX+9]).
+fn raw_copy(k: usize, d: usize) -> usize {
+    let (p, dx) = point_inputs(d).expect("a task's transition");
+    (k / p.len()) * dx + p.start + k % p.len()
 }
 
 pub use adam::{Adam, AdamConfig};
@@ -250,16 +264,17 @@ impl DiscriminatorConfig {
         self.adam.validate().map_err(DiscriminatorError::Config)
     }
 
-    /// Whether input `i` of a 2 dX transition is one that [`Self::near_goal_scale`] warps.
-    fn warps(&self, i: usize) -> bool {
-        self.near_goal_scale > 0.0 && EE_MINUS_GOAL.contains(&(i % DX))
+    /// Whether input `i` of a transition of `d` = 2 dX inputs is one that
+    /// [`Self::near_goal_scale`] warps: a tool point's position minus its target, in s or s'.
+    fn warps(&self, i: usize, d: usize) -> bool {
+        self.near_goal_scale > 0.0 && point_inputs(d).is_some_and(|(p, dx)| p.contains(&(i % dx)))
     }
 
-    /// Input `i` as the critic sees it before the normalisation: `x`, or
-    /// `g(x) = a·x + (1 − a)·c·asinh(x/c)` (c = [`Self::near_goal_scale`],
+    /// Input `i` of a transition of `d` inputs as the critic sees it before the normalisation:
+    /// `x`, or `g(x) = a·x + (1 − a)·c·asinh(x/c)` (c = [`Self::near_goal_scale`],
     /// a = [`Self::near_goal_far_slope`]) for the inputs it warps.
-    pub fn warp(&self, i: usize, x: f64) -> f64 {
-        if self.warps(i) {
+    pub fn warp(&self, i: usize, d: usize, x: f64) -> f64 {
+        if self.warps(i, d) {
             let (c, a) = (self.near_goal_scale, self.near_goal_far_slope);
             a * x + (1.0 - a) * c * (x / c).asinh()
         } else {
@@ -270,8 +285,8 @@ impl DiscriminatorConfig {
     /// `(g'(x), g''(x))` of [`Self::warp`] `g` at input `i`: `(1, 0)` where it is the identity;
     /// else, with r = x/c, `g' = a + (1 − a)/√(1 + r²)` and
     /// `g'' = −(1 − a) r/(c (1 + r²)^{3/2})`.
-    fn warp_derivatives(&self, i: usize, x: f64) -> (f64, f64) {
-        if self.warps(i) {
+    fn warp_derivatives(&self, i: usize, d: usize, x: f64) -> (f64, f64) {
+        if self.warps(i, d) {
             let (c, a) = (self.near_goal_scale, self.near_goal_far_slope);
             let r = x / c;
             let q = 1.0 + r * r;
@@ -291,18 +306,18 @@ impl DiscriminatorConfig {
         let d = x.ncols();
         Mat::from_fn(x.nrows(), self.net_inputs(d), |r, c| {
             if c < d {
-                self.warp(c, x[(r, c)])
+                self.warp(c, d, x[(r, c)])
             } else {
-                x[(r, raw_copy(c - d))]
+                x[(r, raw_copy(c - d, d))]
             }
         })
     }
 
-    /// The net's inputs for `d` transition inputs: `d`, plus six with
-    /// [`Self::near_goal_keep_raw`].
+    /// The net's inputs for `d` transition inputs: `d`, plus the tool-point inputs of s and s'
+    /// again with [`Self::near_goal_keep_raw`] (six for a point goal).
     pub fn net_inputs(&self, d: usize) -> usize {
         if self.near_goal_keep_raw {
-            d + RAW_COPIES
+            d + raw_copies(d)
         } else {
             d
         }
@@ -441,6 +456,8 @@ pub struct Discriminator {
     /// θ̄, the running average of the weights ([`DiscriminatorConfig::param_average`]); empty
     /// when that is off or before the first [`Discriminator::train`] call.
     avg: Vec<f64>,
+    /// Transition inputs d (2 dX); the net has [`DiscriminatorConfig::net_inputs`]`(d)`.
+    d_in: usize,
 }
 
 impl Discriminator {
@@ -455,10 +472,10 @@ impl Discriminator {
         if d_in == 0 {
             return Err(DiscriminatorError::Config("input dimension is 0".into()));
         }
-        if config.near_goal_scale > 0.0 && d_in != 2 * DX {
+        if config.near_goal_scale > 0.0 && point_inputs(d_in).is_none() {
             return Err(DiscriminatorError::Config(format!(
-                "near_goal_scale warps transitions [s; s'] of {} inputs; this critic has {d_in}",
-                2 * DX
+                "near_goal_scale warps the tool points of transitions [s; s'] of a task (24, 36 \
+                 or 60 inputs); this critic has {d_in}"
             )));
         }
         norm.validate(config.net_inputs(d_in))
@@ -473,6 +490,7 @@ impl Discriminator {
             adam,
             rng,
             avg: Vec::new(),
+            d_in,
         })
     }
 
@@ -492,12 +510,12 @@ impl Discriminator {
     /// Input dimension `2 dX` (the transition; the net may see six more,
     /// [`DiscriminatorConfig::near_goal_keep_raw`]).
     pub fn input_dim(&self) -> usize {
-        self.net.input_dim() - self.extra_inputs()
+        self.d_in
     }
 
     /// The net's inputs beyond the transition's.
     fn extra_inputs(&self) -> usize {
-        self.config.net_inputs(0)
+        self.net.input_dim() - self.d_in
     }
 
     pub fn config(&self) -> &DiscriminatorConfig {
@@ -584,6 +602,7 @@ impl Discriminator {
     /// Normalises `x` into the net's input buffer and runs the forward pass.
     fn forward_raw(&self, x: &[f64], mlp_ws: &mut MlpWorkspace) -> f64 {
         assert_eq!(x.len(), self.input_dim(), "input length");
+        let d = x.len();
         for (i, (((u, &xi), &m), &s)) in mlp_ws
             .u
             .iter_mut()
@@ -592,11 +611,10 @@ impl Discriminator {
             .zip(&self.norm.std)
             .enumerate()
         {
-            *u = (self.config.warp(i, xi) - m) / s;
+            *u = (self.config.warp(i, d, xi) - m) / s;
         }
-        let d = x.len();
         for k in 0..self.extra_inputs() {
-            mlp_ws.u[d + k] = (x[raw_copy(k)] - self.norm.mean[d + k]) / self.norm.std[d + k];
+            mlp_ws.u[d + k] = (x[raw_copy(k, d)] - self.norm.mean[d + k]) / self.norm.std[d + k];
         }
         self.net.forward(mlp_ws)
     }
@@ -617,14 +635,14 @@ impl Discriminator {
         for ((g, &gu), &s) in grad.iter_mut().zip(&ws.mlp.grad_u).zip(&self.norm.std) {
             *g = gu / s;
         }
+        let d = x.len();
         if self.config.near_goal_scale > 0.0 {
             for (i, g) in grad.iter_mut().enumerate() {
-                *g *= self.config.warp_derivatives(i, x[i]).0;
+                *g *= self.config.warp_derivatives(i, d, x[i]).0;
             }
         }
-        let d = x.len();
         for k in 0..self.extra_inputs() {
-            grad[raw_copy(k)] += ws.mlp.grad_u[d + k] / self.norm.std[d + k];
+            grad[raw_copy(k, d)] += ws.mlp.grad_u[d + k] / self.norm.std[d + k];
         }
         y
     }
@@ -659,11 +677,11 @@ impl Discriminator {
         }
         if self.config.near_goal_scale > 0.0 {
             // x ↦ g(x) elementwise: ∇²ₓD = diag(g') H diag(g') + diag(∂D/∂g ⊙ g'').
-            // d = 2 dX here (checked at construction).
-            let mut g1 = [1.0; 2 * DX];
-            let mut g2 = [0.0; 2 * DX];
+            // d = 2 dX of a task here (checked at construction).
+            let mut g1 = [1.0; 2 * MAX_DX];
+            let mut g2 = [0.0; 2 * MAX_DX];
             for p in 0..d {
-                (g1[p], g2[p]) = self.config.warp_derivatives(p, x[p]);
+                (g1[p], g2[p]) = self.config.warp_derivatives(p, d, x[p]);
             }
             for p in 0..d {
                 for q in 0..d {
@@ -683,16 +701,16 @@ impl Discriminator {
         let (d, dn) = (x.len(), self.net.input_dim());
         let s = &self.norm.std;
         // Column p of J: (p, g'_p/σ_p) and, where input p has a raw copy d + k, (d + k, 1/σ_{d+k}).
-        let mut cols = [[(0usize, 0.0f64); 2]; 2 * DX];
-        let mut len = [1usize; 2 * DX];
-        let mut g2 = [0.0; 2 * DX];
+        let mut cols = [[(0usize, 0.0f64); 2]; 2 * MAX_DX];
+        let mut len = [1usize; 2 * MAX_DX];
+        let mut g2 = [0.0; 2 * MAX_DX];
         for p in 0..d {
-            let (g1p, g2p) = self.config.warp_derivatives(p, x[p]);
+            let (g1p, g2p) = self.config.warp_derivatives(p, d, x[p]);
             cols[p][0] = (p, g1p / s[p]);
             g2[p] = g2p;
         }
         for k in 0..self.extra_inputs() {
-            let p = raw_copy(k);
+            let p = raw_copy(k, d);
             cols[p][1] = (d + k, 1.0 / s[d + k]);
             len[p] = 2;
         }

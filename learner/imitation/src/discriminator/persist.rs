@@ -172,6 +172,7 @@ impl Discriminator {
             adam,
             rng,
             avg: f.params_average,
+            d_in,
         })
     }
 }

@@ -15,8 +15,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::*;
+use ur5_shared::layout::DX;
 
-const H: f64 = 1e-3;
+const H: f64 = 5e-4;
 const FLOOR: f64 = 1e-4;
 const TOL: f64 = 1e-6;
 
@@ -150,14 +151,25 @@ fn random_critic(c: &Case) -> (Discriminator, Vec<Vec<f64>>) {
     (disc, xs)
 }
 
-/// [`cases`], plus the 2 dX-input ones again with the end-effector inputs warped
+/// [`cases`], plus the 2 dX-input ones again with the tool-point inputs warped
 /// (`near_goal_scale` 0.3, on the scale of the inputs' spread so that g'' matters), without
-/// and with a far slope, and with raw copies beside the warped inputs.
+/// and with a far slope, and with raw copies beside the warped inputs; for the point task
+/// (dX = 12) and the six-joint pose task (dX = 30, three tool points).
 fn cases_with_warp() -> Vec<Case> {
     let mut v = cases();
+    let pose_d = 2 * ur5_shared::StateLayout::POSE6.dx();
     let warped: Vec<Case> = v
         .iter()
         .filter(|c| c.d == 2 * DX)
+        .flat_map(|c| {
+            [
+                c.clone(),
+                Case {
+                    d: pose_d,
+                    ..c.clone()
+                },
+            ]
+        })
         .flat_map(|c| {
             [(0.0, false), (0.2, false), (0.0, true)].map(|(far_slope, keep_raw)| Case {
                 space: PenaltySpace::Normalised,

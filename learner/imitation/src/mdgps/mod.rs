@@ -41,7 +41,7 @@ use ur5_shared::noise::Noise;
 use ur5_shared::{EpisodePlan, GainTable, PolicyTable};
 
 use crate::controller::{init_hold, to_gain_table};
-use crate::cost::composite::{CompositeCost, CompositeWorkspace, D_IN};
+use crate::cost::composite::{CompositeCost, CompositeWorkspace};
 use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{Normalizer, TrainStats};
@@ -192,12 +192,20 @@ impl Mdgps {
         let first = demos
             .first()
             .ok_or_else(|| ImitationError::Config("MDGPS needs at least one condition".into()))?;
-        if let Some(d) = demos
-            .iter()
-            .find(|d| d.horizon != first.horizon || d.dt != first.dt || d.start_q != first.start_q)
-        {
+        if first.layout() != ur5_shared::StateLayout::REACH3 {
+            return Err(ImitationError::Unsupported {
+                algo: "MDGPS",
+                layout: first.layout(),
+            });
+        }
+        if let Some(d) = demos.iter().find(|d| {
+            d.horizon != first.horizon
+                || d.dt != first.dt
+                || d.start_q != first.start_q
+                || d.layout() != first.layout()
+        }) {
             return Err(ImitationError::Config(format!(
-                "the demonstrations of goal {:?} have another T, dt or start pose than those of \
+                "the demonstrations of goal {:?} have another T, dt, start pose or task layout than those of \
                  goal {:?}: every condition must share them",
                 d.goal, first.goal
             )));
@@ -473,10 +481,12 @@ impl Mdgps {
         let mut rows: Vec<[f64; DX]> = Vec::new();
         for c in &self.conds {
             let d = &c.demos;
-            rows.extend((0..d.count).flat_map(|i| (0..d.horizon).map(move |t| d.state(i, t))));
+            rows.extend(
+                (0..d.count).flat_map(|i| (0..d.horizon).map(move |t| d.reach3_state(i, t))),
+            );
         }
         for ep in samples.iter().flatten() {
-            rows.extend((0..ep.horizon()).map(|t| ep.state(t)));
+            rows.extend((0..ep.horizon()).map(|t| ep.reach3_state(t)));
         }
         let x = Mat::from_fn(rows.len(), DX, |r, c| rows[r][c]);
         self.policy
@@ -538,7 +548,7 @@ impl Mdgps {
             let pol = c.lqr.policy();
             for ep in eps {
                 for t in 0..ep.horizon() {
-                    let s = ep.state(t);
+                    let s = ep.reach3_state(t);
                     let mut a = [0.0; DU];
                     pol.act(t, &s, &[0.0; DU], &mut a);
                     let base = crate::mlp_policy::action_base(mode, &s);
@@ -663,11 +673,12 @@ fn condition_seed(seed: u64, m: usize) -> u64 {
 /// Rows of every matrix, stacked.
 fn stack(parts: &[Mat<f64>]) -> Mat<f64> {
     let rows: usize = parts.iter().map(Mat::nrows).sum();
-    let mut out = Mat::zeros(rows, D_IN);
+    let cols = parts.first().map_or(0, Mat::ncols);
+    let mut out = Mat::zeros(rows, cols);
     let mut r0 = 0;
     for p in parts {
         out.as_mut()
-            .submatrix_mut(r0, 0, p.nrows(), D_IN)
+            .submatrix_mut(r0, 0, p.nrows(), cols)
             .copy_from(p);
         r0 += p.nrows();
     }

@@ -241,9 +241,14 @@ impl Policy for GlobalActor<'_> {
         usize::MAX
     }
 
-    fn act(&mut self, _t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
+    /// The global policy acts on the three-joint task's state (dX = 12, dU = 3); MDGPS
+    /// refuses other tasks when it is built.
+    fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, out: &mut [f64]) {
+        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
         let a = self.pol.mean_action(s, mode, self.ws);
-        std::array::from_fn(|j| a[j] + self.std[j] * eps[j])
+        for j in 0..DU {
+            out[j] = a[j] + self.std[j] * eps[j];
+        }
     }
 }
 
@@ -301,7 +306,8 @@ mod tests {
                     } else {
                         std::array::from_fn(|_| rng.random_range(-2.0..2.0))
                     };
-                    let want = GlobalActor::new(&p, &mut ws).act(0, &s, &eps, mode);
+                    let mut want = [f64::NAN; DU];
+                    GlobalActor::new(&p, &mut ws).act(0, &s, &eps, mode, &mut want);
                     let mut got = [f64::NAN; DU];
                     policy_action(&table, &s, &eps, &mut scratch, &mut got).unwrap();
                     assert_eq!(

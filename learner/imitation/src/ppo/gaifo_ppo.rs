@@ -165,6 +165,12 @@ impl GaifoPpo {
     pub fn new(cfg: GaifoPpoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
+        if task.layout() != ur5_shared::StateLayout::REACH3 {
+            return Err(ImitationError::Unsupported {
+                algo: "GAIfO (PPO)",
+                layout: task.layout(),
+            });
+        }
         let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
         let ppo = Ppo::new(cfg.ppo.clone(), cfg.sim.mode, cfg.seed ^ 0x5050_4f00) // "PPO"
             .map_err(ImitationError::Ppo)?;
@@ -315,6 +321,7 @@ mod tests {
     fn task_rewards_return_minus_the_task_cost() {
         let t = 7;
         let mut ep = Episode {
+            layout: ur5_shared::StateLayout::REACH3,
             x: vec![0.0; t * DX],
             u: vec![],
             u_policy: vec![],

@@ -328,7 +328,7 @@ impl Ppo {
             assert_eq!(r.len() + 1, t_len, "one reward per transition");
             self.values.clear();
             for t in 0..t_len {
-                let s = ep.state(t);
+                let s = ep.reach3_state(t);
                 self.values.push(self.ac.value(&s, &mut self.ws));
             }
             self.adv.resize(t_len - 1, 0.0);
@@ -341,7 +341,7 @@ impl Ppo {
                 &mut self.adv,
             );
             for t in 0..t_len - 1 {
-                let s = ep.state(t);
+                let s = ep.reach3_state(t);
                 let d = offset(self.mode, ep, t);
                 let mu = self.ac.policy.mean(&s, &mut self.ws.policy);
                 self.data.states.extend_from_slice(&s);

@@ -19,7 +19,8 @@ use crate::ImitationError;
 
 /// The unclamped offset Δ_t = u_policy_t − base(s_t) of step `t` of `ep`.
 pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> [f64; DU] {
-    let base = action_base(mode, &ep.state(t));
+    let s: &[f64; DX] = ep.state(t).try_into().expect("a three-joint task's state");
+    let base = action_base(mode, s);
     std::array::from_fn(|j| ep.u_policy[t * DU + j] - base[j])
 }
 
@@ -51,10 +52,15 @@ impl Policy for MlpActor<'_> {
         usize::MAX
     }
 
-    fn act(&mut self, _t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
+    /// The MLP policy acts on the three-joint task's state (dX = 12, dU = 3); its learners
+    /// refuse other tasks when they are built.
+    fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, a: &mut [f64]) {
+        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
         let mu = self.pol.mean(s, &mut self.ws);
         let base = action_base(mode, s);
-        std::array::from_fn(|j| base[j] + (mu[j] + self.std[j] * eps[j]))
+        for j in 0..DU {
+            a[j] = base[j] + (mu[j] + self.std[j] * eps[j]);
+        }
     }
 }
 

@@ -7,8 +7,12 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+use crate::joints::Joints;
 use crate::layout::N_JOINTS;
+
+mod task;
 use crate::model::UrModel;
+pub use task::{TaskConfig, DEFAULT_TOOL_POINTS};
 
 /// Errors reading a configuration file.
 #[derive(Debug, thiserror::Error)]
@@ -98,7 +102,9 @@ fn layered<T: Serialize + DeserializeOwned>(
         _ => return toml::from_str(text).map_err(parse),
     };
     model_defaults(&mut merged, &file)?;
+    let task_given = task_keys_given(&merged, &file);
     merge_table(&mut merged, file);
+    task_defaults(&mut merged, task_given);
     T::deserialize(toml::Value::Table(merged)).map_err(parse)
 }
 
@@ -186,6 +192,64 @@ fn model_defaults(base: &mut toml::Table, file: &toml::Table) -> Result<(), Conf
     Ok(())
 }
 
+/// Which of the task's keys that others default from the file gives: (`joints`, `start_q`,
+/// `goal`, `goal_pose`), for [`task_defaults`]; `None` if the configuration has no task.
+fn task_keys_given(base: &toml::Table, file: &toml::Table) -> Option<[bool; 4]> {
+    let task = if base.get("task").is_some_and(|v| v.is_table()) {
+        file.get("task").and_then(|v| v.as_table())
+    } else if base.contains_key("horizon") && base.contains_key("start_q") {
+        Some(file)
+    } else {
+        return None;
+    };
+    let has = |k: &str| task.is_some_and(|t| t.contains_key(k));
+    Some([has("joints"), has("start_q"), has("goal"), has("goal_pose")])
+}
+
+/// The task's defaults that follow from other keys (docs/design.md §2.5): a six-joint task
+/// whose file leaves out `start_q` starts from the three-joint start pose with the wrist where
+/// `sim.wrist_q` puts it (its default: UR's home posture); a file that gives `goal_pose`
+/// without `goal` gets the pose's position as the goal point.
+fn task_defaults(merged: &mut toml::Table, given: Option<[bool; 4]>) {
+    let Some([joints, start_q, goal, goal_pose]) = given else {
+        return;
+    };
+    let wrist: Vec<toml::Value> = merged
+        .get("sim")
+        .and_then(|s| s.get("wrist_q"))
+        .and_then(|w| w.as_array())
+        .cloned()
+        .unwrap_or_else(|| {
+            UrModel::Ur5
+                .default_wrist_q()
+                .iter()
+                .map(|v| toml::Value::Float(*v))
+                .collect()
+        });
+    let task = if merged.get("task").is_some_and(|v| v.is_table()) {
+        merged
+            .get_mut("task")
+            .and_then(|v| v.as_table_mut())
+            .expect("checked")
+    } else {
+        merged
+    };
+    let six = task.get("joints").and_then(|v| v.as_integer()) == Some(6);
+    if joints && six && !start_q {
+        if let Some(toml::Value::Array(q)) = task.get_mut("start_q") {
+            if q.len() == 3 {
+                q.extend(wrist);
+            }
+        }
+    }
+    if goal_pose && !goal {
+        if let Some(toml::Value::Array(p)) = task.get("goal_pose") {
+            let position: Vec<toml::Value> = p.iter().take(3).cloned().collect();
+            task.insert("goal".into(), toml::Value::Array(position));
+        }
+    }
+}
+
 /// `base` with `over` laid on top: tables recursively, everything else replaced.
 fn merge_table(base: &mut toml::Table, over: toml::Table) {
     for (k, v) in over {
@@ -211,34 +275,6 @@ pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
         return Err("values must be finite".into());
     }
     Ok(a)
-}
-
-/// The reaching task (docs/design.md §2.5, the paper's §5 set-up).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct TaskConfig {
-    /// Control period (s). Paper §5: a new action every 0.1 s.
-    pub dt: f64,
-    /// Episode length T (steps). Paper §5: 100 steps (10 s).
-    pub horizon: usize,
-    /// Start pose q0 (rad): the retracted pose every episode starts from (paper §5: "the arm
-    /// starts in the same retracted pose"; the exact angles are ours: upper arm raised, elbow
-    /// folded).
-    pub start_q: [f64; N_JOINTS],
-    /// Goal point of the end effector (m, arm base frame). Ours: a point in front of the arm at
-    /// table height, reachable without passing a joint limit.
-    pub goal: [f64; 3],
-}
-
-impl Default for TaskConfig {
-    fn default() -> Self {
-        Self {
-            dt: 0.1,
-            horizon: 100,
-            start_q: [0.0, -2.0, 2.4],
-            goal: [-0.45, -0.25, 0.25],
-        }
-    }
 }
 
 /// Control rates (Hz) the project supports, the controller's loop and the learner alike:
@@ -291,51 +327,6 @@ pub fn check_time_compression(c: f64) -> Result<(), String> {
     }
 }
 
-impl TaskConfig {
-    /// The keys whose defaults depend on the arm model (see [`from_toml_str`]).
-    pub const MODEL_KEYS: [&'static str; 2] = ["start_q", "goal"];
-
-    /// The default task on `model`: its start pose and goal ([`UrModel::default_start_q`],
-    /// [`UrModel::default_goal`]); `for_model(UrModel::Ur5) == TaskConfig::default()`.
-    pub fn for_model(model: UrModel) -> Self {
-        Self {
-            start_q: model.default_start_q(),
-            goal: model.default_goal(),
-            ..Self::default()
-        }
-    }
-
-    /// Checks ranges; the message names the key and the allowed range.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        check_dt(self.dt).map_err(|why| ConfigError::Invalid {
-            key: "task.dt",
-            why,
-        })?;
-        if self.horizon == 0 || self.horizon > crate::layout::MAX_HORIZON {
-            return Err(ConfigError::Invalid {
-                key: "task.horizon",
-                why: format!(
-                    "{} must be in 1..={}",
-                    self.horizon,
-                    crate::layout::MAX_HORIZON
-                ),
-            });
-        }
-        if self
-            .start_q
-            .iter()
-            .chain(self.goal.iter())
-            .any(|v| !v.is_finite())
-        {
-            return Err(ConfigError::Invalid {
-                key: "task.start_q/goal",
-                why: "must be finite".into(),
-            });
-        }
-        Ok(())
-    }
-}
-
 /// What an action means to the simulated arm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -348,39 +339,45 @@ pub enum ActionMode {
     Torque,
 }
 
-/// Limits of the three active joints that every action is clamped to (see `crate::safety`).
-/// Defaults: UR5 (CB3) data sheet, as written in hil-sim's bundled URDF.
+/// Limits of the active joints that every action is clamped to (see `crate::safety`), one
+/// value per active joint (3 or 6; docs/design.md §2.4). Defaults: UR5 (CB3) data sheet, as
+/// written in hil-sim's bundled URDF, for the three arm joints.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArmLimits {
     /// Lower joint limits (rad): ±2π for pan and lift, ±π for the elbow.
-    pub lower: [f64; N_JOINTS],
+    pub lower: Joints,
     /// Upper joint limits (rad).
-    pub upper: [f64; N_JOINTS],
+    pub upper: Joints,
     /// Joint velocity limits (rad/s): π rad/s (180°/s).
-    pub velocity: [f64; N_JOINTS],
+    pub velocity: Joints,
     /// Joint effort limits (N·m): 150 N·m for the three large joints.
-    pub effort: [f64; N_JOINTS],
+    pub effort: Joints,
 }
 
 impl Default for ArmLimits {
     fn default() -> Self {
         use std::f64::consts::PI;
         Self {
-            lower: [-2.0 * PI, -2.0 * PI, -PI],
-            upper: [2.0 * PI, 2.0 * PI, PI],
-            velocity: [PI; N_JOINTS],
-            effort: [150.0; N_JOINTS],
+            lower: Joints::from([-2.0 * PI, -2.0 * PI, -PI]),
+            upper: Joints::from([2.0 * PI, 2.0 * PI, PI]),
+            velocity: Joints::splat(N_JOINTS, PI),
+            effort: Joints::splat(N_JOINTS, 150.0),
         }
     }
 }
 
 impl ArmLimits {
-    /// Limits of the three active joints (shoulder pan, shoulder lift, elbow) of `model`
+    /// Limits of the three arm joints (shoulder pan, shoulder lift, elbow) of `model`
     /// ([`UrModel::joint_limits`]); `for_model(UrModel::Ur5) == ArmLimits::default()`.
     pub fn for_model(model: UrModel) -> Self {
+        Self::for_model_joints(model, N_JOINTS)
+    }
+
+    /// Limits of the first `joints` joints of `model` (3: the arm joints; 6: the whole arm).
+    pub fn for_model_joints(model: UrModel, joints: usize) -> Self {
         let l = model.joint_limits();
-        let first = |v: [f64; 6]| [v[0], v[1], v[2]];
+        let first = |v: [f64; 6]| Joints::from_slice(&v[..joints]);
         Self {
             lower: first(l.lower),
             upper: first(l.upper),
@@ -389,9 +386,27 @@ impl ArmLimits {
         }
     }
 
-    /// Checks ordering and signs.
+    /// Number of joints the limits are for.
+    pub fn joints(&self) -> usize {
+        self.lower.len()
+    }
+
+    /// Checks lengths, ordering and signs.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        for j in 0..N_JOINTS {
+        let n = self.lower.len();
+        if [self.upper.len(), self.velocity.len(), self.effort.len()] != [n; 3] {
+            return Err(ConfigError::Invalid {
+                key: "limits",
+                why: format!(
+                    "lower, upper, velocity and effort have {n}, {}, {} and {} values: give one \
+                     per active joint in each",
+                    self.upper.len(),
+                    self.velocity.len(),
+                    self.effort.len()
+                ),
+            });
+        }
+        for j in 0..n {
             if !(self.lower[j] < self.upper[j] && self.velocity[j] > 0.0 && self.effort[j] > 0.0) {
                 return Err(ConfigError::Invalid {
                     key: "limits",
