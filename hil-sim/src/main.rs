@@ -254,6 +254,10 @@ struct Ros2SimArgs {
     /// Joint states per second (500: e-Series, 125: CB3).
     #[arg(long, default_value_t = 500.0)]
     rate: f64,
+    /// A namespace before the driver's topics (`/ns` gives `/ns/joint_states` …); none by
+    /// default, as the driver.
+    #[arg(long, default_value = "")]
+    namespace: String,
     /// Real time runs this many times faster than wall time.
     #[arg(long, default_value_t = 1.0)]
     time_compression: f64,
@@ -480,9 +484,15 @@ fn ros2_sim(args: Ros2SimArgs, model: Option<UrModel>) -> Result<()> {
         "all" => ur5_ros2::Network::All,
         other => anyhow::bail!("--network {other}: loopback or all"),
     };
+    let d = hil_sim::ros2_sim::Ros2SimConfig::default();
+    let ns = args.namespace.trim_end_matches('/');
     let cfg = hil_sim::ros2_sim::Ros2SimConfig {
         domain_id: args.domain_id,
         network,
+        joint_states_topic: format!("{ns}{}", d.joint_states_topic),
+        command_topic: format!("{ns}{}", d.command_topic),
+        robot_mode_topic: format!("{ns}{}", d.robot_mode_topic),
+        safety_mode_topic: format!("{ns}{}", d.safety_mode_topic),
         rate_hz: args.rate,
         time_compression: args.time_compression,
         fault_protective_stop_after: args.fault_protective_stop_after,

@@ -6,7 +6,7 @@
 //!   ([`DRIVER_ORDER`]; clients must match by name), stamped with the wall clock at start plus
 //!   arm time;
 //! - `/forward_position_controller/commands` (`std_msgs/msg/Float64MultiArray`): six positions
-//!   in the controller's joint order; the newest is the position servo's goal from the next
+//!   in the order of the controller's `joints` parameter ([`Ros2SimConfig::joints`]); the newest is the position servo's goal from the next
 //!   cycle on, held until the next (the wrist joints stay locked: their values are ignored);
 //! - `/io_and_status_controller/robot_mode` and `/safety_mode` (`ur_dashboard_msgs`) every
 //!   0.1 s of arm time and on change: RUNNING; NORMAL until a target outside the joint limits
@@ -55,6 +55,9 @@ pub struct Ros2SimConfig {
     pub robot_mode_topic: String,
     pub safety_mode_topic: String,
     pub qos: TopicQos,
+    /// The forward position controller's `joints` parameter: the order of the commands' six
+    /// values (UR's driver: shoulder pan to wrist 3; any order of UR's six names).
+    pub joints: [String; 6],
     /// Joint states per second of arm time (500: an e-Series driver).
     pub rate_hz: f64,
     /// Real time runs this many times faster than wall time (≥ 1).
@@ -79,6 +82,7 @@ impl Default for Ros2SimConfig {
             robot_mode_topic: "/io_and_status_controller/robot_mode".into(),
             safety_mode_topic: "/io_and_status_controller/safety_mode".into(),
             qos: TopicQos::reliable(10),
+            joints: CONTROLLER_ORDER.map(String::from),
             rate_hz: 500.0,
             time_compression: 1.0,
             fault_protective_stop_after: 0,
@@ -103,6 +107,8 @@ pub enum Ros2SimError {
     TimeCompression(String),
     #[error("rate_hz {0} must be in [10, 2000]")]
     Rate(f64),
+    #[error("joints {0:?}: the forward position controller's joints must be UR's six joint names, each once")]
+    Joints([String; 6]),
     #[error("cannot start the ros2-sim thread: {0}")]
     Thread(String),
 }
@@ -194,6 +200,7 @@ pub fn spawn(
     if !(10.0..=2000.0).contains(&cfg.rate_hz) {
         return Err(Ros2SimError::Rate(cfg.rate_hz));
     }
+    command_order(&cfg.joints).ok_or_else(|| Ros2SimError::Joints(cfg.joints.clone()))?;
     let dt = 1.0 / cfg.rate_hz;
     let mut arm = Arm::new(
         Ur5Sim::new(sim_cfg.clone(), dt)?,
@@ -233,6 +240,16 @@ struct Io {
     _node: Node,
 }
 
+/// `order[k]`: the place of UR's joint `k` (shoulder pan … wrist 3) in a command of the
+/// controller whose `joints` parameter is `joints`; `None` unless those are UR's six names.
+fn command_order(joints: &[String; 6]) -> Option<[usize; 6]> {
+    let mut order = [0usize; 6];
+    for (k, name) in CONTROLLER_ORDER.iter().enumerate() {
+        order[k] = joints.iter().position(|j| j == name)?;
+    }
+    Some(order)
+}
+
 /// Nanoseconds since the Unix epoch (the stamps' origin).
 fn realtime_ns() -> u64 {
     std::time::SystemTime::now()
@@ -260,6 +277,7 @@ fn run(mut arm: Arm, mut io: Io, cfg: &Ros2SimConfig, stop: &AtomicBool, c: &Cou
             .position(|m| *m == n)
             .expect("a UR joint")
     });
+    let order = command_order(&cfg.joints).expect("checked by spawn");
     let mut last_modes = (i8::MIN, 0u8);
     // The arm cycle of the first command (the faults' origin).
     let mut first_command: Option<u64> = None;
@@ -281,9 +299,7 @@ fn run(mut arm: Arm, mut io: Io, cfg: &Ros2SimConfig, stop: &AtomicBool, c: &Cou
                 c.ignored.fetch_add(1, Ordering::Relaxed);
             } else {
                 // All six: an arm with a locked wrist ignores the wrist's (`Arm::set_goal`).
-                goal = Some([
-                    m.data[0], m.data[1], m.data[2], m.data[3], m.data[4], m.data[5],
-                ]);
+                goal = Some(order.map(|i| m.data[i]));
             }
         }
         let mut violation = goal.and_then(|q: [f64; 6]| {

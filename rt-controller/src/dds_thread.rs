@@ -44,6 +44,12 @@ impl<T> Handoff<T> {
         self.queue.pop()
     }
 
+    /// Nothing queued.
+    #[inline]
+    pub(crate) fn is_empty(&self) -> bool {
+        self.queue.is_empty()
+    }
+
     /// Values dropped because the queue was full.
     pub(crate) fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)

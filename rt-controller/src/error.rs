@@ -180,6 +180,25 @@ pub enum Ros2SetupError {
     /// The first joint state cannot be acted on.
     #[error("the first joint state: {0}")]
     Stream(StreamFault),
+    /// More than one writer of the joint states.
+    #[error("{publishers} publishers of {topic} on ROS domain {domain}: two drivers (or a driver and hil-sim ros2-sim) on one domain; the controller would mix their joint states and drive both arms: stop one, or give each its own ROS_DOMAIN_ID (arm.ros2.domain_id)")]
+    SecondPublisher {
+        topic: String,
+        domain: u16,
+        publishers: usize,
+    },
+    /// A reliability DDS cannot match between the controller and the driver.
+    #[error("{key} {ours} but on {topic} {theirs}: DDS never matches them, so nothing would pass; set {key}.reliability = \"{fix}\" (or change the driver's QoS)")]
+    Qos {
+        topic: String,
+        key: &'static str,
+        ours: String,
+        theirs: String,
+        fix: &'static str,
+    },
+    /// `arm.ros2.joints` does not name UR's joints.
+    #[error("{0}")]
+    Joints(String),
 }
 
 /// Why the `ur` arm could not be set up.

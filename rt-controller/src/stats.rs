@@ -310,6 +310,8 @@ pub struct RejectCounts {
     pub invalid_policy: u64,
     /// A policy table acts in another action mode than the controller's.
     pub mode_mismatch: u64,
+    /// A policy table trained on another arm model than the controller's.
+    pub model_mismatch: u64,
 }
 
 impl RejectCounts {
@@ -328,6 +330,7 @@ impl RejectCounts {
             Rejection::StaleVersion { .. } => &mut self.stale_version,
             Rejection::InvalidPolicy(_) => &mut self.invalid_policy,
             Rejection::ModeMismatch { .. } => &mut self.mode_mismatch,
+            Rejection::ModelMismatch { .. } => &mut self.model_mismatch,
             Rejection::LayoutMismatch(_) => &mut self.layout_mismatch,
         };
         *c += 1;
@@ -346,6 +349,7 @@ impl RejectCounts {
             + self.plan
             + self.invalid_policy
             + self.mode_mismatch
+            + self.model_mismatch
             + self.layout_mismatch
     }
 }

@@ -38,6 +38,16 @@ pub enum Rejection {
         /// `action_mode`.
         expected: ActionMode,
     },
+    /// A policy table trained on another arm model than the controller drives.
+    #[error("policy table version {version} was trained on the {table}, the controller drives the {expected} (arm.ur.model): the same joint angles put the other arm's end effector elsewhere; serve a policy of the {expected}")]
+    ModelMismatch {
+        /// Table version.
+        version: u64,
+        /// The table's model.
+        table: ur5_shared::UrModel,
+        /// The controller's (`arm.ur.model`).
+        expected: ur5_shared::UrModel,
+    },
     /// The table's horizon differs from the controller's episode length.
     #[error("gain table version {version} has horizon T = {horizon}, the controller runs episodes of T = {expected} (task.horizon): learner and controller disagree about the task")]
     HorizonMismatch {
@@ -67,6 +77,7 @@ impl Rejection {
             self,
             Rejection::HorizonMismatch { .. }
                 | Rejection::ModeMismatch { .. }
+                | Rejection::ModelMismatch { .. }
                 | Rejection::LayoutMismatch(_)
         )
     }
@@ -137,6 +148,8 @@ pub struct TableBuffer {
     horizon: usize,
     mode: ActionMode,
     layout: StateLayout,
+    /// The arm model policy tables that state one must have (`None`: any).
+    model: Option<ur5_shared::UrModel>,
 }
 
 impl TableBuffer {
@@ -159,7 +172,15 @@ impl TableBuffer {
             horizon,
             mode,
             layout,
+            model: None,
         }
+    }
+
+    /// Refuses policy tables trained on another arm model than `model` (tables that state
+    /// none are taken).
+    pub fn for_arm_model(mut self, model: ur5_shared::UrModel) -> Self {
+        self.model = Some(model);
+        self
     }
 
     /// The task's layout every table must have (and the arm's joints with it).
@@ -230,6 +251,15 @@ impl TableBuffer {
                 table: mode,
                 expected: self.mode,
             });
+        }
+        if let (Some(model), Some(expected)) = (table.arm_model(), self.model) {
+            if model != expected {
+                return Err(Rejection::ModelMismatch {
+                    version: table.version,
+                    table: model,
+                    expected,
+                });
+            }
         }
         self.active = Some((Kind::Policy, inactive));
         Ok(Offer::Swapped {
@@ -381,6 +411,47 @@ mod tests {
         }
         b.offer_policy(&policy(7, 0.125), clock).unwrap();
         assert_eq!(b.active_version(), Some(7));
+    }
+
+    /// A controller driving a UR5 refuses a policy trained on a UR5e as a task mismatch
+    /// (learner and controller stop), takes one of the UR5 and one that states no model; a
+    /// model code of no arm is an invalid table.
+    #[test]
+    fn a_policy_of_another_arm_model_is_refused() {
+        use ur5_shared::UrModel;
+        let clock = || 0;
+        let mut b = buffer(100).for_arm_model(UrModel::Ur5);
+        let mut ur5e = policy(1, 0.25);
+        ur5e.set_arm_model(UrModel::Ur5e);
+        let r = b.offer_policy(&ur5e, clock).unwrap_err();
+        assert!(r.is_task_mismatch(), "{r}");
+        let text = r.to_string();
+        assert!(
+            text.contains("trained on the ur5e") && text.contains("drives the ur5"),
+            "{text}"
+        );
+        let mut counts = RejectCounts::default();
+        counts.add(&r);
+        assert_eq!((counts.model_mismatch, counts.total()), (1, 1));
+        assert_eq!(b.active_version(), None);
+        let mut ur5 = policy(2, 0.25);
+        ur5.set_arm_model(UrModel::Ur5);
+        assert!(matches!(
+            b.offer_policy(&ur5, clock),
+            Ok(Offer::Swapped { .. })
+        ));
+        assert!(matches!(
+            b.offer_policy(&policy(3, 0.25), clock),
+            Ok(Offer::Swapped { .. })
+        ));
+        let mut bad = policy(4, 0.25);
+        bad.model = 999;
+        bad.seal();
+        assert!(matches!(
+            b.offer_policy(&bad, clock),
+            Err(Rejection::InvalidPolicy(_))
+        ));
+        assert_eq!(b.active_version(), Some(3));
     }
 
     fn table(version: u64, horizon: usize, a_hat: f64) -> Box<GainTable> {

@@ -35,7 +35,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 BIN = ROOT / "target" / "release"
-DOMAIN = 140  # a ROS domain of its own: the Rust tests use 120-125 and 201
+DOMAIN = 140  # a ROS domain of its own: the Rust tests use 120-130 and 201-202, rclpy_check.py 141-143
 
 # Loopback only, no multicast, peers by unicast on the well-known ports of 127.0.0.1 (what the
 # Rust side's `network = "loopback"` does).

@@ -30,14 +30,14 @@
 //! # Checksum
 //!
 //! XXH3-64 (seed 0) of `version` (u64), `dx`, `du`, `action_mode`, `n_hidden`, `hidden[0..4]`,
-//! `n_params` (u32 each), then `params[..n_params]` as IEEE-754 bit patterns, all little-endian
-//! (52 + 8·P bytes): on a little-endian machine the raw bytes of those fields; then, when the
+//! `n_params`, `model` (u32 each), then `params[..n_params]` as IEEE-754 bit patterns, all
+//! little-endian (56 + 8·P bytes): on a little-endian machine the raw bytes of those fields; then, when the
 //! episode plan is not the default, its 32 bytes ([`crate::plan`], as for gain tables). The
 //! `epoch` field, the checksum itself and `params[n_params..]` are not covered.
 //!
 //! # Size
 //!
-//! [`POLICY_TABLE_BYTES`] = 88 + 8 · [`MAX_POLICY_PARAMS`] ≈ 256 KB: room for three heads of
+//! [`POLICY_TABLE_BYTES`] = 96 + 8 · [`MAX_POLICY_PARAMS`] ≈ 256 KB: room for three heads of
 //! two hidden layers of 96 (31,998 values), at most [`MAX_HIDDEN_LAYERS`] hidden layers of at
 //! most [`MAX_WIDTH`] units. Like [`crate::GainTable`], build one on the heap
 //! ([`PolicyTable::new_boxed`]) or in place ([`PolicyTable::init_zeroed`]), fill, [`PolicyTable::seal`];
@@ -50,6 +50,7 @@ use crate::config::ActionMode;
 use crate::kernels::{affine, dot, tanh_in_place};
 use crate::law::LawError;
 use crate::layout::{DimensionMismatch, StateLayout, MAX_DX};
+use crate::model::UrModel;
 use crate::plan::{EpisodePlan, PlanError};
 use crate::table::{self, HeaderBytes, Table};
 use iceoryx2::prelude::ZeroCopySend;
@@ -64,7 +65,7 @@ pub const MAX_POLICY_PARAMS: usize = 32_768;
 /// Size of a [`PolicyTable`] in bytes.
 pub const POLICY_TABLE_BYTES: usize = core::mem::size_of::<PolicyTable>();
 
-const _: () = assert!(POLICY_TABLE_BYTES == 88 + 8 * MAX_POLICY_PARAMS);
+const _: () = assert!(POLICY_TABLE_BYTES == 96 + 8 * MAX_POLICY_PARAMS);
 
 /// Parameters of one head with hidden widths `hidden` on a state of `dx` entries:
 /// Σ_l (n_l · n_{l+1} + n_{l+1}) over the layer sizes `[dX, hidden…, 1]`.
@@ -87,7 +88,7 @@ pub fn flat_len(dx: usize, du: usize, hidden: &[usize]) -> usize {
 /// The weights of a Gaussian MLP policy (module docs), as sent on `controller/policy`.
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("ur5_shared::PolicyTable.v2")]
+#[type_name("ur5_shared::PolicyTable.v3")]
 pub struct PolicyTable {
     /// Version, in the same increasing sequence as gain tables' (the controller takes the
     /// newest of either kind).
@@ -110,6 +111,12 @@ pub struct PolicyTable {
     /// count k. Echoed in [`crate::StepSample::table_epoch`]. Not hashed; tables written before
     /// it had 0 here (the old `reserved`).
     pub epoch: u32,
+    /// The arm model the policy was trained on ([`model_code`]; 0: not stated). A controller
+    /// driving another model refuses the table: the same joint angles put another arm's end
+    /// effector elsewhere.
+    pub model: u32,
+    /// Zero (alignment).
+    pub reserved: u32,
     /// XXH3-64 checksum (module docs), set by [`PolicyTable::seal`].
     pub checksum: u64,
     /// The goal, noise stream and schedule of the table's episodes ([`crate::plan`]), as a
@@ -317,7 +324,15 @@ pub fn mode_code(mode: ActionMode) -> u32 {
     }
 }
 
-const HASHED_HEADER_BYTES: usize = 8 + 4 * 4 + 4 * MAX_HIDDEN_LAYERS + 4;
+/// The arm model's code in [`PolicyTable::model`]: 1 + its place in [`UrModel::ALL`].
+pub fn model_code(model: UrModel) -> u32 {
+    UrModel::ALL
+        .iter()
+        .position(|m| *m == model)
+        .map_or(0, |i| i as u32 + 1)
+}
+
+const HASHED_HEADER_BYTES: usize = 8 + 4 * 4 + 4 * MAX_HIDDEN_LAYERS + 4 + 4;
 
 // SAFETY: repr(C), integers and f64 only (the size assertion above: no padding).
 unsafe impl Table for PolicyTable {
@@ -334,6 +349,7 @@ unsafe impl Table for PolicyTable {
             .iter()
             .fold(h, |h, &w| h.u32(w))
             .u32(self.n_params)
+            .u32(self.model)
             .finish()
     }
 
@@ -426,6 +442,8 @@ impl PolicyTable {
         }
         self.n_params = expected as u32;
         self.epoch = 0;
+        self.model = 0;
+        self.reserved = 0;
         self.plan = EpisodePlan::default();
         self.params[..expected].copy_from_slice(theta);
         self.params[expected..].fill(0.0);
@@ -438,6 +456,19 @@ impl PolicyTable {
         let n = (src.n_params as usize).min(MAX_POLICY_PARAMS);
         let header = core::mem::offset_of!(PolicyTable, params);
         table::copy_prefix(self, src, header + 8 * n);
+    }
+
+    /// The arm model the table states (`None`: not stated, or a code of no model).
+    pub fn arm_model(&self) -> Option<UrModel> {
+        (self.model as usize)
+            .checked_sub(1)
+            .and_then(|i| UrModel::ALL.get(i).copied())
+    }
+
+    /// States the arm model the policy was trained on and seals the table again.
+    pub fn set_arm_model(&mut self, model: UrModel) {
+        self.model = model_code(model);
+        self.seal();
     }
 
     /// The action mode, if the code is valid.
@@ -544,6 +575,9 @@ impl PolicyTable {
                 n_params: self.n_params,
                 expected,
             });
+        }
+        if self.model != 0 && self.arm_model().is_none() {
+            return shape("model is the code of no arm model");
         }
         if self.mode().is_none() {
             return Err(PolicyTableError::BadActionMode {

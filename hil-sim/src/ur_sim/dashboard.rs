@@ -8,9 +8,11 @@
 //!
 //! The replies read and change the simulated arm ([`super::plant::Arm`]): `power off` makes the
 //! robot mode POWER_OFF (in RTDE too) and ends a running program, `power on` makes it IDLE,
-//! `brake release` RUNNING; `unlock protective stop` clears a protective stop once 5 s of arm
-//! time have passed since it (earlier it is refused with the controller's words); `stop` stops
-//! the running program (`stopj`); `play` runs the loaded program again. ur-sim has one
+//! `brake release` RUNNING (powering a powered-off arm on first, as a real controller does);
+//! `unlock protective stop` clears a protective stop once 5 s of arm time have passed since it
+//! (earlier it is refused with the controller's words); `stop` ends the running program at once
+//! (runtime state and `programState` STOPPED, the reverse connection closed) while the arm
+//! decelerates as with `stopj`; `play` runs the loaded program again. ur-sim has one
 //! program: the last external_control program sent to its secondary interface; `load` of a
 //! `.urp` name selects it under that name (docs/ur.md, "The dashboard server").
 
@@ -166,8 +168,10 @@ pub(crate) fn answer(ctx: &Arc<Ctx>, cmd: &str) -> (String, bool) {
             "Powering off".into()
         }
         "brake release" => {
+            // A powered-off robot is powered on on the fly, then its brakes released (as UR's
+            // controller does, and the ROS driver's `brake_release` service says).
             ctx.advance(false, |arm| {
-                if arm.robot_mode == RobotMode::Idle {
+                if matches!(arm.robot_mode, RobotMode::PowerOff | RobotMode::Idle) {
                     arm.robot_mode = RobotMode::Running;
                     arm.refresh();
                 }
@@ -199,8 +203,7 @@ pub(crate) fn answer(ctx: &Arc<Ctx>, cmd: &str) -> (String, bool) {
         "stop" => {
             let mut stopped = false;
             ctx.advance(false, |arm| {
-                stopped = arm.phase == Phase::Running;
-                arm.begin_stop();
+                stopped = arm.stop_program();
                 Ok(())
             });
             if stopped {

@@ -194,6 +194,21 @@ impl Arm {
         }
     }
 
+    /// The dashboard's `stop`: the running program ends at once (its thread sees another
+    /// program generation and closes the reverse connection; the runtime state is STOPPED from
+    /// this cycle) and the arm decelerates as `stopj` does, to where [`Arm::begin_stop`] would
+    /// bring it. Whether a program was running.
+    pub fn stop_program(&mut self) -> bool {
+        if self.phase != Phase::Running {
+            return false;
+        }
+        self.begin_stop();
+        self.program += 1;
+        self.phase = Phase::Idle;
+        self.refresh();
+        true
+    }
+
     /// A protective stop: the program stops the arm and ends, safety reports PROTECTIVE_STOP.
     pub fn protective_stop(&mut self) {
         self.safety = SafetyMode::ProtectiveStop;

@@ -181,9 +181,7 @@ fn dashboard_power_and_brakes_change_the_robot_mode_and_gate_the_program() {
     let mut d = dash(&sim);
     assert_eq!(d.ask("robotmode"), "Robotmode: POWER_OFF");
     assert_eq!(rtde_robot_mode(&sim), RobotMode::PowerOff.code());
-    // Brakes cannot be released unpowered; a program is refused.
-    assert_eq!(d.ask("brake release"), "Brake releasing");
-    assert_eq!(d.ask("robotmode"), "Robotmode: POWER_OFF");
+    // Unpowered or with the brakes on, a program is refused.
     let (mut c, recipe) = Client::ready(sim.rtde_addr);
     c.state(&recipe).unwrap();
     send_program_refused(&sim, &mut c, "robot mode is POWER_OFF");
@@ -194,7 +192,15 @@ fn dashboard_power_and_brakes_change_the_robot_mode_and_gate_the_program() {
     assert_eq!(d.ask("brake release"), "Brake releasing");
     assert_eq!(d.ask("robotmode"), "Robotmode: RUNNING");
     assert_eq!(rtde_robot_mode(&sim), RobotMode::Running.code());
-    // Now the program runs; `stop` stops it (stopj), `power off` ends it.
+    // A brake release while powered off powers the arm on first, as a real controller does:
+    // the reply is what it does.
+    assert_eq!(d.ask("power off"), "Powering off");
+    assert_eq!(d.ask("robotmode"), "Robotmode: POWER_OFF");
+    assert_eq!(d.ask("brake release"), "Brake releasing");
+    assert_eq!(d.ask("robotmode"), "Robotmode: RUNNING");
+    assert_eq!(rtde_robot_mode(&sim), RobotMode::Running.code());
+    // Now the program runs; `stop` ends it at once (the arm decelerates as with stopj), `power
+    // off` ends it.
     let mut rev = run_program(&sim);
     let start_q = TaskConfig::default().start_arm_joints();
     servoj(&mut rev, start_q, 5_000);
@@ -203,6 +209,10 @@ fn dashboard_power_and_brakes_change_the_robot_mode_and_gate_the_program() {
     assert_eq!(d.ask("programState"), "PLAYING <unnamed>");
     assert_eq!(d.ask("running"), "Program running: true");
     assert_eq!(d.ask("stop"), "Stopped");
+    assert_eq!(d.ask("programState"), "STOPPED <unnamed>");
+    assert_eq!(d.ask("running"), "Program running: false");
+    assert_eq!(d.ask("stop"), "Failed to execute: stop");
+    // The program's next read ends it (the arm steps a cycle): RTDE says STOPPED.
     servoj(&mut rev, start_q, 5_000);
     let t0 = Instant::now();
     while c.state(&recipe).unwrap().runtime_state != runtime_state::STOPPED {

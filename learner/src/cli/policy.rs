@@ -117,10 +117,12 @@ pub fn run(cmd: PolicyCmd) -> anyhow::Result<()> {
         }
         PolicyCmd::Serve(args) => {
             let file = load_policy(&args.policy)?;
-            let table = file
+            let mut table = file
                 .policy
                 .to_table(args.version, file.mode)
                 .with_context(|| format!("{} as a policy table", args.policy.display()))?;
+            // The controller refuses a policy of another arm than it drives.
+            table.set_arm_model(file.model);
             let opts = PolicyServeOptions {
                 prefix: args.prefix.clone(),
                 steps: args.steps.unwrap_or(file.horizon),

@@ -8,7 +8,9 @@
 //! joint angles minus its `ee − goal` entries, C_expert as the trajectories' mean task cost,
 //! C_random by running the expert's random initial controller on the task
 //! ([`imitation::expert::random_policy_cost`], `learner expert`'s default settings, seed
-//! [`DERIVED_SEED`] unless the source notes its own).
+//! [`DERIVED_SEED`] unless the source notes its own). Costs a source notes (`ur5_task` of a
+//! dataset we exported) are checked against the recomputed ones, never trusted: normalised
+//! performance divides by their difference.
 
 use std::path::{Path, PathBuf};
 
@@ -291,28 +293,47 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
     };
     task.validate().map_err(IoError::TrajectoryTask)?;
     let known = traj.task.as_ref();
+    // Both costs are recomputed from the data; a recorded one is checked against them, not
+    // trusted (normalised performance divides by their difference).
+    let mut expert = 0.0;
+    for ep in traj.states.chunks(traj.horizon * DX) {
+        expert += ur5_shared::cost::task_cost_of_states(&task.layout(), ep)?;
+    }
+    expert /= traj.count as f64;
     let cost_expert = match known.and_then(|m| m.cost_expert) {
-        Some(c) => c,
-        None => {
-            let mut total = 0.0;
-            for ep in traj.states.chunks(traj.horizon * DX) {
-                total += ur5_shared::cost::task_cost_of_states(&task.layout(), ep)?;
-            }
-            total / traj.count as f64
+        // The states may have been stored in single precision.
+        Some(c) if (c - expert).abs() <= COST_EXPERT_TOLERANCE * expert.abs().max(1e-12) => c,
+        Some(c) => {
+            return Err(IoError::TaskCost {
+                field: "cost_expert",
+                recorded: c,
+                recomputed: expert,
+                of: "the demonstrations' states (their mean task cost)",
+            })
         }
+        None => expert,
+    };
+    let random = {
+        let cfg = imitation::expert::ExpertConfig {
+            task: task.clone(),
+            sim: sim.clone(),
+            seed,
+            ..Default::default()
+        };
+        let mut arm = crate::arm::SimArm::new(sim.clone(), traj.dt)?;
+        imitation::expert::random_policy_cost(&cfg, &mut arm)?
     };
     let cost_random = match known.and_then(|m| m.cost_random) {
-        Some(c) => c,
-        None => {
-            let cfg = imitation::expert::ExpertConfig {
-                task: task.clone(),
-                sim: sim.clone(),
-                seed,
-                ..Default::default()
-            };
-            let mut arm = crate::arm::SimArm::new(sim.clone(), traj.dt)?;
-            imitation::expert::random_policy_cost(&cfg, &mut arm)?
+        Some(c) if c >= random / COST_RANDOM_FACTOR && c <= random * COST_RANDOM_FACTOR => c,
+        Some(c) => {
+            return Err(IoError::TaskCost {
+                field: "cost_random",
+                recorded: c,
+                recomputed: random,
+                of: "the task, arm and seed (the random initial controller's mean cost, default expert settings)",
+            })
         }
+        None => random,
     };
     let actions = traj
         .actions
@@ -334,6 +355,15 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
         cost_expert,
     })
 }
+
+/// A recorded `cost_expert` may differ from the one recomputed from the states by this
+/// fraction (states kept in single precision).
+const COST_EXPERT_TOLERANCE: f64 = 1e-3;
+/// A recorded `cost_random` is taken if within this factor of the one recomputed with the
+/// default expert settings: an expert of another seed or `random_episodes` estimates the same
+/// cost differently (the default task, seeds 0–9, 10 or 2 random episodes: 12.20 to 13.44,
+/// within 5 % of seed 0's 12.93); beyond the factor the file was altered.
+const COST_RANDOM_FACTOR: f64 = 1.5;
 
 /// Whether `path` is demonstrations in a format of this module (a folder: a LeRobot dataset;
 /// a `.csv` file) rather than a `.npz`.

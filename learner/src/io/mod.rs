@@ -106,6 +106,19 @@ pub enum IoError {
     /// Trajectories at a control period the arm cannot run.
     #[error("time step dt of the trajectories (1 / fps, or the step of the time column): {0}")]
     TrajectoryDt(String),
+    /// A task cost a dataset records (`ur5_task.cost_expert`, `cost_random`) that the data
+    /// contradict: normalised performance would be computed against it.
+    #[error("ur5_task.{field} = {recorded} but {recomputed} recomputed from {of}: the dataset was altered (or made with other settings); delete the field to have it recomputed")]
+    TaskCost {
+        /// `cost_expert` or `cost_random`.
+        field: &'static str,
+        /// The value in the file.
+        recorded: f64,
+        /// The value the data give.
+        recomputed: f64,
+        /// What it was recomputed from.
+        of: &'static str,
+    },
     /// Trajectories whose task (goal, start, horizon) is not one the learner takes.
     #[error("the task the trajectories show")]
     TrajectoryTask(#[source] ur5_shared::config::ConfigError),

@@ -507,6 +507,54 @@ fn imported_demonstrations_are_checked_like_our_own() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A LeRobot dataset's `ur5_task.cost_random` or `cost_expert` edited is refused naming the
+/// field, the value and the one the data give; the exported values load unchanged, and a
+/// dataset without them has them recomputed.
+#[test]
+fn a_datasets_edited_task_costs_are_refused() {
+    let dir = scratch("costs");
+    let demos = recorded_demos();
+    let sim = SimConfig::default();
+    let traj = foreign::from_demos(&demos);
+    let export = |tag: &str, edit: &dyn Fn(&mut serde_json::Value)| {
+        let d = dir.join(tag);
+        lerobot::export(&traj, &d).unwrap();
+        let info = d.join("meta/info.json");
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&info).unwrap()).unwrap();
+        edit(&mut v["ur5_task"]);
+        std::fs::write(&info, v.to_string()).unwrap();
+        d
+    };
+    let same = export("same", &|_| {});
+    let got = learner::io::demos::load_checked(&same, &sim).unwrap();
+    assert_eq!(
+        (got.cost_random, got.cost_expert),
+        (demos.cost_random, demos.cost_expert)
+    );
+    let gone = export("gone", &|t| {
+        t["cost_random"] = serde_json::Value::Null;
+        t["cost_expert"] = serde_json::Value::Null;
+    });
+    let got = learner::io::demos::load_checked(&gone, &sim).unwrap();
+    // Recomputed: the expert's states' mean cost, the default settings' random cost (those of
+    // the demonstrations here).
+    assert!((got.cost_expert - demos.cost_expert).abs() < 1e-9 * demos.cost_expert);
+    assert_eq!(got.cost_random, demos.cost_random);
+    for (field, value) in [
+        ("cost_random", 1000.0),
+        ("cost_expert", 0.5 * demos.cost_expert),
+    ] {
+        let d = export(field, &|t| t[field] = serde_json::json!(value));
+        let e = learner::error::line(&learner::io::demos::load_checked(&d, &sim).unwrap_err());
+        assert!(
+            e.contains(&format!("ur5_task.{field} = {value} but ")) && e.contains("recomputed"),
+            "{field}: {e}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Exports never mix or overwrite: a LeRobot export into a folder holding files, a CSV export
 /// onto its input and an MCAP export onto a file of its run are refused, the files untouched.
 #[test]

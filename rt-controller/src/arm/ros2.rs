@@ -1,6 +1,13 @@
 //! The `ros2` arm (docs/design.md §3.13): Universal Robots' ROS 2 driver, or `hil-sim
 //! ros2-sim`, over DDS. `/joint_states` in (matched to `arm.ros2.joints` by name), six positions
 //! on `/forward_position_controller/commands` out, the driver's robot and safety modes watched.
+//! The controller's joints are UR's, shoulder pan to wrist 3, found by name in
+//! `arm.ros2.joints` (the commands' order) whatever their place there.
+//!
+//! Trusting no one blindly: joint states from a second writer (two drivers on one domain) are
+//! dropped and refuse the setup or end the run; no joint state for `arm.ros2.lost_after_s` ends
+//! it as a lost arm (a killed driver closes no connection); a command subscriber whose QoS the
+//! commands' cannot serve, or a joint-state publisher whose QoS cannot serve ours, is named.
 //!
 //! DDS (RustDDS) runs on a thread of its own: it decodes joint states into fixed-size samples in
 //! the controller's joint order and hands them to the loop through a preallocated lock-free
@@ -42,6 +49,10 @@ const STATE_QUEUE: usize = 256;
 const COMMAND_QUEUE: usize = 64;
 /// A mode not received yet.
 const UNKNOWN_MODE: i32 = i32::MIN;
+/// Why the arm is lost when joint states came from a second writer during the run.
+const SECOND_PUBLISHER: &str = "joint states from a second publisher (two drivers on one ROS domain and topic?): the controller would mix their states and drive both arms (arm.foreign counts them)";
+/// Why the arm is lost when the driver fell silent.
+const SILENT_DRIVER: &str = "no joint state for arm.ros2.lost_after_s: the driver is gone (killed, or its network down); arm.longest_gap_s says how long";
 
 /// One joint state in the controller's joint order.
 #[derive(Clone, Copy, Debug, Default)]
@@ -64,6 +75,8 @@ struct Shared {
     // DDS thread counters.
     received: AtomicU64,
     unmatched: AtomicU64,
+    /// Joint states from a writer other than the first (a second driver), dropped.
+    foreign: AtomicU64,
     published: AtomicU64,
     publish_errors: AtomicU64,
 }
@@ -78,6 +91,7 @@ impl Shared {
             safety_mode: AtomicI32::new(UNKNOWN_MODE),
             received: AtomicU64::new(0),
             unmatched: AtomicU64::new(0),
+            foreign: AtomicU64::new(0),
             published: AtomicU64::new(0),
             publish_errors: AtomicU64::new(0),
         })
@@ -90,17 +104,20 @@ impl Shared {
     }
 }
 
-/// Maps a joint state's names onto the controller's joints (cached while the names repeat).
+/// Maps a joint state's names onto the controller's joints, UR's order (cached while the
+/// names repeat).
 struct JointMap {
+    /// The names of the controller's joints: `arm.ros2.joints` in UR's order.
     joints: [String; 6],
     names: Vec<String>,
     index: Option<[usize; 6]>,
 }
 
 impl JointMap {
-    fn new(joints: &[String; 6]) -> Self {
+    /// `order[k]`: where UR's joint `k` is in `joints`.
+    fn new(joints: &[String; 6], order: &[usize; 6]) -> Self {
         Self {
-            joints: joints.clone(),
+            joints: order.map(|i| joints[i].clone()),
             names: Vec::new(),
             index: None,
         }
@@ -148,10 +165,17 @@ struct Endpoints {
     safety_mode: Option<Reader<SafetyMode>>,
     commands: Writer<Float64MultiArray>,
     map: JointMap,
+    /// Where UR's joint `k` goes in a command (`arm.ros2.joints`' order).
+    order: [usize; 6],
+    /// The writer of the first joint state taken; another's are dropped and counted.
+    writer: Option<[u8; 16]>,
 }
 
 impl Endpoints {
     fn create(cfg: &Ros2Config) -> Result<Self, Ros2SetupError> {
+        // Checked with the configuration.
+        let order = crate::config::ur_joint_order("arm.ros2.joints", &cfg.joints)
+            .map_err(|e| Ros2SetupError::Joints(e.to_string()))?;
         let node = Node::new(cfg.domain_id, cfg.network)?;
         let joint_states = node.reader(&cfg.joint_states_topic, cfg.joint_states_qos)?;
         let commands = node.writer(&cfg.command_topic, cfg.command_qos)?;
@@ -169,14 +193,20 @@ impl Endpoints {
             robot_mode,
             safety_mode,
             commands,
-            map: JointMap::new(&cfg.joints),
+            map: JointMap::new(&cfg.joints, &order),
+            order,
+            writer: None,
         })
     }
 
     /// Reads every queued message: joint states into `shared.states`, modes into the atomics.
     fn pump(&mut self, shared: &Shared) {
-        while let Some(m) = self.joint_states.take() {
+        while let Some((m, writer)) = self.joint_states.take_with_writer() {
             shared.received.fetch_add(1, Ordering::Relaxed);
+            if *self.writer.get_or_insert(writer) != writer {
+                shared.foreign.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
             match self.map.sample(&m) {
                 Ok(s) => shared.states.push(s),
                 Err(_) => {
@@ -204,7 +234,10 @@ impl Endpoints {
     fn publish(&mut self, shared: &Shared, msg: &mut Float64MultiArray) {
         while let Some(q) = shared.commands.pop() {
             msg.data.clear();
-            msg.data.extend_from_slice(&q);
+            msg.data.resize(6, 0.0);
+            for (k, &i) in self.order.iter().enumerate() {
+                msg.data[i] = q[k];
+            }
             let ok = self.commands.write(msg.clone()).is_ok();
             let c = if ok {
                 &shared.published
@@ -250,6 +283,8 @@ pub struct Ros2Report {
     /// dropped because the loop fell 256 behind.
     pub joint_states: u64,
     pub unmatched: u64,
+    /// Joint states from a second publisher (another driver on the domain), dropped.
+    pub foreign: u64,
     pub dropped: u64,
     /// Joint states the loop used, and states handed to the controller.
     pub samples: u64,
@@ -313,6 +348,9 @@ pub struct Ros2Arm {
     /// A gap between joint states longer than this (ns of wall time) is a stale stream
     /// (`safety.stale_state_timeout_s`: the controller holds), counted.
     stale_gap_ns: u64,
+    /// No joint state for this long (ns of wall time): the driver is gone
+    /// (`arm.ros2.lost_after_s`).
+    lost_gap_ns: u64,
     shared: Arc<Shared>,
     endpoints: Option<Endpoints>,
     first: Option<JointSample>,
@@ -332,6 +370,7 @@ impl Ros2Arm {
             period_s: cfg.task.dt,
             cycle_s: 1.0 / cfg.arm.ros2.joint_state_rate_hz,
             stale_gap_ns: (cfg.safety.stale_state_timeout_s * 1e9) as u64,
+            lost_gap_ns: (cfg.arm.ros2.lost_after_s * 1e9) as u64,
             shared: Arc::new(shared),
             endpoints: None,
             first: None,
@@ -347,6 +386,7 @@ impl Ros2Arm {
         let mut r = Ros2Report {
             joint_states: g(&sh.received),
             unmatched: g(&sh.unmatched),
+            foreign: g(&sh.foreign),
             dropped: sh.states.dropped(),
             commands: g(&sh.published),
             publish_errors: g(&sh.publish_errors),
@@ -387,7 +427,8 @@ impl Ros2Arm {
     /// another type, or the joints do not match.
     fn diagnose(&self, ep: &Endpoints, timeout_s: f64) -> Ros2SetupError {
         let c = &self.cfg;
-        let publishers = ep.node.publishers_of(&c.joint_states_topic);
+        let writers = ep.node.writers_on(&c.joint_states_topic);
+        let publishers: Vec<String> = writers.iter().map(|w| w.type_name.clone()).collect();
         if publishers.is_empty() {
             return Ros2SetupError::NoPublisher {
                 topic: c.joint_states_topic.clone(),
@@ -402,6 +443,16 @@ impl Ros2Arm {
                 expected: JointState::DDS_TYPE,
             };
         }
+        let requested = c.joint_states_qos.reliability;
+        if let Some(w) = writers.iter().find(|w| !w.reliability.serves(requested)) {
+            return Ros2SetupError::Qos {
+                topic: c.joint_states_topic.clone(),
+                key: "arm.ros2.joint_states_qos",
+                ours: format!("requests {}", requested.name()),
+                theirs: format!("its publisher offers {}", w.reliability.name()),
+                fix: w.reliability.name(),
+            };
+        }
         if self.shared.unmatched.load(Ordering::Relaxed) > 0 {
             return Ros2SetupError::JointsMissing {
                 topic: c.joint_states_topic.clone(),
@@ -413,6 +464,43 @@ impl Ros2Arm {
             topic: c.joint_states_topic.clone(),
             publishers: publishers.len(),
             timeout_s,
+        }
+    }
+
+    /// Whether the commands have a subscriber; `Err` when every one discovered requests a
+    /// reliability `arm.ros2.command_qos` does not offer (DDS would never match them: the
+    /// commands would go nowhere).
+    fn check_subscribers(&self, ep: &Endpoints) -> Result<bool, Ros2SetupError> {
+        let c = &self.cfg;
+        let readers = ep.node.readers_on(&c.command_topic);
+        let offered = c.command_qos.reliability;
+        match readers.iter().find(|r| offered.serves(r.reliability)) {
+            Some(_) => Ok(true),
+            None if readers.is_empty() => Ok(false),
+            None => Err(Ros2SetupError::Qos {
+                topic: c.command_topic.clone(),
+                key: "arm.ros2.command_qos",
+                ours: format!("offers {}", offered.name()),
+                theirs: format!(
+                    "its subscriber (the forward position controller) requests {}",
+                    readers[0].reliability.name()
+                ),
+                fix: readers[0].reliability.name(),
+            }),
+        }
+    }
+
+    /// Two writers of the joint states: two drivers (or a driver and a simulator) on one
+    /// domain, whose states the controller would mix and whose arms it would both drive.
+    fn second_publisher(&self, ep: &Endpoints) -> Ros2SetupError {
+        Ros2SetupError::SecondPublisher {
+            topic: self.cfg.joint_states_topic.clone(),
+            domain: self.cfg.domain_id,
+            publishers: ep
+                .node
+                .writers_on(&self.cfg.joint_states_topic)
+                .len()
+                .max(2),
         }
     }
 }
@@ -429,7 +517,12 @@ impl ArmBackend for Ros2Arm {
             while let Some(s) = self.shared.states.pop() {
                 first = Some(s);
             }
-            subscribed = subscribed || !ep.node.subscribers_of(&self.cfg.command_topic).is_empty();
+            if !subscribed {
+                subscribed = self.check_subscribers(&ep)?;
+            }
+            if self.shared.foreign.load(Ordering::Relaxed) > 0 {
+                return Err(self.second_publisher(&ep).into());
+            }
             if monotonic_ns() - t0 > timeout_ns {
                 return Err(if first.is_none() {
                     self.diagnose(&ep, timeout_s)
@@ -444,6 +537,10 @@ impl ArmBackend for Ros2Arm {
             std::thread::sleep(Duration::from_millis(2));
         }
         let s = first.expect("loop ends with a sample");
+        if ep.node.writers_on(&self.cfg.joint_states_topic).len() > 1 {
+            // Discovered, no sample of it yet: still a second driver.
+            return Err(self.second_publisher(&ep).into());
+        }
         check_joints(&s.q, &s.qd, &self.limits).map_err(Ros2SetupError::Stream)?;
         let kin = UrKinematics::new(self.ur.model, self.ur.ee_offset);
         self.first = Some(s);
@@ -522,6 +619,15 @@ impl ArmBackend for Ros2Arm {
         if !l.in_gap && gap > self.stale_gap_ns {
             l.in_gap = true;
             l.stale_gaps += 1;
+        }
+        if self.shared.foreign.load(Ordering::Relaxed) > 0 {
+            l.lost = Some(SECOND_PUBLISHER);
+            return Err(ArmIoError::Receive);
+        }
+        if gap > self.lost_gap_ns && self.shared.states.is_empty() {
+            l.longest_gap_ns = l.longest_gap_ns.max(gap);
+            l.lost = Some(SILENT_DRIVER);
+            return Err(ArmIoError::Receive);
         }
         if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
             l.lost = Some("the DDS thread ended");

@@ -12,8 +12,8 @@ use ur5_shared::{GainBounds, PolicyBounds};
 
 mod ros2;
 
-use ros2::{check_domain, check_joint_names, check_topic, is_live_view_default};
-pub use ros2::{LiveViewConfig, Ros2Config, UR_JOINTS};
+use ros2::{check_domain, check_topic, is_live_view_default};
+pub use ros2::{ur_joint_order, LiveViewConfig, Ros2Config, UR_JOINTS};
 
 /// How the loop is paced.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -323,7 +323,7 @@ impl ArmConfig {
                         return bad(key, "must be >= 1".into());
                     }
                 }
-                check_joint_names("arm.ros2.joints", &r.joints)?;
+                r.check_joints_and_silence()?;
                 if !(r.joint_state_rate_hz >= 10.0 && r.joint_state_rate_hz <= 10_000.0) {
                     return bad(
                         "arm.ros2.joint_state_rate_hz",

@@ -23,10 +23,17 @@ pub struct Ros2Config {
     /// The forward position controller's input (`std_msgs/msg/Float64MultiArray`).
     pub command_topic: String,
     pub command_qos: ur5_ros2::TopicQos,
-    /// The controller's joints, in the order its commands carry them (its `joints` parameter;
-    /// the driver's `ur_controllers.yaml` with an empty `tf_prefix`). Joint states are matched
-    /// to them by name.
+    /// The forward position controller's joints, in the order its commands carry them (its
+    /// `joints` parameter; the driver's `ur_controllers.yaml` with an empty `tf_prefix`), in
+    /// any order: each of UR's six joints is found by its name (or a name ending in it, as a
+    /// `tf_prefix` makes), so the active joints are shoulder pan, shoulder lift and elbow
+    /// wherever they are listed. Joint states are matched to them by name.
     pub joints: [String; 6],
+    /// No joint state for this long (s of wall time) and the driver is taken as gone: the run
+    /// ends as with a lost arm (exit 3), whatever `safety.give_up_after_s`. DDS has no
+    /// connection to close, so a killed driver is known only by its silence. 2 s: a thousand
+    /// e-Series cycles, far above the stale timeout (0.5 s) and the stalls of a loaded machine.
+    pub lost_after_s: f64,
     /// Read the driver's robot and safety modes and stop the run (exit 5) when the robot is
     /// not RUNNING or the safety mode is not NORMAL (or REDUCED), like the `ur` arm.
     pub watch_status: bool,
@@ -53,6 +60,7 @@ impl Default for Ros2Config {
             command_topic: "/forward_position_controller/commands".into(),
             command_qos: ur5_ros2::TopicQos::reliable(10),
             joints: UR_JOINTS.map(String::from),
+            lost_after_s: 2.0,
             watch_status: true,
             robot_mode_topic: "/io_and_status_controller/robot_mode".into(),
             safety_mode_topic: "/io_and_status_controller/safety_mode".into(),
@@ -185,6 +193,54 @@ pub(super) fn check_joint_names(
     Ok(())
 }
 
+/// Where each of UR's joints (shoulder pan … wrist 3, [`UR_JOINTS`]) is in `joints`: the
+/// name itself or the one name ending in `_` and it (a `tf_prefix`). `key` names the setting
+/// in the error.
+pub fn ur_joint_order(key: &'static str, joints: &[String; 6]) -> Result<[usize; 6], ConfigError> {
+    let mut order = [0usize; 6];
+    for (k, ur) in UR_JOINTS.iter().enumerate() {
+        let suffix = format!("_{ur}");
+        let found: Vec<usize> = (0..6)
+            .filter(|&i| joints[i] == *ur || joints[i].ends_with(&suffix))
+            .collect();
+        match found[..] {
+            [i] => order[k] = i,
+            [] => {
+                return Err(ConfigError::Invalid {
+                    key,
+                    why: format!("{joints:?} names no `{ur}` (or `PREFIX_{ur}`): UR's six joints are found by name"),
+                })
+            }
+            _ => {
+                return Err(ConfigError::Invalid {
+                    key,
+                    why: format!("{joints:?} names `{ur}` more than once"),
+                })
+            }
+        }
+    }
+    Ok(order)
+}
+
+impl Ros2Config {
+    /// The checks of the joints and of the silence that ends a run (the rest is checked with
+    /// the other arm settings).
+    pub(super) fn check_joints_and_silence(&self) -> Result<(), ConfigError> {
+        check_joint_names("arm.ros2.joints", &self.joints)?;
+        ur_joint_order("arm.ros2.joints", &self.joints)?;
+        if !(self.lost_after_s > 0.0 && self.lost_after_s <= 3600.0) {
+            return Err(ConfigError::Invalid {
+                key: "arm.ros2.lost_after_s",
+                why: format!(
+                    "{} must be in (0, 3600] s: a silent driver must end the run",
+                    self.lost_after_s
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
 impl LiveViewConfig {
     /// Checks the section when it is enabled; `arm`: the ros2 arm's driver publishes its own
     /// joint states.
@@ -233,6 +289,50 @@ impl LiveViewConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn urs_joints_are_found_by_name_in_any_order() {
+        let names = |v: [&str; 6]| v.map(String::from);
+        assert_eq!(
+            ur_joint_order("k", &names(UR_JOINTS)).unwrap(),
+            [0, 1, 2, 3, 4, 5]
+        );
+        // The wrists first: the active joints are where their names are.
+        let wrists_first = names([
+            "wrist_1_joint",
+            "wrist_2_joint",
+            "wrist_3_joint",
+            "shoulder_pan_joint",
+            "shoulder_lift_joint",
+            "elbow_joint",
+        ]);
+        assert_eq!(
+            ur_joint_order("k", &wrists_first).unwrap(),
+            [3, 4, 5, 0, 1, 2]
+        );
+        // A tf_prefix.
+        let prefixed = UR_JOINTS.map(|n| format!("ur5_{n}"));
+        assert_eq!(ur_joint_order("k", &prefixed).unwrap(), [0, 1, 2, 3, 4, 5]);
+        let mut other = names(UR_JOINTS);
+        other[2] = "knee_joint".into();
+        let e = ur_joint_order("arm.ros2.joints", &other)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("arm.ros2.joints") && e.contains("`elbow_joint`"),
+            "{e}"
+        );
+        let mut twice = names(UR_JOINTS);
+        twice[2] = "a_shoulder_pan_joint".into();
+        let e = ur_joint_order("k", &twice).unwrap_err().to_string();
+        assert!(e.contains("more than once"), "{e}");
+        let silent = Ros2Config {
+            lost_after_s: 0.0,
+            ..Ros2Config::default()
+        };
+        let e = silent.check_joints_and_silence().unwrap_err().to_string();
+        assert!(e.contains("arm.ros2.lost_after_s"), "{e}");
+    }
 
     #[test]
     fn topic_names_are_checked_as_ros_2_does() {

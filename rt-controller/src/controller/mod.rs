@@ -314,7 +314,8 @@ impl<A: ArmBackend> Controller<A> {
                 cfg.task.horizon,
                 cfg.action_mode,
                 ur5_shared::StateLayout::REACH3,
-            ),
+            )
+            .for_arm_model(cfg.arm.ur.model),
             scratch: Box::default(),
             limits: cfg.limits(),
             noise: Noise::new(cfg.seed, 0, 0),

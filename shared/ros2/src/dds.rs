@@ -46,6 +46,42 @@ pub enum ReliabilityKind {
     BestEffort,
 }
 
+impl ReliabilityKind {
+    /// Whether a writer offering `self` matches a reader requesting `requested` (DDS's
+    /// request–offered rule: reliable offers serve both, best effort only best effort).
+    pub fn serves(self, requested: ReliabilityKind) -> bool {
+        self == ReliabilityKind::Reliable || requested == ReliabilityKind::BestEffort
+    }
+
+    /// The QoS setting's spelling (`reliable`, `best_effort`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ReliabilityKind::Reliable => "reliable",
+            ReliabilityKind::BestEffort => "best_effort",
+        }
+    }
+
+    fn of(r: Option<Reliability>, default: ReliabilityKind) -> ReliabilityKind {
+        match r {
+            Some(Reliability::Reliable { .. }) => ReliabilityKind::Reliable,
+            Some(Reliability::BestEffort) => ReliabilityKind::BestEffort,
+            None => default,
+        }
+    }
+}
+
+/// A reader or writer another participant announced on a topic.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Endpoint {
+    /// Its DDS GUID (participant prefix and entity id).
+    pub guid: [u8; 16],
+    /// Its DDS type name.
+    pub type_name: String,
+    /// The reliability it offers (a writer) or requests (a reader); DDS's default when it
+    /// announced none (writers reliable, readers best effort).
+    pub reliability: ReliabilityKind,
+}
+
 /// The QoS of one topic: reliability and `KEEP_LAST` history depth; durability volatile, as
 /// ROS 2's defaults.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
@@ -212,6 +248,45 @@ impl Node {
             .collect()
     }
 
+    /// Writers discovered on the ROS topic (other participants'), with their GUIDs and QoS.
+    pub fn writers_on(&self, ros_topic: &str) -> Vec<Endpoint> {
+        let name = dds_topic(ros_topic);
+        self.participant
+            .discovered_writers()
+            .into_iter()
+            .filter(|w| w.publication_topic_data.topic_name == name)
+            .map(|w| {
+                let d = w.publication_topic_data;
+                Endpoint {
+                    guid: d.key.to_bytes(),
+                    type_name: d.type_name,
+                    reliability: ReliabilityKind::of(d.reliability, ReliabilityKind::Reliable),
+                }
+            })
+            .collect()
+    }
+
+    /// Readers discovered on the ROS topic (other participants'), with their GUIDs and QoS.
+    pub fn readers_on(&self, ros_topic: &str) -> Vec<Endpoint> {
+        let name = dds_topic(ros_topic);
+        self.participant
+            .discovered_readers()
+            .into_iter()
+            .filter(|r| r.subscription_topic_data.topic_name() == &name)
+            .map(|r| {
+                let d = r.subscription_topic_data;
+                Endpoint {
+                    guid: d.key().to_bytes(),
+                    type_name: d.type_name().clone(),
+                    reliability: ReliabilityKind::of(
+                        d.qos().reliability(),
+                        ReliabilityKind::BestEffort,
+                    ),
+                }
+            })
+            .collect()
+    }
+
     /// Readers discovered on the ROS topic (other participants'), with their DDS type names.
     pub fn subscribers_of(&self, ros_topic: &str) -> Vec<String> {
         let name = dds_topic(ros_topic);
@@ -256,6 +331,20 @@ impl<M: Message + 'static> Reader<M> {
         loop {
             match self.inner.take_next_sample() {
                 Ok(Some(s)) => return Some(s.into_value()),
+                Ok(None) => return None,
+                Err(_) => continue,
+            }
+        }
+    }
+
+    /// [`Reader::take`] with the GUID of the writer that sent the message.
+    pub fn take_with_writer(&mut self) -> Option<(M, [u8; 16])> {
+        loop {
+            match self.inner.take_next_sample() {
+                Ok(Some(s)) => {
+                    let guid = s.sample_info().writer_guid().to_bytes();
+                    return Some((s.into_value(), guid));
+                }
                 Ok(None) => return None,
                 Err(_) => continue,
             }
@@ -362,12 +451,22 @@ mod tests {
         for _ in 0..3000 {
             w.write(msg.clone()).unwrap();
             std::thread::sleep(std::time::Duration::from_millis(10));
-            if let Some(m) = r.take() {
+            if let Some(m) = r.take_with_writer() {
                 got = Some(m);
                 break;
             }
         }
-        assert_eq!(got, Some(msg));
+        let (got, writer) = got.expect("a joint state arrived");
+        assert_eq!(got, msg);
+        // The sample names its writer as discovery does, with the QoS it offers.
+        let writers = b.writers_on(&topic);
+        assert_eq!(writers.len(), 1);
+        assert_eq!(writers[0].guid, writer);
+        assert_eq!(writers[0].reliability, ReliabilityKind::Reliable);
+        let readers = a.readers_on(&topic);
+        assert_eq!(readers.len(), 1);
+        assert_eq!(readers[0].reliability, ReliabilityKind::Reliable);
+        assert_ne!(readers[0].guid, writer);
         assert_eq!(
             b.publishers_of(&topic),
             vec!["sensor_msgs::msg::dds_::JointState_".to_owned()]
@@ -388,6 +487,15 @@ mod tests {
         let (names, values) = (lines.next()?, lines.next()?);
         let i = names.split_whitespace().position(|n| n == "OutMcastPkts")?;
         values.split_whitespace().nth(i)?.parse().ok()
+    }
+
+    #[test]
+    fn reliability_offered_serves_as_dds_matches() {
+        use ReliabilityKind::*;
+        assert!(Reliable.serves(Reliable));
+        assert!(Reliable.serves(BestEffort));
+        assert!(BestEffort.serves(BestEffort));
+        assert!(!BestEffort.serves(Reliable));
     }
 
     #[test]

@@ -24,7 +24,9 @@ pub const UR_JOINTS: [&str; 6] = [
     "wrist_3_joint",
 ];
 
-pub use dds::{dds_topic, DdsError, Network, Node, Reader, ReliabilityKind, TopicQos, Writer};
+pub use dds::{
+    dds_topic, DdsError, Endpoint, Network, Node, Reader, ReliabilityKind, TopicQos, Writer,
+};
 pub use msg::{
     Float64MultiArray, Header, JointState, Message, MultiArrayDimension, MultiArrayLayout, Point,
     PointStamped, RobotMode, SafetyMode, Time, UInt64,

@@ -162,7 +162,12 @@ fn setup(dir: &Path) {
     edited("swapped.npz", &|d| {
         std::mem::swap(&mut d.cost_expert, &mut d.cost_random)
     });
-    for (fmt, out) in [("lerobot", "lr"), ("lerobot", "lr-fps"), ("csv", "d.csv")] {
+    for (fmt, out) in [
+        ("lerobot", "lr"),
+        ("lerobot", "lr-fps"),
+        ("lerobot", "lr-cost"),
+        ("csv", "d.csv"),
+    ] {
         learner_ok(
             dir,
             &["dataset", "export", "--format", fmt, "demos.npz", out],
@@ -181,6 +186,11 @@ fn setup(dir: &Path) {
         serde_json::from_slice(&std::fs::read(&ipath).unwrap()).unwrap();
     info["fps"] = 1e-300.into();
     std::fs::write(&ipath, serde_json::to_vec(&info).unwrap()).unwrap();
+    let cpath = dir.join("lr-cost/meta/info.json");
+    let mut info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&cpath).unwrap()).unwrap();
+    info["ur5_task"]["cost_random"] = 1000.0.into();
+    std::fs::write(&cpath, serde_json::to_vec(&info).unwrap()).unwrap();
 }
 
 /// Copies a folder tree.
@@ -624,6 +634,28 @@ fn cases(dir: &Path) -> Vec<Case> {
                      [arm.ros2]\ncommand_topic = \"/a//b\"\n",
                 ),
             ]),
+        },
+        Case {
+            class: "C3",
+            what: "`[arm.ros2] joints` naming no elbow",
+            bin: "rt-controller",
+            args: s(&[
+                "run",
+                "--config",
+                &write(
+                    dir,
+                    "joints.toml",
+                    "mode = \"real_time\"\npacing = \"arm\"\n[arm]\nbackend = \"ros2\"\n\
+                     [arm.ros2]\njoints = [\"wrist_1_joint\", \"wrist_2_joint\", \"wrist_3_joint\", \
+                     \"shoulder_pan_joint\", \"shoulder_lift_joint\", \"knee_joint\"]\n",
+                ),
+            ]),
+        },
+        Case {
+            class: "C4",
+            what: "a LeRobot dataset's `ur5_task.cost_random` edited to 1000",
+            bin: "learner",
+            args: s(&["dataset", "check", "lr-cost"]),
         },
         Case {
             class: "3",

@@ -2,7 +2,9 @@
 //! §3.13): episodes in real time with the joints matched by name (ros2-sim publishes them in
 //! the driver's order, not the controller's), a clear error naming the topic when no driver
 //! publishes, a protective stop ending the run (exit 5), a silent stream held and reported,
-//! and the expert's learning over ROS 2 against the same over iceoryx2.
+//! and the expert's learning over ROS 2 against the same over iceoryx2. Trusting no one
+//! blindly: the forward controller's joints listed wrists first, two drivers on one domain, a
+//! driver killed mid-run, a command QoS the driver cannot match.
 //!
 //! Each test has a ROS domain of its own (`DOMAIN_*`) and topics under a namespace of its own
 //! and its process ([`ns`]), so neither parallel tests nor a second run of the suite at the
@@ -24,6 +26,19 @@ const DOMAIN_NO_DRIVER: u16 = 121;
 const DOMAIN_STOP: u16 = 122;
 const DOMAIN_SILENT: u16 = 123;
 const DOMAIN_LEARN: u16 = 124;
+const DOMAIN_TWO: u16 = 128;
+const DOMAIN_KILLED: u16 = 129;
+const DOMAIN_QOS: u16 = 130;
+
+/// The forward position controller's joints with the wrists first.
+const WRISTS_FIRST: [&str; 6] = [
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+];
 
 const LONG: Duration = Duration::from_secs(180);
 /// The reaching tables' goal (rad).
@@ -71,7 +86,8 @@ fn arm_toml(domain: u16) -> String {
 }
 
 /// A controller (`ros2` arm, real time, arm pacing, `compression`) with a learner stand-in
-/// publishing a reaching table; returns (exit code, summary, log, samples (episode, t, q)).
+/// publishing a reaching table, `extra` after its `[arm.ros2]` keys (more of them, or tables);
+/// returns (exit code, summary, log, samples (episode, t, q)).
 fn run_controller(
     tag: &str,
     domain: u16,
@@ -104,7 +120,7 @@ fn run_controller_raw(
         &dir,
         "ctl.toml",
         &format!(
-            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"real_time\"\npacing = \"arm\"\ntime_compression = {compression}\nsetup_timeout_s = {setup_timeout_s}\n{extra}\n[task]\nhorizon = {horizon}\n{}",
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"real_time\"\npacing = \"arm\"\ntime_compression = {compression}\nsetup_timeout_s = {setup_timeout_s}\n[task]\nhorizon = {horizon}\n{}{extra}\n",
             arm_toml(domain)
         ),
     );
@@ -122,6 +138,9 @@ fn run_controller_raw(
     (code, out, log, samples)
 }
 
+/// The forward controller's `joints` parameter with the wrists listed first (ros2-sim takes
+/// its commands in that order, `arm.ros2.joints` says so): the active joints are found by
+/// name, not taken as the first three listed.
 #[test]
 fn ros2_controller_runs_episodes_on_ros2_sim_with_joints_matched_by_name() {
     let sim = ros2_sim(
@@ -131,9 +150,19 @@ fn ros2_controller_runs_episodes_on_ros2_sim_with_joints_matched_by_name() {
             horizon: 20,
             ..TaskConfig::default()
         },
-        Ros2SimConfig::default(),
+        Ros2SimConfig {
+            joints: WRISTS_FIRST.map(String::from),
+            ..Ros2SimConfig::default()
+        },
     );
-    let (code, j, log, samples) = run_controller("ros2-episodes", DOMAIN_EPISODES, 10.0, 20, 3, "");
+    let (code, j, log, samples) = run_controller(
+        "ros2-episodes",
+        DOMAIN_EPISODES,
+        10.0,
+        20,
+        3,
+        &format!("joints = {WRISTS_FIRST:?}"),
+    );
     let summary = sim.stop();
     assert_eq!(code, Some(0), "{log}");
     assert_eq!(j["episodes_completed"], 3, "{j}");
@@ -357,4 +386,131 @@ fn ros2_learning_in_real_time_has_the_outcome_of_the_iceoryx2_run() {
     );
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Two `ros2-sim` on one domain and topic (two drivers): the controller takes the joint
+/// states of one writer only and refuses the setup (exit 2), or, when the second driver's
+/// states come after the setup, ends the run as with a lost arm (exit 3), naming the second
+/// publisher either way; it never runs both to the end.
+#[test]
+fn ros2_a_second_driver_on_the_domain_is_refused() {
+    let task = TaskConfig {
+        horizon: 20,
+        ..TaskConfig::default()
+    };
+    let a = ros2_sim(DOMAIN_TWO, 10.0, task.clone(), Ros2SimConfig::default());
+    let b = ros2_sim(DOMAIN_TWO, 10.0, task, Ros2SimConfig::default());
+    let (code, out, log, _) = run_controller_raw("ros2-two", DOMAIN_TWO, 10.0, 20, 50, 20.0, "");
+    a.stop();
+    b.stop();
+    match code {
+        Some(2) => assert!(
+            log.contains(&format!(
+                "publishers of {}/joint_states on ROS domain {DOMAIN_TWO}",
+                ns(DOMAIN_TWO)
+            )) && log.contains("two drivers"),
+            "{log}"
+        ),
+        Some(3) => {
+            let j = json_summary(&out, &log);
+            assert!(
+                j["arm_lost"]
+                    .as_str()
+                    .unwrap()
+                    .contains("a second publisher"),
+                "{j}"
+            );
+            assert!(j["arm"]["foreign"].as_u64().unwrap() >= 1, "{j}");
+        }
+        _ => panic!("two drivers were not refused: exit {code:?}\n{log}"),
+    }
+    cleanup_dead_nodes();
+}
+
+/// `hil-sim ros2-sim` killed (SIGKILL) in the middle of a run, with the default
+/// `give_up_after_s = 0` (hold for ever): no joint state for `arm.ros2.lost_after_s` (its
+/// default) ends the run as a lost arm (exit 3), naming the silence.
+#[test]
+fn ros2_a_killed_driver_is_a_lost_arm() {
+    let dir = scratch("ros2-killed");
+    let ns = ns(DOMAIN_KILLED);
+    let domain = DOMAIN_KILLED.to_string();
+    let sim = Proc::spawn(
+        "hil-sim",
+        "sim",
+        &[
+            "ros2-sim",
+            "--domain-id",
+            &domain,
+            "--namespace",
+            &ns,
+            "--time-compression",
+            "10",
+        ],
+        &dir,
+    );
+    let prefix = unique_prefix("ros2-killed");
+    let cfg = write_config(
+        &dir,
+        "ctl.toml",
+        &format!(
+            "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"real_time\"\npacing = \"arm\"\ntime_compression = 10\nsetup_timeout_s = 60\n[task]\nhorizon = 20\n{}",
+            arm_toml(DOMAIN_KILLED)
+        ),
+    );
+    let mut learner = TestLearner::learner_only(&prefix);
+    learner.publish(&reaching_table(1, 20, GOAL, 0.01));
+    // Killed once the second episode has begun (an event, not a time).
+    let mut killed = false;
+    let (code, out, log) = run_controller_polling(&cfg, &prefix, 1000, &dir, LONG, || {
+        learner.poll();
+        if !killed && learner.received.iter().any(|s| s.episode >= 1) {
+            sim.signal(libc::SIGKILL);
+            killed = true;
+        }
+    });
+    assert!(killed, "the run never reached its second episode: {log}");
+    assert_eq!(code, Some(3), "{log}");
+    let j = json_summary(&out, &log);
+    assert_eq!(j["exit_reason"], "arm_lost", "{j}");
+    assert!(
+        j["arm_lost"]
+            .as_str()
+            .unwrap()
+            .contains("arm.ros2.lost_after_s"),
+        "{j}"
+    );
+    assert!(j["arm"]["longest_gap_s"].as_f64().unwrap() >= 2.0, "{j}");
+    std::fs::remove_dir_all(&dir).ok();
+    cleanup_dead_nodes();
+}
+
+/// `arm.ros2.command_qos` best effort against the forward controller's reliable subscriber:
+/// DDS never matches them, so the commands would go nowhere; the setup names the QoS.
+#[test]
+fn ros2_a_command_qos_the_driver_cannot_match_is_named() {
+    let sim = ros2_sim(
+        DOMAIN_QOS,
+        10.0,
+        TaskConfig::default(),
+        Ros2SimConfig::default(),
+    );
+    let (code, _, log, _) = run_controller_raw(
+        "ros2-qos",
+        DOMAIN_QOS,
+        10.0,
+        20,
+        1,
+        60.0,
+        "command_qos = { reliability = \"best_effort\", depth = 10 }",
+    );
+    sim.stop();
+    assert_eq!(code, Some(2), "{log}");
+    assert!(
+        log.contains("arm.ros2.command_qos offers best_effort")
+            && log.contains("requests reliable")
+            && log.contains("arm.ros2.command_qos.reliability = \"reliable\""),
+        "{log}"
+    );
+    cleanup_dead_nodes();
 }

@@ -580,6 +580,37 @@ fn ur_a_stopped_ur_sim_gives_the_controller_a_clear_exit() {
     cleanup_dead_nodes();
 }
 
+/// The dashboard's `stop` in the middle of a run: the program ends (`programState` STOPPED at
+/// once, as a real controller says) and the controller ends the run as an arm that stopped
+/// itself, its program ended (exit 5), not as a lost one (exit 3).
+#[test]
+fn ur_a_dashboard_stop_ends_the_run_as_its_program_ended() {
+    let s = sim(UrSimConfig::default());
+    let (addr, ports) = (s.rtde_addr, Ports::from(&s));
+    let dash = s.dashboard_addr.unwrap();
+    let stopper = std::thread::spawn(move || {
+        // Once the controller runs its first episode (arm time after the first reset), stop
+        // the program as a person at the dashboard would.
+        let mut obs = observer(addr.port());
+        while obs.next_state().expect("observer reads").timestamp < 1.2 {}
+        let mut d = ur_protocol::dashboard::Dashboard::connect(dash, TIMEOUT).unwrap();
+        let stopped = d.ask("stop").unwrap();
+        let state = d.ask("programState").unwrap();
+        (stopped, state, s)
+    });
+    let (code, j, log) = run_against(ports, "ur-dash-stop", "", WATCHDOG_MS, 50, GOAL);
+    let (stopped, state, s) = stopper.join().unwrap();
+    let summary = s.stop();
+    assert_eq!(stopped, "Stopped");
+    assert_eq!(state, "STOPPED <unnamed>");
+    assert_eq!(summary.programs, 1, "{summary:?}");
+    assert_eq!(code, Some(5), "exit 5 = the arm stopped itself: {j}\n{log}");
+    assert_eq!(j["exit_reason"], "arm_stopped", "{j}");
+    let why = j["arm"]["robot_stop"].as_str().unwrap();
+    assert!(why.contains("program not running"), "{why}");
+    cleanup_dead_nodes();
+}
+
 #[test]
 fn ur_a_protective_stop_ends_the_run_with_its_own_exit_code() {
     // The robot stops itself mid-run (as on a detected collision; the controller's own limits

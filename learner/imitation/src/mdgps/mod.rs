@@ -332,6 +332,7 @@ impl Mdgps {
             .map_err(|e| ImitationError::Config(format!("the global policy as a table: {e}")))?;
         table.epoch = epoch;
         table.plan = self.plan(m).noise_free();
+        table.model = ur5_shared::policy::model_code(self.cfg.lqr_gaifo.sim.model);
         table.seal();
         Ok(table)
     }
