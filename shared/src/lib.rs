@@ -21,7 +21,8 @@
 //! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`model`]: the UR arm models ([`UrModel`]): DH tables, joint limits, default tasks.
 //! - [`kinematics`]: a UR arm's end-effector point and velocity from joint angles (f64, no
-//!   simulator), for arms that report joint states only.
+//!   simulator), for arms that report joint states only; [`ik`]: its inverse in closed form
+//!   (a tool pose, or a tool point with the wrist locked, to joint angles).
 //! - [`cost`]: the task cost C(τ) and normalised performance.
 //! - [`noise`]: seeded exploration noise ε, per (run seed, table version, episode).
 //! - [`safety`]: the action clamp ([`safety::clamp_action`]) used by every path to an arm.
@@ -40,6 +41,7 @@ pub mod clock;
 pub mod config;
 pub mod cost;
 pub mod gains;
+pub mod ik;
 pub mod kernels;
 pub mod kinematics;
 pub mod law;
