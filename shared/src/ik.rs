@@ -132,6 +132,18 @@ pub fn pose_from_rotation_vector(p: [f64; 3], r: [f64; 3]) -> Isometry3<f64> {
     )
 }
 
+/// The rotation a fraction `w` (0 to 1) of the way from rotation vector `r0` to `r1` (rad,
+/// axis × angle) along the shortest arc (spherical linear interpolation), as a rotation vector.
+pub fn interpolate_rotation_vector(r0: [f64; 3], r1: [f64; 3], w: f64) -> [f64; 3] {
+    let q = |r: [f64; 3]| UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2]));
+    let (a, mut b) = (q(r0), q(r1));
+    if a.coords.dot(&b.coords) < 0.0 {
+        b = UnitQuaternion::new_unchecked(-b.into_inner());
+    }
+    let v = a.slerp(&b, w).scaled_axis();
+    [v.x, v.y, v.z]
+}
+
 impl UrIk {
     /// The bundled `model` with the tool point `ee_offset` (m, `wrist_3_link` frame).
     pub fn new(model: UrModel, ee_offset: [f64; 3]) -> Self {
@@ -513,6 +525,17 @@ mod tests {
             tight.nearest_point(p, wrist, &[0.3, -1.4, 2.1]),
             Err(IkError::Limits { joint: 2, .. })
         ));
+    }
+
+    #[test]
+    fn rotation_vectors_interpolate_along_the_shortest_arc() {
+        let (a, b) = ([0.0, 0.0, 0.2], [0.0, 0.0, 0.6]);
+        let m = interpolate_rotation_vector(a, b, 0.25);
+        assert!((m[2] - 0.3).abs() < 1e-12 && m[0].abs() < 1e-15, "{m:?}");
+        // Across ±π: 3.0 rad and −3.0 rad about z are 0.28 rad apart the short way.
+        let m = interpolate_rotation_vector([0.0, 0.0, 3.0], [0.0, 0.0, -3.0], 0.5);
+        let angle = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        assert!((angle - PI).abs() < 1e-9, "{m:?}");
     }
 
     #[test]

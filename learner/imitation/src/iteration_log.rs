@@ -6,7 +6,8 @@ use serde::Serialize;
 use crate::demos::Demos;
 use crate::discriminator::TrainStats;
 use crate::rollout::Episode;
-use ur5_shared::layout::DX;
+use crate::tool_path::{mean_path, rmse, spread, tool_paths, PathMeasures, Point};
+use ur5_shared::layout::{StateLayout, DX};
 
 /// Per-iteration log (progress line and CSV row).
 #[derive(Clone, Debug, Serialize)]
@@ -46,6 +47,10 @@ pub struct GaifoLog {
     /// [`demo_gap`] (dimensionless; docs/design.md §5 D36). NaN where the learner does not
     /// compute it (the PPO baseline, the expert). Not a column of `gaifo_log.csv`.
     pub demo_gap: f64,
+    /// Per-step RMSE (m) of the noise-free episode's tool path against the demonstrations'
+    /// mean path ([`path_rmse`]; docs/design.md §4.15). NaN where not computed. Not a column
+    /// of `gaifo_log.csv`.
+    pub path_rmse: f64,
 }
 
 impl Default for GaifoLog {
@@ -68,8 +73,39 @@ impl Default for GaifoLog {
             t_lqr: 0.0,
             cpu_learner: 0.0,
             demo_gap: f64::NAN,
+            path_rmse: f64::NAN,
         }
     }
+}
+
+/// The demonstrations' tool paths (of the reaching layout the [`Demos`] hold).
+fn demo_paths(demos: &Demos) -> Vec<Vec<Point>> {
+    tool_paths(
+        &demos.states,
+        &StateLayout::REACH3,
+        demos.horizon,
+        &demos.goal,
+    )
+}
+
+/// Per-step RMSE (m) of `eval`'s tool path against the mean path of `demos` (docs/design.md
+/// §4.15), or NaN if either has no samples.
+pub fn path_rmse(eval: &Episode, demos: &Demos) -> f64 {
+    let paths = demo_paths(demos);
+    let refs: Vec<&[Point]> = paths.iter().map(Vec::as_slice).collect();
+    let Ok(mean) = mean_path(&refs) else {
+        return f64::NAN;
+    };
+    let ep = tool_paths(&eval.x, &StateLayout::REACH3, eval.horizon(), &demos.goal);
+    rmse(&ep[0], &mean).unwrap_or(f64::NAN)
+}
+
+/// The demonstrations' own spread in the path measures (each against the mean of the others;
+/// docs/design.md §4.15), or `None` for fewer than two demonstrations.
+pub fn demo_spread(demos: &Demos) -> Option<PathMeasures> {
+    let paths = demo_paths(demos);
+    let refs: Vec<&[Point]> = paths.iter().map(Vec::as_slice).collect();
+    spread(&refs).ok()
 }
 
 /// The mean over `episodes` of the distance between each one's final state s_{T−1} and the
@@ -135,6 +171,7 @@ impl GaifoLog {
             kl: f64::NAN,
             eta: f64::NAN,
             step_mult: f64::NAN,
+            path_rmse: path_rmse(eval, demos),
             ..Self::default()
         }
     }
