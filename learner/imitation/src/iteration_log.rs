@@ -182,17 +182,18 @@ impl GaifoLog {
     }
 
     /// Column names of [`GaifoLog::progress_line`].
-    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
+    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m   path_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
 
     /// The progress line of this iteration (`learner train`, `learner serve --algo lqr-gaifo`;
-    /// `sim_ms` is [`GaifoLog::t_execute`]).
+    /// `path_m` is [`GaifoLog::path_rmse`], `sim_ms` [`GaifoLog::t_execute`]).
     pub fn progress_line(&self) -> String {
         format!(
-            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
+            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
             self.iteration,
             self.task_cost,
             self.performance,
             self.final_distance,
+            self.path_rmse,
             self.critic_loss,
             self.wasserstein,
             self.kl,
