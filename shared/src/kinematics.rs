@@ -88,6 +88,14 @@ impl UrKinematics {
         [p.x, p.y, p.z]
     }
 
+    /// The tool's pose (base frame): the end-effector point and `wrist_3_link`'s orientation
+    /// (the DH flange frame's), at joint angles `q` (rad).
+    pub fn tool_pose(&self, q: &Joints6) -> Isometry3<f64> {
+        let f = self.frames(q)[5];
+        let p = f * Point3::from(self.ee_offset);
+        Isometry3::from_parts(Translation3::from(p.coords), f.rotation)
+    }
+
     /// The points of the chain (m, base frame) at joint angles `q` (rad), for drawing the arm:
     /// the base, the origin of each joint's frame (shoulder pan to wrist 3) and the
     /// end-effector point, in that order.

@@ -21,7 +21,8 @@
 //! - [`clock`]: the monotonic clock of every timestamp.
 //! - [`model`]: the UR arm models ([`UrModel`]): DH tables, joint limits, default tasks.
 //! - [`kinematics`]: a UR arm's end-effector point and velocity from joint angles (f64, no
-//!   simulator), for arms that report joint states only.
+//!   simulator), for arms that report joint states only; [`ik`]: its inverse in closed form
+//!   (a tool pose, or a tool point with the wrist locked, to joint angles).
 //! - [`joints`]: per-joint values of run-time length ([`joints::Joints`], 3 or 6 joints).
 //! - [`pose`]: UR's tool pose p[x, y, z, rx, ry, rz], tool points and the orientation error.
 //! - [`cost`]: the task cost C(τ) and normalised performance.
@@ -42,6 +43,7 @@ pub mod clock;
 pub mod config;
 pub mod cost;
 pub mod gains;
+pub mod ik;
 pub mod joints;
 pub mod kernels;
 pub mod kinematics;

@@ -6,6 +6,7 @@ use serde::Serialize;
 use crate::demos::Demos;
 use crate::discriminator::TrainStats;
 use crate::rollout::Episode;
+use crate::tool_path::{mean_path, rmse, spread, tool_paths, PathMeasures, Point};
 
 /// Per-iteration log (progress line and CSV row).
 #[derive(Clone, Debug, Serialize)]
@@ -45,6 +46,10 @@ pub struct GaifoLog {
     /// [`demo_gap`] (dimensionless; docs/design.md §5 D36). NaN where the learner does not
     /// compute it (the PPO baseline, the expert). Not a column of `gaifo_log.csv`.
     pub demo_gap: f64,
+    /// Per-step RMSE (m) of the noise-free episode's tool path against the demonstrations'
+    /// mean path ([`path_rmse`]; docs/design.md §4.15). NaN where not computed. Not a column
+    /// of `gaifo_log.csv`.
+    pub path_rmse: f64,
 }
 
 impl Default for GaifoLog {
@@ -67,8 +72,48 @@ impl Default for GaifoLog {
             t_lqr: 0.0,
             cpu_learner: 0.0,
             demo_gap: f64::NAN,
+            path_rmse: f64::NAN,
         }
     }
+}
+
+/// The target of the first tool point (the tool centre point) of the demonstrations' task.
+fn tcp_target(demos: &Demos) -> Point {
+    demos
+        .task()
+        .ok()
+        .and_then(|t| t.targets().first().copied())
+        .unwrap_or(demos.goal)
+}
+
+/// The demonstrations' tool paths (of their first tool point, the tool centre point).
+fn demo_paths(demos: &Demos) -> Vec<Vec<Point>> {
+    tool_paths(
+        &demos.states,
+        &demos.layout(),
+        demos.horizon,
+        &tcp_target(demos),
+    )
+}
+
+/// Per-step RMSE (m) of `eval`'s tool path against the mean path of `demos` (docs/design.md
+/// §4.15), or NaN if either has no samples.
+pub fn path_rmse(eval: &Episode, demos: &Demos) -> f64 {
+    let paths = demo_paths(demos);
+    let refs: Vec<&[Point]> = paths.iter().map(Vec::as_slice).collect();
+    let Ok(mean) = mean_path(&refs) else {
+        return f64::NAN;
+    };
+    let ep = tool_paths(&eval.x, &eval.layout, eval.horizon(), &tcp_target(demos));
+    rmse(&ep[0], &mean).unwrap_or(f64::NAN)
+}
+
+/// The demonstrations' own spread in the path measures (each against the mean of the others;
+/// docs/design.md §4.15), or `None` for fewer than two demonstrations.
+pub fn demo_spread(demos: &Demos) -> Option<PathMeasures> {
+    let paths = demo_paths(demos);
+    let refs: Vec<&[Point]> = paths.iter().map(Vec::as_slice).collect();
+    spread(&refs).ok()
 }
 
 /// The mean over `episodes` of the distance between each one's final state s_{T−1} and the
@@ -138,6 +183,7 @@ impl GaifoLog {
             kl: f64::NAN,
             eta: f64::NAN,
             step_mult: f64::NAN,
+            path_rmse: path_rmse(eval, demos),
             ..Self::default()
         }
     }
@@ -148,17 +194,18 @@ impl GaifoLog {
     }
 
     /// Column names of [`GaifoLog::progress_line`].
-    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
+    pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m   path_m    critic   W1_est       kl       eta   mult  lrn_ms  sim_ms";
 
     /// The progress line of this iteration (`learner train`, `learner serve --algo lqr-gaifo`;
-    /// `sim_ms` is [`GaifoLog::t_execute`]).
+    /// `path_m` is [`GaifoLog::path_rmse`], `sim_ms` [`GaifoLog::t_execute`]).
     pub fn progress_line(&self) -> String {
         format!(
-            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
+            "{:>4} {:>9.4} {:>7.3} {:>8.4} {:>8.4} {:>9.4} {:>8.4} {:>8.3} {:>9.2e} {:>6.2} {:>7.1} {:>7.1}",
             self.iteration,
             self.task_cost,
             self.performance,
             self.final_distance,
+            self.path_rmse,
             self.critic_loss,
             self.wasserstein,
             self.kl,

@@ -20,7 +20,9 @@
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
-//!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table.
+//!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table;
+//! - [`tool_path`]: measures of a tool path against the demonstrated ones (RMSE, DTW, Fréchet)
+//!   and the demonstrations' own spread.
 //!
 //! Depends on `gps` and `shared` (the contract) only; the simulator, files and IPC are the
 //! `learner` application's.
@@ -42,5 +44,6 @@ pub mod mlp_policy;
 pub mod ppo;
 pub mod rollout;
 pub mod settings;
+pub mod tool_path;
 
 pub use error::ImitationError;

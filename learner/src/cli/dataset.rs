@@ -1,6 +1,6 @@
 //! `learner dataset`: demonstrations and recorded episodes out to the formats other tools read
-//! (LeRobot v3.0, CSV), and a check of demonstrations in any format `--demos` takes
-//! (docs/design.md §4.12).
+//! (LeRobot v3.0, CSV), a check of demonstrations in any format `--demos` takes
+//! (docs/design.md §4.12), and the LASA handwriting shapes as tool paths (§4.18).
 
 use std::path::{Path, PathBuf};
 
@@ -30,9 +30,38 @@ pub enum DatasetCmd {
     /// or a folder of them, e.g. RUN/episodes) as a LeRobot v3.0 dataset folder or a CSV file;
     /// or a recorded run (RUN) as one MCAP file.
     Export(ExportArgs),
-    /// Load demonstrations in any format `--demos` takes (.npz, LeRobot folder, .csv), check
-    /// them against the arm model they name (ur5 if they name none) and print what they hold.
+    /// Load demonstrations in any format `--demos` takes (.npz, LeRobot folder, .csv of states
+    /// or of tool paths), check them against the arm model they name (ur5 if they name none)
+    /// and print what they hold, with their tool paths' spread.
     Check(CheckArgs),
+    /// Write a shape of the LASA handwriting dataset, placed in the arm's workspace, as a
+    /// tool-path CSV file that `--demos` takes (docs/design.md §4.18); without SHAPE, list
+    /// the shapes.
+    Lasa(LasaArgs),
+}
+
+/// Arguments of `learner dataset lasa`.
+#[derive(Args, Debug)]
+pub struct LasaArgs {
+    /// The shape (e.g. Sshape; case-insensitive); none: list them.
+    pub shape: Option<String>,
+    /// Output tool-path CSV file (required with SHAPE).
+    pub out: Option<PathBuf>,
+    /// The arm whose default goal is the shape's end (without --end).
+    #[arg(long, default_value = "ur5")]
+    pub model: ur5_shared::UrModel,
+    /// Where the shape ends, "x,y,z" (m, base frame); default: the model's default goal.
+    #[arg(long, value_parser = ur5_shared::config::parse_triple, allow_hyphen_values = true)]
+    pub end: Option<[f64; 3]>,
+    /// The plane the shape is drawn in.
+    #[arg(long, value_enum, default_value = "facing")]
+    pub plane: crate::io::lasa::Plane,
+    /// The shape's larger extent (m).
+    #[arg(long, default_value_t = 0.2)]
+    pub size: f64,
+    /// The drawings' mean duration (s).
+    #[arg(long, default_value_t = 10.0)]
+    pub duration: f64,
 }
 
 /// Arguments of `learner dataset export`.
@@ -193,18 +222,63 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
             );
             Ok(())
         }
+        DatasetCmd::Lasa(a) => {
+            use crate::io::lasa;
+            let Some(name) = &a.shape else {
+                println!("{}", lasa::SHAPES.join("\n"));
+                return Ok(());
+            };
+            let out = a
+                .out
+                .as_ref()
+                .context("give the output file: learner dataset lasa SHAPE OUT.csv")?;
+            let shape = lasa::shape(name)?;
+            let placement = lasa::Placement {
+                plane: a.plane,
+                end: a.end.unwrap_or_else(|| a.model.default_goal()),
+                size: a.size,
+                duration: a.duration,
+            };
+            let paths = lasa::place(&shape, &placement).map_err(anyhow::Error::msg)?;
+            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                crate::io::create_dir(dir)?;
+            }
+            lasa::write_csv(&paths, out)?;
+            eprintln!(
+                "LASA {}: {} drawings, {} m in the {:?} plane ending at {:?} m, {} s -> {}",
+                shape.name,
+                paths.len(),
+                a.size,
+                a.plane,
+                placement.end,
+                a.duration,
+                out.display()
+            );
+            Ok(())
+        }
         DatasetCmd::Check(a) => {
             let recorded = crate::io::demos::model_of(&a.demos)?;
             let model = recorded.unwrap_or_default();
             let sim = ur5_shared::config::SimConfig::for_model(model);
             let d = crate::io::demos::load_checked(&a.demos, &sim)?;
+            let spread = imitation::iteration_log::demo_spread(&d);
             let summary = serde_json::json!({"command": "dataset check", "demos": a.demos,
                 "model": model, "model_recorded": recorded.is_some(), "count": d.count,
                 "horizon": d.horizon, "dt_s": d.dt, "goal_m": d.goal, "start_q_rad": d.start_q,
-                "cost_random": d.cost_random, "cost_expert": d.cost_expert});
+                "cost_random": d.cost_random, "cost_expert": d.cost_expert,
+                "demo_spread_rmse_m": spread.map(|s| s.rmse_m),
+                "demo_spread_dtw_m": spread.map(|s| s.dtw_m),
+                "demo_spread_frechet_m": spread.map(|s| s.frechet_m)});
             if a.json {
                 println!("{summary}");
             } else {
+                if let Some(s) = spread {
+                    eprintln!(
+                        "tool path spread (each demonstration against the mean of the others): \
+                         RMSE {:.4} m, DTW {:.4} m, Fréchet {:.4} m",
+                        s.rmse_m, s.dtw_m, s.frechet_m
+                    );
+                }
                 eprintln!(
                     "{}: {} demonstrations of T = {} at dt = {} s, goal {:?} m, start {:?} rad, \
                      C_random {:.4}, C_expert {:.4}: consistent with the {model}{}",

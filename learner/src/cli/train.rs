@@ -79,8 +79,16 @@ pub struct TrainArgs {
 }
 
 /// The end of a `learner train` run: the summary line on stderr and, with `--json`, the
-/// one-line JSON summary on stdout (both algorithms).
-pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, json: bool) {
+/// one-line JSON summary on stdout (both algorithms). `spread`: the demonstrations' own path
+/// RMSE spread (m), beside the noise-free episode's path RMSE.
+pub fn report(
+    logs: &[GaifoLog],
+    algo: &str,
+    seed: u64,
+    out: &std::path::Path,
+    json: bool,
+    spread: Option<f64>,
+) {
     let Some(last) = logs.last() else { return };
     eprintln!(
         "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m); log and checkpoints in {}",
@@ -89,6 +97,12 @@ pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, j
         last.final_distance,
         out.display()
     );
+    if let Some(s) = spread {
+        eprintln!(
+            "path RMSE {:.4} m against the demonstrations' mean path; their own spread {s:.4} m",
+            last.path_rmse
+        );
+    }
     if json {
         let best = logs
             .iter()
@@ -98,7 +112,8 @@ pub fn report(logs: &[GaifoLog], algo: &str, seed: u64, out: &std::path::Path, j
             "{}",
             serde_json::json!({"command": "train", "algo": algo, "iterations": logs.len(), "seed": seed,
                 "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
-                "final_distance_m": last.final_distance, "out": out})
+                "final_distance_m": last.final_distance, "path_rmse_m": last.path_rmse,
+                "demo_spread_rmse_m": spread, "out": out})
         );
     }
 }
@@ -310,6 +325,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let bar =
         crate::progress::Progress::new(cfg.iterations.saturating_sub(start) as u64, "iterations");
     let print = |l: &GaifoLog| bar.done_one(&l.progress_line());
+    let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
     let logs = match &args.resume {
         Some(dir) => train_resumed(&cfg, demos, dir, print)?,
         None => train(&cfg, demos, Some(&out), print)?,
@@ -329,7 +345,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             );
         }
     }
-    report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json);
+    report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json, spread);
     Ok(())
 }
 
@@ -381,11 +397,19 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
         "sim_ms"
     );
     let bar = crate::progress::Progress::new(pcfg.iterations as u64, "iterations");
+    let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
     let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), |l, u| {
         bar.done_one(&ppo_line(l, u))
     })?;
     drop(bar);
-    report(&logs, "gaifo-ppo", pcfg.seed, &out, args.common.json);
+    report(
+        &logs,
+        "gaifo-ppo",
+        pcfg.seed,
+        &out,
+        args.common.json,
+        spread,
+    );
     Ok(())
 }
 

@@ -1,5 +1,6 @@
 //! Demonstrations in the formats `--demos` takes beside our `.npz` (docs/design.md §4.12): a
-//! LeRobot v3.0 dataset folder ([`super::lerobot`]) and a CSV file ([`read_csv`]), and the way
+//! LeRobot v3.0 dataset folder ([`super::lerobot`]), a CSV file of states ([`read_csv`]) or of
+//! tool paths ([`super::tool_path`]), and the way
 //! back: demonstrations or recorded episodes as
 //! [`Trajectories`] for `learner dataset export`.
 //!
@@ -374,7 +375,9 @@ pub fn is_foreign(path: &Path) -> bool {
             .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
 }
 
-/// The demonstrations in the LeRobot dataset folder or `.csv` file `path` ([`is_foreign`]).
+/// The demonstrations in the LeRobot dataset folder or `.csv` file `path` ([`is_foreign`]); a
+/// CSV file of tool paths ([`super::tool_path`]) is solved on the arm of `sim` at the default
+/// task's control period.
 pub fn load_foreign(path: &Path, sim: &SimConfig) -> Result<Demos, IoError> {
     if path.is_dir() {
         ensure!(
@@ -385,6 +388,10 @@ pub fn load_foreign(path: &Path, sim: &SimConfig) -> Result<Demos, IoError> {
             )
         );
         return to_demos(super::lerobot::import(path)?, sim);
+    }
+    if super::tool_path::is_tool_path_csv(path) {
+        let dt = TaskConfig::for_model(sim.model).dt;
+        return to_demos(super::tool_path::load(path, sim, dt, DERIVED_SEED)?, sim);
     }
     to_demos(read_csv(path)?, sim)
 }

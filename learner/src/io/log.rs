@@ -91,6 +91,7 @@ impl GaifoRow {
             t_lqr: self.t_lqr_s,
             cpu_learner: self.cpu_learner_s,
             demo_gap: f64::NAN,
+            path_rmse: f64::NAN,
         }
     }
 }
@@ -327,6 +328,7 @@ mod tests {
             cpu_learner: 0.7,
             // Not a CSV column: it reads back as NaN.
             demo_gap: 0.25,
+            path_rmse: f64::NAN,
         };
         let mut buf = Vec::new();
         let mut w = csv::Writer::from_writer(&mut buf);

@@ -1,11 +1,12 @@
 //! Files that leave the program (docs/design.md §4): `.npz` containers, demonstrations (also
-//! as LeRobot datasets and CSV), gain tables, the MDGPS policy, MCAP logs of recorded runs.
+//! as LeRobot datasets, CSV and tool paths), gain tables, the MDGPS policy, MCAP logs of recorded runs.
 
 pub mod checkpoint;
 pub mod demos;
 pub mod episode;
 pub mod files;
 pub mod foreign;
+pub mod lasa;
 pub mod learned;
 pub mod lerobot;
 pub mod log;
@@ -15,6 +16,7 @@ pub mod policy;
 pub mod run_mcap;
 pub mod table;
 pub mod task_arrays;
+pub mod tool_path;
 
 use std::path::{Path, PathBuf};
 
@@ -131,6 +133,14 @@ pub enum IoError {
         path: PathBuf,
         /// What went wrong.
         source: Box<IoError>,
+    },
+    /// Tool paths that cannot become demonstrations of the arm.
+    #[error("{}", path.display())]
+    ToolPath {
+        /// The file.
+        path: PathBuf,
+        /// Which episode and time, and why.
+        source: tool_path::ToolPathError,
     },
     /// The simulated arm the files are checked on.
     #[error(transparent)]

@@ -222,11 +222,25 @@ impl NpzFile {
             path: path.to_owned(),
             source,
         })?;
+        let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
+        Self::read_from(path, file, file_len)
+    }
+
+    /// Reads every array of an `.npz` file held in memory (`bytes`; `path` names it in
+    /// errors), e.g. one built into the program.
+    pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self, NpzError> {
+        Self::read_from(path, std::io::Cursor::new(bytes), bytes.len() as u64)
+    }
+
+    fn read_from<R: Read + std::io::Seek>(
+        path: &Path,
+        file: R,
+        file_len: u64,
+    ) -> Result<Self, NpzError> {
         let zerr = |e: zip::result::ZipError| NpzError::Zip {
             path: path.to_owned(),
             message: e.to_string(),
         };
-        let file_len = file.metadata().map(|m| m.len()).unwrap_or(0);
         let mut zip = ZipArchive::new(file).map_err(zerr)?;
         let mut arrays = BTreeMap::new();
         for i in 0..zip.len() {

@@ -15,3 +15,4 @@ mod replay;
 mod run_dir;
 mod shard;
 mod structure;
+mod tool_paths;

@@ -1,0 +1,94 @@
+//! Demonstrations as tool paths (docs/design.md §4.17): a CSV file of tool points loads
+//! through `--demos` like the other formats, passes the arm's checks, trains, and a sample
+//! out of reach is refused naming the file, the episode and the time.
+
+use crate::common::{learner, learner_output};
+
+use std::path::PathBuf;
+
+use ur5_shared::config::SimConfig;
+use ur5_shared::kinematics::UrKinematics;
+
+fn scratch(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("toolpaths-{tag}-{}", std::process::id()));
+    std::fs::remove_dir_all(&d).ok();
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Three strokes of 1 s sampled at 50 Hz (T = 11 at the 0.1 s control period), made by the
+/// UR5's forward kinematics of a smooth joint motion; `far` replaces episode 2's sample at
+/// t = 0.5 s with a point out of reach.
+fn strokes_csv(far: bool) -> String {
+    let sim = SimConfig::default();
+    let kin = UrKinematics::new(sim.model, sim.ee_offset);
+    let mut text = String::from("episode,t,x,y,z\n");
+    for e in 0..3 {
+        for i in 0..=50 {
+            let t = i as f64 * 0.02;
+            let s = t * t * (3.0 - 2.0 * t);
+            let q = [
+                0.0 + 0.3 * s,
+                -2.0 + 0.5 * s + 0.02 * e as f64 * (std::f64::consts::PI * t).sin(),
+                2.4 - 0.4 * s,
+            ];
+            let mut p = kin.ee_point(&UrKinematics::six(&q, &sim.wrist_q));
+            if far && e == 2 && i == 25 {
+                p = [2.0, 0.0, 0.4];
+            }
+            text += &format!("{e},{t},{},{},{}\n", p[0], p[1], p[2]);
+        }
+    }
+    text
+}
+
+#[test]
+fn a_tool_path_file_loads_checks_and_trains() {
+    let dir = scratch("train");
+    let csv = dir.join("strokes.csv");
+    std::fs::write(&csv, strokes_csv(false)).unwrap();
+    let d = learner::io::demos::load_checked(&csv, &SimConfig::default()).unwrap();
+    assert_eq!((d.count, d.horizon, d.dt), (3, 11, 0.1));
+    assert!(
+        (0..3).all(|j| (d.start_q[j] - [0.0, -2.0, 2.4][j]).abs() < 1e-6),
+        "the start through the inverse kinematics: {:?}",
+        d.start_q
+    );
+    let (ok, out, err) = learner_output(&["dataset", "check", "--json", csv.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["count"], 3);
+    // The strokes differ by 0.02 rad of shoulder lift at most, mid-stroke: a spread of a few
+    // millimetres, not zero.
+    let spread = v["demo_spread_rmse_m"].as_f64().unwrap();
+    assert!(spread > 1e-4 && spread < 0.02, "{spread}");
+    let run = dir.join("run");
+    let (ok, err) = learner(&[
+        "train",
+        "--demos",
+        csv.to_str().unwrap(),
+        "--iterations",
+        "1",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(err.contains("final distance"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_sample_out_of_reach_is_refused_naming_file_episode_and_time() {
+    let dir = scratch("far");
+    let csv = dir.join("far.csv");
+    std::fs::write(&csv, strokes_csv(true)).unwrap();
+    let e = learner::io::demos::load_checked(&csv, &SimConfig::default()).unwrap_err();
+    let msg = learner::error::line(&e);
+    assert!(
+        msg.contains("far.csv") && msg.contains("episode 2, t = 0.5 s") && msg.contains("reach"),
+        "{msg}"
+    );
+    let (ok, err) = learner(&["dataset", "check", csv.to_str().unwrap()]);
+    assert!(!ok && err.contains("episode 2, t = 0.5 s"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
