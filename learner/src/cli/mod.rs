@@ -15,6 +15,7 @@ pub mod replay;
 pub mod serve;
 pub mod sweep;
 pub mod train;
+pub mod train_td3;
 
 /// The options every run-producing subcommand shares.
 #[derive(clap::Args, Clone, Debug, Default)]

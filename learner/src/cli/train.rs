@@ -24,6 +24,9 @@ pub enum Algo {
     /// MDGPS: one neural-network policy for several goals (docs/design.md §6); --demos is a
     /// folder of `.npz` demonstrations, one file per goal.
     Mdgps,
+    /// Off-policy GAIfO: the critic as the reward of TD3 with a replay buffer (the baseline
+    /// built for sample efficiency, docs/design.md §1.8).
+    GaifoTd3,
 }
 
 /// Arguments of `learner train`.
@@ -124,7 +127,7 @@ pub fn default_demos_path(out: &Path) -> PathBuf {
 /// claimed for the run (`m`, recording no demonstrations yet, so that a folder holding another
 /// run is refused before the expert trains) and the default expert is trained and recorded into
 /// `out/expert/` ([`crate::run::train_and_record`], as `learner expert` does).
-fn demos_file(
+pub(super) fn demos_file(
     args: &TrainArgs,
     seed: u64,
     sim: &ur5_shared::config::SimConfig,
@@ -169,7 +172,10 @@ fn demos_file(
 /// Demonstrations that name no arm model (a CSV, a LeRobot dataset without the model field)
 /// are taken to be the `[sim]` model's; their joint angles cannot tell another arm apart, so
 /// the run says so.
-fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
+pub(super) fn warn_unrecorded_model(
+    path: &Path,
+    sim: &ur5_shared::config::SimConfig,
+) -> anyhow::Result<()> {
     if crate::io::demos::model_of(path)?.is_none() {
         eprintln!(
             "note: {} names no arm model: taken to be the {} ([sim] model), which cannot be \
@@ -184,7 +190,12 @@ fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> an
 /// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
 /// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
 /// records into because it is there.
-fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
+pub(super) fn take_folder(
+    record: bool,
+    out: &Path,
+    m: &Manifest,
+    claim: Claim,
+) -> anyhow::Result<()> {
     manifest::claim(out, m, claim)?;
     if claim == Claim::Resume {
         crate::io::files::adopt(out)?;
@@ -206,6 +217,7 @@ fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
         Algo::LqrGaifo => "lqr-gaifo",
         Algo::Mdgps => "mdgps",
         Algo::GaifoPpo => "gaifo-ppo",
+        Algo::GaifoTd3 => "gaifo-td3",
     };
     if let Some(m) = manifest::read(dir)? {
         anyhow::ensure!(
@@ -226,6 +238,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     check_resumed_algo(&args)?;
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
+    }
+    if args.algo == Algo::GaifoTd3 {
+        return super::train_td3::run(&args);
     }
     if args.algo == Algo::GaifoPpo {
         anyhow::ensure!(

@@ -40,6 +40,7 @@ use imitation::expert::{ExpertConfig, ExpertLearner};
 use imitation::gaifo::{GaifoConfig, LqrGaifo};
 use imitation::learn::Learn;
 use imitation::mdgps::{Mdgps, MdgpsConfig};
+use imitation::offpolicy::{GaifoTd3, GaifoTd3Config};
 use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 use imitation::rollout::Episode;
 use serde::Serialize;
@@ -60,7 +61,7 @@ use crate::run::Checkpoint;
 use crate::serve::Batch;
 
 /// The learners whose runs a replay redoes.
-pub(crate) const REPLAYED: [&str; 4] = ["lqr-gaifo", "expert", "gaifo-ppo", "mdgps"];
+pub(crate) const REPLAYED: [&str; 5] = ["lqr-gaifo", "expert", "gaifo-ppo", "mdgps", "gaifo-td3"];
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -309,6 +310,23 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayEr
                 &mut report,
                 None,
                 |l, dir, i, r| checkpoint_files(l, dir, i, &["policy.json", "critic.json"], r),
+            )?;
+        }
+        "gaifo-td3" => {
+            let cfg: GaifoTd3Config = m.settings_as()?;
+            let path = demos_path(&m, demos)?;
+            let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
+            let resume = |tmp: &Path| Ok(crate::run::resume_td3(cfg.clone(), d.clone(), tmp)?.0);
+            drive(
+                GaifoTd3::new(cfg.clone(), d.clone())?,
+                dir,
+                &picks,
+                &mut report,
+                Some(&resume),
+                |l, dir, i, r| match checkpoint_files(l, dir, i, &["critic.json"], r)? {
+                    Checked::Equal => state_file(&l.snapshot(), dir, i, r),
+                    other => Ok(other),
+                },
             )?;
         }
         "mdgps" => {
