@@ -10,7 +10,7 @@ use imitation::demos::Demos;
 use imitation::discriminator::Discriminator;
 use imitation::learn::{iterate, Learn};
 use imitation::offpolicy::td3::Td3Config;
-use imitation::offpolicy::{GaifoTd3, GaifoTd3Config};
+use imitation::offpolicy::{CriticData, GaifoTd3, GaifoTd3Config, OffPolicyReward};
 use learner::run::{arm_for, Checkpoint};
 
 fn tmp(name: &str) -> PathBuf {
@@ -114,30 +114,30 @@ fn a_tiny_td3_run_is_the_same_for_any_thread_count_and_learns_something() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-#[test]
-fn a_td3_run_checkpointed_and_resumed_at_any_iteration_is_the_same_bit_for_bit() {
-    let dir = tmp("resume");
-    let (_, demos) = short_demos(&dir);
-    let cfg = tiny_config();
-    let whole = run(&cfg, &demos, 4);
+/// `cfg` run for 4 iterations equals, logs and final state bit for bit, the run checkpointed
+/// after `stop` = 1, 2, 3 iterations as `learner train` does (the arm's noise position with it)
+/// and continued from the files in `dir/ck<stop>`.
+fn resumed_at_any_iteration(dir: &Path, cfg: &GaifoTd3Config, demos: &Demos) {
+    let zero = |mut log: imitation::iteration_log::GaifoLog| {
+        (
+            log.t_execute,
+            log.t_critic,
+            log.t_cost,
+            log.t_lqr,
+            log.cpu_learner,
+        ) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        format!("{log:?}")
+    };
+    let whole = run(cfg, demos, 4);
     for stop in 1..4 {
-        // `stop` iterations, checkpointed as `learner train` does (the arm's noise position
-        // with it), then 4 − stop more from the files.
         let mut l = GaifoTd3::new(cfg.clone(), demos.clone()).unwrap();
         let arm = arm_for(&l).unwrap();
         let mut logs = Vec::new();
         for _ in 0..stop {
-            let (mut log, _) = iterate(&mut l, &arm).unwrap();
-            (
-                log.t_execute,
-                log.t_critic,
-                log.t_cost,
-                log.t_lqr,
-                log.cpu_learner,
-            ) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            logs.push(format!("{log:?}"));
+            logs.push(zero(iterate(&mut l, &arm).unwrap().0));
         }
         let ck = dir.join(format!("ck{stop}"));
+        let _ = std::fs::remove_dir_all(&ck);
         l.checkpoint(&ck, Some(&arm)).unwrap();
         drop(l);
         let (mut l, noise) = learner::run::resume_td3(cfg.clone(), demos.clone(), &ck).unwrap();
@@ -145,19 +145,27 @@ fn a_td3_run_checkpointed_and_resumed_at_any_iteration_is_the_same_bit_for_bit()
         let mut arm = arm_for(&l).unwrap();
         arm.sim_mut().set_noise_position(noise.unwrap());
         for _ in stop..4 {
-            let (mut log, _) = iterate(&mut l, &arm).unwrap();
-            (
-                log.t_execute,
-                log.t_critic,
-                log.t_cost,
-                log.t_lqr,
-                log.cpu_learner,
-            ) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            logs.push(format!("{log:?}"));
+            logs.push(zero(iterate(&mut l, &arm).unwrap().0));
         }
         assert_eq!(logs, whole.0, "logs, resumed after {stop}");
         assert!(state_bytes(&l) == whole.1, "state, resumed after {stop}");
     }
+}
+
+#[test]
+fn a_td3_run_checkpointed_and_resumed_at_any_iteration_is_the_same_bit_for_bit() {
+    let dir = tmp("resume");
+    let (_, demos) = short_demos(&dir);
+    // Also with the critic trained on buffer rows and the diagnostic reward, which draw from
+    // the learner's RNG too.
+    let other_data = GaifoTd3Config {
+        critic_data: CriticData::Buffer,
+        reward: OffPolicyReward::TaskDistance,
+        ..tiny_config()
+    };
+    resumed_at_any_iteration(&dir, &other_data, &demos);
+    let cfg = tiny_config();
+    resumed_at_any_iteration(&dir, &cfg, &demos);
     // Another seed's or another buffer size's resume is refused, naming the state file.
     let ck = dir.join("ck1");
     let mut other = cfg.clone();
@@ -165,11 +173,8 @@ fn a_td3_run_checkpointed_and_resumed_at_any_iteration_is_the_same_bit_for_bit()
     let e = learner::run::resume_td3(other, demos.clone(), &ck)
         .err()
         .unwrap();
-    assert!(
-        learner::error::line(&e).contains("seed"),
-        "{}",
-        learner::error::line(&e)
-    );
+    let e = learner::error::line(&e);
+    assert!(e.contains("seed"), "{e}");
     let mut small = cfg.clone();
     small.buffer_capacity = 10;
     let e = learner::run::resume_td3(small, demos.clone(), &ck)

@@ -9,8 +9,10 @@
 //! 2. (no dynamics model) add the N episodes' transitions to the replay buffer ([`replay`]);
 //! 3. update the critic on expert vs this iteration's transitions, exactly as LQR+GAIfO and
 //!    GAIfO (PPO) do ([`Critic::update`]);
-//! 4. (the reward) `r = −c D(s, s')` (c = `reward_scale`) of every sampled row, recomputed from
-//!    the critic of the moment for each minibatch, as DAC recomputes its reward;
+//! 4. (the reward) `r = −c (D(s, s') − D̄_E) / σ_D` (c = `reward_scale`) of every sampled row,
+//!    recomputed from the critic of the moment for each minibatch, as DAC recomputes its
+//!    reward; D̄_E is the critic's mean on the expert transitions and σ_D its standard deviation
+//!    on expert ∪ this iteration's transitions, both taken after the critic's update;
 //! 5. (no expansion);
 //! 6. `updates_per_episode × N` TD3 gradient steps on minibatches from the buffer ([`td3`]).
 //!
@@ -22,17 +24,22 @@
 //! more quantity tuned online. TD3 is also deterministic given its noise draws, and simpler to
 //! test against hand-computed values.
 //!
-//! Why `r = −D`: the critic is a Wasserstein critic, not a classifier; its value is an
-//! unbounded score, low on expert transitions, so DAC's `log D − log(1 − D)` and GAIL's
-//! `−log(1 − D)` (which need D ∈ (0, 1)) do not apply. `−D` is the reward GAIfO (PPO) takes
-//! from the same critic, so the two baselines differ in the policy learner only.
+//! Why `−D`: the critic is a Wasserstein critic, not a classifier; its value is an unbounded
+//! score, low on expert transitions, so DAC's `log D − log(1 − D)` and GAIL's `−log(1 − D)`
+//! (which need D ∈ (0, 1)) do not apply. `−D` is the reward GAIfO (PPO) takes from the same
+//! critic, so the two baselines differ in the policy learner only. Why centred and scaled: a
+//! Wasserstein critic is defined up to an additive constant, which drifts from update to
+//! update, and PPO's advantages are blind to it while TD3's bootstrapped values are not (a
+//! shift c moves every Q by c / (1 − γ)); centred on the expert, the reward is about 0 where the
+//! expert goes and negative elsewhere, in units of the critic's spread (measured: without it the
+//! TD targets chase the drift and the arm runs away; docs/design.md §1.8).
 //!
 //! Absorbing states (DAC §4.2): the reaching tasks' episodes end at the time limit T only, and
 //! DAC treats a time limit as no termination: the last transition bootstraps from Q'(s_T,
 //! π'(s_T)) like any other ([`replay::RowKind::Step`]). An episode that terminates
 //! ([`EpisodeEnd::Terminated`]) ends in the absorbing state instead: its last transition
 //! bootstraps from Q'(s_a, 0), and the buffer gets the absorbing state's own transition, whose
-//! reward is that of the terminal state held still, −c D(s_T, s_T).
+//! reward is that of the terminal state held still, the pair (s_T, s_T).
 
 pub mod replay;
 mod resume;
@@ -78,18 +85,50 @@ pub struct GaifoTd3Config {
     pub discriminator: DiscriminatorConfig,
     /// Seed of every random draw (noise, critic, nets, minibatches, smoothing noise).
     pub seed: u64,
-    /// Exploration σ of the noisy episodes, in units of the per-step action bound (TD3: 0.1).
+    /// Exploration σ of the noisy episodes, in units of the per-step action bound (TD3: 0.1;
+    /// ours 0.5, from the search).
     pub exploration_noise: f64,
     /// TD3 gradient steps per noisy episode collected (DAC: one per environment step, i.e. T
-    /// per episode).
+    /// per episode; ours 100, from the search).
     pub updates_per_episode: usize,
     /// Rows the replay buffer holds (the oldest are overwritten). Its rows are part of every
     /// checkpoint: 27 f64 each on the reaching task.
     pub buffer_capacity: usize,
-    /// c in r = −c D(s, s').
+    /// c in r = −c (D(s, s') − D̄_E) / σ_D (module docs).
     pub reward_scale: f64,
+    /// What the critic D is trained on against the expert each iteration: this iteration's
+    /// transitions, as LQR+GAIfO and GAIfO (PPO) train it, or as many rows drawn uniformly from
+    /// the replay buffer, as DAC trains its discriminator (the rewards are taken on buffer rows).
+    pub critic_data: CriticData,
+    /// Where TD3's reward comes from: the critic (GAIfO, the default) or, as a diagnostic
+    /// only, the true distance to the goal (then it is reinforcement learning, not imitation:
+    /// it tells TD3's own behaviour from the critic's, as GAIfO (PPO)'s `reward` does).
+    pub reward: OffPolicyReward,
     /// TD3.
     pub td3: Td3Config,
+}
+
+/// The critic's policy-side data ([`GaifoTd3Config::critic_data`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CriticData {
+    /// The iteration's N episodes' transitions.
+    #[default]
+    Iteration,
+    /// As many rows drawn uniformly from the replay buffer (after this iteration's are in).
+    Buffer,
+}
+
+/// TD3's reward ([`GaifoTd3Config::reward`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OffPolicyReward {
+    /// `r = −c (D(s, s') − D̄_E) / σ_D`: GAIfO (module docs).
+    #[default]
+    Critic,
+    /// `r = −c |ee(s') − goal|` (m): RL on the task's distance, a diagnostic that sees the
+    /// goal; not imitation from observation.
+    TaskDistance,
 }
 
 impl Default for GaifoTd3Config {
@@ -109,10 +148,14 @@ impl GaifoTd3Config {
             critic_lr_half_life: g.critic_lr_half_life,
             discriminator: g.discriminator.clone(),
             seed: g.seed,
-            exploration_noise: 0.1,
-            updates_per_episode: 50,
+            // 0.5 and 100 (TD3: 0.1; 50 before), with γ = 0.95: the search on the default
+            // task (docs/results.md, "Off-policy GAIfO (TD3)").
+            exploration_noise: 0.5,
+            updates_per_episode: 100,
             buffer_capacity: 50_000,
             reward_scale: 1.0,
+            critic_data: CriticData::Iteration,
+            reward: OffPolicyReward::Critic,
             td3: Td3Config::default(),
         }
     }
@@ -271,6 +314,9 @@ pub struct GaifoTd3 {
     iteration: usize,
     idx: Vec<usize>,
     batch: Minibatch,
+    /// (D̄_E, σ_D) of the iteration's reward (module docs); recomputed after every critic
+    /// update, so not part of the checkpoint.
+    reward_ref: (f64, f64),
     /// Statistics of the last iteration's TD3 steps.
     pub last_update: UpdateStats,
 }
@@ -280,6 +326,39 @@ fn demo_states(demos: &Demos) -> Mat<f64> {
     Mat::from_fn(demos.count * demos.horizon, DX, |r, c| {
         demos.states[r * DX + c]
     })
+}
+
+/// (D̄_E, σ_D): the mean of `disc` on the `expert` transitions and its population standard
+/// deviation on expert ∪ `controller` (rows of [s; s']); σ_D = 1 where it is not positive.
+pub fn reward_reference(
+    disc: &Discriminator,
+    expert: &Mat<f64>,
+    controller: &Mat<f64>,
+) -> (f64, f64) {
+    let mut ws = disc.workspace();
+    let mut x = vec![0.0; expert.ncols()];
+    let mut values = |m: &Mat<f64>| -> Vec<f64> {
+        (0..m.nrows())
+            .map(|r| {
+                for (c, v) in x.iter_mut().enumerate() {
+                    *v = m[(r, c)];
+                }
+                disc.value(&x, &mut ws)
+            })
+            .collect()
+    };
+    let (e, c) = (values(expert), values(controller));
+    let d_e = e.iter().sum::<f64>() / e.len().max(1) as f64;
+    let n = (e.len() + c.len()).max(1) as f64;
+    let mean = e.iter().chain(&c).sum::<f64>() / n;
+    let var = e
+        .iter()
+        .chain(&c)
+        .map(|v| (v - mean) * (v - mean))
+        .sum::<f64>()
+        / n;
+    let sd = var.sqrt();
+    (d_e, if sd > 0.0 && sd.is_finite() { sd } else { 1.0 })
 }
 
 impl GaifoTd3 {
@@ -302,6 +381,7 @@ impl GaifoTd3 {
             iteration: 0,
             idx: Vec::new(),
             batch: Minibatch::default(),
+            reward_ref: (0.0, 1.0),
             last_update: UpdateStats::default(),
             cfg,
             task,
@@ -370,7 +450,16 @@ impl GaifoTd3 {
                 let row = self.buffer.row(i);
                 x[..DX].copy_from_slice(row.s);
                 x[DX..].copy_from_slice(row.s_next);
-                let r = -self.cfg.reward_scale * disc.value(&x, &mut dws);
+                let r = match self.cfg.reward {
+                    OffPolicyReward::Critic => {
+                        let (d_e, sd) = self.reward_ref;
+                        -self.cfg.reward_scale * (disc.value(&x, &mut dws) - d_e) / sd
+                    }
+                    OffPolicyReward::TaskDistance => {
+                        let e = &row.s_next[ur5_shared::layout::EE_MINUS_GOAL];
+                        -self.cfg.reward_scale * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+                    }
+                };
                 st.mean_reward += r;
                 self.batch.s.extend_from_slice(row.s);
                 self.batch.a.extend_from_slice(row.a);
@@ -459,8 +548,28 @@ impl Learn for GaifoTd3 {
             );
         }
         // 3. The critic on (s, s') of this iteration's episodes vs the expert.
-        let controller = episode_transitions(episodes);
+        let controller = match self.cfg.critic_data {
+            CriticData::Iteration => episode_transitions(episodes),
+            CriticData::Buffer => {
+                let n: usize = episodes.iter().map(|e| e.horizon() - 1).sum();
+                self.buffer.sample(&mut self.rng, n, &mut self.idx);
+                let (buffer, idx) = (&self.buffer, &self.idx);
+                Mat::from_fn(n, 2 * DX, |r, c| {
+                    let row = buffer.row(idx[r]);
+                    if c < DX {
+                        row.s[c]
+                    } else {
+                        row.s_next[c - DX]
+                    }
+                })
+            }
+        };
         let critic = self.critic.update(&controller, self.iteration)?;
+        self.reward_ref = reward_reference(
+            self.critic.cost_discriminator(),
+            self.critic.expert(),
+            &controller,
+        );
         // 4, 6. TD3 on minibatches of the buffer, rewards from the updated critic.
         let t2 = Instant::now();
         let st = self.td3_steps(self.cfg.updates_per_episode * episodes.len());

@@ -95,6 +95,7 @@ fn td_targets_are_the_clipped_double_q_of_the_smoothed_target_action() {
     let cfg = Td3Config {
         target_noise: 0.4,
         target_noise_clip: 0.3,
+        gamma: 0.9,
         ..tiny_cfg()
     };
     let mut t = tiny(cfg, 1);
@@ -104,7 +105,7 @@ fn td_targets_are_the_clipped_double_q_of_the_smoothed_target_action() {
     let eps = [1.5, -0.2, 0.1, -2.0, 0.7, 3.0, 0.0, 0.0, 0.0];
     let mut y = Vec::new();
     t.targets(&b, &eps, &mut y);
-    let gamma = 0.99;
+    let gamma = 0.9;
     // Row 0: a step row.
     let s1: [f64; DX] = b.s_next[..DX].try_into().unwrap();
     let a: [f64; DU] = std::array::from_fn(|j| {
