@@ -120,7 +120,13 @@ pub enum Cmd {
 pub fn main() -> anyhow::Result<()> {
     match Cli::parse().cmd {
         Cmd::Expert(args) => crate::experiment::pool(args.threads)?.install(|| expert::run(args)),
-        Cmd::Train(args) => crate::experiment::pool(args.threads)?.install(|| train::run(args)),
+        Cmd::Train(args) => crate::experiment::pool(args.threads)?.install(|| {
+            if args.algo == train::Algo::GaifoTd3 {
+                train_td3::run(&args)
+            } else {
+                train::run(args)
+            }
+        }),
         Cmd::Experiment(args) => experiment::run_cli(args),
         Cmd::Serve(args) => serve::run_cli(args),
         Cmd::Conformance(args) => bench::conformance(args),

@@ -46,7 +46,7 @@ pub struct TrainArgs {
     /// Iterations; overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
-    /// Continue the LQR+GAIfO or MDGPS run in DIR (its --out) from its latest complete
+    /// Continue the LQR+GAIfO, MDGPS or GAIfO (TD3) run in DIR (its --out) from its latest complete
     /// checkpoint (iter_NNN_critic.json + iter_NNN_state.npz) up to --iterations in all, with
     /// the run's own demonstrations, config and seed: iterations are numbered on from NNN and
     /// rows are appended to DIR/gaifo_log.csv (DIR/mdgps_log.csv for MDGPS). The resume is
@@ -63,7 +63,7 @@ pub struct TrainArgs {
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
     /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
-    /// --algo gaifo-ppo and mdgps.
+    /// --algo gaifo-ppo, mdgps and gaifo-td3.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
@@ -74,7 +74,10 @@ pub struct TrainArgs {
     /// `critic_updates`, `adapt_step`, `psd_hessian`, `seed`; tables `sim`, `discriminator`,
     /// `algorithm`, `prior`, `fit`, `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys
     /// `samples`, `iterations`, `critic_updates`, `seed`; tables `sim`, `discriminator`, `ppo`),
-    /// for mdgps an `MdgpsConfig` (key `kl_step`; tables `lqr_gaifo`, `policy`).
+    /// for mdgps an `MdgpsConfig` (key `kl_step`; tables `lqr_gaifo`, `policy`), for gaifo-td3
+    /// a `GaifoTd3Config` (keys `samples`, `iterations`, `exploration_noise`,
+    /// `updates_per_episode`, `buffer_capacity`, `reward_scale`, `critic_data`, `reward`,
+    /// `seed`; tables `sim`, `discriminator`, `td3`).
     /// --out: per-iteration CSV, gain tables and critic checkpoints [default: runs/train; with
     /// --resume, DIR].
     #[command(flatten)]
@@ -209,7 +212,7 @@ pub(super) fn take_folder(
 /// A resumed folder must hold a run of the algorithm asked for: said before anything reads
 /// the demonstrations or the checkpoints, which differ in kind between algorithms (a folder of
 /// goals for MDGPS, `mdgps.iteration` in its states).
-fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
+pub(super) fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
     let Some(dir) = &args.resume else {
         return Ok(());
     };
@@ -238,9 +241,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     check_resumed_algo(&args)?;
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
-    }
-    if args.algo == Algo::GaifoTd3 {
-        return super::train_td3::run(&args);
     }
     if args.algo == Algo::GaifoPpo {
         anyhow::ensure!(

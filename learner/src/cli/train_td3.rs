@@ -4,7 +4,9 @@
 use imitation::iteration_log::GaifoLog;
 use imitation::offpolicy::{GaifoTd3Config, UpdateStats};
 
-use super::train::{demos_file, report, take_folder, warn_unrecorded_model, TrainArgs};
+use super::train::{
+    check_resumed_algo, demos_file, report, take_folder, warn_unrecorded_model, TrainArgs,
+};
 use crate::io::manifest::{Claim, Manifest};
 
 /// The progress line of an off-policy GAIfO iteration.
@@ -29,6 +31,7 @@ fn line(l: &GaifoLog, u: &UpdateStats) -> String {
 /// Runs `learner train --algo gaifo-td3` (its `--config` a [`GaifoTd3Config`] layered over its
 /// defaults, i.e. LQR+GAIfO's shared settings, then the command line).
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
+    check_resumed_algo(args)?;
     let mut cfg: GaifoTd3Config = args.common.settings()?;
     if let Some(i) = args.iterations {
         cfg.iterations = i;
