@@ -25,7 +25,10 @@
 //! GAIfO (PPO) (`learner train --algo gaifo-ppo --record-episodes`) its policy nets
 //! `iter_NNN_policy.json` and critic `iter_NNN_critic.json`, byte for byte (the replayed ones
 //! written by the same [`Checkpoint`] code; JSON numbers are shortest round-trip decimals, so
-//! equal bytes are equal bits). The first difference ends the replay.
+//! equal bytes are equal bits); GAIfO (TD3) (`learner train --algo gaifo-td3
+//! --record-episodes`) its critic `iter_NNN_critic.json` byte for byte and its learner state
+//! `iter_NNN_state.npz` (nets, optimisers, RNG, replay buffer) bit for bit. The first difference
+//! ends the replay.
 //!
 //! Every random draw of the learners (critic minibatches, gradient-penalty points, GMM
 //! initialisation, PPO's minibatch order) comes from RNGs seeded by the run seed and advanced
