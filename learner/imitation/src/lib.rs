@@ -18,6 +18,7 @@
 //!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
 //! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor and MDGPS's global policy;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
+//! - [`offpolicy`]: off-policy GAIfO, the critic as the reward of TD3 with a replay buffer;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
 //!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table;
@@ -41,6 +42,7 @@ pub mod iteration_log;
 pub mod learn;
 pub mod mdgps;
 pub mod mlp_policy;
+pub mod offpolicy;
 pub mod ppo;
 pub mod rollout;
 pub mod settings;

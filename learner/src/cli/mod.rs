@@ -15,6 +15,7 @@ pub mod replay;
 pub mod serve;
 pub mod sweep;
 pub mod train;
+pub mod train_td3;
 
 /// The options every run-producing subcommand shares.
 #[derive(clap::Args, Clone, Debug, Default)]
@@ -119,7 +120,13 @@ pub enum Cmd {
 pub fn main() -> anyhow::Result<()> {
     match Cli::parse().cmd {
         Cmd::Expert(args) => crate::experiment::pool(args.threads)?.install(|| expert::run(args)),
-        Cmd::Train(args) => crate::experiment::pool(args.threads)?.install(|| train::run(args)),
+        Cmd::Train(args) => crate::experiment::pool(args.threads)?.install(|| {
+            if args.algo == train::Algo::GaifoTd3 {
+                train_td3::run(&args)
+            } else {
+                train::run(args)
+            }
+        }),
         Cmd::Experiment(args) => experiment::run_cli(args),
         Cmd::Serve(args) => serve::run_cli(args),
         Cmd::Conformance(args) => bench::conformance(args),

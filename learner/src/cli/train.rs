@@ -24,6 +24,9 @@ pub enum Algo {
     /// MDGPS: one neural-network policy for several goals (docs/design.md §6); --demos is a
     /// folder of `.npz` demonstrations, one file per goal.
     Mdgps,
+    /// Off-policy GAIfO: the critic as the reward of TD3 with a replay buffer (the baseline
+    /// built for sample efficiency, docs/design.md §1.8).
+    GaifoTd3,
 }
 
 /// Arguments of `learner train`.
@@ -43,7 +46,7 @@ pub struct TrainArgs {
     /// Iterations; overrides the config.
     #[arg(long)]
     pub iterations: Option<usize>,
-    /// Continue the LQR+GAIfO or MDGPS run in DIR (its --out) from its latest complete
+    /// Continue the LQR+GAIfO, MDGPS or GAIfO (TD3) run in DIR (its --out) from its latest complete
     /// checkpoint (iter_NNN_critic.json + iter_NNN_state.npz) up to --iterations in all, with
     /// the run's own demonstrations, config and seed: iterations are numbered on from NNN and
     /// rows are appended to DIR/gaifo_log.csv (DIR/mdgps_log.csv for MDGPS). The resume is
@@ -60,7 +63,7 @@ pub struct TrainArgs {
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
     /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
-    /// --algo gaifo-ppo and mdgps.
+    /// --algo gaifo-ppo, mdgps and gaifo-td3.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
@@ -71,7 +74,10 @@ pub struct TrainArgs {
     /// `critic_updates`, `adapt_step`, `psd_hessian`, `seed`; tables `sim`, `discriminator`,
     /// `algorithm`, `prior`, `fit`, `traj_opt`), for gaifo-ppo a `GaifoPpoConfig` (keys
     /// `samples`, `iterations`, `critic_updates`, `seed`; tables `sim`, `discriminator`, `ppo`),
-    /// for mdgps an `MdgpsConfig` (key `kl_step`; tables `lqr_gaifo`, `policy`).
+    /// for mdgps an `MdgpsConfig` (key `kl_step`; tables `lqr_gaifo`, `policy`), for gaifo-td3
+    /// a `GaifoTd3Config` (keys `samples`, `iterations`, `exploration_noise`,
+    /// `updates_per_episode`, `buffer_capacity`, `reward_scale`, `critic_data`, `reward`,
+    /// `seed`; tables `sim`, `discriminator`, `td3`).
     /// --out: per-iteration CSV, gain tables and critic checkpoints [default: runs/train; with
     /// --resume, DIR].
     #[command(flatten)]
@@ -139,7 +145,7 @@ pub fn default_demos_path(out: &Path) -> PathBuf {
 /// claimed for the run (`m`, recording no demonstrations yet, so that a folder holding another
 /// run is refused before the expert trains) and the default expert is trained and recorded into
 /// `out/expert/` ([`crate::run::train_and_record`], as `learner expert` does).
-fn demos_file(
+pub(super) fn demos_file(
     args: &TrainArgs,
     seed: u64,
     sim: &ur5_shared::config::SimConfig,
@@ -184,7 +190,10 @@ fn demos_file(
 /// Demonstrations that name no arm model (a CSV, a LeRobot dataset without the model field)
 /// are taken to be the `[sim]` model's; their joint angles cannot tell another arm apart, so
 /// the run says so.
-fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
+pub(super) fn warn_unrecorded_model(
+    path: &Path,
+    sim: &ur5_shared::config::SimConfig,
+) -> anyhow::Result<()> {
     if crate::io::demos::model_of(path)?.is_none() {
         eprintln!(
             "note: {} names no arm model: taken to be the {} ([sim] model), which cannot be \
@@ -199,7 +208,12 @@ fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> an
 /// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
 /// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
 /// records into because it is there.
-fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
+pub(super) fn take_folder(
+    record: bool,
+    out: &Path,
+    m: &Manifest,
+    claim: Claim,
+) -> anyhow::Result<()> {
     manifest::claim(out, m, claim)?;
     if claim == Claim::Resume {
         crate::io::files::adopt(out)?;
@@ -213,7 +227,7 @@ fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::
 /// A resumed folder must hold a run of the algorithm asked for: said before anything reads
 /// the demonstrations or the checkpoints, which differ in kind between algorithms (a folder of
 /// goals for MDGPS, `mdgps.iteration` in its states).
-fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
+pub(super) fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
     let Some(dir) = &args.resume else {
         return Ok(());
     };
@@ -221,6 +235,7 @@ fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
         Algo::LqrGaifo => "lqr-gaifo",
         Algo::Mdgps => "mdgps",
         Algo::GaifoPpo => "gaifo-ppo",
+        Algo::GaifoTd3 => "gaifo-td3",
     };
     if let Some(m) = manifest::read(dir)? {
         anyhow::ensure!(

@@ -25,7 +25,10 @@
 //! GAIfO (PPO) (`learner train --algo gaifo-ppo --record-episodes`) its policy nets
 //! `iter_NNN_policy.json` and critic `iter_NNN_critic.json`, byte for byte (the replayed ones
 //! written by the same [`Checkpoint`] code; JSON numbers are shortest round-trip decimals, so
-//! equal bytes are equal bits). The first difference ends the replay.
+//! equal bytes are equal bits); GAIfO (TD3) (`learner train --algo gaifo-td3
+//! --record-episodes`) its critic `iter_NNN_critic.json` byte for byte and its learner state
+//! `iter_NNN_state.npz` (nets, optimisers, RNG, replay buffer) bit for bit. The first difference
+//! ends the replay.
 //!
 //! Every random draw of the learners (critic minibatches, gradient-penalty points, GMM
 //! initialisation, PPO's minibatch order) comes from RNGs seeded by the run seed and advanced
@@ -40,6 +43,7 @@ use imitation::expert::{ExpertConfig, ExpertLearner};
 use imitation::gaifo::{GaifoConfig, LqrGaifo};
 use imitation::learn::Learn;
 use imitation::mdgps::{Mdgps, MdgpsConfig};
+use imitation::offpolicy::{GaifoTd3, GaifoTd3Config};
 use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
 use imitation::rollout::Episode;
 use serde::Serialize;
@@ -60,7 +64,7 @@ use crate::run::Checkpoint;
 use crate::serve::Batch;
 
 /// The learners whose runs a replay redoes.
-pub(crate) const REPLAYED: [&str; 4] = ["lqr-gaifo", "expert", "gaifo-ppo", "mdgps"];
+pub(crate) const REPLAYED: [&str; 5] = ["lqr-gaifo", "expert", "gaifo-ppo", "mdgps", "gaifo-td3"];
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -309,6 +313,23 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayEr
                 &mut report,
                 None,
                 |l, dir, i, r| checkpoint_files(l, dir, i, &["policy.json", "critic.json"], r),
+            )?;
+        }
+        "gaifo-td3" => {
+            let cfg: GaifoTd3Config = m.settings_as()?;
+            let path = demos_path(&m, demos)?;
+            let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
+            let resume = |tmp: &Path| Ok(crate::run::resume_td3(cfg.clone(), d.clone(), tmp)?.0);
+            drive(
+                GaifoTd3::new(cfg.clone(), d.clone())?,
+                dir,
+                &picks,
+                &mut report,
+                Some(&resume),
+                |l, dir, i, r| match checkpoint_files(l, dir, i, &["critic.json"], r)? {
+                    Checked::Equal => state_file(&l.snapshot(), dir, i, r),
+                    other => Ok(other),
+                },
             )?;
         }
         "mdgps" => {

@@ -9,6 +9,7 @@ mod expert;
 mod gaifo;
 mod golden;
 mod mdgps;
+mod offpolicy;
 mod pictures;
 mod ppo;
 mod replay;
