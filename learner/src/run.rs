@@ -333,7 +333,7 @@ pub fn resume_td3(
     demos: Demos,
     dir: &Path,
 ) -> Result<(GaifoTd3, Option<u128>), RunError> {
-    let (snap, disc, arm, state_path) = load_checkpoint(dir, "td3.iteration")?;
+    let (snap, disc, arm, state_path) = load_checkpoint(dir, "td3.iteration", 2 * demos.layout().dx())?;
     let run =
         GaifoTd3::from_snapshot(cfg, demos, &snap, disc).map_err(|source| RunError::Restore {
             path: state_path,

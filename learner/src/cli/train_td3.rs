@@ -52,6 +52,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let pre = Manifest::new("train", "gaifo-td3", cfg.seed, None, &cfg)?;
     let (path, claimed) = demos_file(args, cfg.seed, &cfg.sim, &pre)?;
     let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
+    let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
     warn_unrecorded_model(&path, &cfg.sim)?;
     let m = Manifest::new("train", "gaifo-td3", cfg.seed, Some(&path), &cfg)?;
     let claim = match args.resume {
@@ -108,6 +109,6 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             cfg.iterations
         );
     }
-    report(&logs, "gaifo-td3", cfg.seed, &out, args.common.json);
+    report(&logs, "gaifo-td3", cfg.seed, &out, args.common.json, spread);
     Ok(())
 }

@@ -236,7 +236,7 @@ pub fn add_episode(
 ) {
     let t_len = ep.horizon();
     for t in 0..t_len.saturating_sub(1) {
-        let s = ep.state(t);
+        let s = ep.reach3_state(t);
         let base = action_base(mode, &s);
         let a: [f64; DU] = std::array::from_fn(|j| (ep.u[t * DU + j] - base[j]) / bound[j]);
         let kind = match end {
@@ -264,9 +264,14 @@ impl Policy for ActorPolicy<'_> {
         usize::MAX
     }
 
-    fn act(&mut self, _t: usize, s: &[f64; DX], eps: &[f64; DU], mode: ActionMode) -> [f64; DU] {
+    /// The actor acts on the three-joint task's state (dX = 12, dU = 3); GAIfO (TD3) refuses
+    /// other tasks when it is built.
+    fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, out: &mut [f64]) {
+        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
         let a = self.pol.mean_action(s, mode, &mut self.ws);
-        std::array::from_fn(|j| a[j] + self.std[j] * eps[j])
+        for j in 0..DU {
+            out[j] = a[j] + self.std[j] * eps[j];
+        }
     }
 }
 
@@ -367,6 +372,12 @@ impl GaifoTd3 {
     pub fn new(cfg: GaifoTd3Config, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
+        if task.layout() != ur5_shared::StateLayout::REACH3 {
+            return Err(ImitationError::Unsupported {
+                algo: "GAIfO (TD3)",
+                layout: task.layout(),
+            });
+        }
         let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
         let norm = Normalizer::from_data(demo_states(&demos).as_ref())?;
         let bound = action_bound(&cfg.sim, task.dt);

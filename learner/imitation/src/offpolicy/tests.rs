@@ -293,6 +293,7 @@ fn a_step_updates_the_critics_every_time_and_the_actor_and_targets_every_d_steps
 /// An episode of `t` states with distinct values.
 fn episode(t: usize) -> Episode {
     Episode {
+        layout: ur5_shared::StateLayout::REACH3,
         x: (0..t * DX).map(|i| 0.01 * i as f64).collect(),
         u: (0..t * DU).map(|i| 0.5 + 0.02 * i as f64).collect(),
         u_policy: vec![0.0; t * DU],
