@@ -18,6 +18,8 @@
 //!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
 //! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor and MDGPS's global policy;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
+//! - [`bco`]: behavioural cloning from observation, BCO(α), a baseline (docs/design.md §7);
+//! - [`replay_mean`]: the naive baseline, the demonstrations' mean joint path as commands;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
 //!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table.
@@ -25,6 +27,7 @@
 //! Depends on `gps` and `shared` (the contract) only; the simulator, files and IPC are the
 //! `learner` application's.
 
+pub mod bco;
 pub mod controller;
 pub mod cost;
 pub mod cpu;
@@ -40,6 +43,7 @@ pub mod learn;
 pub mod mdgps;
 pub mod mlp_policy;
 pub mod ppo;
+pub mod replay_mean;
 pub mod rollout;
 pub mod settings;
 

@@ -14,6 +14,8 @@ use crate::io::manifest::{self, Claim, Manifest};
 use crate::run::{train, train_resumed};
 use imitation::ppo::gaifo_ppo::GaifoPpoConfig;
 
+mod baselines;
+
 /// Which imitation algorithm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Algo {
@@ -24,6 +26,11 @@ pub enum Algo {
     /// MDGPS: one neural-network policy for several goals (docs/design.md §6); --demos is a
     /// folder of `.npz` demonstrations, one file per goal.
     Mdgps,
+    /// BCO(α): behavioural cloning from observation, a baseline (docs/design.md §7).
+    Bco,
+    /// The naive baseline: the demonstrations' mean joint path as the commands, no learning
+    /// (docs/design.md §7.3).
+    ReplayMean,
 }
 
 /// Arguments of `learner train`.
@@ -206,6 +213,8 @@ fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
         Algo::LqrGaifo => "lqr-gaifo",
         Algo::Mdgps => "mdgps",
         Algo::GaifoPpo => "gaifo-ppo",
+        Algo::Bco => "bco",
+        Algo::ReplayMean => "replay-mean",
     };
     if let Some(m) = manifest::read(dir)? {
         anyhow::ensure!(
@@ -226,6 +235,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     check_resumed_algo(&args)?;
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
+    }
+    if args.algo == Algo::Bco {
+        return baselines::run_bco(&args);
+    }
+    if args.algo == Algo::ReplayMean {
+        return baselines::run_replay_mean(&args);
     }
     if args.algo == Algo::GaifoPpo {
         anyhow::ensure!(
