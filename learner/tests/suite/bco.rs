@@ -159,13 +159,14 @@ fn learner_train_runs_and_resumes_bco_exactly_and_runs_the_mean_path() {
         let (ok, err) = common::learner(&args);
         assert!(ok, "{} {err}", out.display());
     };
+    let rec = "--record-episodes";
     train(
         &whole,
-        &["--iterations", "4", "--out", whole.to_str().unwrap()],
+        &["--iterations", "4", "--out", whole.to_str().unwrap(), rec],
     );
     train(
         &part,
-        &["--iterations", "2", "--out", part.to_str().unwrap()],
+        &["--iterations", "2", "--out", part.to_str().unwrap(), rec],
     );
     train(
         &part,
@@ -185,7 +186,13 @@ fn learner_train_runs_and_resumes_bco_exactly_and_runs_the_mean_path() {
             "{f}"
         );
     }
-    // The mean path: one evaluation row, its table.
+    // The recorded runs' learning, redone from their episodes, is theirs bit for bit (the
+    // resumed one's too).
+    for run in [&whole, &part] {
+        let (ok, err) = common::learner(&["replay", run.to_str().unwrap()]);
+        assert!(ok, "{} {err}", run.display());
+    }
+    // The mean path: one evaluation row, its table; its replay redoes it.
     let mean = dir.join("mean");
     let (ok, err) = common::learner(&[
         "train",
@@ -195,12 +202,15 @@ fn learner_train_runs_and_resumes_bco_exactly_and_runs_the_mean_path() {
         d,
         "--out",
         mean.to_str().unwrap(),
+        "--record-episodes",
     ]);
     assert!(ok, "{err}");
     let r = rows(&mean.join("gaifo_log.csv"));
     assert_eq!(r.len(), 1);
     assert!(r[0].contains(",replay-mean"), "{}", r[0]);
     assert!(mean.join("iter_001_table.npz").is_file());
+    let (ok, err) = common::learner(&["replay", mean.to_str().unwrap()]);
+    assert!(ok, "{err}");
     let (ok, err) = common::learner(&[
         "train",
         "--algo",
