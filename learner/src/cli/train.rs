@@ -57,7 +57,8 @@ pub struct TrainArgs {
     /// exact: the whole learner state (critic with Adam moments, GMM dynamics prior and its data,
     /// previous controllers, step size, η, MDGPS's policy and its optimiser, every RNG position)
     /// was checkpointed, so tables and CSV rows (timing columns aside) are those of an
-    /// uninterrupted run, bit for bit, wherever the run was stopped or killed.
+    /// uninterrupted run, bit for bit, wherever the run was stopped or killed. A BCO run
+    /// (--algo bco) resumes the same way from its latest iter_NNN_state.npz.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
     /// Start a new run in --out even though another run's files are there: they are deleted
@@ -67,7 +68,7 @@ pub struct TrainArgs {
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
     /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
-    /// --algo gaifo-ppo and mdgps.
+    /// --algo gaifo-ppo, mdgps, bco and replay-mean.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
