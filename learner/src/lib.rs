@@ -16,6 +16,7 @@
 //! - [`cli`]: the command line, one module per subcommand.
 
 pub mod arm;
+pub mod baselines;
 pub mod bench;
 pub mod cli;
 pub mod error;

@@ -153,7 +153,7 @@ pub trait Checkpoint {
 
 /// The name of checkpoint file `kind` (`table.npz`, `critic.json`, `state.npz`, ...) after `i`
 /// iterations: `iter_{i:03}_{kind}`.
-fn checkpoint_file(dir: &Path, i: usize, kind: &str) -> PathBuf {
+pub(crate) fn checkpoint_file(dir: &Path, i: usize, kind: &str) -> PathBuf {
     dir.join(format!("iter_{i:03}_{kind}"))
 }
 
@@ -201,7 +201,7 @@ impl Checkpoint for Mdgps {
 }
 
 /// `snap` with the in-process `arm`'s noise position (entry [`ARM_NOISE`]) when there is one.
-fn with_arm_noise(
+pub(crate) fn with_arm_noise(
     mut snap: gps::snapshot::Snapshot,
     arm: Option<&SimArm>,
 ) -> gps::snapshot::Snapshot {
@@ -333,7 +333,8 @@ pub fn resume_td3(
     demos: Demos,
     dir: &Path,
 ) -> Result<(GaifoTd3, Option<u128>), RunError> {
-    let (snap, disc, arm, state_path) = load_checkpoint(dir, "td3.iteration", 2 * demos.layout().dx())?;
+    let (snap, disc, arm, state_path) =
+        load_checkpoint(dir, "td3.iteration", 2 * demos.layout().dx())?;
     let run =
         GaifoTd3::from_snapshot(cfg, demos, &snap, disc).map_err(|source| RunError::Restore {
             path: state_path,
@@ -553,7 +554,7 @@ pub fn train_resumed(
 
 /// Continues `run`, resumed from its checkpoint in `dir` (with the in-process arm's noise
 /// position `arm_noise`), up to `iterations` in all ([`train_resumed`], [`train_mdgps_resumed`]).
-fn continue_run<R: Learn<Log: LogRow> + Checkpoint>(
+pub(crate) fn continue_run<R: Learn<Log: LogRow> + Checkpoint>(
     mut run: R,
     arm_noise: Option<u128>,
     dir: &Path,

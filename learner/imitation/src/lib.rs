@@ -19,6 +19,8 @@
 //! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor and MDGPS's global policy;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`offpolicy`]: off-policy GAIfO, the critic as the reward of TD3 with a replay buffer;
+//! - [`bco`]: behavioural cloning from observation, BCO(α), a baseline (docs/design.md §7);
+//! - [`replay_mean`]: the naive baseline, the demonstrations' mean joint path as commands;
 //! - [`mdgps`]: MDGPS with the critic's cost: one global MLP policy for many goals (docs/design.md §6);
 //! - [`learn`]: the one driver interface ([`learn::Learn`]) the application runs every learner
 //!   through, in process or over IPC; [`controller`]: linear-Gaussian controller ↔ gain table;
@@ -28,6 +30,7 @@
 //! Depends on `gps` and `shared` (the contract) only; the simulator, files and IPC are the
 //! `learner` application's.
 
+pub mod bco;
 pub mod controller;
 pub mod cost;
 pub mod cpu;
@@ -44,6 +47,7 @@ pub mod mdgps;
 pub mod mlp_policy;
 pub mod offpolicy;
 pub mod ppo;
+pub mod replay_mean;
 pub mod rollout;
 pub mod settings;
 pub mod tool_path;

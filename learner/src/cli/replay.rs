@@ -9,7 +9,7 @@ use clap::Args;
 #[derive(Args, Debug)]
 pub struct ReplayArgs {
     /// The `--out` folder of a `learner serve` run (resumed ones included), or of a
-    /// `learner train --record-episodes` run (LQR+GAIfO, `--algo gaifo-ppo` or `--algo mdgps`).
+    /// `learner train --record-episodes` run (LQR+GAIfO, `--algo gaifo-ppo`, `mdgps`, `bco` or `replay-mean`).
     pub run_dir: PathBuf,
     /// The run's demonstrations, when they are no longer where `run.json` says (their hash
     /// must be the run's).

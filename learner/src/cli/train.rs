@@ -14,6 +14,8 @@ use crate::io::manifest::{self, Claim, Manifest};
 use crate::run::{train, train_resumed};
 use imitation::ppo::gaifo_ppo::GaifoPpoConfig;
 
+mod baselines;
+
 /// Which imitation algorithm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Algo {
@@ -27,6 +29,11 @@ pub enum Algo {
     /// Off-policy GAIfO: the critic as the reward of TD3 with a replay buffer (the baseline
     /// built for sample efficiency, docs/design.md §1.8).
     GaifoTd3,
+    /// BCO(α): behavioural cloning from observation, a baseline (docs/design.md §7).
+    Bco,
+    /// The naive baseline: the demonstrations' mean joint path as the commands, no learning
+    /// (docs/design.md §7.3).
+    ReplayMean,
 }
 
 /// Arguments of `learner train`.
@@ -53,7 +60,8 @@ pub struct TrainArgs {
     /// exact: the whole learner state (critic with Adam moments, GMM dynamics prior and its data,
     /// previous controllers, step size, η, MDGPS's policy and its optimiser, every RNG position)
     /// was checkpointed, so tables and CSV rows (timing columns aside) are those of an
-    /// uninterrupted run, bit for bit, wherever the run was stopped or killed.
+    /// uninterrupted run, bit for bit, wherever the run was stopped or killed. A BCO run
+    /// (--algo bco) resumes the same way from its latest iter_NNN_state.npz.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
     /// Start a new run in --out even though another run's files are there: they are deleted
@@ -63,7 +71,7 @@ pub struct TrainArgs {
     /// Record every episode (noisy and noise-free) into OUT/episodes/ as `learner serve` does
     /// (docs/design.md §4.3), so that `learner replay OUT` can redo the run and check it bit
     /// for bit; a resumed run records on when its folder has episodes/. LQR+GAIfO and
-    /// --algo gaifo-ppo, mdgps and gaifo-td3.
+    /// --algo gaifo-ppo, mdgps, gaifo-td3, bco and replay-mean.
     #[arg(long)]
     pub record_episodes: bool,
     /// Worker threads for the episodes of an iteration, which run in parallel (0 = one per
@@ -236,6 +244,8 @@ pub(super) fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
         Algo::Mdgps => "mdgps",
         Algo::GaifoPpo => "gaifo-ppo",
         Algo::GaifoTd3 => "gaifo-td3",
+        Algo::Bco => "bco",
+        Algo::ReplayMean => "replay-mean",
     };
     if let Some(m) = manifest::read(dir)? {
         anyhow::ensure!(
@@ -256,6 +266,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     check_resumed_algo(&args)?;
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
+    }
+    if args.algo == Algo::Bco {
+        return baselines::run_bco(&args);
+    }
+    if args.algo == Algo::ReplayMean {
+        return baselines::run_replay_mean(&args);
     }
     if args.algo == Algo::GaifoPpo {
         anyhow::ensure!(

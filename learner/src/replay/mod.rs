@@ -64,7 +64,15 @@ use crate::run::Checkpoint;
 use crate::serve::Batch;
 
 /// The learners whose runs a replay redoes.
-pub(crate) const REPLAYED: [&str; 5] = ["lqr-gaifo", "expert", "gaifo-ppo", "mdgps", "gaifo-td3"];
+pub(crate) const REPLAYED: [&str; 7] = [
+    "lqr-gaifo",
+    "expert",
+    "gaifo-ppo",
+    "mdgps",
+    "gaifo-td3",
+    "bco",
+    "replay-mean",
+];
 
 /// The first place where the replay and the recorded run differ.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -365,6 +373,32 @@ pub fn replay(dir: &Path, demos: Option<&Path>) -> Result<ReplayReport, ReplayEr
                     )
                 },
             )?;
+        }
+        "bco" => {
+            let cfg: imitation::bco::BcoConfig = m.settings_as()?;
+            let path = demos_path(&m, demos)?;
+            let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
+            let resume =
+                |tmp: &Path| Ok(crate::baselines::resume_bco(cfg.clone(), d.clone(), tmp)?.0);
+            // The whole learner state, bit for bit (the policy file is a view of it).
+            drive(
+                imitation::bco::Bco::new(cfg.clone(), d.clone())?,
+                dir,
+                &picks,
+                &mut report,
+                Some(&resume),
+                |l, dir, i, r| match dir.join(format!("iter_{i:03}_state.npz")).is_file() {
+                    true => state_file(&l.snapshot(), dir, i, r),
+                    false => Ok(Checked::NothingRecorded),
+                },
+            )?;
+        }
+        "replay-mean" => {
+            let cfg: imitation::replay_mean::ReplayMeanConfig = m.settings_as()?;
+            let path = demos_path(&m, demos)?;
+            let d = crate::io::demos::load_checked(&path, &cfg.sim)?;
+            let learner = imitation::replay_mean::ReplayMean::new(cfg, d)?;
+            drive(learner, dir, &picks, &mut report, None, tables)?;
         }
         other => {
             return Err(ReplayError::Algorithm {
