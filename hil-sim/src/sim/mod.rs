@@ -731,27 +731,6 @@ fn first3(a: &[f64; MAX_JOINTS]) -> [f64; N_JOINTS] {
     [a[0], a[1], a[2]]
 }
 
-/// The rotation vector of `r` (rad; axis times angle, angle in [0, π]): the orientation part of
-/// UR's pose p[x, y, z, rx, ry, rz] as the teach pendant and RTDE's `actual_TCP_pose` give it.
-/// From the unit quaternion (w ≥ 0) as 2 atan2(|v|, w) v/|v|, accurate at every angle.
-pub fn rotation_vector(r: &UnitQuaternion<f64>) -> [f64; 3] {
-    let q = r.quaternion();
-    let (w, v) = if q.w < 0.0 {
-        (-q.w, -q.imag())
-    } else {
-        (q.w, q.imag())
-    };
-    let s = v.norm();
-    if s == 0.0 {
-        return [0.0; 3];
-    }
-    let k = 2.0 * s.atan2(w) / s;
-    [k * v.x, k * v.y, k * v.z]
-}
-
-/// UR's pose p[x, y, z, rx, ry, rz] (m, rad; base frame) of `pose`.
-pub fn ur_pose(pose: &Isometry3<f64>) -> [f64; 6] {
-    let t = pose.translation.vector;
-    let r = rotation_vector(&pose.rotation);
-    [t.x, t.y, t.z, r[0], r[1], r[2]]
-}
+/// UR's rotation vector and pose p[x, y, z, rx, ry, rz] of an orientation or a frame: the
+/// contract's (`ur5_shared::pose`), re-exported for the simulator's users.
+pub use ur5_shared::pose::{rotation_vector, ur_pose};

@@ -50,6 +50,10 @@ pub struct GaifoLog {
     /// mean path ([`path_rmse`]; docs/design.md §4.15). NaN where not computed. Not a column
     /// of `gaifo_log.csv`.
     pub path_rmse: f64,
+    /// Final orientation error of the tool in the noise-free episode (degrees;
+    /// `Episode::final_orientation_error`): pose goals only, NaN otherwise. Not a column of
+    /// `gaifo_log.csv`.
+    pub final_orientation_error_deg: f64,
 }
 
 impl Default for GaifoLog {
@@ -73,6 +77,7 @@ impl Default for GaifoLog {
             cpu_learner: 0.0,
             demo_gap: f64::NAN,
             path_rmse: f64::NAN,
+            final_orientation_error_deg: f64::NAN,
         }
     }
 }
@@ -184,6 +189,11 @@ impl GaifoLog {
             eta: f64::NAN,
             step_mult: f64::NAN,
             path_rmse: path_rmse(eval, demos),
+            final_orientation_error_deg: demos
+                .task()
+                .ok()
+                .and_then(|t| eval.final_orientation_error(&t.targets()))
+                .map_or(f64::NAN, f64::to_degrees),
             ..Self::default()
         }
     }

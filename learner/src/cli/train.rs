@@ -104,8 +104,14 @@ pub fn report(
     spread: Option<f64>,
 ) {
     let Some(last) = logs.last() else { return };
+    let orientation = last.final_orientation_error_deg;
+    let orientation_text = if orientation.is_nan() {
+        String::new()
+    } else {
+        format!(", orientation error {orientation:.2}°")
+    };
     eprintln!(
-        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m); log and checkpoints in {}",
+        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m{orientation_text}); log and checkpoints in {}",
         last.performance,
         last.task_cost,
         last.final_distance,
@@ -122,13 +128,14 @@ pub fn report(
             .iter()
             .map(|l| l.performance)
             .fold(f64::NEG_INFINITY, f64::max);
-        println!(
-            "{}",
-            serde_json::json!({"command": "train", "algo": algo, "iterations": logs.len(), "seed": seed,
-                "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
-                "final_distance_m": last.final_distance, "path_rmse_m": last.path_rmse,
-                "demo_spread_rmse_m": spread, "out": out})
-        );
+        let mut line = serde_json::json!({"command": "train", "algo": algo, "iterations": logs.len(), "seed": seed,
+            "final_performance": last.performance, "best_performance": best, "final_task_cost": last.task_cost,
+            "final_distance_m": last.final_distance, "path_rmse_m": last.path_rmse,
+            "demo_spread_rmse_m": spread, "out": out});
+        if !orientation.is_nan() {
+            line["final_orientation_error_deg"] = orientation.into();
+        }
+        println!("{line}");
     }
 }
 

@@ -92,6 +92,7 @@ impl GaifoRow {
             cpu_learner: self.cpu_learner_s,
             demo_gap: f64::NAN,
             path_rmse: f64::NAN,
+            final_orientation_error_deg: f64::NAN,
         }
     }
 }
@@ -329,6 +330,7 @@ mod tests {
             // Not a CSV column: it reads back as NaN.
             demo_gap: 0.25,
             path_rmse: f64::NAN,
+            final_orientation_error_deg: f64::NAN,
         };
         let mut buf = Vec::new();
         let mut w = csv::Writer::from_writer(&mut buf);

@@ -40,7 +40,7 @@ use std::time::Instant;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
+use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX};
 use ur5_shared::{PolicyTable, StateLayout};
 
@@ -48,10 +48,10 @@ use crate::demos::Demos;
 use crate::discriminator::Normalizer;
 use crate::iteration_log::GaifoLog;
 use crate::learn::Learn;
-use crate::mdgps::policy::{GlobalPolicy, GlobalPolicyWorkspace};
+use crate::mdgps::policy::GlobalPolicy;
 use crate::mdgps::s_step::{PolicyOpt, PolicyOptConfig, Targets};
 use crate::mlp_policy::action_base;
-use crate::rollout::{execute, Actors, Arms, Episode, Policy};
+use crate::rollout::{execute, Arms, Episode};
 use crate::settings::MAX_COUNT;
 use crate::ImitationError;
 use inverse::{FitReport, InverseModel, InverseModelConfig};
@@ -357,41 +357,6 @@ impl Bco {
     pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m   trans  M_rmse_lin    M_rmse  bc_before  bc_after  cpu_ms";
 }
 
-/// The cloned policy acting in an episode: a = ā(s) + σ ⊙ ε, with its own scratch memory.
-struct ClonedActor<'a> {
-    pol: &'a GlobalPolicy,
-    ws: GlobalPolicyWorkspace,
-    std: [f64; DU],
-}
-
-impl Policy for ClonedActor<'_> {
-    fn horizon(&self) -> usize {
-        usize::MAX
-    }
-
-    /// The cloned policy acts on the three-joint task's state (dX = 12, dU = 3); BCO
-    /// refuses other tasks when it is built.
-    fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, out: &mut [f64]) {
-        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
-        let a = self.pol.mean_action(s, mode, &mut self.ws);
-        for j in 0..DU {
-            out[j] = a[j] + self.std[j] * eps[j];
-        }
-    }
-}
-
-/// The policy of a BCO run for the episodes of step 1, each with its own workspace.
-struct Cloned<'a>(&'a GlobalPolicy);
-
-impl Actors for Cloned<'_> {
-    fn actor(&self) -> Box<dyn Policy + '_> {
-        Box::new(ClonedActor {
-            pol: self.0,
-            ws: self.0.workspace(),
-            std: self.0.std(),
-        })
-    }
-}
 
 impl Learn for Bco {
     type Log = GaifoLog;
@@ -421,7 +386,7 @@ impl Learn for Bco {
         let (noisy, eval) = execute(
             arms,
             &self.task,
-            &Cloned(&self.policy),
+            &self.policy,
             self.version(),
             self.cfg.seed,
             self.cfg.samples,

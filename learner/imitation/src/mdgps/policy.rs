@@ -28,7 +28,7 @@ use ur5_shared::StateLayout;
 
 use crate::discriminator::Normalizer;
 use crate::mlp_policy::{action_base, GaussianMlpPolicy, PolicyWorkspace};
-use crate::rollout::Policy;
+use crate::rollout::{Actors, Policy};
 
 /// Length of the flat parameter vector for mean heads of hidden widths `hidden` (the policy
 /// table's layout, [`ur5_shared::policy`]).
@@ -249,6 +249,41 @@ impl Policy for GlobalActor<'_> {
         for j in 0..DU {
             out[j] = a[j] + self.std[j] * eps[j];
         }
+    }
+}
+
+/// A [`GlobalPolicy`]'s episodes in parallel (`crate::rollout::execute`): each actor a
+/// [`GlobalActor`] with its own scratch memory. MDGPS, BCO and GAIfO (TD3) run their policies
+/// so.
+impl Actors for GlobalPolicy {
+    fn actor(&self) -> Box<dyn Policy + '_> {
+        Box::new(OwnedActor {
+            pol: self,
+            ws: self.workspace(),
+            std: self.std(),
+        })
+    }
+}
+
+/// [`GlobalActor`] owning its scratch memory.
+struct OwnedActor<'a> {
+    pol: &'a GlobalPolicy,
+    ws: GlobalPolicyWorkspace,
+    std: [f64; DU],
+}
+
+impl Policy for OwnedActor<'_> {
+    fn horizon(&self) -> usize {
+        usize::MAX
+    }
+
+    fn act(&mut self, t: usize, s: &[f64], eps: &[f64], mode: ActionMode, out: &mut [f64]) {
+        let mut actor = GlobalActor {
+            pol: self.pol,
+            ws: &mut self.ws,
+            std: self.std,
+        };
+        actor.act(t, s, eps, mode, out)
     }
 }
 

@@ -60,7 +60,7 @@ use crate::iteration_log::GaifoLog;
 use crate::learn::Learn;
 use crate::mdgps::policy::GlobalPolicy;
 use crate::mlp_policy::action_base;
-use crate::rollout::{execute, Actors, Arms, Episode, Policy};
+use crate::rollout::{execute, Arms, Episode};
 use crate::settings::{CriticSettings, GaifoConfig, MAX_COUNT};
 use crate::ImitationError;
 use replay::{ReplayBuffer, RowKind};
@@ -251,42 +251,6 @@ pub fn add_episode(
     }
 }
 
-/// The actor as a [`Policy`] of the one episode loop, with its own scratch memory:
-/// a = base(s) + μ(u(s)) + σ ⊙ ε, the policy table's law (`ur5_shared::policy_action`).
-struct ActorPolicy<'a> {
-    pol: &'a GlobalPolicy,
-    ws: crate::mdgps::policy::GlobalPolicyWorkspace,
-    std: [f64; DU],
-}
-
-impl Policy for ActorPolicy<'_> {
-    fn horizon(&self) -> usize {
-        usize::MAX
-    }
-
-    /// The actor acts on the three-joint task's state (dX = 12, dU = 3); GAIfO (TD3) refuses
-    /// other tasks when it is built.
-    fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, out: &mut [f64]) {
-        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
-        let a = self.pol.mean_action(s, mode, &mut self.ws);
-        for j in 0..DU {
-            out[j] = a[j] + self.std[j] * eps[j];
-        }
-    }
-}
-
-/// The actor, for parallel episodes.
-struct ActorActors<'a>(&'a GlobalPolicy);
-
-impl Actors for ActorActors<'_> {
-    fn actor(&self) -> Box<dyn Policy + '_> {
-        Box::new(ActorPolicy {
-            pol: self.0,
-            ws: self.0.workspace(),
-            std: self.0.std(),
-        })
-    }
-}
 
 /// What the TD3 steps of one iteration did (means over them).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -527,8 +491,8 @@ impl Learn for GaifoTd3 {
     /// Step 1: the actor with exploration noise, and its mean for the evaluation.
     fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         let (version, seed, n) = (self.version(), self.cfg.seed, self.cfg.samples);
-        let actors = ActorActors(self.td3.actor());
-        let (noisy, eval) = execute(arms, &self.task, &actors, version, seed, n)?;
+        let actors = self.td3.actor();
+        let (noisy, eval) = execute(arms, &self.task, actors, version, seed, n)?;
         Ok((noisy, vec![eval]))
     }
 
