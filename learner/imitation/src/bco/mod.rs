@@ -357,7 +357,6 @@ impl Bco {
     pub const PROGRESS_HEADER: &'static str = "iter task_cost    perf  final_m   trans  M_rmse_lin    M_rmse  bc_before  bc_after  cpu_ms";
 }
 
-
 impl Learn for Bco {
     type Log = GaifoLog;
     const ALGO: &'static str = "bco";

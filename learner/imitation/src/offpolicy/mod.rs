@@ -251,7 +251,6 @@ pub fn add_episode(
     }
 }
 
-
 /// What the TD3 steps of one iteration did (means over them).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct UpdateStats {
