@@ -160,7 +160,7 @@ pub fn default_demos_path(out: &Path) -> PathBuf {
 /// claimed for the run (`m`, recording no demonstrations yet, so that a folder holding another
 /// run is refused before the expert trains) and the default expert is trained and recorded into
 /// `out/expert/` ([`crate::run::train_and_record`], as `learner expert` does).
-pub(super) fn demos_file(
+fn demos_file(
     args: &TrainArgs,
     seed: u64,
     sim: &ur5_shared::config::SimConfig,
@@ -205,10 +205,7 @@ pub(super) fn demos_file(
 /// Demonstrations that name no arm model (a CSV, a LeRobot dataset without the model field)
 /// are taken to be the `[sim]` model's; their joint angles cannot tell another arm apart, so
 /// the run says so.
-pub(super) fn warn_unrecorded_model(
-    path: &Path,
-    sim: &ur5_shared::config::SimConfig,
-) -> anyhow::Result<()> {
+fn warn_unrecorded_model(path: &Path, sim: &ur5_shared::config::SimConfig) -> anyhow::Result<()> {
     if crate::io::demos::model_of(path)?.is_none() {
         eprintln!(
             "note: {} names no arm model: taken to be the {} ([sim] model), which cannot be \
@@ -223,12 +220,7 @@ pub(super) fn warn_unrecorded_model(
 /// Takes `out` for the run `m` as `claim` says, adopts a resumed run's files as they are
 /// ([`crate::io::files::adopt`]) and, with `record`, creates `out/episodes/`, which the run
 /// records into because it is there.
-pub(super) fn take_folder(
-    record: bool,
-    out: &Path,
-    m: &Manifest,
-    claim: Claim,
-) -> anyhow::Result<()> {
+fn take_folder(record: bool, out: &Path, m: &Manifest, claim: Claim) -> anyhow::Result<()> {
     manifest::claim(out, m, claim)?;
     if claim == Claim::Resume {
         crate::io::files::adopt(out)?;
@@ -237,6 +229,43 @@ pub(super) fn take_folder(
         crate::io::create_dir(out.join("episodes"))?;
     }
     Ok(())
+}
+
+/// The start of an in-process `learner train --algo ALGO` on settings `cfg` (run seed `seed`,
+/// arm `sim`): a resumed run only in its own `--out`; the demonstrations ([`demos_file`])
+/// loaded and checked against the arm ([`warn_unrecorded_model`] too); the run's manifest and
+/// its output folder taken ([`take_folder`]: claimed, or adopted when resumed). Returns the
+/// output folder and the demonstrations.
+pub(super) fn open_run<S: serde::Serialize>(
+    args: &TrainArgs,
+    algo: &str,
+    seed: u64,
+    sim: &ur5_shared::config::SimConfig,
+    cfg: &S,
+) -> anyhow::Result<(PathBuf, Demos)> {
+    let out = args.out_dir();
+    if let Some(dir) = &args.resume {
+        anyhow::ensure!(
+            out == *dir,
+            "--out {} and --resume {} differ: a resumed run continues in its own folder",
+            out.display(),
+            dir.display()
+        );
+    }
+    let pre = Manifest::new("train", algo, seed, None, cfg)?;
+    let (path, claimed) = demos_file(args, seed, sim, &pre)?;
+    let demos = crate::io::demos::load_checked(&path, sim)?;
+    warn_unrecorded_model(&path, sim)?;
+    let m = Manifest::new("train", algo, seed, Some(&path), cfg)?;
+    let claim = match args.resume {
+        Some(_) => Claim::Resume,
+        // Claimed already: the folder holds only its run.json, replaced now.
+        None => Claim::New {
+            force: args.force || claimed,
+        },
+    };
+    take_folder(args.record_episodes, &out, &m, claim)?;
+    Ok((out, demos))
 }
 
 /// A resumed folder must hold a run of the algorithm asked for: said before anything reads
@@ -293,18 +322,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             pcfg.seed = s;
         }
         pcfg.validate()?;
-        let pre = Manifest::new("train", "gaifo-ppo", pcfg.seed, None, &pcfg)?;
-        let (path, claimed) = demos_file(&args, pcfg.seed, &pcfg.sim, &pre)?;
-        let demos = crate::io::demos::load_checked(&path, &pcfg.sim)?;
-        warn_unrecorded_model(&path, &pcfg.sim)?;
-        let m = Manifest::new("train", "gaifo-ppo", pcfg.seed, Some(&path), &pcfg)?;
-        // Claimed already: the folder holds only its run.json, replaced now.
-        let force = args.force || claimed;
-        manifest::claim(&args.out_dir(), &m, Claim::New { force })?;
-        if args.record_episodes {
-            // `run::train_ppo` records into it because it is there.
-            crate::io::create_dir(args.out_dir().join("episodes"))?;
-        }
+        let (_, demos) = open_run(&args, "gaifo-ppo", pcfg.seed, &pcfg.sim, &pcfg)?;
         return run_ppo(&args, demos, &pcfg);
     }
     let mut cfg: GaifoConfig = args.common.settings()?;
@@ -316,32 +334,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     // Every setting, before anything is printed or written (the run checks them again).
     cfg.validate()?;
-    let out = args.out_dir();
-    if let Some(dir) = &args.resume {
-        anyhow::ensure!(
-            args.algo == Algo::LqrGaifo,
-            "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
-        );
-        anyhow::ensure!(
-            out == *dir,
-            "--out {} and --resume {} differ: a resumed run continues in its own folder",
-            out.display(),
-            dir.display()
-        );
-    }
-    let pre = Manifest::new("train", "lqr-gaifo", cfg.seed, None, &cfg)?;
-    let (path, claimed) = demos_file(&args, cfg.seed, &cfg.sim, &pre)?;
-    let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
-    warn_unrecorded_model(&path, &cfg.sim)?;
-    let m = Manifest::new("train", "lqr-gaifo", cfg.seed, Some(&path), &cfg)?;
-    let claim = match args.resume {
-        Some(_) => Claim::Resume,
-        // Claimed already: the folder holds only its run.json, replaced now.
-        None => Claim::New {
-            force: args.force || claimed,
-        },
-    };
-    take_folder(args.record_episodes, &out, &m, claim)?;
+    anyhow::ensure!(
+        args.resume.is_none() || args.algo == Algo::LqrGaifo,
+        "--resume continues LQR+GAIfO runs only (not --algo gaifo-ppo)"
+    );
+    let (out, demos) = open_run(&args, "lqr-gaifo", cfg.seed, &cfg.sim, &cfg)?;
     eprintln!(
         "LQR+GAIfO on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,

@@ -4,10 +4,7 @@
 use imitation::iteration_log::GaifoLog;
 use imitation::offpolicy::{GaifoTd3Config, UpdateStats};
 
-use super::train::{
-    check_resumed_algo, demos_file, report, take_folder, warn_unrecorded_model, TrainArgs,
-};
-use crate::io::manifest::{Claim, Manifest};
+use super::train::{check_resumed_algo, open_run, report, TrainArgs};
 
 /// The progress line of an off-policy GAIfO iteration.
 fn line(l: &GaifoLog, u: &UpdateStats) -> String {
@@ -40,28 +37,8 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         cfg.seed = s;
     }
     cfg.validate()?;
-    let out = args.out_dir();
-    if let Some(dir) = &args.resume {
-        anyhow::ensure!(
-            out == *dir,
-            "--out {} and --resume {} differ: a resumed run continues in its own folder",
-            out.display(),
-            dir.display()
-        );
-    }
-    let pre = Manifest::new("train", "gaifo-td3", cfg.seed, None, &cfg)?;
-    let (path, claimed) = demos_file(args, cfg.seed, &cfg.sim, &pre)?;
-    let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
+    let (out, demos) = open_run(args, "gaifo-td3", cfg.seed, &cfg.sim, &cfg)?;
     let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
-    warn_unrecorded_model(&path, &cfg.sim)?;
-    let m = Manifest::new("train", "gaifo-td3", cfg.seed, Some(&path), &cfg)?;
-    let claim = match args.resume {
-        Some(_) => Claim::Resume,
-        None => Claim::New {
-            force: args.force || claimed,
-        },
-    };
-    take_folder(args.record_episodes, &out, &m, claim)?;
     eprintln!(
         "GAIfO (TD3) on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         demos.count,

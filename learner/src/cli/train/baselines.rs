@@ -4,8 +4,7 @@
 use imitation::bco::{Bco, BcoConfig};
 use imitation::replay_mean::ReplayMeanConfig;
 
-use super::{demos_file, report, take_folder, warn_unrecorded_model, TrainArgs};
-use crate::io::manifest::{Claim, Manifest};
+use super::{open_run, report, TrainArgs};
 
 /// `learner train --algo bco`: BCO(α) in process, a checkpoint before every iteration, exact
 /// `--resume`.
@@ -18,27 +17,7 @@ pub(super) fn run_bco(args: &TrainArgs) -> anyhow::Result<()> {
         cfg.seed = s;
     }
     cfg.validate()?;
-    let out = args.out_dir();
-    if let Some(dir) = &args.resume {
-        anyhow::ensure!(
-            out == *dir,
-            "--out {} and --resume {} differ: a resumed run continues in its own folder",
-            out.display(),
-            dir.display()
-        );
-    }
-    let pre = Manifest::new("train", "bco", cfg.seed, None, &cfg)?;
-    let (path, claimed) = demos_file(args, cfg.seed, &cfg.sim, &pre)?;
-    let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
-    warn_unrecorded_model(&path, &cfg.sim)?;
-    let m = Manifest::new("train", "bco", cfg.seed, Some(&path), &cfg)?;
-    let claim = match args.resume {
-        Some(_) => Claim::Resume,
-        None => Claim::New {
-            force: args.force || claimed,
-        },
-    };
-    take_folder(args.record_episodes, &out, &m, claim)?;
+    let (out, demos) = open_run(args, "bco", cfg.seed, &cfg.sim, &cfg)?;
     eprintln!(
         "BCO(α = {}) on {} demonstrations of T = {} (goal {:?} m), seed {}, -> {}{}",
         1.0 / cfg.pre_iterations as f64,
@@ -93,16 +72,7 @@ pub(super) fn run_replay_mean(args: &TrainArgs) -> anyhow::Result<()> {
         cfg.seed = s;
     }
     cfg.validate()?;
-    let out = args.out_dir();
-    let pre = Manifest::new("train", "replay-mean", cfg.seed, None, &cfg)?;
-    let (path, claimed) = demos_file(args, cfg.seed, &cfg.sim, &pre)?;
-    let demos = crate::io::demos::load_checked(&path, &cfg.sim)?;
-    warn_unrecorded_model(&path, &cfg.sim)?;
-    let m = Manifest::new("train", "replay-mean", cfg.seed, Some(&path), &cfg)?;
-    let claim = Claim::New {
-        force: args.force || claimed,
-    };
-    take_folder(args.record_episodes, &out, &m, claim)?;
+    let (out, demos) = open_run(args, "replay-mean", cfg.seed, &cfg.sim, &cfg)?;
     eprintln!(
         "the demonstrations' mean joint path ({} demonstrations of T = {}, goal {:?} m) as the \
          commands -> {}",
