@@ -191,6 +191,13 @@ impl StateLayout {
             .find(|l| l.dx() == dx)
     }
 
+    /// The layout of a task moving `joints` joints toward a point (`pose_goal` false: one tool
+    /// point) or a pose (three tool points, which fix it): the one rule of the task settings,
+    /// the demonstrations and their files.
+    pub fn of_task(joints: usize, pose_goal: bool) -> Result<Self, LayoutError> {
+        Self::new(joints, if pose_goal { 3 } else { 1 })
+    }
+
     /// The layout of `joints` active joints and `points` tool points.
     pub fn new(joints: usize, points: usize) -> Result<Self, LayoutError> {
         if !(1..=MAX_JOINTS).contains(&joints) {

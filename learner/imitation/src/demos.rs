@@ -45,8 +45,8 @@ impl Demos {
     /// The layout of the demonstrations' states: their task's
     /// ([`TaskConfig::layout`]).
     pub fn layout(&self) -> StateLayout {
-        let points = if self.goal_pose.is_some() { 3 } else { 1 };
-        StateLayout::new(self.start_q.len(), points).expect("validated demonstrations")
+        StateLayout::of_task(self.start_q.len(), self.goal_pose.is_some())
+            .expect("validated demonstrations")
     }
 
     /// State t of demonstration d (dX).

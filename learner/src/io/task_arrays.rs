@@ -57,7 +57,7 @@ pub fn read_task(f: &NpzFile) -> Result<TaskArrays, NpzError> {
     } else {
         ur5_shared::config::DEFAULT_TOOL_POINTS
     };
-    let layout = StateLayout::new(start_q.len(), if goal_pose.is_some() { 3 } else { 1 })
+    let layout = StateLayout::of_task(start_q.len(), goal_pose.is_some())
         .map_err(|e| f.bad("start_q", e.to_string()))?;
     Ok(TaskArrays {
         goal: f.f64_shaped("goal", &[3])?.try_into().expect("3"),

@@ -105,8 +105,7 @@ impl TaskConfig {
     /// The state layout of this task: its active joints and one tool point for a point goal,
     /// three for a pose goal.
     pub fn layout(&self) -> StateLayout {
-        let points = if self.goal_pose.is_some() { 3 } else { 1 };
-        StateLayout::new(self.joints, points).expect("validated task")
+        StateLayout::of_task(self.joints, self.goal_pose.is_some()).expect("validated task")
     }
 
     /// The tool points' offsets from the tool centre point (m, flange frame), one per point

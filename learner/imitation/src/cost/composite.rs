@@ -38,12 +38,6 @@ pub struct CompositeWorkspace {
     h_mean: Mat<f64>,
 }
 
-/// Input dimension of the discriminator of a task with state dimension `dx`: a transition
-/// [s; s'].
-pub fn d_in(dx: usize) -> usize {
-    2 * dx
-}
-
 impl CompositeWorkspace {
     /// Sets [`Self::psd`].
     pub fn with_psd(mut self, psd: bool) -> Self {
