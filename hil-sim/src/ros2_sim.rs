@@ -203,8 +203,8 @@ pub fn spawn(
     command_order(&cfg.joints).ok_or_else(|| Ros2SimError::Joints(cfg.joints.clone()))?;
     let dt = 1.0 / cfg.rate_hz;
     let mut arm = Arm::new(
-        Ur5Sim::new(sim_cfg.clone(), dt)?,
-        task.start_arm_joints(),
+        Ur5Sim::with_joints(sim_cfg.clone(), dt, task.joints)?,
+        task.start_six(&sim_cfg.wrist_q),
         task.goal,
         dt,
     )?;

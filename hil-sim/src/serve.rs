@@ -28,11 +28,11 @@ use serde::{Deserialize, Serialize};
 use ur5_shared::clock::{monotonic_ns, sleep_until_ns};
 use ur5_shared::config::{ActionMode, ConfigError, SimConfig, TaskConfig};
 use ur5_shared::kinematics::Joints6;
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::layout::{MAX_JOINTS, MAX_TOOL_POINTS, N_JOINTS};
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind};
 
-use crate::{Observation, SimError, Ur5Sim};
+use crate::{SimError, Ur5Sim};
 
 /// How the arm is clocked.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -68,8 +68,8 @@ pub struct ServeConfig {
     /// Active joints of the served arm: 3 (the wrist locked at `sim.wrist_q`) or 6; states carry
     /// that many joints and commands for another number are refused (`WRONG_JOINTS`). At six,
     /// reset poses and goals have six values; the torque-mode hold damps the wrist with its
-    /// servo's velocity gains (`hil_sim::servo::wrist_velocity_gain`). Left out when
-    /// serialised at 3.
+    /// servo's velocity gains (`hil_sim::servo::wrist_velocity_gain`). A task of six joints
+    /// (`task.joints = 6`) serves six whatever this says. Left out when serialised at 3.
     #[serde(skip_serializing_if = "is_three")]
     pub joints: usize,
 }
@@ -229,6 +229,9 @@ enum Held {
 struct Arm {
     sim: Ur5Sim,
     task: TaskConfig,
+    /// The task's tool points (`TaskConfig::tool_offsets`), reported in every state.
+    offsets: [[f64; 3]; MAX_TOOL_POINTS],
+    points: usize,
     cfg: ServeConfig,
     held: Held,
     state: ArmState,
@@ -277,7 +280,7 @@ impl Arm {
             Ok(CommandKind::Reset) => {
                 let reset_pose = reset_pose.expect("n values");
                 self.summary.resets += 1;
-                match self.sim.reset_all(&reset_pose[..n], self.task.goal) {
+                match self.sim.restart(&reset_pose[..n], self.task.goal) {
                     Ok(_) => self.held = Held::Hold(reset_pose),
                     Err(e) => {
                         eprintln!("hil-sim serve: reset refused: {e}");
@@ -304,33 +307,37 @@ impl Arm {
     }
 
     /// Advances one period of the sim under what is held.
-    fn step(&mut self) -> Observation {
+    fn step(&mut self) {
         let action = match (self.held, self.sim.config().mode) {
             (Held::Action(a), _) => a,
             (Held::Hold(q), ActionMode::GoalAngles) => q,
             (Held::Hold(_), ActionMode::Torque) => self.sim.hold_torque_all(&self.cfg.hold_damping),
         };
         self.summary.sim_time_s += self.period_s;
-        self.sim.step_all(&action[..self.sim.joints()])
+        self.sim.advance(&action[..self.sim.joints()]);
     }
 
+    /// Measures the arm (sensor noise included, as `Ur5Sim::observe_points` draws it: for three
+    /// joints and one point the draws of `Ur5Sim::observe`) and publishes the state.
     fn publish(
         &mut self,
         publisher: &iceoryx2::port::publisher::Publisher<ipc::Service, ArmState, ()>,
-        obs: &Observation,
         extra: ArmFaults,
     ) {
-        // The first three joints as measured (sensor noise included), a six-joint arm's wrist
-        // as it is (the perturbation's sensor noise covers three joints).
-        let n = self.sim.joints();
-        let (mut q, mut qd) = self.sim.joint_state_all();
-        q[..N_JOINTS].copy_from_slice(&obs.q);
-        qd[..N_JOINTS].copy_from_slice(&obs.qd);
+        let (n, p) = (self.sim.joints(), self.points);
+        let (mut q, mut qd) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+        let (mut points, mut vels) = ([[0.0; 3]; MAX_TOOL_POINTS], [[0.0; 3]; MAX_TOOL_POINTS]);
+        self.sim.observe_points(
+            &self.offsets[..p],
+            &mut q[..n],
+            &mut qd[..n],
+            &mut points[..p],
+            &mut vels[..p],
+        );
         let s = &mut self.state;
         s.seq += 1;
         s.set_joints(&q[..n], &qd[..n]);
-        s.ee_pos = obs.ee_pos;
-        s.ee_vel = obs.ee_vel;
+        s.set_points(&points[..p], &vels[..p]);
         let mut status = ArmStatus::READY;
         if matches!(self.held, Held::Hold(_)) {
             status.insert(ArmStatus::HOLDING);
@@ -338,13 +345,7 @@ impl Arm {
         s.status = status;
         let mut faults = self.command_faults;
         faults.insert(extra);
-        let finite = q
-            .iter()
-            .chain(&qd)
-            .chain(&obs.ee_pos)
-            .chain(&obs.ee_vel)
-            .all(|v| v.is_finite());
-        if !finite {
+        if !s.is_finite() {
             faults.insert(ArmFaults::PHYSICS);
         }
         s.faults = faults;
@@ -371,7 +372,8 @@ pub fn serve(
         ServeMode::Lockstep => task.dt,
         ServeMode::RealTime => cfg.state_period_s,
     };
-    let sim = Ur5Sim::with_joints(sim_cfg.clone(), period_s, cfg.joints)?;
+    let joints = cfg.joints.max(task.joints);
+    let sim = Ur5Sim::with_joints(sim_cfg.clone(), period_s, joints)?;
     let _role = services::RoleLock::acquire(&cfg.prefix, "arm")?;
     let names = ServiceNames::new(&cfg.prefix);
     let node = NodeBuilder::new()
@@ -392,9 +394,14 @@ pub fn serve(
         .create()
         .map_err(|e| ipc_err(&names.arm_command)(&e))?;
 
+    let tool = task.tool_offsets();
+    let mut offsets = [[0.0; 3]; MAX_TOOL_POINTS];
+    offsets[..tool.len()].copy_from_slice(tool);
     let mut arm = Arm {
         sim,
         task: task.clone(),
+        offsets,
+        points: tool.len(),
         cfg: cfg.clone(),
         held: Held::Hold([0.0; 6]), // set below, after the reset
         state: ArmState::default(),
@@ -405,11 +412,12 @@ pub fn serve(
         command_faults: ArmFaults::default(),
         period_s,
     };
-    let obs = arm.sim.reset(task.start_arm_joints(), task.goal)?;
-    // Hold the start pose as given (not as the f32 physics rounds it); a wrist at its rest.
-    let (q, w) = (task.start_arm_joints(), arm.sim.model().wrist_q);
-    arm.held = Held::Hold([q[0], q[1], q[2], w[0], w[1], w[2]]);
-    arm.publish(&publisher, &obs, ArmFaults::default());
+    // The task's start pose; a wrist the task does not move at its rest. Held as given (not
+    // as the f32 physics rounds it).
+    let start = task.start_six(&arm.sim.model().wrist_q);
+    arm.sim.restart(&start[..joints], task.goal)?;
+    arm.held = Held::Hold(start);
+    arm.publish(&publisher, ArmFaults::default());
     let done = |arm: &Arm| {
         stop.load(Ordering::Relaxed)
             || (cfg.max_commands > 0 && arm.summary.commands >= cfg.max_commands)
@@ -431,12 +439,10 @@ pub fn serve(
                         idle = 0;
                         let cmd = *cmd;
                         arm.apply(&cmd);
-                        let obs = if cmd.kind() == Ok(CommandKind::Reset) {
-                            arm.sim.observe()
-                        } else {
-                            arm.step()
-                        };
-                        arm.publish(&publisher, &obs, ArmFaults::default());
+                        if cmd.kind() != Ok(CommandKind::Reset) {
+                            arm.step();
+                        }
+                        arm.publish(&publisher, ArmFaults::default());
                     }
                     Ok(None) | Err(_) => {
                         idle = idle.saturating_add(1);
@@ -494,8 +500,8 @@ pub fn serve(
                         extra.insert(ArmFaults::STALE_COMMAND);
                     }
                 }
-                let obs = arm.step();
-                arm.publish(&publisher, &obs, extra);
+                arm.step();
+                arm.publish(&publisher, extra);
             }
         }
     }

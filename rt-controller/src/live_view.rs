@@ -7,7 +7,7 @@
 //! | `{namespace}/end_effector` | `geometry_msgs/msg/PointStamped` | the end-effector point of a state the controller acted on (a state of the learner's samples) |
 //! | `{namespace}/episode` | `std_msgs/msg/UInt64` | the episode number (of the next one between episodes) |
 //! | `{namespace}/table_version` | `std_msgs/msg/UInt64` | the active table's version (0 before the first) |
-//! | `joint_states_topic` (optional) | `sensor_msgs/msg/JointState` | the arm's six joints, the wrist at `arm.ur.wrist_q` |
+//! | `joint_states_topic` (optional) | `sensor_msgs/msg/JointState` | the arm's six joints, a wrist the task does not move at `arm.ur.wrist_q` |
 //!
 //! The loop offers an entry at every control tick and at every fresh state between episodes
 //! (reset, hold, waiting for a table); it keeps one per `1 / rate_hz` s of wall time (the
@@ -26,7 +26,6 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use serde::Serialize;
 use ur5_ros2::{Header, JointState, Node, Point, PointStamped, Time, UInt64, Writer};
 use ur5_shared::clock::monotonic_ns;
-use ur5_shared::layout::N_JOINTS;
 use ur5_shared::ArmState;
 
 use crate::config::LiveViewConfig;
@@ -46,8 +45,10 @@ struct Entry {
     episode: u64,
     table_version: u64,
     ee: [f64; 3],
-    q: [f64; N_JOINTS],
-    qd: [f64; N_JOINTS],
+    /// The arm's active joints (`joints` of them) in `q[..joints]`, `qd[..joints]`.
+    joints: usize,
+    q: [f64; 6],
+    qd: [f64; 6],
 }
 
 /// What the loop and the DDS thread share.
@@ -160,7 +161,8 @@ impl LiveView {
             tick,
             episode,
             table_version,
-            ee: s.ee_pos,
+            ee: s.points[0],
+            joints: s.joints as usize,
             q: core::array::from_fn(|j| s.q[j]),
             qd: core::array::from_fn(|j| s.qd[j]),
         });
@@ -250,15 +252,19 @@ impl Publish {
                         frame_id: String::new(),
                     },
                     name: self.joint_names.clone(),
-                    position: vec![
-                        q[0],
-                        q[1],
-                        q[2],
-                        self.wrist_q[0],
-                        self.wrist_q[1],
-                        self.wrist_q[2],
-                    ],
-                    velocity: vec![qd[0], qd[1], qd[2], 0.0, 0.0, 0.0],
+                    // A wrist the task does not move: at `wrist_q`, at rest.
+                    position: (0..6)
+                        .map(|j| {
+                            if j < e.joints.max(3) {
+                                q[j]
+                            } else {
+                                self.wrist_q[j - 3]
+                            }
+                        })
+                        .collect(),
+                    velocity: (0..6)
+                        .map(|j| if j < e.joints.max(3) { qd[j] } else { 0.0 })
+                        .collect(),
                     effort: Vec::new(),
                 })
                 .is_ok();

@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 use ur5_shared::config::{ActionMode, ArmLimits};
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::layout::MAX_JOINTS;
 use ur5_shared::ArmCommand;
 
 use crate::config::Safety;
@@ -44,7 +44,8 @@ impl Fault {
     }
 }
 
-/// The hold command: PD to the last safe pose `q_safe` (rad).
+/// The hold command: PD to the last safe pose `q_safe` (rad, one per active joint; `q` and
+/// `qd` of the same joints).
 ///
 /// - Goal-angle mode: goal = `q_safe` clamped to the joint limits; the arm's servo holds it.
 /// - Torque mode with a fresh state (`q`, `qd`): τ = K_p (q_safe − q) − K_d q̇, clamped to the
@@ -55,24 +56,27 @@ pub fn hold_command(
     mode: ActionMode,
     lim: &ArmLimits,
     safety: &Safety,
-    q_safe: &[f64; N_JOINTS],
-    fresh: Option<(&[f64; N_JOINTS], &[f64; N_JOINTS])>,
+    q_safe: &[f64],
+    fresh: Option<(&[f64], &[f64])>,
     seq: u64,
     stamp_ns: u64,
     episode: u64,
 ) -> ArmCommand {
+    let n = q_safe.len();
+    let mut v = [0.0; MAX_JOINTS];
     match (mode, fresh) {
         (ActionMode::GoalAngles, _) => {
-            let goal: [f64; N_JOINTS] =
-                core::array::from_fn(|j| q_safe[j].clamp(lim.lower[j], lim.upper[j]));
-            ArmCommand::goal_angles(seq, stamp_ns, episode, goal)
+            for j in 0..n {
+                v[j] = q_safe[j].clamp(lim.lower[j], lim.upper[j]);
+            }
+            ArmCommand::goal_angles(seq, stamp_ns, episode, &v[..n])
         }
         (ActionMode::Torque, Some((q, qd))) => {
-            let tau: [f64; N_JOINTS] = core::array::from_fn(|j| {
-                (safety.hold_kp[j] * (q_safe[j] - q[j]) - safety.hold_kd[j] * qd[j])
-                    .clamp(-lim.effort[j], lim.effort[j])
-            });
-            ArmCommand::torques(seq, stamp_ns, episode, tau)
+            for j in 0..n {
+                let (kp, kd) = safety.hold_gains(j);
+                v[j] = (kp * (q_safe[j] - q[j]) - kd * qd[j]).clamp(-lim.effort[j], lim.effort[j]);
+            }
+            ArmCommand::torques(seq, stamp_ns, episode, &v[..n])
         }
         (ActionMode::Torque, None) => ArmCommand::hold(seq, stamp_ns, episode),
     }
@@ -114,5 +118,30 @@ mod tests {
         assert_eq!(c.values(), [200.0 * 0.1, -20.0, 0.0]);
         let c = hold_command(ActionMode::Torque, &l, &s, &[0.1, 0.0, 0.0], None, 1, 0, 0);
         assert_eq!(c.kind(), Ok(CommandKind::Hold));
+        // Six joints: every one held, the wrist with its own gains and limits.
+        let l6 = ArmLimits::for_model_joints(ur5_shared::model::UrModel::Ur5e, 6);
+        let c = hold_command(
+            ActionMode::GoalAngles,
+            &l6,
+            &s,
+            &[0.2, 0.0, 0.0, 0.0, 0.0, 9.0],
+            None,
+            1,
+            0,
+            0,
+        );
+        assert_eq!(c.joints, 6);
+        assert_eq!(c.values()[5], l6.upper[5]);
+        let c = hold_command(
+            ActionMode::Torque,
+            &l6,
+            &s,
+            &[0.0, 0.0, 0.0, 0.5, 0.0, 0.0],
+            Some((&[0.0; 6], &[0.0, 0.0, 0.0, 0.0, 2.0, 0.0])),
+            1,
+            0,
+            0,
+        );
+        assert_eq!(c.values(), [0.0, 0.0, 0.0, 10.0 * 0.5, -2.0, 0.0]);
     }
 }

@@ -288,7 +288,8 @@ impl FaultCounts {
 pub struct RejectCounts {
     /// `dx`/`du` of no task (a damaged header).
     pub dimensions: u64,
-    /// A valid table of another task's dimensions than the controller's layout.
+    /// A valid table of another task's dimensions than the controller's layout, or with a
+    /// goal point for a pose task.
     pub layout_mismatch: u64,
     /// Horizon 0 or > MAX_HORIZON.
     pub horizon: u64,
@@ -331,7 +332,9 @@ impl RejectCounts {
             Rejection::InvalidPolicy(_) => &mut self.invalid_policy,
             Rejection::ModeMismatch { .. } => &mut self.mode_mismatch,
             Rejection::ModelMismatch { .. } => &mut self.model_mismatch,
-            Rejection::LayoutMismatch(_) => &mut self.layout_mismatch,
+            Rejection::LayoutMismatch(_) | Rejection::GoalPointForPose { .. } => {
+                &mut self.layout_mismatch
+            }
         };
         *c += 1;
     }

@@ -58,6 +58,15 @@ pub enum Rejection {
         /// `task.horizon`.
         expected: u64,
     },
+    /// The table's episode plan sets a goal point, but the task's goal is a pose (several tool
+    /// points): a point cannot say where they go.
+    #[error("table version {version} sets a goal point for its episodes, but the task's goal is a pose ({points} tool points, task.goal_pose): learner and controller disagree about the task")]
+    GoalPointForPose {
+        /// Table version.
+        version: u64,
+        /// The layout's tool points.
+        points: usize,
+    },
     /// The version is not newer than the active table's (versions increase, docs/design.md §3.3).
     #[error("gain table version {version} is not newer than the active version {active}; ignored")]
     StaleVersion {
@@ -79,6 +88,7 @@ impl Rejection {
                 | Rejection::ModeMismatch { .. }
                 | Rejection::ModelMismatch { .. }
                 | Rejection::LayoutMismatch(_)
+                | Rejection::GoalPointForPose { .. }
         )
     }
 }
@@ -214,6 +224,15 @@ impl TableBuffer {
         (version < v).then_some(Err(Rejection::StaleVersion { version, active: v }))
     }
 
+    /// A plan's goal is a point: only for a task of one tool point.
+    fn check_plan(&self, version: u64, plan: &ur5_shared::EpisodePlan) -> Result<(), Rejection> {
+        let points = self.layout.tool_points();
+        if plan.goal().is_some() && points != 1 {
+            return Err(Rejection::GoalPointForPose { version, points });
+        }
+        Ok(())
+    }
+
     /// The half of `kind` that is not active.
     fn inactive(&self, kind: Kind) -> usize {
         match self.active {
@@ -244,6 +263,7 @@ impl TableBuffer {
         table
             .check_layout(&self.layout)
             .map_err(Rejection::LayoutMismatch)?;
+        self.check_plan(table.version, &table.plan)?;
         let mode = table.mode().expect("validated");
         if mode != self.mode {
             return Err(Rejection::ModeMismatch {
@@ -291,6 +311,7 @@ impl TableBuffer {
         table
             .check_layout(&self.layout)
             .map_err(Rejection::LayoutMismatch)?;
+        self.check_plan(table.version, &table.plan)?;
         if table.horizon() != self.horizon {
             return Err(Rejection::HorizonMismatch {
                 version: table.version,

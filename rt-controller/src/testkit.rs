@@ -9,10 +9,10 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::{MAX_JOINTS, N_JOINTS};
+use ur5_shared::layout::{MAX_JOINTS, MAX_TOOL_POINTS};
 use ur5_shared::services::{self, ServiceNames};
 use ur5_shared::{
-    ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, PolicyTable, StateLayout, DU, DX,
+    ArmCommand, ArmState, ArmStatus, CommandKind, GainTable, PolicyTable, StateLayout, DU,
 };
 
 use crate::ports::SetupError;
@@ -41,7 +41,8 @@ fn setup_err(what: &'static str) -> impl Fn(&dyn core::fmt::Debug) -> SetupError
 
 /// Runs a lockstep kinematic arm on `prefix` until `stop` is raised. Joint angles move towards
 /// goal angles by at most `max_velocity` (rad/s) × `dt` (s) per command; torques and holds keep
-/// the pose; a reset teleports. `ee_pos` is q scaled by 0.1 (only the layout matters here).
+/// the pose; a reset teleports. Three joints and one tool point, at q scaled by 0.1 (only the
+/// layout matters here).
 pub fn run_kinematic_arm(
     prefix: &str,
     dt: f64,
@@ -58,6 +59,26 @@ pub fn run_kinematic_arm(
 /// instead of racing the loop. The controller gives up waiting after
 /// `safety.stale_state_timeout_s`.
 pub fn run_kinematic_arm_with(
+    prefix: &str,
+    dt: f64,
+    max_velocity: f64,
+    stop: &AtomicBool,
+    before_answer: impl FnMut(&ArmCommand),
+) -> Result<ArmReport, SetupError> {
+    run_kinematic_arm_for(
+        &StateLayout::REACH3,
+        prefix,
+        dt,
+        max_velocity,
+        stop,
+        before_answer,
+    )
+}
+
+/// [`run_kinematic_arm_with`] of an arm with `layout`'s joints and tool points (point i at
+/// 0.1 q[..3] shifted by i × 0.1 m in z).
+pub fn run_kinematic_arm_for(
+    layout: &StateLayout,
     prefix: &str,
     dt: f64,
     max_velocity: f64,
@@ -90,15 +111,20 @@ pub fn run_kinematic_arm_with(
         holds: 0,
         round_trip: Histogram::new(),
     };
+    let (n, p) = (layout.joints(), layout.tool_points());
     let mut state = ArmState {
         status: ArmStatus::READY,
-        joints: N_JOINTS as u32,
+        joints: n as u32,
+        tool_points: p as u32,
         ..ArmState::default()
     };
     let publish = |state: &mut ArmState| {
         state.seq += 1;
         state.stamp_ns = monotonic_ns();
-        state.ee_pos = core::array::from_fn(|j| 0.1 * state.q[j]);
+        for i in 0..p.min(MAX_TOOL_POINTS) {
+            state.points[i] = core::array::from_fn(|j| 0.1 * state.q[j]);
+            state.points[i][2] += 0.1 * i as f64;
+        }
         let _ = state_pub.send_copy(*state);
         state.stamp_ns
     };
@@ -132,10 +158,11 @@ pub fn run_kinematic_arm_with(
         match cmd.kind() {
             Ok(CommandKind::Reset) => {
                 report.resets += 1;
-                state.set_joints(cmd.reset_pose(), &[0.0; N_JOINTS]);
+                let q = cmd.reset_pose();
+                state.set_joints(q, &[0.0; MAX_JOINTS][..q.len()]);
             }
             Ok(CommandKind::GoalAngles) => {
-                for j in 0..DU {
+                for j in 0..cmd.values().len() {
                     let dq = (cmd.values[j] - state.q[j]).clamp(-step, step);
                     state.q[j] += dq;
                     state.qd[j] = dq / dt;
@@ -199,13 +226,33 @@ pub fn random_policy_table(
     sigma: f64,
     seed: u64,
 ) -> Box<PolicyTable> {
+    random_policy_table_for(
+        &StateLayout::REACH3,
+        version,
+        hidden,
+        out_scale,
+        sigma,
+        seed,
+    )
+}
+
+/// [`random_policy_table`] for any layout.
+pub fn random_policy_table_for(
+    layout: &StateLayout,
+    version: u64,
+    hidden: &[usize],
+    out_scale: f64,
+    sigma: f64,
+    seed: u64,
+) -> Box<PolicyTable> {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut theta = Vec::with_capacity(ur5_shared::policy::flat_len(DX, DU, hidden));
-    theta.extend([0.0; DX]);
-    theta.extend([1.0; DX]);
-    for _ in 0..DU {
-        let mut prev = DX;
+    let (dx, du) = (layout.dx(), layout.du());
+    let mut theta = Vec::with_capacity(ur5_shared::policy::flat_len(dx, du, hidden));
+    theta.extend(core::iter::repeat_n(0.0, dx));
+    theta.extend(core::iter::repeat_n(1.0, dx));
+    for _ in 0..du {
+        let mut prev = dx;
         for (l, &n) in hidden.iter().chain(&[1]).enumerate() {
             let a = (6.0 / (prev + n) as f64).sqrt();
             let scale = if l == hidden.len() { out_scale } else { 1.0 };
@@ -214,15 +261,9 @@ pub fn random_policy_table(
             prev = n;
         }
     }
-    theta.extend([sigma.ln(); DU]);
+    theta.extend(core::iter::repeat_n(sigma.ln(), du));
     let mut p = PolicyTable::new_boxed();
-    p.fill(
-        version,
-        &StateLayout::REACH3,
-        ActionMode::GoalAngles,
-        hidden,
-        &theta,
-    )
-    .expect("a policy within the table's limits");
+    p.fill(version, layout, ActionMode::GoalAngles, hidden, &theta)
+        .expect("a policy within the table's limits");
     p
 }

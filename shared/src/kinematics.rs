@@ -124,6 +124,34 @@ impl UrKinematics {
         ([p.x, p.y, p.z], [v.x, v.y, v.z])
     }
 
+    /// The tool points at `offsets` (m, `wrist_3_link` frame, from the end-effector point; one
+    /// per entry of `points` and `velocities`) and their linear velocities (m/s), base frame,
+    /// at joint angles `q` (rad) and velocities `qd` (rad/s): the points of
+    /// [`crate::pose::tool_points`] on [`UrKinematics::tool_pose`], each moving as
+    /// [`UrKinematics::ee_point_velocity`]'s point does. Offset 0 is the end-effector point.
+    pub fn tool_points_velocity(
+        &self,
+        q: &Joints6,
+        qd: &Joints6,
+        offsets: &[[f64; 3]],
+        points: &mut [[f64; 3]],
+        velocities: &mut [[f64; 3]],
+    ) {
+        assert!(offsets.len() == points.len() && offsets.len() == velocities.len());
+        let f = self.frames(q);
+        for ((o, pt), vel) in offsets.iter().zip(points).zip(velocities) {
+            let local = Vector3::from(self.ee_offset) + Vector3::from(*o);
+            let p = f[5] * Point3::from(local);
+            let mut v = Vector3::zeros();
+            for (j, fj) in f.iter().enumerate() {
+                let z = fj.rotation * Vector3::z();
+                v += qd[j] * z.cross(&(p - Point3::from(fj.translation.vector)));
+            }
+            *pt = [p.x, p.y, p.z];
+            *vel = [v.x, v.y, v.z];
+        }
+    }
+
     /// The six joint values of the arm with the active joints at `active` and the wrist at
     /// `wrist` (layout order: pan, lift, elbow, wrist 1–3).
     pub fn six(active: &[f64; N_JOINTS], wrist: &[f64; 3]) -> Joints6 {
@@ -164,6 +192,37 @@ mod tests {
         for r in 0..3 {
             let fd = (plus[r] - minus[r]) / (2.0 * h);
             assert!((fd - v[r]).abs() < 1e-7, "row {r}: {fd} vs {}", v[r]);
+        }
+    }
+
+    #[test]
+    fn tool_points_are_the_poses_points_and_move_as_their_derivative() {
+        let k = UrKinematics::new(UrModel::Ur5e, [0.01, -0.02, 0.03]);
+        let q = [0.3, -1.9, 2.2, -1.4, 1.6, 0.2];
+        let qd = [0.7, -0.4, 1.1, 0.3, -0.2, 0.5];
+        let offsets = [[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.05]];
+        let (mut p, mut v) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+        k.tool_points_velocity(&q, &qd, &offsets, &mut p, &mut v);
+        assert_eq!(p[0], k.ee_point(&q));
+        assert_eq!(v[0], k.ee_point_velocity(&q, &qd).1);
+        let mut want = [[0.0; 3]; 3];
+        crate::pose::tool_points(&k.tool_pose(&q), &offsets, &mut want);
+        let h = 1e-6;
+        let (mut plus, mut minus, mut scratch) = ([[0.0; 3]; 3], [[0.0; 3]; 3], [[0.0; 3]; 3]);
+        let qp: Joints6 = core::array::from_fn(|j| q[j] + h * qd[j]);
+        let qm: Joints6 = core::array::from_fn(|j| q[j] - h * qd[j]);
+        k.tool_points_velocity(&qp, &qd, &offsets, &mut plus, &mut scratch);
+        k.tool_points_velocity(&qm, &qd, &offsets, &mut minus, &mut scratch);
+        for i in 0..3 {
+            for r in 0..3 {
+                assert!((p[i][r] - want[i][r]).abs() < 1e-12, "{p:?} vs {want:?}");
+                let fd = (plus[i][r] - minus[i][r]) / (2.0 * h);
+                assert!(
+                    (fd - v[i][r]).abs() < 1e-7,
+                    "point {i} row {r}: {fd} vs {}",
+                    v[i][r]
+                );
+            }
         }
     }
 

@@ -9,7 +9,7 @@
 //!   and [`GainTable::validate`] against [`GainBounds`].
 //! - [`law`]: the controller law a = K_t (s − ŝ_t) + k_t + â_t + L_t ε ([`controller_action`]),
 //!   used by both the real-time loop and the learner's rollouts.
-//! - [`policy`]: the policy table ([`PolicyTable`], ≈ 256 KB), the second controller kind: the
+//! - [`policy`]: the policy table ([`PolicyTable`], ≈ 384 KB), the second controller kind: the
 //!   weights of a Gaussian MLP policy, checksum, validation and [`policy_action`].
 //! - [`msg`]: the other IPC payloads ([`ArmState`], [`ArmCommand`], [`StepSample`]).
 //! - [`services`]: iceoryx2 service names, per-run prefixes and the quality of service of each

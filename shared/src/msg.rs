@@ -17,7 +17,9 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::layout::{DimensionMismatch, StateLayout, DX, MAX_DU, MAX_DX, MAX_JOINTS};
+use crate::layout::{
+    DimensionMismatch, StateLayout, DX, MAX_DU, MAX_DX, MAX_JOINTS, MAX_TOOL_POINTS,
+};
 
 /// One executed step, published by the controller on `learner/samples` for the learner's
 /// dynamics fit and discriminator (docs/design.md §3.2; the dynamics use a_sent, §5 D18).
@@ -178,7 +180,7 @@ impl ArmFaults {
 /// per physics step in lockstep, as the arm chooses).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Default, ZeroCopySend)]
-#[type_name("ur5_shared::ArmState.v2")]
+#[type_name("ur5_shared::ArmState.v3")]
 pub struct ArmState {
     /// Message sequence number of this publisher (from 1).
     pub seq: u64,
@@ -192,10 +194,13 @@ pub struct ArmState {
     pub q: [f64; MAX_JOINTS],
     /// Joint velocities q̇ (rad/s) in `qd[..joints]`.
     pub qd: [f64; MAX_JOINTS],
-    /// End-effector point (m, arm base frame).
-    pub ee_pos: [f64; 3],
-    /// End-effector linear velocity (m/s, arm base frame).
-    pub ee_vel: [f64; 3],
+    /// Positions (m, arm base frame) of the task's tool points in `points[..tool_points]`
+    /// (`TaskConfig::tool_offsets`, in the end-effector link frame from the end-effector
+    /// point; one point, the end-effector point, for a point goal); the rest 0
+    /// (`ArmState.v3`; v2 had the end-effector point only).
+    pub points: [[f64; 3]; MAX_TOOL_POINTS],
+    /// Linear velocities (m/s, arm base frame) of the tool points in `point_vels[..tool_points]`.
+    pub point_vels: [[f64; 3]; MAX_TOOL_POINTS],
     /// Status bits.
     pub status: ArmStatus,
     /// Fault bits.
@@ -203,8 +208,8 @@ pub struct ArmState {
     /// Active joints n, 1..=[`MAX_JOINTS`] (`ArmState.v2`; v1 had the reaching task's 3 in
     /// arrays of 3).
     pub joints: u32,
-    /// Keeps the layout free of implicit padding; write 0.
-    pub reserved: u32,
+    /// Tool points p in `points`, 1..=[`MAX_TOOL_POINTS`] (`ArmState.v3`).
+    pub tool_points: u32,
 }
 
 impl ArmState {
@@ -212,13 +217,42 @@ impl ArmState {
     /// `ee_pos` (m) and its velocity `ee_vel` (m/s); the rest default. Panics if n exceeds
     /// [`MAX_JOINTS`] or the lengths differ.
     pub fn of_joints(q: &[f64], qd: &[f64], ee_pos: [f64; 3], ee_vel: [f64; 3]) -> Self {
-        let mut s = Self {
-            ee_pos,
-            ee_vel,
-            ..Self::default()
-        };
+        let mut s = Self::default();
         s.set_joints(q, qd);
+        s.set_points(&[ee_pos], &[ee_vel]);
         s
+    }
+
+    /// Sets `tool_points` and the tool points' positions (m) and velocities (m/s) (the rest of
+    /// the arrays 0). Panics if there are more than [`MAX_TOOL_POINTS`] or the lengths differ.
+    pub fn set_points(&mut self, points: &[[f64; 3]], velocities: &[[f64; 3]]) {
+        assert_eq!(points.len(), velocities.len(), "a velocity per point");
+        let p = points.len();
+        self.tool_points = p as u32;
+        self.points = [[0.0; 3]; MAX_TOOL_POINTS];
+        self.point_vels = [[0.0; 3]; MAX_TOOL_POINTS];
+        self.points[..p].copy_from_slice(points);
+        self.point_vels[..p].copy_from_slice(velocities);
+    }
+
+    /// The tool points' positions `points[..tool_points]` (clamped to the capacity).
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.points[..(self.tool_points as usize).min(MAX_TOOL_POINTS)]
+    }
+
+    /// The tool points' velocities `point_vels[..tool_points]` (clamped to the capacity).
+    pub fn point_vels(&self) -> &[[f64; 3]] {
+        &self.point_vels[..(self.tool_points as usize).min(MAX_TOOL_POINTS)]
+    }
+
+    /// Whether every value the arm reports (joints, tool points) is finite.
+    pub fn is_finite(&self) -> bool {
+        self.q
+            .iter()
+            .chain(&self.qd)
+            .chain(self.points.as_flattened())
+            .chain(self.point_vels.as_flattened())
+            .all(|v| v.is_finite())
     }
 
     /// Sets `joints` and the joint angles and velocities (the rest of the arrays 0). Panics if
@@ -247,9 +281,22 @@ impl ArmState {
     /// arm reports joints, not a state: its dimensions are those of the layout with its
     /// joints).
     pub fn check_layout(&self, layout: &StateLayout) -> Result<(), DimensionMismatch> {
-        let n = self.joints as usize;
-        let dx = 2 * n + 6 * layout.tool_points();
-        layout.check_dims("the arm's state", dx, n)
+        let (n, p) = (self.joints as usize, self.tool_points as usize);
+        layout.check_dims("the arm's state", 2 * n + 6 * p, n)
+    }
+
+    /// The state vector s of `layout` into `s` (dX of it), with the tool points' targets
+    /// `targets` (m, base frame, one per tool point), through [`StateLayout::fill_state`]. Call
+    /// it for an arm whose [`ArmState::check_layout`] passed (else it panics).
+    pub fn fill_state(&self, layout: &StateLayout, targets: &[[f64; 3]], s: &mut [f64]) {
+        layout.fill_state(
+            self.q(),
+            self.qd(),
+            self.points(),
+            self.point_vels(),
+            targets,
+            s,
+        );
     }
 
     /// The state vector s of the reaching task ([`StateLayout::REACH3`]) for `goal` (m, arm
@@ -260,8 +307,8 @@ impl ArmState {
         crate::layout::state_vector(
             &[q[0], q[1], q[2]],
             &[qd[0], qd[1], qd[2]],
-            &self.ee_pos,
-            &self.ee_vel,
+            &self.points[0],
+            &self.point_vels[0],
             goal,
         )
     }
@@ -456,6 +503,32 @@ mod tests {
         assert_eq!(s[QD], [4.0, 5.0, 6.0]);
         assert_eq!(s[EE_MINUS_GOAL], [0.25, 0.0, 0.5]);
         assert_eq!(s[EE_VEL], [10.0, 11.0, 12.0]);
+        let mut full = st;
+        full.fill_state(&StateLayout::REACH3, &[goal], &mut [0.0; DX]);
+        // Six joints and three tool points: the pose layout, and its state from the targets.
+        let mut pose = ArmState::of_joints(&[0.1; 6], &[0.2; 6], [0.0; 3], [0.0; 3]);
+        assert!(pose.check_layout(&StateLayout::POSE6).is_err());
+        pose.set_points(
+            &[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]],
+            &[[0.5; 3], [0.25; 3], [0.125; 3]],
+        );
+        pose.check_layout(&StateLayout::POSE6).unwrap();
+        let e = pose
+            .check_layout(&StateLayout::new(6, 1).unwrap())
+            .unwrap_err();
+        assert!(e.to_string().contains("dX = 30, dU = 6"), "{e}");
+        let mut s6 = [0.0; 30];
+        pose.fill_state(
+            &StateLayout::POSE6,
+            &[[1.0; 3], [2.0; 3], [3.0; 3]],
+            &mut s6,
+        );
+        let l = StateLayout::POSE6;
+        assert_eq!(s6[l.point(2)], [4.0, 5.0, 6.0]);
+        assert_eq!(s6[l.point_velocity(1)], [0.25; 3]);
+        assert_eq!(s6[l.qd()], [0.2; 6]);
+        full.points[0][1] = f64::NAN;
+        assert!(!full.is_finite() && st.is_finite());
     }
 
     #[test]
@@ -498,7 +571,7 @@ mod tests {
         );
         assert_eq!(
             core::mem::size_of::<ArmState>(),
-            8 * 4 + 8 * (2 * MAX_JOINTS + 6) + 4 * 4
+            8 * 4 + 8 * (2 * MAX_JOINTS + 6 * MAX_TOOL_POINTS) + 4 * 4
         );
         assert_eq!(
             core::mem::size_of::<ArmCommand>(),

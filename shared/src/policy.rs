@@ -37,8 +37,8 @@
 //!
 //! # Size
 //!
-//! [`POLICY_TABLE_BYTES`] = 96 + 8 · [`MAX_POLICY_PARAMS`] ≈ 256 KB: room for three heads of
-//! two hidden layers of 96 (31,998 values), at most [`MAX_HIDDEN_LAYERS`] hidden layers of at
+//! [`POLICY_TABLE_BYTES`] = 96 + 8 · [`MAX_POLICY_PARAMS`] ≈ 384 KB: room for seven heads of
+//! two hidden layers of 64 on the largest state (44 430 values), at most [`MAX_HIDDEN_LAYERS`] hidden layers of at
 //! most [`MAX_WIDTH`] units. Like [`crate::GainTable`], build one on the heap
 //! ([`PolicyTable::new_boxed`]) or in place ([`PolicyTable::init_zeroed`]), fill, [`PolicyTable::seal`];
 //! a receiver calls [`PolicyTable::validate`] before use.
@@ -60,8 +60,10 @@ use serde::{Deserialize, Serialize};
 pub const MAX_HIDDEN_LAYERS: usize = 4;
 /// Widest hidden layer (units).
 pub const MAX_WIDTH: usize = 256;
-/// Most parameters a table carries.
-pub const MAX_POLICY_PARAMS: usize = 32_768;
+/// Most parameters a table carries: room for the largest task's default policy, 7 heads
+/// 32-64-64-1 (44 430 parameters; 6 heads 30-64-64-1 for the six-joint pose task: 37 320).
+/// `PolicyTable.v4`; v3 held 32 768, enough for three joints only.
+pub const MAX_POLICY_PARAMS: usize = 49_152;
 /// Size of a [`PolicyTable`] in bytes.
 pub const POLICY_TABLE_BYTES: usize = core::mem::size_of::<PolicyTable>();
 
@@ -88,7 +90,7 @@ pub fn flat_len(dx: usize, du: usize, hidden: &[usize]) -> usize {
 /// The weights of a Gaussian MLP policy (module docs), as sent on `controller/policy`.
 #[repr(C)]
 #[derive(Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("ur5_shared::PolicyTable.v3")]
+#[type_name("ur5_shared::PolicyTable.v4")]
 pub struct PolicyTable {
     /// Version, in the same increasing sequence as gain tables' (the controller takes the
     /// newest of either kind).

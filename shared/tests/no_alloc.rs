@@ -131,6 +131,9 @@ fn table_handling_and_state_assembly_do_not_allocate() {
     let mut buffers = [GainTable::new_boxed(), GainTable::new_boxed()];
     let bounds = GainBounds::default();
     let arm = ArmState::of_joints(&[0.1, 0.2, 0.3], &[0.0; 3], [0.4, 0.1, 0.3], [0.0; 3]);
+    let mut pose = ArmState::of_joints(&[0.1; 6], &[0.0; 6], [0.0; 3], [0.0; 3]);
+    pose.set_points(&[[0.4, 0.1, 0.3]; 3], &[[0.0; 3]; 3]);
+    let targets = [[0.4, 0.1, 0.3], [0.3, 0.1, 0.3], [0.4, 0.0, 0.3]];
     let (n, ()) = heap_ops(|| {
         for k in 0..20 {
             incoming.validate(&bounds).unwrap();
@@ -140,8 +143,17 @@ fn table_handling_and_state_assembly_do_not_allocate() {
                 [arm.q[0], arm.q[1], arm.q[2]],
                 [arm.qd[0], arm.qd[1], arm.qd[2]],
             );
-            let s2 = state_vector(&q, &qd, &arm.ee_pos, &arm.ee_vel, &[0.5, 0.0, 0.3]);
+            let s2 = state_vector(
+                &q,
+                &qd,
+                &arm.points[0],
+                &arm.point_vels[0],
+                &[0.5, 0.0, 0.3],
+            );
             assert_eq!(s, s2);
+            let mut s3 = [0.0; 30];
+            pose.fill_state(&StateLayout::POSE6, &targets, &mut s3);
+            assert_eq!(s3[StateLayout::POSE6.point(2)], [0.0, 0.1, 0.0]);
         }
         // Rejections build their error without formatting anything.
         buffers[0].step_mut(7).set_l(0, 1, 1.0);

@@ -8,6 +8,9 @@
 //! controller's queue before the loop starts, and version 2 is published while the lockstep
 //! controller waits for the arm to answer the reset of episode 3 (the arm stand-in holds that
 //! answer), so it is taken at the boundary before episode 4 on any machine.
+//!
+//! Each arm backend (iceoryx2, `ur`, `ros2`) runs the reaching task (three joints, a point) and
+//! the whole arm with a pose goal (six joints, three tool points: dX = 30, dU = 6).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -18,10 +21,15 @@ use std::time::{Duration, Instant};
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use rt_controller::config::{LiveViewConfig, Safety};
-use rt_controller::testkit::{constant_goal_table, random_policy_table, run_kinematic_arm_with};
+use rt_controller::testkit::{
+    constant_goal_table_for, random_policy_table_for, run_kinematic_arm_for,
+};
 use rt_controller::{Controller, ControllerConfig, ExitReason};
+use ur5_shared::config::TaskConfig;
+use ur5_shared::kinematics::UrKinematics;
+use ur5_shared::model::UrModel;
 use ur5_shared::services::{self, unique_prefix, ServiceNames};
-use ur5_shared::{ArmCommand, CommandKind, GainTable, PolicyTable, StepSample};
+use ur5_shared::{ArmCommand, CommandKind, GainTable, PolicyTable, StateLayout, StepSample};
 
 struct Counting;
 
@@ -75,35 +83,52 @@ enum Kind {
     Policy,
 }
 
-/// The stand-in's table of `kind` and `version`: a constant goal with noise, or a random
-/// 12-64-64-1 policy (σ = 0.01 rad).
+/// The six-joint pose task on the UR5 (the controller's default model): the start pose of
+/// the model with its wrist, and as goal the tool's pose at other joint angles.
+fn pose_task(horizon: usize) -> TaskConfig {
+    let kin = UrKinematics::new(UrModel::Ur5, UrModel::Ur5.default_ee_offset());
+    let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&[0.3, -1.7, 2.0, -1.8, -1.5, 0.2]));
+    TaskConfig {
+        horizon,
+        ..TaskConfig::pose_for_model(UrModel::Ur5, goal)
+    }
+}
+
+/// The goal angles of table `version` for `layout`'s joints (rad).
+fn goal_angles(layout: &StateLayout, version: u64) -> Vec<f64> {
+    let q = if version == 1 {
+        [0.2, -1.8, 2.2, -1.6, -1.5, 0.1]
+    } else {
+        [-0.2, -1.7, 2.0, -1.5, -1.6, -0.1]
+    };
+    q[..layout.du()].to_vec()
+}
+
+/// The stand-in's table of `kind` and `version` for `layout`: a constant goal with noise, or a
+/// random dX-64-64-1 policy (σ = 0.01 rad).
 fn send(
+    layout: &StateLayout,
     kind: Kind,
     version: u64,
     gains: &iceoryx2::port::publisher::Publisher<ipc::Service, GainTable, ()>,
     policy: &iceoryx2::port::publisher::Publisher<ipc::Service, PolicyTable, ()>,
 ) {
-    let q = if version == 1 {
-        [0.2, -1.8, 2.2]
-    } else {
-        [-0.2, -1.7, 2.0]
-    };
     match kind {
         Kind::Gains => {
-            gains
-                .send_copy(*constant_goal_table(version, T, q, 0.01))
-                .unwrap();
+            let q = goal_angles(layout, version);
+            let t = constant_goal_table_for(layout, version, T, &q, 0.01);
+            gains.send_copy(*t).unwrap();
         }
         Kind::Policy => {
             publish_policy(
                 policy,
-                &random_policy_table(version, &[64, 64], 0.05, 0.01, version),
+                &random_policy_table_for(layout, version, &[64, 64], 0.05, 0.01, version),
             );
         }
     }
 }
 
-/// Sends `table` through a loaned sample (no 256 KB value on the stack).
+/// Sends `table` through a loaned sample (no 384 KB value on the stack).
 fn publish_policy(
     publisher: &iceoryx2::port::publisher::Publisher<ipc::Service, PolicyTable, ()>,
     table: &PolicyTable,
@@ -120,6 +145,7 @@ fn publish_policy(
 /// when the arm asks on `publish_v2`, after draining the samples so far; `v2_sent` confirms.
 /// Returns (episode, table version) of every sample received, in order.
 fn learner(
+    layout: StateLayout,
     prefix: String,
     kinds: [Kind; 2],
     stop: Arc<AtomicBool>,
@@ -161,7 +187,7 @@ fn learner(
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    send(kinds[0], 1, &publisher, &policy_pub);
+    send(&layout, kinds[0], 1, &publisher, &policy_pub);
     v1_sent.send(()).unwrap();
 
     while !stop.load(Ordering::Relaxed) {
@@ -171,7 +197,7 @@ fn learner(
         match publish_v2.recv_timeout(Duration::from_millis(1)) {
             Ok(()) => {
                 drain(&mut received);
-                send(kinds[1], 2, &publisher, &policy_pub);
+                send(&layout, kinds[1], 2, &publisher, &policy_pub);
                 v2_sent.send(()).unwrap();
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
@@ -199,23 +225,32 @@ fn counter_sees_allocations() {
 
 #[test]
 fn the_loop_does_not_allocate_across_a_swap_from_gains_to_a_policy() {
-    no_allocation_across_a_swap([Kind::Gains, Kind::Policy], false);
+    no_allocation_across_a_swap(TaskConfig::default(), [Kind::Gains, Kind::Policy], false);
 }
 
 #[test]
 fn the_loop_does_not_allocate_across_a_swap_from_a_policy_to_gains() {
-    no_allocation_across_a_swap([Kind::Policy, Kind::Gains], false);
+    no_allocation_across_a_swap(TaskConfig::default(), [Kind::Policy, Kind::Gains], false);
+}
+
+/// Six joints and a pose goal, both controller kinds.
+#[test]
+fn the_loop_does_not_allocate_at_six_joints_and_a_pose() {
+    no_allocation_across_a_swap(pose_task(T), [Kind::Gains, Kind::Policy], false);
+    no_allocation_across_a_swap(pose_task(T), [Kind::Policy, Kind::Gains], false);
 }
 
 /// The same with the live view on (`[live_view]`: an entry at every tick and every fresh state
 /// between episodes, joint states too, on ROS domain 127); its DDS thread is not counted.
 #[test]
 fn the_loop_with_the_live_view_does_not_allocate() {
-    no_allocation_across_a_swap([Kind::Gains, Kind::Policy], true);
+    no_allocation_across_a_swap(TaskConfig::default(), [Kind::Gains, Kind::Policy], true);
 }
 
-/// Version 1 of kind `kinds[0]`, version 2 of kind `kinds[1]`; `live_view`: with the live view.
-fn no_allocation_across_a_swap(kinds: [Kind; 2], live_view: bool) {
+/// On `task`: version 1 of kind `kinds[0]`, version 2 of kind `kinds[1]`; `live_view`: with
+/// the live view.
+fn no_allocation_across_a_swap(task: TaskConfig, kinds: [Kind; 2], live_view: bool) {
+    let layout = task.layout();
     let prefix = unique_prefix("no-alloc-loop");
     let stop = Arc::new(AtomicBool::new(false));
     let (v1_sent_tx, v1_sent) = mpsc::channel();
@@ -239,27 +274,41 @@ fn no_allocation_across_a_swap(kinds: [Kind; 2], live_view: bool) {
                     v2_sent.recv().unwrap();
                 }
             };
-            run_kinematic_arm_with(&prefix, 0.1, std::f64::consts::PI, &stop, before_answer)
-                .unwrap()
-                .commands
+            run_kinematic_arm_for(
+                &layout,
+                &prefix,
+                0.1,
+                std::f64::consts::PI,
+                &stop,
+                before_answer,
+            )
+            .unwrap()
+            .commands
         })
     };
     let learner = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || learner(prefix, kinds, stop, v1_sent_tx, publish_v2, v2_sent_tx))
+        std::thread::spawn(move || {
+            learner(
+                layout, prefix, kinds, stop, v1_sent_tx, publish_v2, v2_sent_tx,
+            )
+        })
     };
 
     // Setup phase: may allocate.
     let cfg = ControllerConfig {
         prefix,
         episodes: EPISODES,
+        task,
         wait_for_learner: true,
         // The per-episode report goes through the loop too.
         episode_report: true,
         safety: Safety {
             // The arm holds one answer while version 2 is published (microseconds unless a
-            // thread is descheduled); only a hang should count as a stale arm here.
+            // thread is descheduled); only a hang should count as a stale arm here, and a
+            // stand-in that died ends the run (a failure, not a test that never returns).
             stale_state_timeout_s: 30.0,
+            give_up_after_s: 60.0,
             ..Safety::default()
         },
         live_view: LiveViewConfig {
@@ -355,6 +404,7 @@ struct Swapped<A: rt_controller::ArmBackend> {
 /// next boundary.
 fn run_swapping<A: rt_controller::ArmBackend>(
     tag: &str,
+    layout: &StateLayout,
     horizon: usize,
     make: impl FnOnce(&str) -> Controller<A>,
 ) -> Swapped<A> {
@@ -415,8 +465,9 @@ fn run_swapping<A: rt_controller::ArmBackend>(
     while gains.dynamic_config().number_of_subscribers() == 0 {
         std::thread::sleep(Duration::from_millis(1));
     }
+    let q = goal_angles(layout, 1);
     publisher
-        .send_copy(*constant_goal_table(1, horizon, [0.2, -1.8, 2.2], 0.01))
+        .send_copy(*constant_goal_table_for(layout, 1, horizon, &q, 0.01))
         .unwrap();
     ALLOCS.with(|c| c.set(0));
     FREES.with(|c| c.set(0));
@@ -426,7 +477,7 @@ fn run_swapping<A: rt_controller::ArmBackend>(
     // Version 2 is the other controller kind, a policy table.
     publish_policy(
         &policy_pub,
-        &random_policy_table(2, &[64, 64], 0.05, 0.01, 2),
+        &random_policy_table_for(layout, 2, &[64, 64], 0.05, 0.01, 2),
     );
     let never = AtomicBool::new(false);
     ARMED.with(|a| a.set(true));
@@ -450,14 +501,25 @@ fn run_swapping<A: rt_controller::ArmBackend>(
 /// gain table to a policy table ([`run_swapping`]).
 #[test]
 fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
+    ur_loop(TaskConfig::default());
+}
+
+/// The same with six joints and a pose goal: the servoj targets move the wrist too.
+#[test]
+fn the_ur_loop_does_not_allocate_at_six_joints_and_a_pose() {
+    ur_loop(pose_task(20));
+}
+
+fn ur_loop(task: TaskConfig) {
     use hil_sim::ur_sim::{self, UrSimConfig};
     use rt_controller::config::{ArmConfig, ArmKind, UrConfig};
-    use ur5_shared::config::{SimConfig, TaskConfig};
+    use ur5_shared::config::SimConfig;
 
     const T_UR: usize = 20;
     const EPISODES_UR: u64 = 5;
+    let layout = task.layout();
     let sim = ur_sim::spawn(
-        &TaskConfig::default(),
+        &task,
         &SimConfig::default(),
         &UrSimConfig {
             rtde_port: 0,
@@ -467,7 +529,7 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
         },
     )
     .expect("ur-sim");
-    let run = run_swapping("no-alloc-ur", T_UR, |prefix| {
+    let run = run_swapping("no-alloc-ur", &layout, T_UR, |prefix| {
         let cfg = ControllerConfig {
             prefix: prefix.to_owned(),
             episodes: EPISODES_UR,
@@ -475,7 +537,7 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
             episode_report: true,
             task: TaskConfig {
                 horizon: T_UR,
-                ..TaskConfig::default()
+                ..task
             },
             safety: Safety {
                 stale_state_timeout_s: 30.0,
@@ -531,22 +593,32 @@ fn the_ur_loop_does_not_allocate_across_boundaries_and_a_swap() {
 /// table swap ([`run_swapping`]).
 #[test]
 fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
+    ros2_loop(TaskConfig::default(), 125);
+}
+
+/// The same with six joints and a pose goal: the commands move the wrist too.
+#[test]
+fn the_ros2_loop_does_not_allocate_at_six_joints_and_a_pose() {
+    ros2_loop(pose_task(20), 131);
+}
+
+/// On ROS domain `domain` (the test's own).
+fn ros2_loop(task: TaskConfig, domain: u16) {
     use hil_sim::ros2_sim::{self, Ros2SimConfig};
     use rt_controller::config::{ArmConfig, ArmKind, Mode, Pacing, Ros2Config};
-    use ur5_shared::config::{SimConfig, TaskConfig};
+    use ur5_shared::config::SimConfig;
 
     const T_R: usize = 20;
     const EPISODES_R: u64 = 5;
-    // ROS domain 125: this test's own.
-    const DOMAIN: u16 = 125;
+    let layout = task.layout();
     // Topics of this process only: a second run of this test at the same time uses the same
     // domain.
     let ns = format!("/na{}", std::process::id());
     let sim = ros2_sim::spawn(
-        &TaskConfig::default(),
+        &task,
         &SimConfig::default(),
         &Ros2SimConfig {
-            domain_id: DOMAIN,
+            domain_id: domain,
             time_compression: 10.0,
             joint_states_topic: format!("{ns}/joint_states"),
             command_topic: format!("{ns}/forward_position_controller/commands"),
@@ -556,7 +628,7 @@ fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
         },
     )
     .expect("ros2-sim");
-    let run = run_swapping("no-alloc-ros2", T_R, |prefix| {
+    let run = run_swapping("no-alloc-ros2", &layout, T_R, |prefix| {
         let cfg = ControllerConfig {
             prefix: prefix.to_owned(),
             episodes: EPISODES_R,
@@ -567,7 +639,7 @@ fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
             time_compression: 10.0,
             task: TaskConfig {
                 horizon: T_R,
-                ..TaskConfig::default()
+                ..task
             },
             safety: Safety {
                 stale_state_timeout_s: 30.0,
@@ -576,7 +648,7 @@ fn the_ros2_loop_does_not_allocate_across_boundaries_and_a_swap() {
             arm: ArmConfig {
                 backend: ArmKind::Ros2,
                 ros2: Ros2Config {
-                    domain_id: DOMAIN,
+                    domain_id: domain,
                     joint_states_topic: format!("{ns}/joint_states"),
                     command_topic: format!("{ns}/forward_position_controller/commands"),
                     robot_mode_topic: format!("{ns}/io_and_status_controller/robot_mode"),

@@ -562,10 +562,12 @@ pub fn spawn(
         )),
         None => None,
     };
-    let sim = Ur5Sim::with_joints(sim_cfg.clone(), dt, cfg.joints)?;
-    let start_q = player
-        .as_ref()
-        .map_or(task.start_arm_joints(), playback::Player::start_active);
+    // A task of six joints needs an arm of six.
+    let sim = Ur5Sim::with_joints(sim_cfg.clone(), dt, cfg.joints.max(task.joints))?;
+    let start_q = player.as_ref().map_or(
+        task.start_six(&sim_cfg.wrist_q),
+        playback::Player::start_pose,
+    );
     let mut arm = Arm::new(sim, start_q, task.goal, dt)?;
     if let Some(p) = player {
         arm.load_playback(p);

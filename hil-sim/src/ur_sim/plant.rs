@@ -7,7 +7,6 @@ use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
 use ur5_shared::kinematics::Joints6;
-use ur5_shared::layout::N_JOINTS;
 use ur_protocol::state::runtime_state;
 use ur_protocol::{RobotMode, RobotState, SafetyMode};
 
@@ -115,14 +114,19 @@ pub struct Arm {
 pub struct Violation(pub String);
 
 impl Arm {
-    /// The arm at rest at `start_q` (rad), arm cycle `dt` (s).
+    /// The arm at rest at `start_q` (rad, six joints; a locked wrist's are ignored: it rests
+    /// at its lock angles), arm cycle `dt` (s).
     pub fn new(
         mut sim: Ur5Sim,
-        start_q: [f64; N_JOINTS],
+        start_q: [f64; 6],
         goal_point: [f64; 3],
         dt: f64,
     ) -> Result<Self, crate::SimError> {
-        sim.reset(start_q, goal_point)?;
+        if sim.joints() == 6 {
+            sim.reset_all(&start_q, goal_point)?;
+        } else {
+            sim.reset([start_q[0], start_q[1], start_q[2]], goal_point)?;
+        }
         let goal = sim.arm_joints().0;
         let mut arm = Self {
             sim,

@@ -335,10 +335,9 @@ impl Player {
         }
     }
 
-    /// The first row's active joints (rad): where the arm starts.
-    pub fn start_active(&self) -> [f64; N_JOINTS] {
-        let q = self.playback.q[0];
-        [q[0], q[1], q[2]]
+    /// The first row's six joints (rad): where the arm starts.
+    pub fn start_pose(&self) -> Joints6 {
+        self.playback.q[0]
     }
 
     /// The arm now (at rest while it is held).

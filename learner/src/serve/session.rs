@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use gps::policy::lin_gauss::LinGaussPolicy;
 use imitation::controller::to_gain_table;
 use imitation::rollout::Episode;
-use ur5_shared::{GainTable, StateLayout, StepSample};
+use ur5_shared::{GainTable, StepSample};
 
 use super::learner::{Publication, Run};
 use super::ports::Ports;
@@ -136,7 +136,7 @@ impl<'p, L: ServeLearner> Session<'p, L> {
             ports,
             start_version,
             t_len,
-            asm: Assembler::new(t_len, StateLayout::REACH3),
+            asm: Assembler::new(t_len, run.learner.task().layout()),
             publications,
             at: 0,
             batch: Batch {

@@ -30,11 +30,11 @@ use ur5_ros2::{
 };
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ArmLimits;
-use ur5_shared::kinematics::{Joints6, UrKinematics};
+use ur5_shared::kinematics::Joints6;
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus};
 use ur_protocol::modes::{robot_mode_name, safety_mode_name};
 
-use crate::arm::servo::{arm_state, state_due, Servo};
+use crate::arm::servo::{state_due, ArmSensor, Servo};
 use crate::arm::ur::check_joints;
 use crate::arm::{ArmBackend, ArmIoError, ArmReport};
 use crate::config::{Ros2Config, ServoTarget, UrConfig};
@@ -314,7 +314,7 @@ pub struct Ros2Report {
 
 /// The loop side.
 struct Live {
-    kin: UrKinematics,
+    sensor: ArmSensor,
     servo: Servo,
     servo_target: ServoTarget,
     q: Joints6,
@@ -357,6 +357,9 @@ pub struct Ros2Arm {
     /// Stopped and joined when the arm drops.
     thread: Option<DdsThread>,
     live: Option<Live>,
+    /// The task's active joints and tool points as the arm reports them.
+    sensor: ArmSensor,
+    joints: usize,
 }
 
 impl Ros2Arm {
@@ -376,6 +379,8 @@ impl Ros2Arm {
             first: None,
             thread: None,
             live: None,
+            sensor: ArmSensor::new(cfg.arm.ur.model, cfg.arm.ur.ee_offset, &cfg.task),
+            joints: cfg.task.joints,
         })
     }
 
@@ -542,10 +547,9 @@ impl ArmBackend for Ros2Arm {
             return Err(self.second_publisher(&ep).into());
         }
         check_joints(&s.q, &s.qd, &self.limits).map_err(Ros2SetupError::Stream)?;
-        let kin = UrKinematics::new(self.ur.model, self.ur.ee_offset);
         self.first = Some(s);
         self.endpoints = Some(ep);
-        Ok(arm_state(&kin, &s.q, &s.qd, 0, 0, 0, ArmStatus::READY))
+        Ok(self.sensor.state(&s.q, &s.qd, 0, 0, 0, ArmStatus::READY))
     }
 
     fn connect(&mut self) -> Result<(), SetupError> {
@@ -577,10 +581,18 @@ impl ArmBackend for Ros2Arm {
             )
             .map_err(|e| Ros2SetupError::Thread(e.to_string()))?,
         );
-        let here = UrKinematics::six(&[s.q[0], s.q[1], s.q[2]], &self.ur.wrist_q);
+        let mut servo = Servo::new(
+            s.q,
+            0.0,
+            self.cycle_s,
+            self.period_s,
+            self.joints,
+            self.ur.wrist_q,
+        );
+        servo.hold_here(&s.q, 0.0);
         let live = Live {
-            kin: UrKinematics::new(self.ur.model, self.ur.ee_offset),
-            servo: Servo::new(here, 0.0, self.cycle_s, self.period_s),
+            sensor: self.sensor,
+            servo,
             servo_target: self.ur.servo_target,
             q: s.q,
             qd: s.qd,
@@ -602,7 +614,7 @@ impl ArmBackend for Ros2Arm {
             handoff: Histogram::new(),
         };
         // Hold where the arm is until the controller's first command.
-        self.shared.command(here);
+        self.shared.command(live.servo.goal);
         self.live = Some(live);
         Ok(())
     }
@@ -667,10 +679,9 @@ impl ArmBackend for Ros2Arm {
         let ok = l.servo.take_command(
             cmd,
             &self.limits,
-            &self.ur.wrist_q,
             self.ur.reset_speed_rad_s,
             self.ur.servo_target,
-            UrKinematics::six(&[l.q[0], l.q[1], l.q[2]], &self.ur.wrist_q),
+            l.q,
             l.ts,
         );
         if l.robot_stop.is_none() {
@@ -739,8 +750,7 @@ impl Live {
 
     fn emit(&mut self, status: ArmStatus) -> ArmState {
         self.state_seq += 1;
-        let mut s = arm_state(
-            &self.kin,
+        let mut s = self.sensor.state(
             &self.q,
             &self.qd,
             self.state_seq,

@@ -5,9 +5,10 @@
 //! commands per joint state). No allocation.
 
 use ur5_shared::clock::monotonic_ns;
-use ur5_shared::config::ArmLimits;
+use ur5_shared::config::{ArmLimits, TaskConfig};
 use ur5_shared::kinematics::{Joints6, UrKinematics};
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::layout::MAX_TOOL_POINTS;
+use ur5_shared::model::UrModel;
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus, CommandKind};
 
 use crate::config::ServoTarget;
@@ -64,12 +65,26 @@ pub(crate) struct Servo {
     pub resets: u64,
     pub unsettled: u64,
     pub refused: u64,
+    /// The task's active joints (3: the wrist held at `wrist_q`; 6: the whole arm commanded).
+    joints: usize,
+    wrist_q: [f64; 3],
 }
 
 impl Servo {
-    /// Holding `q` from arm time `ts` (s).
-    pub fn new(q: Joints6, ts: f64, cycle_s: f64, period_s: f64) -> Self {
+    /// Holding `q` from arm time `ts` (s), taking commands for the first `joints` joints (3
+    /// or 6; with 3 the wrist's goal is `wrist_q`, rad).
+    pub fn new(
+        q: Joints6,
+        ts: f64,
+        cycle_s: f64,
+        period_s: f64,
+        joints: usize,
+        wrist_q: [f64; 3],
+    ) -> Self {
+        assert!(joints == 3 || joints == 6, "a UR task moves 3 or 6 joints");
         Self {
+            joints,
+            wrist_q,
             motion: Motion::Servo,
             goal: q,
             ramp_from: q,
@@ -82,6 +97,13 @@ impl Servo {
             unsettled: 0,
             refused: 0,
         }
+    }
+
+    /// Holds the active joints where they are (`here`, six joints, rad) from arm time `ts`,
+    /// ending any reset: the wrist at `wrist_q` when three joints are active.
+    pub fn hold_here(&mut self, here: &Joints6, ts: f64) {
+        let q = self.six(&here[..self.joints]);
+        self.hold(q, ts);
     }
 
     /// Holds `q` from arm time `ts`, ending any reset.
@@ -123,14 +145,23 @@ impl Servo {
         None
     }
 
+    /// The six joint goals (rad) of goals `active` for the task's joints: the wrist's at
+    /// `wrist_q` when three joints are active.
+    fn six(&self, active: &[f64]) -> Joints6 {
+        if self.joints == 6 {
+            core::array::from_fn(|j| active[j])
+        } else {
+            UrKinematics::six(&[active[0], active[1], active[2]], &self.wrist_q)
+        }
+    }
+
     /// Takes a controller command with the arm at `here` (six joints) at arm time `ts`; false
-    /// if it could not be sent as it is (non-finite, outside `limits`, torques: then the arm
-    /// holds where it is and `refused` counts it).
+    /// if it could not be sent as it is (non-finite, outside `limits`, for another number of
+    /// joints, torques: then the arm holds where it is and `refused` counts it).
     pub fn take_command(
         &mut self,
         cmd: &ArmCommand,
         limits: &ArmLimits,
-        wrist_q: &[f64; 3],
         reset_speed_rad_s: f64,
         servo_target: ServoTarget,
         here: Joints6,
@@ -138,20 +169,21 @@ impl Servo {
     ) -> bool {
         self.last_command_seq = cmd.seq;
         self.episode = cmd.episode;
-        let hold_here = UrKinematics::six(&[here[0], here[1], here[2]], wrist_q);
-        // The active joints' values of a command for them within their limits (None: for
-        // another number of joints, refused as out of limits are).
+        let n = self.joints;
+        let hold_here = self.six(&here[..n]);
+        // The six joint goals of a command for the active joints within their limits (None:
+        // for another number of joints, refused as out of limits are).
         let valid = |v: &[f64]| {
-            <[f64; N_JOINTS]>::try_from(v).ok().filter(|q| {
-                (0..N_JOINTS)
-                    .all(|j| q[j].is_finite() && q[j] >= limits.lower[j] && q[j] <= limits.upper[j])
-            })
+            let ok = v.len() == n
+                && (0..n).all(|j| {
+                    v[j].is_finite() && v[j] >= limits.lower[j] && v[j] <= limits.upper[j]
+                });
+            ok.then(|| self.six(v))
         };
         let (goal, ok) = match (cmd.kind(), valid(cmd.values()), valid(cmd.reset_pose())) {
-            (Ok(CommandKind::GoalAngles), Some(q), _) => (UrKinematics::six(&q, wrist_q), true),
+            (Ok(CommandKind::GoalAngles), Some(q), _) => (q, true),
             (Ok(CommandKind::Hold), ..) => (hold_here, true),
-            (Ok(CommandKind::Reset), _, Some(q)) => {
-                let to = UrKinematics::six(&q, wrist_q);
+            (Ok(CommandKind::Reset), _, Some(to)) => {
                 match &mut self.motion {
                     // The same reset again (the controller's retry): it goes on.
                     Motion::Reset { to: t, seq, .. } if *t == to => *seq = cmd.seq,
@@ -210,26 +242,59 @@ impl Servo {
     }
 }
 
-/// The controller's [`ArmState`] from a measured six-joint state: the three active joints,
-/// the end-effector point and velocity from all six (`ur5_shared::kinematics`). No fault bits.
-pub(crate) fn arm_state(
-    kin: &UrKinematics,
-    q: &Joints6,
-    qd: &Joints6,
-    seq: u64,
-    last_command_seq: u64,
-    episode: u64,
-    status: ArmStatus,
-) -> ArmState {
-    let (ee_pos, ee_vel) = kin.ee_point_velocity(q, qd);
-    ArmState {
-        seq,
-        stamp_ns: monotonic_ns(),
-        episode,
-        last_command_seq,
-        status,
-        faults: ArmFaults::default(),
-        ..ArmState::of_joints(&q[..N_JOINTS], &qd[..N_JOINTS], ee_pos, ee_vel)
+/// What a position-streaming backend reports of the arm for the task: its active joints and
+/// the task's tool points by forward kinematics (`ur5_shared::kinematics`) from all six
+/// measured joints.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ArmSensor {
+    kin: UrKinematics,
+    joints: usize,
+    offsets: [[f64; 3]; MAX_TOOL_POINTS],
+    points: usize,
+}
+
+impl ArmSensor {
+    /// The sensor of `model` with the end-effector point `ee_offset` (m, `wrist_3_link` frame)
+    /// for `task`'s joints and tool points.
+    pub fn new(model: UrModel, ee_offset: [f64; 3], task: &TaskConfig) -> Self {
+        let tool = task.tool_offsets();
+        let mut offsets = [[0.0; 3]; MAX_TOOL_POINTS];
+        offsets[..tool.len()].copy_from_slice(tool);
+        Self {
+            kin: UrKinematics::new(model, ee_offset),
+            joints: task.joints,
+            offsets,
+            points: tool.len(),
+        }
+    }
+
+    /// The controller's [`ArmState`] from a measured six-joint state (rad, rad/s): the active
+    /// joints and the tool points. No fault bits.
+    pub fn state(
+        &self,
+        q: &Joints6,
+        qd: &Joints6,
+        seq: u64,
+        last_command_seq: u64,
+        episode: u64,
+        status: ArmStatus,
+    ) -> ArmState {
+        let p = self.points;
+        let (mut points, mut vels) = ([[0.0; 3]; MAX_TOOL_POINTS], [[0.0; 3]; MAX_TOOL_POINTS]);
+        self.kin
+            .tool_points_velocity(q, qd, &self.offsets[..p], &mut points[..p], &mut vels[..p]);
+        let mut s = ArmState {
+            seq,
+            stamp_ns: monotonic_ns(),
+            episode,
+            last_command_seq,
+            status,
+            faults: ArmFaults::default(),
+            ..ArmState::default()
+        };
+        s.set_joints(&q[..self.joints], &qd[..self.joints]);
+        s.set_points(&points[..p], &vels[..p]);
+        s
     }
 }
 
@@ -245,4 +310,59 @@ pub(crate) fn state_due(next_emit_ts: &mut f64, ts: f64, cycle_s: f64, period_s:
         *next_emit_ts = ts + period_s;
     }
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits6() -> ArmLimits {
+        ArmLimits::for_model_joints(UrModel::Ur5e, 6)
+    }
+
+    #[test]
+    fn six_active_joints_command_the_wrist_three_hold_it_at_wrist_q() {
+        let here = [0.1, -1.6, 2.0, -1.5, -1.6, 0.3];
+        let wrist = [-1.57, -1.57, 0.0];
+        let goal = [0.2, -1.7, 2.1, -1.4, -1.5, 0.5];
+        let mut six = Servo::new(here, 0.0, 0.002, 0.1, 6, wrist);
+        let cmd = ArmCommand::goal_angles(1, 0, 0, goal);
+        assert!(six.take_command(&cmd, &limits6(), 1.0, ServoTarget::Hold, here, 0.0));
+        assert_eq!(six.goal, goal);
+        // A command for three joints is refused by a six-joint servo: it holds where it is.
+        let three = ArmCommand::goal_angles(2, 0, 0, [0.2, -1.7, 2.1]);
+        assert!(!six.take_command(&three, &limits6(), 1.0, ServoTarget::Hold, here, 0.0));
+        assert_eq!((six.goal, six.refused), (here, 1));
+        let mut locked = Servo::new(here, 0.0, 0.002, 0.1, 3, wrist);
+        let l3 = ArmLimits::for_model_joints(UrModel::Ur5e, 3);
+        assert!(locked.take_command(&three, &l3, 1.0, ServoTarget::Hold, here, 0.0));
+        assert_eq!(locked.goal, [0.2, -1.7, 2.1, -1.57, -1.57, 0.0]);
+        assert!(!locked.take_command(&cmd, &l3, 1.0, ServoTarget::Hold, here, 0.0));
+        // A reset of six joints moves the wrist to the reset pose's.
+        let reset = ArmCommand::reset(3, 0, 1, goal);
+        assert!(six.take_command(&reset, &limits6(), 1.0, ServoTarget::Hold, here, 0.0));
+        assert!(matches!(six.motion, Motion::Reset { to, .. } if to == goal));
+    }
+
+    #[test]
+    fn the_sensor_reports_the_tasks_joints_and_tool_points() {
+        let kin = UrKinematics::new(UrModel::Ur5e, [0.0; 3]);
+        let q = [0.3, -1.9, 2.2, -1.4, 1.6, 0.2];
+        let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&q));
+        let task = TaskConfig::pose_for_model(UrModel::Ur5e, goal);
+        let sensor = ArmSensor::new(UrModel::Ur5e, [0.0; 3], &task);
+        let s = sensor.state(&q, &[0.0; 6], 1, 0, 0, ArmStatus::READY);
+        s.check_layout(&task.layout()).unwrap();
+        // At the goal pose every tool point is on its target.
+        let targets = task.targets();
+        for (p, t) in s.points().iter().zip(&targets) {
+            for k in 0..3 {
+                assert!((p[k] - t[k]).abs() < 1e-12, "{p:?} vs {t:?}");
+            }
+        }
+        let reach = ArmSensor::new(UrModel::Ur5e, [0.0; 3], &TaskConfig::default());
+        let s3 = reach.state(&q, &[0.0; 6], 1, 0, 0, ArmStatus::READY);
+        s3.check_layout(&ur5_shared::StateLayout::REACH3).unwrap();
+        assert_eq!(s3.points[0], kin.ee_point(&q));
+    }
 }

@@ -7,7 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{ActionMode, ArmLimits, ConfigError, TaskConfig};
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::joints::Joints;
 use ur5_shared::{GainBounds, PolicyBounds};
 
 mod ros2;
@@ -56,11 +56,13 @@ pub struct Safety {
     pub no_table_timeout_s: f64,
     /// Resend the reset when the arm has not acknowledged it after this long (s).
     pub reset_timeout_s: f64,
-    /// Torque-mode hold: PD stiffness towards the last safe pose (N·m/rad). Ours: well inside
+    /// Torque-mode hold: PD stiffness towards the last safe pose (N·m/rad), one per joint from
+    /// the shoulder pan; a wrist joint not given here gets [`WRIST_HOLD_KP`]. Ours: well inside
     /// the effort limits for the errors a hold sees.
-    pub hold_kp: [f64; N_JOINTS],
-    /// Torque-mode hold: PD damping (N·m·s/rad).
-    pub hold_kd: [f64; N_JOINTS],
+    pub hold_kp: Joints,
+    /// Torque-mode hold: PD damping (N·m·s/rad), one per joint; a wrist joint not given here
+    /// gets [`WRIST_HOLD_KD`].
+    pub hold_kd: Joints,
 }
 
 impl Default for Safety {
@@ -70,9 +72,26 @@ impl Default for Safety {
             give_up_after_s: 0.0,
             no_table_timeout_s: 0.0,
             reset_timeout_s: 1.0,
-            hold_kp: [200.0, 200.0, 50.0],
-            hold_kd: [20.0, 20.0, 5.0],
+            hold_kp: Joints::from([200.0, 200.0, 50.0]),
+            hold_kd: Joints::from([20.0, 20.0, 5.0]),
         }
+    }
+}
+
+/// Torque-mode hold stiffness of a wrist joint `safety.hold_kp` leaves out (N·m/rad): a
+/// tenth of a UR wrist's 28 N·m at 0.28 rad of error.
+pub const WRIST_HOLD_KP: f64 = 10.0;
+/// Torque-mode hold damping of a wrist joint `safety.hold_kd` leaves out (N·m·s/rad).
+pub const WRIST_HOLD_KD: f64 = 1.0;
+
+impl Safety {
+    /// The torque-mode hold's (K_p, K_d) of joint `j`: `hold_kp[j]`, `hold_kd[j]`, or the
+    /// wrist's defaults past them.
+    pub fn hold_gains(&self, j: usize) -> (f64, f64) {
+        (
+            self.hold_kp.get(j).copied().unwrap_or(WRIST_HOLD_KP),
+            self.hold_kd.get(j).copied().unwrap_or(WRIST_HOLD_KD),
+        )
     }
 }
 
@@ -552,8 +571,18 @@ impl ControllerConfig {
         // The clamp may be tighter than the robot's own limits, never looser (docs/ur.md, "Arm
         // models"): e.g. the UR5's exceed a UR10e's joint speeds.
         let model = self.arm.ur.model;
-        let own = ArmLimits::for_model(model);
-        for j in 0..N_JOINTS {
+        let own = ArmLimits::for_model_joints(model, 6);
+        let n = self.task.joints;
+        if [&l.lower, &l.upper, &l.velocity, &l.effort]
+            .iter()
+            .any(|v| v.len() < n)
+        {
+            return bad(
+                "limits",
+                format!("[limits] must give every one of the task's {n} joints (task.joints)"),
+            );
+        }
+        for j in 0..n {
             if l.lower[j] < own.lower[j]
                 || l.upper[j] > own.upper[j]
                 || l.velocity[j] > own.velocity[j]
@@ -570,7 +599,7 @@ impl ControllerConfig {
                 );
             }
         }
-        for j in 0..N_JOINTS {
+        for j in 0..n {
             let ok = l.lower[j].is_finite()
                 && l.upper[j].is_finite()
                 && l.lower[j] < l.upper[j]
@@ -609,7 +638,13 @@ impl ControllerConfig {
                 "give_up_after_s and no_table_timeout_s must be >= 0 (0 = never)".into(),
             );
         }
-        if !s.hold_kp.iter().chain(&s.hold_kd).all(|v| nonneg(*v)) {
+        if s.hold_kp.len() < 3 || s.hold_kd.len() < 3 {
+            return bad(
+                "safety.hold_kp/hold_kd",
+                "need a gain for each of the three arm joints at least".into(),
+            );
+        }
+        if !s.hold_kp.iter().chain(s.hold_kd.iter()).all(|v| nonneg(*v)) {
             return bad("safety.hold_kp/hold_kd", "must be finite and >= 0".into());
         }
         if !nonneg(self.monitor_period_s) {
@@ -673,11 +708,12 @@ impl ControllerConfig {
         Ok(())
     }
 
-    /// The clamp's joint limits: `[limits]`, else those of `arm.ur.model`.
+    /// The clamp's joint limits: `[limits]`, else those of `arm.ur.model`, for the task's
+    /// active joints.
     pub fn limits(&self) -> ArmLimits {
         self.limits
             .clone()
-            .unwrap_or_else(|| ArmLimits::for_model(self.arm.ur.model))
+            .unwrap_or_else(|| ArmLimits::for_model_joints(self.arm.ur.model, self.task.joints))
     }
 
     /// Wall-clock period of one tick (ns): `task.dt / time_compression`.

@@ -6,9 +6,9 @@ use std::io::Write;
 
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::{MAX_JOINTS, N_JOINTS};
+use ur5_shared::layout::{MAX_DU, MAX_DX};
 use ur5_shared::safety::clamp_action;
-use ur5_shared::{controller_action, policy_action, ArmCommand, ArmFaults, StepSample, DU};
+use ur5_shared::{controller_action, policy_action, ArmCommand, ArmFaults, StepSample};
 
 use super::wait::StateFreshness;
 use super::{Controller, ExitReason, Phase};
@@ -41,13 +41,14 @@ impl<A: ArmBackend> Controller<A> {
     pub(super) fn send_hold(&mut self) {
         let seq = self.next_seq();
         let fresh = self.stale_since_ns.is_none() && self.have_state;
-        let (q, qd) = (active(&self.latest.q), active(&self.latest.qd));
+        let n = self.layout.joints();
+        let (q, qd) = (&self.latest.q[..n], &self.latest.qd[..n]);
         let cmd = hold_command(
             self.cfg.action_mode,
             &self.limits,
             &self.cfg.safety,
-            &self.last_safe_q,
-            if fresh { Some((&q, &qd)) } else { None },
+            &self.last_safe_q[..n],
+            if fresh { Some((q, qd)) } else { None },
             seq,
             monotonic_ns(),
             self.episode,
@@ -99,16 +100,10 @@ impl<A: ArmBackend> Controller<A> {
         if s.faults.any() {
             return Some(Fault::ArmFault);
         }
-        if s.check_layout(self.tables.layout()).is_err() {
+        if s.check_layout(&self.layout).is_err() {
             return Some(Fault::WrongJoints);
         }
-        let finite =
-            s.q.iter()
-                .chain(&s.qd)
-                .chain(&s.ee_pos)
-                .chain(&s.ee_vel)
-                .all(|v| v.is_finite());
-        if !finite {
+        if !s.is_finite() {
             return Some(Fault::NonFiniteState);
         }
         None
@@ -210,7 +205,7 @@ impl<A: ArmBackend> Controller<A> {
                         self.abort_episode(f);
                         return None;
                     }
-                    self.last_safe_q = active(&self.latest.q);
+                    self.last_safe_q = self.latest.q;
                     self.phase = Phase::Running { t: 0 };
                     self.tick(0);
                 } else if freshness == StateFreshness::Stale && self.cfg.mode == Mode::Lockstep {
@@ -282,7 +277,11 @@ impl<A: ArmBackend> Controller<A> {
         // The table's episode plan (docs/design.md §3.3): its goal, noise stream and whether
         // every episode runs noise-free; the default plan is the controller's own.
         self.noisy = !plan.is_noise_free() && k % cycle < self.cfg.noisy_episodes;
-        self.goal = *plan.goal().unwrap_or(&self.cfg.task.goal);
+        // A goal point applies to a point task only (the table buffer refuses it for a pose).
+        self.targets = self.task_targets;
+        if let Some(goal) = plan.goal() {
+            self.targets[0] = *goal;
+        }
         self.noise
             .reseed(plan.noise_seed(self.cfg.seed), version, k);
         self.episodes_with_version += 1;
@@ -419,21 +418,29 @@ impl<A: ArmBackend> Controller<A> {
             return;
         }
         let state = self.latest;
-        let s = state.state_vector(&self.goal);
-        let eps = if self.noisy {
-            self.noise.next()
-        } else {
-            [0.0; DU]
-        };
-        let mut a = [0.0; DU];
+        let (dx, du, p) = (
+            self.layout.dx(),
+            self.layout.du(),
+            self.layout.tool_points(),
+        );
+        let mut s_buf = [0.0; MAX_DX];
+        let s = &mut s_buf[..dx];
+        state.fill_state(&self.layout, &self.targets[..p], s);
+        let mut eps_buf = [0.0; MAX_DU];
+        let eps = &mut eps_buf[..du];
+        if self.noisy {
+            self.noise.next_into(eps);
+        }
+        let mut a_buf = [0.0; MAX_DU];
+        let a = &mut a_buf[..du];
         let (ok, version, epoch) = match self.tables.active() {
             Some(Active::Gains(table)) => (
-                controller_action(table, t, &s, &eps, &mut a).is_ok(),
+                controller_action(table, t, s, eps, a).is_ok(),
                 table.version,
                 table.epoch,
             ),
             Some(Active::Policy(table)) => (
-                policy_action(table, &s, &eps, &mut self.scratch, &mut a).is_ok(),
+                policy_action(table, s, eps, &mut self.scratch, a).is_ok(),
                 table.version,
                 table.epoch,
             ),
@@ -446,19 +453,20 @@ impl<A: ArmBackend> Controller<A> {
             self.abort_episode(Fault::NonFiniteAction);
             return;
         }
-        let mut sent = a;
+        let mut sent_buf = a_buf;
+        let sent = &mut sent_buf[..du];
         let saturated = clamp_action(
             self.cfg.action_mode,
             &self.limits,
             self.cfg.task.dt,
-            &active(&state.q),
-            &mut sent,
+            &state.q[..du],
+            sent,
         );
         let seq = self.next_seq();
         let stamp = monotonic_ns();
         let cmd = match self.cfg.action_mode {
-            ActionMode::GoalAngles => ArmCommand::goal_angles(seq, stamp, self.episode, sent),
-            ActionMode::Torque => ArmCommand::torques(seq, stamp, self.episode, sent),
+            ActionMode::GoalAngles => ArmCommand::goal_angles(seq, stamp, self.episode, &*sent),
+            ActionMode::Torque => ArmCommand::torques(seq, stamp, self.episode, &*sent),
         };
         self.send(cmd);
         let mut sample = StepSample {
@@ -472,8 +480,8 @@ impl<A: ArmBackend> Controller<A> {
             command_stamp_ns: stamp,
             ..StepSample::default()
         };
-        sample.set_state(&s);
-        sample.set_actions(&a, &sent);
+        sample.set_state(&s_buf[..dx]);
+        sample.set_actions(&a_buf[..du], &sent_buf[..du]);
         match self.ports.sample_pub.loan_uninit() {
             Ok(slot) => match slot.write_payload(sample).send() {
                 Ok(0) => self.stats.samples_unheard += 1,
@@ -489,7 +497,7 @@ impl<A: ArmBackend> Controller<A> {
         self.stats.ticks += 1;
         self.stats.saturated_ticks += saturated as u64;
         self.used_state_seq = state.seq;
-        self.last_safe_q = active(&state.q);
+        self.last_safe_q = state.q;
         let next = t + 1;
         if next >= self.cfg.task.horizon {
             self.stats.episodes_completed += 1;
@@ -544,11 +552,4 @@ impl<A: ArmBackend> Controller<A> {
         self.stats.compute_episode.clear();
         self.stats.wake_episode.clear();
     }
-}
-
-/// The first [`N_JOINTS`] entries of an arm message's joint array (the task's active joints;
-/// `check_state` has checked the arm's joint count).
-#[inline]
-pub(super) fn active(v: &[f64; MAX_JOINTS]) -> [f64; N_JOINTS] {
-    core::array::from_fn(|j| v[j])
 }

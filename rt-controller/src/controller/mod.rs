@@ -45,7 +45,7 @@ use std::io::Write;
 use serde::Serialize;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ArmLimits;
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::layout::{StateLayout, MAX_JOINTS, MAX_TOOL_POINTS};
 use ur5_shared::status::PeerStatus;
 use ur5_shared::{ArmState, PolicyScratch};
 
@@ -193,13 +193,19 @@ pub struct Controller<A: ArmBackend = Iceoryx2Arm> {
     /// Holding at a boundary for a table newer than the active one (`cycles_per_table`).
     waiting_newer: bool,
     noisy: bool,
-    /// The goal of the running episode: the active table's ([`ur5_shared::EpisodePlan`]), or
-    /// `task.goal`.
-    goal: [f64; 3],
+    /// The task's layout (`task.joints`, point or pose goal): the dimensions of every table,
+    /// state and action.
+    layout: StateLayout,
+    /// The task's targets of its tool points (m, base frame; `TaskConfig::targets`).
+    task_targets: [[f64; 3]; MAX_TOOL_POINTS],
+    /// The targets of the running episode in `targets[..tool points]`: the active table's goal
+    /// for a point task ([`ur5_shared::EpisodePlan`]), or the task's.
+    targets: [[f64; 3]; MAX_TOOL_POINTS],
     latest: ArmState,
     have_state: bool,
     used_state_seq: u64,
-    last_safe_q: [f64; N_JOINTS],
+    /// The last safe pose of the active joints in `last_safe_q[..joints]` (rad).
+    last_safe_q: [f64; MAX_JOINTS],
     stale_since_ns: Option<u64>,
     next_deadline_ns: u64,
     tick_start_ns: u64,
@@ -307,13 +313,19 @@ impl<A: ArmBackend> Controller<A> {
         );
         let period_ns = cfg.wall_period_ns();
         let stale_ns = (cfg.safety.stale_state_timeout_s * 1e9) as u64;
+        let layout = cfg.task.layout();
+        let mut task_targets = [[0.0; 3]; MAX_TOOL_POINTS];
+        let t = cfg.task.targets();
+        task_targets[..t.len()].copy_from_slice(&t);
+        let mut last_safe_q = [0.0; MAX_JOINTS];
+        last_safe_q.copy_from_slice(&latest.q);
         Ok(Self {
             tables: TableBuffer::new(
                 cfg.bounds,
                 cfg.policy_bounds,
                 cfg.task.horizon,
                 cfg.action_mode,
-                ur5_shared::StateLayout::REACH3,
+                layout,
             )
             .for_arm_model(cfg.arm.ur.model),
             scratch: Box::default(),
@@ -332,8 +344,10 @@ impl<A: ArmBackend> Controller<A> {
             aborted_with_version: 0,
             waiting_newer: false,
             noisy: false,
-            goal: cfg.task.goal,
-            last_safe_q: episode::active(&latest.q),
+            layout,
+            task_targets,
+            targets: task_targets,
+            last_safe_q,
             have_state: true,
             used_state_seq: 0,
             latest,

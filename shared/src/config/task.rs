@@ -102,6 +102,17 @@ impl TaskConfig {
         [self.start_q[0], self.start_q[1], self.start_q[2]]
     }
 
+    /// The start angles of all six joints (rad): the task's own when it moves six, else its
+    /// three arm joints and the wrist at `wrist_q` (a locked wrist's angles).
+    pub fn start_six(&self, wrist_q: &[f64; 3]) -> [f64; 6] {
+        if self.start_q.len() >= 6 {
+            core::array::from_fn(|j| self.start_q[j])
+        } else {
+            let q = self.start_arm_joints();
+            [q[0], q[1], q[2], wrist_q[0], wrist_q[1], wrist_q[2]]
+        }
+    }
+
     /// The state layout of this task: its active joints and one tool point for a point goal,
     /// three for a pose goal.
     pub fn layout(&self) -> StateLayout {

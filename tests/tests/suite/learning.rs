@@ -461,16 +461,32 @@ fn replay_report(out: &Path, dir: &Path, label: &str) -> (Option<i32>, serde_jso
 /// checkpoints byte for byte.
 #[test]
 fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
+    lqr_gaifo_over_ipc_equals_in_process("learn-g", TaskConfig::default());
+}
+
+/// The same with the whole arm and a pose goal: six joints commanded, three tool points in the
+/// state (dX = 30, dU = 6), the arm's states and the controller's samples at that layout.
+#[test]
+fn lqr_gaifo_at_six_joints_and_a_pose_over_ipc_equals_the_in_process_run() {
+    use ur5_shared::kinematics::UrKinematics;
+    use ur5_shared::model::UrModel;
+    let kin = UrKinematics::new(UrModel::Ur5, UrModel::Ur5.default_ee_offset());
+    let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&[0.2, -1.8, 2.0, -1.7, -1.5, 0.3]));
+    lqr_gaifo_over_ipc_equals_in_process("learn-p", TaskConfig::pose_for_model(UrModel::Ur5, goal));
+}
+
+/// LQR+GAIfO served over IPC on `task` (its horizon set to T) against the in-process run: the
+/// noise-free episodes, the learned numbers, the tables and the critic checkpoints bit for bit.
+fn lqr_gaifo_over_ipc_equals_in_process(tag: &str, task: TaskConfig) {
     const ITERATIONS: usize = 3;
-    let prefix = unique_prefix("learn-g");
-    let dir = scratch("learn-g");
+    let task = TaskConfig { horizon: T, ..task };
+    let reach = task.layout() == ur5_shared::StateLayout::REACH3;
+    let prefix = unique_prefix(tag);
+    let dir = scratch(tag);
     let (out, ref_out) = (dir.join("out"), dir.join("reference"));
-    // Demonstrations of the task the arm and the controller run (T steps, default goal/start).
+    // Demonstrations of the task the arm and the controller run.
     let ecfg = ExpertConfig {
-        task: TaskConfig {
-            horizon: T,
-            ..TaskConfig::default()
-        },
+        task: task.clone(),
         samples: N,
         iterations: 4,
         random_episodes: 1,
@@ -483,7 +499,17 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     let demos_path = dir.join("demos.npz");
     learner::io::demos::save(&demos, &demos_path).unwrap();
     let learner_cfg = write_served_gaifo_config(&dir, N, SEED, ITERATIONS);
-    let (_, sim_cfg, ctl_cfg) = configs(&dir, ITERATIONS);
+    let (_, mut sim_cfg, mut ctl_cfg) = configs(&dir, ITERATIONS);
+    if !reach {
+        // The arm and the controller run the pose task too.
+        let t = toml::to_string(&task).unwrap();
+        sim_cfg = write_config(&dir, "sim.toml", &format!("[task]\n{t}"));
+        ctl_cfg = write_config(
+            &dir,
+            "controller.toml",
+            &format!("seed = {SEED}\nnoisy_episodes = {N}\neval_episodes = 1\n[task]\n{t}"),
+        );
+    }
     let (cfg, _) = load_gaifo_config(Path::new(&learner_cfg)).unwrap();
     let reference = {
         let (cfg, demos, ref_out) = (cfg.clone(), demos.clone(), ref_out.clone());
@@ -492,14 +518,13 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
 
     let mut monitor = SampleMonitor::new(&prefix);
     let demos_arg = demos_path.display().to_string();
-    let mut learner = spawn_learner(
-        &learner_cfg,
-        &prefix,
-        &out,
-        &["--demos", &demos_arg, "--mcap"],
-        &dir,
-        "learner",
-    );
+    // MCAP files hold the reaching task's layout only.
+    let args: &[&str] = if reach {
+        &["--demos", &demos_arg, "--mcap"]
+    } else {
+        &["--demos", &demos_arg]
+    };
+    let mut learner = spawn_learner(&learner_cfg, &prefix, &out, args, &dir, "learner");
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
     let (lj, llog, cj) = run_until_learned(&mut learner, &mut sim, &mut ctl, &mut monitor);
 
@@ -559,10 +584,19 @@ fn lqr_gaifo_over_ipc_equals_the_in_process_run_bit_for_bit() {
     }
     assert!(tables[ITERATIONS].used_values() != tables[0].used_values());
     assert!(sim.running());
-    assert_replays_equal(&out, &dir, ITERATIONS, ITERATIONS + 1);
-    // --mcap: the run as one MCAP file (its reading back: learner/tests/suite/replay.rs).
-    let mcap = std::fs::read(out.join("run.mcap")).unwrap();
-    assert!(mcap.starts_with(b"\x89MCAP0\r\n") && mcap.ends_with(b"\x89MCAP0\r\n"));
+    if reach {
+        assert_replays_equal(&out, &dir, ITERATIONS, ITERATIONS + 1);
+        // --mcap: the run as one MCAP file (its reading back: learner/tests/suite/replay.rs).
+        let mcap = std::fs::read(out.join("run.mcap")).unwrap();
+        assert!(mcap.starts_with(b"\x89MCAP0\r\n") && mcap.ends_with(b"\x89MCAP0\r\n"));
+    } else {
+        let ipc = monitor.episodes(1);
+        assert_eq!(
+            ipc[0].layout,
+            task.layout(),
+            "the samples carry the pose layout"
+        );
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -15,13 +15,12 @@ use ur_protocol::{FrameDecoder, OutputRecipe, RobotMessage, RobotState};
 use serde::Serialize;
 use ur5_shared::clock::monotonic_ns;
 use ur5_shared::config::ArmLimits;
-use ur5_shared::kinematics::{Joints6, UrKinematics};
-use ur5_shared::layout::N_JOINTS;
+use ur5_shared::kinematics::Joints6;
 use ur5_shared::{ArmCommand, ArmFaults, ArmState, ArmStatus};
 use ur_protocol::state::runtime_state;
 use ur_protocol::{ControlMode, ReverseCommand};
 
-use crate::arm::servo::{arm_state, state_due, Servo};
+use crate::arm::servo::{state_due, ArmSensor, Servo};
 use crate::arm::{ArmBackend, ArmIoError};
 use crate::config::UrConfig;
 use crate::error::SetupError;
@@ -107,7 +106,7 @@ struct Live {
     protocol: Protocol,
     recipe: OutputRecipe,
     robot: RobotState,
-    kin: UrKinematics,
+    sensor: ArmSensor,
     /// Arm cycle (s).
     cycle_s: f64,
     /// Control period (s of arm time).
@@ -163,6 +162,9 @@ pub struct UrArm {
     timeout: Duration,
     rtde: Option<UrRtde>,
     live: Option<Live>,
+    /// The task's active joints and tool points as the arm reports them.
+    sensor: ArmSensor,
+    joints: usize,
 }
 
 impl UrArm {
@@ -176,6 +178,8 @@ impl UrArm {
             timeout: Duration::from_secs_f64(cfg.setup_timeout_s),
             rtde: None,
             live: None,
+            sensor: ArmSensor::new(cfg.arm.ur.model, cfg.arm.ur.ee_offset, &cfg.task),
+            joints: cfg.task.joints,
         }
     }
 
@@ -225,9 +229,10 @@ impl ArmBackend for UrArm {
             during: "first data package",
             fault,
         })?;
-        let kin = UrKinematics::new(self.cfg.model, self.cfg.ee_offset);
         let st = r.state();
-        let s = arm_state(&kin, &st.actual_q, &st.actual_qd, 0, 0, 0, ArmStatus::READY);
+        let s = self
+            .sensor
+            .state(&st.actual_q, &st.actual_qd, 0, 0, 0, ArmStatus::READY);
         self.rtde = Some(r);
         Ok(s)
     }
@@ -259,10 +264,17 @@ impl ArmBackend for UrArm {
             protocol: session.protocol,
             recipe: session.recipe,
             robot: session.state,
-            kin: UrKinematics::new(self.cfg.model, self.cfg.ee_offset),
+            sensor: self.sensor,
             cycle_s: session.cycle_s,
             period_s: self.period_s,
-            servo: Servo::new(q, ts, session.cycle_s, self.period_s),
+            servo: Servo::new(
+                q,
+                ts,
+                session.cycle_s,
+                self.period_s,
+                self.joints,
+                self.cfg.wrist_q,
+            ),
             next_emit_ts: ts + self.period_s,
             awaiting_answer: false,
             idle: false,
@@ -370,7 +382,8 @@ pub fn check_joints(
             return Err(StreamFault::NonFinite { joint: j, q, qd });
         }
     }
-    for j in 0..N_JOINTS {
+    // The clamp's limits cover the task's active joints.
+    for j in 0..limits.lower.len().min(6) {
         let (q, lower, upper) = (actual_q[j], limits.lower[j], limits.upper[j]);
         let m = MEASURED_LIMIT_MARGIN_RAD;
         if q < lower - m || q > upper + m {
@@ -577,8 +590,7 @@ impl Live {
 
     fn emit(&mut self, status: ArmStatus) -> ArmState {
         self.state_seq += 1;
-        let mut s = arm_state(
-            &self.kin,
+        let mut s = self.sensor.state(
             &self.robot.actual_q,
             &self.robot.actual_qd,
             self.state_seq,
@@ -598,7 +610,6 @@ impl Live {
         self.servo.take_command(
             cmd,
             limits,
-            &cfg.wrist_q,
             cfg.reset_speed_rad_s,
             cfg.servo_target,
             self.robot.actual_q,

@@ -16,8 +16,12 @@ use ur5_shared::{GainTable, PolicyTable, StepSample};
 
 use rt_controller::config::{ControllerConfig, Mode, Polling};
 use rt_controller::stats::Percentiles;
-use rt_controller::testkit::{constant_goal_table, random_policy_table, run_kinematic_arm};
+use rt_controller::testkit::{
+    constant_goal_table_for, random_policy_table_for, run_kinematic_arm_for,
+};
 use rt_controller::{Controller, ExitReason};
+use ur5_shared::config::TaskConfig;
+use ur5_shared::StateLayout;
 
 /// Benchmark results (ns).
 #[derive(Clone, Debug, Serialize)]
@@ -58,23 +62,43 @@ pub enum Kind {
 /// Hidden widths of the benchmark's policy: the MDGPS default (docs/design.md §6.1).
 pub const POLICY_HIDDEN: [usize; 2] = [64, 64];
 
-/// Runs `episodes` episodes of `horizon` ticks. `spin_ns`: the controller's busy-poll budget
-/// per wait (longer measures the IPC, shorter measures the sleep granularity too).
-pub fn run(episodes: u64, horizon: usize, spin_ns: u64, kind: Kind) -> anyhow::Result<BenchReport> {
+/// The six-joint pose task of the benchmark (UR5, the controller's default model): its start
+/// pose and as goal the tool's pose at other joint angles.
+pub fn pose_task() -> TaskConfig {
+    use ur5_shared::kinematics::UrKinematics;
+    use ur5_shared::model::UrModel;
+    let kin = UrKinematics::new(UrModel::Ur5, UrModel::Ur5.default_ee_offset());
+    let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&[0.3, -1.7, 2.0, -1.8, -1.5, 0.2]));
+    TaskConfig::pose_for_model(UrModel::Ur5, goal)
+}
+
+/// Runs `episodes` episodes of `horizon` ticks of `task` (its layout: the reaching task or
+/// [`pose_task`]). `spin_ns`: the controller's busy-poll budget per wait (longer measures the
+/// IPC, shorter measures the sleep granularity too).
+pub fn run(
+    episodes: u64,
+    horizon: usize,
+    spin_ns: u64,
+    kind: Kind,
+    task: TaskConfig,
+) -> anyhow::Result<BenchReport> {
     let prefix = unique_prefix("rt-bench");
     let stop = Arc::new(AtomicBool::new(false));
     let dt = 0.01;
+    let layout = task.layout();
 
     let arm = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || run_kinematic_arm(&prefix, dt, std::f64::consts::PI, &stop))
+        std::thread::spawn(move || {
+            run_kinematic_arm_for(&layout, &prefix, dt, std::f64::consts::PI, &stop, |_| {})
+        })
     };
     let learner = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || learner_stand_in(&prefix, horizon, kind, &stop))
+        std::thread::spawn(move || learner_stand_in(&prefix, &layout, horizon, kind, &stop))
     };
 
-    let cfg = bench_config(prefix.clone(), episodes, horizon, spin_ns, dt);
+    let cfg = bench_config(prefix.clone(), episodes, horizon, spin_ns, dt, task);
     let mut controller = Controller::setup(cfg)?;
     let never = AtomicBool::new(false);
     let reason = controller.run(&never);
@@ -109,6 +133,7 @@ fn bench_config(
     horizon: usize,
     spin_ns: u64,
     dt: f64,
+    task: TaskConfig,
 ) -> ControllerConfig {
     ControllerConfig {
         prefix,
@@ -116,10 +141,10 @@ fn bench_config(
         episodes,
         episode_report: false,
         wait_for_learner: true,
-        task: ur5_shared::config::TaskConfig {
+        task: TaskConfig {
             dt,
             horizon,
-            ..Default::default()
+            ..task
         },
         polling: Polling {
             spin_ns,
@@ -135,7 +160,7 @@ fn bench_config(
 /// ticks have pushed out of the cache.
 pub fn policy_action_alone(calls: usize) -> Percentiles {
     use ur5_shared::policy::{policy_action, PolicyScratch};
-    let table = random_policy_table(1, &POLICY_HIDDEN, 0.05, 0.01, 1);
+    let table = random_policy_table_for(&StateLayout::REACH3, 1, &POLICY_HIDDEN, 0.05, 0.01, 1);
     let mut scratch = PolicyScratch::default();
     let mut h = rt_controller::stats::Histogram::new();
     let (mut s, mut a) = ([0.1; ur5_shared::DX], [0.0; ur5_shared::DU]);
@@ -192,12 +217,13 @@ pub fn controller_action_alone(layout: &ur5_shared::StateLayout, calls: usize) -
 /// `learner/samples`), so that every boundary swaps.
 fn learner_stand_in(
     prefix: &str,
+    layout: &StateLayout,
     horizon: usize,
     kind: Kind,
     stop: &AtomicBool,
 ) -> anyhow::Result<()> {
     if kind == Kind::Policy {
-        return policy_stand_in(prefix, stop);
+        return policy_stand_in(prefix, layout, stop);
     }
     let names = ServiceNames::new(prefix);
     let node = NodeBuilder::new()
@@ -210,8 +236,9 @@ fn learner_stand_in(
     let publisher = gains.publisher_builder().create()?;
     let subscriber = samples.subscriber_builder().create()?;
     let mut version = 1;
-    let goal = |v: u64| [0.1 * (v % 5) as f64, -1.8, 2.2];
-    publisher.send_copy(*constant_goal_table(version, horizon, goal(version), 0.01))?;
+    let goal = |v: u64| [0.1 * (v % 5) as f64, -1.8, 2.2, -1.6, -1.5, 0.0];
+    let table = |v: u64| constant_goal_table_for(layout, v, horizon, &goal(v)[..layout.du()], 0.01);
+    publisher.send_copy(*table(version))?;
     let mut last_episode = 0;
     while !stop.load(Ordering::Relaxed) {
         let _ = publisher.update_connections();
@@ -220,8 +247,7 @@ fn learner_stand_in(
                 last_episode = s.episode;
                 version += 1;
                 let mut slot = publisher.loan_uninit()?;
-                constant_goal_table(version, horizon, goal(version), 0.01)
-                    .copy_to_uninit(slot.payload_mut());
+                table(version).copy_to_uninit(slot.payload_mut());
                 // SAFETY: copy_to_uninit initialised the payload.
                 unsafe { slot.assume_init() }.send()?;
             }
@@ -237,7 +263,7 @@ fn learner_stand_in(
 /// As [`learner_stand_in`] with policy tables (seeded random weights, σ = 0.01 rad) on
 /// `controller/policy`; also subscribes to `controller/gains`' publisher count by opening it,
 /// so the controller's learner check sees a table publisher.
-fn policy_stand_in(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
+fn policy_stand_in(prefix: &str, layout: &StateLayout, stop: &AtomicBool) -> anyhow::Result<()> {
     let names = ServiceNames::new(prefix);
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -248,7 +274,7 @@ fn policy_stand_in(prefix: &str, stop: &AtomicBool) -> anyhow::Result<()> {
         .open_or_create::<StepSample>(&node, &names.learner_samples()?)?;
     let publisher = policy.publisher_builder().create()?;
     let subscriber = samples.subscriber_builder().create()?;
-    let table = |v: u64| random_policy_table(v, &POLICY_HIDDEN, 0.05, 0.01, v);
+    let table = |v: u64| random_policy_table_for(layout, v, &POLICY_HIDDEN, 0.05, 0.01, v);
     let mut version = 1;
     {
         let first = table(version);
@@ -298,7 +324,9 @@ pub fn run_ros2(
     };
     let learner = {
         let (prefix, stop) = (prefix.clone(), stop.clone());
-        std::thread::spawn(move || learner_stand_in(&prefix, horizon, Kind::Gains, &stop))
+        std::thread::spawn(move || {
+            learner_stand_in(&prefix, &StateLayout::REACH3, horizon, Kind::Gains, &stop)
+        })
     };
     let cfg = ControllerConfig {
         mode: Mode::RealTime,
@@ -313,7 +341,14 @@ pub fn run_ros2(
             },
             ..ArmConfig::default()
         },
-        ..bench_config(prefix, episodes, horizon, spin_ns, dt)
+        ..bench_config(
+            prefix,
+            episodes,
+            horizon,
+            spin_ns,
+            dt,
+            TaskConfig::default(),
+        )
     };
     let mut controller = rt_controller::Controller::setup_ros2(cfg)?;
     let never = AtomicBool::new(false);

@@ -363,25 +363,30 @@ fn real_main() -> Result<i32> {
             json,
             ..
         } => {
-            let r = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains)?;
+            let reach = ur5_shared::config::TaskConfig::default;
+            let r = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains, reach())?;
             let ros2 = ros2_domain
                 .map(|d| bench::run_ros2(episodes, horizon, spin_ns, d))
                 .transpose()?;
-            let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy)?;
+            let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy, reach())?;
+            let r6 = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains, bench::pose_task())?;
+            let p6 = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy, bench::pose_task())?;
             let alone = bench::policy_action_alone(20_000);
             let law3 = bench::controller_action_alone(&ur5_shared::StateLayout::REACH3, 20_000);
             let law6 = bench::controller_action_alone(&ur5_shared::StateLayout::POSE6, 20_000);
             println!("rt-controller bench: {} + {} episodes × {} ticks, lockstep, kinematic arm in-process, iceoryx2 ipc; gain tables, then policy tables (heads 12-{}-1, {} parameters)", r.episodes, p.episodes, horizon,
                 bench::POLICY_HIDDEN.map(|h| h.to_string()).join("-"), ur5_shared::policy::flat_len(ur5_shared::DX, ur5_shared::DU, &bench::POLICY_HIDDEN));
             print_table(&[
-                ("gain table: tick compute (law + clamp + command + sample)", r.compute),
+                ("gain table: tick compute (law + clamp + command + sample), 3 joints and a point", r.compute),
+                ("gain table: tick compute, 6 joints and a pose (dX 30, dU 6)", r6.compute),
                 ("gain table: swap (copy used part + flip)", r.swap),
                 ("gain table: the law alone, 3 joints and a point (dX 12, dU 3)", law3),
                 ("gain table: the law alone, 6 joints and a pose (dX 30, dU 6)", law6),
                 ("gain table: validation", r.validate),
                 ("gain table: intake (receive + copy + validate + flip)", r.intake),
                 ("gain table: IPC round trip state → command", r.round_trip),
-                ("policy: tick compute (MLP + clamp + command + sample)", p.compute),
+                ("policy: tick compute (MLP + clamp + command + sample), 3 joints and a point", p.compute),
+                ("policy: tick compute, 6 joints and a pose (heads 30-64-64-1)", p6.compute),
                 ("policy: policy_action alone, warm cache", alone),
                 ("policy: swap (copy used part + flip)", p.swap),
                 ("policy: validation", p.validate),
@@ -393,7 +398,7 @@ fn real_main() -> Result<i32> {
                 print_table(&[("gain table: DDS round trip joint state → command", d)]);
             }
             if json {
-                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone, "law_alone_reach3": law3, "law_alone_pose6": law6, "ros2_round_trip": ros2}));
+                println!("{}", serde_json::json!({"gains": r, "policy": p, "policy_action_alone": alone, "law_alone_reach3": law3, "law_alone_pose6": law6, "gains_pose6": r6, "policy_pose6": p6, "ros2_round_trip": ros2}));
             }
             Ok(0)
         }

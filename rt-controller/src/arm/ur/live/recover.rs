@@ -17,7 +17,6 @@ use ur_protocol::{RobotMessage, SafetyMode};
 use super::{Live, UrArm, REVERSE_CLOSED};
 use crate::arm::ur::dashboard::Dashboard;
 use crate::arm::ur::setup::{send_program, UrSetupError};
-use ur5_shared::kinematics::UrKinematics;
 
 /// A controller refuses `unlock protective stop` this soon after the stop (s of its time).
 pub const UNLOCK_AFTER_S: f64 = 5.0;
@@ -63,14 +62,13 @@ impl UrArm {
         let reverse = send_program(&cfg, &l.rtde, l.cycle_s, timeout, &mut texts)?;
         let ts = l.robot.timestamp;
         let q = l.robot.actual_q;
-        let here = UrKinematics::six(&[q[0], q[1], q[2]], &cfg.wrist_q);
         l.reverse = reverse;
         l.robot_stop = None;
         l.lost = None;
         l.reverse_closed = false;
         l.program_seen = false;
         l.restarted = true;
-        l.servo.hold(here, ts);
+        l.servo.hold_here(&q, ts);
         l.next_emit_ts = ts + period_s;
         l.awaiting_answer = false;
         l.counts.recoveries += 1;
