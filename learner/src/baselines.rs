@@ -41,7 +41,7 @@ impl Checkpoint for Bco {
         let file = PolicyFile {
             policy: self.policy().clone(),
             mode: self.config().sim.mode,
-            start_q: task.start_arm_joints(),
+            start_q: task.start_q,
             dt: task.dt,
             horizon: task.horizon,
             seed: self.seed(),

@@ -23,19 +23,23 @@
 //! velocity. One whose motion has not come to rest within T steps is skipped (the message says
 //! how long it took against T dt). Its end-effector point and velocity come from all six joints
 //! by the model's forward kinematics (`ur5_shared::kinematics`), as the `ur` backend builds the
-//! state; the wrist must stay within [`WRIST_TOLERANCE`] of the wrist lock (`sim.wrist_q`) the
-//! learner's arm keeps, or the demonstration is skipped.
+//! state. A three-joint task (`[task] joints = 3`, the default) keeps the wrist locked: the
+//! wrist must stay within [`WRIST_TOLERANCE`] of the wrist lock (`sim.wrist_q`) the learner's
+//! arm keeps, or the demonstration is skipped. A six-joint task (`joints = 6`) records the
+//! wrist as it moves: all six joints are in the state (layout of six joints and one tool point,
+//! dX = 18, dU = 6).
 //!
 //! **The task.** start_q = the start pose's active joints; goal = the mean end-effector point
-//! at the demonstrations' last step, its spread reported. C_expert and C_random are derived as
+//! at the demonstrations' last step, its spread reported (a point goal: a pose goal is not
+//! derived from a recording). C_expert and C_random are derived as
 //! for any imported demonstrations (`io::foreign`): the demonstrations' mean task cost, and the
 //! expert's random initial controller run on the task in the simulator.
 
 use std::collections::VecDeque;
 
 use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::joints::Joints;
 use ur5_shared::kinematics::{Joints6, UrKinematics};
-use ur5_shared::layout::{state_vector, DX};
 use ur5_shared::UrModel;
 
 use imitation::demos::Demos;
@@ -510,7 +514,7 @@ pub struct RecordReport {
     /// Demonstrations kept.
     pub episodes: usize,
     /// Start pose (rad, active joints).
-    pub start_q: [f64; 3],
+    pub start_q: Joints,
     /// Goal: the mean end-effector point at the demonstrations' last step (m, base frame).
     pub goal: [f64; 3],
     /// Largest distance of a demonstration's last end-effector point from the goal (m).
@@ -525,8 +529,9 @@ pub struct RecordReport {
 
 /// The demonstrations `demos` (each a [`Segmenter`] demonstration) recorded on the arm of
 /// `sim`, with start pose `start` (six joints, rad), as T = `task.horizon` steps of
-/// `task.dt` (module docs). Each is first [`resample`]d and checked against the wrist lock by
-/// the caller ([`steps_checked`]).
+/// `task.dt` (module docs), in the layout of `task.joints` active joints and a point goal.
+/// Each is first [`resample`]d and, for three joints, checked against the wrist lock by the
+/// caller ([`steps_checked`]).
 pub fn to_recorded_demos(
     episodes: &[Vec<(Joints6, Joints6)>],
     start: &Joints6,
@@ -552,19 +557,19 @@ pub fn to_recorded_demos(
         .iter()
         .map(|e| (0..3).map(|k| (e[k] - goal[k]).powi(2)).sum::<f64>().sqrt())
         .collect();
-    let mut states = Vec::with_capacity(episodes.len() * task.horizon * DX);
-    for (ep, pts) in episodes.iter().zip(&points) {
-        for ((q, qd), (ee, ee_vel)) in ep.iter().zip(pts) {
-            states.extend_from_slice(&state_vector(
-                &[q[0], q[1], q[2]],
-                &[qd[0], qd[1], qd[2]],
-                ee,
-                ee_vel,
-                &goal,
-            ));
-        }
+    let joints = task.joints;
+    let layout =
+        ur5_shared::StateLayout::of_task(joints, false).expect("a validated task's joints");
+    let mut states = vec![0.0; episodes.len() * task.horizon * layout.dx()];
+    let rows = states.chunks_exact_mut(layout.dx());
+    let steps = episodes
+        .iter()
+        .zip(&points)
+        .flat_map(|(ep, pts)| ep.iter().zip(pts));
+    for (s, ((q, qd), (ee, ee_vel))) in rows.zip(steps) {
+        layout.fill_state(&q[..joints], &qd[..joints], &[*ee], &[*ee_vel], &[goal], s);
     }
-    let start_q = [start[0], start[1], start[2]];
+    let start_q = Joints::from_slice(&start[..joints]);
     let traj = Trajectories {
         states,
         actions: None,
@@ -573,7 +578,7 @@ pub fn to_recorded_demos(
         dt: task.dt,
         task: Some(TaskMeta {
             goal,
-            start_q: start_q.into(),
+            start_q,
             seed: DERIVED_SEED,
             cost_random: None,
             cost_expert: None,
@@ -594,13 +599,17 @@ pub fn to_recorded_demos(
     Ok((demos, report))
 }
 
-/// [`resample`], then the wrist against `sim.wrist_q` ([`WRIST_TOLERANCE`]).
+/// [`resample`], then, for a three-joint task, the wrist against `sim.wrist_q`
+/// ([`WRIST_TOLERANCE`]); a six-joint task's wrist moves freely.
 pub fn steps_checked(
     demo: &Taught,
     task: &TaskConfig,
     sim: &SimConfig,
 ) -> Result<Vec<(Joints6, Joints6)>, String> {
     let steps = resample(demo, task.dt, task.horizon)?;
+    if task.joints == 6 {
+        return Ok(steps);
+    }
     for (k, (q, _)) in steps.iter().enumerate() {
         for w in 0..3 {
             let d = q[3 + w] - sim.wrist_q[w];
@@ -749,6 +758,61 @@ mod tests {
             let e = steps_checked(&bent, &task, &SimConfig::default()).unwrap_err();
             assert!(e.contains("wrist 2") && e.contains("sim.wrist_q"), "{e}");
         }
+    }
+
+    /// A six-joint task keeps the wrist's motion: all six joints in the demonstrations' states
+    /// (six joints and a point goal, dX = 18), the start pose of six angles.
+    #[test]
+    fn the_whole_arm_is_recorded_with_its_wrist_moving() {
+        let (a, b) = ([0.0, -2.0, 2.4], [0.3, -1.4, 2.1]);
+        let ev = run(&stream(125.0, a, b, 0.0, 1.5, 1.2));
+        let mut d = demonstrations(&ev)[0].clone();
+        // The wrist turns with the arm (0.3 rad of wrist 1 and −0.2 of wrist 3 over the motion).
+        for s in &mut d.samples {
+            let f = (s.t - 1.5).clamp(0.0, 1.0);
+            s.q[3] += 0.3 * f;
+            s.q[5] -= 0.2 * f;
+        }
+        let sim = SimConfig::default();
+        let three = TaskConfig {
+            dt: 0.1,
+            horizon: 30,
+            ..TaskConfig::default()
+        };
+        assert!(steps_checked(&d, &three, &sim)
+            .unwrap_err()
+            .contains("wrist 1"));
+        let start = UrKinematics::six(&a, &W);
+        let task = TaskConfig {
+            joints: 6,
+            start_q: Joints::from_slice(&start),
+            ..three
+        };
+        task.validate().unwrap();
+        let steps = steps_checked(&d, &task, &sim).unwrap();
+        let (demos, report) = to_recorded_demos(&[steps.clone()], &start, &task, &sim).unwrap();
+        let layout = ur5_shared::StateLayout::of_task(6, false).unwrap();
+        assert_eq!(demos.layout(), layout);
+        assert_eq!(demos.states.len(), 30 * 18);
+        assert_eq!((demos.start_q.len(), report.start_q.len()), (6, 6));
+        let kin = kin();
+        for t in [0, 15, 29] {
+            let s = demos.state(0, t);
+            let (q, qd) = steps[t];
+            assert_eq!(&s[layout.q()], &q[..]);
+            assert_eq!(&s[layout.qd()], &qd[..]);
+            let (ee, v) = kin.ee_point_velocity(&q, &qd);
+            for k in 0..3 {
+                assert!((s[layout.point(0)][k] - (ee[k] - report.goal[k])).abs() < 1e-12);
+                assert_eq!(s[layout.point_velocity(0)][k], v[k]);
+            }
+        }
+        assert!(
+            (steps[29].0[3] - (W[0] + 0.3)).abs() < 1e-9,
+            "the wrist moved"
+        );
+        assert!(report.cost_random.is_finite() && report.cost_expert.is_finite());
+        assert_eq!(demos.task().unwrap().joints, 6);
     }
 
     #[test]

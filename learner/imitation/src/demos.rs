@@ -56,8 +56,9 @@ impl Demos {
         &self.states[i..i + dx]
     }
 
-    /// State t of demonstration d of a three-joint point task (dX = 12), for the learners
-    /// that take that task only; panics on another layout.
+    /// State t of demonstration d of a three-joint point task (dX = 12) as an array, for
+    /// code written for that task only (the precision probe example); panics on another
+    /// layout.
     pub fn reach3_state(&self, d: usize, t: usize) -> [f64; ur5_shared::layout::DX] {
         self.state(d, t)
             .try_into()

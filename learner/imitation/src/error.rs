@@ -29,14 +29,6 @@ pub enum ImitationError {
     /// Settings that cannot work; the message names the setting and its allowed range.
     #[error("invalid setting: {0}")]
     Config(String),
-    /// A learner that does not run the demonstrations' task (its joints or goal kind).
-    #[error("{algo} learns the three-joint point task only (dX = 12, dU = 3); these demonstrations are of a task with {layout}: use --algo lqr-gaifo or the expert")]
-    Unsupported {
-        /// The learner.
-        algo: &'static str,
-        /// The demonstrations' layout.
-        layout: ur5_shared::StateLayout,
-    },
     /// PPO settings that cannot work.
     #[error("PPO: {0}")]
     Ppo(String),

@@ -3,40 +3,45 @@
 //! [`crate::discriminator::mlp`]. Below the learners that use it: GAIfO (PPO)'s actor and
 //! value function, and MDGPS's global policy (whose mean is this policy's on normalised states).
 //!
-//! That MLP has a scalar output, so the mean is `DU` of them, one per joint (`μ_j(s)`, no
+//! The dimensions are the task's, at run time: the state has dX entries and the action dU
+//! (`ur5_shared::layout::StateLayout`), taken when a policy is built.
+//!
+//! That MLP has a scalar output, so the mean is dU of them, one per joint (`μ_j(s)`, no
 //! shared trunk). Stable-baselines3's `MlpPolicy` shares nothing between policy and value
-//! either, but its action head is one 3-output layer on a shared 64-64 trunk; ours has three
-//! 64-64 trunks (3× the compute, same function class per output). We keep it so there is one
+//! either, but its action head is one dU-output layer on a shared 64-64 trunk; ours has dU
+//! 64-64 trunks (dU× the compute, same function class per output). We keep it so there is one
 //! MLP implementation in the project.
 //!
 //! Parameters, flat (for the optimiser and the gradient checks):
-//! `θ = [θ_μ0 | θ_μ1 | θ_μ2 | log σ (DU) | θ_V]`, each `θ_…` in the MLP's own layout.
+//! `θ = [θ_μ0 | … | θ_μ(dU−1) | log σ (dU) | θ_V]`, each `θ_…` in the MLP's own layout; the
+//! heads are drawn in that order, so a three-joint policy draws exactly as before the
+//! dimensions were a run-time value.
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
 
 use crate::discriminator::mlp::{Mlp, MlpWorkspace};
 
 /// `½ ln 2π`.
 pub const HALF_LN_2PI: f64 = 0.918_938_533_204_672_8;
 
-/// What the policy's offset is added to: the joint angles `s[0..DU]` in goal-angle mode, 0 in
-/// torque mode.
-pub fn action_base(mode: ActionMode, s: &[f64; DX]) -> [f64; DU] {
+/// What the policy's offset is added to for `du` active joints: the joint angles `s[0..du]`
+/// in goal-angle mode (every layout starts with them, `StateLayout::q`), 0 in torque mode.
+pub fn action_base(mode: ActionMode, du: usize, s: &[f64]) -> Joints {
     match mode {
-        ActionMode::GoalAngles => std::array::from_fn(|j| s[ur5_shared::layout::Q.start + j]),
-        ActionMode::Torque => [0.0; DU],
+        ActionMode::GoalAngles => Joints::from_slice(&s[..du]),
+        ActionMode::Torque => Joints::splat(du, 0.0),
     }
 }
 
-/// Gaussian MLP policy over the action offset Δ ∈ R^DU (rad in goal-angle mode, added to
-/// [`action_base`]).
+/// Gaussian MLP policy over the action offset Δ ∈ R^dU (rad in goal-angle mode, added to
+/// [`action_base`]) on states of dX entries.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GaussianMlpPolicy {
     heads: Vec<Mlp>,
-    log_std: [f64; DU],
+    log_std: Joints,
 }
 
 /// Scratch space of a [`GaussianMlpPolicy`]: one MLP workspace per mean head.
@@ -45,9 +50,9 @@ pub struct PolicyWorkspace {
     heads: Vec<MlpWorkspace>,
 }
 
-/// Layer sizes `[DX, hidden..., 1]`.
-pub fn net_sizes(hidden: &[usize]) -> Vec<usize> {
-    let mut s = vec![DX];
+/// Layer sizes `[dx, hidden..., 1]`.
+pub fn net_sizes(dx: usize, hidden: &[usize]) -> Vec<usize> {
+    let mut s = vec![dx];
     s.extend_from_slice(hidden);
     s.push(1);
     s
@@ -57,10 +62,17 @@ impl GaussianMlpPolicy {
     /// Glorot-uniform weights (the MLP's initialisation) with the output layer scaled by
     /// `out_scale`, so that the initial mean offset is ≈ 0 (SB3 / OpenAI baselines scale the
     /// action layer by 0.01 with their orthogonal initialisation for the same reason); log σ
-    /// = `log_std` for every joint.
-    pub fn new(hidden: &[usize], log_std: f64, out_scale: f64, rng: &mut impl Rng) -> Self {
-        let sizes = net_sizes(hidden);
-        let heads = (0..DU)
+    /// = `log_std` for every joint. `dx`, `du`: the task's state and action dimensions.
+    pub fn new(
+        dx: usize,
+        du: usize,
+        hidden: &[usize],
+        log_std: f64,
+        out_scale: f64,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let sizes = net_sizes(dx, hidden);
+        let heads = (0..du)
             .map(|_| {
                 let mut net = Mlp::glorot(&sizes, rng);
                 let r = net.weight_range(net.layers() - 1);
@@ -72,14 +84,19 @@ impl GaussianMlpPolicy {
             .collect();
         Self {
             heads,
-            log_std: [log_std; DU],
+            log_std: Joints::splat(du, log_std),
         }
     }
 
-    /// Rebuilds a policy from its layer sizes, per-head parameters and log σ (checkpoints).
-    pub fn from_parts(hidden: &[usize], heads: Vec<Vec<f64>>, log_std: [f64; DU]) -> Self {
-        let sizes = net_sizes(hidden);
-        assert_eq!(heads.len(), DU);
+    /// Rebuilds a policy on states of `dx` entries from its hidden widths, per-head parameters
+    /// (one head per joint) and log σ (one per joint; checkpoints).
+    pub fn from_parts(dx: usize, hidden: &[usize], heads: Vec<Vec<f64>>, log_std: Joints) -> Self {
+        let sizes = net_sizes(dx, hidden);
+        assert_eq!(
+            heads.len(),
+            log_std.len(),
+            "one head and one log σ per joint"
+        );
         Self {
             heads: heads
                 .into_iter()
@@ -100,29 +117,41 @@ impl GaussianMlpPolicy {
         }
     }
 
+    /// State dimension dX (the heads' input).
+    pub fn dx(&self) -> usize {
+        self.heads[0].sizes()[0]
+    }
+
+    /// Action dimension dU (one head per joint).
+    pub fn du(&self) -> usize {
+        self.heads.len()
+    }
+
     /// The mean head of joint `j`.
     pub fn head(&self, j: usize) -> &Mlp {
         &self.heads[j]
     }
 
-    /// Per-joint log σ.
-    pub fn log_std(&self) -> &[f64; DU] {
+    /// Per-joint log σ (dU).
+    pub fn log_std(&self) -> &Joints {
         &self.log_std
     }
 
-    /// Sets the per-joint log σ.
-    pub fn set_log_std(&mut self, log_std: [f64; DU]) {
+    /// Sets the per-joint log σ (dU values).
+    pub fn set_log_std(&mut self, log_std: Joints) {
+        assert_eq!(log_std.len(), self.du(), "one log σ per joint");
         self.log_std = log_std;
     }
 
-    /// Parameters per head (`DU × n_head`) plus `DU` log σ.
+    /// Parameters per head (`dU × n_head`) plus dU log σ.
     pub fn n_params(&self) -> usize {
-        self.heads.iter().map(|h| h.params().len()).sum::<usize>() + DU
+        self.heads.iter().map(|h| h.params().len()).sum::<usize>() + self.du()
     }
 
-    /// The mean μ(s). Leaves every head's forward pass in `ws` (for [`Self::accumulate_mean_grad`]).
-    pub fn mean(&self, s: &[f64; DX], ws: &mut PolicyWorkspace) -> [f64; DU] {
-        let mut mu = [0.0; DU];
+    /// The mean μ(s) (dU) at the state `s` (dX). Leaves every head's forward pass in `ws` (for
+    /// [`Self::accumulate_mean_grad`]).
+    pub fn mean(&self, s: &[f64], ws: &mut PolicyWorkspace) -> Joints {
+        let mut mu = Joints::splat(self.du(), 0.0);
         for (j, (h, w)) in self.heads.iter().zip(&mut ws.heads).enumerate() {
             w.u.copy_from_slice(s);
             mu[j] = h.forward(w);
@@ -131,9 +160,9 @@ impl GaussianMlpPolicy {
     }
 
     /// log π(Δ|s) given the mean μ(s): `Σ_j −½ ((Δ_j − μ_j)/σ_j)² − log σ_j − ½ ln 2π`.
-    pub fn log_prob_given_mean(&self, mu: &[f64; DU], delta: &[f64; DU]) -> f64 {
+    pub fn log_prob_given_mean(&self, mu: &[f64], delta: &[f64]) -> f64 {
         let mut lp = 0.0;
-        for j in 0..DU {
+        for j in 0..self.du() {
             let z = (delta[j] - mu[j]) * (-self.log_std[j]).exp();
             lp += -0.5 * z * z - self.log_std[j] - HALF_LN_2PI;
         }
@@ -150,7 +179,7 @@ impl GaussianMlpPolicy {
     pub(crate) fn accumulate_mean_grad(
         &self,
         ws: &mut PolicyWorkspace,
-        c: &[f64; DU],
+        c: &[f64],
         grad: &mut [f64],
     ) {
         let mut off = 0;
@@ -180,7 +209,7 @@ impl GaussianMlpPolicy {
     pub fn param(&self, k: usize) -> f64 {
         match self.locate(k) {
             Some((j, i)) => self.heads[j].params()[i],
-            None => self.log_std[k - (self.n_params() - DU)],
+            None => self.log_std[k - (self.n_params() - self.du())],
         }
     }
 
@@ -189,23 +218,25 @@ impl GaussianMlpPolicy {
         match self.locate(k) {
             Some((j, i)) => self.heads[j].params_mut()[i] = v,
             None => {
-                let i = k - (self.n_params() - DU);
+                let i = k - (self.n_params() - self.du());
                 self.log_std[i] = v;
             }
         }
     }
 
-    /// `jac[j] = ∂μ_j/∂s` (row j of the `DU × DX` Jacobian of the mean) at `s`; leaves every
-    /// head's forward and backward pass in `ws`. Exact (the MLP's backward pass with its input
-    /// gradient); checked against central differences in `tests/mdgps.rs`.
-    pub fn mean_jacobian(
-        &self,
-        s: &[f64; DX],
-        ws: &mut PolicyWorkspace,
-        jac: &mut [[f64; DX]; DU],
-    ) -> [f64; DU] {
+    /// `jac[j·dX..(j+1)·dX] = ∂μ_j/∂s` (row j of the `dU × dX` Jacobian of the mean, row-major)
+    /// at `s`; leaves every head's forward and backward pass in `ws`. Exact (the MLP's backward
+    /// pass with its input gradient); checked against central differences in `tests/mdgps.rs`.
+    pub fn mean_jacobian(&self, s: &[f64], ws: &mut PolicyWorkspace, jac: &mut [f64]) -> Joints {
         let mu = self.mean(s, ws);
-        for ((h, w), row) in self.heads.iter().zip(&mut ws.heads).zip(jac.iter_mut()) {
+        let dx = self.dx();
+        assert_eq!(jac.len(), self.du() * dx, "a dU × dX Jacobian");
+        for ((h, w), row) in self
+            .heads
+            .iter()
+            .zip(&mut ws.heads)
+            .zip(jac.chunks_exact_mut(dx))
+        {
             h.backward(w, true);
             row.copy_from_slice(&w.grad_u);
         }
@@ -220,7 +251,7 @@ impl GaussianMlpPolicy {
             out[off..off + p.len()].copy_from_slice(p);
             off += p.len();
         }
-        out[off..off + DU].copy_from_slice(&self.log_std);
+        out[off..off + self.log_std.len()].copy_from_slice(&self.log_std);
     }
 
     /// Sets the flat parameters (heads, then log σ) from `src` (`n_params`).
@@ -232,7 +263,8 @@ impl GaussianMlpPolicy {
             p.copy_from_slice(&src[off..off + n]);
             off += n;
         }
-        self.log_std.copy_from_slice(&src[off..off + DU]);
+        let du = self.log_std.len();
+        self.log_std.copy_from_slice(&src[off..off + du]);
     }
 }
 
@@ -262,21 +294,24 @@ pub struct PolicyFile {
     pub action: String,
     /// Per-head flat parameters (layout of `learner::discriminator::mlp`).
     pub heads: Vec<Vec<f64>>,
-    /// Per-joint log σ.
-    pub log_std: [f64; DU],
+    /// Per-joint log σ (dU).
+    pub log_std: Vec<f64>,
 }
 
 impl ActorCritic {
-    /// A fresh policy ([`GaussianMlpPolicy::new`]) and a Glorot-initialised value net.
+    /// A fresh policy ([`GaussianMlpPolicy::new`]) and a Glorot-initialised value net, for
+    /// states of `dx` entries and actions of `du`.
     pub fn new(
+        dx: usize,
+        du: usize,
         pi_hidden: &[usize],
         v_hidden: &[usize],
         log_std: f64,
         out_scale: f64,
         rng: &mut impl Rng,
     ) -> Self {
-        let policy = GaussianMlpPolicy::new(pi_hidden, log_std, out_scale, rng);
-        let value = Mlp::glorot(&net_sizes(v_hidden), rng);
+        let policy = GaussianMlpPolicy::new(dx, du, pi_hidden, log_std, out_scale, rng);
+        let value = Mlp::glorot(&net_sizes(dx, v_hidden), rng);
         Self { policy, value }
     }
 
@@ -299,7 +334,7 @@ impl ActorCritic {
     }
 
     /// V(s). Leaves the forward pass in `ws` (for the value gradient).
-    pub fn value(&self, s: &[f64; DX], ws: &mut ActorCriticWorkspace) -> f64 {
+    pub fn value(&self, s: &[f64], ws: &mut ActorCriticWorkspace) -> f64 {
         ws.value.u.copy_from_slice(s);
         self.value.forward(&mut ws.value)
     }
@@ -355,10 +390,10 @@ impl ActorCritic {
             schema_version: 1,
             hidden: hidden.to_vec(),
             action: "goal angles a = q + mean(s) (+ exp(log_std) * eps when exploring), then shared::safety::clamp_action".into(),
-            heads: (0..DU)
+            heads: (0..self.policy.du())
                 .map(|j| self.policy.head(j).params().to_vec())
                 .collect(),
-            log_std: *self.policy.log_std(),
+            log_std: self.policy.log_std().to_vec(),
         }
     }
 }

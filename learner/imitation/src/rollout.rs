@@ -60,9 +60,8 @@ impl Episode {
         &self.x[t * dx..(t + 1) * dx]
     }
 
-    /// State at step t of a three-joint point task (dX = 12), for the learners whose MLP
-    /// policies take that task only (GAIfO (PPO), MDGPS); panics on another layout, which
-    /// those learners refuse when they are built.
+    /// State at step t of a three-joint point task (dX = 12) as an array, for code written
+    /// for that task only (the precision probe example); panics on another layout.
     pub fn reach3_state(&self, t: usize) -> [f64; ur5_shared::layout::DX] {
         self.state(t)
             .try_into()

@@ -168,12 +168,22 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
     let task = TaskConfig {
         dt: file.dt,
         horizon: args.steps.unwrap_or(file.horizon),
-        start_q: file.start_q.into(),
+        joints: file.start_q.len(),
+        start_q: file.start_q,
         goal: args.goal,
         ..TaskConfig::default()
     };
     task.validate()
         .with_context(|| format!("--goal {:?} / --steps {}", args.goal, task.horizon))?;
+    // `--goal` is a point: a policy of a pose task would act on states it was not made for.
+    file.check_layout(&task.layout()).with_context(|| {
+        format!(
+            "{}: a policy of a task with {} cannot run to the goal point --goal {:?}",
+            args.policy.display(),
+            file.layout(),
+            args.goal
+        )
+    })?;
     // The task cost sums over steps 1..T (its distance term is normalised by T − 1).
     anyhow::ensure!(
         task.horizon >= 2,
@@ -185,7 +195,7 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<EvalSummary> {
         mode: file.mode,
         ..SimConfig::for_model(file.model)
     };
-    let mut arm = SimArm::new(sim, task.dt).context("building the simulated arm")?;
+    let mut arm = SimArm::for_task(sim, &task).context("building the simulated arm")?;
     let mut ws = file.policy.workspace();
     let ep = run_episode(
         &mut arm,

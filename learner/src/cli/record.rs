@@ -59,8 +59,9 @@ pub struct RecordArgs {
     /// the config's `[sim] model`, else ur5).
     #[arg(long)]
     pub model: Option<UrModel>,
-    /// TOML file with optional [task] (dt, horizon: the steps a demonstration is cut to) and
-    /// [sim] (model, wrist_q, ee_offset) tables; start_q and goal come from the recording.
+    /// TOML file with optional [task] (dt, horizon: the steps a demonstration is cut to;
+    /// joints = 6 records the whole arm, the wrist free to move) and [sim] (model, wrist_q,
+    /// ee_offset) tables; start_q and goal come from the recording.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Output format.
@@ -94,7 +95,18 @@ fn load_config(args: &RecordArgs) -> anyhow::Result<RecordConfig> {
             }
         }
         (Some(p), m) => {
-            let c: RecordConfig = ur5_shared::config::from_toml_file(p)?;
+            let mut c: RecordConfig = ur5_shared::config::from_toml_file(p)?;
+            anyhow::ensure!(
+                c.task.goal_pose.is_none(),
+                "{}: [task] goal_pose: a recording's goal is the point its demonstrations end \
+                 at (a pose goal is not derived from a recording); drop goal_pose",
+                p.display()
+            );
+            // The start pose comes from the recording; a whole-arm task without one gets the
+            // wrist's angles after the arm's three so that the settings validate.
+            if c.task.joints == 6 && c.task.start_q.len() == 3 {
+                c.task.start_q = c.task.start_q.extended(&c.sim.wrist_q)?;
+            }
             if let Some(m) = m {
                 anyhow::ensure!(
                     c.sim.model == m,
@@ -229,6 +241,12 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         args.max_time_s.is_finite() && args.max_time_s >= 0.0,
         "--max-time-s {}: a time in s (0: never)",
         args.max_time_s
+    );
+    anyhow::ensure!(
+        cfg.task.joints == 3 || matches!(args.format, RecordFormat::Npz),
+        "--format lerobot holds the three-joint task's states; a recording of the whole arm \
+         ([task] joints = {}) is written as npz",
+        cfg.task.joints
     );
     let claim = Claim::take(&args.out, args.format)?;
     let timeout = Duration::from_secs(10);

@@ -219,7 +219,7 @@ pub fn run_mdgps(
     let file = PolicyFile {
         policy: run.policy().clone(),
         mode: c.lqr_gaifo.sim.mode,
-        start_q: base.start_arm_joints(),
+        start_q: base.start_q,
         dt: base.dt,
         horizon: base.horizon,
         seed,

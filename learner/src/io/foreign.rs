@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use super::IoError;
 use crate::error::ensure;
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX, EE_MINUS_GOAL, Q, STATE_NAMES};
+use ur5_shared::layout::{DX, EE_MINUS_GOAL, Q, STATE_NAMES};
 
 use imitation::demos::Demos;
 
@@ -285,20 +285,24 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
             ([ee[0] - e[0], ee[1] - e[1], ee[2] - e[2]], q.into(), seed)
         }
     };
+    // The active joints are those of the start pose (a recording of the whole arm notes six;
+    // the joint-state formats hold three), the goal a point.
     let task = TaskConfig {
         dt: traj.dt,
         horizon: traj.horizon,
+        joints: start_q.len(),
         start_q,
         goal,
         ..TaskConfig::default()
     };
     task.validate().map_err(IoError::TrajectoryTask)?;
+    let layout = task.layout();
     let known = traj.task.as_ref();
     // Both costs are recomputed from the data; a recorded one is checked against them, not
     // trusted (normalised performance divides by their difference).
     let mut expert = 0.0;
-    for ep in traj.states.chunks(traj.horizon * DX) {
-        expert += ur5_shared::cost::task_cost_of_states(&task.layout(), ep)?;
+    for ep in traj.states.chunks(traj.horizon * layout.dx()) {
+        expert += ur5_shared::cost::task_cost_of_states(&layout, ep)?;
     }
     expert /= traj.count as f64;
     let cost_expert = match known.and_then(|m| m.cost_expert) {
@@ -321,7 +325,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
             seed,
             ..Default::default()
         };
-        let mut arm = crate::arm::SimArm::new(sim.clone(), traj.dt)?;
+        let mut arm = crate::arm::SimArm::for_task(sim.clone(), &task)?;
         imitation::expert::random_policy_cost(&cfg, &mut arm)?
     };
     let cost_random = match known.and_then(|m| m.cost_random) {
@@ -338,7 +342,7 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
     };
     let actions = traj
         .actions
-        .unwrap_or_else(|| vec![0.0; traj.count * traj.horizon * DU]);
+        .unwrap_or_else(|| vec![0.0; traj.count * traj.horizon * layout.du()]);
     Ok(Demos {
         states: traj.states,
         actions,

@@ -2,27 +2,30 @@
 //!
 //! | array | shape | meaning |
 //! |---|---|---|
-//! | `params` | (P,) f64 | the flat parameter vector θ (layout in `imitation::mdgps::policy`: input mean and scale, 3 mean heads, log σ) |
-//! | `hidden` | (H,) i64 | hidden widths of each mean head; P = `flat_len(hidden)` |
+//! | `params` | (P,) f64 | the flat parameter vector θ (layout in `imitation::mdgps::policy`: input mean and scale, dU mean heads, log σ) |
+//! | `hidden` | (H,) i64 | hidden widths of each mean head; P = `flat_len(dX, dU, hidden)` |
 //! | `action_mode` | str | `goal_angles` (a = q + μ + σ ε, rad) or `torque` (a = μ + σ ε, N·m) |
-//! | `start_q` | (3,) f64 | start pose the policy was trained from (rad) |
+//! | `start_q` | (dU,) f64 | start pose the policy was trained from (rad), one angle per active joint |
 //! | `dt` | () f64 | control period (s) |
 //! | `horizon` | () u64 | T of the training episodes (the policy itself is time-invariant) |
 //! | `seed`, `iterations` | () u64 | the training run's seed and MDGPS iterations |
 //! | `model` | str | the arm it was trained on (`ur5e`, …; absent in files written before: the UR5) |
-//! | `state_names`, `action_names` | (dX,), (dU,) str | layout |
+//! | `state_names`, `action_names` | (dX,), (dU,) str | the task's layout (`StateLayout::state_names`): 12 and 3 names for three joints and a point, 30 and 6 for six joints and a pose |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
-//! Loading checks the schema, the layout names, every shape (P against `hidden`), finiteness,
+//! Loading finds the layout from the names (files of the three-joint task load as before),
+//! checks the schema, every shape (P against `hidden` and the layout's dX, dU), finiteness,
 //! the input scale's sign and the controller's bounds (`PolicyBounds`: |weight| ≤ 1e4, …),
-//! naming the file and array at fault.
+//! naming the file and array at fault. A policy used for a task of another layout is refused
+//! naming both ([`PolicyFile::check_layout`]).
 
 use std::path::Path;
 
 use imitation::mdgps::policy::{flat_len, GlobalPolicy};
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
-use ur5_shared::{PolicyBounds, UrModel};
+use ur5_shared::joints::Joints;
+use ur5_shared::layout::DimensionMismatch;
+use ur5_shared::{PolicyBounds, StateLayout, UrModel};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -40,8 +43,9 @@ pub struct PolicyFile {
     pub policy: GlobalPolicy,
     /// What its output is.
     pub mode: ActionMode,
-    /// Start pose of the training episodes (rad).
-    pub start_q: [f64; 3],
+    /// Start pose of the training episodes (rad), one angle per active joint of the policy's
+    /// layout.
+    pub start_q: Joints,
     /// Control period (s).
     pub dt: f64,
     /// Steps of the training episodes.
@@ -54,6 +58,20 @@ pub struct PolicyFile {
     pub model: UrModel,
 }
 
+impl PolicyFile {
+    /// The layout of the task the policy acts on (its dX inputs, dU outputs).
+    pub fn layout(&self) -> StateLayout {
+        self.policy.layout()
+    }
+
+    /// `Ok` if the policy acts on states and actions of `task`'s layout; otherwise the
+    /// mismatch, naming both.
+    pub fn check_layout(&self, task: &StateLayout) -> Result<(), DimensionMismatch> {
+        let l = self.layout();
+        task.check_dims("the policy file", l.dx(), l.du())
+    }
+}
+
 fn mode_name(mode: ActionMode) -> &'static str {
     match mode {
         ActionMode::GoalAngles => "goal_angles",
@@ -63,6 +81,12 @@ fn mode_name(mode: ActionMode) -> &'static str {
 
 /// Writes `p` to `path` (atomically).
 pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
+    let layout = p.layout();
+    assert_eq!(
+        p.start_q.len(),
+        layout.du(),
+        "a start pose of the policy's joints"
+    );
     let flat = p.policy.flat();
     let hidden: Vec<i64> = p.policy.hidden().iter().map(|&h| h as i64).collect();
     let mut w = NpzWriter::create(path)?;
@@ -70,14 +94,21 @@ pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
     w.f64("params", &[flat.len() as u64], &flat)?;
     w.i64("hidden", &[hidden.len() as u64], &hidden)?;
     w.string("action_mode", mode_name(p.mode))?;
-    w.f64("start_q", &[3], &p.start_q)?;
+    w.f64("start_q", &[p.start_q.len() as u64], &p.start_q)?;
     w.f64("dt", &[], &[p.dt])?;
     w.u64("horizon", &[], &[p.horizon as u64])?;
     w.u64("seed", &[], &[p.seed])?;
     w.u64("iterations", &[], &[p.iterations])?;
     w.string("model", p.model.name())?;
-    w.strings("state_names", &STATE_NAMES)?;
-    w.strings("action_names", &ACTION_NAMES)?;
+    let (states, actions) = (layout.state_names(), layout.action_names());
+    w.strings(
+        "state_names",
+        &states.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
+    w.strings(
+        "action_names",
+        &actions.iter().map(String::as_str).collect::<Vec<_>>(),
+    )?;
     w.finish()?;
     Ok(())
 }
@@ -99,15 +130,25 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
     }
     f.check_schema(SCHEMA_VERSION)?;
     let bad = |name: &str, why: String| f.bad(name, why);
-    for (name, want) in [
-        ("state_names", &STATE_NAMES[..]),
-        ("action_names", &ACTION_NAMES[..]),
+    let (states, actions) = (f.strings("state_names")?, f.strings("action_names")?);
+    let layout = StateLayout::from_dims(states.len(), actions.len()).ok_or_else(|| {
+        bad(
+            "state_names",
+            format!(
+                "{} state and {} action names: the dimensions of no task (dX = 2n + 6p, dU = n)",
+                states.len(),
+                actions.len()
+            ),
+        )
+    })?;
+    for (name, got, want) in [
+        ("state_names", &states, layout.state_names()),
+        ("action_names", &actions, layout.action_names()),
     ] {
-        let got = f.strings(name)?;
-        if got != want {
+        if *got != want {
             return Err(bad(
                 name,
-                format!("{got:?} is not this project's layout {want:?}"),
+                format!("{got:?} is not the layout of a task with {layout} ({want:?})"),
             ));
         }
     }
@@ -128,8 +169,11 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
         ));
     }
     let hidden: Vec<usize> = hidden.iter().map(|&h| h as usize).collect();
-    let params = f.f64_shaped("params", &[flat_len(DX, DU, &hidden) as u64])?;
-    let policy = GlobalPolicy::from_flat(&hidden, &params).map_err(|e| bad("params", e))?;
+    let params = f.f64_shaped(
+        "params",
+        &[flat_len(layout.dx(), layout.du(), &hidden) as u64],
+    )?;
+    let policy = GlobalPolicy::from_flat(layout, &hidden, &params).map_err(|e| bad("params", e))?;
     let mode = match f.string("action_mode")?.as_str() {
         "goal_angles" => ActionMode::GoalAngles,
         "torque" => ActionMode::Torque,
@@ -151,10 +195,7 @@ pub fn load_policy(path: &Path) -> Result<PolicyFile, NpzError> {
                 format!("{e}: not a trained policy's (the controller refuses it)"),
             )
         })?;
-    let start_q: [f64; 3] = f
-        .f64_shaped("start_q", &[3])?
-        .try_into()
-        .expect("shape checked");
+    let start_q = Joints::from_slice(&f.f64_shaped("start_q", &[layout.du() as u64])?);
     if start_q.iter().any(|v| !v.is_finite()) {
         return Err(bad("start_q", format!("{start_q:?} is not finite")));
     }

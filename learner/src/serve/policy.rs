@@ -1,10 +1,13 @@
 //! `learner policy serve`: publishes a saved MDGPS policy as a policy table on
 //! `controller/policy` (docs/design.md §3.11) and reports the episodes the controller runs
-//! with it, from the `learner/samples` stream: per episode its steps, the distance to the goal
-//! at the last step (|s[6..9]|, m) and, for noise-free episodes, how many actions differ from
-//! the policy's own [`policy_action`] on the recorded state (0: the controller executed the
-//! policy exactly). The goal is the controller's (`rt-controller run --goal x,y,z`); the
-//! policy is time-invariant, so one table serves any goal.
+//! with it, from the `learner/samples` stream: per episode its steps, the distance of the tool
+//! centre point to its goal at the last step (the first tool point of the table's layout, m)
+//! and, for noise-free episodes, how many actions differ from the policy's own
+//! [`policy_action`] on the recorded state (0: the controller executed the policy exactly).
+//! The goal is the controller's (`rt-controller run --goal x,y,z`); the policy is
+//! time-invariant, so one table serves any goal. The table carries its task's dimensions
+//! (dX, dU); a sample of other dimensions (a controller running another task) is refused,
+//! naming both.
 
 use std::time::{Duration, Instant};
 
@@ -77,6 +80,12 @@ fn collect(
     opts: &PolicyServeOptions,
     report: &mut impl FnMut(&PolicyEpisode),
 ) -> Result<Vec<PolicyEpisode>, ServeError> {
+    let (dx, du) = table.dims();
+    let layout = StateLayout::from_dims(dx, du).ok_or_else(|| {
+        ServeError::Range(format!(
+            "the policy table's dimensions dX = {dx}, dU = {du} are those of no task"
+        ))
+    })?;
     ports.publish(table)?;
     let mut scratch = PolicyScratch::default();
     let mut done = Vec::new();
@@ -105,6 +114,13 @@ fn collect(
         if sample.table_version != table.version {
             continue; // another controller kind or version (e.g. an older gain table)
         }
+        layout
+            .check_dims(
+                "a sample of the controller",
+                sample.state().len(),
+                sample.action().len(),
+            )
+            .map_err(ServeError::Peer)?;
         let t = sample.t as usize;
         let noisy = sample.noise != 0;
         let fresh = t == 0;
@@ -129,8 +145,6 @@ fn collect(
             }
         }
         c.3 = t + 1;
-        let layout =
-            StateLayout::from_dims(sample.state().len(), sample.action().len()).unwrap_or_default();
         c.4 = sample.state()[layout.point(0)]
             .iter()
             .map(|v| v * v)

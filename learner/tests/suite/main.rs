@@ -16,5 +16,6 @@ mod ppo;
 mod replay;
 mod run_dir;
 mod shard;
+mod six_joints;
 mod structure;
 mod tool_paths;

@@ -22,7 +22,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{ActionMode, TaskConfig};
 use ur5_shared::layout::{DU, DX};
-use ur5_shared::UrModel;
+use ur5_shared::{StateLayout, UrModel};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mdgps-test-{}-{name}", std::process::id()));
@@ -33,17 +33,23 @@ fn tmp(name: &str) -> PathBuf {
 /// A policy with every parameter random (non-zero output layers, a non-trivial
 /// normalisation), so that every term of the Jacobian is exercised.
 fn random_policy(hidden: &[usize], seed: u64) -> GlobalPolicy {
+    random_policy_of(StateLayout::REACH3, hidden, seed)
+}
+
+/// [`random_policy`] for the task of `layout`.
+fn random_policy_of(layout: StateLayout, hidden: &[usize], seed: u64) -> GlobalPolicy {
+    let dx = layout.dx();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let flat: Vec<f64> = (0..flat_len(DX, DU, hidden))
+    let flat: Vec<f64> = (0..flat_len(dx, layout.du(), hidden))
         .map(|i| {
-            if (DX..2 * DX).contains(&i) {
+            if (dx..2 * dx).contains(&i) {
                 rng.random_range(0.2..2.0)
             } else {
                 rng.random_range(-0.6..0.6)
             }
         })
         .collect();
-    GlobalPolicy::from_flat(hidden, &flat).unwrap()
+    GlobalPolicy::from_flat(layout, hidden, &flat).unwrap()
 }
 
 fn random_state(rng: &mut ChaCha8Rng) -> [f64; DX] {
@@ -53,38 +59,42 @@ fn random_state(rng: &mut ChaCha8Rng) -> [f64; DX] {
 #[test]
 fn mean_action_jacobian_matches_central_differences() {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
-    for (hidden, mode) in [
-        (vec![16, 8], ActionMode::GoalAngles),
-        (vec![5], ActionMode::Torque),
-        (vec![64, 64], ActionMode::GoalAngles),
+    for (layout, hidden, mode) in [
+        (StateLayout::REACH3, vec![16, 8], ActionMode::GoalAngles),
+        (StateLayout::REACH3, vec![5], ActionMode::Torque),
+        (StateLayout::REACH3, vec![64, 64], ActionMode::GoalAngles),
+        (StateLayout::POSE6, vec![16, 8], ActionMode::GoalAngles),
+        (StateLayout::POSE6, vec![5], ActionMode::Torque),
     ] {
-        let pol = random_policy(&hidden, 11);
+        let (dx, du) = (layout.dx(), layout.du());
+        let pol = random_policy_of(layout, &hidden, 11);
         let mut ws = pol.workspace();
         for _ in 0..5 {
-            let s = random_state(&mut rng);
-            let mut jac = [[0.0; DX]; DU];
+            let s: Vec<f64> = (0..dx).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut jac = vec![0.0; du * dx];
             let a = pol.mean_action_jacobian(&s, mode, &mut ws, &mut jac);
+            assert_eq!(a.len(), du);
             assert_eq!(
                 a,
                 pol.mean_action(&s, mode, &mut ws),
                 "same mean either way"
             );
             let h = 1e-6;
-            for i in 0..DX {
-                let (mut sp, mut sm) = (s, s);
+            for i in 0..dx {
+                let (mut sp, mut sm) = (s.clone(), s.clone());
                 sp[i] += h;
                 sm[i] -= h;
                 let (ap, am) = (
                     pol.mean_action(&sp, mode, &mut ws),
                     pol.mean_action(&sm, mode, &mut ws),
                 );
-                for j in 0..DU {
+                for j in 0..du {
                     let fd = (ap[j] - am[j]) / (2.0 * h);
-                    let err = (fd - jac[j][i]).abs();
+                    let err = (fd - jac[j * dx + i]).abs();
                     assert!(
                         err <= 1e-7 * (1.0 + fd.abs()),
-                        "{hidden:?} {mode:?}: ∂a_{j}/∂s_{i} analytic {} vs central difference {fd}",
-                        jac[j][i]
+                        "{layout} {hidden:?} {mode:?}: ∂a_{j}/∂s_{i} analytic {} vs central difference {fd}",
+                        jac[j * dx + i]
                     );
                 }
             }
@@ -97,21 +107,22 @@ fn synthetic_targets(n: usize, seed: u64) -> Targets {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let a: [[f64; DX]; DU] =
         std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-0.3..0.3)));
-    let mut t = Targets::default();
+    let mut t = Targets::new(DX, DU);
     for _ in 0..n {
         let s = random_state(&mut rng);
-        t.offsets.push(std::array::from_fn(|j| {
+        let offset: [f64; DU] = std::array::from_fn(|j| {
             (0..DX).map(|i| a[j][i] * s[i]).sum::<f64>() + 0.2 * (2.0 * s[j]).sin()
-        }));
+        });
         // P = B Bᵀ + 0.5 I.
         let b: [[f64; DU]; DU] =
             std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0)));
-        t.precisions.push(std::array::from_fn(|i| {
-            std::array::from_fn(|j| {
+        let p: Vec<f64> = (0..DU * DU)
+            .map(|ij| {
+                let (i, j) = (ij / DU, ij % DU);
                 (0..DU).map(|k| b[i][k] * b[j][k]).sum::<f64>() + if i == j { 0.5 } else { 0.0 }
             })
-        }));
-        t.states.push(s);
+            .collect();
+        t.push(&s, &offset, &p);
     }
     t
 }
@@ -126,7 +137,12 @@ fn s_step_reduces_the_weighted_loss_and_is_deterministic_for_a_seed() {
         ..PolicyOptConfig::default()
     };
     let fit = |seed: u64| {
-        let mut pol = GlobalPolicy::new(&cfg.hidden, 0.2, &mut ChaCha8Rng::seed_from_u64(3));
+        let mut pol = GlobalPolicy::new(
+            StateLayout::REACH3,
+            &cfg.hidden,
+            0.2,
+            &mut ChaCha8Rng::seed_from_u64(3),
+        );
         let mut opt = PolicyOpt::new(cfg.clone(), &pol, seed);
         let r1 = opt.update(&mut pol, &data).unwrap();
         let r2 = opt.update(&mut pol, &data).unwrap();
@@ -144,7 +160,10 @@ fn s_step_reduces_the_weighted_loss_and_is_deterministic_for_a_seed() {
     assert_eq!(PolicyOpt::loss(&pol, &data, &mut ws), r2.loss_after);
     // σ² = 1 / mean (P)_jj.
     for j in 0..DU {
-        let m = data.precisions.iter().map(|p| p[j][j]).sum::<f64>() / data.len() as f64;
+        let m = (0..data.len())
+            .map(|i| data.precision(i)[j * DU + j])
+            .sum::<f64>()
+            / data.len() as f64;
         assert!((pol.std()[j] - (1.0 / m).sqrt()).abs() < 1e-12);
     }
     let (again, a1, _) = fit(5);
@@ -162,7 +181,7 @@ fn policy_file() -> PolicyFile {
     PolicyFile {
         policy: random_policy(&[8, 4], 2),
         mode: ActionMode::GoalAngles,
-        start_q: [0.0, -2.0, 2.4],
+        start_q: [0.0, -2.0, 2.4].into(),
         dt: 0.1,
         horizon: 100,
         seed: u64::MAX - 3,
@@ -390,7 +409,7 @@ fn policy_eval_runs_a_saved_policy_to_a_goal() {
     for v in &mut flat[2 * DX..] {
         *v = 0.0;
     }
-    f.policy = GlobalPolicy::from_flat(&[8, 4], &flat).unwrap();
+    f.policy = GlobalPolicy::from_flat(StateLayout::REACH3, &[8, 4], &flat).unwrap();
     save_policy(&f, &p).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_learner"))
         .args(["policy", "eval", "--policy", p.to_str().unwrap()])

@@ -13,6 +13,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
 use ur5_shared::layout::{DU, DX, EE_MINUS_GOAL};
+use ur5_shared::StateLayout;
 
 /// Small nets so that every parameter can be checked.
 fn small_cfg() -> PpoConfig {
@@ -50,7 +51,15 @@ fn ppo_loss_gradient_matches_finite_differences() {
     let cfg = small_cfg();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     // Output scale 1 so the mean heads matter; log σ = ln 0.3.
-    let mut ac = ActorCritic::new(&cfg.pi_hidden, &cfg.v_hidden, 0.3f64.ln(), 1.0, &mut rng);
+    let mut ac = ActorCritic::new(
+        DX,
+        DU,
+        &cfg.pi_hidden,
+        &cfg.v_hidden,
+        0.3f64.ln(),
+        1.0,
+        &mut rng,
+    );
     let m = 12;
     let data = batch(&ac, &mut rng, m);
     let idx: Vec<usize> = (0..m).collect();
@@ -145,7 +154,7 @@ fn ppo_on_task_cost(
     seed: u64,
 ) -> (Vec<f64>, Vec<f64>) {
     let sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
-    let mut ppo = Ppo::new(cfg, ActionMode::GoalAngles, seed).unwrap();
+    let mut ppo = Ppo::new(cfg, ActionMode::GoalAngles, StateLayout::REACH3, seed).unwrap();
     let mut costs = Vec::new();
     for it in 0..=iterations {
         let (pol, _) = ppo.policy_and_workspace();
@@ -249,7 +258,13 @@ fn same_seed_same_run_bit_for_bit() {
 /// Demonstrations stand-in: two episodes of a fresh noisy policy (the loop only needs states).
 fn fake_demos(task: &TaskConfig) -> Demos {
     let sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
-    let mut ppo = Ppo::new(PpoConfig::default(), ActionMode::GoalAngles, 99).unwrap();
+    let mut ppo = Ppo::new(
+        PpoConfig::default(),
+        ActionMode::GoalAngles,
+        StateLayout::REACH3,
+        99,
+    )
+    .unwrap();
     let (pol, _) = ppo.policy_and_workspace();
     let (eps, _) = execute_mlp(&sim, task, pol, 1, 5, 2).unwrap();
     Demos {

@@ -23,12 +23,12 @@ const T: usize = 40;
 /// A policy that moves the arm: a fresh 64-64 one with every parameter perturbed (seeded).
 fn moving_policy() -> GlobalPolicy {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
-    let p = GlobalPolicy::new(&[64, 64], 0.05, &mut rng);
+    let p = GlobalPolicy::new(ur5_shared::StateLayout::REACH3, &[64, 64], 0.05, &mut rng);
     let mut flat = p.flat();
     for v in flat.iter_mut().skip(2 * DX) {
         *v += rng.random_range(-0.05..0.05);
     }
-    GlobalPolicy::from_flat(&[64, 64], &flat).unwrap()
+    GlobalPolicy::from_flat(ur5_shared::StateLayout::REACH3, &[64, 64], &flat).unwrap()
 }
 
 #[test]
@@ -52,7 +52,7 @@ fn the_controller_runs_a_policy_table_to_a_goal_given_on_the_command_line() {
         &PolicyFile {
             policy: policy.clone(),
             mode: ActionMode::GoalAngles,
-            start_q: task.start_arm_joints(),
+            start_q: task.start_q,
             dt: task.dt,
             horizon: T,
             seed: 21,

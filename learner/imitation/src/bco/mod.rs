@@ -41,7 +41,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX};
 use ur5_shared::{PolicyTable, StateLayout};
 
 use crate::demos::Demos;
@@ -181,8 +180,8 @@ pub struct Bco {
 
 impl Bco {
     /// Sets up a run imitating `demos` (the task is theirs). The dimensions come from the
-    /// demonstrations (their states' dX and the task's joints); the policy and the episode loop
-    /// still hold fixed-size states, so other dimensions are refused here.
+    /// demonstrations (their states' dX and the task's joints), checked against the task's
+    /// layout; the policy and the inverse model take them.
     pub fn new(cfg: BcoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
@@ -203,14 +202,11 @@ impl Bco {
                 "demonstrations with dX = {dx} for {du} joints match no task layout"
             ))
         })?;
-        if (layout.dx(), layout.du()) != (DX, DU) {
-            return Err(ImitationError::Config(format!(
-                "BCO runs the {DX}-state, {DU}-joint task (its policy is the fixed-size MLP \
-                 policy); the demonstrations have dX = {dx}, dU = {du}"
-            )));
-        }
+        task.layout()
+            .check_dims("the demonstrations' states", layout.dx(), layout.du())
+            .map_err(|e| ImitationError::Episodes(e.to_string()))?;
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ SEED_POLICY);
-        let mut policy = GlobalPolicy::new(&cfg.policy.hidden, cfg.explore_std, &mut rng);
+        let mut policy = GlobalPolicy::new(layout, &cfg.policy.hidden, cfg.explore_std, &mut rng);
         let x = faer::Mat::from_fn(rows, dx, |r, c| demos.states[r * dx + c]);
         policy.set_normalizer(Normalizer::from_data(x.as_ref())?);
         let opt = PolicyOpt::new(cfg.policy.clone(), &policy, cfg.seed ^ SEED_CLONE);
@@ -264,22 +260,26 @@ impl Bco {
     /// Step 2: the transitions of `episodes` into the model's data.
     fn add_transitions(&mut self, episodes: &[Episode]) -> Result<(), ImitationError> {
         let mode = self.cfg.sim.mode;
+        let (dx, du) = (self.layout.dx(), self.layout.du());
         for (k, ep) in episodes.iter().enumerate() {
             let t_len = ep.horizon();
-            if ep.x.len() != t_len * DX || ep.u.len() != t_len * DU {
+            if ep.layout != self.layout || ep.x.len() != t_len * dx || ep.u.len() != t_len * du {
                 return Err(ImitationError::Episodes(format!(
-                    "episode {k}: {} state and {} action values for T = {t_len}: not states of \
-                     dX = {DX} and actions of dU = {DU}",
+                    "episode {k}: {} state and {} action values for T = {t_len} ({}): not states \
+                     of dX = {dx} and actions of dU = {du} ({})",
                     ep.x.len(),
-                    ep.u.len()
+                    ep.u.len(),
+                    ep.layout,
+                    self.layout
                 )));
             }
             for t in 0..t_len.saturating_sub(1) {
-                let s = ep.reach3_state(t);
-                let base = action_base(mode, &s);
-                let delta: [f64; DU] = std::array::from_fn(|j| ep.u[t * DU + j] - base[j]);
-                self.model
-                    .push(&s, &ep.x[(t + 1) * DX..(t + 2) * DX], &delta);
+                let s = ep.state(t);
+                let mut delta = action_base(mode, du, s);
+                for (j, d) in delta.iter_mut().enumerate() {
+                    *d = ep.u[t * du + j] - *d;
+                }
+                self.model.push(s, ep.state(t + 1), &delta);
             }
         }
         Ok(())
@@ -289,19 +289,17 @@ impl Bco {
     fn label(&mut self) -> Result<Targets, ImitationError> {
         let d = &self.demos;
         let prc = 1.0 / (self.cfg.explore_std * self.cfg.explore_std);
-        let mut p = [[0.0; DU]; DU];
-        for (j, row) in p.iter_mut().enumerate() {
-            row[j] = prc;
+        let (dx, du) = (self.layout.dx(), self.layout.du());
+        let mut p = vec![0.0; du * du];
+        for j in 0..du {
+            p[j * du + j] = prc;
         }
-        let mut out = Targets::default();
+        let mut out = Targets::new(dx, du);
         for i in 0..d.count {
             for t in 0..d.horizon - 1 {
-                let (s, s_next) = (d.reach3_state(i, t), d.reach3_state(i, t + 1));
-                let label = self.model.predict(&s, &s_next)?;
-                out.states.push(s);
-                out.offsets
-                    .push(label.try_into().expect("the model predicts dU values"));
-                out.precisions.push(p);
+                let (s, s_next) = (d.state(i, t), d.state(i, t + 1));
+                let label = self.model.predict(s, s_next)?;
+                out.push(s, &label, &p);
             }
         }
         Ok(out)
@@ -320,7 +318,7 @@ impl Bco {
         self.last.labelled = targets.len();
         self.last.label_rms = (targets
             .offsets
-            .iter()
+            .chunks_exact(targets.du)
             .map(|o| o.iter().map(|v| v * v).sum::<f64>())
             .sum::<f64>()
             / targets.len() as f64)

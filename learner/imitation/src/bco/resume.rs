@@ -10,7 +10,6 @@ use super::{Bco, BcoConfig};
 use crate::demos::Demos;
 use crate::mdgps::policy::{flat_len, GlobalPolicy};
 use crate::ImitationError;
-use ur5_shared::layout::{DU, DX};
 
 /// Iterations done (u64, 1).
 pub const ITERATION: &str = "bco.iteration";
@@ -47,10 +46,11 @@ impl Bco {
         let mut run = Self::new(cfg, demos)?;
         let iteration = snap.words(ITERATION, 1).map_err(refused)?[0];
         let hidden = run.cfg.policy.hidden.clone();
+        let layout = run.layout;
         let flat = snap
-            .real(POLICY, &[flat_len(DX, DU, &hidden)])
+            .real(POLICY, &[flat_len(layout.dx(), layout.du(), &hidden)])
             .map_err(refused)?;
-        let policy = GlobalPolicy::from_flat(&hidden, flat)
+        let policy = GlobalPolicy::from_flat(layout, &hidden, flat)
             .map_err(|e| refused(format!("{POLICY}: {e}")))?;
         run.opt.restore(snap).map_err(refused)?;
         run.model.restore(snap).map_err(refused)?;

@@ -1,5 +1,6 @@
 use super::*;
 use rand::Rng;
+use ur5_shared::layout::{DU, DX};
 
 /// Cloning (the regression of step 4 on the project's MLP policy) fits a known linear policy
 /// Δ*(s) = K s + k on states spread as an episode's are.
@@ -19,12 +20,13 @@ fn cloning_fits_a_known_linear_policy() {
         .collect();
     let sigma = 0.1;
     let prc = 1.0 / (sigma * sigma);
-    let p = std::array::from_fn(|j| std::array::from_fn(|l| if j == l { prc } else { 0.0 }));
-    let data = Targets {
-        offsets: states.iter().map(target).collect(),
-        precisions: vec![p; states.len()],
-        states: states.clone(),
-    };
+    let p: Vec<f64> = (0..DU * DU)
+        .map(|i| if i / DU == i % DU { prc } else { 0.0 })
+        .collect();
+    let mut data = Targets::new(DX, DU);
+    for s in &states {
+        data.push(s, &target(s), &p);
+    }
     let cfg = PolicyOptConfig {
         hidden: vec![16],
         steps: 6000,
@@ -35,7 +37,7 @@ fn cloning_fits_a_known_linear_policy() {
         },
         ..PolicyOptConfig::default()
     };
-    let mut pol = GlobalPolicy::new(&cfg.hidden, sigma, &mut rng);
+    let mut pol = GlobalPolicy::new(StateLayout::REACH3, &cfg.hidden, sigma, &mut rng);
     let x = faer::Mat::from_fn(states.len(), DX, |r, c| states[r][c]);
     pol.set_normalizer(Normalizer::from_data(x.as_ref()).unwrap());
     let mut opt = PolicyOpt::new(cfg, &pol, 12);

@@ -36,9 +36,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX};
 use ur5_shared::noise::Noise;
-use ur5_shared::{EpisodePlan, GainTable, PolicyTable};
+use ur5_shared::{EpisodePlan, GainTable, PolicyTable, StateLayout};
 
 use crate::controller::{init_hold, to_gain_table};
 use crate::cost::composite::{CompositeCost, CompositeWorkspace};
@@ -186,17 +185,22 @@ pub struct Mdgps {
 
 impl Mdgps {
     /// Sets up a run with one condition per demonstration set (each set's goal; all with the
-    /// same start pose, T and dt).
+    /// same start pose, T, dt and task layout). The policy and the controllers take the
+    /// layout's dimensions. A pose task (three tool points) runs with one goal only: the
+    /// episode plan that moves the real-time controller to each condition's goal
+    /// ([`Mdgps::plan`]) carries a goal point, not a pose, so a served run could not set a
+    /// condition's pose.
     pub fn new(cfg: MdgpsConfig, demos: Vec<Demos>) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let first = demos
             .first()
             .ok_or_else(|| ImitationError::Config("MDGPS needs at least one condition".into()))?;
-        if first.layout() != ur5_shared::StateLayout::REACH3 {
-            return Err(ImitationError::Unsupported {
-                algo: "MDGPS",
-                layout: first.layout(),
-            });
+        let layout = first.layout();
+        if first.goal_pose.is_some() && demos.len() > 1 {
+            return Err(ImitationError::Config(format!(
+                "MDGPS on a pose task ({layout}) takes the demonstrations of one goal pose, got                  {}: the episode plan that sets each condition's goal on the real-time                  controller carries a goal point, not a pose",
+                demos.len()
+            )));
         }
         if let Some(d) = demos.iter().find(|d| {
             d.horizon != first.horizon
@@ -225,19 +229,20 @@ impl Mdgps {
                 g.fit.clone(),
                 g.traj_opt.clone(),
                 task.horizon,
-                DX,
-                DU,
+                layout.dx(),
+                layout.du(),
                 g.samples,
                 ChaCha8Rng::seed_from_u64(condition_seed(g.seed ^ SEED_GMM, m)),
             );
             conds.push(Condition {
                 lqr: LqrIteration::new(learner, init_hold(&task, g.init_var), 0),
-                lin: LinGaussPolicy::zeros(task.horizon, DX, DU),
+                lin: LinGaussPolicy::zeros(task.horizon, layout.dx(), layout.du()),
                 demos: d,
                 task,
             });
         }
         let policy = GlobalPolicy::new(
+            layout,
             &cfg.policy.hidden,
             g.init_var.sqrt(),
             &mut ChaCha8Rng::seed_from_u64(g.seed ^ SEED_POLICY),
@@ -479,17 +484,16 @@ impl Mdgps {
     /// The policy's input normalisation, once: the states of the demonstrations of every goal
     /// and of the first iteration's samples (docs/design.md §6.4).
     fn fit_policy_normalizer(&mut self, samples: &[Vec<Episode>]) -> Result<(), ImitationError> {
-        let mut rows: Vec<[f64; DX]> = Vec::new();
+        let dx = self.layout().dx();
+        let mut rows: Vec<&[f64]> = Vec::new();
         for c in &self.conds {
             let d = &c.demos;
-            rows.extend(
-                (0..d.count).flat_map(|i| (0..d.horizon).map(move |t| d.reach3_state(i, t))),
-            );
+            rows.extend((0..d.count).flat_map(|i| (0..d.horizon).map(move |t| d.state(i, t))));
         }
         for ep in samples.iter().flatten() {
-            rows.extend((0..ep.horizon()).map(|t| ep.reach3_state(t)));
+            rows.extend((0..ep.horizon()).map(|t| ep.state(t)));
         }
-        let x = Mat::from_fn(rows.len(), DX, |r, c| rows[r][c]);
+        let x = Mat::from_fn(rows.len(), dx, |r, c| rows[r][c]);
         self.policy
             .set_normalizer(Normalizer::from_data(x.as_ref())?);
         Ok(())
@@ -500,17 +504,19 @@ impl Mdgps {
     /// k_t = ā(s̄_t) − K_t s̄_t, Σ_t = diag(σ²).
     fn linearise_policy(&mut self, samples: &[Vec<Episode>]) {
         let mode = self.mode();
+        let (dx, du) = (self.layout().dx(), self.layout().du());
         let mut ws = self.policy.workspace();
         let std = self.policy.std();
+        let (mut s_bar, mut jac) = (vec![0.0; dx], vec![0.0; du * dx]);
         for (c, eps) in self.conds.iter_mut().zip(samples) {
             for t in 0..c.task.horizon {
-                let mut s_bar = [0.0; DX];
+                s_bar.fill(0.0);
                 for ep in eps {
-                    for (v, x) in s_bar.iter_mut().zip(&ep.x[t * DX..(t + 1) * DX]) {
+                    for (v, x) in s_bar.iter_mut().zip(ep.state(t)) {
                         *v += x / eps.len() as f64;
                     }
                 }
-                let mut jac = [[0.0; DX]; DU];
+                jac.fill(0.0);
                 let a = self
                     .policy
                     .mean_action_jacobian(&s_bar, mode, &mut ws, &mut jac);
@@ -544,25 +550,30 @@ impl Mdgps {
     /// K_t s + k_t − base(s) of condition m's controller and its precision Σ_t⁻¹.
     pub fn targets(&self, samples: &[Vec<Episode>]) -> Targets {
         let mode = self.mode();
-        let mut out = Targets::default();
+        let (dx, du) = (self.layout().dx(), self.layout().du());
+        let mut out = Targets::new(dx, du);
+        let zeros = vec![0.0; du];
+        let mut a = vec![0.0; du];
         for (c, eps) in self.conds.iter().zip(samples) {
             let pol = c.lqr.policy();
             for ep in eps {
                 for t in 0..ep.horizon() {
-                    let s = ep.reach3_state(t);
-                    let mut a = [0.0; DU];
-                    pol.act(t, &s, &[0.0; DU], &mut a);
-                    let base = crate::mlp_policy::action_base(mode, &s);
-                    let prc = pol.inv_pol_covar.slice(t);
-                    out.states.push(s);
-                    out.offsets.push(std::array::from_fn(|j| a[j] - base[j]));
-                    out.precisions.push(std::array::from_fn(|i| {
-                        std::array::from_fn(|j| prc[i * DU + j])
-                    }));
+                    let s = ep.state(t);
+                    pol.act(t, s, &zeros, &mut a);
+                    let mut offset = crate::mlp_policy::action_base(mode, du, s);
+                    for (o, a) in offset.iter_mut().zip(&a) {
+                        *o = a - *o;
+                    }
+                    out.push(s, &offset, pol.inv_pol_covar.slice(t));
                 }
             }
         }
         out
+    }
+
+    /// The task's state layout (every condition's).
+    pub fn layout(&self) -> StateLayout {
+        self.policy.layout()
     }
 
     fn mode(&self) -> ActionMode {
@@ -688,21 +699,20 @@ fn stack(parts: &[Mat<f64>]) -> Mat<f64> {
 
 /// Step t of `lin` := the linear-Gaussian controller a = K (s − s̄) + ā with K = `jac` and
 /// Σ = diag(`std`²), in GPS's absolute form (k = ā − K s̄; R = diag(σ), Σ⁻¹ = diag(σ⁻²)).
+/// `jac` is dU × dX row-major, `s_bar` dX, `a` and `std` dU.
 fn linear_gaussian_step(
     lin: &mut LinGaussPolicy,
     t: usize,
-    s_bar: &[f64; DX],
-    a: &[f64; DU],
-    jac: &[[f64; DX]; DU],
-    std: &[f64; DU],
+    s_bar: &[f64],
+    a: &[f64],
+    jac: &[f64],
+    std: &[f64],
 ) {
-    let gain = lin.gain.slice_mut(t);
-    for (j, row) in jac.iter().enumerate() {
-        gain[j * DX..(j + 1) * DX].copy_from_slice(row);
-    }
+    let (dx, du) = (s_bar.len(), a.len());
+    lin.gain.slice_mut(t).copy_from_slice(jac);
     let k = lin.k.slice_mut(t);
-    for j in 0..DU {
-        k[j] = a[j] - (0..DX).map(|i| jac[j][i] * s_bar[i]).sum::<f64>();
+    for j in 0..du {
+        k[j] = a[j] - (0..dx).map(|i| jac[j * dx + i] * s_bar[i]).sum::<f64>();
     }
     for m in [
         &mut lin.pol_covar,
@@ -711,9 +721,9 @@ fn linear_gaussian_step(
     ] {
         m.slice_mut(t).fill(0.0);
     }
-    for j in 0..DU {
-        lin.pol_covar.slice_mut(t)[j * DU + j] = std[j] * std[j];
-        lin.chol_pol_covar.slice_mut(t)[j * DU + j] = std[j];
-        lin.inv_pol_covar.slice_mut(t)[j * DU + j] = 1.0 / (std[j] * std[j]);
+    for j in 0..du {
+        lin.pol_covar.slice_mut(t)[j * du + j] = std[j] * std[j];
+        lin.chol_pol_covar.slice_mut(t)[j * du + j] = std[j];
+        lin.inv_pol_covar.slice_mut(t)[j * du + j] = 1.0 / (std[j] * std[j]);
     }
 }

@@ -1,28 +1,32 @@
 //! The global policy π_θ(a | s) of MDGPS (docs/design.md §6.1): a Gaussian MLP on the state,
-//! one policy for every goal (s[6..9] is ee − goal, so the goal is part of its input).
+//! one policy for every goal (the tool points minus their targets are in the state, so the
+//! goal is part of its input). Its dimensions are its task's layout ([`StateLayout`]: dX
+//! inputs, dU joints), fixed when it is built.
 //!
 //! In goal-angle mode (the paper's set-up, docs/design.md §2.3)
 //!
 //! ```text
-//! a = q + μ(u) + σ ⊙ ε,    u = (s − m) ⊘ r,    ε ~ N(0, I_3)
+//! a = q + μ(u) + σ ⊙ ε,    u = (s − m) ⊘ r,    ε ~ N(0, I_dU)
 //! ```
 //!
-//! with q = s[0..3] (rad), μ the PPO baseline's three tanh mean heads
-//! ([`GaussianMlpPolicy`], one hand-written MLP per joint, docs/design.md §1.5), m, r (12 each)
-//! a fixed input normalisation and σ (rad, 3) a state-independent standard deviation. The
+//! with q the joint angles (rad, the layout's `q()`), μ the PPO baseline's dU tanh mean heads
+//! ([`GaussianMlpPolicy`], one hand-written MLP per joint, docs/design.md §1.5), m, r (dX each)
+//! a fixed input normalisation and σ (rad, dU) a state-independent standard deviation. The
 //! offset form makes μ = 0 hold the arm, as the initial controller does (§5 D14). In torque mode
 //! a = μ(u) + σ ⊙ ε (N·m).
 //!
 //! # Flat parameter layout (what a fixed-size table carries)
-//! `θ = [m (12) | r (12) | θ_μ0 | θ_μ1 | θ_μ2 | log σ (3)]`, f64, where each `θ_μj` is one head
-//! `12 → h_1 → … → h_k → 1` in the MLP's layout (`discriminator::mlp`: layer by layer, `W_l`
-//! row-major `n_{l+1} × n_l` then `b_l`). Its length is [`flat_len`]`(hidden)`; with the
-//! default `hidden = [64, 64]` that is 24 + 3 · 5057 + 3 = 15,198 values (121.6 KB). The file
-//! (`learner::io::policy`) stores this vector and `hidden`.
+//! `θ = [m (dX) | r (dX) | θ_μ0 | … | θ_μ(dU−1) | log σ (dU)]`, f64, where each `θ_μj` is one
+//! head `dX → h_1 → … → h_k → 1` in the MLP's layout (`discriminator::mlp`: layer by layer,
+//! `W_l` row-major `n_{l+1} × n_l` then `b_l`). Its length is [`flat_len`]`(dX, dU, hidden)`;
+//! with the default `hidden = [64, 64]` that is 24 + 3 · 5057 + 3 = 15,198 values (121.6 KB) at
+//! three joints and a point (dX = 12), 60 + 6 · 6209 + 6 = 37,320 at six joints and a pose
+//! (dX = 30). The file (`learner::io::policy`) stores this vector, `hidden` and the layout's
+//! names.
 
 use rand::Rng;
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
 use ur5_shared::policy::{PolicyTable, PolicyTableError};
 use ur5_shared::StateLayout;
 
@@ -37,6 +41,7 @@ pub use ur5_shared::policy::flat_len;
 /// The global policy: input normalisation and the Gaussian MLP (module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct GlobalPolicy {
+    layout: StateLayout,
     hidden: Vec<usize>,
     norm: Normalizer,
     net: GaussianMlpPolicy,
@@ -46,60 +51,68 @@ pub struct GlobalPolicy {
 #[derive(Clone, Debug)]
 pub struct GlobalPolicyWorkspace {
     pub(crate) net: PolicyWorkspace,
-    u: [f64; DX],
+    /// The normalised input u of the last [`GlobalPolicy::normalise`] (dX).
+    pub(crate) u: Vec<f64>,
 }
 
 impl GlobalPolicy {
     /// A fresh policy: Glorot weights with a zero output layer (μ = 0: hold the arm), identity
-    /// normalisation (set by [`GlobalPolicy::set_normalizer`] before training), σ = `std`.
-    pub fn new(hidden: &[usize], std: f64, rng: &mut impl Rng) -> Self {
+    /// normalisation (set by [`GlobalPolicy::set_normalizer`] before training), σ = `std`, for
+    /// the task of `layout`.
+    pub fn new(layout: StateLayout, hidden: &[usize], std: f64, rng: &mut impl Rng) -> Self {
+        let (dx, du) = (layout.dx(), layout.du());
         Self {
+            layout,
             hidden: hidden.to_vec(),
-            norm: Normalizer::identity(DX),
-            net: GaussianMlpPolicy::new(hidden, std.ln(), 0.0, rng),
+            norm: Normalizer::identity(dx),
+            net: GaussianMlpPolicy::new(dx, du, hidden, std.ln(), 0.0, rng),
         }
     }
 
-    /// Rebuilds a policy from its hidden widths and flat parameters (module docs); `Err` says
-    /// what is wrong (length, non-finite value, non-positive scale).
-    pub fn from_flat(hidden: &[usize], flat: &[f64]) -> Result<Self, String> {
-        let want = flat_len(DX, DU, hidden);
+    /// Rebuilds a policy for the task of `layout` from its hidden widths and flat parameters
+    /// (module docs); `Err` says what is wrong (length, non-finite value, non-positive scale).
+    pub fn from_flat(layout: StateLayout, hidden: &[usize], flat: &[f64]) -> Result<Self, String> {
+        let (dx, du) = (layout.dx(), layout.du());
+        let want = flat_len(dx, du, hidden);
         if flat.len() != want {
             return Err(format!(
-                "{} parameters, hidden widths {hidden:?} need {want}",
+                "{} parameters, hidden widths {hidden:?} need {want} (dX = {dx}, dU = {du}: \
+                 {layout})",
                 flat.len()
             ));
         }
         if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
             return Err(format!("parameter {i} is not finite ({})", flat[i]));
         }
-        let (mean, rest) = flat.split_at(DX);
-        let (std, net) = rest.split_at(DX);
+        let (mean, rest) = flat.split_at(dx);
+        let (std, net) = rest.split_at(dx);
         if let Some(i) = std.iter().position(|&v| v <= 0.0) {
             return Err(format!(
                 "input scale r[{i}] = {} (parameter {}): must be > 0",
                 std[i],
-                DX + i
+                dx + i
             ));
         }
-        let head = (net.len() - DU) / DU;
-        let heads = (0..DU)
+        let head = (net.len() - du) / du;
+        let heads = (0..du)
             .map(|j| net[j * head..(j + 1) * head].to_vec())
             .collect();
-        let log_std: [f64; DU] = net[DU * head..].try_into().expect("DU log σ");
+        let log_std = Joints::from_slice(&net[du * head..]);
         Ok(Self {
+            layout,
             hidden: hidden.to_vec(),
             norm: Normalizer {
                 mean: mean.to_vec(),
                 std: std.to_vec(),
             },
-            net: GaussianMlpPolicy::from_parts(hidden, heads, log_std),
+            net: GaussianMlpPolicy::from_parts(dx, hidden, heads, log_std),
         })
     }
 
     /// The flat parameter vector (module docs).
     pub fn flat(&self) -> Vec<f64> {
-        let mut out = Vec::with_capacity(flat_len(DX, DU, &self.hidden));
+        let mut out =
+            Vec::with_capacity(flat_len(self.layout.dx(), self.layout.du(), &self.hidden));
         out.extend_from_slice(&self.norm.mean);
         out.extend_from_slice(&self.norm.std);
         let n = self.net.n_params();
@@ -118,14 +131,13 @@ impl GlobalPolicy {
         mode: ActionMode,
     ) -> Result<Box<PolicyTable>, PolicyTableError> {
         let mut table = PolicyTable::new_boxed();
-        table.fill(
-            version,
-            &StateLayout::REACH3,
-            mode,
-            &self.hidden,
-            &self.flat(),
-        )?;
+        table.fill(version, &self.layout, mode, &self.hidden, &self.flat())?;
         Ok(table)
+    }
+
+    /// The layout of the task the policy acts on (its dX inputs and dU outputs).
+    pub fn layout(&self) -> StateLayout {
+        self.layout
     }
 
     /// Hidden widths of every mean head.
@@ -153,67 +165,80 @@ impl GlobalPolicy {
     }
 
     /// σ (rad in goal-angle mode), per joint.
-    pub fn std(&self) -> [f64; DU] {
-        self.net.log_std().map(f64::exp)
+    pub fn std(&self) -> Joints {
+        let mut std = *self.net.log_std();
+        for v in std.iter_mut() {
+            *v = v.exp();
+        }
+        std
     }
 
     /// Scratch space for this policy's size.
     pub fn workspace(&self) -> GlobalPolicyWorkspace {
         GlobalPolicyWorkspace {
             net: self.net.workspace(),
-            u: [0.0; DX],
+            u: vec![0.0; self.layout.dx()],
         }
     }
 
-    /// The normalised input u = (s − m) ⊘ r, into `ws`.
-    pub(crate) fn normalise(&self, s: &[f64; DX], ws: &mut GlobalPolicyWorkspace) -> [f64; DX] {
+    /// The normalised input u = (s − m) ⊘ r (dX), into `ws.u`.
+    pub(crate) fn normalise(&self, s: &[f64], ws: &mut GlobalPolicyWorkspace) {
+        assert_eq!(s.len(), ws.u.len(), "a state of the policy's dX");
         for (i, u) in ws.u.iter_mut().enumerate() {
             *u = (s[i] - self.norm.mean[i]) / self.norm.std[i];
         }
-        ws.u
     }
 
-    /// The offset μ(u(s)) (rad; the action mean minus q in goal-angle mode).
-    pub fn offset(&self, s: &[f64; DX], ws: &mut GlobalPolicyWorkspace) -> [f64; DU] {
-        let u = self.normalise(s, ws);
-        self.net.mean(&u, &mut ws.net)
+    /// The offset μ(u(s)) (rad; the action mean minus q in goal-angle mode), dU.
+    pub fn offset(&self, s: &[f64], ws: &mut GlobalPolicyWorkspace) -> Joints {
+        self.normalise(s, ws);
+        self.net.mean(&ws.u, &mut ws.net)
     }
 
-    /// The action mean q + μ(u(s)) (goal-angle mode) or μ(u(s)) (torque mode).
+    /// The action mean q + μ(u(s)) (goal-angle mode) or μ(u(s)) (torque mode), dU.
     pub fn mean_action(
         &self,
-        s: &[f64; DX],
+        s: &[f64],
         mode: ActionMode,
         ws: &mut GlobalPolicyWorkspace,
-    ) -> [f64; DU] {
+    ) -> Joints {
         let mu = self.offset(s, ws);
-        let base = action_base(mode, s);
-        std::array::from_fn(|j| base[j] + mu[j])
+        let mut a = action_base(mode, self.layout.du(), s);
+        for (a, m) in a.iter_mut().zip(mu.iter()) {
+            *a += m;
+        }
+        a
     }
 
-    /// The action mean ā(s) and its Jacobian `∂ā/∂s` (`DU × DX`, action units per state unit):
-    /// `∂ā/∂s = E + (∂μ/∂u) diag(1/r)` with E = [I_3 0] in goal-angle mode, 0 in torque mode.
+    /// The action mean ā(s) and its Jacobian `∂ā/∂s` (`dU × dX` row-major, action units per
+    /// state unit): `∂ā/∂s = E + (∂μ/∂u) diag(1/r)` with E = [I_dU 0] (the joint angles) in
+    /// goal-angle mode, 0 in torque mode.
     pub fn mean_action_jacobian(
         &self,
-        s: &[f64; DX],
+        s: &[f64],
         mode: ActionMode,
         ws: &mut GlobalPolicyWorkspace,
-        jac: &mut [[f64; DX]; DU],
-    ) -> [f64; DU] {
-        let u = self.normalise(s, ws);
-        let mu = self.net.mean_jacobian(&u, &mut ws.net, jac);
-        for row in jac.iter_mut() {
+        jac: &mut [f64],
+    ) -> Joints {
+        self.normalise(s, ws);
+        let mu = self.net.mean_jacobian(&ws.u, &mut ws.net, jac);
+        let dx = self.layout.dx();
+        for row in jac.chunks_exact_mut(dx) {
             for (v, r) in row.iter_mut().zip(&self.norm.std) {
                 *v /= r;
             }
         }
-        let base = action_base(mode, s);
+        let mut a = action_base(mode, self.layout.du(), s);
         if mode == ActionMode::GoalAngles {
-            for (j, row) in jac.iter_mut().enumerate() {
-                row[ur5_shared::layout::Q.start + j] += 1.0;
+            let q = self.layout.q();
+            for (j, row) in jac.chunks_exact_mut(dx).enumerate() {
+                row[q.start + j] += 1.0;
             }
         }
-        std::array::from_fn(|j| base[j] + mu[j])
+        for (a, m) in a.iter_mut().zip(mu.iter()) {
+            *a += m;
+        }
+        a
     }
 }
 
@@ -222,7 +247,7 @@ impl GlobalPolicy {
 pub struct GlobalActor<'a> {
     pol: &'a GlobalPolicy,
     ws: &'a mut GlobalPolicyWorkspace,
-    std: [f64; DU],
+    std: Joints,
 }
 
 impl<'a> GlobalActor<'a> {
@@ -241,12 +266,10 @@ impl Policy for GlobalActor<'_> {
         usize::MAX
     }
 
-    /// The global policy acts on the three-joint task's state (dX = 12, dU = 3); MDGPS
-    /// refuses other tasks when it is built.
+    /// The global policy acts on states of its layout's dX and writes its dU actions.
     fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, out: &mut [f64]) {
-        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
         let a = self.pol.mean_action(s, mode, self.ws);
-        for j in 0..DU {
+        for j in 0..a.len() {
             out[j] = a[j] + self.std[j] * eps[j];
         }
     }
@@ -269,7 +292,7 @@ impl Actors for GlobalPolicy {
 struct OwnedActor<'a> {
     pol: &'a GlobalPolicy,
     ws: GlobalPolicyWorkspace,
-    std: [f64; DU],
+    std: Joints,
 }
 
 impl Policy for OwnedActor<'_> {
@@ -291,25 +314,39 @@ impl Policy for OwnedActor<'_> {
 mod tests {
     use super::*;
     use rand::SeedableRng;
+    use ur5_shared::layout::{DU, DX};
 
     #[test]
     fn flat_layout_round_trips_and_has_the_documented_length() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let mut p = GlobalPolicy::new(&[64, 64], 0.2, &mut rng);
+        let mut p = GlobalPolicy::new(StateLayout::REACH3, &[64, 64], 0.2, &mut rng);
         // Non-zero output layers so that every head differs.
         let mut flat = p.flat();
         for (i, v) in flat.iter_mut().enumerate().skip(2 * DX) {
             *v += 1e-3 * (i % 7) as f64;
         }
-        p = GlobalPolicy::from_flat(&[64, 64], &flat).unwrap();
+        p = GlobalPolicy::from_flat(StateLayout::REACH3, &[64, 64], &flat).unwrap();
         assert_eq!(flat_len(DX, DU, &[64, 64]), 15_198);
         assert_eq!(p.flat(), flat);
-        let e = GlobalPolicy::from_flat(&[64, 64], &flat[1..]).unwrap_err();
+        let e = GlobalPolicy::from_flat(StateLayout::REACH3, &[64, 64], &flat[1..]).unwrap_err();
         assert!(e.contains("15197 parameters") && e.contains("15198"), "{e}");
         let mut bad = flat.clone();
         bad[DX + 2] = 0.0;
-        let e = GlobalPolicy::from_flat(&[64, 64], &bad).unwrap_err();
+        let e = GlobalPolicy::from_flat(StateLayout::REACH3, &[64, 64], &bad).unwrap_err();
         assert!(e.contains("r[2]"), "{e}");
+        // Six joints and a pose: the documented length, and a three-joint vector is refused
+        // naming both dimensions.
+        let pose = StateLayout::POSE6;
+        assert_eq!(flat_len(pose.dx(), pose.du(), &[64, 64]), 37_320);
+        let p6 = GlobalPolicy::new(pose, &[64, 64], 0.2, &mut rng);
+        let f6 = p6.flat();
+        assert_eq!(f6.len(), 37_320);
+        assert_eq!(GlobalPolicy::from_flat(pose, &[64, 64], &f6).unwrap(), p6);
+        let e = GlobalPolicy::from_flat(pose, &[64, 64], &flat).unwrap_err();
+        assert!(
+            e.contains("15198 parameters") && e.contains("dX = 30"),
+            "{e}"
+        );
     }
 
     /// The controller's `policy_action` on the table gives the learner's action bit for bit,
@@ -320,36 +357,40 @@ mod tests {
         use ur5_shared::policy::{policy_action, PolicyBounds, PolicyScratch};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let mut scratch = PolicyScratch::default();
-        for hidden in [vec![64, 64], vec![7], vec![5, 9, 3]] {
-            let p = GlobalPolicy::new(&hidden, 0.3, &mut rng);
+        for (layout, hidden) in [
+            (StateLayout::REACH3, vec![64, 64]),
+            (StateLayout::REACH3, vec![7]),
+            (StateLayout::REACH3, vec![5, 9, 3]),
+            (StateLayout::POSE6, vec![16, 8]),
+        ] {
+            let (dx, du) = (layout.dx(), layout.du());
+            let p = GlobalPolicy::new(layout, &hidden, 0.3, &mut rng);
             let mut flat = p.flat();
             for v in flat.iter_mut() {
                 *v += rng.random_range(-0.3..0.3);
             }
-            for v in &mut flat[DX..2 * DX] {
+            for v in &mut flat[dx..2 * dx] {
                 *v = rng.random_range(0.2..3.0);
             }
-            let p = GlobalPolicy::from_flat(&hidden, &flat).unwrap();
+            let p = GlobalPolicy::from_flat(layout, &hidden, &flat).unwrap();
             let mut ws = p.workspace();
             for mode in [ActionMode::GoalAngles, ActionMode::Torque] {
                 let table = p.to_table(4, mode).unwrap();
                 table.validate(&PolicyBounds::default()).unwrap();
+                table.check_layout(&layout).unwrap();
                 for k in 0..50 {
-                    let s: [f64; DX] = std::array::from_fn(|_| rng.random_range(-2.0..2.0));
-                    let eps: [f64; DU] = if k % 2 == 0 {
-                        [0.0; DU]
+                    let s: Vec<f64> = (0..dx).map(|_| rng.random_range(-2.0..2.0)).collect();
+                    let eps: Vec<f64> = if k % 2 == 0 {
+                        vec![0.0; du]
                     } else {
-                        std::array::from_fn(|_| rng.random_range(-2.0..2.0))
+                        (0..du).map(|_| rng.random_range(-2.0..2.0)).collect()
                     };
-                    let mut want = [f64::NAN; DU];
+                    let mut want = vec![f64::NAN; du];
                     GlobalActor::new(&p, &mut ws).act(0, &s, &eps, mode, &mut want);
-                    let mut got = [f64::NAN; DU];
+                    let mut got = vec![f64::NAN; du];
                     policy_action(&table, &s, &eps, &mut scratch, &mut got).unwrap();
-                    assert_eq!(
-                        got.map(f64::to_bits),
-                        want.map(f64::to_bits),
-                        "{hidden:?} {mode:?}"
-                    );
+                    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "{layout} {hidden:?} {mode:?}");
                 }
             }
         }

@@ -17,7 +17,6 @@ use crate::demos::Demos;
 use crate::discriminator::Discriminator;
 use crate::iteration::LqrIteration;
 use crate::ImitationError;
-use ur5_shared::layout::{DU, DX};
 
 /// Iterations done (u64, 1).
 const ITERATION: &str = "mdgps.iteration";
@@ -101,10 +100,11 @@ impl Mdgps {
         }
         let iteration = snap.words(ITERATION, 1).map_err(refused)?[0];
         let hidden = run.cfg.policy.hidden.clone();
+        let layout = run.layout();
         let flat = snap
-            .real(POLICY, &[flat_len(DX, DU, &hidden)])
+            .real(POLICY, &[flat_len(layout.dx(), layout.du(), &hidden)])
             .map_err(refused)?;
-        let policy = GlobalPolicy::from_flat(&hidden, flat)
+        let policy = GlobalPolicy::from_flat(layout, &hidden, flat)
             .map_err(|e| refused(format!("{POLICY}: {e}")))?;
         run.opt.restore(snap).map_err(refused)?;
         for (i, c) in run.conds.iter_mut().enumerate() {

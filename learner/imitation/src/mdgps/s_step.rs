@@ -16,7 +16,7 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
 
 use gps::snapshot::Snapshot;
 use gps::GpsError;
@@ -87,26 +87,70 @@ impl PolicyOptConfig {
 }
 
 /// The regression targets of one S-step: per sample the state s_i, the target offset Δ*_i
-/// and the precision P_i (row-major 3 × 3, symmetric positive definite).
+/// and the precision P_i (row-major dU × dU, symmetric positive definite), in flat arrays of
+/// the task's dimensions.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Targets {
-    /// States, one per sample.
-    pub states: Vec<[f64; DX]>,
-    /// Target offsets Δ* (rad), one per sample.
-    pub offsets: Vec<[f64; DU]>,
-    /// Precisions P (rad⁻²), one per sample.
-    pub precisions: Vec<[[f64; DU]; DU]>,
+    /// State dimension dX.
+    pub dx: usize,
+    /// Action dimension dU.
+    pub du: usize,
+    /// States, (n, dX) row-major.
+    pub states: Vec<f64>,
+    /// Target offsets Δ* (rad), (n, dU).
+    pub offsets: Vec<f64>,
+    /// Precisions P (rad⁻²), (n, dU, dU).
+    pub precisions: Vec<f64>,
 }
 
 impl Targets {
+    /// No samples yet, of dimensions `dx`, `du`.
+    pub fn new(dx: usize, du: usize) -> Self {
+        Self {
+            dx,
+            du,
+            ..Self::default()
+        }
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
-        self.states.len()
+        self.offsets.len() / self.du.max(1)
     }
 
     /// No samples.
     pub fn is_empty(&self) -> bool {
-        self.states.is_empty()
+        self.offsets.is_empty()
+    }
+
+    /// Adds a sample: state `s` (dX), target offset `offset` (dU), precision `precision`
+    /// (dU × dU row-major).
+    pub fn push(&mut self, s: &[f64], offset: &[f64], precision: &[f64]) {
+        assert!(
+            s.len() == self.dx && offset.len() == self.du && precision.len() == self.du * self.du,
+            "a sample of the targets' dX = {}, dU = {}",
+            self.dx,
+            self.du
+        );
+        self.states.extend_from_slice(s);
+        self.offsets.extend_from_slice(offset);
+        self.precisions.extend_from_slice(precision);
+    }
+
+    /// State of sample i (dX).
+    pub fn state(&self, i: usize) -> &[f64] {
+        &self.states[i * self.dx..(i + 1) * self.dx]
+    }
+
+    /// Target offset of sample i (dU).
+    pub fn offset(&self, i: usize) -> &[f64] {
+        &self.offsets[i * self.du..(i + 1) * self.du]
+    }
+
+    /// Precision of sample i (dU × dU row-major).
+    pub fn precision(&self, i: usize) -> &[f64] {
+        let n = self.du * self.du;
+        &self.precisions[i * n..(i + 1) * n]
     }
 }
 
@@ -179,7 +223,7 @@ impl PolicyOpt {
         let mut total = 0.0;
         for i in 0..data.len() {
             let e = residual(pol, data, i, ws);
-            total += 0.5 * quad(&data.precisions[i], &e);
+            total += 0.5 * quad(data.precision(i), &e);
         }
         total / data.len().max(1) as f64
     }
@@ -193,6 +237,13 @@ impl PolicyOpt {
     ) -> Result<SStepReport, ImitationError> {
         if data.is_empty() {
             return Err(ImitationError::Episodes("an S-step needs samples".into()));
+        }
+        let (dx, du) = (pol.layout().dx(), pol.layout().du());
+        if (data.dx, data.du) != (dx, du) {
+            return Err(ImitationError::Episodes(format!(
+                "S-step targets of dX = {}, dU = {} for a policy of dX = {dx}, dU = {du}",
+                data.dx, data.du
+            )));
         }
         let mut ws = pol.workspace();
         let loss_before = Self::loss(pol, data, &mut ws);
@@ -208,11 +259,12 @@ impl PolicyOpt {
             for k in cursor..cursor + b {
                 let i = self.order[k];
                 let e = residual(pol, data, i, &mut ws);
-                let p = &data.precisions[i];
+                let p = data.precision(i);
                 // ∂L/∂μ = P e / b; the heads' gradients are accumulated per joint.
-                let c: [f64; DU] = std::array::from_fn(|j| {
-                    (0..DU).map(|l| p[j][l] * e[l]).sum::<f64>() / b as f64
-                });
+                let mut c = Joints::splat(du, 0.0);
+                for (j, c) in c.iter_mut().enumerate() {
+                    *c = (0..du).map(|l| p[j * du + l] * e[l]).sum::<f64>() / b as f64;
+                }
                 pol.net()
                     .accumulate_mean_grad(&mut ws.net, &c, &mut self.grad);
             }
@@ -237,10 +289,15 @@ impl PolicyOpt {
     /// σ_j² = 1 / mean_i (P_i)_jj, σ_j ≥ `min_std`.
     fn update_variance(&self, pol: &mut GlobalPolicy, data: &Targets) {
         let n = data.len() as f64;
-        let log_std = std::array::from_fn(|j| {
-            let mean_prc = data.precisions.iter().map(|p| p[j][j]).sum::<f64>() / n;
-            (1.0 / mean_prc).sqrt().max(self.cfg.min_std).ln()
-        });
+        let du = data.du;
+        let mut log_std = Joints::splat(du, 0.0);
+        for (j, v) in log_std.iter_mut().enumerate() {
+            let mean_prc = (0..data.len())
+                .map(|i| data.precision(i)[j * du + j])
+                .sum::<f64>()
+                / n;
+            *v = (1.0 / mean_prc).sqrt().max(self.cfg.min_std).ln();
+        }
         pol.net_mut().set_log_std(log_std);
     }
 }
@@ -251,14 +308,18 @@ fn residual(
     data: &Targets,
     i: usize,
     ws: &mut GlobalPolicyWorkspace,
-) -> [f64; DU] {
-    let mu = pol.offset(&data.states[i], ws);
-    std::array::from_fn(|j| mu[j] - data.offsets[i][j])
+) -> Joints {
+    let mut e = pol.offset(data.state(i), ws);
+    for (e, o) in e.iter_mut().zip(data.offset(i)) {
+        *e -= o;
+    }
+    e
 }
 
-/// eᵀ P e.
-fn quad(p: &[[f64; DU]; DU], e: &[f64; DU]) -> f64 {
-    (0..DU)
-        .map(|j| e[j] * (0..DU).map(|l| p[j][l] * e[l]).sum::<f64>())
+/// eᵀ P e (P dU × dU row-major).
+fn quad(p: &[f64], e: &[f64]) -> f64 {
+    let du = e.len();
+    (0..du)
+        .map(|j| e[j] * (0..du).map(|l| p[j * du + l] * e[l]).sum::<f64>())
         .sum()
 }

@@ -51,7 +51,7 @@ use faer::Mat;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{ActionMode, ArmLimits, SimConfig, TaskConfig};
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
 
 use crate::critic::{episode_transitions, expert_transitions, Critic};
 use crate::demos::Demos;
@@ -214,14 +214,19 @@ pub enum EpisodeEnd {
     Terminated,
 }
 
-/// The per-step action bound b of each joint: the clamp's `v_max · dt` (rad) in goal-angle
-/// mode, the effort limit (N·m) in torque mode (`ur5_shared::safety::clamp_action`).
-pub fn action_bound(sim: &SimConfig, dt: f64) -> [f64; DU] {
-    let limits = ArmLimits::for_model(sim.model);
-    std::array::from_fn(|j| match sim.mode {
-        ActionMode::GoalAngles => limits.velocity[j] * dt,
-        ActionMode::Torque => limits.effort[j],
-    })
+/// The per-step action bound b of each of the task's `joints` active joints: the clamp's
+/// `v_max · dt` (rad) in goal-angle mode, the effort limit (N·m) in torque mode
+/// (`ur5_shared::safety::clamp_action`).
+pub fn action_bound(sim: &SimConfig, joints: usize, dt: f64) -> Joints {
+    let limits = ArmLimits::for_model_joints(sim.model, joints);
+    let mut b = Joints::splat(joints, 0.0);
+    for (j, b) in b.iter_mut().enumerate() {
+        *b = match sim.mode {
+            ActionMode::GoalAngles => limits.velocity[j] * dt,
+            ActionMode::Torque => limits.effort[j],
+        };
+    }
+    b
 }
 
 /// Adds the transitions of `ep` to `buffer` (module docs): (s_t, â_t, s_{t+1}) for t < T − 1,
@@ -231,23 +236,26 @@ pub fn add_episode(
     buffer: &mut ReplayBuffer,
     ep: &Episode,
     mode: ActionMode,
-    bound: &[f64; DU],
+    bound: &[f64],
     end: EpisodeEnd,
 ) {
     let t_len = ep.horizon();
+    let du = ep.du();
     for t in 0..t_len.saturating_sub(1) {
-        let s = ep.reach3_state(t);
-        let base = action_base(mode, &s);
-        let a: [f64; DU] = std::array::from_fn(|j| (ep.u[t * DU + j] - base[j]) / bound[j]);
+        let s = ep.state(t);
+        let mut a = action_base(mode, du, s);
+        for (j, a) in a.iter_mut().enumerate() {
+            *a = (ep.u[t * du + j] - *a) / bound[j];
+        }
         let kind = match end {
             EpisodeEnd::Terminated if t + 2 == t_len => RowKind::ToAbsorbing,
             _ => RowKind::Step,
         };
-        buffer.push(&s, &a, &ep.x[(t + 1) * DX..(t + 2) * DX], kind);
+        buffer.push(s, &a, ep.state(t + 1), kind);
     }
     if end == EpisodeEnd::Terminated && t_len >= 1 {
-        let last = &ep.x[(t_len - 1) * DX..t_len * DX];
-        buffer.push(last, &[0.0; DU], last, RowKind::Absorbing);
+        let last = ep.state(t_len - 1);
+        buffer.push(last, &Joints::splat(du, 0.0), last, RowKind::Absorbing);
     }
 }
 
@@ -278,7 +286,7 @@ pub struct GaifoTd3 {
     buffer: ReplayBuffer,
     /// Minibatch rows and smoothing noise.
     rng: ChaCha8Rng,
-    bound: [f64; DU],
+    bound: Joints,
     iteration: usize,
     idx: Vec<usize>,
     batch: Minibatch,
@@ -291,8 +299,9 @@ pub struct GaifoTd3 {
 
 /// The demonstrations' states, one per row (`count · T` × dX).
 fn demo_states(demos: &Demos) -> Mat<f64> {
-    Mat::from_fn(demos.count * demos.horizon, DX, |r, c| {
-        demos.states[r * DX + c]
+    let dx = demos.layout().dx();
+    Mat::from_fn(demos.count * demos.horizon, dx, |r, c| {
+        demos.states[r * dx + c]
     })
 }
 
@@ -331,27 +340,25 @@ pub fn reward_reference(
 
 impl GaifoTd3 {
     /// Sets up a run imitating `demos` (the task is theirs): the actor's and critics' input
-    /// normalisation fitted on the demonstrations' states, the nets drawn from the run seed.
+    /// normalisation fitted on the demonstrations' states, the nets drawn from the run seed;
+    /// the dimensions are the task's layout.
     pub fn new(cfg: GaifoTd3Config, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        if task.layout() != ur5_shared::StateLayout::REACH3 {
-            return Err(ImitationError::Unsupported {
-                algo: "GAIfO (TD3)",
-                layout: task.layout(),
-            });
-        }
+        let layout = task.layout();
         let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
         let norm = Normalizer::from_data(demo_states(&demos).as_ref())?;
-        let bound = action_bound(&cfg.sim, task.dt);
+        let bound = action_bound(&cfg.sim, layout.du(), task.dt);
         let mut rng = td3::td3_rng(cfg.seed);
-        let mut td3 = Td3::new(cfg.td3.clone(), bound, norm, 1.0, &mut rng);
-        td3.actor.net_mut().set_log_std(std::array::from_fn(|j| {
-            (cfg.exploration_noise * bound[j]).ln()
-        }));
+        let mut td3 = Td3::new(cfg.td3.clone(), layout, bound, norm, 1.0, &mut rng);
+        let mut log_std = bound;
+        for l in log_std.iter_mut() {
+            *l = (cfg.exploration_noise * *l).ln();
+        }
+        td3.actor.net_mut().set_log_std(log_std);
         td3.actor_target = td3.actor.clone();
         Ok(Self {
-            buffer: ReplayBuffer::new(DX, DU, cfg.buffer_capacity),
+            buffer: ReplayBuffer::new(layout.dx(), layout.du(), cfg.buffer_capacity),
             iteration: 0,
             idx: Vec::new(),
             batch: Minibatch::default(),
@@ -397,8 +404,8 @@ impl GaifoTd3 {
         &self.cfg
     }
 
-    /// The per-joint action bound b.
-    pub fn bound(&self) -> &[f64; DU] {
+    /// The per-joint action bound b (dU).
+    pub fn bound(&self) -> &[f64] {
         &self.bound
     }
 
@@ -414,7 +421,9 @@ impl GaifoTd3 {
         }
         let disc = self.critic.cost_discriminator();
         let mut dws = disc.workspace();
-        let mut x = [0.0; 2 * DX];
+        let layout = self.task.layout();
+        let dx = layout.dx();
+        let mut x = vec![0.0; 2 * dx];
         let m = self.cfg.td3.batch_size;
         let mut actor_steps = 0usize;
         for _ in 0..steps {
@@ -422,16 +431,16 @@ impl GaifoTd3 {
             self.batch.clear();
             for &i in &self.idx {
                 let row = self.buffer.row(i);
-                x[..DX].copy_from_slice(row.s);
-                x[DX..].copy_from_slice(row.s_next);
+                x[..dx].copy_from_slice(row.s);
+                x[dx..].copy_from_slice(row.s_next);
                 let r = match self.cfg.reward {
                     OffPolicyReward::Critic => {
                         let (d_e, sd) = self.reward_ref;
                         -self.cfg.reward_scale * (disc.value(&x, &mut dws) - d_e) / sd
                     }
                     OffPolicyReward::TaskDistance => {
-                        let e = &row.s_next[ur5_shared::layout::EE_MINUS_GOAL];
-                        -self.cfg.reward_scale * (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+                        -self.cfg.reward_scale
+                            * ur5_shared::cost::goal_distance(&layout, row.s_next)
                     }
                 };
                 st.mean_reward += r;
@@ -528,12 +537,13 @@ impl Learn for GaifoTd3 {
                 let n: usize = episodes.iter().map(|e| e.horizon() - 1).sum();
                 self.buffer.sample(&mut self.rng, n, &mut self.idx);
                 let (buffer, idx) = (&self.buffer, &self.idx);
-                Mat::from_fn(n, 2 * DX, |r, c| {
+                let dx = self.task.layout().dx();
+                Mat::from_fn(n, 2 * dx, |r, c| {
                     let row = buffer.row(idx[r]);
-                    if c < DX {
+                    if c < dx {
                         row.s[c]
                     } else {
-                        row.s_next[c - DX]
+                        row.s_next[c - dx]
                     }
                 })
             }

@@ -13,7 +13,6 @@ use crate::demos::Demos;
 use crate::discriminator::{Adam, Discriminator};
 use crate::mdgps::policy::{flat_len, GlobalPolicy};
 use crate::ImitationError;
-use ur5_shared::layout::{DU, DX};
 
 const ITERATION: &str = "td3.iteration";
 const STEPS: &str = "td3.steps";
@@ -85,14 +84,20 @@ impl GaifoTd3 {
         run.critic.restore(disc)?;
         let iteration = snap.words(ITERATION, 1).map_err(refused)?[0];
         let hidden = run.cfg.td3.pi_hidden.clone();
-        let n_flat = flat_len(DX, DU, &hidden);
+        let layout = run.task.layout();
+        let n_flat = flat_len(layout.dx(), layout.du(), &hidden);
         let policy = |name: &str| {
             let flat = snap.real(name, &[n_flat]).map_err(refused)?;
-            GlobalPolicy::from_flat(&hidden, flat).map_err(|e| refused(format!("{name}: {e}")))
+            GlobalPolicy::from_flat(layout, &hidden, flat)
+                .map_err(|e| refused(format!("{name}: {e}")))
         };
         let (actor, actor_target) = (policy(ACTOR)?, policy(ACTOR_TARGET)?);
         let t = &mut run.td3;
-        let n_q = crate::discriminator::mlp::param_count(&q_sizes(&run.cfg.td3.q_hidden));
+        let n_q = crate::discriminator::mlp::param_count(&q_sizes(
+            layout.dx(),
+            layout.du(),
+            &run.cfg.td3.q_hidden,
+        ));
         for k in 0..2 {
             for (name, net) in [
                 (format!("td3.q{k}"), &mut t.q[k]),

@@ -31,7 +31,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
+use ur5_shared::StateLayout;
 
 use crate::discriminator::mlp::{Mlp, MlpWorkspace};
 use crate::discriminator::{Adam, AdamConfig, Normalizer};
@@ -183,12 +184,22 @@ impl Minibatch {
         self.r.clear();
     }
 
-    fn state(&self, i: usize) -> [f64; DX] {
-        self.s[i * DX..(i + 1) * DX].try_into().expect("dX")
+    /// State of row i (dX: the rows' width).
+    fn state(&self, i: usize) -> &[f64] {
+        let dx = self.s.len() / self.len();
+        &self.s[i * dx..(i + 1) * dx]
     }
 
-    fn next_state(&self, i: usize) -> [f64; DX] {
-        self.s_next[i * DX..(i + 1) * DX].try_into().expect("dX")
+    /// Next state of row i (dX).
+    fn next_state(&self, i: usize) -> &[f64] {
+        let dx = self.s_next.len() / self.len();
+        &self.s_next[i * dx..(i + 1) * dx]
+    }
+
+    /// Normalised action of row i (dU).
+    fn action(&self, i: usize) -> &[f64] {
+        let du = self.a.len() / self.len();
+        &self.a[i * du..(i + 1) * du]
     }
 }
 
@@ -207,8 +218,8 @@ pub struct StepStats {
 /// and scratch memory.
 pub struct Td3 {
     pub(crate) cfg: Td3Config,
-    /// Per-joint action bound b.
-    pub(crate) bound: [f64; DU],
+    /// Per-joint action bound b (dU).
+    pub(crate) bound: Joints,
     pub(crate) actor: GlobalPolicy,
     pub(crate) actor_target: GlobalPolicy,
     pub(crate) q: [Mlp; 2],
@@ -225,8 +236,8 @@ pub struct Td3 {
 }
 
 /// Layer sizes of a critic: `[dX + dU + 1, hidden…, 1]`.
-pub fn q_sizes(hidden: &[usize]) -> Vec<usize> {
-    let mut s = vec![DX + DU + 1];
+pub fn q_sizes(dx: usize, du: usize, hidden: &[usize]) -> Vec<usize> {
+    let mut s = vec![dx + du + 1];
     s.extend_from_slice(hidden);
     s.push(1);
     s
@@ -235,17 +246,20 @@ pub fn q_sizes(hidden: &[usize]) -> Vec<usize> {
 impl Td3 {
     /// Fresh nets drawn from `rng`: the actor holds the arm (zero output layer, μ = 0) with
     /// exploration σ = `exploration_std` and input normalisation `norm`; Glorot critics; the
-    /// targets copies of them. `bound`: the per-joint action bound b (> 0).
+    /// targets copies of them, for the task of `layout`. `bound`: the per-joint action bound
+    /// b (> 0, dU).
     pub fn new(
         cfg: Td3Config,
-        bound: [f64; DU],
+        layout: StateLayout,
+        bound: Joints,
         norm: Normalizer,
         exploration_std: f64,
         rng: &mut ChaCha8Rng,
     ) -> Self {
-        let mut actor = GlobalPolicy::new(&cfg.pi_hidden, exploration_std, rng);
+        assert_eq!(bound.len(), layout.du(), "one action bound per joint");
+        let mut actor = GlobalPolicy::new(layout, &cfg.pi_hidden, exploration_std, rng);
         actor.set_normalizer(norm);
-        let sizes = q_sizes(&cfg.q_hidden);
+        let sizes = q_sizes(layout.dx(), layout.du(), &cfg.q_hidden);
         let q = [Mlp::glorot(&sizes, rng), Mlp::glorot(&sizes, rng)];
         let n_actor = actor.net().n_params();
         let n_q = q[0].params().len();
@@ -296,26 +310,27 @@ impl Td3 {
         actor: &GlobalPolicy,
         pws: &mut GlobalPolicyWorkspace,
         ws: &mut MlpWorkspace,
-        s: Option<&[f64; DX]>,
-        a: &[f64; DU],
+        s: Option<&[f64]>,
+        a: &[f64],
     ) {
+        let (dx, du) = (actor.layout().dx(), actor.layout().du());
         match s {
             Some(s) => {
-                let u = actor.normalise(s, pws);
-                ws.u[..DX].copy_from_slice(&u);
-                ws.u[DX..DX + DU].copy_from_slice(a);
-                ws.u[DX + DU] = 0.0;
+                actor.normalise(s, pws);
+                ws.u[..dx].copy_from_slice(&pws.u);
+                ws.u[dx..dx + du].copy_from_slice(a);
+                ws.u[dx + du] = 0.0;
             }
             None => {
-                ws.u[..DX + DU].fill(0.0);
-                ws.u[DX + DU] = 1.0;
+                ws.u[..dx + du].fill(0.0);
+                ws.u[dx + du] = 1.0;
             }
         }
     }
 
     /// Q_k (k = 0, 1; `target`: Q'_k) at state `s` (`None`: the absorbing state) and
     /// normalised action `a`.
-    pub fn q_value(&mut self, k: usize, target: bool, s: Option<&[f64; DX]>, a: &[f64; DU]) -> f64 {
+    pub fn q_value(&mut self, k: usize, target: bool, s: Option<&[f64]>, a: &[f64]) -> f64 {
         Self::set_q_input(&self.actor, &mut self.pws, &mut self.qws, s, a);
         let net = if target {
             &self.q_target[k]
@@ -325,15 +340,18 @@ impl Td3 {
         net.forward(&mut self.qws)
     }
 
-    /// μ(s) ⊘ b of the actor (`target`: of μ').
-    pub fn normalised_action(&mut self, target: bool, s: &[f64; DX]) -> [f64; DU] {
+    /// μ(s) ⊘ b of the actor (`target`: of μ'), dU.
+    pub fn normalised_action(&mut self, target: bool, s: &[f64]) -> Joints {
         let pol = if target {
             &self.actor_target
         } else {
             &self.actor
         };
-        let mu = pol.offset(s, &mut self.pws);
-        std::array::from_fn(|j| mu[j] / self.bound[j])
+        let mut mu = pol.offset(s, &mut self.pws);
+        for (m, b) in mu.iter_mut().zip(self.bound.iter()) {
+            *m /= b;
+        }
+        mu
     }
 
     /// The TD targets y_i of `batch` into `y` (module docs), with the smoothing noise
@@ -345,19 +363,20 @@ impl Td3 {
             self.cfg.gamma,
         );
         y.clear();
+        let du = self.bound.len();
         for i in 0..batch.len() {
             let (s, a) = if batch.next_absorbing[i] {
-                (None, [0.0; DU])
+                (None, Joints::splat(du, 0.0))
             } else {
                 let s = batch.next_state(i);
-                let mu = self.normalised_action(true, &s);
-                let a = std::array::from_fn(|j| {
-                    (mu[j] + (sigma * eps[i * DU + j]).clamp(-c, c)).clamp(-1.0, 1.0)
-                });
+                let mut a = self.normalised_action(true, s);
+                for (j, a) in a.iter_mut().enumerate() {
+                    *a = (*a + (sigma * eps[i * du + j]).clamp(-c, c)).clamp(-1.0, 1.0);
+                }
                 (Some(s), a)
             };
-            let q1 = self.q_value(0, true, s.as_ref(), &a);
-            let q2 = self.q_value(1, true, s.as_ref(), &a);
+            let q1 = self.q_value(0, true, s, &a);
+            let q2 = self.q_value(1, true, s, &a);
             y.push(batch.r[i] + gamma * q1.min(q2));
         }
     }
@@ -377,8 +396,7 @@ impl Td3 {
         let mut loss = 0.0;
         for i in 0..batch.len() {
             let s = (!batch.absorbing[i]).then(|| batch.state(i));
-            let a: [f64; DU] = batch.a[i * DU..(i + 1) * DU].try_into().expect("dU");
-            let q = self.q_value(k, false, s.as_ref(), &a);
+            let q = self.q_value(k, false, s, batch.action(i));
             let e = q - y[i];
             loss += e * e / m;
             self.q[k].backward(&mut self.qws, false);
@@ -399,18 +417,21 @@ impl Td3 {
         }
         let m = rows.len() as f64;
         let beta = self.cfg.bound_penalty;
+        let (dx, du) = (self.actor.layout().dx(), self.actor.layout().du());
         let mut loss = 0.0;
         for &i in &rows {
             let s = batch.state(i);
-            let u = self.actor.normalise(&s, &mut self.pws);
-            let mu = self.actor.net().mean(&u, &mut self.pws.net);
-            let a: [f64; DU] = std::array::from_fn(|j| mu[j] / self.bound[j]);
-            Self::set_q_input(&self.actor, &mut self.pws, &mut self.qws, Some(&s), &a);
+            self.actor.normalise(s, &mut self.pws);
+            let mut a = self.actor.net().mean(&self.pws.u, &mut self.pws.net);
+            for (a, b) in a.iter_mut().zip(self.bound.iter()) {
+                *a /= b;
+            }
+            Self::set_q_input(&self.actor, &mut self.pws, &mut self.qws, Some(s), &a);
             let q = self.q[0].forward(&mut self.qws);
             self.q[0].backward(&mut self.qws, true);
-            let mut c = [0.0; DU];
+            let mut c = Joints::splat(du, 0.0);
             loss -= q / m;
-            for j in 0..DU {
+            for j in 0..du {
                 let over = a[j].abs() - 1.0;
                 let (pen, slope) = if over > 0.0 {
                     (0.5 * over * over, over * a[j].signum())
@@ -418,7 +439,7 @@ impl Td3 {
                     (0.0, 0.0)
                 };
                 loss += beta * pen / m;
-                c[j] = (-self.qws.grad_u[DX + j] + beta * slope) / (m * self.bound[j]);
+                c[j] = (-self.qws.grad_u[dx + j] + beta * slope) / (m * self.bound[j]);
             }
             // The mean heads' forward passes of `s` are still in `pws.net` (the critic's input
             // only read the normalisation).
@@ -432,7 +453,7 @@ impl Td3 {
     /// One TD3 gradient step on `batch` (module docs), drawing the smoothing noise from `rng`
     /// ((m, dU) standard normals, row by row).
     pub fn step(&mut self, batch: &Minibatch, rng: &mut ChaCha8Rng) -> StepStats {
-        let eps: Vec<f64> = (0..batch.len() * DU)
+        let eps: Vec<f64> = (0..batch.len() * self.bound.len())
             .map(|_| StandardNormal.sample(rng))
             .collect();
         let mut y = std::mem::take(&mut self.y);

@@ -23,7 +23,14 @@ fn tiny(cfg: Td3Config, seed: u64) -> Td3 {
         mean: vec![0.1; DX],
         std: vec![2.0; DX],
     };
-    let mut t = Td3::new(cfg, BOUND, norm, 0.3, &mut rng);
+    let mut t = Td3::new(
+        cfg,
+        ur5_shared::StateLayout::REACH3,
+        ur5_shared::joints::Joints::from(BOUND),
+        norm,
+        0.3,
+        &mut rng,
+    );
     let mut draw = |p: &mut [f64]| p.iter_mut().for_each(|v| *v = rng.random_range(-0.8..0.8));
     for k in 0..2 {
         draw(t.q[k].params_mut());

@@ -20,7 +20,6 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::DX;
 
 use super::rollout::execute_mlp;
 use super::{Ppo, PpoConfig, UpdateStats};
@@ -129,17 +128,16 @@ impl GaifoPpoConfig {
 }
 
 /// Rewards of [`PpoReward::TaskCost`] for every transition of every episode: the episode's
-/// return is `−C(τ)` less its `d_0` term, which no action changes.
+/// return is `−C(τ)` less its `d_0` term, which no action changes (d the distance of every
+/// tool point to its target, `ur5_shared::cost::goal_distance`).
 pub fn task_rewards(episodes: &[Episode]) -> Vec<Vec<f64>> {
-    use ur5_shared::layout::EE_MINUS_GOAL;
     episodes
         .iter()
         .map(|ep| {
             let n = ep.horizon() - 1;
             (0..n)
                 .map(|t| {
-                    let e = &ep.x[(t + 1) * DX..(t + 2) * DX][EE_MINUS_GOAL];
-                    let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+                    let d = ur5_shared::cost::goal_distance(&ep.layout, ep.state(t + 1));
                     let w = (t + 1) as f64 / n as f64 + if t + 1 == n { 1.0 } else { 0.0 };
                     -w * d
                 })
@@ -161,19 +159,19 @@ pub struct GaifoPpo {
 }
 
 impl GaifoPpo {
-    /// Sets up a run imitating `demos` (the task is theirs).
+    /// Sets up a run imitating `demos` (the task is theirs; the nets take its layout's dX and
+    /// dU).
     pub fn new(cfg: GaifoPpoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        if task.layout() != ur5_shared::StateLayout::REACH3 {
-            return Err(ImitationError::Unsupported {
-                algo: "GAIfO (PPO)",
-                layout: task.layout(),
-            });
-        }
         let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
-        let ppo = Ppo::new(cfg.ppo.clone(), cfg.sim.mode, cfg.seed ^ 0x5050_4f00) // "PPO"
-            .map_err(ImitationError::Ppo)?;
+        let ppo = Ppo::new(
+            cfg.ppo.clone(),
+            cfg.sim.mode,
+            task.layout(),
+            cfg.seed ^ 0x5050_4f00, // "PPO"
+        )
+        .map_err(ImitationError::Ppo)?;
         Ok(Self {
             iteration: 0,
             last_update: UpdateStats::default(),
@@ -284,7 +282,7 @@ impl Learn for GaifoPpo {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ur5_shared::layout::EE_MINUS_GOAL;
+    use ur5_shared::layout::{DX, EE_MINUS_GOAL};
 
     #[test]
     fn settings_that_cannot_work_are_refused_naming_the_setting() {

@@ -14,7 +14,7 @@
 //! `∂ log π/∂ log σ_j = ((Δ_j − μ_j)/σ_j)² − 1`, `∂H/∂ log σ_j = 1`, and `∂μ_j/∂θ`, `∂V/∂θ` by
 //! the MLP's backward pass.
 
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
 
 use super::PpoConfig;
 use crate::mlp_policy::{ActorCritic, ActorCriticWorkspace};
@@ -22,9 +22,9 @@ use crate::mlp_policy::{ActorCritic, ActorCriticWorkspace};
 /// PPO's training data of one iteration: one row per transition.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Rollouts {
-    /// States s_i, (n, DX).
+    /// States s_i, (n, dX).
     pub states: Vec<f64>,
-    /// Sampled action offsets Δ_i (before the clamp), (n, DU).
+    /// Sampled action offsets Δ_i (before the clamp), (n, dU).
     pub deltas: Vec<f64>,
     /// log π_old(Δ_i|s_i) under the policy that sampled them.
     pub logp_old: Vec<f64>,
@@ -54,14 +54,16 @@ impl Rollouts {
         self.returns.clear();
     }
 
-    /// State of row i.
-    pub fn state(&self, i: usize) -> [f64; DX] {
-        self.states[i * DX..(i + 1) * DX].try_into().expect("DX")
+    /// State of row i (dX: the rows' width).
+    pub fn state(&self, i: usize) -> &[f64] {
+        let dx = self.states.len() / self.len();
+        &self.states[i * dx..(i + 1) * dx]
     }
 
-    /// Offset of row i.
-    pub fn delta(&self, i: usize) -> [f64; DU] {
-        self.deltas[i * DU..(i + 1) * DU].try_into().expect("DU")
+    /// Offset of row i (dU).
+    pub fn delta(&self, i: usize) -> &[f64] {
+        let du = self.deltas.len() / self.len();
+        &self.deltas[i * du..(i + 1) * du]
     }
 }
 
@@ -109,16 +111,19 @@ pub fn ppo_loss_gradient(
         }
     }
     let np = ac.n_policy_params();
-    let n_heads = np - DU;
-    let log_std = *ac.policy.log_std();
-    let inv_std: [f64; DU] = std::array::from_fn(|j| (-log_std[j]).exp());
+    let du = ac.policy.du();
+    let n_heads = np - du;
+    let mut inv_std = *ac.policy.log_std();
+    for v in inv_std.iter_mut() {
+        *v = (-*v).exp();
+    }
     let (lo, hi) = (1.0 - cfg.clip_range, 1.0 + cfg.clip_range);
     let mut out = LossParts::default();
     for (&i, &a) in idx.iter().zip(adv.iter()) {
         let s = data.state(i);
         let delta = data.delta(i);
-        let mu = ac.policy.mean(&s, &mut ws.policy);
-        let logp = ac.policy.log_prob_given_mean(&mu, &delta);
+        let mu = ac.policy.mean(s, &mut ws.policy);
+        let logp = ac.policy.log_prob_given_mean(&mu, delta);
         let log_ratio = logp - data.logp_old[i];
         let ratio = log_ratio.exp();
         let surr1 = ratio * a;
@@ -130,8 +135,8 @@ pub fn ppo_loss_gradient(
         }
         if surr1 <= surr2 {
             let g_logp = -ratio * a / mf;
-            let mut c_mu = [0.0; DU];
-            for j in 0..DU {
+            let mut c_mu = Joints::splat(du, 0.0);
+            for j in 0..du {
                 let z = (delta[j] - mu[j]) * inv_std[j];
                 c_mu[j] = g_logp * z * inv_std[j];
                 grad[n_heads + j] += g_logp * (z * z - 1.0);
@@ -139,7 +144,7 @@ pub fn ppo_loss_gradient(
             ac.policy
                 .accumulate_mean_grad(&mut ws.policy, &c_mu, &mut grad[..np]);
         }
-        let v = ac.value(&s, ws);
+        let v = ac.value(s, ws);
         let err = v - data.returns[i];
         out.value_loss += err * err / mf;
         ac.accumulate_value_grad(ws, cfg.vf_coef * 2.0 * err / mf, &mut grad[np..]);

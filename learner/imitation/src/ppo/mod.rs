@@ -4,8 +4,8 @@
 //! iteration like LQR+GAIfO (docs/design.md §1.5).
 //!
 //! - [`policy`] ([`crate::mlp_policy`], below this module because MDGPS's global policy is the
-//!   same): π(Δ|s) = N(μ(s), diag σ²), μ from tanh MLPs of the 12-dim state, log σ learned and
-//!   state-independent; V(s) the same MLP. Both reuse [`crate::discriminator::mlp::Mlp`].
+//!   same): π(Δ|s) = N(μ(s), diag σ²), μ from tanh MLPs of the task's dX-dim state (one per
+//!   joint), log σ learned and state-independent; V(s) the same MLP. Both reuse [`crate::discriminator::mlp::Mlp`].
 //! - [`rollout`]: episodes of that policy through `shared::safety::clamp_action`; the action
 //!   is an offset from the current joint angles.
 //! - [`gae`], [`loss`]: advantages and the clipped-surrogate loss with its exact gradient.
@@ -25,7 +25,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use ur5_shared::config::ActionMode;
-use ur5_shared::layout::DU;
+use ur5_shared::StateLayout;
 
 use crate::discriminator::{Adam, AdamConfig};
 use crate::rollout::Episode;
@@ -255,12 +255,20 @@ pub struct Ppo {
 }
 
 impl Ppo {
-    /// Fresh nets from `ChaCha8(seed)`, which then draws the minibatches. `mode` is the arm's
-    /// action mode (what the offset is added to, [`rollout::action_base`]).
-    pub fn new(cfg: PpoConfig, mode: ActionMode, seed: u64) -> Result<Self, String> {
+    /// Fresh nets for the task's `layout` (dX inputs, dU mean heads) from `ChaCha8(seed)`,
+    /// which then draws the minibatches. `mode` is the arm's action mode (what the offset is
+    /// added to, [`policy::action_base`]).
+    pub fn new(
+        cfg: PpoConfig,
+        mode: ActionMode,
+        layout: StateLayout,
+        seed: u64,
+    ) -> Result<Self, String> {
         cfg.validate()?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let ac = ActorCritic::new(
+            layout.dx(),
+            layout.du(),
             &cfg.pi_hidden,
             &cfg.v_hidden,
             cfg.init_std.ln(),
@@ -328,8 +336,7 @@ impl Ppo {
             assert_eq!(r.len() + 1, t_len, "one reward per transition");
             self.values.clear();
             for t in 0..t_len {
-                let s = ep.reach3_state(t);
-                self.values.push(self.ac.value(&s, &mut self.ws));
+                self.values.push(self.ac.value(ep.state(t), &mut self.ws));
             }
             self.adv.resize(t_len - 1, 0.0);
             gae(
@@ -341,10 +348,10 @@ impl Ppo {
                 &mut self.adv,
             );
             for t in 0..t_len - 1 {
-                let s = ep.reach3_state(t);
+                let s = ep.state(t);
                 let d = offset(self.mode, ep, t);
-                let mu = self.ac.policy.mean(&s, &mut self.ws.policy);
-                self.data.states.extend_from_slice(&s);
+                let mu = self.ac.policy.mean(s, &mut self.ws.policy);
+                self.data.states.extend_from_slice(s);
                 self.data.deltas.extend_from_slice(&d);
                 self.data
                     .logp_old
@@ -425,7 +432,7 @@ impl Ppo {
             .iter()
             .map(|l| l.exp())
             .sum::<f64>()
-            / DU as f64;
+            / self.ac.policy.du() as f64;
         st
     }
 }

@@ -10,18 +10,21 @@
 //! unclamped offset `Δ = a − q` (as SB3 stores the unclipped action), [`offset`].
 
 use ur5_shared::config::{ActionMode, TaskConfig};
-use ur5_shared::layout::{DU, DX};
+use ur5_shared::joints::Joints;
 
 use crate::mlp_policy::action_base;
 use crate::mlp_policy::{GaussianMlpPolicy, PolicyWorkspace};
 use crate::rollout::{execute, Actors, Arms, Episode, Policy};
 use crate::ImitationError;
 
-/// The unclamped offset Δ_t = u_policy_t − base(s_t) of step `t` of `ep`.
-pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> [f64; DU] {
-    let s: &[f64; DX] = ep.state(t).try_into().expect("a three-joint task's state");
-    let base = action_base(mode, s);
-    std::array::from_fn(|j| ep.u_policy[t * DU + j] - base[j])
+/// The unclamped offset Δ_t = u_policy_t − base(s_t) of step `t` of `ep` (dU).
+pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> Joints {
+    let du = ep.du();
+    let mut d = action_base(mode, du, ep.state(t));
+    for (j, v) in d.iter_mut().enumerate() {
+        *v = ep.u_policy[t * du + j] - *v;
+    }
+    d
 }
 
 /// The Gaussian MLP policy as a [`Policy`] for [`crate::rollout::run_episode`]:
@@ -29,13 +32,16 @@ pub fn offset(mode: ActionMode, ep: &Episode, t: usize) -> [f64; DU] {
 pub struct MlpActor<'a> {
     pol: &'a GaussianMlpPolicy,
     ws: PolicyWorkspace,
-    std: [f64; DU],
+    std: Joints,
 }
 
 impl<'a> MlpActor<'a> {
     /// `pol` acting with scratch memory `ws`.
     pub fn new(pol: &'a GaussianMlpPolicy, ws: PolicyWorkspace) -> Self {
-        let std = std::array::from_fn(|j| pol.log_std()[j].exp());
+        let mut std = *pol.log_std();
+        for v in std.iter_mut() {
+            *v = v.exp();
+        }
         Self { pol, ws, std }
     }
 }
@@ -52,13 +58,11 @@ impl Policy for MlpActor<'_> {
         usize::MAX
     }
 
-    /// The MLP policy acts on the three-joint task's state (dX = 12, dU = 3); its learners
-    /// refuse other tasks when they are built.
+    /// The MLP policy acts on states of its dX and writes its dU actions.
     fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], mode: ActionMode, a: &mut [f64]) {
-        let s: &[f64; DX] = s.try_into().expect("a three-joint task's state");
         let mu = self.pol.mean(s, &mut self.ws);
-        let base = action_base(mode, s);
-        for j in 0..DU {
+        let base = action_base(mode, self.pol.du(), s);
+        for j in 0..self.pol.du() {
             a[j] = base[j] + (mu[j] + self.std[j] * eps[j]);
         }
     }
