@@ -55,6 +55,21 @@ pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
     })
 }
 
+/// `transitions` (rows [s_t; s_{t+1}] of episodes of horizon `horizon`, `T − 1` rows each, in
+/// step order, as [`expert_transitions`] and [`episode_transitions`] give them) with the phase
+/// t/(T − 1) of each row's first state appended as a last column: the inputs of a critic
+/// D(s, s', φ) (docs/design.md §5 D39).
+pub fn with_phase(transitions: &Mat<f64>, horizon: usize) -> Mat<f64> {
+    let d = transitions.ncols();
+    Mat::from_fn(transitions.nrows(), d + 1, |r, c| {
+        if c < d {
+            transitions[(r, c)]
+        } else {
+            crate::cost::composite::phase(r % (horizon - 1), horizon)
+        }
+    })
+}
+
 /// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
 /// that runs with different seeds get different critics.
 pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
