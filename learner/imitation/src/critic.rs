@@ -254,6 +254,21 @@ mod tests {
 
     const D_IN: usize = 2 * DX;
 
+    /// Two episodes of T = 4: rows t = 0, 1, 2 of each get the phases 0, 1/3, 2/3; the
+    /// transitions are kept as they were.
+    #[test]
+    fn the_phase_is_each_rows_first_step_over_t_minus_one() {
+        let x = transitions(6, 0.0);
+        let p = with_phase(&x, 4);
+        assert_eq!((p.nrows(), p.ncols()), (6, D_IN + 1));
+        for r in 0..6 {
+            assert_eq!(p[(r, D_IN)], (r % 3) as f64 / 3.0);
+            for c in 0..D_IN {
+                assert_eq!(p[(r, c)], x[(r, c)]);
+            }
+        }
+    }
+
     /// `rows` transitions of a seeded, non-degenerate pseudo-random walk offset by `shift`.
     fn transitions(rows: usize, shift: f64) -> Mat<f64> {
         Mat::from_fn(rows, D_IN, |r, c| {
