@@ -185,6 +185,11 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
             &crate::experiment::pilqr::run(&cfg, &out)?,
         ))?,
         ExperimentName::Shapes => {
+            anyhow::ensure!(
+                args.demos.is_none(),
+                "--demos does not apply to shapes: it places the LASA drawings itself ([shapes] \
+                 shapes, plane, size, duration)"
+            );
             cfg.validate(name)?;
             crate::experiment::shapes::run(&cfg, &out, args.shard)?
         }
