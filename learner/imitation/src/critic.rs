@@ -55,6 +55,21 @@ pub fn episode_transitions(episodes: &[Episode]) -> Mat<f64> {
     })
 }
 
+/// `transitions` (rows [s_t; s_{t+1}] of episodes of horizon `horizon`, `T − 1` rows each, in
+/// step order, as [`expert_transitions`] and [`episode_transitions`] give them) with the phase
+/// t/(T − 1) of each row's first state appended as a last column: the inputs of a critic
+/// D(s, s', φ) (docs/design.md §5 D39).
+pub fn with_phase(transitions: &Mat<f64>, horizon: usize) -> Mat<f64> {
+    let d = transitions.ncols();
+    Mat::from_fn(transitions.nrows(), d + 1, |r, c| {
+        if c < d {
+            transitions[(r, c)]
+        } else {
+            crate::cost::composite::phase(r % (horizon - 1), horizon)
+        }
+    })
+}
+
 /// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
 /// that runs with different seeds get different critics.
 pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
@@ -238,6 +253,21 @@ mod tests {
     use ur5_shared::layout::DX;
 
     const D_IN: usize = 2 * DX;
+
+    /// Two episodes of T = 4: rows t = 0, 1, 2 of each get the phases 0, 1/3, 2/3; the
+    /// transitions are kept as they were.
+    #[test]
+    fn the_phase_is_each_rows_first_step_over_t_minus_one() {
+        let x = transitions(6, 0.0);
+        let p = with_phase(&x, 4);
+        assert_eq!((p.nrows(), p.ncols()), (6, D_IN + 1));
+        for r in 0..6 {
+            assert_eq!(p[(r, D_IN)], (r % 3) as f64 / 3.0);
+            for c in 0..D_IN {
+                assert_eq!(p[(r, c)], x[(r, c)]);
+            }
+        }
+    }
 
     /// `rows` transitions of a seeded, non-degenerate pseudo-random walk offset by `shift`.
     fn transitions(rows: usize, shift: f64) -> Mat<f64> {

@@ -35,8 +35,9 @@ use ur5_shared::config::{SimConfig, TaskConfig};
 
 use crate::controller::init_hold;
 use crate::cost::composite::{CompositeCost, CompositeWorkspace};
+use crate::cost::tracking::{Tracking, WithTracking};
 use crate::cpu::thread_cpu_s;
-use crate::critic::{episode_transitions, expert_transitions, Critic};
+use crate::critic::{episode_transitions, expert_transitions, with_phase, Critic};
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, TrainStats};
 use crate::iteration::LqrIteration;
@@ -59,6 +60,8 @@ pub struct LqrGaifo {
     lqr: LqrIteration,
     critic: Critic,
     cost_ws: CompositeWorkspace,
+    /// The demonstrations' per-step tracking term when `cfg.path.tracking_weight` > 0.
+    tracking: Option<Tracking>,
 }
 
 impl LqrGaifo {
@@ -66,7 +69,20 @@ impl LqrGaifo {
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let critic = Critic::from_settings(expert_transitions(&demos), cfg.critic(), cfg.seed)?;
+        let mut expert = expert_transitions(&demos);
+        if cfg.path.critic_phase {
+            expert = with_phase(&expert, demos.horizon);
+        }
+        let critic = Critic::from_settings(expert, cfg.critic(), cfg.seed)?;
+        let tracking = if cfg.path.tracking_weight > 0.0 {
+            Some(Tracking::from_demos(
+                &demos,
+                cfg.path.tracking_weight,
+                cfg.path.tracking_floor,
+            )?)
+        } else {
+            None
+        };
         let learner = Learner::new(
             cfg.algorithm.clone(),
             cfg.prior.clone(),
@@ -86,6 +102,7 @@ impl LqrGaifo {
             task,
             demos,
             critic,
+            tracking,
         })
     }
 
@@ -175,13 +192,21 @@ impl LqrGaifo {
         self.lqr.fit_dynamics(&samples)?;
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
-        let controller = episode_transitions(episodes);
+        let mut controller = episode_transitions(episodes);
+        if self.cfg.path.critic_phase {
+            controller = with_phase(&controller, t_len);
+        }
         let critic = self.update_discriminator(&controller)?;
-        // 4–5. Composite cost D(s, F_t[s;a] + f_t) and its second-order expansion.
+        // 4–5. Composite cost D(s, F_t[s;a] + f_t) (plus the tracking term, when on) and its
+        // second-order expansion.
         let t3 = Instant::now();
-        let mut cost = CompositeCost {
-            disc: self.critic.cost_discriminator(),
-            ws: &mut self.cost_ws,
+        let mut cost = WithTracking {
+            inner: CompositeCost {
+                disc: self.critic.cost_discriminator(),
+                ws: &mut self.cost_ws,
+            },
+            inner_weight: self.cfg.path.critic_weight,
+            tracking: self.tracking.as_ref(),
         };
         self.lqr.expand(&mut cost, episodes);
         // 6. KL-bounded LQR step.

@@ -115,6 +115,77 @@ pub struct GaifoConfig {
     pub fit: LrPriorConfig,
     /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
     pub traj_opt: TrajOptConfig,
+    /// How the cost sees the time along the motion (docs/design.md §5 D39); off by default.
+    pub path: PathSettings,
+}
+
+/// How LQR+GAIfO's cost sees the time along the demonstrated motion (TOML table `[path]`;
+/// docs/design.md §5 D39). Off (the default) is the paper's cost, D(s, s') alone, which
+/// knows no time: it makes the end of a motion, not its path.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PathSettings {
+    /// The critic also takes the phase t/(T − 1) of the transition's first state:
+    /// D(s, s', t/(T − 1)).
+    pub critic_phase: bool,
+    /// Weight w of the demonstrations' per-step tracking term added to the composite cost
+    /// ([`crate::cost::tracking`]); 0 = off.
+    pub tracking_weight: f64,
+    /// The tracking term's variance floor κ, a fraction of each state input's standard
+    /// deviation over all demonstrations and steps.
+    pub tracking_floor: f64,
+    /// Factor on the critic's composite cost; 1 is the paper's, 0 leaves the tracking term
+    /// alone (an ablation: the critic is still trained and logged).
+    pub critic_weight: f64,
+}
+
+impl Default for PathSettings {
+    fn default() -> Self {
+        Self {
+            critic_phase: false,
+            tracking_weight: 0.0,
+            tracking_floor: 0.1,
+            critic_weight: 1.0,
+        }
+    }
+}
+
+impl PathSettings {
+    /// The settings a motion's demonstrations (a tool-path file) take unless the run's
+    /// configuration has a `[path]` table (docs/design.md §5 D39).
+    pub fn for_motions() -> Self {
+        Self {
+            critic_phase: false,
+            tracking_weight: 0.1,
+            tracking_floor: 0.1,
+            critic_weight: 1.0,
+        }
+    }
+
+    /// Refuses settings that cannot work, naming the setting.
+    pub fn validate(&self) -> Result<(), ImitationError> {
+        crate::error::check_reals(&[
+            (
+                "path.tracking_weight",
+                self.tracking_weight,
+                self.tracking_weight.is_finite() && self.tracking_weight >= 0.0,
+                "finite and >= 0 (0 = off)",
+            ),
+            (
+                "path.tracking_floor",
+                self.tracking_floor,
+                self.tracking_floor.is_finite() && self.tracking_floor > 0.0,
+                "finite and > 0",
+            ),
+            (
+                "path.critic_weight",
+                self.critic_weight,
+                self.critic_weight.is_finite() && self.critic_weight >= 0.0,
+                "finite and >= 0 (1 = the paper's cost)",
+            ),
+        ])
+        .map_err(ImitationError::Config)
+    }
 }
 
 impl Default for GaifoConfig {
@@ -157,6 +228,7 @@ impl Default for GaifoConfig {
             },
             fit: LrPriorConfig::default(),
             traj_opt: TrajOptConfig::default(),
+            path: PathSettings::default(),
         }
     }
 }
@@ -199,6 +271,7 @@ impl GaifoConfig {
             return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
         }
         self.critic().validate()?;
+        self.path.validate()?;
         crate::error::check_arm_and_gps(
             &self.sim,
             &self.algorithm,
@@ -240,6 +313,14 @@ mod tests {
             (
                 "critic_lr_half_life",
                 Box::new(|c| c.critic_lr_half_life = -2.0),
+            ),
+            (
+                "path.tracking_weight",
+                Box::new(|c| c.path.tracking_weight = -1.0),
+            ),
+            (
+                "path.tracking_floor",
+                Box::new(|c| c.path.tracking_floor = 0.0),
             ),
         ];
         crate::error::assert_each_refused_naming(cases, GaifoConfig::validate);

@@ -18,7 +18,9 @@ pub struct ExperimentArgs {
     pub name: Option<ExperimentName>,
     /// Run only the K-th (1-based) of N disjoint parts of the experiment's jobs (variant ×
     /// seed: jobs K, K + N, K + 2N, … of its list), noting them in OUT/shard.json; join the
-    /// parts' folders with `learner experiment merge`. Not for sim-vs-physical, multi-goal and pilqr.
+    /// parts' folders with `learner experiment merge`. Not for sim-vs-physical, multi-goal and
+    /// pilqr; shapes writes each job's file into OUT/runs/ (copy the shards' runs/ together and
+    /// run it again for the table).
     #[arg(long, value_name = "K/N")]
     pub shard: Option<Shard>,
     /// Seeds per variant; overrides the config.
@@ -39,7 +41,7 @@ pub struct ExperimentArgs {
     /// `algorithms`, `subset_sizes`, `demos_per_point`, `critic_steps`, `time_compression`,
     /// `ablation_variants`, `eval_inside`, `eval_outside`, `eval_outside_margin`, `eval_seed`,
     /// `mdgps_kl_step`;
-    /// tables `expert`, `lqr_gaifo`, `gaifo_ppo`, `physical`, `mdgps_policy`, `pilqr`) layered over the experiment's
+    /// tables `expert`, `lqr_gaifo`, `gaifo_ppo`, `physical`, `mdgps_policy`, `pilqr`, `shapes`) layered over the experiment's
     /// defaults; --seed: the first seed (`first_seed`); --out [default:
     /// runs/experiments/<name>].
     #[command(flatten)]
@@ -182,6 +184,15 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
         ExperimentName::Pilqr => serde_json::to_value(crate::experiment::summarise(
             &crate::experiment::pilqr::run(&cfg, &out)?,
         ))?,
+        ExperimentName::Shapes => {
+            anyhow::ensure!(
+                args.demos.is_none(),
+                "--demos does not apply to shapes: it places the LASA drawings itself ([shapes] \
+                 shapes, plane, size, duration)"
+            );
+            cfg.validate(name)?;
+            crate::experiment::shapes::run(&cfg, &out, args.shard)?
+        }
         name => serde_json::to_value(
             run_sharded(name, &cfg, &out, args.demos.as_deref(), args.shard)?.1,
         )?,

@@ -8,6 +8,7 @@ use clap::{Args, ValueEnum};
 use imitation::demos::Demos;
 use imitation::gaifo::{GaifoConfig, GaifoLog};
 use imitation::ppo::UpdateStats;
+use imitation::settings::PathSettings;
 
 use super::CommonArgs;
 use crate::io::manifest::{self, Claim, Manifest};
@@ -94,7 +95,8 @@ pub struct TrainArgs {
 
 /// The end of a `learner train` run: the summary line on stderr and, with `--json`, the
 /// one-line JSON summary on stdout (both algorithms). `spread`: the demonstrations' own path
-/// RMSE spread (m), beside the noise-free episode's path RMSE.
+/// RMSE spread (m), beside the noise-free episode's path RMSE. The headline of a reach
+/// ([`report_motion`] with `motion` false).
 pub fn report(
     logs: &[GaifoLog],
     algo: &str,
@@ -103,25 +105,69 @@ pub fn report(
     json: bool,
     spread: Option<f64>,
 ) {
+    report_motion(logs, algo, seed, out, json, spread, false);
+}
+
+/// How near a path RMSE is to the demonstrations' spread, as the ratio `path / spread`:
+/// "on the path" at most 1 (as close to the mean as another demonstration), "near the path"
+/// at most 2, "off the path" beyond (docs/design.md §5 D39).
+pub fn path_verdict(ratio: f64) -> &'static str {
+    if ratio <= 1.0 {
+        "on the path"
+    } else if ratio <= 2.0 {
+        "near the path"
+    } else {
+        "off the path"
+    }
+}
+
+/// [`report`]; with `motion` (demonstrations of a motion: a tool-path file) and a spread, the
+/// headline is the path: path RMSE, its ratio to the demonstrations' spread and
+/// [`path_verdict`], before the final distance; normalised performance, whose task cost is a
+/// reach's, follows as such (JSON: `path_ratio`, `path_verdict`).
+pub fn report_motion(
+    logs: &[GaifoLog],
+    algo: &str,
+    seed: u64,
+    out: &std::path::Path,
+    json: bool,
+    spread: Option<f64>,
+    motion: bool,
+) {
     let Some(last) = logs.last() else { return };
+    let ratio = spread.filter(|_| motion).map(|s| last.path_rmse / s);
     let orientation = last.final_orientation_error_deg;
     let orientation_text = if orientation.is_nan() {
         String::new()
     } else {
         format!(", orientation error {orientation:.2}°")
     };
-    eprintln!(
-        "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m{orientation_text}); log and checkpoints in {}",
-        last.performance,
-        last.task_cost,
-        last.final_distance,
-        out.display()
-    );
-    if let Some(s) = spread {
-        eprintln!(
-            "path RMSE {:.4} m against the demonstrations' mean path; their own spread {s:.4} m",
-            last.path_rmse
-        );
+    match (ratio, spread) {
+        (Some(r), Some(s)) => eprintln!(
+            "done: {} — path RMSE {:.4} m = {r:.2} × the demonstrations' own spread {s:.4} m; \
+             final distance {:.4} m{orientation_text} (normalised performance {:.3} on the \
+             reaching task cost, which does not measure the path); log and checkpoints in {}",
+            path_verdict(r),
+            last.path_rmse,
+            last.final_distance,
+            last.performance,
+            out.display()
+        ),
+        _ => {
+            eprintln!(
+                "done: normalised performance {:.3} (task cost {:.4}, final distance {:.4} m{orientation_text}); log and checkpoints in {}",
+                last.performance,
+                last.task_cost,
+                last.final_distance,
+                out.display()
+            );
+            if let Some(s) = spread {
+                eprintln!(
+                    "path RMSE {:.4} m against the demonstrations' mean path; their own spread {s:.4} m",
+                    last.path_rmse
+                );
+            }
+        }
     }
     if json {
         let best = logs
@@ -134,6 +180,10 @@ pub fn report(
             "demo_spread_rmse_m": spread, "out": out});
         if !orientation.is_nan() {
             line["final_orientation_error_deg"] = orientation.into();
+        }
+        if let Some(r) = ratio {
+            line["path_ratio"] = r.into();
+            line["path_verdict"] = path_verdict(r).into();
         }
         println!("{line}");
     }
@@ -332,6 +382,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(s) = args.common.seed {
         cfg.seed = s;
     }
+    let motion = motion_defaults(&args, &mut cfg)?;
     // Every setting, before anything is printed or written (the run checks them again).
     cfg.validate()?;
     anyhow::ensure!(
@@ -352,15 +403,29 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             ""
         }
     );
-    eprintln!("{}", GaifoLog::PROGRESS_HEADER);
+    let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
+    // A motion's progress line adds the path RMSE over the demonstrations' spread.
+    let ratio_of = |l: &GaifoLog| spread.filter(|_| motion).map(|s| l.path_rmse / s);
+    if motion && spread.is_some() {
+        eprintln!(
+            "a motion: [path] critic_phase = {}, tracking_weight = {} (docs/design.md §5 D39); \
+             `path/spr` is the path RMSE over the demonstrations' own spread (<= 1: on the path)",
+            cfg.path.critic_phase, cfg.path.tracking_weight
+        );
+        eprintln!("{} path/spr", GaifoLog::PROGRESS_HEADER);
+    } else {
+        eprintln!("{}", GaifoLog::PROGRESS_HEADER);
+    }
     let start = match &args.resume {
         Some(dir) => crate::run::latest_checkpoint(dir).map_or(0, |(n, _, _)| n),
         None => 0,
     };
     let bar =
         crate::progress::Progress::new(cfg.iterations.saturating_sub(start) as u64, "iterations");
-    let print = |l: &GaifoLog| bar.done_one(&l.progress_line());
-    let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
+    let print = |l: &GaifoLog| match ratio_of(l) {
+        Some(r) => bar.done_one(&format!("{} {r:>8.2}", l.progress_line())),
+        None => bar.done_one(&l.progress_line()),
+    };
     let logs = match &args.resume {
         Some(dir) => train_resumed(&cfg, demos, dir, print)?,
         None => train(&cfg, demos, Some(&out), print)?,
@@ -380,8 +445,41 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             );
         }
     }
-    report(&logs, "lqr-gaifo", cfg.seed, &out, args.common.json, spread);
+    report_motion(
+        &logs,
+        "lqr-gaifo",
+        cfg.seed,
+        &out,
+        args.common.json,
+        spread,
+        motion,
+    );
     Ok(())
+}
+
+/// Whether the run imitates a motion (its `--demos` is a tool-path file, docs/design.md
+/// §4.17); if so and `--config` has no `[path]` table, `cfg.path` becomes
+/// [`PathSettings::for_motions`] (docs/design.md §5 D39). Reaches keep the paper's cost.
+fn motion_defaults(args: &TrainArgs, cfg: &mut GaifoConfig) -> anyhow::Result<bool> {
+    let motion = args
+        .demos
+        .as_deref()
+        .is_some_and(crate::io::tool_path::is_tool_path_csv);
+    if motion && !config_has_table(args.common.config.as_deref(), "path")? {
+        cfg.path = PathSettings::for_motions();
+    }
+    Ok(motion)
+}
+
+/// Whether the TOML file `config` (if any) has a top-level key `key`.
+fn config_has_table(config: Option<&Path>, key: &str) -> anyhow::Result<bool> {
+    let Some(p) = config else { return Ok(false) };
+    let text =
+        std::fs::read_to_string(p).with_context(|| format!("reading --config {}", p.display()))?;
+    let v: toml::Table = text
+        .parse()
+        .with_context(|| format!("parsing --config {}", p.display()))?;
+    Ok(v.contains_key(key))
 }
 
 /// The progress line of a GAIfO (PPO) iteration.
@@ -433,17 +531,22 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
     );
     let bar = crate::progress::Progress::new(pcfg.iterations as u64, "iterations");
     let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
+    let motion = args
+        .demos
+        .as_deref()
+        .is_some_and(crate::io::tool_path::is_tool_path_csv);
     let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), |l, u| {
         bar.done_one(&ppo_line(l, u))
     })?;
     drop(bar);
-    report(
+    report_motion(
         &logs,
         "gaifo-ppo",
         pcfg.seed,
         &out,
         args.common.json,
         spread,
+        motion,
     );
     Ok(())
 }

@@ -7,6 +7,7 @@
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25, D36), or candidates ([`PRECISION_VARIANTS`]); with `ablation_workspace_goals`, on the five [`goals::WORKSPACE_GOALS`] with the steady-precision outputs | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
 //! | `multi-goal` | one MDGPS policy from the 8 square points vs the centre's LQR+GAIfO controller, at never-demonstrated goals ([`multi_goal`]) | 3 seeds × 20 iterations |
+//! | `shapes` | every LASA handwriting shape imitated from its drawings, measured by the path ([`shapes`]) | 26 shapes × 5 seeds × 30 iterations |
 //!
 //! The simulated-vs-"physical" experiment runs over IPC: see [`ipc`].
 //!
@@ -53,6 +54,7 @@ pub mod ipc;
 pub mod multi_goal;
 pub mod pilqr;
 pub mod scheduler;
+pub mod shapes;
 pub mod shard;
 pub mod summary;
 
@@ -81,6 +83,8 @@ pub enum ExperimentName {
     MultiGoal,
     /// The KL-bounded LQR step against PILQR, nominal and perturbed arm.
     Pilqr,
+    /// Every LASA handwriting shape × seeds, measured by the path.
+    Shapes,
 }
 
 impl ExperimentName {
@@ -94,6 +98,7 @@ impl ExperimentName {
             Self::Ablation => "ablation",
             Self::MultiGoal => "multi-goal",
             Self::Pilqr => "pilqr",
+            Self::Shapes => "shapes",
         }
     }
 }
@@ -167,6 +172,8 @@ pub struct ExperimentConfig {
     pub eval_seed: u64,
     /// PILQR: learners, arms, methods and goals compared ([`pilqr`]).
     pub pilqr: pilqr::PilqrExperimentConfig,
+    /// Shapes: which LASA shapes, algorithms and placement ([`shapes`]).
+    pub shapes: shapes::ShapesExperimentConfig,
 }
 
 /// The comparison's algorithms ([`ExperimentConfig::algorithms`]).
@@ -210,6 +217,7 @@ impl ExperimentConfig {
             eval_outside_margin: 0.03,
             eval_seed: 14,
             pilqr: Default::default(),
+            shapes: Default::default(),
         };
         match name {
             ExperimentName::Comparison => base,
@@ -239,6 +247,7 @@ impl ExperimentConfig {
                 ..base
             },
             ExperimentName::Pilqr => pilqr::defaults(base),
+            ExperimentName::Shapes => shapes::defaults(base),
         }
     }
 
@@ -668,6 +677,12 @@ pub fn run_sharded(
         ExperimentName::Pilqr => {
             return Err(ExperimentError::Settings(
                 "pilqr has its own outputs: learner::experiment::pilqr::run".into(),
+            )
+            .into())
+        }
+        ExperimentName::Shapes => {
+            return Err(ExperimentError::Settings(
+                "shapes has its own outputs: learner::experiment::shapes::run".into(),
             )
             .into())
         }

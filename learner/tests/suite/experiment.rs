@@ -159,3 +159,91 @@ fn ablation_runs_each_variant_and_reports_final_distance() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `learner experiment shapes` (docs/design.md §5 D39): shards write each job's file into one
+/// folder, the table counts the jobs not done yet, a second run of a finished list runs
+/// nothing, and the sharded jobs equal the unsharded ones.
+#[test]
+fn shapes_shards_resume_and_tabulate_the_path() {
+    let (a, b) = (tmp("shapes-a"), tmp("shapes-b"));
+    let cfg_file = tmp("shapes-cfg");
+    std::fs::create_dir_all(&cfg_file).unwrap();
+    let cfg = cfg_file.join("c.toml");
+    std::fs::write(&cfg, "[shapes]\nshapes = [\"Worm\"]\n").unwrap();
+    let args = |out: &Path, shard: Option<&str>| {
+        let mut v: Vec<String> = [
+            "experiment",
+            "shapes",
+            "--seeds",
+            "2",
+            "--iterations",
+            "2",
+            "--threads",
+            "1",
+            "--json",
+            "--config",
+            cfg.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        if let Some(s) = shard {
+            v.extend(["--shard".into(), s.into()]);
+        }
+        v
+    };
+    let call = |v: Vec<String>| {
+        let a: Vec<&str> = v.iter().map(String::as_str).collect();
+        let (ok, out, err) = common::learner_output(&a);
+        assert!(ok, "{err}");
+        (
+            serde_json::from_str::<serde_json::Value>(out.trim()).unwrap(),
+            err,
+        )
+    };
+    let (v, err) = call(args(&a, Some("1/2")));
+    assert_eq!(v["summary"]["jobs_missing"], 1, "{v}");
+    assert!(err.contains("1 job(s) of the list not done yet"), "{err}");
+    let (v, _) = call(args(&a, Some("2/2")));
+    assert_eq!(v["summary"]["jobs_missing"], 0, "{v}");
+    let row = &v["summary"]["rows"][0];
+    assert_eq!(
+        (row["shape"].as_str(), row["seeds"].as_u64()),
+        (Some("Worm"), Some(2))
+    );
+    let (_, err) = call(args(&a, None));
+    assert!(
+        err.contains("0 to run"),
+        "a finished list runs nothing: {err}"
+    );
+    call(args(&b, None));
+    for s in 0..2 {
+        let f = format!("runs/Worm_lqr-gaifo_s{s}.json");
+        let read = |d: &Path| -> serde_json::Value {
+            serde_json::from_slice(&std::fs::read(d.join(&f)).unwrap()).unwrap()
+        };
+        let (x, y) = (read(&a), read(&b));
+        assert_eq!(x["path_rmse_m"], y["path_rmse_m"], "{f}");
+        assert_eq!(x["final_distance_m"], y["final_distance_m"], "{f}");
+        assert_eq!(x["path_rmse_m"].as_array().unwrap().len(), 2);
+    }
+    assert!(a.join("demos/Worm.csv").is_file());
+    let text = std::fs::read_to_string(a.join("shapes.txt")).unwrap();
+    assert!(
+        text.contains("Worm") && text.contains("lqr-gaifo"),
+        "{text}"
+    );
+    std::fs::write(&cfg, "[shapes]\nshapes = [\"Wormm\"]\n").unwrap();
+    let v = args(&tmp("shapes-c"), None);
+    let a2: Vec<&str> = v.iter().map(String::as_str).collect();
+    let (ok, _, err) = common::learner_output(&a2);
+    assert!(
+        !ok && err.contains("Wormm") && err.contains("Worm"),
+        "{err}"
+    );
+    for d in [a, b, cfg_file] {
+        std::fs::remove_dir_all(d).ok();
+    }
+}

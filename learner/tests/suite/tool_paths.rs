@@ -92,3 +92,67 @@ fn a_sample_out_of_reach_is_refused_naming_file_episode_and_time() {
     assert!(!ok && err.contains("episode 2, t = 0.5 s"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A motion's run reports the path first (docs/design.md §5 D39): the verdict and the ratio
+/// to the demonstrations' spread on the summary line, `path/spr` on the progress line,
+/// `path_ratio` and `path_verdict` in `--json`; it takes the tracking term unless `--config`
+/// has a `[path]` table, and then takes that table.
+#[test]
+fn a_motion_reports_the_path_first_and_takes_the_tracking_term() {
+    let dir = scratch("motion");
+    let csv = dir.join("strokes.csv");
+    std::fs::write(&csv, strokes_csv(false)).unwrap();
+    let run = |out: &str, config: Option<&str>| {
+        let out = dir.join(out);
+        let mut args = vec![
+            "train".to_string(),
+            "--demos".into(),
+            csv.to_str().unwrap().into(),
+            "--iterations".into(),
+            "2".into(),
+            "--json".into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ];
+        if let Some(text) = config {
+            let p = dir.join("path.toml");
+            std::fs::write(&p, text).unwrap();
+            args.extend(["--config".into(), p.to_str().unwrap().into()]);
+        }
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, stdout, err) = learner_output(&a);
+        assert!(ok, "{err}");
+        let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+        (v, err)
+    };
+    let (v, err) = run("default", None);
+    assert!(err.contains("tracking_weight = 0.1"), "{err}");
+    assert!(err.contains("path/spr"), "{err}");
+    let ratio = v["path_ratio"].as_f64().unwrap();
+    let (path, spread) = (
+        v["path_rmse_m"].as_f64().unwrap(),
+        v["demo_spread_rmse_m"].as_f64().unwrap(),
+    );
+    assert!((ratio - path / spread).abs() < 1e-12 * ratio, "{v}");
+    let verdict = v["path_verdict"].as_str().unwrap();
+    let expected = if ratio <= 1.0 {
+        "on the path"
+    } else if ratio <= 2.0 {
+        "near the path"
+    } else {
+        "off the path"
+    };
+    assert_eq!(verdict, expected, "{v}");
+    let done = err.lines().find(|l| l.starts_with("done: ")).unwrap();
+    assert!(
+        done.starts_with(&format!("done: {verdict}")) && done.contains("spread"),
+        "{done}"
+    );
+    let (v2, err) = run("paper", Some("[path]\ntracking_weight = 0.0\n"));
+    assert!(err.contains("tracking_weight = 0 ("), "{err}");
+    assert_ne!(
+        v2["path_rmse_m"], v["path_rmse_m"],
+        "the tracking term changes the run"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -30,6 +30,10 @@ pub struct CompositeWorkspace {
     /// Replace ∇²D by its projection on the positive semi-definite cone (negative eigenvalues
     /// set to 0) before composing; see [`expand_step`].
     pub psd: bool,
+    /// The critic takes the phase t/(T − 1) as its last input (2 dX + 1 inputs,
+    /// docs/design.md §5 D39): a constant of each step, so it enters D's value, not the
+    /// derivatives in [s; a].
+    phase: bool,
     disc: Workspace,
     x: Vec<f64>,
     g: Vec<f64>,
@@ -45,15 +49,13 @@ impl CompositeWorkspace {
         self
     }
 
-    /// Scratch for `disc` (a critic on [s; s'], 2 dX inputs).
+    /// Scratch for `disc`: a critic on [s; s'] (2 dX inputs) or [s; s'; φ] (2 dX + 1, the
+    /// phase last).
     pub fn new(disc: &Discriminator) -> Self {
         let n = disc.input_dim();
-        assert!(
-            n % 2 == 0,
-            "the discriminator must take [s; s'] (2 dX inputs)"
-        );
         Self {
             psd: false,
+            phase: n % 2 == 1,
             disc: disc.workspace(),
             x: vec![0.0; n],
             g: vec![0.0; n],
@@ -63,8 +65,18 @@ impl CompositeWorkspace {
     }
 }
 
-/// The transition the dynamics predict, written into `x` (`2 dX`): `[s; F_t [s; a] + f_t]`,
-/// or `[s; s]` at the last step (`t + 1 >= horizon`).
+/// The phase of step `t` of `horizon`: t/(T − 1), 1 at the last step (0 for T = 1).
+pub fn phase(t: usize, horizon: usize) -> f64 {
+    if horizon < 2 {
+        0.0
+    } else {
+        t as f64 / (horizon - 1) as f64
+    }
+}
+
+/// The transition the dynamics predict, written into `x` (`2 dX`, or `2 dX + 1` with the
+/// phase of step t last): `[s; F_t [s; a] + f_t]`, or `[s; s]` at the last step
+/// (`t + 1 >= horizon`).
 fn predicted_transition(
     dyn_: &Dynamics,
     t: usize,
@@ -76,8 +88,11 @@ fn predicted_transition(
     let (dx, du) = (dyn_.dx, dyn_.du);
     let dy = dx + du;
     x[..dx].copy_from_slice(s);
+    if x.len() > 2 * dx {
+        x[2 * dx] = phase(t, horizon);
+    }
     if t + 1 >= horizon {
-        x[dx..].copy_from_slice(s);
+        x[dx..2 * dx].copy_from_slice(s);
         return;
     }
     let f = dyn_.fm.slice(t);
@@ -209,11 +224,24 @@ pub fn expand_step(
     predicted_transition(dyn_, t, horizon, s, a, &mut ws.x);
     let value = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
     if ws.psd {
+        drop_phase(ws.phase, &mut ws.h);
         project_psd(&mut ws.h);
     }
     compose_gradient(dyn_, t, horizon, &ws.g, lx, lu);
     compose_hessian(dyn_, t, horizon, &ws.h, lxx, luu, lux);
     value
+}
+
+/// With the phase input, zeroes its row and column of ∇²D (the last), so that the PSD
+/// projection sees the curvature in [s; s'] only: the phase is no variable of the cost.
+fn drop_phase(phase: bool, h: &mut Mat<f64>) {
+    if phase {
+        let n = h.nrows() - 1;
+        for k in 0..=n {
+            h[(n, k)] = 0.0;
+            h[(k, n)] = 0.0;
+        }
+    }
 }
 
 /// Projects a symmetric matrix on the PSD cone: U max(Λ, 0) Uᵀ.
@@ -263,7 +291,10 @@ impl Cost for CompositeCost<'_> {
             for t in 0..t_len {
                 let next = (t + 1).min(t_len - 1);
                 self.ws.x[..dx].copy_from_slice(ep.state(t));
-                self.ws.x[dx..].copy_from_slice(ep.state(next));
+                self.ws.x[dx..2 * dx].copy_from_slice(ep.state(next));
+                if self.ws.phase {
+                    self.ws.x[2 * dx] = phase(t, t_len);
+                }
                 out.push(self.disc.value(&self.ws.x, &mut self.ws.disc));
             }
         }
@@ -322,6 +353,7 @@ pub fn composite_cost_derivs(
         }
         if ws.psd {
             ws.h_mean *= faer::Scale(1.0 / n as f64);
+            drop_phase(ws.phase, &mut ws.h_mean);
             project_psd(&mut ws.h_mean);
             compose_hessian(
                 dyn_,
@@ -356,7 +388,8 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// The composed function C(y) = D(s, F y + f) evaluated directly.
+    /// The composed function C(y) = D(s, F y + f) (or D(s, F y + f, t/(T − 1)) with a critic
+    /// of 2 dX + 1 inputs) evaluated directly.
     fn composed(
         disc: &Discriminator,
         dyn_: &Dynamics,
@@ -365,10 +398,13 @@ mod tests {
         y: &[f64],
         ws: &mut Workspace,
     ) -> f64 {
-        let mut x = vec![0.0; D_IN];
+        let mut x = vec![0.0; disc.input_dim()];
+        if x.len() > D_IN {
+            x[D_IN] = t as f64 / (horizon - 1) as f64;
+        }
         x[..DX].copy_from_slice(&y[..DX]);
         if t + 1 >= horizon {
-            x[DX..].copy_from_slice(&y[..DX]);
+            x[DX..D_IN].copy_from_slice(&y[..DX]);
         } else {
             let f = dyn_.fm.slice(t);
             for i in 0..DX {
@@ -381,17 +417,28 @@ mod tests {
 
     #[test]
     fn gradient_and_hessian_match_finite_differences_of_the_composed_function() {
+        composed_function_check(D_IN);
+    }
+
+    /// With the phase as the critic's last input: its value enters C, its derivatives do not
+    /// (the phase is a constant of the step).
+    #[test]
+    fn with_the_phase_input_gradient_and_hessian_match_finite_differences() {
+        composed_function_check(D_IN + 1);
+    }
+
+    fn composed_function_check(d_in: usize) {
         let mut rng = ChaCha8Rng::seed_from_u64(4);
         let cfg = DiscriminatorConfig {
             hidden: vec![16, 16],
             seed: 2,
             ..DiscriminatorConfig::default()
         };
-        let mut norm = Normalizer::identity(D_IN);
+        let mut norm = Normalizer::identity(d_in);
         for (j, s) in norm.std.iter_mut().enumerate() {
             *s = 0.5 + 0.1 * j as f64;
         }
-        let disc = Discriminator::new(D_IN, cfg, norm).unwrap();
+        let disc = Discriminator::new(d_in, cfg, norm).unwrap();
         let horizon = 4;
         let mut dyn_ = Dynamics::zeros(horizon, DX, DU);
         for v in dyn_.fm.data.iter_mut() {

@@ -3,10 +3,12 @@
 //! `cost.eval` ([`Cost`]), plugged into the one LQR iteration
 //! ([`crate::iteration::LqrIteration`]). The expert's is the true task cost ([`task`]);
 //! LQR+GAIfO's is the critic's composite cost C_t(s, a) = D(s, F_t [s; a] + f_t) ([`composite`];
-//! docs/design.md §1, steps 4–5).
+//! docs/design.md §1, steps 4–5); a demonstrations' per-step tracking term can be added to it
+//! ([`tracking`], docs/design.md §5 D39).
 
 pub mod composite;
 pub mod task;
+pub mod tracking;
 
 use gps::algorithm::eval_cost::CostDerivs;
 use gps::dynamics::Dynamics;

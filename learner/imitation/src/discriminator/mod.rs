@@ -38,10 +38,11 @@ use std::ops::Range;
 use ur5_shared::layout::{StateLayout, MAX_DX};
 
 /// The tool-point inputs (each point's position minus its target, `StateLayout::points`) of a
-/// state within a transition of `d` inputs [s; s'] (d = 2 dX of a task,
-/// `StateLayout::of_task_state`), and dX; `None` for another `d`.
+/// state within a transition of `d` inputs, [s; s'] (d = 2 dX of a task,
+/// `StateLayout::of_task_state`) or [s; s'; φ] with the phase (d = 2 dX + 1), and dX; `None`
+/// for another `d`. The phase (input 2 dX) is never a tool point's.
 fn point_inputs(d: usize) -> Option<(Range<usize>, usize)> {
-    let layout = StateLayout::of_task_state(d / 2).filter(|_| d % 2 == 0)?;
+    let layout = StateLayout::of_task_state(d / 2)?;
     Some((layout.points(), layout.dx()))
 }
 
@@ -267,7 +268,8 @@ impl DiscriminatorConfig {
     /// Whether input `i` of a transition of `d` = 2 dX inputs is one that
     /// [`Self::near_goal_scale`] warps: a tool point's position minus its target, in s or s'.
     fn warps(&self, i: usize, d: usize) -> bool {
-        self.near_goal_scale > 0.0 && point_inputs(d).is_some_and(|(p, dx)| p.contains(&(i % dx)))
+        self.near_goal_scale > 0.0
+            && point_inputs(d).is_some_and(|(p, dx)| i < 2 * dx && p.contains(&(i % dx)))
     }
 
     /// Input `i` of a transition of `d` inputs as the critic sees it before the normalisation:
