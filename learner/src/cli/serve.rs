@@ -9,7 +9,8 @@ use imitation::gaifo::GaifoConfig;
 
 use super::CommonArgs;
 use crate::serve::{
-    read_config, serve, serve_gaifo, serve_mdgps, settings, ServeAlgo, ServeOptions, ServeSummary,
+    read_config, serve, serve_bco, serve_gaifo, serve_mdgps, serve_replay_mean, serve_td3,
+    settings, ServeAlgo, ServeOptions, ServeSummary,
 };
 
 /// Units and files, shown after `learner serve --help`.
@@ -31,14 +32,21 @@ against one whose reset is not (ur-sim, a real arm) it does not; the expert's re
 goal): per version, goal after goal, the goal's gain table (its goal and noise stream in the table's episode plan) \
 until its N noisy episodes are in, then the policy as a noise-free policy table at the goal until its evaluation is \
 in; the checkpoints iter_NNN_critic.json + iter_NNN_state.npz and mdgps_log.csv of `learner train --algo mdgps`; \
-tables/v*.npz and latest_table.npz hold each version's first gain table.";
+tables/v*.npz and latest_table.npz hold each version's first gain table. bco, gaifo-td3, replay-mean \
+(--demos FILE; config a BcoConfig, GaifoTd3Config or ReplayMeanConfig, as for `learner train --algo …`): \
+bco and gaifo-td3 publish their MLP policy as a policy table per version (tables/v*.npz: params, hidden, \
+the header of a gain table's file), which the controller runs like a gain table (N noisy episodes, \
+then the noise-free one); replay-mean publishes the mean path as a gain table; their files are \
+those of `learner train`, and --resume continues exactly from the latest iter_NNN_state.npz.";
 
 /// Arguments of `learner serve`.
 #[derive(clap::Args, Debug)]
 #[command(after_help = HELP_UNITS)]
 pub struct ServeArgs {
-    /// Learner: `expert` (true task cost; default), `lqr-gaifo` (imitation from --demos) or
-    /// `mdgps` (several goals, a folder --demos); overrides the config's [serve] algo.
+    /// Learner: `expert` (true task cost; default), `lqr-gaifo` (imitation from --demos),
+    /// `mdgps` (several goals, a folder --demos), or the baselines `bco`, `gaifo-td3` (a policy
+    /// table per version) and `replay-mean` (the demonstrations' mean path as a gain table with
+    /// K = 0); overrides the config's [serve] algo.
     #[arg(long, value_enum)]
     pub algo: Option<ServeAlgo>,
     /// Demonstrations (.npz from `learner expert`) for --algo lqr-gaifo; their task (goal,
@@ -74,6 +82,13 @@ pub struct ServeArgs {
     /// the controller's `seed`; --out: episodes, tables, checkpoints, per-iteration CSV.
     #[command(flatten)]
     pub common: CommonArgs,
+}
+
+/// `--algo`'s spelling of `algo`.
+fn algo_name(algo: ServeAlgo) -> String {
+    use clap::ValueEnum;
+    algo.to_possible_value()
+        .map_or_else(|| format!("{algo:?}"), |v| v.get_name().to_owned())
 }
 
 /// The end-of-run line (stderr) and, with `--json`, the summary (stdout).
@@ -155,6 +170,44 @@ pub fn run_cli(args: ServeArgs) -> anyhow::Result<()> {
             }
             let demos = crate::io::demos::load_checked(&demos_path, &cfg.sim)?;
             finish(&serve_gaifo(cfg, demos, opts, |_| {})?, args.common.json)
+        }
+        ServeAlgo::Bco | ServeAlgo::GaifoTd3 | ServeAlgo::ReplayMean => {
+            let Some(demos_path) = opts.demos.clone() else {
+                anyhow::bail!(
+                    "--algo {} needs --demos FILE (or [serve] demos): the demonstrations to \
+                     imitate, from `learner expert`",
+                    algo_name(opts.algo)
+                );
+            };
+            let (seed, iterations, json) = (args.common.seed, args.iterations, args.common.json);
+            macro_rules! run {
+                ($cfg:ty, $what:expr, $serve:ident) => {{
+                    let mut cfg: $cfg = settings(rest, &path, $what)?;
+                    if let Some(s) = seed {
+                        cfg.seed = s;
+                    }
+                    if let Some(i) = iterations {
+                        cfg.iterations = i;
+                    }
+                    let demos = crate::io::demos::load_checked(&demos_path, &cfg.sim)?;
+                    finish(&$serve(cfg, demos, opts, |_| {})?, json)
+                }};
+            }
+            match opts.algo {
+                ServeAlgo::Bco => run!(imitation::bco::BcoConfig, "BCO", serve_bco),
+                ServeAlgo::GaifoTd3 => {
+                    run!(
+                        imitation::offpolicy::GaifoTd3Config,
+                        "GAIfO (TD3)",
+                        serve_td3
+                    )
+                }
+                _ => run!(
+                    imitation::replay_mean::ReplayMeanConfig,
+                    "mean path",
+                    serve_replay_mean
+                ),
+            }
         }
         ServeAlgo::Mdgps => {
             let Some(folder) = opts.demos.clone() else {

@@ -2,7 +2,7 @@
 //!
 //! | name | what | default |
 //! |---|---|---|
-//! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison"), PPO also with a converged budget; the summary adds episodes to normalised 0.9 and to 1 cm | 10 seeds × 100 iterations each |
+//! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison"), PPO also with a converged budget; the summary adds episodes to normalised 0.9 and to 1 cm; on request also the baselines BCO(α), GAIfO (TD3) and the mean path ([`BASELINES`]) on the same arm, demonstrations and episodes per iteration | 10 seeds × 100 iterations each |
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25, D36), or candidates ([`PRECISION_VARIANTS`]); with `ablation_workspace_goals`, on the five [`goals::WORKSPACE_GOALS`] with the steady-precision outputs | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
@@ -43,10 +43,8 @@ pub use error::ExperimentError;
 
 use crate::error::ensure;
 use imitation::expert::ExpertConfig;
-use imitation::gaifo::{GaifoConfig, GaifoLog, LqrGaifo};
-use imitation::ppo::gaifo_ppo::{GaifoPpo, GaifoPpoConfig};
-
-use crate::run::{arm_for, run_iterations};
+use imitation::gaifo::{GaifoConfig, GaifoLog};
+use imitation::ppo::gaifo_ppo::GaifoPpoConfig;
 
 mod ablation;
 pub mod goals;
@@ -56,7 +54,10 @@ pub mod pilqr;
 pub mod scheduler;
 pub mod shapes;
 pub mod shard;
+mod spec;
 pub mod summary;
+
+pub use spec::{baseline, Spec, BASELINES};
 
 pub use summary::{csv_header, summarise, summary_text, write_outputs, SummaryRow};
 
@@ -119,7 +120,9 @@ pub struct ExperimentConfig {
     pub threads: usize,
     /// Algorithms of the comparison: `lqr-gaifo`, `gaifo-ppo` (the paper's budget, N =
     /// `gaifo_ppo.samples` episodes per iteration) and `gaifo-ppo-converged` (the same with
-    /// N = `ppo_converged_samples`, a budget at which it converges).
+    /// N = `ppo_converged_samples`, a budget at which it converges); also the baselines
+    /// [`BASELINES`] `bco`, `gaifo-td3` and `replay-mean`, on LQR+GAIfO's arm with its N
+    /// ([`baseline`]).
     pub algorithms: Vec<String>,
     /// Comparison: noisy episodes per iteration of `gaifo-ppo-converged`. Ours: 40 (with it,
     /// one seed reached normalised 0.95 by iteration 55 with it).
@@ -132,6 +135,11 @@ pub struct ExperimentConfig {
     pub lqr_gaifo: GaifoConfig,
     /// GAIfO (PPO) (its `seed` and `iterations` are set per run).
     pub gaifo_ppo: GaifoPpoConfig,
+    /// Comparison: BCO(α) (its `sim`, `samples`, `seed` and `iterations` are set per run, the
+    /// first two from `lqr_gaifo`).
+    pub bco: imitation::bco::BcoConfig,
+    /// Comparison: GAIfO (TD3) (the same four set per run as for `bco`).
+    pub gaifo_td3: imitation::offpolicy::GaifoTd3Config,
     /// Generalisation: numbers of demonstrated square points, each a curve.
     pub subset_sizes: Vec<usize>,
     /// Generalisation: demonstrations per square point.
@@ -199,6 +207,8 @@ impl ExperimentConfig {
             expert: ExpertConfig::default(),
             lqr_gaifo: GaifoConfig::default(),
             gaifo_ppo: GaifoPpoConfig::default(),
+            bco: Default::default(),
+            gaifo_td3: Default::default(),
             subset_sizes: (1..=8).collect(),
             demos_per_point: 5,
             critic_steps: vec![100, 1000],
@@ -263,10 +273,11 @@ impl ExperimentConfig {
         );
         for a in &self.algorithms {
             ensure!(
-                ALGORITHMS.contains(&a.as_str()),
+                ALGORITHMS.contains(&a.as_str()) || BASELINES.contains(&a.as_str()),
                 ExperimentError::Settings(format!(
-                    "algorithms: unknown `{a}`; known: {}",
-                    ALGORITHMS.join(", ")
+                    "algorithms: unknown `{a}`; known: {}, {}",
+                    ALGORITHMS.join(", "),
+                    BASELINES.join(", ")
                 ))
             );
         }
@@ -354,6 +365,12 @@ impl ExperimentConfig {
             self.time_compression > 0.0 && self.time_compression.is_finite(),
             ExperimentError::Settings("time_compression must be > 0".into())
         );
+        if self.algorithms.iter().any(|a| a == "bco") {
+            self.bco.validate()?;
+        }
+        if self.algorithms.iter().any(|a| a == "gaifo-td3") {
+            self.gaifo_td3.validate()?;
+        }
         self.expert.task.validate()?;
         self.expert.sim.validate()?;
         Ok(())
@@ -385,15 +402,6 @@ pub struct Run {
     pub wall_s: f64,
 }
 
-/// What one job runs.
-#[derive(Clone)]
-pub enum Spec {
-    /// LQR+GAIfO with these settings.
-    LqrGaifo(GaifoConfig),
-    /// GAIfO (PPO) with these settings.
-    GaifoPpo(GaifoPpoConfig),
-}
-
 /// One independent unit of work: a variant at one seed on one demonstration set.
 #[derive(Clone)]
 pub struct Job {
@@ -407,45 +415,22 @@ pub struct Job {
 
 impl Job {
     fn seed(&self) -> u64 {
-        match &self.spec {
-            Spec::LqrGaifo(c) => c.seed,
-            Spec::GaifoPpo(c) => c.seed,
-        }
+        self.spec.seed()
     }
 
     fn algorithm(&self) -> &'static str {
-        match &self.spec {
-            Spec::LqrGaifo(_) => "lqr-gaifo",
-            Spec::GaifoPpo(_) => "gaifo-ppo",
-        }
+        self.spec.algorithm()
     }
 
     /// Runs the job in this thread.
     pub fn run(&self) -> Result<Run, ExperimentError> {
         let t0 = Instant::now();
-        let demos = (*self.demos).clone();
-        let (seed, algo) = (self.seed(), self.algorithm());
-        let logs = match &self.spec {
-            Spec::LqrGaifo(c) => {
-                let mut run = LqrGaifo::new(c.clone(), demos)?;
-                let arm = arm_for(&run)?;
-                run_iterations(&mut run, &arm, c.iterations, None, |_, _| {})?
-            }
-            Spec::GaifoPpo(c) => {
-                let mut run = GaifoPpo::new(c.clone(), demos)?;
-                let arm = arm_for(&run)?;
-                run_iterations(&mut run, &arm, c.iterations, None, |_, _| {})?
-            }
-        };
-        let episodes_per_iteration = match &self.spec {
-            Spec::LqrGaifo(c) => c.samples,
-            Spec::GaifoPpo(c) => c.samples,
-        };
+        let logs = self.spec.logs((*self.demos).clone())?;
         Ok(Run {
             variant: self.variant.clone(),
-            algorithm: algo.into(),
-            seed,
-            episodes_per_iteration,
+            algorithm: self.algorithm().into(),
+            seed: self.seed(),
+            episodes_per_iteration: self.spec.samples(),
             horizon: self.demos.horizon,
             logs,
             wall_s: t0.elapsed().as_secs_f64(),
@@ -509,7 +494,9 @@ pub fn comparison_jobs(cfg: &ExperimentConfig, demos: Arc<Demos>) -> Vec<Job> {
     let mut jobs = Vec::new();
     for a in &cfg.algorithms {
         for seed in cfg.seed_list() {
-            let (variant, spec) = if a.starts_with("gaifo-ppo") {
+            let (variant, spec) = if let Some(spec) = baseline(cfg, a, seed) {
+                (a.clone(), spec)
+            } else if a.starts_with("gaifo-ppo") {
                 let mut c = cfg.gaifo_ppo.clone();
                 c.seed = seed;
                 c.iterations = cfg.iterations;

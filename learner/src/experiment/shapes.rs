@@ -25,13 +25,14 @@ use imitation::demos::Demos;
 use imitation::settings::PathSettings;
 
 use super::shard::Shard;
-use super::{pool, ExperimentConfig, ExperimentError, Job, Spec};
+use super::{baseline, pool, ExperimentConfig, ExperimentError, Job, Spec, BASELINES};
 use crate::error::ensure;
 use crate::io::lasa;
 
 /// Algorithms the experiment runs ([`ShapesExperimentConfig::algorithms`]): LQR+GAIfO with
 /// `lqr_gaifo`'s settings (whose `[path]` defaults to [`PathSettings::for_motions`] here), the
-/// same with the paper's cost (no `[path]` term), and GAIfO (PPO).
+/// same with the paper's cost (no `[path]` term), and GAIfO (PPO); the baselines
+/// ([`BASELINES`]) run too.
 pub const SHAPE_ALGORITHMS: [&str; 3] = ["lqr-gaifo", "lqr-gaifo-paper", "gaifo-ppo"];
 
 /// Settings of `learner experiment shapes` (`[shapes]` of its config file).
@@ -110,10 +111,11 @@ impl ShapesExperimentConfig {
         );
         for a in &self.algorithms {
             ensure!(
-                SHAPE_ALGORITHMS.contains(&a.as_str()),
+                SHAPE_ALGORITHMS.contains(&a.as_str()) || BASELINES.contains(&a.as_str()),
                 ExperimentError::Settings(format!(
-                    "shapes.algorithms: unknown `{a}`; known: {}",
-                    SHAPE_ALGORITHMS.join(", ")
+                    "shapes.algorithms: unknown `{a}`; known: {}, {}",
+                    SHAPE_ALGORITHMS.join(", "),
+                    BASELINES.join(", ")
                 ))
             );
         }
@@ -186,6 +188,7 @@ fn job(
     demos: Arc<Demos>,
 ) -> Result<(Job, String), ExperimentError> {
     let spec = match algo {
+        b if BASELINES.contains(&b) => baseline(cfg, b, seed).expect("a baseline's name"),
         "gaifo-ppo" => {
             let mut c = cfg.gaifo_ppo.clone();
             c.seed = seed;
@@ -205,6 +208,9 @@ fn job(
     let settings = match &spec {
         Spec::LqrGaifo(c) => serde_json::to_string(c)?,
         Spec::GaifoPpo(c) => serde_json::to_string(c)?,
+        Spec::Bco(c) => serde_json::to_string(c)?,
+        Spec::GaifoTd3(c) => serde_json::to_string(c)?,
+        Spec::ReplayMean(c) => serde_json::to_string(c)?,
     };
     let s = &cfg.shapes;
     let hash = crate::io::files::fnv1a64(

@@ -16,13 +16,19 @@
 //! | `state_names`, `action_names` | | the layout's names (`ur5_shared::StateLayout`) |
 //! | `schema_version` | () i64 | [`SCHEMA_VERSION`] |
 //!
+//! A learner whose policy is an MLP (BCO, GAIfO (TD3)) publishes policy tables instead; `learner
+//! serve` records them under the same names ([`save_policy_table`], schema
+//! [`POLICY_SCHEMA_VERSION`]): `params` (P,) f64 θ as sent (`ur5_shared::PolicyTable`), `hidden`
+//! (H,) u64, `action_mode` and `model` () u64 (the table's codes), then `version`, `checksum`,
+//! `epoch`, the plan, `dt` and the names as above. [`stored_epoch`] reads the epoch of either.
+//!
 //! dX and dU are the table's task's (K's shape): loading takes them from the file, refuses
 //! dimensions of no task naming them, rebuilds the table, checks the stored checksum and runs
 //! `GainTable::validate`. Whether they are the caller's task's is `GainTable::check_layout`.
 
 use std::path::{Path, PathBuf};
 
-use ur5_shared::{GainBounds, GainStep, GainTable, StateLayout};
+use ur5_shared::{EpisodePlan, GainBounds, GainStep, GainTable, PolicyTable, StateLayout};
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
 
@@ -62,38 +68,104 @@ pub fn save_table(path: &Path, table: &GainTable, dt: f64) -> Result<(), NpzErro
     for (name, shape, data) in table_arrays(table) {
         w.f64(name, &shape, &data)?;
     }
-    w.u64("version", &[], &[table.version])?;
-    if table.epoch != 0 {
-        w.u64("epoch", &[], &[u64::from(table.epoch)])?;
-    }
-    if !table.plan.is_default() {
-        w.u64("plan_flags", &[], &[u64::from(table.plan.flags)])?;
-        w.u64(
-            "plan_noise_stream",
-            &[],
-            &[u64::from(table.plan.noise_stream)],
-        )?;
-        w.f64("plan_goal", &[3], &table.plan.goal)?;
-    }
-    w.u64("checksum", &[], &[table.checksum])?;
-    w.f64("dt", &[], &[dt])?;
     let (dx, du) = table.dims();
-    let layout = StateLayout::from_dims(dx, du).ok_or_else(|| NpzError::Bad {
-        path: path.to_path_buf(),
-        name: "K".into(),
-        why: format!("dx = {dx}, du = {du} are the dimensions of no task"),
-    })?;
-    let (state, action) = (layout.state_names(), layout.action_names());
-    w.strings(
-        "state_names",
-        &state.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
-    w.strings(
-        "action_names",
-        &action.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
+    let head = Header {
+        version: table.version,
+        epoch: table.epoch,
+        plan: &table.plan,
+        checksum: table.checksum,
+        dims: (dx, du),
+        dt,
+    };
+    head.write(&mut w, path, "K")?;
     w.finish()?;
     Ok(())
+}
+
+/// Version of the policy-table file layout (module docs).
+pub const POLICY_SCHEMA_VERSION: i64 = 1;
+
+/// Writes policy table `table` with control period `dt` (s) (module docs).
+pub fn save_policy_table(path: &Path, table: &PolicyTable, dt: f64) -> Result<(), NpzError> {
+    let mut w = NpzWriter::create(path)?;
+    w.i64("schema_version", &[], &[POLICY_SCHEMA_VERSION])?;
+    let theta = table.theta();
+    w.f64("params", &[theta.len() as u64], theta)?;
+    let hidden: Vec<u64> = table.hidden_widths().map(|h| h as u64).collect();
+    w.u64("hidden", &[hidden.len() as u64], &hidden)?;
+    w.u64("action_mode", &[], &[u64::from(table.action_mode)])?;
+    w.u64("model", &[], &[u64::from(table.model)])?;
+    let head = Header {
+        version: table.version,
+        epoch: table.epoch,
+        plan: &table.plan,
+        checksum: table.checksum,
+        dims: table.dims(),
+        dt,
+    };
+    head.write(&mut w, path, "params")?;
+    w.finish()?;
+    Ok(())
+}
+
+/// The epoch recorded in a table file of either kind (0 when absent), its schema checked.
+pub fn stored_epoch(path: &Path) -> Result<u32, NpzError> {
+    let f = NpzFile::open(path)?;
+    if f.names().iter().any(|n| n == "params") {
+        f.check_schema(POLICY_SCHEMA_VERSION)?;
+    } else {
+        f.check_schema(SCHEMA_VERSION)?;
+    }
+    f.u32_scalar_or_zero("epoch")
+}
+
+/// What both kinds of table file store after their arrays.
+struct Header<'a> {
+    version: u64,
+    epoch: u32,
+    plan: &'a EpisodePlan,
+    checksum: u64,
+    /// (dX, dU).
+    dims: (usize, usize),
+    dt: f64,
+}
+
+impl Header<'_> {
+    /// Writes the scalars, the plan unless it is the default, and the layout's names;
+    /// `array`: the array to name when the dimensions are of no task.
+    fn write(&self, w: &mut NpzWriter, path: &Path, array: &str) -> Result<(), NpzError> {
+        w.u64("version", &[], &[self.version])?;
+        if self.epoch != 0 {
+            w.u64("epoch", &[], &[u64::from(self.epoch)])?;
+        }
+        if !self.plan.is_default() {
+            w.u64("plan_flags", &[], &[u64::from(self.plan.flags)])?;
+            w.u64(
+                "plan_noise_stream",
+                &[],
+                &[u64::from(self.plan.noise_stream)],
+            )?;
+            w.f64("plan_goal", &[3], &self.plan.goal)?;
+        }
+        w.u64("checksum", &[], &[self.checksum])?;
+        w.f64("dt", &[], &[self.dt])?;
+        let (dx, du) = self.dims;
+        let layout = StateLayout::from_dims(dx, du).ok_or_else(|| NpzError::Bad {
+            path: path.to_path_buf(),
+            name: array.into(),
+            why: format!("dx = {dx}, du = {du} are the dimensions of no task"),
+        })?;
+        let (state, action) = (layout.state_names(), layout.action_names());
+        w.strings(
+            "state_names",
+            &state.iter().map(String::as_str).collect::<Vec<_>>(),
+        )?;
+        w.strings(
+            "action_names",
+            &action.iter().map(String::as_str).collect::<Vec<_>>(),
+        )?;
+        Ok(())
+    }
 }
 
 /// A table file as stored, without any check beyond its schema: the float arrays of

@@ -20,7 +20,7 @@ use crate::io::episode::{EpisodeOrigin, EpisodeRecorder};
 use crate::io::learned::{append_event, LearnedEvent};
 use crate::io::log::{open_log_with, write_record, LogRow, EXPERT_CSV_HEADER};
 use crate::io::run_mcap::{RunMcap, TableInfo};
-use crate::io::table::save_table;
+use crate::io::table::{save_policy_table, save_table};
 use crate::io::IoError;
 use crate::run::Checkpoint;
 use crate::run::RunError;
@@ -55,7 +55,7 @@ impl Publication {
 
 /// The one publication per version of a learner with one goal and a linear-Gaussian
 /// controller: its gain table at `epoch`, N noisy episodes and the noise-free one.
-fn single<L: LinGaussLearn>(learner: &L, epoch: u32) -> Vec<Publication> {
+pub(super) fn single<L: LinGaussLearn>(learner: &L, epoch: u32) -> Vec<Publication> {
     let mut table = learner.table();
     table.epoch = epoch;
     vec![Publication {
@@ -149,7 +149,7 @@ impl ServeLearner for ExpertLearner {
 
 /// [`ServeLearner::open_csv`] of a learner whose log is a [`LogRow`]: the CSV `learner train`
 /// writes (`gaifo_log.csv`, `mdgps_log.csv`), for appending.
-fn open_log_row<L: Learn<Log: LogRow>>(
+pub(super) fn open_log_row<L: Learn<Log: LogRow>>(
     learner: &L,
     out: &Path,
     resumed: bool,
@@ -162,7 +162,10 @@ fn open_log_row<L: Learn<Log: LogRow>>(
 }
 
 /// [`ServeLearner::csv_row`] of a learner whose log is a [`LogRow`].
-fn log_row<L: Learn<Log: LogRow>>(learner: &L, log: &L::Log) -> Result<String, ServeError> {
+pub(super) fn log_row<L: Learn<Log: LogRow>>(
+    learner: &L,
+    log: &L::Log,
+) -> Result<String, ServeError> {
     let mut row = Vec::new();
     log.write_row(&mut row, learner.seed(), L::ALGO)
         .map_err(ServeError::Row)?;
@@ -266,24 +269,31 @@ impl<L: ServeLearner> Run<L> {
         let out = &self.opts.out;
         let version = self.learner.version();
         let publications = self.learner.publications(self.epoch)?;
-        let table = publications
+        let first = publications
             .first()
-            .and_then(Publication::gain_table)
-            .ok_or_else(|| {
-                ServeError::Range("a version's first publication must be a gain table".into())
-            })?;
+            .ok_or_else(|| ServeError::Range("a version without publications (a bug)".into()))?;
         self.learner.checkpoint(out, None)?;
         let dt = self.learner.task().dt;
         let file = crate::io::table::version_path(out, version);
-        save_table(&file, table, dt)?;
+        // The first publication as recorded: a gain table, or a policy learner's policy table.
+        let save = |path: &Path| match &first.table {
+            AnyTable::Gain(t) => save_table(path, t, dt),
+            AnyTable::Policy(t) => save_policy_table(path, t, dt),
+        };
+        save(&file)?;
         crate::io::files::note_checkpoint(out, self.learner.iteration())?;
         crate::io::files::note(out, &[&file])?;
-        save_table(&out.join("latest_table.npz"), table, dt)?;
+        save(&out.join("latest_table.npz"))?;
         if let Some(m) = self.mcap.as_mut() {
+            let (_, epoch) = first.table.publication();
+            let checksum = match &first.table {
+                AnyTable::Gain(t) => t.checksum,
+                AnyTable::Policy(t) => t.checksum,
+            };
             m.table(TableInfo {
                 version,
-                epoch: table.epoch,
-                checksum: table.checksum,
+                epoch,
+                checksum,
                 horizon: self.learner.task().horizon as u64,
                 file,
             });

@@ -8,7 +8,8 @@
 //! Algorithm 1 with step 1 ("execute the controller") done by the real-time loop, for the
 //! learners ([`ServeLearner`]: `--algo expert`, [`ExpertLearner`]; `--algo lqr-gaifo`,
 //! [`LqrGaifo`]; `--algo mdgps`, [`Mdgps`], a gain table per goal and the policy's evaluation
-//! at each goal per version, docs/design.md §6.5). The protocol (same episodes as in process, the task checks, which episodes
+//! at each goal per version, docs/design.md §6.5; the baselines `--algo bco`, `gaifo-td3`
+//! (a policy table per version) and `replay-mean` (a gain table), [`baselines`]). The protocol (same episodes as in process, the task checks, which episodes
 //! count, the files, peers that die, exact resume): docs/design.md §3.6; the loop:
 //! `session.rs`.
 
@@ -24,6 +25,7 @@ use serde::{Deserialize, Serialize};
 use ur5_shared::GainTable;
 
 pub mod assemble;
+mod baselines;
 mod learner;
 pub mod policy;
 mod ports;
@@ -31,6 +33,7 @@ mod session;
 mod task_check;
 
 pub use assemble::{episode_from_samples, Assembled, Assembler, Batch, Counts};
+pub use baselines::{serve_bco, serve_replay_mean, serve_td3};
 pub use learner::{Publication, ServeLearner};
 pub use task_check::motion_per_step;
 
@@ -52,6 +55,13 @@ pub enum ServeAlgo {
     /// MDGPS on several goals (the config is an `MdgpsConfig`; needs `demos`, a folder with one
     /// `.npz` per goal).
     Mdgps,
+    /// BCO(α) from state-only demonstrations (the config is a `BcoConfig`; needs `demos`).
+    Bco,
+    /// GAIfO with TD3 (the config is a `GaifoTd3Config`; needs `demos`).
+    GaifoTd3,
+    /// The demonstrations' mean joint path, no learning (the config is a `ReplayMeanConfig`;
+    /// needs `demos`).
+    ReplayMean,
 }
 
 /// Options of `learner serve` (the `[serve]` table of the config file; the rest of the file is
@@ -452,8 +462,7 @@ fn claim_dirs<S: Serialize>(
 fn republication_epoch(dir: &Path, version: u64, publications: u32) -> Result<u32, ServeError> {
     let path = crate::io::table::version_path(dir, version);
     let recorded = if path.is_file() {
-        crate::io::npz::NpzFile::open_schema(&path, crate::io::table::SCHEMA_VERSION)?
-            .u32_scalar_or_zero("epoch")?
+        crate::io::table::stored_epoch(&path)?
     } else {
         0
     };
@@ -832,5 +841,104 @@ mod tests {
             Err(ServeError::Epoch { .. })
         ));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A learner whose policy is an MLP (BCO) publishes one policy table per version: the
+    /// policy's law, the default plan (the controller's own N noisy and one noise-free
+    /// episodes), its seed's noise; the task checks hold its noisy episodes to that table
+    /// (another seed's noise is refused); the version is recorded as a policy table with its
+    /// epoch, above which a resume publishes; the mean path publishes a gain table with K = 0.
+    #[test]
+    fn a_policy_learner_publishes_and_records_policy_tables() {
+        use imitation::bco::{Bco, BcoConfig};
+        use imitation::rollout::Actors;
+        let mut ecfg = ExpertConfig::default();
+        (ecfg.task.horizon, ecfg.demos) = (8, 2);
+        let hold = imitation::controller::init_hold(&ecfg.task, 0.01);
+        let arm = SimArm::new(ecfg.sim.clone(), ecfg.task.dt).unwrap();
+        let mut demos = imitation::expert::record_demos(&ecfg, &arm, &hold, 0.0).unwrap();
+        demos.cost_random = demos.cost_expert + 1.0;
+        let mut cfg = BcoConfig {
+            samples: 3,
+            seed: 4,
+            ..BcoConfig::default()
+        };
+        cfg.policy.hidden = vec![4];
+        let bco = Bco::new(cfg, demos.clone()).unwrap();
+        let publications = bco.publications(5).unwrap();
+        assert_eq!(publications.len(), 1);
+        let p = &publications[0];
+        assert_eq!((p.goal, p.noisy, p.eval, p.noise_seed), (0, 3, true, 4));
+        let AnyTable::Policy(table) = &p.table else {
+            panic!("{:?}", p.table)
+        };
+        assert_eq!((table.version, table.epoch), (1, 5));
+        assert!(table.plan.is_default());
+        assert_eq!(table.checksum, table.compute_checksum());
+        // The table's law is the policy's, noise included.
+        let s = demos.reach3_state(0, 3);
+        let eps = [0.3, -1.0, 0.5];
+        let (mut a, mut b) = ([0.0; DU], [0.0; DU]);
+        let mode = bco.config().sim.mode;
+        bco.policy().actor().act(0, &s, &eps, mode, &mut a);
+        let mut scratch = ur5_shared::PolicyScratch::default();
+        ur5_shared::policy_action(table, &s, &eps, &mut scratch, &mut b).unwrap();
+        assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        // The task checks: its seed's noisy episode passes, another seed's does not.
+        let task = bco.task().clone();
+        let episode = |seed: u64, k: u64| {
+            let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
+            let mut actor = bco.policy().actor();
+            run_episode(
+                &mut sim,
+                &task,
+                &mut *actor,
+                Some(&mut Noise::new(seed, 1, k)),
+            )
+            .unwrap()
+        };
+        let r = Reference::of(&bco, p, 1);
+        TaskCheck::default()
+            .episode(&episode(4, 2), (1, 5), &r, 0.01)
+            .unwrap();
+        let e = TaskCheck::default()
+            .episode(&episode(7, 0), (1, 5), &r, 0.01)
+            .unwrap_err();
+        assert!(crate::error::line(&e).contains("seed 4"), "{e}");
+        // Saved as the version's record: the policy table with its epoch; a resume above it.
+        let dir = std::env::temp_dir().join(format!("serve-policy-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("tables")).unwrap();
+        let theta = table.theta().to_vec();
+        let mut run = Run {
+            learner: bco,
+            opts: ServeOptions {
+                out: dir.clone(),
+                ..ServeOptions::default()
+            },
+            csv: std::fs::File::create(dir.join("log.csv")).unwrap(),
+            recorder: None,
+            epoch: 2,
+            mcap: None,
+        };
+        let saved = run.save_current().unwrap();
+        assert_eq!(saved[0].table.publication(), (1, 2));
+        for f in [
+            crate::io::table::version_path(&dir, 1),
+            dir.join("latest_table.npz"),
+        ] {
+            assert_eq!(crate::io::table::stored_epoch(&f).unwrap(), 2);
+            let npz = crate::io::npz::NpzFile::open(&f).unwrap();
+            assert_eq!(npz.f64("params").unwrap().1, theta);
+        }
+        assert!(dir.join("iter_000_policy.npz").is_file());
+        assert_eq!(republication_epoch(&dir, 1, 1).unwrap(), 3);
+        std::fs::remove_dir_all(&dir).ok();
+        // The mean path: a gain table with K = 0.
+        let mean = imitation::replay_mean::ReplayMean::new(Default::default(), demos).unwrap();
+        let publications = mean.publications(0).unwrap();
+        let t = publications[0].gain_table().unwrap();
+        assert_eq!(publications[0].noisy, 5);
+        assert!((0..8).all(|i| t.step(i).k_mat.iter().all(|&k| k == 0.0)));
+        assert!((0..8).any(|i| t.step(i).k_vec.iter().any(|&k| k != 0.0)));
     }
 }

@@ -104,9 +104,13 @@ impl<'p, L: ServeLearner> Session<'p, L> {
         let (n, t_len) = (run.learner.samples(), run.learner.task().horizon);
         let goals = run.learner.goal_tasks().len();
         eprintln!(
-            "learner serve ({}): prefix `{}`, published gain table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version{}",
+            "learner serve ({}): prefix `{}`, published {} table version {start_version}{}; waiting for {n} noisy + 1 noise-free episodes of T = {t_len} per version{}",
             L::ALGO,
             run.opts.prefix,
+            match publications[0].table {
+                super::ports::AnyTable::Gain(_) => "gain",
+                super::ports::AnyTable::Policy(_) => "policy",
+            },
             if run.opts.resume.is_some() {
                 format!(" (resumed; publication {} of it)", run.epoch)
             } else {

@@ -1,14 +1,15 @@
 //! The checks that the controller and the arm run the learner's task (docs/design.md §3.6,
 //! "The task must be the controller's and the arm's").
 
-use imitation::rollout::{run_episode, Arm, Episode};
-use ur5_shared::config::{SimConfig, TaskConfig};
+use imitation::rollout::{run_episode, Arm, Episode, Policy};
+use ur5_shared::config::{ActionMode, SimConfig, TaskConfig};
 use ur5_shared::layout::{MAX_DU, MAX_HORIZON};
 use ur5_shared::noise::Noise;
 use ur5_shared::services::ServiceNames;
-use ur5_shared::{GainTable, StepSample};
+use ur5_shared::{policy_action, PolicyScratch, PolicyTable, StepSample};
 
 use super::learner::{Publication, ServeLearner};
+use super::ports::AnyTable;
 use super::ServeError;
 use super::ServeOptions;
 use crate::arm::SimArm;
@@ -83,8 +84,8 @@ pub(super) struct Reference<'a> {
     /// The publication.
     pub(super) version: u64,
     pub(super) epoch: u32,
-    /// Its gain table (`None`: a policy table, whose episodes are noise-free).
-    pub(super) table: Option<&'a GainTable>,
+    /// The table its noisy episodes run (`None`: a noise-free policy table, an evaluation).
+    pub(super) table: Option<&'a AnyTable>,
     /// The run seed (for messages) and the seed of the publication's noise.
     pub(super) seed: u64,
     pub(super) noise_seed: u64,
@@ -110,12 +111,43 @@ impl<'a> Reference<'a> {
             sim: learner.sim_config(),
             version,
             epoch,
-            table: p.gain_table(),
+            table: (p.noisy > 0).then_some(&p.table),
             seed: learner.seed(),
             noise_seed: p.noise_seed,
             samples: learner.samples(),
             single: publications == 1,
             source: L::TASK_SOURCE,
+        }
+    }
+}
+
+/// A table as the controller runs it: a gain table through the controller law, a policy
+/// table through `ur5_shared::policy_action` (an action it cannot compute is NaN, which no
+/// recorded action matches).
+fn actor(table: &AnyTable) -> Box<dyn Policy + '_> {
+    match table {
+        AnyTable::Gain(t) => Box::new(&**t),
+        AnyTable::Policy(t) => Box::new(PolicyActor {
+            table: t,
+            scratch: PolicyScratch::default(),
+        }),
+    }
+}
+
+/// A policy table as a [`Policy`].
+struct PolicyActor<'a> {
+    table: &'a PolicyTable,
+    scratch: PolicyScratch,
+}
+
+impl Policy for PolicyActor<'_> {
+    fn horizon(&self) -> usize {
+        usize::MAX
+    }
+
+    fn act(&mut self, _t: usize, s: &[f64], eps: &[f64], _: ActionMode, a: &mut [f64]) {
+        if policy_action(self.table, s, eps, &mut self.scratch, a).is_err() {
+            a.fill(f64::NAN);
         }
     }
 }
@@ -169,7 +201,7 @@ impl TaskCheck {
     fn check_seed(
         &mut self,
         ep: &Episode,
-        table: &GainTable,
+        table: &AnyTable,
         r: &Reference,
     ) -> Result<(), ServeError> {
         let version = r.version;
@@ -178,11 +210,12 @@ impl TaskCheck {
         let got = &ep.u_policy[..du];
         let seed = r.seed;
         // k beyond N + 1 only if episodes were lost before this one; allow a few.
+        let mut law = actor(table);
         let matches = (0..=4 * (r.samples as u64 + 1)).any(|k| {
             let (mut eps, mut a) = ([0.0; MAX_DU], [0.0; MAX_DU]);
             Noise::new(r.noise_seed, version, k).next_into(&mut eps[..du]);
-            ur5_shared::controller_action(table, 0, s0, &eps[..du], &mut a[..du]).is_ok()
-                && (0..du).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
+            law.act(0, s0, &eps[..du], r.sim.mode, &mut a[..du]);
+            (0..du).all(|i| (a[i] - got[i]).abs() <= 1e-9 * (1.0 + got[i].abs()))
         });
         ensure!(
             matches,
@@ -260,9 +293,8 @@ impl TaskCheck {
             self.start_checked = true;
         }
         if let (true, Some(table)) = (check_dt, table) {
-            let mut table = table.boxed_clone();
             let mut noise = Noise::new(r.noise_seed, version, 0);
-            let replay = run_episode(&mut sim, task, &mut *table, Some(&mut noise))
+            let replay = run_episode(&mut sim, task, &mut *actor(table), Some(&mut noise))
                 .map_err(ServeError::FirstEpisode)?;
             if let (Some(a), Some(b)) = (motion_per_step(ep), motion_per_step(&replay)) {
                 let ratio = a / b;

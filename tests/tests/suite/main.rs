@@ -1,6 +1,7 @@
 //! The crate's integration tests as one test binary (linking one binary, not one per file, is
 //! most of the build time saved; docs/dev.md). One module per area.
 
+mod baselines_ipc;
 mod cli_doc;
 mod errors;
 mod experiment_ipc;
