@@ -116,6 +116,9 @@ pub struct GaifoConfig {
     /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
     pub traj_opt: TrajOptConfig,
     /// How the cost sees the time along the motion (docs/design.md §5 D39); off by default.
+    /// Left out when serialised off, so that settings without it print and hash as before
+    /// (a run of an earlier build resumes).
+    #[serde(skip_serializing_if = "PathSettings::is_off")]
     pub path: PathSettings,
 }
 
@@ -151,6 +154,11 @@ impl Default for PathSettings {
 }
 
 impl PathSettings {
+    /// Off: the paper's cost (the default).
+    pub fn is_off(&self) -> bool {
+        *self == Self::default()
+    }
+
     /// The settings a motion's demonstrations (a tool-path file) take unless the run's
     /// configuration has a `[path]` table (docs/design.md §5 D39).
     pub fn for_motions() -> Self {
