@@ -172,21 +172,29 @@ pub(super) fn log_row<L: Learn<Log: LogRow>>(
     Ok(String::from_utf8_lossy(&row).into_owned())
 }
 
+/// [`ServeLearner`]'s files and lines of a learner whose log is [`GaifoLog`] (`gaifo_log.csv`,
+/// as `learner train` writes it).
+macro_rules! gaifo_log_files {
+    () => {
+        const TASK_SOURCE: &'static str = "the demonstrations";
+        const PROGRESS_HEADER: &'static str = GaifoLog::PROGRESS_HEADER;
+        fn open_csv(&self, out: &Path, resumed: bool) -> Result<std::fs::File, ServeError> {
+            open_log_row(self, out, resumed)
+        }
+        fn csv_row(&self, log: &GaifoLog) -> Result<String, ServeError> {
+            log_row(self, log)
+        }
+        fn progress_line(log: &GaifoLog) -> String {
+            log.progress_line()
+        }
+        fn planned_iterations(&self) -> usize {
+            self.config().iterations
+        }
+    };
+}
+
 impl ServeLearner for LqrGaifo {
-    const TASK_SOURCE: &'static str = "the demonstrations";
-    const PROGRESS_HEADER: &'static str = GaifoLog::PROGRESS_HEADER;
-    fn open_csv(&self, out: &Path, resumed: bool) -> Result<std::fs::File, ServeError> {
-        open_log_row(self, out, resumed)
-    }
-    fn csv_row(&self, log: &GaifoLog) -> Result<String, ServeError> {
-        log_row(self, log)
-    }
-    fn progress_line(log: &GaifoLog) -> String {
-        log.progress_line()
-    }
-    fn planned_iterations(&self) -> usize {
-        self.config().iterations
-    }
+    gaifo_log_files!();
     fn publications(&self, epoch: u32) -> Result<Vec<Publication>, ServeError> {
         Ok(single(self, epoch))
     }

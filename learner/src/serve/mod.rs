@@ -25,8 +25,10 @@ use serde::{Deserialize, Serialize};
 use ur5_shared::GainTable;
 
 pub mod assemble;
-mod baselines;
+// Before `baselines`: its learners take `learner`'s `gaifo_log_files!`.
+#[macro_use]
 mod learner;
+mod baselines;
 pub mod policy;
 mod ports;
 mod session;
