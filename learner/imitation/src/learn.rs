@@ -18,6 +18,33 @@ use crate::controller::to_gain_table;
 use crate::rollout::{execute, Arms, Episode};
 use crate::ImitationError;
 
+/// [`Learn`]'s accessors of a learner of one task whose fields are `task`, `iteration` and
+/// `cfg` (with `sim`, `samples`, `seed` and `iterations`): GAIfO (PPO), GAIfO (TD3), BCO and
+/// the mean path.
+macro_rules! run_accessors {
+    () => {
+        fn task(&self) -> &TaskConfig {
+            &self.task
+        }
+        fn sim_config(&self) -> &SimConfig {
+            &self.cfg.sim
+        }
+        fn samples(&self) -> usize {
+            self.cfg.samples
+        }
+        fn seed(&self) -> u64 {
+            self.cfg.seed
+        }
+        fn iteration(&self) -> usize {
+            self.iteration
+        }
+        fn done(&self) -> bool {
+            self.iteration >= self.cfg.iterations
+        }
+    };
+}
+pub(crate) use run_accessors;
+
 /// An iterative learner.
 pub trait Learn {
     /// What one iteration reports.

@@ -151,24 +151,7 @@ impl Learn for ReplayMean {
     type Log = GaifoLog;
     const ALGO: &'static str = "replay-mean";
 
-    fn task(&self) -> &TaskConfig {
-        &self.task
-    }
-    fn sim_config(&self) -> &SimConfig {
-        &self.cfg.sim
-    }
-    fn samples(&self) -> usize {
-        self.cfg.samples
-    }
-    fn seed(&self) -> u64 {
-        self.cfg.seed
-    }
-    fn iteration(&self) -> usize {
-        self.iteration
-    }
-    fn done(&self) -> bool {
-        self.iteration >= self.cfg.iterations
-    }
+    crate::learn::run_accessors!();
     fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
         execute_table(self, arms)
     }

@@ -477,24 +477,7 @@ impl Learn for GaifoTd3 {
     type Log = GaifoLog;
     const ALGO: &'static str = "gaifo-td3";
 
-    fn task(&self) -> &TaskConfig {
-        &self.task
-    }
-    fn sim_config(&self) -> &SimConfig {
-        &self.cfg.sim
-    }
-    fn samples(&self) -> usize {
-        self.cfg.samples
-    }
-    fn seed(&self) -> u64 {
-        self.cfg.seed
-    }
-    fn iteration(&self) -> usize {
-        self.iteration
-    }
-    fn done(&self) -> bool {
-        self.iteration >= self.cfg.iterations
-    }
+    crate::learn::run_accessors!();
 
     /// Step 1: the actor with exploration noise, and its mean for the evaluation.
     fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {

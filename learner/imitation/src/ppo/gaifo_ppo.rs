@@ -208,24 +208,7 @@ impl Learn for GaifoPpo {
     type Log = GaifoLog;
     const ALGO: &'static str = "gaifo-ppo";
 
-    fn task(&self) -> &TaskConfig {
-        &self.task
-    }
-    fn sim_config(&self) -> &SimConfig {
-        &self.cfg.sim
-    }
-    fn samples(&self) -> usize {
-        self.cfg.samples
-    }
-    fn seed(&self) -> u64 {
-        self.cfg.seed
-    }
-    fn iteration(&self) -> usize {
-        self.iteration
-    }
-    fn done(&self) -> bool {
-        self.iteration >= self.cfg.iterations
-    }
+    crate::learn::run_accessors!();
 
     /// Step 1: the MLP policy with noise, and its mean for the evaluation.
     fn execute(&mut self, arms: &dyn Arms) -> Result<(Vec<Episode>, Vec<Episode>), ImitationError> {
