@@ -181,6 +181,19 @@ pub fn run_kinematic_arm_for(
     Ok(report)
 }
 
+/// The six-joint pose task of T = `horizon` on the UR5 (the controller's default model): the
+/// model's start pose with its wrist, and as goal the tool's pose at other joint angles.
+pub fn pose_task(horizon: usize) -> ur5_shared::config::TaskConfig {
+    use ur5_shared::kinematics::UrKinematics;
+    use ur5_shared::model::UrModel;
+    let kin = UrKinematics::new(UrModel::Ur5, UrModel::Ur5.default_ee_offset());
+    let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&[0.3, -1.7, 2.0, -1.8, -1.5, 0.2]));
+    ur5_shared::config::TaskConfig {
+        horizon,
+        ..ur5_shared::config::TaskConfig::pose_for_model(UrModel::Ur5, goal)
+    }
+}
+
 /// A table that commands the constant goal `q_goal` (rad) with exploration noise of standard
 /// deviation `sigma` (rad) on every joint: K = 0, k = 0, ŝ = 0, â = q_goal, L = σ I. Sealed.
 pub fn constant_goal_table(

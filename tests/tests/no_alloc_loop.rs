@@ -22,12 +22,10 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use rt_controller::config::{LiveViewConfig, Safety};
 use rt_controller::testkit::{
-    constant_goal_table_for, random_policy_table_for, run_kinematic_arm_for,
+    constant_goal_table_for, pose_task, random_policy_table_for, run_kinematic_arm_for,
 };
 use rt_controller::{Controller, ControllerConfig, ExitReason};
 use ur5_shared::config::TaskConfig;
-use ur5_shared::kinematics::UrKinematics;
-use ur5_shared::model::UrModel;
 use ur5_shared::services::{self, unique_prefix, ServiceNames};
 use ur5_shared::{ArmCommand, CommandKind, GainTable, PolicyTable, StateLayout, StepSample};
 
@@ -81,17 +79,6 @@ const V2_FROM_EPISODE: u64 = 4;
 enum Kind {
     Gains,
     Policy,
-}
-
-/// The six-joint pose task on the UR5 (the controller's default model): the start pose of
-/// the model with its wrist, and as goal the tool's pose at other joint angles.
-fn pose_task(horizon: usize) -> TaskConfig {
-    let kin = UrKinematics::new(UrModel::Ur5, UrModel::Ur5.default_ee_offset());
-    let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&[0.3, -1.7, 2.0, -1.8, -1.5, 0.2]));
-    TaskConfig {
-        horizon,
-        ..TaskConfig::pose_for_model(UrModel::Ur5, goal)
-    }
 }
 
 /// The goal angles of table `version` for `layout`'s joints (rad).

@@ -62,18 +62,8 @@ pub enum Kind {
 /// Hidden widths of the benchmark's policy: the MDGPS default (docs/design.md §6.1).
 pub const POLICY_HIDDEN: [usize; 2] = [64, 64];
 
-/// The six-joint pose task of the benchmark (UR5, the controller's default model): its start
-/// pose and as goal the tool's pose at other joint angles.
-pub fn pose_task() -> TaskConfig {
-    use ur5_shared::kinematics::UrKinematics;
-    use ur5_shared::model::UrModel;
-    let kin = UrKinematics::new(UrModel::Ur5, UrModel::Ur5.default_ee_offset());
-    let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&[0.3, -1.7, 2.0, -1.8, -1.5, 0.2]));
-    TaskConfig::pose_for_model(UrModel::Ur5, goal)
-}
-
 /// Runs `episodes` episodes of `horizon` ticks of `task` (its layout: the reaching task or
-/// [`pose_task`]). `spin_ns`: the controller's busy-poll budget per wait (longer measures the
+/// `testkit::pose_task`). `spin_ns`: the controller's busy-poll budget per wait (longer measures the
 /// IPC, shorter measures the sleep granularity too).
 pub fn run(
     episodes: u64,

@@ -369,8 +369,8 @@ fn real_main() -> Result<i32> {
                 .map(|d| bench::run_ros2(episodes, horizon, spin_ns, d))
                 .transpose()?;
             let p = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy, reach())?;
-            let r6 = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains, bench::pose_task())?;
-            let p6 = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy, bench::pose_task())?;
+            let r6 = bench::run(episodes, horizon, spin_ns, bench::Kind::Gains, rt_controller::testkit::pose_task(horizon))?;
+            let p6 = bench::run(episodes, horizon, spin_ns, bench::Kind::Policy, rt_controller::testkit::pose_task(horizon))?;
             let alone = bench::policy_action_alone(20_000);
             let law3 = bench::controller_action_alone(&ur5_shared::StateLayout::REACH3, 20_000);
             let law6 = bench::controller_action_alone(&ur5_shared::StateLayout::POSE6, 20_000);
