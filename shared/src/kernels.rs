@@ -1,5 +1,6 @@
 //! The numerical kernels of every MLP in the project: the dot product, the affine map, tanh, and
-//! the element-wise updates of the backward pass (`axpy`, `mat_t_vec`, `outer_acc`).
+//! the element-wise updates of the backward pass (`axpy`, `mat_t_vec`, `outer_acc`,
+//! `sym_outer_acc_upper`).
 //! The learner's networks (critic, PPO policy and value, MDGPS policy) and the controller's
 //! [`crate::policy_action`] call these and nothing else, so a policy acts with the same bits in
 //! the learner and in the real-time loop (docs/design.md §3.11).
@@ -155,6 +156,24 @@ pub fn outer_acc(c: f64, u: &[f64], v: &[f64], m: &mut [f64]) {
     outer_acc_rows(c, u, v, m);
 }
 
+/// The upper triangle (diagonal included) of `M += c v vᵀ`, `M` row-major `v.len() × v.len()`:
+/// row p is [`axpy`]`(c · v_p, v[p..], M[p, p..])`, bit for bit; the strict lower triangle is
+/// left as it is (a symmetric accumulation mirrors it once at the end).
+///
+/// # Panics
+/// If `m.len() < v.len()²`.
+#[inline]
+pub fn sym_outer_acc_upper(c: f64, v: &[f64], m: &mut [f64]) {
+    assert!(m.len() >= v.len() * v.len());
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present (checked above); the length was checked above.
+        unsafe { sym_outer_acc_upper_avx(c, v, m) };
+        return;
+    }
+    sym_outer_acc_upper_rows(c, v, m);
+}
+
 /// The element loop of [`axpy`] (any CPU; inlined into the AVX versions, where the compiler
 /// vectorises it: no fused multiply-add, per element the same two operations).
 #[inline(always)]
@@ -179,6 +198,24 @@ fn outer_acc_rows(c: f64, u: &[f64], v: &[f64], m: &mut [f64]) {
     for (i, &ui) in u.iter().enumerate() {
         axpy_lanes(c * ui, v, &mut m[i * n..(i + 1) * n]);
     }
+}
+
+#[inline(always)]
+fn sym_outer_acc_upper_rows(c: f64, v: &[f64], m: &mut [f64]) {
+    let n = v.len();
+    for (p, &vp) in v.iter().enumerate() {
+        axpy_lanes(c * vp, &v[p..], &mut m[p * n + p..(p + 1) * n]);
+    }
+}
+
+/// [`sym_outer_acc_upper`] compiled for AVX.
+///
+/// # Safety
+/// The CPU has AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn sym_outer_acc_upper_avx(c: f64, v: &[f64], m: &mut [f64]) {
+    sym_outer_acc_upper_rows(c, v, m);
 }
 
 /// [`axpy`] compiled for AVX.
@@ -327,7 +364,7 @@ mod tests {
         }
     }
 
-    /// `axpy`, `mat_t_vec` and `outer_acc` (AVX where the CPU has it) equal their
+    /// `axpy`, `mat_t_vec`, `outer_acc` and `sym_outer_acc_upper` (AVX where the CPU has it) equal their
     /// element-by-element scalar loops bit for bit, for lengths around the four-wide blocks
     /// and magnitudes over many binades.
     #[test]
@@ -373,6 +410,16 @@ mod tests {
                     }
                 }
                 assert_eq!(bits(&fast), bits(&slow), "outer_acc rows {rows}, n {n}");
+                // Upper triangle of M += c v vᵀ (n × n).
+                let mut fast: Vec<f64> = (0..n * n).map(|_| big(&mut rng)).collect();
+                let mut slow = fast.clone();
+                sym_outer_acc_upper(c, &v, &mut fast);
+                for p in 0..n {
+                    for q in p..n {
+                        slow[p * n + q] += (c * v[p]) * v[q];
+                    }
+                }
+                assert_eq!(bits(&fast), bits(&slow), "sym_outer_acc_upper n {n}");
             }
         }
     }

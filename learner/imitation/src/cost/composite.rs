@@ -17,6 +17,7 @@
 //! projects the per-step mean of ∇²D on the PSD cone before the chain rule.
 
 use faer::Mat;
+use ur5_shared::kernels::axpy;
 use ur5_shared::layout::{MAX_DU, MAX_DX};
 
 use super::Cost;
@@ -167,25 +168,27 @@ fn compose_hessian(
     }
     let f = dyn_.fm.slice(t);
     // HM = h M (2dX × dY), M = [[I, 0]; F_t]; row-major scratch of at most 2 MAX_DX × MAX_DY.
+    // Row r: h[r, :dX] (0 in the action columns) + Σ_k h[r, dX + k] F_t[k, :], the terms of each
+    // entry added in the order of k ([`axpy`]: the scalar sum's bits, a row at a time).
     let mut hm = [0.0; 2 * MAX_DX * (MAX_DX + MAX_DU)];
     for r in 0..n_in {
-        for c in 0..dy {
-            let mut acc = if c < dx { h[(r, c)] } else { 0.0 };
-            for k in 0..dx {
-                acc += h[(r, dx + k)] * f[k * dy + c];
-            }
-            hm[r * dy + c] = acc;
+        let row = &mut hm[r * dy..(r + 1) * dy];
+        for c in 0..dx {
+            row[c] = h[(r, c)];
+        }
+        for k in 0..dx {
+            axpy(h[(r, dx + k)], &f[k * dy..(k + 1) * dy], row);
         }
     }
     // Mᵀ (HM): row i of Mᵀ is e_i (i < dX) in the first block plus F_t[:, i] in the second.
     let mut hess = [0.0; (MAX_DX + MAX_DU) * (MAX_DX + MAX_DU)];
     for i in 0..dy {
-        for j in 0..dy {
-            let mut acc = if i < dx { hm[i * dy + j] } else { 0.0 };
-            for k in 0..dx {
-                acc += f[k * dy + i] * hm[(dx + k) * dy + j];
-            }
-            hess[i * dy + j] = acc;
+        let row = &mut hess[i * dy..(i + 1) * dy];
+        if i < dx {
+            row.copy_from_slice(&hm[i * dy..(i + 1) * dy]);
+        }
+        for k in 0..dx {
+            axpy(f[k * dy + i], &hm[(dx + k) * dy..(dx + k + 1) * dy], row);
         }
     }
     for i in 0..dx {
@@ -253,16 +256,23 @@ pub fn project_psd(h: &mut Mat<f64>) {
     if (0..lam.nrows()).all(|i| lam[i] >= 0.0) {
         return;
     }
+    // Entry (i, j) is Σ_{k: λ_k > 0} (u_ik λ_k) u_jk, the terms added in the order of k: row i
+    // as [`axpy`]s of U's columns (the scalar triple loop's bits, a row at a time).
     let n = h.nrows();
+    let mut cols = Vec::with_capacity(n * n);
+    let mut keep = Vec::with_capacity(n);
+    for k in (0..n).filter(|&k| lam[k] > 0.0) {
+        cols.extend((0..n).map(|j| u[(j, k)]));
+        keep.push(k);
+    }
+    let mut row = vec![0.0; n];
     for i in 0..n {
-        for j in 0..n {
-            let mut acc = 0.0;
-            for k in 0..n {
-                if lam[k] > 0.0 {
-                    acc += u[(i, k)] * lam[k] * u[(j, k)];
-                }
-            }
-            h[(i, j)] = acc;
+        row.fill(0.0);
+        for (m, &k) in keep.iter().enumerate() {
+            axpy(u[(i, k)] * lam[k], &cols[m * n..(m + 1) * n], &mut row);
+        }
+        for (j, &v) in row.iter().enumerate() {
+            h[(i, j)] = v;
         }
     }
 }

@@ -32,7 +32,9 @@
 use rand::Rng;
 // The one dot product, affine map and tanh of every MLP (the controller's policy_action uses
 // the same, so learner and controller agree bit for bit).
-use ur5_shared::kernels::{affine, axpy, dot, mat_t_vec, outer_acc, tanh_in_place};
+use ur5_shared::kernels::{
+    affine, axpy, dot, mat_t_vec, outer_acc, sym_outer_acc_upper, tanh_in_place,
+};
 
 /// A tanh MLP `R^{n_0} → R` with a flat parameter vector (layout in the module docs).
 #[derive(Clone, Debug, PartialEq)]
@@ -230,12 +232,9 @@ impl Mlp {
                 let n_in = self.sizes[k];
                 let w = self.w(k);
                 let (prev, cur) = (&ws.jac_a[..n_in * n0], &mut ws.jac_b[..n * n0]);
-                cur.fill(0.0);
                 for i in 0..n {
                     let row = &mut cur[i * n0..(i + 1) * n0];
-                    for j in 0..n_in {
-                        axpy(w[i * n_in + j], &prev[j * n0..(j + 1) * n0], row);
-                    }
+                    mat_t_vec(prev, n_in, n0, &w[i * n_in..(i + 1) * n_in], row);
                 }
                 std::mem::swap(&mut ws.jac_a, &mut ws.jac_b);
             }
@@ -245,10 +244,7 @@ impl Mlp {
                 let c = g * (-2.0 * z * sp);
                 let row = &mut jac[i * n0..(i + 1) * n0];
                 // Upper triangle of c · row rowᵀ.
-                for p in 0..n0 {
-                    let cp = c * row[p];
-                    axpy(cp, &row[p..], &mut hess[p * n0 + p..(p + 1) * n0]);
-                }
+                sym_outer_acc_upper(c, row, &mut hess[..n0 * n0]);
                 // Scale the row by s'_k for the next layer's Jacobian.
                 for v in row.iter_mut() {
                     *v *= sp;

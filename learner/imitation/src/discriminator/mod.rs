@@ -672,8 +672,9 @@ impl Discriminator {
             return y;
         }
         let s = &self.norm.std;
-        for p in 0..d {
-            for q in 0..d {
+        // Column by column (faer's storage order); the same quotient per entry.
+        for q in 0..d {
+            for p in 0..d {
                 hess[(p, q)] = ws.hess_u[p * d + q] / (s[p] * s[q]);
             }
         }
