@@ -31,6 +31,9 @@ pub struct PeerHealth {
     pub lost_arm: AtomicU64,
     /// Learner processes that died (or left) during the run.
     pub lost_learner: AtomicU64,
+    /// Scans completed (or `u64::MAX` when the monitor could not start): see
+    /// [`PeerMonitor::wait_first_scan`].
+    pub scans: AtomicU64,
 }
 
 /// Peer processes that died or left: a snapshot of [`PeerHealth`].
@@ -79,6 +82,22 @@ fn open<T: core::fmt::Debug + ZeroCopySend + 'static>(
 }
 
 impl PeerMonitor {
+    /// Blocks until the monitor has finished one scan (or could not start), at most `timeout`;
+    /// returns whether it did. Called in the controller's setup, after the arm and learner are
+    /// connected, so that every peer present at the start is known before the loop runs: a
+    /// peer killed in the first milliseconds is then reported as lost, not missed (its ports
+    /// may be cleaned up before a first scan that comes later would see them).
+    pub fn wait_first_scan(&self, timeout: Duration) -> bool {
+        let t0 = std::time::Instant::now();
+        while self.health.scans.load(Ordering::Acquire) == 0 {
+            if t0.elapsed() >= timeout {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        true
+    }
+
     /// Starts the monitor for the services under `prefix`, looking every `period`.
     pub fn spawn(prefix: &str, period: Duration) -> Self {
         let stop = Arc::new(AtomicBool::new(false));
@@ -106,6 +125,14 @@ enum Role {
 }
 
 fn watch(names: &ServiceNames, period: Duration, stop: &AtomicBool, health: &PeerHealth) {
+    scan_loop(names, period, stop, health);
+    // Could not start, or stopped: nobody waits for a scan that will not come.
+    let _ = health
+        .scans
+        .compare_exchange(0, u64::MAX, Ordering::AcqRel, Ordering::Acquire);
+}
+
+fn scan_loop(names: &ServiceNames, period: Duration, stop: &AtomicBool, health: &PeerHealth) {
     let Ok(node) = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
@@ -184,6 +211,7 @@ fn watch(names: &ServiceNames, period: Duration, stop: &AtomicBool, health: &Pee
                 );
             }
         }
+        health.scans.fetch_add(1, Ordering::AcqRel);
         std::thread::sleep(period);
     }
 }

@@ -319,6 +319,22 @@ impl<A: ArmBackend> Controller<A> {
         task_targets[..t.len()].copy_from_slice(&t);
         let mut last_safe_q = [0.0; MAX_JOINTS];
         last_safe_q.copy_from_slice(&latest.q);
+        let monitor = (cfg.monitor_period_s > 0.0).then(|| {
+            let m = PeerMonitor::spawn(
+                &cfg.prefix,
+                core::time::Duration::from_secs_f64(cfg.monitor_period_s),
+            );
+            // The peers connected above are known before the first episode.
+            if !m.wait_first_scan(core::time::Duration::from_secs_f64(cfg.setup_timeout_s)) {
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "rt-controller: the peer monitor did not finish a scan within {} s; a peer \
+                     lost early may not be reported",
+                    cfg.setup_timeout_s
+                );
+            }
+            m
+        });
         Ok(Self {
             tables: TableBuffer::new(
                 cfg.bounds,
@@ -359,12 +375,7 @@ impl<A: ArmBackend> Controller<A> {
             pending_exit: None,
             no_table_since_ns: 0,
             wall_s: 0.0,
-            monitor: (cfg.monitor_period_s > 0.0).then(|| {
-                PeerMonitor::spawn(
-                    &cfg.prefix,
-                    core::time::Duration::from_secs_f64(cfg.monitor_period_s),
-                )
-            }),
+            monitor,
             live,
             arm,
             ports,
