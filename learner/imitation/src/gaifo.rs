@@ -84,7 +84,7 @@ impl LqrGaifo {
             None
         };
         let learner = Learner::new(
-            cfg.algorithm.clone(),
+            cfg.algorithm_for(task.layout().du()),
             cfg.prior.clone(),
             cfg.fit.clone(),
             cfg.traj_opt.clone(),

@@ -106,7 +106,8 @@ pub struct GaifoConfig {
     pub discriminator: DiscriminatorConfig,
     /// Seed of every random draw of the run: noise, GMM, critic (docs/design.md §3.7).
     pub seed: u64,
-    /// GPS algorithm settings; KL step 0.2 per time step (docs/design.md §1.3 step 6).
+    /// GPS algorithm settings; KL step 0.2 per time step of a three-joint arm, scaled by
+    /// dU / 3 for the task's joints ([`Self::algorithm_for`]; docs/design.md §1.3 step 6, §5 D40).
     pub algorithm: AlgorithmConfig,
     /// GPS dynamics prior on the last 10 trajectories with ≤ 5 EM iterations, for the
     /// learner-time budget (docs/design.md §5 D9).
@@ -242,6 +243,19 @@ impl Default for GaifoConfig {
 }
 
 impl GaifoConfig {
+    /// The GPS algorithm settings of a task with `du` action dimensions: [`Self::algorithm`]
+    /// with `kl_step` × dU / 3 (docs/design.md §5 D40). `kl_step` is the paper's bound per time
+    /// step for its three joints; the KL between two trajectory distributions of one dynamics
+    /// is the expected KL of their action distributions, a sum over the action dimensions, so
+    /// the same bound per joint lets each of six joints move as far per iteration as each of
+    /// three. Three joints: `kl_step` × 1, the same bits.
+    pub fn algorithm_for(&self, du: usize) -> AlgorithmConfig {
+        AlgorithmConfig {
+            kl_step: self.algorithm.kl_step * (du as f64 / 3.0),
+            ..self.algorithm.clone()
+        }
+    }
+
     /// [`MAX_COUNT`], under the name the application uses.
     pub const MAX_COUNT: usize = MAX_COUNT;
 
@@ -293,6 +307,19 @@ impl GaifoConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The KL bound per time step scales with the action dimensions, and three joints keep
+    /// `kl_step` bit for bit (docs/design.md §5 D40).
+    #[test]
+    fn the_kl_bound_scales_with_the_joints() {
+        let cfg = GaifoConfig::default();
+        assert_eq!(
+            cfg.algorithm_for(3).kl_step.to_bits(),
+            cfg.algorithm.kl_step.to_bits()
+        );
+        assert_eq!(cfg.algorithm_for(6).kl_step, 2.0 * cfg.algorithm.kl_step);
+        assert_eq!(cfg.algorithm_for(6).max_step_mult, cfg.algorithm.max_step_mult);
+    }
 
     #[test]
     fn settings_that_cannot_work_are_refused_naming_the_setting() {
