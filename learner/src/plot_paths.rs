@@ -148,7 +148,7 @@ fn draw_panel(
     let mut chart = ChartBuilder::on(&area)
         .caption(&panel.title, (FONT, 15).into_font())
         .margin(6)
-        .x_label_area_size(22)
+        .x_label_area_size(34)
         .y_label_area_size(34)
         .build_cartesian_2d(xr, yr)
         .map_err(plot_err)?;
