@@ -308,11 +308,11 @@ pub fn plot_panels(
 /// the shaded band: they would overlap into a smear.
 pub const MAX_POINTS_FOR_ERROR_BARS: usize = 60;
 
-const MIN_SIDE: u32 = 200;
-const MAX_SIDE: u32 = 16384;
+pub(crate) const MIN_SIDE: u32 = 200;
+pub(crate) const MAX_SIDE: u32 = 16384;
 
 /// The family name the bundled font is registered under (plotters' default sans-serif name).
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 static DEJAVU_SANS: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
 /// Registers the bundled DejaVu Sans with plotters' ab_glyph text backend, once per process.
@@ -460,7 +460,7 @@ fn pad(lo: f64, hi: f64, frac: f64) -> std::ops::Range<f64> {
     }
 }
 
-fn plot_err<E: Display>(e: E) -> PlotError {
+pub(crate) fn plot_err<E: Display>(e: E) -> PlotError {
     PlotError::Plotters(e.to_string())
 }
 

@@ -39,6 +39,7 @@
 pub mod dashboard;
 pub mod plant;
 pub mod playback;
+pub mod playback_motions;
 pub mod program;
 pub mod rtde;
 

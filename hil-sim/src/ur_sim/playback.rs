@@ -416,7 +416,7 @@ fn longest_s(motions: usize) -> f64 {
 }
 
 /// Minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ on τ ∈ [0, 1] (Flash & Hogan 1985).
-fn min_jerk(tau: f64) -> f64 {
+pub(crate) fn min_jerk(tau: f64) -> f64 {
     let t = tau.clamp(0.0, 1.0);
     t * t * t * (10.0 + t * (-15.0 + 6.0 * t))
 }

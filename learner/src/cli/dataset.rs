@@ -38,6 +38,33 @@ pub enum DatasetCmd {
     /// tool-path CSV file that `--demos` takes (docs/design.md §4.18); without SHAPE, list
     /// the shapes.
     Lasa(LasaArgs),
+    /// Write a tool-path CSV file (e.g. of `dataset lasa`) as a playback file for `hil-sim
+    /// ur-sim --playback`: each path a motion moved by hand between two rests, from one start
+    /// pose, the wrist locked, so that `learner record` can be taught it (docs/ur.md,
+    /// "Teaching a motion by hand").
+    Playback(PlaybackArgs),
+}
+
+/// Arguments of `learner dataset playback`.
+#[derive(Args, Debug)]
+pub struct PlaybackArgs {
+    /// Tool-path CSV file (`episode,t,x,y,z`).
+    pub paths: PathBuf,
+    /// Output playback file (new: an existing one is never replaced).
+    pub out: PathBuf,
+    /// The arm the paths are solved on (its default wrist lock and tool point).
+    #[arg(long, default_value = "ur5")]
+    pub model: ur5_shared::UrModel,
+    /// Rows per second of the file (Hz, 10 to 1000).
+    #[arg(long, default_value_t = 100.0)]
+    pub rate: f64,
+    /// Seed of the rests, the returns and the tremor: the same seed and paths give the same
+    /// file, bit for bit.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print a one-line JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `learner dataset lasa`.
@@ -254,6 +281,39 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
                 a.duration,
                 out.display()
             );
+            Ok(())
+        }
+        DatasetCmd::Playback(a) => {
+            anyhow::ensure!(
+                !a.out.exists(),
+                "{} exists: dataset playback writes a new file and never replaces one",
+                a.out.display()
+            );
+            let sim = ur5_shared::config::SimConfig::for_model(a.model);
+            let p = crate::playback::playback_of_file(&a.paths, &sim, a.rate, a.seed)?;
+            if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                crate::io::create_dir(dir)?;
+            }
+            std::fs::write(&a.out, p.to_csv())
+                .with_context(|| format!("writing {}", a.out.display()))?;
+            let motions = crate::io::tool_path::read(&a.paths)?.len();
+            eprintln!(
+                "{} motions of {} on the {} taught by hand between rests: {} rows, {:.1} s -> {}",
+                motions,
+                a.paths.display(),
+                a.model,
+                p.t.len(),
+                p.duration(),
+                a.out.display()
+            );
+            if a.json {
+                println!(
+                    "{}",
+                    serde_json::json!({"command": "dataset playback", "model": a.model,
+                        "motions": motions, "rows": p.t.len(), "duration_s": p.duration(),
+                        "out": a.out})
+                );
+            }
             Ok(())
         }
         DatasetCmd::Check(a) => {

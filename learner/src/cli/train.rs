@@ -457,18 +457,24 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Whether the run imitates a motion (its `--demos` is a tool-path file, docs/design.md
-/// §4.17); if so and `--config` has no `[path]` table, `cfg.path` becomes
+/// Whether the run imitates a motion: its `--demos` is a tool-path file (docs/design.md
+/// §4.17), or its settings turn the path's terms on (`[path]`, e.g. for a motion recorded by
+/// `learner record`). A tool-path file without a `[path]` table in `--config` takes
 /// [`PathSettings::for_motions`] (docs/design.md §5 D39). Reaches keep the paper's cost.
 fn motion_defaults(args: &TrainArgs, cfg: &mut GaifoConfig) -> anyhow::Result<bool> {
-    let motion = args
-        .demos
-        .as_deref()
-        .is_some_and(crate::io::tool_path::is_tool_path_csv);
-    if motion && !config_has_table(args.common.config.as_deref(), "path")? {
+    let paths = demos_are_paths(args);
+    if paths && !config_has_table(args.common.config.as_deref(), "path")? {
         cfg.path = PathSettings::for_motions();
     }
-    Ok(motion)
+    Ok(paths || !cfg.path.is_off())
+}
+
+/// Whether `--demos` is a tool-path file: a motion, whose summary leads with the path
+/// ([`report_motion`]).
+pub(super) fn demos_are_paths(args: &TrainArgs) -> bool {
+    args.demos
+        .as_deref()
+        .is_some_and(crate::io::tool_path::is_tool_path_csv)
 }
 
 /// Whether the TOML file `config` (if any) has a top-level key `key`.
@@ -531,10 +537,7 @@ fn run_ppo(args: &TrainArgs, demos: Demos, pcfg: &GaifoPpoConfig) -> anyhow::Res
     );
     let bar = crate::progress::Progress::new(pcfg.iterations as u64, "iterations");
     let spread = imitation::iteration_log::demo_spread(&demos).map(|s| s.rmse_m);
-    let motion = args
-        .demos
-        .as_deref()
-        .is_some_and(crate::io::tool_path::is_tool_path_csv);
+    let motion = demos_are_paths(args);
     let logs = crate::run::train_ppo(&pcfg, demos, Some(&out), |l, u| {
         bar.done_one(&ppo_line(l, u))
     })?;

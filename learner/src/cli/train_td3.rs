@@ -4,7 +4,7 @@
 use imitation::iteration_log::GaifoLog;
 use imitation::offpolicy::{GaifoTd3Config, UpdateStats};
 
-use super::train::{check_resumed_algo, open_run, report, TrainArgs};
+use super::train::{check_resumed_algo, demos_are_paths, open_run, report_motion, TrainArgs};
 
 /// The progress line of an off-policy GAIfO iteration.
 fn line(l: &GaifoLog, u: &UpdateStats) -> String {
@@ -86,6 +86,14 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             cfg.iterations
         );
     }
-    report(&logs, "gaifo-td3", cfg.seed, &out, args.common.json, spread);
+    report_motion(
+        &logs,
+        "gaifo-td3",
+        cfg.seed,
+        &out,
+        args.common.json,
+        spread,
+        demos_are_paths(args),
+    );
     Ok(())
 }

@@ -12,7 +12,12 @@
 //! `OUT/runs/`, saying how many are missing.
 //!
 //! Outputs: `OUT/demos/<shape>.csv` (the placed drawings, a tool-path file `--demos` takes),
-//! `OUT/runs/*.json`, `OUT/shapes.txt` (the table) and `OUT/shapes.json`.
+//! `OUT/runs/*.json` (each with the last iteration's noise-free tool path), `OUT/shapes.txt`
+//! (the table), `OUT/shapes.json` and per algorithm the picture `OUT/shapes_<algorithm>.png`:
+//! a panel a shape, in its plane, the drawings as the arm is given them in grey, every seed's
+//! last noise-free episode in colour, the goal ringed ([`crate::plot_paths`]). Like the
+//! tables, the pictures are written from the job files, so a run of the command whose jobs are
+//! all done redraws them.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -22,7 +27,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use imitation::demos::Demos;
+use imitation::gaifo::{GaifoLog, LqrGaifo};
+use imitation::learn::Learn;
 use imitation::settings::PathSettings;
+use imitation::tool_path::{tool_paths, Point};
 
 use super::shard::Shard;
 use super::{baseline, pool, ExperimentConfig, ExperimentError, Job, Spec, BASELINES};
@@ -153,6 +161,10 @@ pub struct ShapeRun {
     pub performance: Vec<f64>,
     /// Wall time of the job (s).
     pub wall_s: f64,
+    /// The last iteration's noise-free episode's tool path (m, base frame); empty in job
+    /// files of earlier builds, which the pictures then leave out.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub path_m: Vec<Point>,
 }
 
 fn job_file(out: &Path, shape: &str, algo: &str, seed: u64) -> PathBuf {
@@ -290,7 +302,7 @@ pub fn run(
     pool.install(|| {
         todo.par_iter()
             .map(|(shape, algo, j, hash)| -> Result<(), ExperimentError> {
-                let run = j.run().map_err(|e| ExperimentError::Job {
+                let (run, path) = run_job(j).map_err(|e| ExperimentError::Job {
                     label: format!("{} seed {}", j.variant, j.seed()),
                     source: Box::new(e),
                 })?;
@@ -307,6 +319,7 @@ pub fn run(
                     final_distance_m: run.logs.iter().map(|l| l.final_distance).collect(),
                     performance: run.logs.iter().map(|l| l.performance).collect(),
                     wall_s: run.wall_s,
+                    path_m: path,
                 };
                 let path = job_file(out, shape, algo, run.seed);
                 ur5_shared::atomic_file::write(&path, &serde_json::to_vec_pretty(&r)?)?;
@@ -336,7 +349,11 @@ pub fn run(
             .map(|(_, d)| d.clone());
         let d = match d {
             Some(d) => d,
-            None => Arc::new(shape_demos(cfg, shape, out)?),
+            None => {
+                let d = Arc::new(shape_demos(cfg, shape, out)?);
+                demos.push((shape.clone(), d.clone()));
+                d
+            }
         };
         let (_, hash) = job(cfg, shape, algo, *seed, d)?;
         match read_done(out, shape, algo, *seed, &hash)? {
@@ -348,12 +365,132 @@ pub fn run(
     std::fs::write(out.join("shapes.txt"), &text)?;
     std::fs::write(out.join("shapes.json"), serde_json::to_vec_pretty(&json)?)?;
     eprint!("{text}");
+    pictures(cfg, &done, &demos, out)?;
     eprintln!(
         "experiment shapes done in {:.0} s; shapes.txt in {}",
         t0.elapsed().as_secs_f64(),
         out.display()
     );
     Ok(json)
+}
+
+/// Runs job `j` as [`super::Job::run`] does (the same iterations, bit for bit), keeping the
+/// last iteration's noise-free tool path (m).
+fn run_job(j: &Job) -> Result<(super::Run, Vec<Point>), ExperimentError> {
+    fn go<R: Learn<Log = GaifoLog>>(
+        mut run: R,
+        iterations: usize,
+        target: Point,
+    ) -> Result<(Vec<GaifoLog>, Vec<Point>), ExperimentError> {
+        let arm = crate::run::arm_for(&run)?;
+        let (mut logs, mut path) = (Vec::with_capacity(iterations), Vec::new());
+        for _ in 0..iterations {
+            let (log, evals) = imitation::learn::iterate(&mut run, &arm)?;
+            if let Some(e) = evals.first() {
+                path = tool_paths(&e.x, &e.layout, e.horizon(), &target).swap_remove(0);
+            }
+            logs.push(log);
+        }
+        Ok((logs, path))
+    }
+    use imitation::bco::Bco;
+    use imitation::offpolicy::GaifoTd3;
+    use imitation::ppo::gaifo_ppo::GaifoPpo;
+    use imitation::replay_mean::ReplayMean;
+    let t0 = Instant::now();
+    let (d, goal) = ((*j.demos).clone(), j.demos.goal);
+    let (logs, path) = match &j.spec {
+        Spec::LqrGaifo(c) => go(LqrGaifo::new(c.clone(), d)?, c.iterations, goal),
+        Spec::GaifoPpo(c) => go(GaifoPpo::new(c.clone(), d)?, c.iterations, goal),
+        Spec::Bco(c) => go(Bco::new(c.clone(), d)?, c.iterations, goal),
+        Spec::GaifoTd3(c) => go(GaifoTd3::new(c.clone(), d)?, c.iterations, goal),
+        Spec::ReplayMean(c) => go(ReplayMean::new(c.clone(), d)?, c.iterations, goal),
+    }?;
+    let run = super::Run {
+        variant: j.variant.clone(),
+        algorithm: j.algorithm().into(),
+        seed: j.seed(),
+        episodes_per_iteration: j.spec.samples(),
+        horizon: j.demos.horizon,
+        logs,
+        wall_s: t0.elapsed().as_secs_f64(),
+    };
+    Ok((run, path))
+}
+
+/// Per algorithm, `OUT/shapes_<algorithm>.png` from the job files `done` (module docs): a
+/// panel a shape with a run that kept its path, in cm along the shapes' plane from the goal.
+fn pictures(
+    cfg: &ExperimentConfig,
+    done: &[ShapeRun],
+    demos: &[(String, Arc<Demos>)],
+    out: &Path,
+) -> Result<(), ExperimentError> {
+    let s = &cfg.shapes;
+    let end = cfg.lqr_gaifo.sim.model.default_goal();
+    let placement = lasa::Placement {
+        plane: s.plane()?,
+        end,
+        size: s.size,
+        duration: s.duration,
+    };
+    let (u, v) = placement.axes().map_err(ExperimentError::Settings)?;
+    let flat = |p: &Point| -> [f64; 2] {
+        let d: [f64; 3] = core::array::from_fn(|k| p[k] - end[k]);
+        let dot = |a: &[f64; 3]| 100.0 * (0..3).map(|k| a[k] * d[k]).sum::<f64>();
+        [dot(&u), dot(&v)]
+    };
+    for algo in &s.algorithms {
+        let mut panels = Vec::new();
+        for (shape, d) in demos {
+            let runs: Vec<&ShapeRun> = done
+                .iter()
+                .filter(|r| &r.shape == shape && &r.algorithm == algo && !r.path_m.is_empty())
+                .collect();
+            if runs.is_empty() {
+                continue;
+            }
+            let ratio = runs
+                .iter()
+                .map(|r| r.path_rmse_m.last().copied().unwrap_or(f64::NAN) / r.spread_rmse_m)
+                .sum::<f64>()
+                / runs.len() as f64;
+            panels.push(crate::plot_paths::PathPanel {
+                title: format!("{shape}  {ratio:.2}× spread"),
+                demos: tool_paths(&d.states, &d.layout(), d.horizon, &d.goal)
+                    .iter()
+                    .map(|p| p.iter().map(flat).collect())
+                    .collect(),
+                imitations: runs
+                    .iter()
+                    .map(|r| r.path_m.iter().map(flat).collect())
+                    .collect(),
+                goal: flat(&d.goal),
+            });
+        }
+        if panels.is_empty() {
+            eprintln!(
+                "no picture for {algo}: its job files keep no tool path (written by an earlier \
+                 build); run those jobs again to draw them"
+            );
+            continue;
+        }
+        let file = out.join(format!("shapes_{algo}.png"));
+        crate::plot_paths::plot_path_grid(
+            &file,
+            &format!(
+                "LASA shapes, {algo}, iteration {}: drawings grey, last noise-free episode per seed \
+                 in colour, goal ringed (cm, {} plane)",
+                cfg.iterations, s.plane
+            ),
+            "cm",
+            &panels,
+            6,
+            300,
+        )?;
+        eprintln!("picture of {} shape(s) -> {}", panels.len(), file.display());
+    }
+    Ok(())
 }
 
 /// The job's file if it is there and was run with the settings of `hash`.

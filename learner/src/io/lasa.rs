@@ -126,7 +126,7 @@ pub struct Placement {
 
 impl Placement {
     /// The plane's two axes (unit vectors, base frame).
-    fn axes(&self) -> Result<([f64; 3], [f64; 3]), String> {
+    pub fn axes(&self) -> Result<([f64; 3], [f64; 3]), String> {
         Ok(match self.plane {
             Plane::Facing => {
                 let r = self.end[0].hypot(self.end[1]);

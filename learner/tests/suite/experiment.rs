@@ -162,7 +162,8 @@ fn ablation_runs_each_variant_and_reports_final_distance() {
 
 /// `learner experiment shapes` (docs/design.md §5 D39): shards write each job's file into one
 /// folder, the table counts the jobs not done yet, a second run of a finished list runs
-/// nothing, and the sharded jobs equal the unsharded ones.
+/// nothing (and redraws the picture), the sharded jobs equal the unsharded ones, and a job file
+/// keeps the tool path its last path RMSE measures.
 #[test]
 fn shapes_shards_resume_and_tabulate_the_path() {
     let (a, b) = (tmp("shapes-a"), tmp("shapes-b"));
@@ -230,6 +231,36 @@ fn shapes_shards_resume_and_tabulate_the_path() {
         assert_eq!(x["path_rmse_m"].as_array().unwrap().len(), 2);
     }
     assert!(a.join("demos/Worm.csv").is_file());
+    // Each job file keeps its last noise-free tool path: against the drawings' mean path it
+    // measures the last path RMSE of the file.
+    let demos = learner::io::demos::load_checked(
+        &a.join("demos/Worm.csv"),
+        &ur5_shared::config::SimConfig::default(),
+    )
+    .unwrap();
+    let paths = imitation::tool_path::tool_paths(
+        &demos.states,
+        &demos.layout(),
+        demos.horizon,
+        &demos.goal,
+    );
+    let refs: Vec<&[imitation::tool_path::Point]> = paths.iter().map(Vec::as_slice).collect();
+    let mean = imitation::tool_path::mean_path(&refs).unwrap();
+    let job: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(a.join("runs/Worm_lqr-gaifo_s1.json")).unwrap())
+            .unwrap();
+    let kept: Vec<imitation::tool_path::Point> =
+        serde_json::from_value(job["path_m"].clone()).unwrap();
+    assert_eq!(kept.len(), demos.horizon);
+    let last = job["path_rmse_m"][1].as_f64().unwrap();
+    let rmse = imitation::tool_path::rmse(&kept, &mean).unwrap();
+    assert!((rmse - last).abs() <= 1e-12 * last, "{rmse} against {last}");
+    // The picture is drawn from the job files: gone, a run that runs nothing draws it again.
+    let png = a.join("shapes_lqr-gaifo.png");
+    assert!(png.is_file());
+    std::fs::remove_file(&png).unwrap();
+    call(args(&a, None));
+    assert!(png.is_file(), "redrawn");
     let text = std::fs::read_to_string(a.join("shapes.txt")).unwrap();
     assert!(
         text.contains("Worm") && text.contains("lqr-gaifo"),

@@ -156,3 +156,62 @@ fn a_motion_reports_the_path_first_and_takes_the_tracking_term() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The baselines' front ends (BCO, GAIfO (TD3), the mean path) report a motion's path first
+/// as LQR+GAIfO does; MDGPS, whose conditions are reaches, refuses the path's terms with the
+/// way out.
+#[test]
+fn the_baselines_report_a_motions_path_and_mdgps_refuses_its_terms() {
+    let dir = scratch("motion-baselines");
+    let csv = dir.join("strokes.csv");
+    std::fs::write(&csv, strokes_csv(false)).unwrap();
+    for algo in ["bco", "gaifo-td3", "replay-mean"] {
+        let out = dir.join(algo);
+        let (ok, stdout, err) = learner_output(&[
+            "train",
+            "--algo",
+            algo,
+            "--demos",
+            csv.to_str().unwrap(),
+            "--iterations",
+            "1",
+            "--json",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{algo}: {err}");
+        let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+        let ratio = v["path_ratio"].as_f64().unwrap();
+        let spread = v["demo_spread_rmse_m"].as_f64().unwrap();
+        assert!(
+            (ratio - v["path_rmse_m"].as_f64().unwrap() / spread).abs() < 1e-12 * ratio,
+            "{algo}: {v}"
+        );
+        let verdict = v["path_verdict"].as_str().unwrap();
+        let done = err.lines().find(|l| l.starts_with("done: ")).unwrap();
+        assert!(
+            done.starts_with(&format!("done: {verdict}")) && done.contains("spread"),
+            "{algo}: {done}"
+        );
+    }
+    let goals = dir.join("goals");
+    std::fs::create_dir_all(&goals).unwrap();
+    let cfg = dir.join("mdgps.toml");
+    std::fs::write(&cfg, "[lqr_gaifo.path]\ntracking_weight = 0.1\n").unwrap();
+    let (ok, _, err) = learner_output(&[
+        "train",
+        "--algo",
+        "mdgps",
+        "--demos",
+        goals.to_str().unwrap(),
+        "--config",
+        cfg.to_str().unwrap(),
+        "--out",
+        dir.join("mdgps").to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("lqr_gaifo.path") && err.contains("--algo lqr-gaifo"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -22,4 +22,5 @@ mod ros2_backend;
 mod serve;
 mod soak;
 mod teach;
+mod teach_motion;
 mod ur_backend;

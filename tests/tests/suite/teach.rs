@@ -16,6 +16,7 @@ use integration_tests::{
     cleanup_dead_nodes, json_summary, scratch, unique_prefix, write_config, Proc, TestLearner,
 };
 use ur5_shared::config::{SimConfig, TaskConfig};
+use ur5_shared::msg::StepSample;
 use ur5_shared::UrModel;
 
 const LONG: Duration = Duration::from_secs(120);
@@ -50,7 +51,7 @@ pub(crate) fn generate_reaches(m: UrModel, motions: usize, seed: u64, dir: &Path
     assert_eq!(gen["motions"], motions);
 }
 
-fn run_ok(name: &str, label: &str, args: &[&str], dir: &Path) -> serde_json::Value {
+pub(crate) fn run_ok(name: &str, label: &str, args: &[&str], dir: &Path) -> serde_json::Value {
     let mut p = Proc::spawn(name, label, args, dir);
     let (code, out) = p.wait(LONG);
     let log = p.log();
@@ -111,6 +112,32 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     .unwrap();
 
     // The learned table over RTDE on a UR5e ur-sim (lockstep), the demonstrations' task.
+    let episode = run_over_rtde(m, &demos, &table, &dir, "teach");
+    let last = episode.last().expect("the noise-free episode's samples");
+    assert_eq!(last.t as usize, T - 1);
+    let e = &last.s[ur5_shared::layout::EE_MINUS_GOAL];
+    let dist = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+    eprintln!(
+        "teach: recorded goal spread {spread:.4} m; the table of iteration {best} (of \
+         {ITERATIONS}) ends {sim_distance:.4} m from the goal in the learner's sim, {dist:.4} m \
+         over RTDE"
+    );
+    assert!(dist <= 0.01, "final distance over RTDE {dist} m");
+    cleanup_dead_nodes();
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Runs `table` over RTDE on a ur-sim of model `m` (lockstep) under `rt-controller` on the
+/// task of `demos` (its start pose, goal, horizon and period), a noisy episode and the
+/// noise-free one; checks that the controller ended well and no protective stop happened.
+/// Returns the noise-free episode's samples in time order.
+pub(crate) fn run_over_rtde(
+    m: UrModel,
+    demos: &imitation::demos::Demos,
+    table: &ur5_shared::GainTable,
+    dir: &Path,
+    tag: &str,
+) -> Vec<StepSample> {
     let run_sim = ur_sim::spawn(
         &TaskConfig::for_model(m),
         &SimConfig::for_model(m),
@@ -127,24 +154,26 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     let dashboard = run_sim.dashboard_addr.expect("dashboard").port();
     let f = |v: [f64; 3]| format!("[{}, {}, {}]", v[0], v[1], v[2]);
     let ctl_cfg = write_config(
-        &dir,
+        dir,
         "ctl.toml",
         &format!(
             "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n\
-             [task]\nhorizon = {T}\ndt = {}\nstart_q = {}\ngoal = {}\n\
-             [arm]\nbackend = \"ur\"\n[arm.ur]\nmodel = \"ur5e\"\nhost = \"127.0.0.1\"\n\
+             [task]\nhorizon = {}\ndt = {}\nstart_q = {}\ngoal = {}\n\
+             [arm]\nbackend = \"ur\"\n[arm.ur]\nmodel = \"{}\"\nhost = \"127.0.0.1\"\n\
              rtde_port = {}\nsecondary_port = {}\ndashboard_port = {dashboard}\nreverse_port = 0\n\
              receive_timeout_ms = 1000\n",
+            demos.horizon,
             demos.dt,
             f(demos.start_q.as_slice().try_into().unwrap()),
             f(demos.goal),
+            m.name(),
             run_sim.rtde_addr.port(),
             run_sim.secondary_addr.port()
         ),
     );
-    let prefix = unique_prefix("teach");
+    let prefix = unique_prefix(tag);
     let mut learner = TestLearner::learner_only(&prefix);
-    learner.publish(&table);
+    learner.publish(table);
     let mut ctl = Proc::spawn(
         "rt-controller",
         "controller",
@@ -158,7 +187,7 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
             "--episodes",
             "2",
         ],
-        &dir,
+        dir,
     );
     let t0 = Instant::now();
     while ctl.running() && t0.elapsed() < LONG {
@@ -170,23 +199,14 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     assert_eq!(code, Some(0), "controller:\n{}", ctl.log());
     let summary = run_sim.stop();
     assert_eq!(summary.protective_stops, 0, "{summary:?}");
-    let last = learner
+    let mut episode: Vec<StepSample> = learner
         .received
-        .iter()
+        .into_iter()
         .filter(|s| s.noise == 0)
-        .max_by_key(|s| s.t)
-        .expect("the noise-free episode's samples");
-    assert_eq!(last.t as usize, T - 1);
-    let e = &last.s[ur5_shared::layout::EE_MINUS_GOAL];
-    let dist = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
-    eprintln!(
-        "teach: recorded goal spread {spread:.4} m; the table of iteration {best} (of \
-         {ITERATIONS}) ends {sim_distance:.4} m from the goal in the learner's sim, {dist:.4} m \
-         over RTDE"
-    );
-    assert!(dist <= 0.01, "final distance over RTDE {dist} m");
-    cleanup_dead_nodes();
-    std::fs::remove_dir_all(&dir).ok();
+        .collect();
+    episode.sort_by_key(|s| s.t);
+    episode.dedup_by_key(|s| s.t);
+    episode
 }
 
 /// Recording from a CB3 controller (125 Hz, the UR5 of the paper): the recorder takes the
@@ -211,57 +231,9 @@ fn record_played_back(
     seed: u64,
     dir: &Path,
 ) -> (imitation::demos::Demos, f64) {
-    let d = |p: &str| dir.join(p).display().to_string();
-    let (model, n) = (m.name(), motions.to_string());
     generate_reaches(m, motions, seed, dir);
 
-    // The recorder reads every package it is sent.
-    let sim = ur_sim::spawn(
-        &TaskConfig::for_model(m),
-        &SimConfig::for_model(m),
-        &UrSimConfig {
-            rtde_port: 0,
-            secondary_port: 0,
-            series,
-            time_compression: 10.0,
-            playback: Some(dir.join("reaches.csv")),
-            // The recorder asks the robot's model there.
-            dashboard_port: Some(0),
-            ..UrSimConfig::default()
-        },
-    )
-    .expect("ur-sim plays");
-    let port = sim.rtde_addr.port().to_string();
-    let dashboard = sim.dashboard_addr.expect("dashboard").port().to_string();
-    let rec_cfg = write_config(
-        dir,
-        "record.toml",
-        &format!("[task]\nhorizon = {T}\n[sim]\nmodel = \"{model}\"\n"),
-    );
-    let rec = run_ok(
-        "learner",
-        "record",
-        &[
-            "record",
-            "--ur",
-            "127.0.0.1",
-            "--rtde-port",
-            &port,
-            "--dashboard-port",
-            &dashboard,
-            "--episodes",
-            &n,
-            "--config",
-            &rec_cfg,
-            "--out",
-            &d("rec"),
-            "--max-time-s",
-            "100",
-            "--json",
-        ],
-        dir,
-    );
-    sim.stop();
+    let rec = record_playback(m, series, &dir.join("reaches.csv"), motions, T, dir);
     let rate = rec["rate_hz"].as_f64().unwrap();
     assert!(
         (rate - 1.0 / series.cycle_s()).abs() < 1.0,
@@ -285,4 +257,67 @@ fn record_played_back(
     );
     assert!(demos.cost_expert < demos.cost_random, "{rec}");
     (demos, spread)
+}
+
+/// An in-process ur-sim of model `m` and `series` plays the file `playback` as freedrive at 10
+/// times real time, and `learner record` cuts `episodes` demonstrations of `horizon` steps
+/// from its RTDE stream into `dir/rec`. Returns the recorder's JSON summary.
+pub(crate) fn record_playback(
+    m: UrModel,
+    series: Series,
+    playback: &Path,
+    episodes: usize,
+    horizon: usize,
+    dir: &Path,
+) -> serde_json::Value {
+    let d = |p: &str| dir.join(p).display().to_string();
+    let model = m.name();
+    // The recorder reads every package it is sent.
+    let sim = ur_sim::spawn(
+        &TaskConfig::for_model(m),
+        &SimConfig::for_model(m),
+        &UrSimConfig {
+            rtde_port: 0,
+            secondary_port: 0,
+            series,
+            time_compression: 10.0,
+            playback: Some(playback.to_owned()),
+            // The recorder asks the robot's model there.
+            dashboard_port: Some(0),
+            ..UrSimConfig::default()
+        },
+    )
+    .expect("ur-sim plays");
+    let port = sim.rtde_addr.port().to_string();
+    let dashboard = sim.dashboard_addr.expect("dashboard").port().to_string();
+    let rec_cfg = write_config(
+        dir,
+        "record.toml",
+        &format!("[task]\nhorizon = {horizon}\n[sim]\nmodel = \"{model}\"\n"),
+    );
+    let rec = run_ok(
+        "learner",
+        "record",
+        &[
+            "record",
+            "--ur",
+            "127.0.0.1",
+            "--rtde-port",
+            &port,
+            "--dashboard-port",
+            &dashboard,
+            "--episodes",
+            &episodes.to_string(),
+            "--config",
+            &rec_cfg,
+            "--out",
+            &d("rec"),
+            "--max-time-s",
+            "100",
+            "--json",
+        ],
+        dir,
+    );
+    sim.stop();
+    rec
 }

@@ -85,9 +85,19 @@ impl Default for MdgpsConfig {
 }
 
 impl MdgpsConfig {
-    /// Checks every setting (LQR+GAIfO's, the KL step and the policy's).
+    /// Checks every setting (LQR+GAIfO's, the KL step and the policy's). The path's terms
+    /// (`[lqr_gaifo.path]`, docs/design.md §5 D39) are refused: MDGPS's conditions are reaches
+    /// to several goals, and its composite cost has no per-step tracking term or phase input.
     pub fn validate(&self) -> Result<(), ImitationError> {
         self.lqr_gaifo.validate()?;
+        if !self.lqr_gaifo.path.is_off() {
+            return Err(ImitationError::Config(format!(
+                "lqr_gaifo.path ({:?}): MDGPS imitates reaches to several goals and does not \
+                 take the path's tracking term or phase input; remove [lqr_gaifo.path], or \
+                 imitate the motion with --algo lqr-gaifo (docs/design.md §5 D39)",
+                self.lqr_gaifo.path
+            )));
+        }
         crate::error::check_reals(&[(
             "kl_step",
             self.kl_step,
@@ -725,5 +735,24 @@ fn linear_gaussian_step(
         lin.pol_covar.slice_mut(t)[j * du + j] = std[j] * std[j];
         lin.chol_pol_covar.slice_mut(t)[j * du + j] = std[j];
         lin.inv_pol_covar.slice_mut(t)[j * du + j] = 1.0 / (std[j] * std[j]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The path's terms are refused with a message that names them and the way out; the
+    /// defaults pass.
+    #[test]
+    fn the_paths_terms_are_refused() {
+        MdgpsConfig::default().validate().unwrap();
+        let mut c = MdgpsConfig::default();
+        c.lqr_gaifo.path = crate::settings::PathSettings::for_motions();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("lqr_gaifo.path") && e.contains("--algo lqr-gaifo"),
+            "{e}"
+        );
     }
 }

@@ -4,7 +4,7 @@
 use imitation::bco::{Bco, BcoConfig};
 use imitation::replay_mean::ReplayMeanConfig;
 
-use super::{open_run, report, TrainArgs};
+use super::{demos_are_paths, open_run, report_motion, TrainArgs};
 
 /// `learner train --algo bco`: BCO(α) in process, a checkpoint before every iteration, exact
 /// `--resume`.
@@ -53,7 +53,15 @@ pub(super) fn run_bco(args: &TrainArgs) -> anyhow::Result<()> {
             cfg.iterations
         );
     }
-    report(&logs, "bco", cfg.seed, &out, args.common.json, spread);
+    report_motion(
+        &logs,
+        "bco",
+        cfg.seed,
+        &out,
+        args.common.json,
+        spread,
+        demos_are_paths(args),
+    );
     Ok(())
 }
 
@@ -88,13 +96,14 @@ pub(super) fn run_replay_mean(args: &TrainArgs) -> anyhow::Result<()> {
             l.iteration, l.task_cost, l.performance, l.final_distance
         )
     })?;
-    report(
+    report_motion(
         &logs,
         "replay-mean",
         cfg.seed,
         &out,
         args.common.json,
         spread,
+        demos_are_paths(args),
     );
     Ok(())
 }

@@ -1,0 +1,202 @@
+//! Tool paths as motions taught by hand (`learner dataset playback`, docs/ur.md "Teaching a
+//! motion by hand"): a tool-path file (docs/design.md §4.17; a LASA shape placed by `learner
+//! dataset lasa`, a tracked pen, another arm's log) becomes a freedrive playback for `hil-sim
+//! ur-sim --playback`, each path a motion between two rests
+//! ([`hil_sim::ur_sim::playback_motions`]), so that `learner record` can be tried on any motion,
+//! not only reaches.
+//!
+//! The paths are solved on the arm as `--demos` solves them (§4.17 steps 2–4, at the file's own
+//! samples instead of the control period): every path's start blended into the paths' mean
+//! start (the offset fading linearly in time to nothing at its end), the mean start solved
+//! nearest the model's default pose, every sample nearest the previous solution, the wrist
+//! locked at `sim.wrist_q` (a point path: a three-joint task's demonstrations). Every motion
+//! thus starts from one pose, the one a recorder takes for the start pose.
+
+use std::path::Path;
+
+use hil_sim::ur_sim::playback::{Playback, PlaybackError};
+use hil_sim::ur_sim::playback_motions::{play_motions, Motion, MotionsConfig};
+use ur5_shared::config::SimConfig;
+use ur5_shared::ik::UrIk;
+use ur5_shared::kinematics::UrKinematics;
+
+use crate::io::tool_path::{self, ToolPath, ToolPathError};
+use crate::io::IoError;
+
+/// Why tool paths cannot be played as motions taught by hand.
+#[derive(Debug, thiserror::Error)]
+pub enum TeachPlaybackError {
+    /// The file cannot be read as tool paths.
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// A path the arm cannot follow (the episode, the time and why).
+    #[error("{}", path.display())]
+    Paths {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Which episode and time, and why.
+        source: ToolPathError,
+    },
+    /// The playback cannot be made (a joint too fast, too many rows).
+    #[error(transparent)]
+    Playback(#[from] PlaybackError),
+}
+
+/// The joint paths of `paths` on the arm of `sim`, the wrist locked (module docs): one motion
+/// a path, its sample times kept.
+pub fn motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, ToolPathError> {
+    if paths.is_empty() {
+        return Err(ToolPathError::Empty);
+    }
+    for p in paths {
+        if p.t.len() < 2 || p.points.len() != p.t.len() {
+            return Err(ToolPathError::Samples {
+                episode: p.episode,
+                why: format!("{} samples: at least 2", p.t.len()),
+            });
+        }
+    }
+    let n = paths.len() as f64;
+    let start: [f64; 3] =
+        core::array::from_fn(|r| paths.iter().map(|p| p.points[0][r]).sum::<f64>() / n);
+    let ik = UrIk::new(sim.model, sim.ee_offset);
+    let wrist = sim.wrist_q;
+    let start_q = ik
+        .nearest_point(start, wrist, &sim.model.default_start_q())
+        .map_err(|source| ToolPathError::Start {
+            point: start,
+            source,
+        })?;
+    paths
+        .iter()
+        .map(|path| {
+            let (t0, t1) = (path.t[0], path.t[path.t.len() - 1]);
+            let offset: [f64; 3] = core::array::from_fn(|r| start[r] - path.points[0][r]);
+            let mut prev = start_q;
+            let mut q = Vec::with_capacity(path.t.len());
+            for (k, (&t, x)) in path.t.iter().zip(&path.points).enumerate() {
+                let fade = 1.0 - (t - t0) / (t1 - t0);
+                let p: [f64; 3] = core::array::from_fn(|r| x[r] + fade * offset[r]);
+                if k > 0 {
+                    prev = ik.nearest_point(p, wrist, &prev).map_err(|source| {
+                        ToolPathError::Unreachable {
+                            episode: path.episode,
+                            t,
+                            point: p,
+                            source,
+                        }
+                    })?;
+                }
+                q.push(UrKinematics::six(&prev, &wrist));
+            }
+            Ok(Motion {
+                t: path.t.clone(),
+                q,
+            })
+        })
+        .collect()
+}
+
+/// The tool-path file `path` as a playback of motions taught by hand on the arm of `sim`
+/// (module docs), rows at `rate_hz`, rests and tremor seeded by `seed`.
+pub fn playback_of_file(
+    path: &Path,
+    sim: &SimConfig,
+    rate_hz: f64,
+    seed: u64,
+) -> Result<Playback, TeachPlaybackError> {
+    let paths = tool_path::read(path)?;
+    let motions = motions_of(&paths, sim).map_err(|source| TeachPlaybackError::Paths {
+        path: path.to_owned(),
+        source,
+    })?;
+    Ok(play_motions(&MotionsConfig {
+        model: sim.model,
+        motions,
+        rate_hz,
+        seed,
+    })?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ur5_shared::UrModel;
+
+    /// Two short strokes in a vertical plane before the default goal, starting 1 cm apart.
+    fn strokes(goal: [f64; 3]) -> Vec<ToolPath> {
+        (0..2)
+            .map(|e| {
+                let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.04).collect();
+                let points = t
+                    .iter()
+                    .map(|&s| {
+                        let u = s / 2.0;
+                        let lift = 0.05 * (std::f64::consts::PI * u).sin();
+                        [
+                            goal[0],
+                            goal[1] + 0.1 * (1.0 - u) + 0.01 * e as f64 * (1.0 - u),
+                            goal[2] + lift,
+                        ]
+                    })
+                    .collect();
+                ToolPath {
+                    episode: e as u64,
+                    t,
+                    points,
+                    rotations: None,
+                }
+            })
+            .collect()
+    }
+
+    /// The motions start from one pose (the blended start), follow the paths through the
+    /// forward kinematics (exactly at the end, within the blend elsewhere), keep the wrist
+    /// locked and play as a valid file.
+    #[test]
+    fn paths_become_motions_from_one_start_pose() {
+        let sim = SimConfig::for_model(UrModel::Ur5);
+        let paths = strokes(sim.model.default_goal());
+        let motions = motions_of(&paths, &sim).unwrap();
+        let kin = UrKinematics::new(sim.model, sim.ee_offset);
+        assert_eq!(motions[0].q[0], motions[1].q[0], "one start pose");
+        for (m, p) in motions.iter().zip(&paths) {
+            assert_eq!(m.t, p.t);
+            let end = kin.ee_point(m.q.last().unwrap());
+            let want = p.points.last().unwrap();
+            assert!(
+                (0..3).all(|r| (end[r] - want[r]).abs() < 1e-6),
+                "{end:?} {want:?}"
+            );
+            for (k, q) in m.q.iter().enumerate() {
+                assert_eq!(q[3..], sim.wrist_q[..], "wrist locked");
+                let x = kin.ee_point(q);
+                let blend = 0.005 * (1.0 - p.t[k] / 2.0) + 1e-6;
+                let off = (0..3)
+                    .map(|r| (x[r] - p.points[k][r]).abs())
+                    .fold(0.0, f64::max);
+                assert!(off <= blend, "episode {}, sample {k}: {off} m", p.episode);
+            }
+        }
+        let pb = play_motions(&MotionsConfig {
+            model: sim.model,
+            motions,
+            rate_hz: 100.0,
+            seed: 0,
+        })
+        .unwrap();
+        assert!(pb.duration() > 2.0 * 2.0 + 4.0 * 1.0, "{}", pb.duration());
+    }
+
+    #[test]
+    fn a_point_out_of_reach_is_refused_naming_episode_and_time() {
+        let sim = SimConfig::for_model(UrModel::Ur5);
+        let mut paths = strokes(sim.model.default_goal());
+        paths[1].points[30] = [3.0, 0.0, 0.5];
+        let e = motions_of(&paths, &sim).unwrap_err().to_string();
+        assert!(
+            e.contains("episode 1, t = 1.2 s") && e.contains("out of the arm's reach"),
+            "{e}"
+        );
+    }
+}
