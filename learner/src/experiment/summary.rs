@@ -332,7 +332,7 @@ pub fn csv_header() -> String {
 
 /// The files an experiment's results are, in its output folder: [`write_outputs`]'s and
 /// `goals::write_precision`'s.
-pub fn results_files(name: &str) -> [String; 7] {
+pub fn results_files(name: &str) -> [String; 9] {
     [
         format!("{name}.csv"),
         format!("{name}.png"),
@@ -341,6 +341,8 @@ pub fn results_files(name: &str) -> [String; 7] {
         "precision.txt".into(),
         "reach.txt".into(),
         "spread.csv".into(),
+        "summary_goals.txt".into(),
+        "summary_goals.json".into(),
     ]
 }
 
