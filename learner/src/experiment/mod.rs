@@ -786,6 +786,32 @@ mod tests {
         assert!(text.contains("2/3") && text.contains("1/3"), "{text}");
     }
 
+    /// A first variant that needed no episode (the mean path) is no reference for a ratio:
+    /// the ratio column says "-", never NaN or infinity.
+    #[test]
+    fn no_ratio_to_a_reference_that_needed_no_episode() {
+        let run = |variant: &str, d: [f64; 2]| Run {
+            variant: variant.into(),
+            algorithm: "x".into(),
+            seed: 0,
+            episodes_per_iteration: 5,
+            horizon: 100,
+            logs: d
+                .iter()
+                .map(|&d| GaifoLog {
+                    performance: 1.0,
+                    final_distance: d,
+                    ..GaifoLog::default()
+                })
+                .collect(),
+            wall_s: 0.0,
+        };
+        let rows = summarise(&[run("replay-mean", [0.001; 2]), run("b", [0.1, 0.005])]);
+        assert_eq!(rows[1].to_within_1cm.episodes_mean, 5.0);
+        let text = summary_text(&rows);
+        assert!(!text.contains("NaN") && !text.contains("inf"), "{text}");
+    }
+
     #[test]
     fn report_points_end_with_the_last_iteration() {
         assert_eq!(report_points(3), vec![0, 2]);

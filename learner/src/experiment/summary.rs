@@ -293,7 +293,8 @@ fn sample_efficiency_text(s: &mut String, rows: &[SummaryRow]) {
             }
         };
         let ratio = match base {
-            Some(b) if !none && b.seeds_reached > 0 => {
+            // A reference that needed no episode (the mean path) makes no ratio.
+            Some(b) if !none && b.seeds_reached > 0 && b.episodes_mean > 0.0 => {
                 let bound = if r.seeds_reached < r.seeds { "≥" } else { "" };
                 format!("{bound}{:.1}×", r.episodes_mean / b.episodes_mean)
             }
