@@ -140,8 +140,8 @@ pub fn run_cli(args: ExperimentArgs) -> anyhow::Result<()> {
     if args.expert_only {
         anyhow::ensure!(
             crate::experiment::scheduler::trains_one_expert(name, &cfg),
-            "--expert-only: {} does not train one expert (comparison, stability and ablation on \
-             one goal do)",
+            "--expert-only: {} does not train one expert (stability does, and comparison and \
+             ablation at one goal)",
             name.as_str()
         );
         cfg.validate(name)?;

@@ -1,7 +1,7 @@
 //! Goals over the workspace and the precision figures of runs at several goals: what
-//! `learner experiment pilqr` and `learner experiment ablation` (with
-//! `ablation_workspace_goals`) report beyond the per-iteration curves (docs/results.md,
-//! "Steady precision").
+//! `learner experiment pilqr`, `learner experiment ablation` (with `ablation_workspace_goals`)
+//! and `learner experiment comparison` (with `comparison_workspace_goals`) report beyond the
+//! per-iteration curves (docs/results.md, "Steady precision").
 //!
 //! - `reach.txt` ([`reach_text`]): per variant, the training episodes each seed needed to first
 //!   end within 1 cm and within 3 mm of the goal;
@@ -10,15 +10,22 @@
 //! - `precision.txt` ([`precision_text`]): per variant over all its goals and seeds, the final
 //!   distance at iterations 20, 30, 40 and 50 and how many runs stay within 1.5 cm from 20 on,
 //!   both for the controller of each iteration and for the one kept by the task-cost-free
-//!   criterion [`kept_by_demo_gap`].
+//!   criterion [`kept_by_demo_gap`];
+//! - `summary_goals.txt` / `summary_goals.json` ([`summarise_over_goals`]): the experiment's
+//!   summary with each variant's runs at every goal pooled (episodes to normalised 0.9 and to
+//!   1 cm, final distance and normalised performance at the report iterations, learner CPU).
+
+use std::path::Path;
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use imitation::demos::Demos;
 use imitation::gaifo::GaifoLog;
 
-use super::summary::by_variant;
-use super::{ExperimentConfig, ExperimentError, Run};
+use super::summary::{by_variant, summarise, summary_text, SummaryRow};
+use super::{ExperimentConfig, ExperimentError, Job, Run};
+use crate::error::ensure;
 
 /// Goals spread over the UR5's workspace away from the default one (m, base frame), named
 /// for the experiments that test precision beyond the goal the defaults were tuned on. The
@@ -146,6 +153,57 @@ pub fn goal_demos(
     })
 }
 
+/// One demonstration set per [`WORKSPACE_GOALS`] goal (its expert's, [`goal_demos`]) with its
+/// label suffix `" goal <name>"`, for an experiment run on the workspace goals by the setting
+/// `setting`; `demos` (one set for one goal) is refused.
+pub fn workspace_goal_sets(
+    cfg: &ExperimentConfig,
+    demos: Option<&Path>,
+    setting: &str,
+    pool: &rayon::ThreadPool,
+) -> Result<Vec<(String, Arc<Demos>)>, ExperimentError> {
+    ensure!(
+        demos.is_none(),
+        ExperimentError::Settings(format!(
+            "--demos does not apply with {setting} (an expert per goal)"
+        ))
+    );
+    let g = goal_list(&[], true, cfg.expert.task.goal);
+    Ok(goal_demos(cfg, &g, pool)?
+        .into_iter()
+        .zip(&g)
+        .map(|(d, &p)| (format!(" goal {}", goal_name(p)), Arc::new(d)))
+        .collect())
+}
+
+/// The jobs `jobs` makes of each set's demonstrations, their variants labelled with the set's
+/// suffix (`"<variant> goal <name>"` from [`workspace_goal_sets`]; none for one goal), goal by
+/// goal.
+pub fn at_goals(sets: &[(String, Arc<Demos>)], jobs: impl Fn(Arc<Demos>) -> Vec<Job>) -> Vec<Job> {
+    sets.iter()
+        .flat_map(|(goal, d)| {
+            jobs(d.clone()).into_iter().map(move |mut j| {
+                j.variant += goal;
+                j
+            })
+        })
+        .collect()
+}
+
+/// The summary ([`summarise`]) with each variant's runs at all its goals pooled: a row per
+/// variant without its goal, whose `seeds` counts runs (goals × seeds). Normalised
+/// performance is each run's own (against its goal's demonstrations and random policy).
+pub fn summarise_over_goals(runs: &[Run]) -> Vec<SummaryRow> {
+    let pooled: Vec<Run> = runs
+        .iter()
+        .map(|r| Run {
+            variant: variant_of(&r.variant).to_string(),
+            ..r.clone()
+        })
+        .collect();
+    summarise(&pooled)
+}
+
 /// The final distance (m) of the controller a user would deploy after each iteration if
 /// they kept, of the controllers run so far, the one with the smallest
 /// [`GaifoLog::demo_gap`] (a criterion that needs no task cost: how far its noisy episodes
@@ -163,13 +221,26 @@ pub fn kept_by_demo_gap(logs: &[GaifoLog]) -> Vec<f64> {
         .collect()
 }
 
-/// Writes `precision.txt` ([`precision_text`]), `reach.txt` and `spread.csv` of `runs` into
-/// `out`; returns the precision table.
-pub fn write_precision(runs: &[Run], out: &std::path::Path) -> Result<String, ExperimentError> {
+/// Writes `precision.txt` ([`precision_text`]), `reach.txt`, `spread.csv` and
+/// `summary_goals.txt` / `.json` ([`summarise_over_goals`]) of `runs` into `out`; returns the
+/// precision table.
+pub fn write_precision(runs: &[Run], out: &Path) -> Result<String, ExperimentError> {
     let precision = precision_text(runs);
     std::fs::write(out.join("precision.txt"), &precision)?;
     std::fs::write(out.join("reach.txt"), reach_text(runs))?;
     std::fs::write(out.join("spread.csv"), spread_csv(runs))?;
+    let rows = summarise_over_goals(runs);
+    std::fs::write(
+        out.join("summary_goals.txt"),
+        format!(
+            "Every goal pooled: a row per variant over its goals x seeds (the seeds column counts runs)\n\n{}",
+            summary_text(&rows)
+        ),
+    )?;
+    std::fs::write(
+        out.join("summary_goals.json"),
+        serde_json::to_vec_pretty(&rows)?,
+    )?;
     Ok(precision)
 }
 
@@ -259,6 +330,133 @@ mod tests {
             final_distance: d,
             ..GaifoLog::default()
         }
+    }
+
+    /// A demonstration set that only labels jobs (never run): its goal tells the sets apart.
+    fn demos_at(goal: [f64; 3]) -> Arc<Demos> {
+        Arc::new(Demos {
+            states: Vec::new(),
+            actions: Vec::new(),
+            model: Default::default(),
+            count: 0,
+            horizon: 2,
+            goal,
+            goal_pose: None,
+            tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
+            start_q: [0.0; 3].into(),
+            dt: 0.05,
+            seed: 0,
+            cost_random: 1.0,
+            cost_expert: 0.0,
+        })
+    }
+
+    /// The comparison at two goals: every algorithm × seed at each goal, on that goal's
+    /// demonstrations, labelled `"<algorithm> goal <name>"`; at one goal (no suffix) the
+    /// labels are the algorithms'.
+    #[test]
+    fn the_comparison_runs_every_algorithm_and_seed_at_each_goal() {
+        let mut cfg = ExperimentConfig::default();
+        cfg.seeds = 2;
+        cfg.algorithms = vec!["lqr-gaifo".into(), "bco".into(), "replay-mean".into()];
+        let (a, b) = (WORKSPACE_GOALS[0], WORKSPACE_GOALS[2]);
+        let sets = vec![
+            (format!(" goal {}", goal_name(a.1)), demos_at(a.1)),
+            (format!(" goal {}", goal_name(b.1)), demos_at(b.1)),
+        ];
+        let jobs = at_goals(&sets, |d| super::super::comparison_jobs(&cfg, d));
+        assert_eq!(jobs.len(), 2 * 3 * 2);
+        for (k, j) in jobs.iter().enumerate() {
+            let (goal, algorithm, seed) =
+                ([a, b][k / 6], cfg.algorithms[k / 2 % 3].as_str(), k % 2);
+            assert_eq!(j.variant, format!("{algorithm} goal {}", goal.0), "job {k}");
+            assert_eq!(
+                (j.spec.algorithm(), j.spec.seed()),
+                (algorithm, seed as u64)
+            );
+            assert_eq!(j.demos.goal, goal.1, "job {k}");
+        }
+        let one = at_goals(&[(String::new(), demos_at(a.1))], |d| {
+            super::super::comparison_jobs(&cfg, d)
+        });
+        let labels: Vec<&str> = one.iter().map(|j| j.variant.as_str()).collect();
+        assert_eq!(
+            labels,
+            [
+                "lqr-gaifo",
+                "lqr-gaifo",
+                "bco",
+                "bco",
+                "replay-mean",
+                "replay-mean"
+            ]
+        );
+    }
+
+    /// Over the goals, a variant's runs at every goal make one row: its episodes to 1 cm and
+    /// its final distances are over all of them, and the variants keep their order.
+    #[test]
+    fn the_summary_over_goals_pools_a_variants_runs_at_every_goal() {
+        let run = |variant: &str, seed: u64, d: [f64; 3]| Run {
+            variant: variant.into(),
+            algorithm: "lqr-gaifo".into(),
+            seed,
+            episodes_per_iteration: 5,
+            horizon: 100,
+            logs: d.iter().map(|&d| log(f64::NAN, d)).collect(),
+            wall_s: 0.0,
+        };
+        let runs = [
+            run("a goal table", 0, [0.1, 0.005, 0.004]),
+            run("b goal table", 0, [0.1, 0.1, 0.1]),
+            run("a goal far-low", 0, [0.1, 0.05, 0.002]),
+            run("a goal far-low", 1, [0.1, 0.05, 0.05]),
+        ];
+        let rows = summarise_over_goals(&runs);
+        let names: Vec<&str> = rows.iter().map(|r| r.variant.as_str()).collect();
+        assert_eq!(names, ["a", "b"]);
+        let a = &rows[0];
+        assert_eq!(a.seeds, 3);
+        // Within 1 cm: after 1·5 and 2·5 episodes; the third run never.
+        assert_eq!(
+            (a.to_within_1cm.seeds_reached, a.to_within_1cm.seeds),
+            (2, 3)
+        );
+        assert!((a.to_within_1cm.episodes_mean - 7.5).abs() < 1e-12);
+        let last = a.final_distance_m.last().unwrap();
+        assert_eq!(last.0, 2);
+        assert!((last.1 - (0.004 + 0.002 + 0.05) / 3.0).abs() < 1e-15);
+        assert_eq!(rows[1].seeds, 1);
+        assert_eq!(rows[1].to_within_1cm.seeds_reached, 0);
+    }
+
+    /// A run on the workspace goals trains an expert per goal: one set of demonstrations
+    /// given on the command line is refused before any training, naming the setting.
+    #[test]
+    fn demonstrations_for_one_goal_are_refused_on_the_workspace_goals() {
+        let cfg = ExperimentConfig::default();
+        let pool = super::super::pool(1).unwrap();
+        let e = workspace_goal_sets(
+            &cfg,
+            Some(Path::new("d.npz")),
+            "comparison_workspace_goals",
+            &pool,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("--demos") && e.contains("comparison_workspace_goals"),
+            "{e}"
+        );
+        let mut c = cfg.clone();
+        c.comparison_workspace_goals = true;
+        use super::super::{scheduler::trains_one_expert, ExperimentName::Comparison};
+        assert!(trains_one_expert(Comparison, &cfg) && !trains_one_expert(Comparison, &c));
+        // Off, the setting is left out of the settings (their hash is as before it); on, in.
+        let off = serde_json::to_value(&cfg).unwrap();
+        assert!(off.get("comparison_workspace_goals").is_none(), "{off}");
+        let on = serde_json::to_value(&c).unwrap();
+        assert_eq!(on["comparison_workspace_goals"], serde_json::json!(true));
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //!
 //! | name | what | default |
 //! |---|---|---|
-//! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison"), PPO also with a converged budget; the summary adds episodes to normalised 0.9 and to 1 cm; on request also the baselines BCO(α), GAIfO (TD3) and the mean path ([`BASELINES`]) on the same arm, demonstrations and episodes per iteration | 10 seeds × 100 iterations each |
+//! | `comparison` | LQR+GAIfO vs GAIfO (PPO) on the default goal (paper: "learning rate comparison"), PPO also with a converged budget; the summary adds episodes to normalised 0.9 and to 1 cm; on request also the baselines BCO(α), GAIfO (TD3) and the mean path ([`BASELINES`]) on the same arm, demonstrations and episodes per iteration; with `comparison_workspace_goals`, every algorithm on the five [`goals::WORKSPACE_GOALS`] with the steady-precision outputs and the summary over the goals | 10 seeds × 100 iterations each |
 //! | `generalisation` | demonstrations from k of the 8 square points, target the unseen centre (paper: "multi-point") | k = 1…8, 5 seeds, 15 iterations |
 //! | `stability` | LQR+GAIfO far beyond the paper's 100 iterations: does it degrade, and does a stronger critic make it? | 100 and 1000 critic steps per iteration, 5 seeds × 200 iterations |
 //! | `ablation` | LQR+GAIfO's defaults against the same with one decision for precision undone (docs/design.md §5 D25, D36), or candidates ([`PRECISION_VARIANTS`]); with `ablation_workspace_goals`, on the five [`goals::WORKSPACE_GOALS`] with the steady-precision outputs | [`ABLATION_VARIANTS`], 5 seeds × 50 iterations |
@@ -163,6 +163,13 @@ pub struct ExperimentConfig {
     /// expert's demonstrations) instead of `expert.task.goal`, and add the steady-precision
     /// outputs (`precision.txt`, `reach.txt`, `spread.csv`, [`goals`]).
     pub ablation_workspace_goals: bool,
+    /// Comparison: run every algorithm on the five [`goals::WORKSPACE_GOALS`] (each with its
+    /// own expert's demonstrations, the baselines on LQR+GAIfO's arm and episodes as at one
+    /// goal) instead of `expert.task.goal`, and add the steady-precision outputs and the
+    /// summary over the goals ([`goals::write_precision`]). Left out of the settings file
+    /// when off, so earlier settings hash as before ([`shard::settings_hash`]).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub comparison_workspace_goals: bool,
     /// Multi-goal: the global policy and its S-step (MDGPS's per-condition settings are
     /// `lqr_gaifo`'s, so it uses LQR+GAIfO's N episodes per condition).
     pub mdgps_policy: imitation::mdgps::s_step::PolicyOptConfig,
@@ -220,6 +227,7 @@ impl ExperimentConfig {
                 .map(|(n, _)| n.to_string())
                 .collect(),
             ablation_workspace_goals: false,
+            comparison_workspace_goals: false,
             mdgps_policy: Default::default(),
             mdgps_kl_step: imitation::mdgps::MdgpsConfig::default().kl_step,
             eval_inside: 8,
@@ -573,9 +581,13 @@ pub fn run_sharded(
     let t0 = Instant::now();
     let (jobs, title) = match name {
         ExperimentName::Comparison => {
-            let d = Arc::new(demos_for(cfg, demos, out)?);
+            let sets = if cfg.comparison_workspace_goals {
+                goals::workspace_goal_sets(cfg, demos, "comparison_workspace_goals", &pool)?
+            } else {
+                vec![(String::new(), Arc::new(demos_for(cfg, demos, out)?))]
+            };
             (
-                comparison_jobs(cfg, d),
+                goals::at_goals(&sets, |d| comparison_jobs(cfg, d)),
                 format!(
                     "LQR+GAIfO vs GAIfO (PPO): {} noisy episodes per iteration (PPO also {})",
                     cfg.lqr_gaifo.samples, cfg.ppo_converged_samples
@@ -599,19 +611,7 @@ pub fn run_sharded(
             // One demonstration set per goal: the default goal's (or --demos), or one expert's
             // at each workspace goal.
             let sets: Vec<(String, Arc<Demos>)> = if cfg.ablation_workspace_goals {
-                ensure!(
-                    demos.is_none(),
-                    ExperimentError::Settings(
-                        "--demos does not apply with ablation_workspace_goals (an expert per goal)"
-                            .into()
-                    )
-                );
-                let g = goals::goal_list(&[], true, cfg.expert.task.goal);
-                goals::goal_demos(cfg, &g, &pool)?
-                    .into_iter()
-                    .zip(&g)
-                    .map(|(d, &p)| (format!(" goal {}", goals::goal_name(p)), Arc::new(d)))
-                    .collect()
+                goals::workspace_goal_sets(cfg, demos, "ablation_workspace_goals", &pool)?
             } else {
                 vec![(String::new(), Arc::new(demos_for(cfg, demos, out)?))]
             };
@@ -784,6 +784,32 @@ mod tests {
         assert!((d.episodes_mean - 15.0).abs() < 1e-12);
         let text = summary_text(&rows);
         assert!(text.contains("2/3") && text.contains("1/3"), "{text}");
+    }
+
+    /// A first variant that needed no episode (the mean path) is no reference for a ratio:
+    /// the ratio column says "-", never NaN or infinity.
+    #[test]
+    fn no_ratio_to_a_reference_that_needed_no_episode() {
+        let run = |variant: &str, d: [f64; 2]| Run {
+            variant: variant.into(),
+            algorithm: "x".into(),
+            seed: 0,
+            episodes_per_iteration: 5,
+            horizon: 100,
+            logs: d
+                .iter()
+                .map(|&d| GaifoLog {
+                    performance: 1.0,
+                    final_distance: d,
+                    ..GaifoLog::default()
+                })
+                .collect(),
+            wall_s: 0.0,
+        };
+        let rows = summarise(&[run("replay-mean", [0.001; 2]), run("b", [0.1, 0.005])]);
+        assert_eq!(rows[1].to_within_1cm.episodes_mean, 5.0);
+        let text = summary_text(&rows);
+        assert!(!text.contains("NaN") && !text.contains("inf"), "{text}");
     }
 
     #[test]

@@ -19,11 +19,12 @@ use super::ExperimentName;
 
 /// Whether every job of `name` learns from one expert's demonstrations, so that a sweep can
 /// train it once (`--expert-only`, `--slurm`, `--k8s`): comparison, stability, ablation on one
-/// goal (not with `cfg.ablation_workspace_goals`).
+/// goal (not with `cfg.ablation_workspace_goals` or `cfg.comparison_workspace_goals`).
 pub fn trains_one_expert(name: ExperimentName, cfg: &super::ExperimentConfig) -> bool {
     match name {
-        ExperimentName::Comparison | ExperimentName::Stability => true,
+        ExperimentName::Stability => true,
         // On the workspace goals every job trains its goal's expert itself.
+        ExperimentName::Comparison => !cfg.comparison_workspace_goals,
         ExperimentName::Ablation => !cfg.ablation_workspace_goals,
         _ => false,
     }

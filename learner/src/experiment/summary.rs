@@ -293,7 +293,8 @@ fn sample_efficiency_text(s: &mut String, rows: &[SummaryRow]) {
             }
         };
         let ratio = match base {
-            Some(b) if !none && b.seeds_reached > 0 => {
+            // A reference that needed no episode (the mean path) makes no ratio.
+            Some(b) if !none && b.seeds_reached > 0 && b.episodes_mean > 0.0 => {
                 let bound = if r.seeds_reached < r.seeds { "≥" } else { "" };
                 format!("{bound}{:.1}×", r.episodes_mean / b.episodes_mean)
             }
@@ -332,7 +333,7 @@ pub fn csv_header() -> String {
 
 /// The files an experiment's results are, in its output folder: [`write_outputs`]'s and
 /// `goals::write_precision`'s.
-pub fn results_files(name: &str) -> [String; 7] {
+pub fn results_files(name: &str) -> [String; 9] {
     [
         format!("{name}.csv"),
         format!("{name}.png"),
@@ -341,6 +342,8 @@ pub fn results_files(name: &str) -> [String; 7] {
         "precision.txt".into(),
         "reach.txt".into(),
         "spread.csv".into(),
+        "summary_goals.txt".into(),
+        "summary_goals.json".into(),
     ]
 }
 
