@@ -809,6 +809,19 @@ mod tests {
         assert!(c.validate().unwrap_err().to_string().contains("start_q"));
     }
 
+    /// A six-joint task without `start_q` starts with the wrist at the controller's
+    /// `arm.ur.wrist_q`, as the learner's does at its `sim.wrist_q`.
+    #[test]
+    fn a_six_joint_start_takes_the_wrist_of_the_arm() {
+        let c: ControllerConfig = ur5_shared::config::from_toml_str(
+            "[arm.ur]\nwrist_q = [-1.5, 1.4, 0.2]\n[task]\njoints = 6\ngoal_pose = [-0.44, -0.3, 0.37, 0.47, -0.11, -0.81]",
+        )
+        .unwrap();
+        c.validate().unwrap();
+        assert_eq!(&c.task.start_q[3..], &[-1.5, 1.4, 0.2]);
+        assert_eq!(c.task.start_q[..3], TaskConfig::default().start_q[..3]);
+    }
+
     #[test]
     fn the_dashboard_and_servoj_keys_print_only_when_set() {
         // Unset, they are not serialised: older configurations print and hash as before.

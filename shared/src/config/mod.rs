@@ -208,7 +208,8 @@ fn task_keys_given(base: &toml::Table, file: &toml::Table) -> Option<[bool; 4]> 
 
 /// The task's defaults that follow from other keys (docs/design.md §2.5): a six-joint task
 /// whose file leaves out `start_q` starts from the three-joint start pose with the wrist where
-/// `sim.wrist_q` puts it (its default: UR's home posture); a file that gives `goal_pose`
+/// `sim.wrist_q` (a controller's file: `arm.ur.wrist_q`) puts it (its default: UR's home
+/// posture); a file that gives `goal_pose`
 /// without `goal` gets the pose's position as the goal point.
 fn task_defaults(merged: &mut toml::Table, given: Option<[bool; 4]>) {
     let Some([joints, start_q, goal, goal_pose]) = given else {
@@ -217,6 +218,12 @@ fn task_defaults(merged: &mut toml::Table, given: Option<[bool; 4]>) {
     let wrist: Vec<toml::Value> = merged
         .get("sim")
         .and_then(|s| s.get("wrist_q"))
+        .or_else(|| {
+            merged
+                .get("arm")
+                .and_then(|a| a.get("ur"))
+                .and_then(|u| u.get("wrist_q"))
+        })
         .and_then(|w| w.as_array())
         .cloned()
         .unwrap_or_else(|| {
