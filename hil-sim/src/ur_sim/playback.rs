@@ -387,6 +387,25 @@ pub struct GenConfig {
     pub seed: u64,
 }
 
+/// A draw uniform in `[lo, hi)`.
+pub(crate) fn uni(rng: &mut ChaCha8Rng, (lo, hi): (f64, f64)) -> f64 {
+    lo + (hi - lo) * rng.random::<f64>()
+}
+
+/// A hand's tremor on `N` joints: two sinusoids per joint, each (amplitude [`TREMOR_RAD`] rad,
+/// frequency in [`TREMOR_HZ`], phase in [0, 2π)), drawn joint by joint in that order.
+pub(crate) fn tremor<const N: usize>(rng: &mut ChaCha8Rng) -> [[(f64, f64, f64); 2]; N] {
+    core::array::from_fn(|_| {
+        core::array::from_fn(|_| {
+            (
+                TREMOR_RAD,
+                uni(rng, TREMOR_HZ),
+                uni(rng, (0.0, std::f64::consts::TAU)),
+            )
+        })
+    })
+}
+
 /// Duration of a reach (s), drawn uniformly: a person's unhurried reach of half a metre.
 pub const REACH_S: (f64, f64) = (1.2, 2.0);
 /// Rests (s): at the start pose before each reach and at the goal after it, each at least 1 s
@@ -506,7 +525,6 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     }
     let kin = UrKinematics::new(cfg.model, cfg.ee_offset);
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let uni = |rng: &mut ChaCha8Rng, (lo, hi): (f64, f64)| lo + (hi - lo) * rng.random::<f64>();
     // Waypoints: (duration of the move to it, its active joints, whether a hand moves the arm).
     let start = cfg.start_q;
     let mut segments: Vec<(f64, [f64; 3], bool)> = Vec::new();
@@ -536,16 +554,8 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
         segments.push((rest(&mut rng), back, false));
         here = back;
     }
-    // Two tremor sinusoids per active joint: (amplitude, frequency, phase).
-    let tremor: [[(f64, f64, f64); 2]; 3] = core::array::from_fn(|_| {
-        core::array::from_fn(|_| {
-            (
-                TREMOR_RAD,
-                uni(&mut rng, TREMOR_HZ),
-                uni(&mut rng, (0.0, std::f64::consts::TAU)),
-            )
-        })
-    });
+    // Two tremor sinusoids per active joint.
+    let tremor: [_; 3] = tremor(&mut rng);
     let dt = 1.0 / cfg.rate_hz;
     let (mut t, mut q) = (Vec::new(), Vec::new());
     let mut from = start;

@@ -11,13 +11,13 @@
 //! everything the hand moves, faded in and out with each movement, so the rests are still. The
 //! same motions and seed give the same file, bit for bit.
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use ur5_shared::kinematics::Joints6;
 use ur5_shared::UrModel;
 
 use super::playback::{
-    min_jerk, Playback, PlaybackError, MAX_ROWS, REACH_S, REST_EXTRA_S, TREMOR_HZ, TREMOR_RAD,
+    min_jerk, tremor, uni, Playback, PlaybackError, MAX_ROWS, REACH_S, REST_EXTRA_S,
 };
 
 /// One motion as joint paths: sample times (s, strictly increasing, from any origin) and the
@@ -88,7 +88,6 @@ pub fn play_motions(cfg: &MotionsConfig) -> Result<Playback, PlaybackError> {
     }
     let limits = cfg.model.joint_limits();
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let uni = |rng: &mut ChaCha8Rng, (lo, hi): (f64, f64)| lo + (hi - lo) * rng.random::<f64>();
     let rest = |rng: &mut ChaCha8Rng| 1.0 + uni(rng, REST_EXTRA_S);
     // A return's duration: a person's unhurried movement, slower if the way is long.
     let return_s = |rng: &mut ChaCha8Rng, a: &Joints6, b: &Joints6| {
@@ -121,16 +120,8 @@ pub fn play_motions(cfg: &MotionsConfig) -> Result<Playback, PlaybackError> {
             total_s * cfg.rate_hz
         )));
     }
-    // Two tremor sinusoids per joint: (amplitude, frequency, phase).
-    let tremor: [[(f64, f64, f64); 2]; 6] = core::array::from_fn(|_| {
-        core::array::from_fn(|_| {
-            (
-                TREMOR_RAD,
-                uni(&mut rng, TREMOR_HZ),
-                uni(&mut rng, (0.0, std::f64::consts::TAU)),
-            )
-        })
-    });
+    // Two tremor sinusoids per joint.
+    let tremor: [_; 6] = tremor(&mut rng);
     let dt = 1.0 / cfg.rate_hz;
     let (mut t, mut q) = (Vec::new(), Vec::new());
     let (mut t0, mut row) = (0.0, 0u64);
@@ -196,6 +187,7 @@ fn along(m: &Motion, time: f64) -> Joints6 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::playback::TREMOR_RAD;
     use super::*;
 
     /// A 2 s arc of the three arm joints from `from` (wrist fixed), sampled every 0.05 s: the
