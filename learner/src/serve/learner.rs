@@ -329,7 +329,7 @@ impl<L: ServeLearner> Run<L> {
         let path = rec.record(ep, &origin, self.learner.task())?;
         crate::io::files::note(&self.opts.out, &[&path])?;
         if let Some(m) = self.mcap.as_mut() {
-            m.episode(&path, ep, &origin, self.learner.task().dt)?;
+            m.episode(&path, ep, &origin, self.learner.task())?;
         }
         Ok(Some(crate::io::learned::file_name(&path)))
     }
