@@ -156,7 +156,7 @@ pub(super) fn open_log_row<L: Learn<Log: LogRow>>(
 ) -> Result<std::fs::File, ServeError> {
     Ok(open_log_with(
         &out.join(L::Log::FILE),
-        L::Log::HEADER,
+        &L::Log::header(&learner.task().layout()),
         resumed.then_some(learner.iteration()),
     )?)
 }
@@ -167,7 +167,7 @@ pub(super) fn log_row<L: Learn<Log: LogRow>>(
     log: &L::Log,
 ) -> Result<String, ServeError> {
     let mut row = Vec::new();
-    log.write_row(&mut row, learner.seed(), L::ALGO)
+    log.write_row(&mut row, learner.seed(), L::ALGO, &learner.task().layout())
         .map_err(ServeError::Row)?;
     Ok(String::from_utf8_lossy(&row).into_owned())
 }
