@@ -557,25 +557,25 @@ fn read_raw(dir: &Path) -> Result<Raw, LeRobotError> {
 /// Errors name the feature that is missing, of another size or type, or of episodes of
 /// unequal length.
 pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
-    let raw = read_raw(dir)?;
+    let width = state_width(dir)?;
     let info_path = dir.join("meta/info.json");
     let feature = |why: String| LeRobotError::Feature {
         path: info_path.clone(),
         feature: STATE_FEATURE.into(),
         why,
     };
-    let Some(layout) = StateLayout::of_task_state(raw.width) else {
+    let Some(layout) = StateLayout::of_task_state(width) else {
         return Err(feature(format!(
-            "shape [{}], expected [12] (3 joints and a point), [18] (6 joints and a point) or \
-             [30] (6 joints and a pose){}",
-            raw.width,
-            if raw.width == JOINT_POSITIONS {
+            "shape [{width}], expected [12] (3 joints and a point), [18] (6 joints and a point) \
+             or [30] (6 joints and a pose){}",
+            if width == JOINT_POSITIONS {
                 ": a UR arm's joint positions are imported as such by `--demos`"
             } else {
                 ""
             }
         )));
     };
+    let raw = read_raw(dir)?;
     if let Some(t) = &raw.task {
         let noted = StateLayout::of_task(t.start_q.len(), t.goal_pose.is_some());
         if noted != Ok(layout) {
