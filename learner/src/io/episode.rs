@@ -220,18 +220,17 @@ pub fn load_episode_task(path: &Path) -> Result<TaskConfig, NpzError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ur5_shared::layout::{DU, DX};
-
     #[test]
     fn round_trip() {
         let dir = std::env::temp_dir().join(format!("episode-test-{}", std::process::id()));
         let path = dir.join("e.npz");
-        let t = 4;
+        let (t, layout) = (4, ur5_shared::StateLayout::REACH3);
+        let (dx, du) = (layout.dx(), layout.du());
         let ep = Episode {
-            layout: ur5_shared::StateLayout::REACH3,
-            x: (0..t * DX).map(|i| i as f64 * 0.1).collect(),
-            u: (0..t * DU).map(|i| -(i as f64)).collect(),
-            u_policy: (0..t * DU).map(|i| i as f64 + 0.5).collect(),
+            layout,
+            x: (0..t * dx).map(|i| i as f64 * 0.1).collect(),
+            u: (0..t * du).map(|i| -(i as f64)).collect(),
+            u_policy: (0..t * du).map(|i| i as f64 + 0.5).collect(),
             eps: Vec::new(),
             noisy: true,
         };

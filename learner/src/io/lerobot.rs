@@ -49,18 +49,10 @@ pub const MODEL_KEY: &str = "ur_model";
 pub const TASK: &str = "reach the goal point with the end effector (UR5, 3 joints)";
 /// The task of a dataset of another layout than the three-joint point task's.
 fn task_text(layout: &StateLayout) -> String {
-    if *layout == StateLayout::REACH3 {
-        TASK.into()
-    } else if layout.tool_points() == 1 {
-        format!(
-            "reach the goal point with the end effector (UR, {} joints)",
-            layout.joints()
-        )
-    } else {
-        format!(
-            "reach the goal pose with the tool (UR, {} joints)",
-            layout.joints()
-        )
+    match (layout.joints(), layout.tool_points()) {
+        _ if *layout == StateLayout::REACH3 => TASK.into(),
+        (n, 1) => format!("reach the goal point with the end effector (UR, {n} joints)"),
+        (n, _) => format!("reach the goal pose with the tool (UR, {n} joints)"),
     }
 }
 /// Width of the `observation.state` of a UR arm's recording made elsewhere: its six joint
@@ -660,12 +652,7 @@ fn noted_model(info: &serde_json::Value) -> Result<Option<UrModel>, String> {
 
 /// The arm model the dataset in `dir` notes ([`MODEL_KEY`]; `None` if it notes none).
 pub fn model_of(dir: &Path) -> Result<Option<UrModel>, LeRobotError> {
-    let info_path = dir.join("meta/info.json");
-    let text = std::fs::read_to_string(&info_path).map_err(io_err(&info_path))?;
-    let info: serde_json::Value = serde_json::from_str(&text).map_err(|e| LeRobotError::Info {
-        path: info_path.clone(),
-        why: format!("not JSON: {e}"),
-    })?;
+    let (info, info_path) = read_info(dir)?;
     noted_model(&info).map_err(|why| LeRobotError::Info {
         path: info_path,
         why,
