@@ -136,18 +136,17 @@ mod tests {
     use super::*;
     use imitation::rollout::run_episode;
     use ur5_shared::config::{SimConfig, TaskConfig};
-    use ur5_shared::layout::{DU, DX};
     use ur5_shared::noise::Noise;
     use ur5_shared::GainTable;
 
     /// A constant-goal table a = â_t = `goal_q` with covariance σ² I.
-    fn hold_table(task: &TaskConfig, goal_q: [f64; DU], sigma: f64) -> Box<GainTable> {
+    fn hold_table(task: &TaskConfig, goal_q: &[f64], sigma: f64) -> Box<GainTable> {
         let mut table = GainTable::new_boxed();
         table.set_horizon(task.horizon).unwrap();
         for t in 0..task.horizon {
             let mut step = table.step_mut(t);
-            step.a_hat.copy_from_slice(&goal_q);
-            for j in 0..DU {
+            step.a_hat.copy_from_slice(goal_q);
+            for j in 0..goal_q.len() {
                 step.set_l(j, j, sigma);
             }
         }
@@ -162,11 +161,12 @@ mod tests {
             ..TaskConfig::default()
         };
         let mut sim = SimArm::new(SimConfig::default(), task.dt).unwrap();
-        let mut table = hold_table(&task, task.start_arm_joints(), 0.2);
+        let (dx, du) = (task.layout().dx(), task.layout().du());
+        let mut table = hold_table(&task, &task.start_q, 0.2);
         let ep = run_episode(&mut sim, &task, &mut *table, None).unwrap();
         assert_eq!(ep.horizon(), 20);
         let last = ep.state(19);
-        for j in 0..DU {
+        for j in 0..du {
             assert!(
                 (last[j] - task.start_q[j]).abs() < 1e-3,
                 "drifted: {last:?}"
@@ -181,8 +181,8 @@ mod tests {
         // The clamp limits every executed goal to v_max · dt from the current angles.
         let step = std::f64::consts::PI * task.dt;
         for t in 0..20 {
-            for j in 0..DU {
-                assert!((a.u[t * DU + j] - a.x[t * DX + j]).abs() <= step + 1e-12);
+            for j in 0..du {
+                assert!((a.u[t * du + j] - a.x[t * dx + j]).abs() <= step + 1e-12);
             }
         }
     }

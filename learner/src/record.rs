@@ -571,6 +571,7 @@ pub fn to_recorded_demos(
     }
     let start_q = Joints::from_slice(&start[..joints]);
     let traj = Trajectories {
+        layout,
         states,
         actions: None,
         count: episodes.len(),
@@ -582,6 +583,8 @@ pub fn to_recorded_demos(
             seed: DERIVED_SEED,
             cost_random: None,
             cost_expert: None,
+            goal_pose: None,
+            tool_points: None,
         }),
         model: Some(sim.model),
     };

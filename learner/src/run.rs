@@ -405,7 +405,8 @@ pub fn run_iterations<R: Learn<Log: LogRow> + Checkpoint>(
     let csv = match out {
         Some(dir) => {
             crate::io::create_dir(dir)?;
-            let f = open_log_with(&dir.join(R::Log::FILE), R::Log::HEADER, None)?;
+            let header = R::Log::header(&run.task().layout());
+            let f = open_log_with(&dir.join(R::Log::FILE), &header, None)?;
             run.checkpoint(dir, Some(arm))?;
             crate::io::files::note_checkpoint(dir, run.iteration())?;
             Some((f, dir))
@@ -468,7 +469,7 @@ fn drive<R: Learn<Log: LogRow> + Checkpoint>(
         progress(&log, run);
         if let Some((f, dir)) = csv.as_mut() {
             let path = dir.join(R::Log::FILE);
-            log.write_row(f, run.seed(), R::ALGO)
+            log.write_row(f, run.seed(), R::ALGO, &run.task().layout())
                 .and_then(|()| f.flush())
                 .map_err(IoError::file("writing", &path))?;
             run.checkpoint(dir, Some(arm))?;
@@ -579,7 +580,8 @@ pub(crate) fn continue_run<R: Learn<Log: LogRow> + Checkpoint>(
     if let Some(pos) = arm_noise {
         arm.sim_mut().set_noise_position(pos);
     }
-    let csv = open_log_with(&dir.join(R::Log::FILE), R::Log::HEADER, Some(start))?;
+    let header = R::Log::header(&run.task().layout());
+    let csv = open_log_with(&dir.join(R::Log::FILE), &header, Some(start))?;
     drive(
         &mut run,
         &arm,

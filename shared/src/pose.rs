@@ -84,6 +84,41 @@ pub fn orientation_error(points: &[[f64; 3]; 3], targets: &[[f64; 3]; 3]) -> Opt
     Some(2.0 * q.imag().norm().atan2(q.w.abs()))
 }
 
+/// The tool pose whose tool points at `offsets` (m, flange frame, relative to the TCP) are at
+/// `points` (m, base frame): the inverse of [`tool_points`] for three points not on one line.
+/// The rotation maps the frame the offsets span onto the frame the points span; the
+/// translation then puts offset 0 on point 0 (exact for points of a rigid tool, a least-effort
+/// fit otherwise). `None` if either triple lies on one line.
+pub fn pose_of_points(offsets: &[[f64; 3]; 3], points: &[[f64; 3]; 3]) -> Option<Isometry3<f64>> {
+    let (fo, fp) = (frame_of(offsets)?, frame_of(points)?);
+    let r = fp * fo.inverse();
+    let t = Vector3::from(points[0]) - r * Vector3::from(offsets[0]);
+    Some(Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_rotation_matrix(&r),
+    ))
+}
+
+/// The mean of poses close to one another: the mean position, and the mean of their unit
+/// quaternions (each on the first one's side of the double cover), normalised: for rotations
+/// a few degrees apart this is the rotation nearest them in the chordal sense (Markley et
+/// al. 2007). Panics on an empty slice.
+pub fn mean_pose(poses: &[Isometry3<f64>]) -> Isometry3<f64> {
+    assert!(!poses.is_empty(), "the mean of no pose");
+    let n = poses.len() as f64;
+    let first = poses[0].rotation.coords;
+    let (mut t, mut q) = (Vector3::zeros(), nalgebra::Vector4::zeros());
+    for p in poses {
+        t += p.translation.vector / n;
+        let c = p.rotation.coords;
+        q += if c.dot(&first) < 0.0 { -c } else { c };
+    }
+    Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(q)),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -123,5 +158,48 @@ mod tests {
         assert!(orientation_error(&g, &g).unwrap() < 1e-15);
         let line = [[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
         assert_eq!(orientation_error(&line, &g), None);
+    }
+
+    #[test]
+    fn the_pose_of_a_tools_points_is_the_pose_they_came_from() {
+        let offsets = [[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]];
+        let odd = [[0.01, -0.02, 0.03], [0.12, 0.0, 0.01], [0.0, 0.09, -0.02]];
+        for o in [offsets, odd] {
+            for p in [
+                [-0.4, -0.2, 0.3, 2.0, -1.0, 0.5],
+                [0.1, 0.5, 0.2, 0.0, 3.1, 0.0],
+                [0.3, 0.0, 0.6, 1e-7, 0.0, 0.0],
+            ] {
+                let mut pts = [[0.0; 3]; 3];
+                tool_points(&isometry(&p), &o, &mut pts);
+                let back = ur_pose(&pose_of_points(&o, &pts).unwrap());
+                for k in 0..6 {
+                    assert!((back[k] - p[k]).abs() < 1e-12, "{p:?} → {back:?}");
+                }
+            }
+        }
+        let line = [[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
+        assert!(pose_of_points(&offsets, &line).is_none());
+    }
+
+    #[test]
+    fn the_mean_pose_of_nearby_poses_lies_between_them() {
+        let a = isometry(&[0.1, 0.2, 0.3, 0.0, 0.0, 0.2]);
+        let b = isometry(&[0.3, 0.0, 0.1, 0.0, 0.0, 0.4]);
+        let m = ur_pose(&mean_pose(&[a, b]));
+        let want = [0.2, 0.1, 0.2, 0.0, 0.0, 0.3];
+        for k in 0..6 {
+            assert!((m[k] - want[k]).abs() < 1e-12, "{m:?}");
+        }
+        // The double cover: the same rotation as −q does not cancel out.
+        let flipped = Isometry3::from_parts(
+            a.translation,
+            UnitQuaternion::new_unchecked(-a.rotation.into_inner()),
+        );
+        let m = ur_pose(&mean_pose(&[a, flipped]));
+        let p = ur_pose(&a);
+        for k in 0..6 {
+            assert!((m[k] - p[k]).abs() < 1e-12, "{m:?}");
+        }
     }
 }

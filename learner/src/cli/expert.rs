@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 
-use ur5_shared::config::parse_triple;
+use ur5_shared::config::{parse_pose, parse_triple, SimConfig, TaskConfig};
 
 use imitation::expert::{square_goals, ExpertConfig, IterationLog};
 
@@ -18,6 +18,12 @@ pub struct ExpertArgs {
     /// Goal point x,y,z (m, arm base frame); overrides the config.
     #[arg(long, value_parser = parse_triple, allow_hyphen_values = true)]
     pub goal: Option<[f64; 3]>,
+    /// Goal pose of the tool, UR's p[x, y, z, rx, ry, rz]: x,y,z (m) and a rotation vector
+    /// rx,ry,rz (rad), arm base frame, as the teach pendant shows it. Sets `[task] goal_pose`
+    /// (and `goal` to its position) and six joints, unless the config gives `[task] joints`;
+    /// overrides the config. Refused if the arm cannot reach it.
+    #[arg(long, value_parser = parse_pose, allow_hyphen_values = true, conflicts_with_all = ["goal", "square"])]
+    pub goal_pose: Option<[f64; 6]>,
     /// Train and record experts for the 8 points of the generalisation square around the goal
     /// (corners and mid-edges, half side `square_half_side`), one folder each.
     #[arg(long)]
@@ -33,6 +39,53 @@ pub struct ExpertArgs {
     /// `traj_opt`); --out default `runs/expert`.
     #[command(flatten)]
     pub common: CommonArgs,
+}
+
+/// Makes `task` a pose task toward UR's pose `pose` (`--goal-pose`): its goal pose and goal
+/// point, and six joints (a three-angle start pose gets the wrist at `sim.wrist_q`, as a
+/// config file that leaves `start_q` out does) unless `joints_given` (the config says how many
+/// joints: a pose then needs six). Checks the task and that the arm reaches the pose within
+/// its joint limits (inverse kinematics of `sim.model`), the error naming the pose.
+pub(super) fn set_goal_pose(
+    task: &mut TaskConfig,
+    sim: &SimConfig,
+    pose: [f64; 6],
+    joints_given: bool,
+) -> anyhow::Result<()> {
+    if !joints_given && task.joints == 3 {
+        task.joints = 6;
+        if task.start_q.len() == 3 {
+            task.start_q = task.start_q.extended(&sim.wrist_q)?;
+        }
+    }
+    task.goal_pose = Some(pose);
+    task.goal = [pose[0], pose[1], pose[2]];
+    task.validate()
+        .with_context(|| format!("--goal-pose {}", pose_text(&pose)))?;
+    let ik = ur5_shared::ik::UrIk::new(sim.model, sim.ee_offset);
+    ik.nearest_pose(
+        &ur5_shared::pose::isometry(&pose),
+        &task.start_six(&sim.wrist_q),
+    )
+    .map_err(|e| {
+        anyhow::anyhow!(
+            "--goal-pose {}: out of the {}'s reach: {e}",
+            pose_text(&pose),
+            sim.model
+        )
+    })?;
+    Ok(())
+}
+
+/// UR's pose as the teach pendant writes it: `p[x, y, z, rx, ry, rz]`.
+pub(super) fn pose_text(p: &[f64; 6]) -> String {
+    format!(
+        "p[{}]",
+        p.iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
 }
 
 /// Trains and records the expert of `c` into `out` ([`train_and_record`]), one progress line
@@ -73,6 +126,10 @@ pub fn run(args: ExpertArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| PathBuf::from("runs/expert"));
     if let Some(g) = args.goal {
         cfg.task.goal = g;
+    }
+    if let Some(p) = args.goal_pose {
+        let joints_given = args.common.config_gives("task", "joints")?;
+        set_goal_pose(&mut cfg.task, &cfg.sim, p, joints_given)?;
     }
     if let Some(s) = args.common.seed {
         cfg.seed = s;

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 pub mod bench;
@@ -45,6 +46,21 @@ impl CommonArgs {
             Some(p) => ur5_shared::config::from_toml_file(p)?,
             None => C::default(),
         })
+    }
+
+    /// Whether `--config` gives `key` in its table `table` (`[task] joints`): a command-line
+    /// option that implies a setting leaves one the file gives alone.
+    pub fn config_gives(&self, table: &str, key: &str) -> anyhow::Result<bool> {
+        let Some(p) = &self.config else {
+            return Ok(false);
+        };
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        let t: toml::Table =
+            toml::from_str(&text).with_context(|| format!("parsing {}", p.display()))?;
+        Ok(t.get(table)
+            .and_then(|v| v.as_table())
+            .is_some_and(|t| t.contains_key(key)))
     }
 }
 

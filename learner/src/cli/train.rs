@@ -48,6 +48,12 @@ pub struct TrainArgs {
     /// goal, in name order); required.
     #[arg(long)]
     pub demos: Option<PathBuf>,
+    /// Goal pose of the tool, UR's p[x, y, z, rx, ry, rz] (m; rotation vector, rad; base
+    /// frame): without --demos the default expert is trained for it (six joints, as `learner
+    /// expert --goal-pose`); with --demos they must be demonstrations of that pose (a file of
+    /// another task is refused, naming both dimensions). Not with --algo mdgps.
+    #[arg(long, value_parser = ur5_shared::config::parse_pose, allow_hyphen_values = true)]
+    pub goal_pose: Option<[f64; 6]>,
     /// Algorithm.
     #[arg(long, value_enum, default_value = "lqr-gaifo")]
     pub algo: Algo,
@@ -231,13 +237,16 @@ fn demos_file(
         );
         return Ok((p, false));
     }
-    manifest::claim(&out, m, Claim::New { force: args.force })?;
-    let ecfg = imitation::expert::ExpertConfig {
+    let mut ecfg = imitation::expert::ExpertConfig {
         seed,
         task: ur5_shared::config::TaskConfig::for_model(sim.model),
         sim: sim.clone(),
         ..Default::default()
     };
+    if let Some(p) = args.goal_pose {
+        super::expert::set_goal_pose(&mut ecfg.task, sim, p, false)?;
+    }
+    manifest::claim(&out, m, Claim::New { force: args.force })?;
     let dir = out.join("expert");
     eprintln!(
         "no --demos: training the default expert for goal {:?} m (seed {seed}) and recording {} \
@@ -305,6 +314,9 @@ pub(super) fn open_run<S: serde::Serialize>(
     let pre = Manifest::new("train", algo, seed, None, cfg)?;
     let (path, claimed) = demos_file(args, seed, sim, &pre)?;
     let demos = crate::io::demos::load_checked(&path, sim)?;
+    if let Some(p) = args.goal_pose {
+        check_goal_pose(&demos, &path, sim, p)?;
+    }
     warn_unrecorded_model(&path, sim)?;
     let m = Manifest::new("train", algo, seed, Some(&path), cfg)?;
     let claim = match args.resume {
@@ -316,6 +328,30 @@ pub(super) fn open_run<S: serde::Serialize>(
     };
     take_folder(args.record_episodes, &out, &m, claim)?;
     Ok((out, demos))
+}
+
+/// Demonstrations of the pose task `--goal-pose` `pose` asks for (on the arm of `sim`): a file
+/// of another layout is refused naming both dimensions, one of another goal pose naming both
+/// poses.
+fn check_goal_pose(
+    demos: &Demos,
+    path: &Path,
+    sim: &ur5_shared::config::SimConfig,
+    pose: [f64; 6],
+) -> anyhow::Result<()> {
+    let mut task = ur5_shared::config::TaskConfig::for_model(sim.model);
+    super::expert::set_goal_pose(&mut task, sim, pose, false)?;
+    crate::io::demos::check_run_layout(demos, &task.layout(), path)?;
+    let theirs = demos.goal_pose.expect("a pose task's layout");
+    anyhow::ensure!(
+        theirs.iter().zip(&pose).all(|(a, b)| (a - b).abs() <= 1e-9),
+        "{}: demonstrations of the goal pose {}, not --goal-pose {}: give demonstrations of \
+         that pose, or leave --goal-pose out to imitate theirs",
+        path.display(),
+        super::expert::pose_text(&theirs),
+        super::expert::pose_text(&pose)
+    );
+    Ok(())
 }
 
 /// A resumed folder must hold a run of the algorithm asked for: said before anything reads
@@ -350,6 +386,10 @@ pub(super) fn check_resumed_algo(args: &TrainArgs) -> anyhow::Result<()> {
 /// Runs `learner train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     check_resumed_algo(&args)?;
+    anyhow::ensure!(
+        args.goal_pose.is_none() || args.algo != Algo::Mdgps,
+        "--goal-pose gives one goal; --algo mdgps takes its goals from the --demos folder"
+    );
     if args.algo == Algo::Mdgps {
         return run_mdgps(&args);
     }

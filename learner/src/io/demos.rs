@@ -342,6 +342,18 @@ pub fn load_checked(path: &Path, sim: &ur5_shared::config::SimConfig) -> Result<
     Ok(demos)
 }
 
+/// Demonstrations (loaded from `path`) against the layout of the run that uses them (its
+/// task's): a file of other dimensions is refused, naming the file's dX, dU and the run's.
+pub fn check_run_layout(
+    demos: &Demos,
+    run: &ur5_shared::StateLayout,
+    path: &Path,
+) -> Result<(), IoError> {
+    let l = demos.layout();
+    run.check_dims("the demonstrations file", l.dx(), l.du())
+        .map_err(|e| IoError::from(e).at("loading demonstrations", path))
+}
+
 /// The demonstrations of every goal of a multi-goal learner (MDGPS): the `.npz` files of the
 /// folder `folder` in name order, each loaded and checked as [`load_checked`] does.
 pub fn load_goals(

@@ -177,6 +177,17 @@ pub fn load_episode(path: &Path) -> Result<(Episode, EpisodeOrigin), NpzError> {
 /// The episode files (`*.npz`) of `folder` in name order, which for an
 /// [`EpisodeRecorder`]'s folder is arrival order, loaded; none when there is no folder.
 pub fn recorded_episodes(folder: &Path) -> Result<Vec<(PathBuf, Episode, EpisodeOrigin)>, IoError> {
+    episode_files(folder)?
+        .into_iter()
+        .map(|p| {
+            let (ep, origin) = load_episode(&p)?;
+            Ok((p, ep, origin))
+        })
+        .collect()
+}
+
+/// The episode files (`*.npz`) of `folder` in name order; none when there is no folder.
+pub fn episode_files(folder: &Path) -> Result<Vec<PathBuf>, IoError> {
     let mut files: Vec<PathBuf> = match std::fs::read_dir(folder) {
         Ok(entries) => entries
             .map(|e| e.map(|e| e.path()))
@@ -187,13 +198,7 @@ pub fn recorded_episodes(folder: &Path) -> Result<Vec<(PathBuf, Episode, Episode
     };
     files.retain(|p| p.extension().is_some_and(|x| x == "npz"));
     files.sort();
-    files
-        .into_iter()
-        .map(|p| {
-            let (ep, origin) = load_episode(&p)?;
-            Ok((p, ep, origin))
-        })
-        .collect()
+    Ok(files)
 }
 
 /// The task an episode file ran (goal, start pose, control period, T).
@@ -215,18 +220,17 @@ pub fn load_episode_task(path: &Path) -> Result<TaskConfig, NpzError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ur5_shared::layout::{DU, DX};
-
     #[test]
     fn round_trip() {
         let dir = std::env::temp_dir().join(format!("episode-test-{}", std::process::id()));
         let path = dir.join("e.npz");
-        let t = 4;
+        let (t, layout) = (4, ur5_shared::StateLayout::REACH3);
+        let (dx, du) = (layout.dx(), layout.du());
         let ep = Episode {
-            layout: ur5_shared::StateLayout::REACH3,
-            x: (0..t * DX).map(|i| i as f64 * 0.1).collect(),
-            u: (0..t * DU).map(|i| -(i as f64)).collect(),
-            u_policy: (0..t * DU).map(|i| i as f64 + 0.5).collect(),
+            layout,
+            x: (0..t * dx).map(|i| i as f64 * 0.1).collect(),
+            u: (0..t * du).map(|i| -(i as f64)).collect(),
+            u_policy: (0..t * du).map(|i| i as f64 + 0.5).collect(),
             eps: Vec::new(),
             noisy: true,
         };

@@ -6,19 +6,25 @@
 //!
 //! What a state-only source does not say is derived on the arm: the start pose from the first
 //! frame of the first trajectory, the goal as the arm's forward kinematics of that frame's
-//! joint angles minus its `ee − goal` entries, C_expert as the trajectories' mean task cost,
+//! joint angles minus its `ee − goal` entries (for a pose task the three tool points' targets
+//! so, and the goal pose the one that puts the default tool points on them), C_expert as the trajectories' mean task cost,
 //! C_random by running the expert's random initial controller on the task
 //! ([`imitation::expert::random_policy_cost`], `learner expert`'s default settings, seed
 //! [`DERIVED_SEED`] unless the source notes its own). Costs a source notes (`ur5_task` of a
 //! dataset we exported) are checked against the recomputed ones, never trusted: normalised
 //! performance divides by their difference.
+//!
+//! A UR arm's recording of six joint positions ([`super::lerobot::import_joint_positions`])
+//! becomes states of the whole arm and a pose ([`from_joint_positions`]): velocities from the
+//! positions and the frame rate, tool points by forward kinematics, the goal pose the mean of
+//! the episodes' last tool poses (a taught reach ends where the tool should be).
 
 use std::path::{Path, PathBuf};
 
 use super::IoError;
 use crate::error::ensure;
 use ur5_shared::config::{SimConfig, TaskConfig};
-use ur5_shared::layout::{DX, EE_MINUS_GOAL, Q, STATE_NAMES};
+use ur5_shared::layout::StateLayout;
 
 use imitation::demos::Demos;
 
@@ -28,13 +34,33 @@ use super::lerobot::{TaskMeta, Trajectories};
 /// note it (and the `seed` of its demonstrations).
 pub const DERIVED_SEED: u64 = 0;
 
-/// The first columns of a demonstrations CSV file; the dX state columns follow, named as in
-/// `ur5_shared::layout::STATE_NAMES`.
+/// The first columns of a demonstrations CSV file; the dX state columns follow, named as
+/// `ur5_shared::StateLayout::state_names` names them for the task's layout.
 pub const CSV_INDEX_COLUMNS: [&str; 2] = ["episode", "time_s"];
 
-/// Reads a demonstrations CSV file: a header `episode,time_s,<the 12 state names>` and one row
-/// per step, the steps of an episode together and in time order, every episode of the same
-/// length, times 0, dt, 2 dt, … (dt from the first episode, the same for all).
+/// The layouts a demonstrations CSV file may hold, told apart by their state names: three
+/// joints and a point (12 columns), six joints and a point (18), six joints and a pose (30).
+fn csv_layouts() -> [StateLayout; 3] {
+    [
+        StateLayout::REACH3,
+        StateLayout::of_task(6, false).expect("6 joints, a point"),
+        StateLayout::POSE6,
+    ]
+}
+
+/// The header of a demonstrations CSV file of `layout`.
+fn csv_header(layout: &StateLayout) -> Vec<String> {
+    CSV_INDEX_COLUMNS
+        .iter()
+        .map(|c| c.to_string())
+        .chain(layout.state_names())
+        .collect()
+}
+
+/// Reads a demonstrations CSV file: a header `episode,time_s,<the state names of the task's
+/// layout>` (12, 18 or 30 of them: the header gives the layout) and one row per step, the
+/// steps of an episode together and in time order, every episode of the same length, times
+/// 0, dt, 2 dt, … (dt from the first episode, the same for all).
 pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
     let mut r = csv::Reader::from_path(path).map_err(IoError::csv("reading", path))?;
     let header: Vec<String> = r
@@ -43,16 +69,22 @@ pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
         .iter()
         .map(str::to_string)
         .collect();
-    let expected: Vec<&str> = CSV_INDEX_COLUMNS
-        .iter()
-        .chain(STATE_NAMES.iter())
-        .copied()
-        .collect();
-    ensure!(
-        header == expected,
-        IoError::content(path, format!("header {header:?}, expected {expected:?}"))
-    );
-    let mut rows: Vec<(u64, f64, [f64; DX])> = Vec::new();
+    let Some(layout) = csv_layouts().into_iter().find(|l| header == csv_header(l)) else {
+        return Err(IoError::content(
+            path,
+            format!(
+                "header {header:?} ({} state columns), expected {:?} (3 joints and a point, \
+                 dX = 12), or the 18 state names of 6 joints and a point, or the 30 of 6 joints \
+                 and a pose ({:?})",
+                header.len().saturating_sub(2),
+                csv_header(&StateLayout::REACH3),
+                StateLayout::POSE6.state_names()
+            ),
+        ));
+    };
+    let dx = layout.dx();
+    let expected = csv_header(&layout);
+    let mut rows: Vec<(u64, f64, Vec<f64>)> = Vec::new();
     for (line, rec) in r.records().enumerate() {
         let rec = rec.map_err(|source| IoError::CsvRow {
             path: path.to_owned(),
@@ -80,10 +112,7 @@ pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
             .trim()
             .parse::<u64>()
             .map_err(|e| not_a_number(0, &e))?;
-        let mut s = [0.0; DX];
-        for (k, v) in s.iter_mut().enumerate() {
-            *v = num(2 + k)?;
-        }
+        let s = (0..dx).map(|k| num(2 + k)).collect::<Result<Vec<_>, _>>()?;
         rows.push((e, num(1)?, s));
     }
     let first = rows.first().map(|r| r.0);
@@ -106,7 +135,7 @@ pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
         )
     );
     let dt = rows[1].1 - rows[0].1;
-    let mut states = Vec::with_capacity(rows.len() * DX);
+    let mut states = Vec::with_capacity(rows.len() * dx);
     let mut seen = std::collections::BTreeSet::new();
     for (i, (e, time, s)) in rows.iter().enumerate() {
         let (d, t) = (i / horizon, i % horizon);
@@ -149,6 +178,7 @@ pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
         states.extend_from_slice(s);
     }
     Ok(Trajectories {
+        layout,
         count: rows.len() / horizon,
         horizon,
         states,
@@ -159,17 +189,13 @@ pub fn read_csv(path: &Path) -> Result<Trajectories, IoError> {
     })
 }
 
-/// Writes `traj`'s states as a demonstrations CSV file ([`read_csv`]'s layout).
+/// Writes `traj`'s states as a demonstrations CSV file ([`read_csv`]'s layout; the header
+/// names the states of `traj.layout`).
 pub fn write_csv(traj: &Trajectories, path: &Path) -> Result<(), IoError> {
     let mut w = csv::Writer::from_path(path).map_err(IoError::csv("writing", path))?;
-    let header: Vec<&str> = CSV_INDEX_COLUMNS
-        .iter()
-        .chain(STATE_NAMES.iter())
-        .copied()
-        .collect();
-    w.write_record(&header)
+    w.write_record(csv_header(&traj.layout))
         .map_err(IoError::csv("writing", path))?;
-    for (i, s) in traj.states.chunks(DX).enumerate() {
+    for (i, s) in traj.states.chunks(traj.layout.dx()).enumerate() {
         let (d, t) = (i / traj.horizon, i % traj.horizon);
         let mut rec = vec![d.to_string(), format!("{}", t as f64 * traj.dt)];
         rec.extend(s.iter().map(|v| format!("{v:?}")));
@@ -183,6 +209,7 @@ pub fn write_csv(traj: &Trajectories, path: &Path) -> Result<(), IoError> {
 /// `demos` as trajectories (for export), noting their task and costs.
 pub fn from_demos(demos: &Demos) -> Trajectories {
     Trajectories {
+        layout: demos.layout(),
         states: demos.states.clone(),
         actions: Some(demos.actions.clone()),
         count: demos.count,
@@ -194,6 +221,8 @@ pub fn from_demos(demos: &Demos) -> Trajectories {
             seed: demos.seed,
             cost_random: Some(demos.cost_random),
             cost_expert: Some(demos.cost_expert),
+            goal_pose: demos.goal_pose,
+            tool_points: demos.goal_pose.map(|_| demos.tool_points),
         }),
         model: Some(demos.model),
     }
@@ -224,6 +253,7 @@ pub fn from_episodes(path: &Path) -> Result<Trajectories, IoError> {
         match &mut out {
             None => {
                 let traj = Trajectories {
+                    layout: ep.layout,
                     horizon: ep.horizon(),
                     count: 1,
                     states: ep.x,
@@ -235,12 +265,18 @@ pub fn from_episodes(path: &Path) -> Result<Trajectories, IoError> {
                         seed: origin.seed,
                         cost_random: None,
                         cost_expert: None,
+                        goal_pose: task.goal_pose,
+                        tool_points: task.goal_pose.map(|_| task.tool_points),
                     }),
                     model: None,
                 };
                 out = Some((traj, task));
             }
             Some((traj, first)) => {
+                first
+                    .layout()
+                    .check_dims("an episode file", ep.layout.dx(), ep.layout.du())
+                    .map_err(|e| IoError::from(e).at("reading", f))?;
                 ensure!(
                     task == *first,
                     IoError::content(
@@ -272,31 +308,35 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
     };
     // Before anything simulates at that period (1e300 s would be 1e303 physics steps).
     ur5_shared::config::check_dt(traj.dt).map_err(IoError::TrajectoryDt)?;
-    let seed = DERIVED_SEED;
-    let s0 = &traj.states[..DX];
-    let mut arm = hil_sim::Ur5Sim::new(sim.clone(), traj.dt)?;
-    let (goal, start_q, seed) = match &traj.task {
-        Some(m) => (m.goal, m.start_q, m.seed),
+    let layout = traj.layout;
+    let (goal, goal_pose, tool_points, start_q, seed) = match &traj.task {
+        Some(m) => (
+            m.goal,
+            m.goal_pose,
+            m.tool_points
+                .unwrap_or(ur5_shared::config::DEFAULT_TOOL_POINTS),
+            m.start_q,
+            m.seed,
+        ),
         None => {
-            let q: [f64; 3] = s0[Q].try_into().expect("3");
-            arm.set_joint_state(q, [0.0; 3]);
-            let ee = arm.true_observation().ee_pos;
-            let e = &s0[EE_MINUS_GOAL];
-            ([ee[0] - e[0], ee[1] - e[1], ee[2] - e[2]], q.into(), seed)
+            let (goal, goal_pose, start_q) = derive_goal(&traj, sim)?;
+            let points = ur5_shared::config::DEFAULT_TOOL_POINTS;
+            (goal, goal_pose, points, start_q, DERIVED_SEED)
         }
     };
-    // The active joints are those of the start pose (a recording of the whole arm notes six;
-    // the joint-state formats hold three), the goal a point.
+    // The active joints are those of the start pose, the goal a point or a pose.
     let task = TaskConfig {
         dt: traj.dt,
         horizon: traj.horizon,
         joints: start_q.len(),
         start_q,
         goal,
-        ..TaskConfig::default()
+        goal_pose,
+        tool_points,
     };
     task.validate().map_err(IoError::TrajectoryTask)?;
-    let layout = task.layout();
+    task.layout()
+        .check_dims("the trajectories' states", layout.dx(), layout.du())?;
     let known = traj.task.as_ref();
     // Both costs are recomputed from the data; a recorded one is checked against them, not
     // trusted (normalised performance divides by their difference).
@@ -351,14 +391,123 @@ pub fn to_demos(traj: Trajectories, sim: &SimConfig) -> Result<Demos, IoError> {
         count: traj.count,
         horizon: traj.horizon,
         goal,
-        goal_pose: None,
-        tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
+        goal_pose,
+        tool_points,
         start_q,
         dt: traj.dt,
         seed,
         cost_random,
         cost_expert,
     })
+}
+
+/// The goal (point, and pose for a pose task) and start pose of trajectories that do not note
+/// their task (module docs): from the first frame, the tool points by the arm's forward
+/// kinematics minus the state's point-minus-target entries; a pose from the three targets and
+/// the default tool points.
+fn derive_goal(
+    traj: &Trajectories,
+    sim: &SimConfig,
+) -> Result<([f64; 3], Option<[f64; 6]>, ur5_shared::joints::Joints), IoError> {
+    let layout = traj.layout;
+    let (n, p) = (layout.joints(), layout.tool_points());
+    let s0 = &traj.states[..layout.dx()];
+    let q = &s0[layout.q()];
+    let mut arm = hil_sim::Ur5Sim::with_joints(sim.clone(), traj.dt, n)?;
+    arm.set_joint_state_all(q, &vec![0.0; n]);
+    let offsets = ur5_shared::config::DEFAULT_TOOL_POINTS;
+    let mut fk = [[0.0; 3]; 3];
+    arm.true_points(&offsets[..p], &mut fk[..p]);
+    let mut targets = [[0.0; 3]; 3];
+    for (i, t) in targets.iter_mut().enumerate().take(p) {
+        let e = &s0[layout.point(i)];
+        *t = [fk[i][0] - e[0], fk[i][1] - e[1], fk[i][2] - e[2]];
+    }
+    let start_q = ur5_shared::joints::Joints::from_slice(q);
+    if p == 1 {
+        return Ok((targets[0], None, start_q));
+    }
+    let pose = ur5_shared::pose::pose_of_points(&offsets, &targets).ok_or_else(|| {
+        IoError::TrajectoryTask(ur5_shared::config::ConfigError::Invalid {
+            key: "task.goal_pose",
+            why: format!(
+                "the first frame's three tool point targets {targets:?} lie on one line: no \
+                 pose puts the tool points there"
+            ),
+        })
+    })?;
+    let goal_pose = ur5_shared::pose::ur_pose(&pose);
+    Ok((
+        [goal_pose[0], goal_pose[1], goal_pose[2]],
+        Some(goal_pose),
+        start_q,
+    ))
+}
+
+/// A UR arm's recorded joint positions as trajectories of the whole arm and a pose
+/// ([`StateLayout::POSE6`], module docs): joint velocities by central differences of the
+/// positions over the frame period (one-sided at an episode's ends), the three default tool
+/// points and their velocities by forward kinematics of `sim`'s model and tool point, the goal
+/// pose the mean of the episodes' last tool poses, the start pose the first frame's.
+pub fn from_joint_positions(rec: &super::lerobot::JointRecording, sim: &SimConfig) -> Trajectories {
+    use ur5_shared::kinematics::UrKinematics;
+    let model = rec.model.unwrap_or(sim.model);
+    let kin = UrKinematics::new(model, sim.ee_offset);
+    let (t_len, dt) = (rec.horizon, rec.dt);
+    let q = |d: usize, t: usize| -> [f64; 6] {
+        let i = (d * t_len + t) * 6;
+        rec.positions[i..i + 6].try_into().expect("6 joints")
+    };
+    let ends: Vec<_> = (0..rec.count)
+        .map(|d| kin.tool_pose(&q(d, t_len - 1)))
+        .collect();
+    let goal_pose = ur5_shared::pose::ur_pose(&ur5_shared::pose::mean_pose(&ends));
+    let start_q = ur5_shared::joints::Joints::from_slice(&q(0, 0));
+    let task = TaskConfig {
+        dt,
+        horizon: t_len,
+        joints: 6,
+        start_q,
+        goal: [goal_pose[0], goal_pose[1], goal_pose[2]],
+        goal_pose: Some(goal_pose),
+        tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
+    };
+    let (layout, targets) = (StateLayout::POSE6, task.targets());
+    let mut states = vec![0.0; rec.count * t_len * layout.dx()];
+    let rows = states.chunks_exact_mut(layout.dx());
+    for (k, s) in rows.enumerate() {
+        let (d, t) = (k / t_len, k % t_len);
+        let (before, after) = (t.saturating_sub(1), (t + 1).min(t_len - 1));
+        let (a, b) = (q(d, before), q(d, after));
+        let qd: [f64; 6] = core::array::from_fn(|j| (b[j] - a[j]) / ((after - before) as f64 * dt));
+        let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+        kin.tool_points_velocity(
+            &q(d, t),
+            &qd,
+            task.tool_offsets(),
+            &mut points,
+            &mut velocities,
+        );
+        layout.fill_state(&q(d, t), &qd, &points, &velocities, &targets, s);
+    }
+    Trajectories {
+        layout,
+        states,
+        actions: None,
+        count: rec.count,
+        horizon: t_len,
+        dt,
+        task: Some(TaskMeta {
+            goal: task.goal,
+            start_q,
+            seed: DERIVED_SEED,
+            cost_random: None,
+            cost_expert: None,
+            goal_pose: Some(goal_pose),
+            tool_points: None,
+        }),
+        model: rec.model,
+    }
 }
 
 /// A recorded `cost_expert` may differ from the one recomputed from the states by this
@@ -391,6 +540,12 @@ pub fn load_foreign(path: &Path, sim: &SimConfig) -> Result<Demos, IoError> {
                 "a folder without meta/info.json: not a LeRobot dataset"
             )
         );
+        if super::lerobot::state_width(path)? == super::lerobot::JOINT_POSITIONS {
+            let rec = super::lerobot::import_joint_positions(path)?;
+            // Before anything simulates at that period.
+            ur5_shared::config::check_dt(rec.dt).map_err(IoError::TrajectoryDt)?;
+            return to_demos(from_joint_positions(&rec, sim), sim);
+        }
         return to_demos(super::lerobot::import(path)?, sim);
     }
     if super::tool_path::is_tool_path_csv(path) {

@@ -9,10 +9,16 @@
 //! | `meta/episodes/chunk-000/file-000.parquet` | per episode: `episode_index`, `tasks`, `length`, `data/chunk_index`, `data/file_index`, `dataset_from_index`, `dataset_to_index`, `meta/episodes/chunk_index`, `meta/episodes/file_index` |
 //! | `data/chunk-000/file-000.parquet` | per frame: `observation.state` list<float64> [dX], `action` list<float64> [dU] (when recorded), `timestamp` float32 (s), `frame_index`, `episode_index`, `index`, `task_index` int64 |
 //!
-//! States are written as float64 so that an export reads back bit for bit; the reader takes
-//! `observation.state` as float64 or float32 lists from every `data/*/*.parquet` file (in name
-//! order), groups frames by `episode_index` and orders them by `frame_index`. It reads nothing
-//! else from the frames: imitation is state-only.
+//! The state's width is the task's dX (`ur5_shared::StateLayout`: 12 for three joints and a
+//! point, 18 for six joints and a point, 30 for six joints and a pose), its `names` the
+//! layout's; the action's width is dU. States are written as float64 so that an export reads
+//! back bit for bit; the reader takes `observation.state` as float64 or float32 lists from
+//! every `data/*/*.parquet` file (in name order), groups frames by `episode_index` and orders
+//! them by `frame_index`. It reads nothing else from the frames: imitation is state-only.
+//!
+//! A recording of a UR arm made elsewhere stores the six joint positions (rad) as
+//! `observation.state` ([`JOINT_POSITIONS`] wide): [`import_joint_positions`] reads those, and
+//! `io::foreign` makes them states of the whole arm.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -28,7 +34,7 @@ use parquet::record::Field;
 use parquet::schema::types::Type;
 use serde::{Deserialize, Serialize};
 
-use ur5_shared::layout::{ACTION_NAMES, DU, DX, STATE_NAMES};
+use ur5_shared::layout::StateLayout;
 use ur5_shared::UrModel;
 
 /// The state feature, the only one the reader needs.
@@ -39,8 +45,19 @@ pub const ACTION_FEATURE: &str = "action";
 /// says the same). Datasets exported before it, and those made elsewhere, have none: they are
 /// taken to be of the configured arm (the UR5 for `learner dataset check`).
 pub const MODEL_KEY: &str = "ur_model";
-/// The one task of every dataset we write.
+/// The task of every three-joint dataset we write.
 pub const TASK: &str = "reach the goal point with the end effector (UR5, 3 joints)";
+/// The task of a dataset of another layout than the three-joint point task's.
+fn task_text(layout: &StateLayout) -> String {
+    match (layout.joints(), layout.tool_points()) {
+        _ if *layout == StateLayout::REACH3 => TASK.into(),
+        (n, 1) => format!("reach the goal point with the end effector (UR, {n} joints)"),
+        (n, _) => format!("reach the goal pose with the tool (UR, {n} joints)"),
+    }
+}
+/// Width of the `observation.state` of a UR arm's recording made elsewhere: its six joint
+/// positions (rad), base to wrist 3.
+pub const JOINT_POSITIONS: usize = 6;
 
 /// Errors of reading or writing a dataset; each names the file and, where it applies, the
 /// feature.
@@ -86,13 +103,23 @@ pub struct TaskMeta {
     pub cost_random: Option<f64>,
     /// Mean task cost of these trajectories, when known.
     pub cost_expert: Option<f64>,
+    /// A pose task's goal pose, UR's p[x, y, z, rx, ry, rz] (m, rad; base frame); absent for
+    /// a point goal (and so absent from three-joint datasets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_pose: Option<[f64; 6]>,
+    /// A pose task's tool points (m, flange frame, relative to the TCP); absent: the default
+    /// ones (`ur5_shared::config::DEFAULT_TOOL_POINTS`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool_points: Option<[[f64; 3]; 3]>,
 }
 
 /// Equal-length state trajectories (and, where recorded, actions) at one control period: what
 /// every demonstration format holds.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectories {
-    /// States, (D, T, dX) row-major (layout `ur5_shared::layout::STATE_NAMES`).
+    /// The states' layout (dX, dU and the names): the task's.
+    pub layout: StateLayout,
+    /// States, (D, T, dX) row-major (names `layout.state_names()`).
     pub states: Vec<f64>,
     /// Actions, (D, T, dU) row-major, when recorded.
     pub actions: Option<Vec<f64>>,
@@ -265,13 +292,16 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
     }
     let (d, t) = (traj.count, traj.horizon);
     let n = d * t;
+    let layout = traj.layout;
+    let (dx, du) = (layout.dx(), layout.du());
+    let task = task_text(&layout);
     let frame =
         |f: &dyn Fn(usize, usize) -> i64| -> Vec<i64> { (0..n).map(|i| f(i / t, i % t)).collect() };
     let mut data = vec![(
         STATE_FEATURE,
         Column::ListF64 {
             values: traj.states.clone(),
-            width: DX,
+            width: dx,
         },
     )];
     if let Some(a) = &traj.actions {
@@ -279,7 +309,7 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
             ACTION_FEATURE,
             Column::ListF64 {
                 values: a.clone(),
-                width: DU,
+                width: du,
             },
         ));
     }
@@ -300,7 +330,7 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
         (
             "tasks",
             Column::ListStr {
-                values: vec![TASK.to_string(); d],
+                values: vec![task.clone(); d],
                 width: 1,
             },
         ),
@@ -337,7 +367,7 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
         &dir.join("meta/tasks.parquet"),
         &[
             ("task_index", Column::I64(vec![0])),
-            ("task", Column::Str(vec![TASK.into()])),
+            ("task", Column::Str(vec![task])),
         ],
         vec![KeyValue::new("pandas".into(), pandas.to_string())],
     )?;
@@ -346,16 +376,16 @@ pub fn export(traj: &Trajectories, dir: &Path) -> Result<(), LeRobotError> {
     let mut features = serde_json::Map::new();
     features.insert(
         STATE_FEATURE.into(),
-        serde_json::json!({"dtype": "float64", "shape": [DX], "names": STATE_NAMES}),
+        serde_json::json!({"dtype": "float64", "shape": [dx], "names": layout.state_names()}),
     );
     let mut stats_json = serde_json::Map::new();
-    stats_json.insert(STATE_FEATURE.into(), stats(&traj.states, DX));
+    stats_json.insert(STATE_FEATURE.into(), stats(&traj.states, dx));
     if let Some(a) = &traj.actions {
         features.insert(
             ACTION_FEATURE.into(),
-            serde_json::json!({"dtype": "float64", "shape": [DU], "names": ACTION_NAMES}),
+            serde_json::json!({"dtype": "float64", "shape": [du], "names": layout.action_names()}),
         );
-        stats_json.insert(ACTION_FEATURE.into(), stats(a, DU));
+        stats_json.insert(ACTION_FEATURE.into(), stats(a, du));
     }
     features.insert("timestamp".into(), scalar("float32"));
     for k in ["frame_index", "episode_index", "index", "task_index"] {
@@ -394,25 +424,40 @@ pub fn is_dataset(dir: &Path) -> bool {
     dir.join("meta/info.json").is_file()
 }
 
-/// Reads the state trajectories of the LeRobot v3.0 dataset in `dir`: `fps` and, if noted,
-/// `ur5_task` from `meta/info.json`; `observation.state` (dX entries, float64 or float32),
-/// `episode_index` and `frame_index` from every `data/*/*.parquet`. Errors name the feature
-/// that is missing, of another size or type, or of episodes of unequal length.
-pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
+/// What `meta/info.json` and the data files of a dataset hold, before the frames are read as
+/// states or as joint positions.
+struct Raw {
+    /// Width of `observation.state`.
+    width: usize,
+    /// Frames, (D, T, width) row-major.
+    values: Vec<f64>,
+    count: usize,
+    horizon: usize,
+    fps: f64,
+    task: Option<TaskMeta>,
+    model: Option<UrModel>,
+}
+
+/// The width of the dataset's `observation.state` as `meta/info.json` declares it (`shape`
+/// [width]).
+pub fn state_width(dir: &Path) -> Result<usize, LeRobotError> {
+    let (info, info_path) = read_info(dir)?;
+    declared_width(&info, &info_path)
+}
+
+fn read_info(dir: &Path) -> Result<(serde_json::Value, PathBuf), LeRobotError> {
     let info_path = dir.join("meta/info.json");
-    let bad_info = |why: String| LeRobotError::Info {
-        path: info_path.clone(),
-        why,
-    };
     let text = std::fs::read_to_string(&info_path).map_err(io_err(&info_path))?;
-    let info: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| bad_info(format!("not JSON: {e}")))?;
-    let fps = info["fps"]
-        .as_f64()
-        .filter(|f| *f > 0.0)
-        .ok_or_else(|| bad_info("no positive `fps`".into()))?;
-    let feature = |why: String| LeRobotError::Feature {
+    let info = serde_json::from_str(&text).map_err(|e| LeRobotError::Info {
         path: info_path.clone(),
+        why: format!("not JSON: {e}"),
+    })?;
+    Ok((info, info_path))
+}
+
+fn declared_width(info: &serde_json::Value, info_path: &Path) -> Result<usize, LeRobotError> {
+    let feature = |why: String| LeRobotError::Feature {
+        path: info_path.to_owned(),
         feature: STATE_FEATURE.into(),
         why,
     };
@@ -422,12 +467,28 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
             "missing from meta/info.json `features`: state-only imitation needs the state".into(),
         ));
     }
-    if f["shape"] != serde_json::json!([DX]) {
-        return Err(feature(format!(
-            "shape {}, expected [{DX}] (names {STATE_NAMES:?})",
+    match f["shape"].as_array().map(|a| a.as_slice()) {
+        Some([w]) if w.as_u64().is_some_and(|w| w > 0) => Ok(w.as_u64().expect("checked") as usize),
+        _ => Err(feature(format!(
+            "shape {}, expected [dX] (the task's state) or [{JOINT_POSITIONS}] (a UR arm's \
+             joint positions)",
             f["shape"]
-        )));
+        ))),
     }
+}
+
+/// Reads the dataset in `dir` whatever its state's width ([`Raw`]).
+fn read_raw(dir: &Path) -> Result<Raw, LeRobotError> {
+    let (info, info_path) = read_info(dir)?;
+    let bad_info = |why: String| LeRobotError::Info {
+        path: info_path.clone(),
+        why,
+    };
+    let fps = info["fps"]
+        .as_f64()
+        .filter(|f| *f > 0.0)
+        .ok_or_else(|| bad_info("no positive `fps`".into()))?;
+    let width = declared_width(&info, &info_path)?;
     let model = noted_model(&info).map_err(bad_info)?;
     let task: Option<TaskMeta> = match &info["ur5_task"] {
         serde_json::Value::Null => None,
@@ -435,9 +496,9 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
             serde_json::from_value(v.clone()).map_err(|e| bad_info(format!("`ur5_task`: {e}")))?,
         ),
     };
-    let mut frames: BTreeMap<i64, BTreeMap<i64, [f64; DX]>> = BTreeMap::new();
+    let mut frames: BTreeMap<i64, BTreeMap<i64, Vec<f64>>> = BTreeMap::new();
     for path in data_files(&dir.join("data"))? {
-        read_frames(&path, &mut frames)?;
+        read_frames(&path, width, &mut frames)?;
     }
     let count = frames.len();
     let horizon = frames.values().next().map_or(0, |e| e.len());
@@ -451,7 +512,7 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
             "{count} episodes of {horizon} frames: need at least 1 of at least 2"
         )));
     }
-    let mut states = Vec::with_capacity(count * horizon * DX);
+    let mut values = Vec::with_capacity(count * horizon * width);
     for (e, ep) in &frames {
         if ep.len() != horizon {
             return Err(at(format!(
@@ -467,17 +528,113 @@ pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
                     "episode {e}: frame_index {i} where {k} belongs"
                 )));
             }
-            states.extend_from_slice(s);
+            values.extend_from_slice(s);
+        }
+    }
+    Ok(Raw {
+        width,
+        values,
+        count,
+        horizon,
+        fps,
+        task,
+        model,
+    })
+}
+
+/// Reads the state trajectories of the LeRobot v3.0 dataset in `dir`: `fps` and, if noted,
+/// `ur5_task` from `meta/info.json`; `observation.state` (dX entries, float64 or float32),
+/// `episode_index` and `frame_index` from every `data/*/*.parquet`. The state's width gives
+/// the layout ([`StateLayout::of_task_state`]: 12, 18 or 30), which a noted task must share.
+/// Errors name the feature that is missing, of another size or type, or of episodes of
+/// unequal length.
+pub fn import(dir: &Path) -> Result<Trajectories, LeRobotError> {
+    let width = state_width(dir)?;
+    let info_path = dir.join("meta/info.json");
+    let feature = |why: String| LeRobotError::Feature {
+        path: info_path.clone(),
+        feature: STATE_FEATURE.into(),
+        why,
+    };
+    let Some(layout) = StateLayout::of_task_state(width) else {
+        return Err(feature(format!(
+            "shape [{width}], expected [12] (3 joints and a point), [18] (6 joints and a point) \
+             or [30] (6 joints and a pose){}",
+            if width == JOINT_POSITIONS {
+                ": a UR arm's joint positions are imported as such by `--demos`"
+            } else {
+                ""
+            }
+        )));
+    };
+    let raw = read_raw(dir)?;
+    if let Some(t) = &raw.task {
+        let noted = StateLayout::of_task(t.start_q.len(), t.goal_pose.is_some());
+        if noted != Ok(layout) {
+            return Err(LeRobotError::Info {
+                path: info_path,
+                why: format!(
+                    "`ur5_task` ({} start angles, {}) does not describe states of dX = {} \
+                     ({layout})",
+                    t.start_q.len(),
+                    if t.goal_pose.is_some() {
+                        "a goal pose"
+                    } else {
+                        "a goal point"
+                    },
+                    layout.dx()
+                ),
+            });
         }
     }
     Ok(Trajectories {
-        states,
+        layout,
+        states: raw.values,
         actions: None,
-        count,
-        horizon,
-        dt: 1.0 / fps,
-        task,
-        model,
+        count: raw.count,
+        horizon: raw.horizon,
+        dt: 1.0 / raw.fps,
+        task: raw.task,
+        model: raw.model,
+    })
+}
+
+/// A UR arm's recorded joint positions: what a LeRobot dataset of a UR arm made elsewhere
+/// stores as its `observation.state`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointRecording {
+    /// Joint positions (rad), (D, T, 6) row-major, base to wrist 3.
+    pub positions: Vec<f64>,
+    /// D.
+    pub count: usize,
+    /// T.
+    pub horizon: usize,
+    /// Frame period 1 / fps (s).
+    pub dt: f64,
+    /// The arm model the dataset notes ([`MODEL_KEY`]).
+    pub model: Option<UrModel>,
+}
+
+/// Reads the dataset in `dir` whose `observation.state` is a UR arm's [`JOINT_POSITIONS`]
+/// joint positions (rad), with the same checks as [`import`].
+pub fn import_joint_positions(dir: &Path) -> Result<JointRecording, LeRobotError> {
+    let raw = read_raw(dir)?;
+    if raw.width != JOINT_POSITIONS {
+        return Err(LeRobotError::Feature {
+            path: dir.join("meta/info.json"),
+            feature: STATE_FEATURE.into(),
+            why: format!(
+                "shape [{}], expected [{JOINT_POSITIONS}] (a UR arm's joint positions)",
+                raw.width
+            ),
+        });
+    }
+    Ok(JointRecording {
+        positions: raw.values,
+        count: raw.count,
+        horizon: raw.horizon,
+        dt: 1.0 / raw.fps,
+        model: raw.model,
     })
 }
 
@@ -495,12 +652,7 @@ fn noted_model(info: &serde_json::Value) -> Result<Option<UrModel>, String> {
 
 /// The arm model the dataset in `dir` notes ([`MODEL_KEY`]; `None` if it notes none).
 pub fn model_of(dir: &Path) -> Result<Option<UrModel>, LeRobotError> {
-    let info_path = dir.join("meta/info.json");
-    let text = std::fs::read_to_string(&info_path).map_err(io_err(&info_path))?;
-    let info: serde_json::Value = serde_json::from_str(&text).map_err(|e| LeRobotError::Info {
-        path: info_path.clone(),
-        why: format!("not JSON: {e}"),
-    })?;
+    let (info, info_path) = read_info(dir)?;
     noted_model(&info).map_err(|why| LeRobotError::Info {
         path: info_path,
         why,
@@ -528,10 +680,12 @@ fn data_files(data: &Path) -> Result<Vec<PathBuf>, LeRobotError> {
     Ok(files)
 }
 
-/// Adds the frames of the data file `path` to `frames` (episode → frame → state).
+/// Adds the frames of the data file `path` to `frames` (episode → frame → state of `width`
+/// entries).
 fn read_frames(
     path: &Path,
-    frames: &mut BTreeMap<i64, BTreeMap<i64, [f64; DX]>>,
+    width: usize,
+    frames: &mut BTreeMap<i64, BTreeMap<i64, Vec<f64>>>,
 ) -> Result<(), LeRobotError> {
     let feature_err = |feature: &str, why: String| LeRobotError::Feature {
         path: path.to_path_buf(),
@@ -579,18 +733,22 @@ fn read_frames(
                             )),
                         })
                         .collect::<Result<_, _>>()?;
-                    let n = v.len();
-                    state = Some(<[f64; DX]>::try_from(v).map_err(|_| {
-                        feature_err(
+                    if v.len() != width {
+                        return Err(feature_err(
                             STATE_FEATURE,
-                            format!("a frame with {n} entries, expected dX = {DX}"),
-                        )
-                    })?);
+                            format!(
+                                "a frame with {} entries, expected {width} (meta/info.json's \
+                                 shape)",
+                                v.len()
+                            ),
+                        ));
+                    }
+                    state = Some(v);
                 }
                 (STATE_FEATURE, other) => {
                     return Err(feature_err(
                         STATE_FEATURE,
-                        format!("{other:?} is not a list of {DX} numbers"),
+                        format!("{other:?} is not a list of {width} numbers"),
                     ))
                 }
                 (name @ ("episode_index" | "frame_index"), f) => {

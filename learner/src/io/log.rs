@@ -1,5 +1,7 @@
 //! The per-iteration CSV of the imitation runs (`gaifo_log.csv`, the same columns for
-//! LQR+GAIfO and GAIfO (PPO); `mdgps_log.csv` for MDGPS; docs/design.md §4).
+//! LQR+GAIfO and GAIfO (PPO); `mdgps_log.csv` for MDGPS; docs/design.md §4). A pose task's
+//! `gaifo_log.csv` has one more column at the end, [`ORIENTATION_COLUMN`]; a point task's
+//! columns are [`CSV_HEADER`]'s alone, as they were before pose tasks.
 
 use std::path::Path;
 
@@ -9,10 +11,15 @@ use crate::error::ensure;
 use imitation::gaifo::GaifoLog;
 use imitation::mdgps::MdgpsLog;
 use serde::{Deserialize, Serialize};
+use ur5_shared::StateLayout;
 
 /// Header of the per-iteration CSV (`gaifo_log.csv`), the same for both algorithms: the fields
 /// of [`GaifoRow`].
 pub const CSV_HEADER: &str = "iteration,seed,algorithm,normalised_performance,task_cost,final_distance_m,critic_loss,wasserstein,kl,eta,step_mult,t_execute_s,t_dynamics_s,t_critic_s,t_cost_s,t_lqr_s,cpu_learner_s";
+
+/// The column a pose task's `gaifo_log.csv` adds after [`CSV_HEADER`]'s: the noise-free
+/// episode's final orientation error (degrees), the name of the `--json` line's field.
+pub const ORIENTATION_COLUMN: &str = "final_orientation_error_deg";
 
 /// Header of the expert's per-iteration CSV (`expert_log.csv`, `serve_log.csv`): the serde
 /// fields of [`imitation::expert::IterationLog`].
@@ -42,6 +49,10 @@ pub struct GaifoRow {
     /// Absent in logs written before it was added: NaN.
     #[serde(default = "nan")]
     pub cpu_learner_s: f64,
+    /// A pose task's final orientation error (degrees; [`ORIENTATION_COLUMN`]); `None` for a
+    /// point task, whose rows have no such column.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub final_orientation_error_deg: Option<f64>,
 }
 
 fn nan() -> f64 {
@@ -49,8 +60,14 @@ fn nan() -> f64 {
 }
 
 impl GaifoRow {
-    /// The row of `log` of run `seed` of `algorithm`.
+    /// The row of `log` of run `seed` of `algorithm` of a point task (no orientation column).
     pub fn new(log: &GaifoLog, seed: u64, algorithm: &str) -> Self {
+        Self::of_task(log, seed, algorithm, false)
+    }
+
+    /// The row of `log` of run `seed` of `algorithm`; with `pose` (a pose task) its
+    /// orientation error in [`ORIENTATION_COLUMN`].
+    pub fn of_task(log: &GaifoLog, seed: u64, algorithm: &str, pose: bool) -> Self {
         Self {
             iteration: log.iteration,
             seed,
@@ -69,6 +86,7 @@ impl GaifoRow {
             t_cost_s: log.t_cost,
             t_lqr_s: log.t_lqr,
             cpu_learner_s: log.cpu_learner,
+            final_orientation_error_deg: pose.then_some(log.final_orientation_error_deg),
         }
     }
 
@@ -92,7 +110,7 @@ impl GaifoRow {
             cpu_learner: self.cpu_learner_s,
             demo_gap: f64::NAN,
             path_rmse: f64::NAN,
-            final_orientation_error_deg: f64::NAN,
+            final_orientation_error_deg: self.final_orientation_error_deg.unwrap_or(f64::NAN),
         }
     }
 }
@@ -160,27 +178,49 @@ impl MdgpsRow {
 pub trait LogRow {
     /// The CSV's file name in the run folder.
     const FILE: &'static str;
-    /// Its header.
+    /// Its header for a point task.
     const HEADER: &'static str;
-    /// Writes the row of run `seed` of `algorithm`.
+    /// Its header for a task of `layout` ([`LogRow::HEADER`] unless the log has columns for
+    /// a pose task).
+    fn header(_layout: &StateLayout) -> String {
+        Self::HEADER.into()
+    }
+    /// Writes the row of run `seed` of `algorithm` on a task of `layout` (the columns of
+    /// [`LogRow::header`]).
     fn write_row(
         &self,
         f: &mut impl std::io::Write,
         seed: u64,
         algorithm: &str,
+        layout: &StateLayout,
     ) -> std::io::Result<()>;
+}
+
+/// Whether the log of a task of `layout` has [`ORIENTATION_COLUMN`]: a pose task's (three
+/// tool points).
+fn has_orientation(layout: &StateLayout) -> bool {
+    layout.tool_points() == 3
 }
 
 impl LogRow for GaifoLog {
     const FILE: &'static str = "gaifo_log.csv";
     const HEADER: &'static str = CSV_HEADER;
+    fn header(layout: &StateLayout) -> String {
+        if has_orientation(layout) {
+            format!("{CSV_HEADER},{ORIENTATION_COLUMN}")
+        } else {
+            CSV_HEADER.into()
+        }
+    }
     fn write_row(
         &self,
         f: &mut impl std::io::Write,
         seed: u64,
         algorithm: &str,
+        layout: &StateLayout,
     ) -> std::io::Result<()> {
-        write_csv_row(f, self, seed, algorithm)
+        let row = GaifoRow::of_task(self, seed, algorithm, has_orientation(layout));
+        write_record(f, &row)
     }
 }
 
@@ -192,6 +232,7 @@ impl LogRow for MdgpsLog {
         f: &mut impl std::io::Write,
         seed: u64,
         _algorithm: &str,
+        _layout: &StateLayout,
     ) -> std::io::Result<()> {
         write_record(f, &MdgpsRow::new(self, seed))
     }
@@ -288,7 +329,8 @@ pub fn open_log_with(
         .map_err(IoError::file("opening", &path))
 }
 
-/// Parses a `gaifo_log.csv` (columns of [`CSV_HEADER`], by name) back into logs.
+/// Parses a `gaifo_log.csv` (columns of [`CSV_HEADER`], and a pose task's
+/// [`ORIENTATION_COLUMN`], by name) back into logs.
 pub fn read_gaifo_csv(path: &Path) -> Result<Vec<GaifoLog>, IoError> {
     let mut r = csv::Reader::from_path(path).map_err(IoError::csv("reading", path))?;
     r.deserialize::<GaifoRow>()
@@ -375,6 +417,45 @@ mod tests {
             String::from_utf8(buf).unwrap().lines().next(),
             Some(EXPERT_CSV_HEADER)
         );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A pose task's rows end with the orientation error, under the header that names it, and
+    /// read back; a point task's rows and header are as before (no such column), whatever
+    /// the log holds.
+    #[test]
+    fn a_pose_tasks_log_has_the_orientation_column_and_a_point_tasks_not() {
+        let log = GaifoLog {
+            iteration: 2,
+            final_orientation_error_deg: 1.5,
+            ..GaifoLog::default()
+        };
+        let (pose, point) = (StateLayout::POSE6, StateLayout::REACH3);
+        let header = GaifoLog::header(&pose);
+        assert_eq!(header, format!("{CSV_HEADER},final_orientation_error_deg"));
+        assert_eq!(GaifoLog::header(&point), CSV_HEADER);
+        let (mut a, mut b, mut old) = (Vec::new(), Vec::new(), Vec::new());
+        log.write_row(&mut a, 1, "lqr-gaifo", &pose).unwrap();
+        log.write_row(&mut b, 1, "lqr-gaifo", &point).unwrap();
+        write_csv_row(&mut old, &log, 1, "lqr-gaifo").unwrap();
+        let (a, b) = (String::from_utf8(a).unwrap(), String::from_utf8(b).unwrap());
+        assert_eq!(b.as_bytes(), old, "a point task's row as before");
+        assert_eq!(a.trim_end().split(',').count(), header.split(',').count());
+        assert!(a.trim_end().ends_with(",1.5"), "{a}");
+        assert_eq!(
+            b.trim_end().split(',').count(),
+            CSV_HEADER.split(',').count()
+        );
+        let dir = std::env::temp_dir().join(format!("log-pose-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("gaifo_log.csv");
+        std::fs::write(&path, format!("{header}\n{a}")).unwrap();
+        let back = read_gaifo_csv(&path).unwrap();
+        assert_eq!(back[0].final_orientation_error_deg, 1.5);
+        std::fs::write(&path, format!("{CSV_HEADER}\n{b}")).unwrap();
+        assert!(read_gaifo_csv(&path).unwrap()[0]
+            .final_orientation_error_deg
+            .is_nan());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

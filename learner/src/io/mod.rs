@@ -154,6 +154,9 @@ pub enum IoError {
     /// A learner piece run on the files (the random policy's cost).
     #[error(transparent)]
     Imitation(#[from] imitation::ImitationError),
+    /// A file of other dimensions than the task's (or the run's) layout: names both.
+    #[error(transparent)]
+    Layout(#[from] ur5_shared::layout::DimensionMismatch),
     /// An MCAP log.
     #[error("writing the MCAP log")]
     Mcap(#[from] mcap::McapError),

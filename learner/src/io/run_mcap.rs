@@ -12,12 +12,16 @@
 //!
 //! | topic | schema | one message per | fields |
 //! |---|---|---|---|
-//! | `/joint_states` | `sensor_msgs/JointState` (its fields, in JSON) | step | `header` (`stamp` {`sec`, `nsec`}, `frame_id` `base`), `name` (URDF joint names), `position` (rad), `velocity` (rad/s), `effort` (empty: not measured) |
-//! | `/state` | `ur5.State` | step | `episode`, `table_version`, `noisy`, `t`, `q`, `qd` (rad, rad/s), `ee_minus_goal` (m), `ee_vel` (m/s) |
-//! | `/action` | `ur5.Action` | step | `episode`, `table_version`, `t`, `executed` (after the clamp; the arm ran it), `policy` (the controller law's) |
+//! | `/joint_states` | `sensor_msgs/JointState` (its fields, in JSON) | step | `header` (`stamp` {`sec`, `nsec`}, `frame_id` `base`), `name` (URDF names of the active joints), `position` (rad), `velocity` (rad/s), `effort` (empty: not measured) |
+//! | `/state` | `ur5.State` | step | `episode`, `table_version`, `noisy`, `t`, `q`, `qd` (rad, rad/s; n each), `ee_minus_goal` (m), `ee_vel` (m/s); a pose task: `point0_minus_target` … `point2_minus_target` (m), `point0_vel` … `point2_vel` (m/s) instead of the last two |
+//! | `/action` | `ur5.Action` | step | `episode`, `table_version`, `t`, `executed` (after the clamp; the arm ran it), `policy` (the controller law's); dU each |
 //! | `/fault` | `ur5.Fault` | step where the clamp changed the action | `episode`, `table_version`, `t`, `kind` (`action_clamped`), `policy`, `executed` |
-//! | `/episode` | `ur5.Episode` | episode, at its last step | `episode`, `table_version`, `table_epoch`, `noisy`, `task_cost`, `final_distance_m`, `file` |
+//! | `/episode` | `ur5.Episode` | episode, at its last step | `episode`, `table_version`, `table_epoch`, `noisy`, `task_cost`, `final_distance_m`, a pose task's `final_orientation_error_deg`, `file` |
 //! | `/table` | `ur5.GainTable` | table publication, when its first episode starts (at the end if it ran none) | `version`, `epoch` (the publication: a resumed learner publishes its version again with the next), `checksum` (XXH3-64, hex), `horizon`, `file` |
+//!
+//! The schemas give the sizes of the run's layout (`ur5_shared::StateLayout`, [`RunMcap::create`]):
+//! one file holds the episodes of one task, and an episode of another layout is refused, naming
+//! both. A three-joint run's file is what it was before six-joint tasks, byte for byte.
 //!
 //! Faults the controller reports (aborted episodes, safety holds) are not in a run folder
 //! (incomplete episodes are not recorded), so `/fault` holds only the clamp's interventions.
@@ -28,11 +32,12 @@ use std::path::{Path, PathBuf};
 
 use super::IoError;
 use serde_json::json;
-use ur5_shared::layout::{ACTIVE_JOINTS, DU, DX};
+use ur5_shared::config::TaskConfig;
+use ur5_shared::layout::{Part, StateLayout};
 
 use imitation::rollout::Episode;
 
-use super::episode::{load_episode_task, recorded_episodes, EpisodeOrigin};
+use super::episode::{episode_files, load_episode_task, recorded_episodes, EpisodeOrigin};
 use super::table::load_stored;
 
 /// What [`write_run_mcap`] wrote: messages per topic.
@@ -46,8 +51,27 @@ pub struct McapCounts {
     pub tables: usize,
 }
 
-/// The topics, their schema names and JSON Schemas.
-fn channels() -> Vec<(&'static str, &'static str, serde_json::Value)> {
+/// The state's fields of `/state` after `q` and `qd`: the point parts of `layout`, named
+/// `ee_minus_goal` and `ee_vel` for one tool point (the state names' convention).
+fn point_fields(layout: &StateLayout) -> Vec<(String, std::ops::Range<usize>)> {
+    layout
+        .parts()
+        .into_iter()
+        .filter_map(|(part, range)| {
+            let name = match part {
+                Part::JointAngles | Part::JointVelocities => return None,
+                Part::PointMinusTarget(_) if layout.tool_points() == 1 => "ee_minus_goal".into(),
+                Part::PointVelocity(_) if layout.tool_points() == 1 => "ee_vel".into(),
+                p => p.name(),
+            };
+            Some((name, range))
+        })
+        .collect()
+}
+
+/// The topics, their schema names and JSON Schemas, sized for `layout`.
+fn channels(layout: &StateLayout) -> Vec<(&'static str, &'static str, serde_json::Value)> {
+    let (n, du) = (layout.joints(), layout.du());
     let num = json!({"type": "number"});
     let int = json!({"type": "integer"});
     let vec = |n: usize| json!({"type": "array", "items": {"type": "number"}, "minItems": n, "maxItems": n});
@@ -64,34 +88,38 @@ fn channels() -> Vec<(&'static str, &'static str, serde_json::Value)> {
                 "velocity": {"type": "array", "items": num},
                 "effort": {"type": "array", "items": num}}}),
         ),
-        (
-            "/state",
-            "ur5.State",
-            json!({"type": "object", "properties": {
-                "episode": int, "table_version": int, "noisy": {"type": "boolean"}, "t": int,
-                "q": vec(3), "qd": vec(3), "ee_minus_goal": vec(3), "ee_vel": vec(3)}}),
-        ),
+        ("/state", "ur5.State", {
+            let mut state = json!({"type": "object", "properties": {
+                    "episode": int, "table_version": int, "noisy": {"type": "boolean"}, "t": int,
+                    "q": vec(n), "qd": vec(n)}});
+            for (name, _) in point_fields(layout) {
+                state["properties"][name] = vec(3);
+            }
+            state
+        }),
         (
             "/action",
             "ur5.Action",
             json!({"type": "object", "properties": {
                 "episode": int, "table_version": int, "t": int,
-                "executed": vec(DU), "policy": vec(DU)}}),
+                "executed": vec(du), "policy": vec(du)}}),
         ),
         (
             "/fault",
             "ur5.Fault",
             json!({"type": "object", "properties": {
                 "episode": int, "table_version": int, "t": int, "kind": {"type": "string"},
-                "executed": vec(DU), "policy": vec(DU)}}),
+                "executed": vec(du), "policy": vec(du)}}),
         ),
-        (
-            "/episode",
-            "ur5.Episode",
-            json!({"type": "object", "properties": {
-                "episode": int, "table_version": int, "table_epoch": int,
-                "noisy": {"type": "boolean"}, "task_cost": num, "final_distance_m": num, "file": {"type": "string"}}}),
-        ),
+        ("/episode", "ur5.Episode", {
+            let mut episode = json!({"type": "object", "properties": {
+                    "episode": int, "table_version": int, "table_epoch": int,
+                    "noisy": {"type": "boolean"}, "task_cost": num, "final_distance_m": num, "file": {"type": "string"}}});
+            if layout.tool_points() == 3 {
+                episode["properties"]["final_orientation_error_deg"] = num.clone();
+            }
+            episode
+        }),
         (
             "/table",
             "ur5.GainTable",
@@ -182,6 +210,8 @@ const EPISODE_BUFFER: usize = 1 << 20;
 /// Python `SeekingReader` that `make_reader` picks for a file) refuse it.
 pub struct RunMcap {
     w: mcap::Writer<BufWriter<std::fs::File>>,
+    /// The run's layout: every episode's.
+    layout: StateLayout,
     ids: BTreeMap<&'static str, u16>,
     seq: u32,
     /// Where the next episode starts on the time line (s).
@@ -194,8 +224,9 @@ pub struct RunMcap {
 }
 
 impl RunMcap {
-    /// Creates `out` (and its folder) with the header, the schemas and the channels.
-    pub fn create(out: &Path) -> Result<Self, IoError> {
+    /// Creates `out` (and its folder) with the header, the schemas and the channels, sized
+    /// for the run's `layout`.
+    pub fn create(out: &Path, layout: StateLayout) -> Result<Self, IoError> {
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
             super::create_dir(dir)?;
         }
@@ -209,7 +240,7 @@ impl RunMcap {
             // An episode's chunk stays in memory until `episode` writes it out whole.
             .create(BufWriter::with_capacity(EPISODE_BUFFER, file))?;
         let mut ids = BTreeMap::new();
-        for (topic, name, schema) in channels() {
+        for (topic, name, schema) in channels(&layout) {
             let s = w.add_schema(name, "jsonschema", &serde_json::to_vec(&schema)?)?;
             let c = w.add_channel(s, topic, "json", &BTreeMap::new())?;
             ids.insert(topic, c);
@@ -217,6 +248,7 @@ impl RunMcap {
         w.flush()?;
         Ok(Self {
             w,
+            layout,
             ids,
             seq: 0,
             start: 0.0,
@@ -251,14 +283,20 @@ impl RunMcap {
         }
     }
 
-    /// Writes the episode recorded as `path` (control period `dt`, s) and ends its chunk.
+    /// Writes the episode recorded as `path` (of the run's `task`: its control period, and a
+    /// pose task's targets for the orientation error) and ends its chunk. An episode of
+    /// another layout than the file's is refused, naming both.
     pub fn episode(
         &mut self,
         path: &Path,
         ep: &Episode,
         origin: &EpisodeOrigin,
-        dt: f64,
+        task: &TaskConfig,
     ) -> Result<(), IoError> {
+        self.layout
+            .check_dims("the episode", ep.layout.dx(), ep.layout.du())
+            .map_err(|e| IoError::from(e).at("writing to the MCAP log the episode", path))?;
+        let dt = task.dt;
         let start = self.start;
         let ns = |t: usize| ((start + t as f64 * dt) * 1e9).round() as u64;
         let v = origin.table_version;
@@ -273,16 +311,9 @@ impl RunMcap {
             self.put("/table", ns(0), t.message())?;
         }
         let (e, noisy) = (origin.episode, ep.noisy);
-        if ep.layout != ur5_shared::StateLayout::REACH3 {
-            return Err(IoError::content(
-                path,
-                format!(
-                    "an episode of a task with {}: the MCAP export writes the three-joint \
-                     point task's messages only",
-                    ep.layout
-                ),
-            ));
-        }
+        let layout = ep.layout;
+        let (q, qd, du) = (layout.q(), layout.qd(), layout.du());
+        let (joints, points) = (layout.joint_urdf_names(), point_fields(&layout));
         for t in 0..ep.horizon() {
             let s = ep.state(t);
             let (sec, nsec) = (ns(t) / 1_000_000_000, ns(t) % 1_000_000_000);
@@ -291,18 +322,18 @@ impl RunMcap {
                 ns(t),
                 json!({
                 "header": {"stamp": {"sec": sec, "nsec": nsec}, "frame_id": "base"},
-                "name": ACTIVE_JOINTS, "position": &s[0..3], "velocity": &s[3..6],
+                "name": &joints, "position": &s[q.clone()], "velocity": &s[qd.clone()],
                 "effort": [] }),
             )?;
-            self.put(
-                "/state",
-                ns(t),
-                json!({
+            let mut state = json!({
                 "episode": e, "table_version": v, "noisy": noisy, "t": t,
-                "q": &s[0..3], "qd": &s[3..6], "ee_minus_goal": &s[6..9], "ee_vel": &s[9..DX]}),
-            )?;
-            let executed = &ep.u[t * DU..(t + 1) * DU];
-            let policy = &ep.u_policy[t * DU..(t + 1) * DU];
+                "q": &s[q.clone()], "qd": &s[qd.clone()]});
+            for (name, range) in &points {
+                state[name] = json!(&s[range.clone()]);
+            }
+            self.put("/state", ns(t), state)?;
+            let executed = &ep.u[t * du..(t + 1) * du];
+            let policy = &ep.u_policy[t * du..(t + 1) * du];
             self.put(
                 "/action",
                 ns(t),
@@ -320,14 +351,14 @@ impl RunMcap {
             }
         }
         let last = ep.horizon() - 1;
-        self.put(
-            "/episode",
-            ns(last),
-            json!({
+        let mut summary = json!({
             "episode": e, "table_version": v, "table_epoch": origin.table_epoch,
             "noisy": noisy, "task_cost": ep.task_cost(),
-            "final_distance_m": ep.final_distance(), "file": path.display().to_string()}),
-        )?;
+            "final_distance_m": ep.final_distance(), "file": path.display().to_string()});
+        if let Some(o) = ep.final_orientation_error(&task.targets()) {
+            summary["final_orientation_error_deg"] = json!(o.to_degrees());
+        }
+        self.put("/episode", ns(last), summary)?;
         self.start += ep.horizon() as f64 * dt;
         self.counts.episodes += 1;
         // The chunk is complete on disk: a kill from here on loses nothing of it.
@@ -344,7 +375,7 @@ impl RunMcap {
         }
         for (path, ep, origin) in recorded_episodes(&run.join("episodes"))? {
             let task = load_episode_task(&path)?;
-            self.episode(&path, &ep, &origin, task.dt)?;
+            self.episode(&path, &ep, &origin, &task)?;
         }
         Ok(())
     }
@@ -362,8 +393,14 @@ impl RunMcap {
 }
 
 /// Writes the run in `run` (its `episodes/` and tables) to the MCAP file `out` (module docs).
+///
+/// The file's layout is the first episode's (three joints and a point if there is none).
 pub fn write_run_mcap(run: &Path, out: &Path) -> Result<McapCounts, IoError> {
-    let mut m = RunMcap::create(out)?;
+    let layout = match episode_files(&run.join("episodes"))?.first() {
+        Some(f) => load_episode_task(f)?.layout(),
+        None => StateLayout::REACH3,
+    };
+    let mut m = RunMcap::create(out, layout)?;
     m.add_run(run)?;
     if m.counts.episodes == 0 {
         drop(m);

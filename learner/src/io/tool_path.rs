@@ -431,6 +431,7 @@ pub fn load(path: &Path, sim: &SimConfig, dt: f64, seed: u64) -> Result<Trajecto
         source,
     })?;
     Ok(Trajectories {
+        layout: StateLayout::REACH3,
         states: s.states,
         actions: None,
         count: s.count,
@@ -442,6 +443,8 @@ pub fn load(path: &Path, sim: &SimConfig, dt: f64, seed: u64) -> Result<Trajecto
             seed,
             cost_random: None,
             cost_expert: None,
+            goal_pose: None,
+            tool_points: None,
         }),
         model: Some(sim.model),
     })

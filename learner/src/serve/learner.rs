@@ -156,7 +156,7 @@ pub(super) fn open_log_row<L: Learn<Log: LogRow>>(
 ) -> Result<std::fs::File, ServeError> {
     Ok(open_log_with(
         &out.join(L::Log::FILE),
-        L::Log::HEADER,
+        &L::Log::header(&learner.task().layout()),
         resumed.then_some(learner.iteration()),
     )?)
 }
@@ -167,7 +167,7 @@ pub(super) fn log_row<L: Learn<Log: LogRow>>(
     log: &L::Log,
 ) -> Result<String, ServeError> {
     let mut row = Vec::new();
-    log.write_row(&mut row, learner.seed(), L::ALGO)
+    log.write_row(&mut row, learner.seed(), L::ALGO, &learner.task().layout())
         .map_err(ServeError::Row)?;
     Ok(String::from_utf8_lossy(&row).into_owned())
 }
@@ -329,7 +329,7 @@ impl<L: ServeLearner> Run<L> {
         let path = rec.record(ep, &origin, self.learner.task())?;
         crate::io::files::note(&self.opts.out, &[&path])?;
         if let Some(m) = self.mcap.as_mut() {
-            m.episode(&path, ep, &origin, self.learner.task().dt)?;
+            m.episode(&path, ep, &origin, self.learner.task())?;
         }
         Ok(Some(crate::io::learned::file_name(&path)))
     }

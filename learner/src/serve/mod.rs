@@ -500,6 +500,7 @@ fn serve_loop<L: ServeLearner>(
         }
         None => 0,
     };
+    let layout = learner.task().layout();
     let run = Run {
         learner,
         csv,
@@ -513,7 +514,7 @@ fn serve_loop<L: ServeLearner>(
         },
         // The run so far (a resumed run's earlier episodes), then episode by episode.
         mcap: if opts.mcap {
-            let mut m = crate::io::run_mcap::RunMcap::create(&out.join("run.mcap"))?;
+            let mut m = crate::io::run_mcap::RunMcap::create(&out.join("run.mcap"), layout)?;
             m.add_run(&out)?;
             Some(m)
         } else {

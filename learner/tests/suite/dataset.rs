@@ -128,7 +128,7 @@ fn a_missing_or_wrong_sized_state_is_an_error_naming_the_feature() {
     );
     let e = edit(&|v| v["features"]["observation.state"]["shape"] = serde_json::json!([11]));
     assert!(
-        e.contains("`observation.state`") && e.contains("expected [12]"),
+        e.contains("`observation.state`") && e.contains("shape [11], expected [12]"),
         "{e}"
     );
     // The data file's rows of another width.
@@ -161,6 +161,23 @@ enum Index {
 
 /// [`write_foreign`] with index columns of type `index`.
 fn write_foreign_indexed(dir: &Path, states: &[f64], horizon: usize, width: usize, index: Index) {
+    write_frames(dir, states, DX, horizon, width, index);
+}
+
+/// [`write_foreign`] of frames `width` wide (`values`: (D, T, width)), whatever a task's dX.
+pub fn write_foreign_width(dir: &Path, values: &[f64], horizon: usize, width: usize) {
+    write_frames(dir, values, width, horizon, width, Index::I64);
+}
+
+/// [`write_foreign_indexed`] of frames that are `stride` apart in `states`.
+fn write_frames(
+    dir: &Path,
+    states: &[f64],
+    stride: usize,
+    horizon: usize,
+    width: usize,
+    index: Index,
+) {
     let path = dir.join("data/chunk-000/file-000.parquet");
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
     let int = |n: &str| {
@@ -209,7 +226,7 @@ fn write_foreign_indexed(dir: &Path, states: &[f64], horizon: usize, width: usiz
         Arc::new(props),
     )
     .unwrap();
-    let frames = states.len() / DX;
+    let frames = states.len() / stride;
     // Two row groups: frames split in the middle of an episode.
     for range in [0..frames / 2 + 1, frames / 2 + 1..frames] {
         let mut rg = w.next_row_group().unwrap();
@@ -237,7 +254,7 @@ fn write_foreign_indexed(dir: &Path, states: &[f64], horizon: usize, width: usiz
         let vals: Vec<f32> = range
             .clone()
             .flat_map(|i| (0..width).map(move |j| (i, j)))
-            .map(|(i, j)| states.get(i * DX + j).copied().unwrap_or(0.0) as f32)
+            .map(|(i, j)| states.get(i * stride + j).copied().unwrap_or(0.0) as f32)
             .collect();
         let def = vec![3i16; vals.len()];
         let rep: Vec<i16> = (0..vals.len()).map(|i| i16::from(i % width != 0)).collect();

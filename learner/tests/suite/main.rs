@@ -7,6 +7,7 @@ mod common;
 mod dataset;
 mod experiment;
 mod expert;
+mod formats;
 mod gaifo;
 mod golden;
 mod mdgps;

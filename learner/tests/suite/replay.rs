@@ -373,11 +373,12 @@ fn a_killed_mcap_writer_leaves_its_complete_episodes_readable() {
     let episodes = recorded_episodes(&run.join("episodes")).unwrap();
     let t_len = episodes[0].1.horizon();
     let file = dir.join("streamed.mcap");
-    let mut m = RunMcap::create(&file).unwrap();
+    let mut m = RunMcap::create(&file, ur5_shared::StateLayout::REACH3).unwrap();
     m.table(TableInfo::load(&run.join("iter_000_table.npz")).unwrap());
     let mut sizes = Vec::new();
     for (path, ep, origin) in &episodes[..5] {
-        m.episode(path, ep, origin, 0.1).unwrap();
+        m.episode(path, ep, origin, &ur5_shared::config::TaskConfig::default())
+            .unwrap();
         sizes.push(std::fs::metadata(&file).unwrap().len());
     }
     // The process dies here: nothing more is written (no summary, no footer).
@@ -416,7 +417,7 @@ fn a_killed_mcap_writer_leaves_its_complete_episodes_readable() {
     }
 
     // Finished, the streamed file reads as the export's: every message, summary and footer.
-    let mut m = RunMcap::create(&file).unwrap();
+    let mut m = RunMcap::create(&file, ur5_shared::StateLayout::REACH3).unwrap();
     m.add_run(&run).unwrap();
     let c = m.finish().unwrap();
     assert_eq!(c.episodes, episodes.len());

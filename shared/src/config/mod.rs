@@ -271,13 +271,25 @@ fn merge_table(base: &mut toml::Table, over: toml::Table) {
 
 /// Parses "x,y,z" (three finite numbers, comma-separated) for command lines.
 pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
+    parse_numbers(s)
+}
+
+/// Parses UR's pose "x,y,z,rx,ry,rz" (six finite numbers, comma-separated: the position in m
+/// and the rotation vector in rad, base frame; what the teach pendant shows) for command lines.
+pub fn parse_pose(s: &str) -> Result<[f64; 6], String> {
+    parse_numbers(s)
+        .map_err(|e| format!("{e} (a pose is x,y,z,rx,ry,rz: m, then a rotation vector in rad)"))
+}
+
+/// Parses `N` finite comma-separated numbers.
+fn parse_numbers<const N: usize>(s: &str) -> Result<[f64; N], String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|x| x.trim().parse::<f64>().map_err(|e| format!("`{x}`: {e}")))
         .collect::<Result<_, _>>()?;
-    let a: [f64; 3] = v
+    let a: [f64; N] = v
         .try_into()
-        .map_err(|v: Vec<f64>| format!("expected 3 comma-separated numbers, got {}", v.len()))?;
+        .map_err(|v: Vec<f64>| format!("expected {N} comma-separated numbers, got {}", v.len()))?;
     if a.iter().any(|x| !x.is_finite()) {
         return Err("values must be finite".into());
     }

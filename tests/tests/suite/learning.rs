@@ -21,7 +21,7 @@ use integration_tests::{
 };
 use learner::arm::SimArm;
 use learner::io::episode::load_episode;
-use learner::io::log::{write_csv_row, CSV_HEADER};
+use learner::io::log::{write_csv_row, LogRow, CSV_HEADER};
 use learner::io::table::load_table;
 use learner::run::{demos as record_demos, expert as train};
 use learner::serve::{episode_from_samples, load_config, load_gaifo_config};
@@ -518,12 +518,7 @@ fn lqr_gaifo_over_ipc_equals_in_process(tag: &str, task: TaskConfig) {
 
     let mut monitor = SampleMonitor::new(&prefix);
     let demos_arg = demos_path.display().to_string();
-    // MCAP files hold the reaching task's layout only.
-    let args: &[&str] = if reach {
-        &["--demos", &demos_arg, "--mcap"]
-    } else {
-        &["--demos", &demos_arg]
-    };
+    let args: &[&str] = &["--demos", &demos_arg, "--mcap"];
     let mut learner = spawn_learner(&learner_cfg, &prefix, &out, args, &dir, "learner");
     let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
     let (lj, llog, cj) = run_until_learned(&mut learner, &mut sim, &mut ctl, &mut monitor);
@@ -539,7 +534,10 @@ fn lqr_gaifo_over_ipc_equals_in_process(tag: &str, task: TaskConfig) {
     let (tables, iterations) = reference.join().unwrap();
     let csv = std::fs::read_to_string(out.join("gaifo_log.csv")).unwrap();
     let mut rows = csv.lines();
-    assert_eq!(rows.next(), Some(CSV_HEADER));
+    // A pose task's log adds its orientation column; a point task's is as it was.
+    let header = GaifoLog::header(&task.layout());
+    assert_eq!(reach, header == CSV_HEADER);
+    assert_eq!(rows.next(), Some(header.as_str()));
     let rows: Vec<&str> = rows.collect();
     assert_eq!(rows.len(), ITERATIONS, "{csv}");
     for (i, (log, eval)) in iterations.iter().enumerate() {
@@ -553,7 +551,13 @@ fn lqr_gaifo_over_ipc_equals_in_process(tag: &str, task: TaskConfig) {
         );
         // The learned numbers, as the CSV writes them (f64 Display round-trips exactly).
         let mut want = Vec::new();
-        write_csv_row(&mut want, log, SEED, "lqr-gaifo").unwrap();
+        log.write_row(&mut want, SEED, "lqr-gaifo", &task.layout())
+            .unwrap();
+        if reach {
+            let mut old = Vec::new();
+            write_csv_row(&mut old, log, SEED, "lqr-gaifo").unwrap();
+            assert_eq!(old, want, "a point task's row as before");
+        }
         assert_eq!(
             learned_columns(rows[i]),
             learned_columns(std::str::from_utf8(&want).unwrap()),
@@ -590,6 +594,9 @@ fn lqr_gaifo_over_ipc_equals_in_process(tag: &str, task: TaskConfig) {
         let mcap = std::fs::read(out.join("run.mcap")).unwrap();
         assert!(mcap.starts_with(b"\x89MCAP0\r\n") && mcap.ends_with(b"\x89MCAP0\r\n"));
     } else {
+        // The pose run's MCAP file, complete, sized by its layout.
+        let mcap = std::fs::read(out.join("run.mcap")).unwrap();
+        assert!(mcap.starts_with(b"\x89MCAP0\r\n") && mcap.ends_with(b"\x89MCAP0\r\n"));
         let ipc = monitor.episodes(1);
         assert_eq!(
             ipc[0].layout,
