@@ -318,7 +318,10 @@ mod tests {
             cfg.algorithm.kl_step.to_bits()
         );
         assert_eq!(cfg.algorithm_for(6).kl_step, 2.0 * cfg.algorithm.kl_step);
-        assert_eq!(cfg.algorithm_for(6).max_step_mult, cfg.algorithm.max_step_mult);
+        assert_eq!(
+            cfg.algorithm_for(6).max_step_mult,
+            cfg.algorithm.max_step_mult
+        );
     }
 
     #[test]
