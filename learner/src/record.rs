@@ -62,6 +62,9 @@ pub enum RecordError {
     /// The recorded trajectories as demonstrations of the arm.
     #[error(transparent)]
     Io(#[from] crate::io::IoError),
+    /// A pose goal asked of a task that keeps the wrist locked.
+    #[error("a pose goal needs the whole arm: [task] joints = 6 (the config has joints = {0})")]
+    PoseNeedsSixJoints(usize),
 }
 
 /// A measured joint state no arm in working order sends (a fault of the robot or of its
@@ -517,6 +520,9 @@ pub struct RecordReport {
     pub start_q: Joints,
     /// Goal: the mean end-effector point at the demonstrations' last step (m, base frame).
     pub goal: [f64; 3],
+    /// A pose goal: the mean of the demonstrations' last tool poses (UR's p[x, y, z, rx, ry,
+    /// rz]: m, rotation vector, base frame); `None` for a point goal.
+    pub goal_pose: Option<[f64; 6]>,
     /// Largest distance of a demonstration's last end-effector point from the goal (m).
     pub goal_spread_max_m: f64,
     /// Root mean square of those distances (m).
@@ -529,7 +535,9 @@ pub struct RecordReport {
 
 /// The demonstrations `demos` (each a [`Segmenter`] demonstration) recorded on the arm of
 /// `sim`, with start pose `start` (six joints, rad), as T = `task.horizon` steps of
-/// `task.dt` (module docs), in the layout of `task.joints` active joints and a point goal.
+/// `task.dt` (module docs), in the layout of `task.joints` active joints and a point goal, or
+/// with `pose` (six joints only) a pose goal: the mean of the demonstrations' last tool poses
+/// ([`ur5_shared::pose::mean_pose`]), the state's three tool points `task.tool_points`.
 /// Each is first [`resample`]d and, for three joints, checked against the wrist lock by the
 /// caller ([`steps_checked`]).
 pub fn to_recorded_demos(
@@ -537,37 +545,55 @@ pub fn to_recorded_demos(
     start: &Joints6,
     task: &TaskConfig,
     sim: &SimConfig,
+    pose: bool,
 ) -> Result<(Demos, RecordReport), RecordError> {
     if episodes.is_empty() {
         return Err(RecordError::NoDemonstrations);
     }
+    let joints = task.joints;
+    if pose && joints != 6 {
+        return Err(RecordError::PoseNeedsSixJoints(joints));
+    }
     let kin = UrKinematics::new(sim.model, sim.ee_offset);
-    let points: Vec<Vec<([f64; 3], [f64; 3])>> = episodes
+    let last = |ep: &Vec<(Joints6, Joints6)>| ep.last().expect("T ≥ 2").0;
+    let goal_pose = pose.then(|| {
+        let ends: Vec<_> = episodes.iter().map(|ep| kin.tool_pose(&last(ep))).collect();
+        ur5_shared::pose::ur_pose(&ur5_shared::pose::mean_pose(&ends))
+    });
+    let ends: Vec<[f64; 3]> = episodes
         .iter()
-        .map(|ep| {
-            ep.iter()
-                .map(|(q, qd)| kin.ee_point_velocity(q, qd))
-                .collect()
-        })
+        .map(|ep| kin.ee_point_velocity(&last(ep), &[0.0; 6]).0)
         .collect();
     let n = episodes.len() as f64;
-    let ends: Vec<[f64; 3]> = points.iter().map(|p| p.last().expect("T ≥ 2").0).collect();
-    let goal: [f64; 3] = core::array::from_fn(|k| ends.iter().map(|e| e[k]).sum::<f64>() / n);
+    let goal: [f64; 3] = match goal_pose {
+        Some(p) => [p[0], p[1], p[2]],
+        None => core::array::from_fn(|k| ends.iter().map(|e| e[k]).sum::<f64>() / n),
+    };
     let dist: Vec<f64> = ends
         .iter()
         .map(|e| (0..3).map(|k| (e[k] - goal[k]).powi(2)).sum::<f64>().sqrt())
         .collect();
-    let joints = task.joints;
-    let layout =
-        ur5_shared::StateLayout::of_task(joints, false).expect("a validated task's joints");
+    let goal_task = TaskConfig {
+        goal,
+        goal_pose,
+        ..task.clone()
+    };
+    let (offsets, targets) = (goal_task.tool_offsets(), goal_task.targets());
+    let layout = ur5_shared::StateLayout::of_task(joints, pose).expect("checked above");
     let mut states = vec![0.0; episodes.len() * task.horizon * layout.dx()];
     let rows = states.chunks_exact_mut(layout.dx());
-    let steps = episodes
-        .iter()
-        .zip(&points)
-        .flat_map(|(ep, pts)| ep.iter().zip(pts));
-    for (s, ((q, qd), (ee, ee_vel))) in rows.zip(steps) {
-        layout.fill_state(&q[..joints], &qd[..joints], &[*ee], &[*ee_vel], &[goal], s);
+    let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+    let p = offsets.len();
+    for (s, (q, qd)) in rows.zip(episodes.iter().flatten()) {
+        kin.tool_points_velocity(q, qd, offsets, &mut points[..p], &mut velocities[..p]);
+        layout.fill_state(
+            &q[..joints],
+            &qd[..joints],
+            &points[..p],
+            &velocities[..p],
+            &targets,
+            s,
+        );
     }
     let start_q = Joints::from_slice(&start[..joints]);
     let traj = Trajectories {
@@ -583,8 +609,9 @@ pub fn to_recorded_demos(
             seed: DERIVED_SEED,
             cost_random: None,
             cost_expert: None,
-            goal_pose: None,
-            tool_points: None,
+            goal_pose,
+            tool_points: (pose && task.tool_points != ur5_shared::config::DEFAULT_TOOL_POINTS)
+                .then_some(task.tool_points),
         }),
         model: Some(sim.model),
     };
@@ -594,6 +621,7 @@ pub fn to_recorded_demos(
         episodes: demos.count,
         start_q,
         goal,
+        goal_pose,
         goal_spread_max_m: dist.iter().copied().fold(0.0, f64::max),
         goal_spread_rms_m: (dist.iter().map(|d| d * d).sum::<f64>() / n).sqrt(),
         cost_expert: demos.cost_expert,
@@ -793,7 +821,8 @@ mod tests {
         };
         task.validate().unwrap();
         let steps = steps_checked(&d, &task, &sim).unwrap();
-        let (demos, report) = to_recorded_demos(&[steps.clone()], &start, &task, &sim).unwrap();
+        let (demos, report) =
+            to_recorded_demos(&[steps.clone()], &start, &task, &sim, false).unwrap();
         let layout = ur5_shared::StateLayout::of_task(6, false).unwrap();
         assert_eq!(demos.layout(), layout);
         assert_eq!(demos.states.len(), 30 * 18);
@@ -816,6 +845,53 @@ mod tests {
         );
         assert!(report.cost_random.is_finite() && report.cost_expert.is_finite());
         assert_eq!(demos.task().unwrap().joints, 6);
+    }
+
+    /// With a pose goal the state carries three tool points against the demonstrations' mean
+    /// last tool pose (dX = 30); a task that keeps the wrist locked is refused.
+    #[test]
+    fn a_pose_goal_is_the_demonstrations_mean_last_tool_pose() {
+        let (a, b) = ([0.0, -2.0, 2.4], [0.3, -1.4, 2.1]);
+        let ev = run(&stream(125.0, a, b, 0.0, 1.5, 1.2));
+        let mut d = demonstrations(&ev)[0].clone();
+        for s in &mut d.samples {
+            s.q[4] += 0.4 * (s.t - 1.5).clamp(0.0, 1.0);
+        }
+        let sim = SimConfig::default();
+        let start = UrKinematics::six(&a, &W);
+        let three = TaskConfig {
+            dt: 0.1,
+            horizon: 30,
+            ..TaskConfig::default()
+        };
+        let task = TaskConfig {
+            joints: 6,
+            start_q: Joints::from_slice(&start),
+            ..three.clone()
+        };
+        let steps = steps_checked(&d, &task, &sim).unwrap();
+        let e = to_recorded_demos(&[steps.clone()], &start, &three, &sim, true).unwrap_err();
+        assert!(matches!(e, RecordError::PoseNeedsSixJoints(3)), "{e}");
+        let (demos, report) =
+            to_recorded_demos(&[steps.clone()], &start, &task, &sim, true).unwrap();
+        let layout = ur5_shared::StateLayout::POSE6;
+        assert_eq!(demos.layout(), layout);
+        let want = ur5_shared::pose::ur_pose(&kin().tool_pose(&steps[29].0));
+        let p = report.goal_pose.expect("a pose goal");
+        for k in 0..6 {
+            assert!((p[k] - want[k]).abs() < 1e-9, "{p:?} against {want:?}");
+        }
+        assert_eq!(demos.task().unwrap().goal_pose, Some(p));
+        assert_eq!(report.goal, [p[0], p[1], p[2]]);
+        // Every tool point on its target at the last step, not at the first.
+        let (first, end) = (demos.state(0, 0), demos.state(0, 29));
+        for i in 0..3 {
+            assert!(
+                end[layout.point(i)].iter().all(|v| v.abs() < 1e-9),
+                "point {i}"
+            );
+        }
+        assert!((0..3).all(|i| first[layout.point(i)].iter().any(|v| v.abs() > 0.01)));
     }
 
     #[test]

@@ -64,6 +64,10 @@ pub struct RecordArgs {
     /// ee_offset) tables; start_q and goal come from the recording.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// A pose goal: the mean of the demonstrations' last tool poses, and three tool points in
+    /// the state (needs `[task] joints = 6`); without it the goal is their mean end point.
+    #[arg(long)]
+    pub pose: bool,
     /// Output format.
     #[arg(long, value_enum, default_value = "npz")]
     pub format: RecordFormat,
@@ -243,10 +247,9 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         args.max_time_s
     );
     anyhow::ensure!(
-        cfg.task.joints == 3 || matches!(args.format, RecordFormat::Npz),
-        "--format lerobot holds the three-joint task's states; a recording of the whole arm \
-         ([task] joints = {}) is written as npz",
-        cfg.task.joints
+        !args.pose || cfg.task.joints == 6,
+        "--pose: {}",
+        crate::record::RecordError::PoseNeedsSixJoints(cfg.task.joints)
     );
     let claim = Claim::take(&args.out, args.format)?;
     let timeout = Duration::from_secs(10);
@@ -339,7 +342,7 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
                 args.out.display()
             )));
     };
-    let (demos, report) = to_recorded_demos(&rec.kept, &start, &cfg.task, &cfg.sim)?;
+    let (demos, report) = to_recorded_demos(&rec.kept, &start, &cfg.task, &cfg.sim, args.pose)?;
     let written = match args.format {
         RecordFormat::Npz => {
             let f = args.out.join("demos.npz");
@@ -369,6 +372,9 @@ pub fn run(args: RecordArgs) -> anyhow::Result<()> {
         report.cost_random,
         rec.skipped
     );
+    if let Some(p) = report.goal_pose {
+        eprintln!("goal pose p{p:.4?} (m, rotation vector)");
+    }
     if args.json {
         println!(
             "{}",
