@@ -7,12 +7,9 @@ use crate::common;
 
 use std::path::{Path, PathBuf};
 
+use super::six_joints::{pose_demos, pose_task, sim, POSE};
 use common::{learner, learner_output};
-use imitation::controller::init_hold;
-use imitation::demos::Demos;
-use imitation::expert::{record_demos, ExpertConfig};
 use imitation::rollout::Episode;
-use learner::arm::SimArm;
 use learner::io::episode::{load_episode, save_episode, EpisodeOrigin};
 use learner::io::foreign;
 use learner::io::lerobot;
@@ -20,40 +17,10 @@ use learner::io::run_mcap::{write_run_mcap, RunMcap};
 use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::{StateLayout, UrModel};
 
-/// The UR5e's flange pose at q = (0.293, −1.379, 2.092, −1.9, 1.3, 0.4) rad.
-const POSE: [f64; 6] = [-0.4383, -0.2993, 0.3748, 0.4667, -0.108, -0.8096];
-
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("formats-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn sim() -> SimConfig {
-    SimConfig::for_model(UrModel::Ur5e)
-}
-
-fn pose_task(horizon: usize) -> TaskConfig {
-    TaskConfig {
-        horizon,
-        ..TaskConfig::pose_for_model(UrModel::Ur5e, POSE)
-    }
-}
-
-/// Two demonstrations of T = 10 of the initial controller of the pose task (it holds the start
-/// pose, with noise): real states of the arm in the pose task's layout.
-fn pose_demos() -> Demos {
-    let cfg = ExpertConfig {
-        task: pose_task(10),
-        sim: sim(),
-        demos: 2,
-        ..ExpertConfig::default()
-    };
-    let arm = SimArm::for_task(cfg.sim.clone(), &cfg.task).unwrap();
-    let mut d = record_demos(&cfg, &arm, &init_hold(&cfg.task, 0.01), 0.0).unwrap();
-    d.cost_random = d.cost_expert + 1.0;
-    assert_eq!(d.layout(), StateLayout::POSE6);
     d
 }
 
@@ -89,7 +56,7 @@ fn names_both(e: &str) {
 #[test]
 fn pose_demonstrations_round_trip_through_csv_and_lerobot_with_their_layout() {
     let dir = tmp("roundtrip");
-    let demos = pose_demos();
+    let demos = pose_demos(10);
     let traj = foreign::from_demos(&demos);
     assert_eq!(traj.layout, StateLayout::POSE6);
     lerobot::export(&traj, &dir.join("lerobot")).unwrap();
@@ -144,7 +111,7 @@ fn pose_demonstrations_round_trip_through_csv_and_lerobot_with_their_layout() {
 fn a_file_of_another_tasks_dimensions_is_refused_naming_both_in_every_format() {
     let dir = tmp("refused");
     // Demonstrations `.npz`: against the run's layout (`learner train --goal-pose` below).
-    let pose = pose_demos();
+    let pose = pose_demos(10);
     let npz = dir.join("pose.npz");
     learner::io::demos::save(&pose, &npz).unwrap();
     let e = learner::io::demos::check_run_layout(&pose, &StateLayout::REACH3, &npz).unwrap_err();
@@ -346,7 +313,7 @@ fn write_joint_positions(dir: &Path, positions: &[f64], horizon: usize) {
 #[test]
 fn a_ur_recordings_joint_positions_import_as_the_whole_arm_and_a_pose() {
     let dir = tmp("ur-recording");
-    let demos = pose_demos();
+    let demos = pose_demos(10);
     let l = demos.layout();
     let positions: Vec<f64> = (0..demos.count)
         .flat_map(|d| (0..demos.horizon).map(move |t| (d, t)))

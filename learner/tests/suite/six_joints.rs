@@ -26,7 +26,7 @@ use ur5_shared::{policy_action, PolicyBounds, PolicyScratch, StateLayout, UrMode
 
 /// The UR5e's flange pose at q = (0.293, −1.379, 2.092, −1.9, 1.3, 0.4) rad (the expert's
 /// pose test).
-const POSE: [f64; 6] = [-0.4383, -0.2993, 0.3748, 0.4667, -0.108, -0.8096];
+pub(crate) const POSE: [f64; 6] = [-0.4383, -0.2993, 0.3748, 0.4667, -0.108, -0.8096];
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("six-test-{}-{name}", std::process::id()));
@@ -35,11 +35,11 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
-fn sim() -> SimConfig {
+pub(crate) fn sim() -> SimConfig {
     SimConfig::for_model(UrModel::Ur5e)
 }
 
-fn pose_task(horizon: usize) -> TaskConfig {
+pub(crate) fn pose_task(horizon: usize) -> TaskConfig {
     TaskConfig {
         horizon,
         ..TaskConfig::pose_for_model(UrModel::Ur5e, POSE)
@@ -48,7 +48,7 @@ fn pose_task(horizon: usize) -> TaskConfig {
 
 /// Two demonstrations of T = `horizon` of the initial controller (it holds the start pose,
 /// with noise): states of the pose task's layout, all a learner reads.
-fn pose_demos(horizon: usize) -> Demos {
+pub(crate) fn pose_demos(horizon: usize) -> Demos {
     let cfg = ExpertConfig {
         task: pose_task(horizon),
         sim: sim(),

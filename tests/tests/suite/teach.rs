@@ -64,29 +64,11 @@ pub(crate) fn run_ok(name: &str, label: &str, args: &[&str], dir: &Path) -> serd
 fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     let m = UrModel::Ur5e;
     let dir = scratch("teach");
-    let d = |p: &str| dir.join(p).display().to_string();
     let (demos, spread) = record_played_back(m, Series::E, 5, 1, &dir);
 
     // LQR+GAIfO on the UR5e model, in process.
     let train_cfg = write_config(&dir, "gaifo.toml", "seed = 1\n[sim]\nmodel = \"ur5e\"\n");
-    let its = ITERATIONS.to_string();
-    let train = run_ok(
-        "learner",
-        "train",
-        &[
-            "train",
-            "--demos",
-            &d("rec/demos.npz"),
-            "--config",
-            &train_cfg,
-            "--iterations",
-            &its,
-            "--out",
-            &d("train"),
-            "--json",
-        ],
-        &dir,
-    );
+    let train = train_recorded(&dir, &train_cfg, ITERATIONS);
     assert_eq!(train["iterations"], ITERATIONS);
     // The learner's pick: the table of the iteration whose noise-free episode (in the
     // learner's sim) ended closest to the goal; row i ran `iter_{i}_table.npz`.
@@ -125,6 +107,30 @@ fn teach_by_hand_record_train_and_run_over_rtde_on_a_ur5e() {
     assert!(dist <= 0.01, "final distance over RTDE {dist} m");
     cleanup_dead_nodes();
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `learner train` on the recording in `dir/rec/demos.npz` with config `cfg` for `iterations`
+/// iterations, into `dir/train`; its `--json` line.
+pub(crate) fn train_recorded(dir: &Path, cfg: &str, iterations: usize) -> serde_json::Value {
+    let d = |p: &str| dir.join(p).display().to_string();
+    let its = iterations.to_string();
+    run_ok(
+        "learner",
+        "train",
+        &[
+            "train",
+            "--demos",
+            &d("rec/demos.npz"),
+            "--config",
+            cfg,
+            "--iterations",
+            &its,
+            "--out",
+            &d("train"),
+            "--json",
+        ],
+        dir,
+    )
 }
 
 /// Runs `table` over RTDE on a ur-sim of model `m` (lockstep) under `rt-controller` on the

@@ -19,7 +19,7 @@ use ur5_shared::UrModel;
 
 use hil_sim::ur_sim::Series;
 
-use super::teach::{record_playback, run_ok, run_over_rtde};
+use super::teach::{record_playback, run_ok, run_over_rtde, train_recorded};
 
 /// The shape: the S, 20 cm, drawn in 5 s (half the benchmark's 10 s, to keep the test short).
 const SHAPE: &str = "Sshape";
@@ -105,24 +105,7 @@ fn teach_a_drawn_shape_by_hand_record_train_and_run_over_rtde() {
         "motion.toml",
         &format!("seed = 1\n[sim]\nmodel = \"{model}\"\n[path]\ntracking_weight = 0.1\n"),
     );
-    let its = ITERATIONS.to_string();
-    let train = run_ok(
-        "learner",
-        "train",
-        &[
-            "train",
-            "--demos",
-            &d("rec/demos.npz"),
-            "--config",
-            &cfg,
-            "--iterations",
-            &its,
-            "--out",
-            &d("train"),
-            "--json",
-        ],
-        &dir,
-    );
+    let train = train_recorded(&dir, &cfg, ITERATIONS);
     assert_eq!(train["iterations"], ITERATIONS);
     assert!(
         train["path_verdict"].is_string(),
