@@ -26,7 +26,7 @@ use std::path::Path;
 use imitation::demos::Demos;
 
 use super::npz::{NpzError, NpzFile, NpzWriter};
-use super::task_arrays::{read_task, write_task};
+use super::task_arrays::{read_task, write_layout_names, write_task};
 use super::IoError;
 use crate::error::ensure;
 
@@ -200,15 +200,7 @@ pub fn save(demos: &Demos, path: &Path) -> Result<(), NpzError> {
     w.u64("seed", &[], &[d.seed])?;
     w.f64("cost_random", &[], &[d.cost_random])?;
     w.f64("cost_expert", &[], &[d.cost_expert])?;
-    let (states, actions) = (layout.state_names(), layout.action_names());
-    w.strings(
-        "state_names",
-        &states.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
-    w.strings(
-        "action_names",
-        &actions.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
+    write_layout_names(&mut w, &layout)?;
     w.string("model", d.model.name())?;
     w.finish()?;
     Ok(())

@@ -74,15 +74,7 @@ pub fn save_episode(
     )?;
     w.f64("dt", &[], &[task.dt])?;
     w.u64("seed", &[], &[origin.seed])?;
-    let (states, actions) = (ep.layout.state_names(), ep.layout.action_names());
-    w.strings(
-        "state_names",
-        &states.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
-    w.strings(
-        "action_names",
-        &actions.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
+    super::task_arrays::write_layout_names(&mut w, &ep.layout)?;
     w.finish()?;
     Ok(())
 }

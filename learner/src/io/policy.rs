@@ -100,15 +100,7 @@ pub fn save_policy(p: &PolicyFile, path: &Path) -> Result<(), NpzError> {
     w.u64("seed", &[], &[p.seed])?;
     w.u64("iterations", &[], &[p.iterations])?;
     w.string("model", p.model.name())?;
-    let (states, actions) = (layout.state_names(), layout.action_names());
-    w.strings(
-        "state_names",
-        &states.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
-    w.strings(
-        "action_names",
-        &actions.iter().map(String::as_str).collect::<Vec<_>>(),
-    )?;
+    super::task_arrays::write_layout_names(&mut w, &layout)?;
     w.finish()?;
     Ok(())
 }

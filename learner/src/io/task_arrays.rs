@@ -1,6 +1,7 @@
 //! The task's arrays that demonstrations and episode files both carry (`super::demos`,
 //! `super::episode`): the goal point, the start pose (its length the task's joints), and a pose
-//! task's goal pose and tool points; from them the file's state layout.
+//! task's goal pose and tool points; from them the file's state layout. Also the layout's
+//! names, which policy files carry too (`super::policy`).
 
 use ur5_shared::joints::Joints;
 use ur5_shared::layout::StateLayout;
@@ -32,6 +33,18 @@ pub fn write_task(
     if let Some(p) = goal_pose {
         w.f64("goal_pose", &[6], p)?;
         w.f64("tool_points", &[3, 3], tool_points.as_flattened())?;
+    }
+    Ok(())
+}
+
+/// Writes the names of `layout`'s state and action entries (`state_names` (dX,), `action_names`
+/// (dU,)), as demonstrations, episode and policy files carry them.
+pub fn write_layout_names(w: &mut NpzWriter, layout: &StateLayout) -> Result<(), NpzError> {
+    for (key, names) in [
+        ("state_names", layout.state_names()),
+        ("action_names", layout.action_names()),
+    ] {
+        w.strings(key, &names.iter().map(String::as_str).collect::<Vec<_>>())?;
     }
     Ok(())
 }
