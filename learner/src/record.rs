@@ -44,7 +44,7 @@ use ur5_shared::UrModel;
 
 use imitation::demos::Demos;
 
-use crate::io::foreign::{to_demos, DERIVED_SEED};
+use crate::io::foreign::{arm_states, mean_tool_pose, to_demos, DERIVED_SEED};
 use crate::io::lerobot::{TaskMeta, Trajectories};
 
 /// Why a recording cannot be turned into the learner's demonstrations, or why it stopped.
@@ -556,10 +556,7 @@ pub fn to_recorded_demos(
     }
     let kin = UrKinematics::new(sim.model, sim.ee_offset);
     let last = |ep: &Vec<(Joints6, Joints6)>| ep.last().expect("T ≥ 2").0;
-    let goal_pose = pose.then(|| {
-        let ends: Vec<_> = episodes.iter().map(|ep| kin.tool_pose(&last(ep))).collect();
-        ur5_shared::pose::ur_pose(&ur5_shared::pose::mean_pose(&ends))
-    });
+    let goal_pose = pose.then(|| mean_tool_pose(&kin, episodes.iter().map(last)));
     let ends: Vec<[f64; 3]> = episodes
         .iter()
         .map(|ep| kin.ee_point_velocity(&last(ep), &[0.0; 6]).0)
@@ -578,23 +575,14 @@ pub fn to_recorded_demos(
         goal_pose,
         ..task.clone()
     };
-    let (offsets, targets) = (goal_task.tool_offsets(), goal_task.targets());
-    let layout = ur5_shared::StateLayout::of_task(joints, pose).expect("checked above");
+    let layout = goal_task.layout();
     let mut states = vec![0.0; episodes.len() * task.horizon * layout.dx()];
-    let rows = states.chunks_exact_mut(layout.dx());
-    let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
-    let p = offsets.len();
-    for (s, (q, qd)) in rows.zip(episodes.iter().flatten()) {
-        kin.tool_points_velocity(q, qd, offsets, &mut points[..p], &mut velocities[..p]);
-        layout.fill_state(
-            &q[..joints],
-            &qd[..joints],
-            &points[..p],
-            &velocities[..p],
-            &targets,
-            s,
-        );
-    }
+    arm_states(
+        &kin,
+        &goal_task,
+        episodes.iter().flatten().copied(),
+        &mut states,
+    );
     let start_q = Joints::from_slice(&start[..joints]);
     let traj = Trajectories {
         layout,

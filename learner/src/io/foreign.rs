@@ -444,6 +444,47 @@ fn derive_goal(
     ))
 }
 
+/// The mean of the tool poses (`kin`'s tool centre point) at the joint angles `qs` (rad), as
+/// UR's p[x, y, z, rx, ry, rz] ([`ur5_shared::pose::mean_pose`]): the goal pose of motions that
+/// end at those angles.
+pub fn mean_tool_pose(
+    kin: &ur5_shared::kinematics::UrKinematics,
+    qs: impl Iterator<Item = ur5_shared::kinematics::Joints6>,
+) -> [f64; 6] {
+    let ends: Vec<_> = qs.map(|q| kin.tool_pose(&q)).collect();
+    ur5_shared::pose::ur_pose(&ur5_shared::pose::mean_pose(&ends))
+}
+
+/// The states of an arm's motion in `task`'s layout, one row of `states` (dX each) per step
+/// `(q, qd)` of the six joints (rad, rad/s): the active joints, then the task's tool points
+/// minus their targets and their velocities, by forward kinematics `kin`.
+pub fn arm_states(
+    kin: &ur5_shared::kinematics::UrKinematics,
+    task: &TaskConfig,
+    steps: impl Iterator<
+        Item = (
+            ur5_shared::kinematics::Joints6,
+            ur5_shared::kinematics::Joints6,
+        ),
+    >,
+    states: &mut [f64],
+) {
+    let (layout, offsets, targets) = (task.layout(), task.tool_offsets(), task.targets());
+    let (n, p) = (layout.joints(), offsets.len());
+    let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+    for (s, (q, qd)) in states.chunks_exact_mut(layout.dx()).zip(steps) {
+        kin.tool_points_velocity(&q, &qd, offsets, &mut points[..p], &mut velocities[..p]);
+        layout.fill_state(
+            &q[..n],
+            &qd[..n],
+            &points[..p],
+            &velocities[..p],
+            &targets,
+            s,
+        );
+    }
+}
+
 /// A UR arm's recorded joint positions as trajectories of the whole arm and a pose
 /// ([`StateLayout::POSE6`], module docs): joint velocities by central differences of the
 /// positions over the frame period (one-sided at an episode's ends), the three default tool
@@ -458,10 +499,7 @@ pub fn from_joint_positions(rec: &super::lerobot::JointRecording, sim: &SimConfi
         let i = (d * t_len + t) * 6;
         rec.positions[i..i + 6].try_into().expect("6 joints")
     };
-    let ends: Vec<_> = (0..rec.count)
-        .map(|d| kin.tool_pose(&q(d, t_len - 1)))
-        .collect();
-    let goal_pose = ur5_shared::pose::ur_pose(&ur5_shared::pose::mean_pose(&ends));
+    let goal_pose = mean_tool_pose(&kin, (0..rec.count).map(|d| q(d, t_len - 1)));
     let start_q = ur5_shared::joints::Joints::from_slice(&q(0, 0));
     let task = TaskConfig {
         dt,
@@ -472,24 +510,16 @@ pub fn from_joint_positions(rec: &super::lerobot::JointRecording, sim: &SimConfi
         goal_pose: Some(goal_pose),
         tool_points: ur5_shared::config::DEFAULT_TOOL_POINTS,
     };
-    let (layout, targets) = (StateLayout::POSE6, task.targets());
+    let layout = StateLayout::POSE6;
     let mut states = vec![0.0; rec.count * t_len * layout.dx()];
-    let rows = states.chunks_exact_mut(layout.dx());
-    for (k, s) in rows.enumerate() {
+    let steps = (0..rec.count * t_len).map(|k| {
         let (d, t) = (k / t_len, k % t_len);
         let (before, after) = (t.saturating_sub(1), (t + 1).min(t_len - 1));
         let (a, b) = (q(d, before), q(d, after));
         let qd: [f64; 6] = core::array::from_fn(|j| (b[j] - a[j]) / ((after - before) as f64 * dt));
-        let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
-        kin.tool_points_velocity(
-            &q(d, t),
-            &qd,
-            task.tool_offsets(),
-            &mut points,
-            &mut velocities,
-        );
-        layout.fill_state(&q(d, t), &qd, &points, &velocities, &targets, s);
-    }
+        (q(d, t), qd)
+    });
+    arm_states(&kin, &task, steps, &mut states);
     Trajectories {
         layout,
         states,
