@@ -597,6 +597,45 @@ pub fn serve_with_kills(
     }
 }
 
+/// A served learner (`learner serve --config SERVE`) with `hil-sim serve` and `rt-controller`
+/// on `prefix`, the settings files `[serve, sim, controller]` in `dir`, writing into `out`:
+/// killed 6 times 30 to 280 ms after its starts (seeded by `seed`) and resumed or restarted
+/// ([`serve_with_kills`]). Asserts that a kill landed after the first checkpoint, that the last
+/// run finished and that the controller rejected no table; returns the arm process, to be
+/// dropped after the caller's checks.
+pub fn serve_killed_and_resumed(
+    dir: &Path,
+    prefix: &str,
+    [serve_cfg, sim_cfg, ctl_cfg]: [&str; 3],
+    out: &Path,
+    seed: u64,
+) -> Proc {
+    let (mut sim, mut ctl) = spawn_sim_and_controller(sim_cfg, ctl_cfg, prefix, dir);
+    let base = ["serve", "--config", serve_cfg, "--prefix", prefix, "--json"];
+    let killed = serve_with_kills(
+        dir,
+        &base,
+        out,
+        [&mut sim, &mut ctl],
+        6,
+        seed,
+        (30, 250),
+        Duration::from_secs(120),
+    );
+    eprintln!(
+        "{} kills: {} resumes, {} restarts; then finished",
+        killed.kills, killed.resumes, killed.restarts
+    );
+    assert!(
+        killed.resumes >= 1,
+        "no kill landed after the first checkpoint"
+    );
+    assert_eq!(killed.summary["exit_reason"], "done", "{}", killed.summary);
+    let (cj, _) = ctl.terminate_ok(Duration::from_secs(120));
+    assert_eq!(cj["rejected_total"], 0, "{cj}");
+    sim
+}
+
 /// Asserts that checkpoint `i` in `out` is the one in `reference`: the learner state file
 /// (`iter_NNN_state.npz`) bit for bit, its entries named in `ignore` aside, and the critic file
 /// (`iter_NNN_critic.json`) byte for byte.

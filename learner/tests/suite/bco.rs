@@ -28,7 +28,7 @@ fn short_demos() -> Demos {
 }
 
 /// N = 3, 4 iterations, α = 1/2, small nets and few steps.
-fn tiny_config() -> BcoConfig {
+pub(crate) fn tiny_config() -> BcoConfig {
     let mut cfg = BcoConfig {
         samples: 3,
         iterations: 4,

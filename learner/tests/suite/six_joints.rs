@@ -170,21 +170,14 @@ fn gaifo_ppo_runs_at_six_joints_and_a_pose() {
     );
 }
 
-/// N = 2, 3 iterations, α = 1/2, small nets and few steps.
+/// The BCO suite's small configuration on the UR5e with N = 2 and 3 iterations.
 fn tiny_bco() -> BcoConfig {
-    let mut cfg = BcoConfig {
+    BcoConfig {
         sim: sim(),
         samples: 2,
         iterations: 3,
-        pre_iterations: 2,
-        seed: 5,
-        ..BcoConfig::default()
-    };
-    cfg.model.hidden = vec![8];
-    cfg.model.steps = 30;
-    cfg.policy.hidden = vec![8];
-    cfg.policy.steps = 30;
-    cfg
+        ..super::bco::tiny_config()
+    }
 }
 
 #[test]

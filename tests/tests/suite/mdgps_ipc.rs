@@ -25,8 +25,8 @@ use imitation::mdgps::{Mdgps, MdgpsConfig};
 use imitation::rollout::Episode;
 use integration_tests::{
     assert_same_checkpoint, assert_served_done, checkpoint_file, json_summary, learn_over_ipc,
-    scratch, serve_with_kills, spawn_sim_and_controller, state_bits, unique_prefix, write_config,
-    Proc, TestLearner,
+    scratch, serve_killed_and_resumed, spawn_sim_and_controller, state_bits, unique_prefix,
+    write_config, Proc, TestLearner,
 };
 use learner::arm::SimArm;
 use learner::serve::episode_from_samples;
@@ -343,32 +343,8 @@ fn a_served_mdgps_learner_killed_and_resumed_equals_learner_train() {
     // grow until samples of an episode it needs are lost (then it learns from later ones).
     let (train, [serve_cfg, sim_cfg, ctl_cfg]) =
         served_run_files(&dir, ITERATIONS, "record_episodes = false\n");
-    let (mut sim, mut ctl) = spawn_sim_and_controller(&sim_cfg, &ctl_cfg, &prefix, &dir);
     let out = dir.join("out");
-    let base = [
-        "serve", "--config", &serve_cfg, "--prefix", &prefix, "--json",
-    ];
-    let killed = serve_with_kills(
-        &dir,
-        &base,
-        &out,
-        [&mut sim, &mut ctl],
-        6,
-        31,
-        (30, 250),
-        Duration::from_secs(120),
-    );
-    eprintln!(
-        "{} kills: {} resumes, {} restarts; then finished",
-        killed.kills, killed.resumes, killed.restarts
-    );
-    assert!(
-        killed.resumes >= 1,
-        "no kill landed after the first checkpoint"
-    );
-    assert_eq!(killed.summary["exit_reason"], "done", "{}", killed.summary);
-    let (cj, _) = ctl.terminate_ok(Duration::from_secs(120));
-    assert_eq!(cj["rejected_total"], 0, "{cj}");
+    let sim = serve_killed_and_resumed(&dir, &prefix, [&serve_cfg, &sim_cfg, &ctl_cfg], &out, 31);
     assert_train_equal(train, &dir, &out, ITERATIONS);
     drop(sim);
     std::fs::remove_dir_all(&dir).ok();
