@@ -20,13 +20,23 @@
 //! each demonstration against the mean of the others ([`mean_path`]), in the same measures,
 //! averaged over the demonstrations: an imitation as close as another demonstration would be.
 //!
+//! With a pose goal the tool carries three points ([`Frame`]), and the orientation is measured
+//! too: [`orientation_rmse`], the per-step angle between the tool's orientations (rad), RMSE
+//! over the steps after the same resampling, against the step-wise mean of the demonstrated
+//! frames ([`mean_frames`]).
+//!
 //! Pure functions; [`tool_paths`] extracts the paths from states of any
-//! [`StateLayout`] (its tool point 0 plus its target).
+//! [`StateLayout`] (its tool point 0 plus its target), [`tool_frames`] the three points of a
+//! pose layout.
 
 use ur5_shared::layout::StateLayout;
 
 /// A point of a tool path (m, arm base frame).
 pub type Point = [f64; 3];
+
+/// The three tool points of a pose layout at one step (m, base frame): not on one line, they
+/// give the tool's orientation (`ur5_shared::pose::orientation_error`).
+pub type Frame = [Point; 3];
 
 /// Inputs the measures cannot be taken of.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -40,6 +50,9 @@ pub enum PathError {
     /// A point with a NaN or infinite coordinate.
     #[error("tool path sample {0} is not finite")]
     NotFinite(usize),
+    /// Three tool points on one line: no orientation.
+    #[error("tool frame sample {0}: its three points are on one line")]
+    Collinear(usize),
 }
 
 /// The three measures of one path against another (module docs), m.
@@ -114,6 +127,46 @@ pub fn mean_path(paths: &[&[Point]]) -> Result<Vec<Point>, PathError> {
         }
     }
     Ok(mean)
+}
+
+/// Point `i` of every frame of `frames`.
+fn frame_point(frames: &[Frame], i: usize) -> Vec<Point> {
+    frames.iter().map(|f| f[i]).collect()
+}
+
+/// The step-wise mean of `frames` (each of the three points as [`mean_path`] takes it).
+pub fn mean_frames(frames: &[&[Frame]]) -> Result<Vec<Frame>, PathError> {
+    let mut means = Vec::with_capacity(3);
+    for i in 0..3 {
+        let paths: Vec<Vec<Point>> = frames.iter().map(|f| frame_point(f, i)).collect();
+        let refs: Vec<&[Point]> = paths.iter().map(Vec::as_slice).collect();
+        means.push(mean_path(&refs)?);
+    }
+    Ok((0..means[0].len())
+        .map(|k| [means[0][k], means[1][k], means[2][k]])
+        .collect())
+}
+
+/// Per-step orientation error of the tool frames `a` against `b` (rad), RMSE over the steps,
+/// both resampled (point by point) to the longer one's length.
+pub fn orientation_rmse(a: &[Frame], b: &[Frame]) -> Result<f64, PathError> {
+    let n = a.len().max(b.len());
+    let mut resampled = Vec::with_capacity(6);
+    for f in [a, b] {
+        for i in 0..3 {
+            let p = frame_point(f, i);
+            check(&p)?;
+            resampled.push(resample(&p, n));
+        }
+    }
+    let mut sq = 0.0;
+    for k in 0..n {
+        let fa = [resampled[0][k], resampled[1][k], resampled[2][k]];
+        let fb = [resampled[3][k], resampled[4][k], resampled[5][k]];
+        let e = ur5_shared::pose::orientation_error(&fa, &fb).ok_or(PathError::Collinear(k))?;
+        sq += e * e;
+    }
+    Ok((sq / n as f64).sqrt())
 }
 
 /// Per-step RMSE of `a` against `b` (m), both resampled to the longer one's length.
@@ -241,6 +294,45 @@ pub fn tool_paths(
                 .collect()
         })
         .collect()
+}
+
+/// The tool's three points at every step of `states` ((count, horizon, dX) row-major) of a
+/// layout with three tool points, each entry minus its target plus `targets[i]` (m): one
+/// `Vec` of frames a trajectory; `None` for a layout of one tool point. Panics as
+/// [`tool_paths`].
+pub fn tool_frames(
+    states: &[f64],
+    layout: &StateLayout,
+    horizon: usize,
+    targets: &[Point],
+) -> Option<Vec<Vec<Frame>>> {
+    if layout.tool_points() != 3 || targets.len() != 3 {
+        return None;
+    }
+    let per_point: Vec<Vec<Vec<Point>>> = (0..3)
+        .map(|i| {
+            let r = layout.point(i);
+            let dx = layout.dx();
+            assert!(horizon > 0 && states.len() % (horizon * dx) == 0);
+            states
+                .chunks(horizon * dx)
+                .map(|ep| {
+                    ep.chunks(dx)
+                        .map(|s| core::array::from_fn(|k| s[r.start + k] + targets[i][k]))
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    Some(
+        (0..per_point[0].len())
+            .map(|e| {
+                (0..horizon)
+                    .map(|t| [per_point[0][e][t], per_point[1][e][t], per_point[2][e][t]])
+                    .collect()
+            })
+            .collect(),
+    )
 }
 
 #[cfg(test)]
@@ -405,5 +497,61 @@ mod tests {
         assert_eq!(p.len(), 2);
         assert_eq!(p[0][0], [1.0; 3]);
         assert_eq!(p[1][2], [1.1, 1.2, 1.3]);
+    }
+
+    /// A frame of the tool turned by `angle` (rad) about z, at `at` (m).
+    fn turned(angle: f64, at: f64) -> Frame {
+        let (c, s) = (angle.cos(), angle.sin());
+        [
+            [at, 0.0, 0.0],
+            [at + 0.1 * c, 0.1 * s, 0.0],
+            [at - 0.1 * s, 0.1 * c, 0.0],
+        ]
+    }
+
+    /// Hand-computed: frames turned by 0, 0.1 and 0.2 rad against unturned ones give
+    /// √((0 + 0.01 + 0.04) / 3) rad wherever they are; the mean of frames turned by ±0.1 rad is
+    /// unturned; collinear points are refused naming the step.
+    #[test]
+    fn the_orientation_rmse_of_turned_frames_is_their_angles_rms() {
+        let a: Vec<Frame> = (0..3).map(|k| turned(0.1 * k as f64, k as f64)).collect();
+        let b: Vec<Frame> = (0..3).map(|k| turned(0.0, 0.5 * k as f64)).collect();
+        let e = orientation_rmse(&a, &b).unwrap();
+        assert!((e - (0.05f64 / 3.0).sqrt()).abs() < 1e-12, "{e}");
+        assert!(orientation_rmse(&a, &a).unwrap() < 1e-12);
+        let (p, m) = (vec![turned(0.1, 0.0); 4], vec![turned(-0.1, 0.0); 4]);
+        let mean = mean_frames(&[&p, &m]).unwrap();
+        assert_eq!(mean.len(), 4);
+        let unturned = vec![turned(0.0, 0.0); 4];
+        assert!(orientation_rmse(&mean, &unturned).unwrap() < 1e-12);
+        let line = vec![[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]; 2];
+        assert_eq!(
+            orientation_rmse(&line, &line[..]),
+            Err(PathError::Collinear(0))
+        );
+    }
+
+    /// The frames of a pose layout's states are their tool points' entries plus the targets;
+    /// a layout of one tool point has none.
+    #[test]
+    fn tool_frames_add_the_targets_back() {
+        let l = StateLayout::POSE6;
+        let targets = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]];
+        let (horizon, count) = (2, 3);
+        let states: Vec<f64> = (0..count * horizon * l.dx()).map(|v| v as f64).collect();
+        let f = tool_frames(&states, &l, horizon, &targets).unwrap();
+        assert_eq!((f.len(), f[0].len()), (count, horizon));
+        for (e, ep) in f.iter().enumerate() {
+            for (t, fr) in ep.iter().enumerate() {
+                let s = &states[(e * horizon + t) * l.dx()..][..l.dx()];
+                for i in 0..3 {
+                    let r = l.point(i);
+                    for k in 0..3 {
+                        assert_eq!(fr[i][k], s[r.start + k] + targets[i][k]);
+                    }
+                }
+            }
+        }
+        assert!(tool_frames(&states[..2 * 12], &StateLayout::REACH3, 2, &targets[..1]).is_none());
     }
 }

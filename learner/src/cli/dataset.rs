@@ -89,6 +89,12 @@ pub struct LasaArgs {
     /// The drawings' mean duration (s).
     #[arg(long, default_value_t = 10.0)]
     pub duration: f64,
+    /// The tool's orientation held along the drawings, "rx,ry,rz" (rotation vector, rad, base
+    /// frame): written as the file's rx, ry, rz columns, which make it demonstrations of the
+    /// whole arm with a pose goal (`learner experiment shapes` with `joints = 6` holds the
+    /// orientation the three-joint arm ends with).
+    #[arg(long, value_parser = ur5_shared::config::parse_triple, allow_hyphen_values = true)]
+    pub rotation: Option<[f64; 3]>,
 }
 
 /// Arguments of `learner dataset export`.
@@ -265,6 +271,7 @@ pub fn run(cmd: DatasetCmd) -> anyhow::Result<()> {
                 end: a.end.unwrap_or_else(|| a.model.default_goal()),
                 size: a.size,
                 duration: a.duration,
+                rotation: a.rotation,
             };
             let paths = lasa::place(&shape, &placement).map_err(anyhow::Error::msg)?;
             if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {

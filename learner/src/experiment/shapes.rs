@@ -30,12 +30,13 @@ use imitation::demos::Demos;
 use imitation::gaifo::{GaifoLog, LqrGaifo};
 use imitation::learn::Learn;
 use imitation::settings::PathSettings;
-use imitation::tool_path::{tool_paths, Point};
+use imitation::tool_path::{mean_frames, orientation_rmse, tool_frames, tool_paths, Frame, Point};
 
 use super::shard::Shard;
 use super::{baseline, pool, ExperimentConfig, ExperimentError, Job, Spec, BASELINES};
 use crate::error::ensure;
 use crate::io::lasa;
+use ur5_shared::config::SimConfig;
 
 /// Algorithms the experiment runs ([`ShapesExperimentConfig::algorithms`]): LQR+GAIfO with
 /// `lqr_gaifo`'s settings (whose `[path]` defaults to [`PathSettings::for_motions`] here), the
@@ -57,6 +58,18 @@ pub struct ShapesExperimentConfig {
     pub size: f64,
     /// The drawings' mean duration (s).
     pub duration: f64,
+    /// The arm's active joints: 3 (the wrist locked, the drawings' tool point alone) or 6 (the
+    /// whole arm holding the tool at [`Self::rotation`] along every drawing, a pose goal).
+    #[serde(skip_serializing_if = "is_three")]
+    pub joints: usize,
+    /// With six joints, the tool's orientation (rotation vector, rad, base frame); none: the
+    /// orientation the three-joint arm ends the drawing with ([`lasa::held_rotation`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rotation: Option<[f64; 3]>,
+}
+
+fn is_three(n: &usize) -> bool {
+    *n == 3
 }
 
 impl Default for ShapesExperimentConfig {
@@ -67,6 +80,8 @@ impl Default for ShapesExperimentConfig {
             plane: "facing".into(),
             size: 0.2,
             duration: 10.0,
+            joints: 3,
+            rotation: None,
         }
     }
 }
@@ -100,6 +115,27 @@ impl ShapesExperimentConfig {
         Ok(self.shapes.clone())
     }
 
+    /// Where the drawings are placed on the arm of `sim`: ending at its model's default goal,
+    /// with the tool's orientation at six joints.
+    pub fn placement(&self, sim: &SimConfig) -> Result<lasa::Placement, ExperimentError> {
+        let end = sim.model.default_goal();
+        let rotation = match (self.joints, self.rotation) {
+            (6, Some(r)) => Some(r),
+            (6, None) => Some(
+                lasa::held_rotation(sim.model, sim.ee_offset, end)
+                    .map_err(ExperimentError::Settings)?,
+            ),
+            _ => None,
+        };
+        Ok(lasa::Placement {
+            plane: self.plane()?,
+            end,
+            size: self.size,
+            duration: self.duration,
+            rotation,
+        })
+    }
+
     fn plane(&self) -> Result<lasa::Plane, ExperimentError> {
         <lasa::Plane as clap::ValueEnum>::from_str(&self.plane, true).map_err(|_| {
             ExperimentError::Settings(format!(
@@ -127,6 +163,22 @@ impl ShapesExperimentConfig {
                 ))
             );
         }
+        ensure!(
+            matches!(self.joints, 3 | 6) && (self.joints == 6 || self.rotation.is_none()),
+            ExperimentError::Settings(format!(
+                "shapes.joints = {} with shapes.rotation {:?}: joints must be 3 or 6, and a \
+                 rotation needs 6 (three joints keep the wrist locked)",
+                self.joints, self.rotation
+            ))
+        );
+        ensure!(
+            self.rotation
+                .is_none_or(|r| r.iter().all(|v| v.is_finite())),
+            ExperimentError::Settings(format!(
+                "shapes.rotation {:?} must be finite",
+                self.rotation
+            ))
+        );
         ensure!(
             self.size > 0.0 && self.size <= 1.0 && self.duration > 0.0 && self.duration <= 100.0,
             ExperimentError::Settings(format!(
@@ -165,6 +217,14 @@ pub struct ShapeRun {
     /// files of earlier builds, which the pictures then leave out.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub path_m: Vec<Point>,
+    /// With a pose goal (six joints): per iteration, the noise-free episode's final
+    /// orientation error (degrees); empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub final_orientation_error_deg: Vec<f64>,
+    /// With a pose goal: the last iteration's noise-free episode's orientation RMSE over the
+    /// steps against the drawings' mean orientation (degrees; `tool_path::orientation_rmse`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub orientation_rmse_deg: Option<f64>,
 }
 
 fn job_file(out: &Path, shape: &str, algo: &str, seed: u64) -> PathBuf {
@@ -175,14 +235,8 @@ fn job_file(out: &Path, shape: &str, algo: &str, seed: u64) -> PathBuf {
 /// The shape's drawings placed by the experiment's settings, written to `OUT/demos/` and
 /// loaded as demonstrations on the arm of `cfg.lqr_gaifo.sim`.
 fn shape_demos(cfg: &ExperimentConfig, shape: &str, out: &Path) -> Result<Demos, ExperimentError> {
-    let s = &cfg.shapes;
     let sim = &cfg.lqr_gaifo.sim;
-    let placement = lasa::Placement {
-        plane: s.plane()?,
-        end: sim.model.default_goal(),
-        size: s.size,
-        duration: s.duration,
-    };
+    let placement = cfg.shapes.placement(sim)?;
     let paths = lasa::place(&lasa::shape(shape)?, &placement).map_err(ExperimentError::Settings)?;
     let dir = out.join("demos");
     crate::io::create_dir(&dir)?;
@@ -225,9 +279,15 @@ fn job(
         Spec::ReplayMean(c) => serde_json::to_string(c)?,
     };
     let s = &cfg.shapes;
+    // The whole arm's settings join the hash only when used, so three-joint job files of
+    // earlier builds stay done.
+    let arm = match s.joints {
+        6 => format!("|6|{:?}", s.rotation),
+        _ => String::new(),
+    };
     let hash = crate::io::files::fnv1a64(
         format!(
-            "{shape}|{algo}|{settings}|{}|{}|{}",
+            "{shape}|{algo}|{settings}|{}|{}|{}{arm}",
             s.plane, s.size, s.duration
         )
         .as_bytes(),
@@ -302,7 +362,7 @@ pub fn run(
     pool.install(|| {
         todo.par_iter()
             .map(|(shape, algo, j, hash)| -> Result<(), ExperimentError> {
-                let (run, path) = run_job(j).map_err(|e| ExperimentError::Job {
+                let (run, last) = run_job(j).map_err(|e| ExperimentError::Job {
                     label: format!("{} seed {}", j.variant, j.seed()),
                     source: Box::new(e),
                 })?;
@@ -319,7 +379,14 @@ pub fn run(
                     final_distance_m: run.logs.iter().map(|l| l.final_distance).collect(),
                     performance: run.logs.iter().map(|l| l.performance).collect(),
                     wall_s: run.wall_s,
-                    path_m: path,
+                    path_m: last.path,
+                    final_orientation_error_deg: run
+                        .logs
+                        .iter()
+                        .map(|l| l.final_orientation_error_deg)
+                        .filter(|v| v.is_finite())
+                        .collect(),
+                    orientation_rmse_deg: last.orientation_rmse.map(f64::to_degrees),
                 };
                 let path = job_file(out, shape, algo, run.seed);
                 ur5_shared::atomic_file::write(&path, &serde_json::to_vec_pretty(&r)?)?;
@@ -374,37 +441,64 @@ pub fn run(
     Ok(json)
 }
 
+/// What a job keeps of its last iteration's noise-free episode: the tool path (m) and, with a
+/// pose goal, its orientation RMSE against the drawings' mean orientation (rad).
+struct LastEpisode {
+    path: Vec<Point>,
+    orientation_rmse: Option<f64>,
+}
+
 /// Runs job `j` as [`super::Job::run`] does (the same iterations, bit for bit), keeping the
-/// last iteration's noise-free tool path (m).
-fn run_job(j: &Job) -> Result<(super::Run, Vec<Point>), ExperimentError> {
+/// last iteration's noise-free episode's measures.
+fn run_job(j: &Job) -> Result<(super::Run, LastEpisode), ExperimentError> {
     fn go<R: Learn<Log = GaifoLog>>(
         mut run: R,
         iterations: usize,
-        target: Point,
-    ) -> Result<(Vec<GaifoLog>, Vec<Point>), ExperimentError> {
+        demos: &Demos,
+    ) -> Result<(Vec<GaifoLog>, LastEpisode), ExperimentError> {
         let arm = crate::run::arm_for(&run)?;
-        let (mut logs, mut path) = (Vec::with_capacity(iterations), Vec::new());
+        let targets = demos.task()?.targets();
+        let (mut logs, mut path, mut frames) = (Vec::with_capacity(iterations), Vec::new(), None);
         for _ in 0..iterations {
             let (log, evals) = imitation::learn::iterate(&mut run, &arm)?;
             if let Some(e) = evals.first() {
-                path = tool_paths(&e.x, &e.layout, e.horizon(), &target).swap_remove(0);
+                path = tool_paths(&e.x, &e.layout, e.horizon(), &demos.goal).swap_remove(0);
+                frames = tool_frames(&e.x, &e.layout, e.horizon(), &targets)
+                    .map(|mut f| f.swap_remove(0));
             }
             logs.push(log);
         }
-        Ok((logs, path))
+        // Against the demonstrations' mean orientation, step by step.
+        let shown = tool_frames(&demos.states, &demos.layout(), demos.horizon, &targets);
+        let orientation_rmse = match (frames, shown) {
+            (Some(f), Some(shown)) => {
+                let refs: Vec<&[Frame]> = shown.iter().map(Vec::as_slice).collect();
+                mean_frames(&refs)
+                    .and_then(|mean| orientation_rmse(&f, &mean))
+                    .ok()
+            }
+            _ => None,
+        };
+        Ok((
+            logs,
+            LastEpisode {
+                path,
+                orientation_rmse,
+            },
+        ))
     }
     use imitation::bco::Bco;
     use imitation::offpolicy::GaifoTd3;
     use imitation::ppo::gaifo_ppo::GaifoPpo;
     use imitation::replay_mean::ReplayMean;
     let t0 = Instant::now();
-    let (d, goal) = ((*j.demos).clone(), j.demos.goal);
-    let (logs, path) = match &j.spec {
-        Spec::LqrGaifo(c) => go(LqrGaifo::new(c.clone(), d)?, c.iterations, goal),
-        Spec::GaifoPpo(c) => go(GaifoPpo::new(c.clone(), d)?, c.iterations, goal),
-        Spec::Bco(c) => go(Bco::new(c.clone(), d)?, c.iterations, goal),
-        Spec::GaifoTd3(c) => go(GaifoTd3::new(c.clone(), d)?, c.iterations, goal),
-        Spec::ReplayMean(c) => go(ReplayMean::new(c.clone(), d)?, c.iterations, goal),
+    let (d, demos) = ((*j.demos).clone(), &*j.demos);
+    let (logs, last) = match &j.spec {
+        Spec::LqrGaifo(c) => go(LqrGaifo::new(c.clone(), d)?, c.iterations, demos),
+        Spec::GaifoPpo(c) => go(GaifoPpo::new(c.clone(), d)?, c.iterations, demos),
+        Spec::Bco(c) => go(Bco::new(c.clone(), d)?, c.iterations, demos),
+        Spec::GaifoTd3(c) => go(GaifoTd3::new(c.clone(), d)?, c.iterations, demos),
+        Spec::ReplayMean(c) => go(ReplayMean::new(c.clone(), d)?, c.iterations, demos),
     }?;
     let run = super::Run {
         variant: j.variant.clone(),
@@ -415,7 +509,7 @@ fn run_job(j: &Job) -> Result<(super::Run, Vec<Point>), ExperimentError> {
         logs,
         wall_s: t0.elapsed().as_secs_f64(),
     };
-    Ok((run, path))
+    Ok((run, last))
 }
 
 /// Per algorithm, `OUT/shapes_<algorithm>.png` from the job files `done` (module docs): a
@@ -427,13 +521,8 @@ fn pictures(
     out: &Path,
 ) -> Result<(), ExperimentError> {
     let s = &cfg.shapes;
-    let end = cfg.lqr_gaifo.sim.model.default_goal();
-    let placement = lasa::Placement {
-        plane: s.plane()?,
-        end,
-        size: s.size,
-        duration: s.duration,
-    };
+    let placement = cfg.shapes.placement(&cfg.lqr_gaifo.sim)?;
+    let end = placement.end;
     let (u, v) = placement.axes().map_err(ExperimentError::Settings)?;
     let flat = |p: &Point| -> [f64; 2] {
         let d: [f64; 3] = core::array::from_fn(|k| p[k] - end[k]);
@@ -542,6 +631,12 @@ pub fn tables(runs: &[ShapeRun], iterations: usize, missing: usize) -> (String, 
         "final_cm m/max",
         "<=1cm"
     );
+    // A pose goal (six joints): the orientation too.
+    let posed = runs.iter().any(|r| r.orientation_rmse_deg.is_some());
+    if posed {
+        text.pop();
+        text += &format!(" {:>13} {:>13}\n", "fin_deg m/max", "path_deg m/max");
+    }
     let mut rows = Vec::new();
     let mut keys: Vec<(String, String)> = Vec::new();
     for r in runs {
@@ -581,13 +676,29 @@ pub fn tables(runs: &[ShapeRun], iterations: usize, missing: usize) -> (String, 
             100.0 * fx,
             near
         );
-        rows.push(
-            serde_json::json!({"shape": shape, "algorithm": algo, "seeds": rs.len(),
+        let mut row = serde_json::json!({"shape": shape, "algorithm": algo, "seeds": rs.len(),
             "spread_rmse_m": spread, "path_rmse_mean_m": pm, "path_rmse_max_m": px,
             "ratio_mean": rm, "ratio_max": rx, "seeds_within_1x": within(1.0),
             "seeds_within_2x": within(2.0), "final_distance_mean_m": fm,
-            "final_distance_max_m": fx, "seeds_within_1cm": near}),
-        );
+            "final_distance_max_m": fx, "seeds_within_1cm": near});
+        if posed {
+            let fin_deg: Vec<f64> = rs
+                .iter()
+                .map(|r| last(&r.final_orientation_error_deg))
+                .collect();
+            let path_deg: Vec<f64> = rs
+                .iter()
+                .map(|r| r.orientation_rmse_deg.unwrap_or(f64::NAN))
+                .collect();
+            let ((om, ox), (qm, qx)) = (mean_max(&fin_deg), mean_max(&path_deg));
+            text.pop();
+            text += &format!(" {om:>6.2}/{ox:<6.2} {qm:>6.2}/{qx:<6.2}\n");
+            row["final_orientation_error_mean_deg"] = om.into();
+            row["final_orientation_error_max_deg"] = ox.into();
+            row["orientation_rmse_mean_deg"] = qm.into();
+            row["orientation_rmse_max_deg"] = qx.into();
+        }
+        rows.push(row);
         let t = match totals.iter_mut().find(|(a, _)| a == algo) {
             Some(t) => t,
             None => {

@@ -6,14 +6,19 @@
 //! (`learner/assets/lasa/lasa_handwriting.npz`, converted by `scripts/lasa/convert.py`, its
 //! provenance and licence in `learner/assets/lasa/README.md`): positions in mm as in the source,
 //! 201 of each drawing's 1000 samples, numbers unchanged. A [`Placement`] puts a shape in the
-//! arm's workspace: a plane, the point where the shape ends, its size and duration; the result
-//! is a set of [`ToolPath`]s, written as a tool-path CSV file ([`write_csv`]) that `--demos`
-//! takes.
+//! arm's workspace: a plane, the point where the shape ends, its size and duration, and for the
+//! whole arm the tool's orientation, held along the drawing (a pen at a fixed angle to the
+//! page); the result is a set of [`ToolPath`]s, written as a tool-path CSV file
+//! ([`write_csv`]) that `--demos` takes.
 
 use std::path::Path;
 
 use super::npz::NpzFile;
-use super::tool_path::{ToolPath, COLUMNS};
+use ur5_shared::ik::UrIk;
+use ur5_shared::kinematics::UrKinematics;
+use ur5_shared::UrModel;
+
+use super::tool_path::{ToolPath, COLUMNS, ROTATION_COLUMNS};
 use super::IoError;
 use crate::error::ensure;
 
@@ -122,6 +127,29 @@ pub struct Placement {
     pub size: f64,
     /// The drawings' mean duration (s); each keeps its pace relative to the others.
     pub duration: f64,
+    /// The tool's orientation at every sample (rotation vector, rad, base frame, UR's
+    /// convention), or none: the drawings give the tool point alone (enough for three joints;
+    /// six joints need it, e.g. [`held_rotation`]).
+    pub rotation: Option<[f64; 3]>,
+}
+
+/// The orientation (rotation vector, rad, base frame) of the tool of `model` with its tool
+/// point at `end` (m) and its wrist locked at the home posture ([`UrModel::default_wrist_q`]),
+/// on the branch nearest the model's default start: the orientation a three-joint arm
+/// ends a drawing with, the default a whole arm holds along it.
+pub fn held_rotation(
+    model: UrModel,
+    ee_offset: [f64; 3],
+    end: [f64; 3],
+) -> Result<[f64; 3], String> {
+    let wrist = model.default_wrist_q();
+    let q = UrIk::new(model, ee_offset)
+        .nearest_point(end, wrist, &model.default_start_q())
+        .map_err(|e| {
+            format!("the tool at the shape's end {end:?} m with the wrist at its home posture: {e}")
+        })?;
+    let pose = UrKinematics::new(model, ee_offset).tool_pose(&UrKinematics::six(&q, &wrist));
+    Ok(ur5_shared::pose::rotation_vector(&pose.rotation))
 }
 
 impl Placement {
@@ -159,6 +187,15 @@ pub fn place(shape: &Shape, placement: &Placement) -> Result<Vec<ToolPath>, Stri
             placement.size, placement.duration
         ));
     }
+    if placement
+        .rotation
+        .is_some_and(|r| r.iter().any(|v| !v.is_finite()))
+    {
+        return Err(format!(
+            "the tool's rotation {:?} must be finite",
+            placement.rotation
+        ));
+    }
     let (u, v) = placement.axes()?;
     let all = shape.pos.iter().flatten();
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -190,26 +227,29 @@ pub fn place(shape: &Shape, placement: &Placement) -> Result<Vec<ToolPath>, Stri
                     core::array::from_fn(|r| placement.end[r] + scale * (p[0] * u[r] + p[1] * v[r]))
                 })
                 .collect(),
-            rotations: None,
+            rotations: placement.rotation.map(|r| vec![r; pos.len()]),
         })
         .collect())
 }
 
-/// Writes tool paths as a tool-path CSV file (`episode,t,x,y,z`, shortest exact decimals).
+/// Writes tool paths as a tool-path CSV file (`episode,t,x,y,z`, and `rx,ry,rz` when every
+/// path has its orientations; shortest exact decimals).
 pub fn write_csv(paths: &[ToolPath], out: &Path) -> Result<(), IoError> {
     let mut w = csv::Writer::from_path(out).map_err(IoError::csv("writing", out))?;
-    w.write_record(COLUMNS)
+    let rotated = !paths.is_empty() && paths.iter().all(|p| p.rotations.is_some());
+    let header = COLUMNS
+        .iter()
+        .chain(&ROTATION_COLUMNS[..if rotated { 3 } else { 0 }]);
+    w.write_record(header)
         .map_err(IoError::csv("writing", out))?;
     for p in paths {
-        for (t, x) in p.t.iter().zip(&p.points) {
-            w.write_record([
-                p.episode.to_string(),
-                format!("{t:?}"),
-                format!("{:?}", x[0]),
-                format!("{:?}", x[1]),
-                format!("{:?}", x[2]),
-            ])
-            .map_err(IoError::csv("writing", out))?;
+        for (k, (t, x)) in p.t.iter().zip(&p.points).enumerate() {
+            let mut row = vec![p.episode.to_string(), format!("{t:?}")];
+            row.extend(x.iter().map(|v| format!("{v:?}")));
+            if let (true, Some(r)) = (rotated, &p.rotations) {
+                row.extend(r[k].iter().map(|v| format!("{v:?}")));
+            }
+            w.write_record(&row).map_err(IoError::csv("writing", out))?;
         }
     }
     w.flush().map_err(IoError::file("writing", out))?;
@@ -253,6 +293,7 @@ mod tests {
             end: [-0.45, -0.25, 0.25],
             size: 0.2,
             duration: 10.0,
+            rotation: None,
         };
         let paths = place(&s, &p).unwrap();
         assert_eq!(paths.len(), 7);
@@ -282,5 +323,75 @@ mod tests {
             ..p
         };
         assert!(place(&s, &bad).unwrap_err().contains("base's axis"));
+    }
+
+    /// A shape drawn by the whole arm: every sample carries the held orientation, the file
+    /// reads back with it, and it solves into six-joint demonstrations whose tool ends at the
+    /// drawings' end with that orientation; the default orientation is the three-joint arm's
+    /// at the end (its forward kinematics there, within 1e-9).
+    #[test]
+    fn a_shape_held_at_one_orientation_becomes_six_joint_demonstrations() {
+        use ur5_shared::config::SimConfig;
+        use ur5_shared::layout::StateLayout;
+        let model = UrModel::Ur5e;
+        let end = model.default_goal();
+        let r = held_rotation(model, [0.0; 3], end).unwrap();
+        let wrist = model.default_wrist_q();
+        let q = UrIk::new(model, [0.0; 3])
+            .nearest_point(end, wrist, &model.default_start_q())
+            .unwrap();
+        let kin = UrKinematics::new(model, [0.0; 3]);
+        let pose = kin.tool_pose(&UrKinematics::six(&q, &wrist));
+        let back = ur5_shared::ik::pose_from_rotation_vector(end, r);
+        assert!(pose.rotation.angle_to(&back.rotation) < 1e-9);
+        let p = Placement {
+            plane: Plane::Facing,
+            end,
+            size: 0.2,
+            duration: 10.0,
+            rotation: Some(r),
+        };
+        let paths = place(&shape("Worm").unwrap(), &p).unwrap();
+        assert!(paths
+            .iter()
+            .all(|p| p.rotations.as_ref().unwrap() == &vec![r; p.t.len()]));
+        let dir = std::env::temp_dir().join(format!("lasa-held-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("worm.csv");
+        write_csv(&paths, &file).unwrap();
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert!(
+            text.starts_with("episode,t,x,y,z,rx,ry,rz\n"),
+            "{}",
+            &text[..40]
+        );
+        assert_eq!(super::super::tool_path::read(&file).unwrap(), paths);
+        let sim = SimConfig {
+            model,
+            ..SimConfig::default()
+        };
+        let six = super::super::tool_path::solve(
+            &paths,
+            &sim,
+            StateLayout::of_task(6, false).unwrap(),
+            0.1,
+        )
+        .unwrap();
+        let layout = StateLayout::of_task(6, false).unwrap();
+        let (t, dx) = (six.horizon, layout.dx());
+        let mut ends = Vec::new();
+        for d in 0..paths.len() {
+            let x = &six.states[(d * t + t - 1) * dx..(d * t + t) * dx];
+            let q6: [f64; 6] = x[layout.q()].try_into().unwrap();
+            let pose = kin.tool_pose(&q6);
+            assert!(pose.rotation.angle_to(&back.rotation) < 1e-6, "drawing {d}");
+            ends.push(pose.translation.vector);
+        }
+        let mean = ends.iter().sum::<nalgebra::Vector3<f64>>() / ends.len() as f64;
+        assert!(
+            (0..3).all(|k| (mean[k] - end[k]).abs() < 1e-6),
+            "{mean:?} against {end:?}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -20,14 +20,19 @@
 //!    state is assembled by the layout ([`StateLayout::fill_state`]).
 //!
 //! Three joints (the wrist locked at `sim.wrist_q`) follow the point and ignore an
-//! orientation; six joints need it.
+//! orientation; six joints need it. A file read by [`load`] (`--demos`) is three joints and a
+//! point goal without the orientation columns, the whole arm and a pose goal with them: each
+//! episode's start orientation is blended into the mean start's as its point is, and the goal
+//! is the mean end pose.
 
 use std::path::Path;
 
-use ur5_shared::config::SimConfig;
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use ur5_shared::config::{SimConfig, DEFAULT_TOOL_POINTS};
 use ur5_shared::ik::{self, IkError, UrIk};
 use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::layout::{StateLayout, MAX_HORIZON};
+use ur5_shared::pose;
 
 use super::lerobot::{TaskMeta, Trajectories};
 use super::IoError;
@@ -292,6 +297,8 @@ pub struct Solved {
     pub start_q: Vec<f64>,
     /// Goal: the paths' mean end (m).
     pub goal: [f64; 3],
+    /// A pose layout's goal: the paths' mean end pose, UR's p[x, y, z, rx, ry, rz] (m, rad).
+    pub goal_pose: Option<[f64; 6]>,
 }
 
 /// The arm's six joints from the layout's `q` (three: the locked wrist added).
@@ -310,8 +317,8 @@ pub fn solve(
     layout: StateLayout,
     dt: f64,
 ) -> Result<Solved, ToolPathError> {
-    let n = layout.joints();
-    if !(n == 3 || n == 6) || layout.tool_points() != 1 {
+    let (n, p_count) = (layout.joints(), layout.tool_points());
+    if !matches!((n, p_count), (3, 1) | (6, 1) | (6, 3)) {
         return Err(ToolPathError::Layout(layout));
     }
     if sim.ee_link != "wrist_3_link" {
@@ -366,31 +373,71 @@ pub fn solve(
                 .map(|q| q.to_vec()),
         }
     };
-    let start_rot = sampled[0].2.as_ref().map(|r| r[0]);
-    let start_q =
-        solve_one(start, start_rot, &default6[..n]).map_err(|source| ToolPathError::Start {
-            point: start,
-            source,
-        })?;
+    // Six joints: the mean start and end orientations (each episode's start rotation is
+    // blended into the mean start's as its point is), the goal pose the mean end pose.
+    let quat = |r: [f64; 3]| UnitQuaternion::from_scaled_axis(Vector3::from(r));
+    let mean_rot = |k: usize| {
+        let poses: Vec<_> = sampled
+            .iter()
+            .filter_map(|s| {
+                s.2.as_ref()
+                    .map(|r| Isometry3::from_parts(Default::default(), quat(r[k])))
+            })
+            .collect();
+        (!poses.is_empty()).then(|| pose::mean_pose(&poses).rotation)
+    };
+    let (start_rot, end_rot) = (mean_rot(0), mean_rot(horizon - 1));
+    let goal_pose = match (p_count, end_rot) {
+        (3, Some(r)) => Some({
+            let v = pose::rotation_vector(&r);
+            [goal[0], goal[1], goal[2], v[0], v[1], v[2]]
+        }),
+        _ => None,
+    };
+    let (offsets, targets) = match goal_pose {
+        Some(g) => {
+            let mut t = vec![[0.0; 3]; 3];
+            pose::tool_points(&pose::isometry(&g), &DEFAULT_TOOL_POINTS, &mut t);
+            (&DEFAULT_TOOL_POINTS[..], t)
+        }
+        None => (&DEFAULT_TOOL_POINTS[..1], vec![goal]),
+    };
+    let start_q = solve_one(
+        start,
+        start_rot.map(|r| pose::rotation_vector(&r)),
+        &default6[..n],
+    )
+    .map_err(|source| ToolPathError::Start {
+        point: start,
+        source,
+    })?;
     let limits = sim.model.joint_limits().velocity;
     let dx = layout.dx();
     let mut states = vec![0.0; paths.len() * horizon * dx];
+    let (mut tool, mut tool_v) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
     for (d, (path, (times, points, rots))) in paths.iter().zip(&sampled).enumerate() {
         let offset: [f64; 3] = core::array::from_fn(|r| start[r] - points[0][r]);
+        // The rotation taking this episode's start orientation to the mean start's.
+        let turn = match (start_rot, rots) {
+            (Some(s), Some(r)) => s * quat(r[0]).inverse(),
+            _ => UnitQuaternion::identity(),
+        };
         let mut prev = start_q.clone();
         for k in 0..horizon {
             let fade = 1.0 - k as f64 / (horizon - 1) as f64;
             let p: [f64; 3] = core::array::from_fn(|r| points[k][r] + fade * offset[r]);
+            let rot = rots.as_ref().map(|r| {
+                let blended = turn.powf(fade) * quat(r[k]);
+                pose::rotation_vector(&blended)
+            });
             let q = if k == 0 {
                 start_q.clone()
             } else {
-                solve_one(p, rots.as_ref().map(|r| r[k]), &prev).map_err(|source| {
-                    ToolPathError::Unreachable {
-                        episode: path.episode,
-                        t: times[k],
-                        point: p,
-                        source,
-                    }
+                solve_one(p, rot, &prev).map_err(|source| ToolPathError::Unreachable {
+                    episode: path.episode,
+                    t: times[k],
+                    point: p,
+                    source,
                 })?
             };
             let qd: Vec<f64> = (0..n)
@@ -405,10 +452,16 @@ pub fn solve(
                     limit: limits[j],
                 });
             }
-            // The locked wrist does not move.
-            let (ee, v) = kin.ee_point_velocity(&six(&q, &wrist), &six(&qd, &[0.0; 3]));
             let at = (d * horizon + k) * dx;
-            layout.fill_state(&q, &qd, &[ee], &[v], &[goal], &mut states[at..at + dx]);
+            if p_count == 1 {
+                // The locked wrist does not move.
+                let (ee, v) = kin.ee_point_velocity(&six(&q, &wrist), &six(&qd, &[0.0; 3]));
+                layout.fill_state(&q, &qd, &[ee], &[v], &[goal], &mut states[at..at + dx]);
+            } else {
+                let (q6, qd6) = (six(&q, &wrist), six(&qd, &[0.0; 3]));
+                kin.tool_points_velocity(&q6, &qd6, offsets, &mut tool, &mut tool_v);
+                layout.fill_state(&q, &qd, &tool, &tool_v, &targets, &mut states[at..at + dx]);
+            }
             prev = q;
         }
     }
@@ -418,20 +471,28 @@ pub fn solve(
         horizon,
         start_q,
         goal,
+        goal_pose,
     })
 }
 
-/// The tool paths of the file `path` as trajectories of the three-joint reaching layout on
-/// the arm of `sim` at the control period `dt` (s), their task noted with `seed` (costs left
-/// to derive).
+/// The tool paths of the file `path` as trajectories on the arm of `sim` at the control
+/// period `dt` (s), their task noted with `seed` (costs left to derive): the three-joint
+/// reaching layout for tool points alone, the whole arm and a pose goal
+/// ([`StateLayout::POSE6`]: the three default tool points, the goal the paths' mean end pose)
+/// when the file gives the tool's orientation.
 pub fn load(path: &Path, sim: &SimConfig, dt: f64, seed: u64) -> Result<Trajectories, IoError> {
     let paths = read(path)?;
-    let s = solve(&paths, sim, StateLayout::REACH3, dt).map_err(|source| IoError::ToolPath {
+    let layout = if paths.iter().all(|p| p.rotations.is_some()) {
+        StateLayout::POSE6
+    } else {
+        StateLayout::REACH3
+    };
+    let s = solve(&paths, sim, layout, dt).map_err(|source| IoError::ToolPath {
         path: path.to_owned(),
         source,
     })?;
     Ok(Trajectories {
-        layout: StateLayout::REACH3,
+        layout,
         states: s.states,
         actions: None,
         count: s.count,
@@ -439,11 +500,11 @@ pub fn load(path: &Path, sim: &SimConfig, dt: f64, seed: u64) -> Result<Trajecto
         dt,
         task: Some(TaskMeta {
             goal: s.goal,
-            start_q: ur5_shared::joints::Joints::from_slice(&s.start_q[..3]),
+            start_q: ur5_shared::joints::Joints::from_slice(&s.start_q),
             seed,
             cost_random: None,
             cost_expert: None,
-            goal_pose: None,
+            goal_pose: s.goal_pose,
             tool_points: None,
         }),
         model: Some(sim.model),
@@ -579,16 +640,41 @@ mod tests {
             worst = (0..6).fold(worst, |w, j| w.max((x[j] - want[j]).abs()));
         }
         assert!(worst < 1e-6, "{worst}");
-        let mut no_rot = path;
+        let mut no_rot = path.clone();
         no_rot.rotations = None;
         assert!(matches!(
             solve(&[no_rot], &sim, l, DT),
             Err(ToolPathError::NeedsOrientation)
         ));
         assert!(matches!(
-            solve(&[], &sim, StateLayout::POSE6, DT),
+            solve(&[], &sim, StateLayout::new(3, 3).unwrap(), DT),
             Err(ToolPathError::Layout(_))
         ));
+        // The pose layout: the same joints, the goal pose the path's end pose, and each tool
+        // point's entries its forward kinematics minus its target.
+        let p = solve(&[path.clone(), path], &sim, StateLayout::POSE6, DT).unwrap();
+        let g = p.goal_pose.unwrap();
+        let end = kin.tool_pose(&q(2.0));
+        let want = ur5_shared::pose::ur_pose(&end);
+        assert!((0..6).all(|k| (g[k] - want[k]).abs() < 1e-9), "{g:?} against {want:?}");
+        let lp = StateLayout::POSE6;
+        let mut targets = [[0.0; 3]; 3];
+        ur5_shared::pose::tool_points(&end, &DEFAULT_TOOL_POINTS, &mut targets);
+        let mut worst = 0.0f64;
+        for k in 0..p.horizon {
+            let x = &p.states[k * lp.dx()..][..lp.dx()];
+            let qk = q(k as f64 * DT);
+            worst = (0..6).fold(worst, |w, j| w.max((x[j] - qk[j]).abs()));
+            let mut pts = [[0.0; 3]; 3];
+            ur5_shared::pose::tool_points(&kin.tool_pose(&qk), &DEFAULT_TOOL_POINTS, &mut pts);
+            for i in 0..3 {
+                let r = lp.point(i);
+                for c in 0..3 {
+                    worst = worst.max((x[r.start + c] + targets[i][c] - pts[i][c]).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-6, "{worst}");
     }
 
     /// Different starts are blended into the mean start: every episode starts at the start

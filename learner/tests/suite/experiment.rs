@@ -278,3 +278,75 @@ fn shapes_shards_resume_and_tabulate_the_path() {
         std::fs::remove_dir_all(d).ok();
     }
 }
+
+/// `learner experiment shapes` with the whole arm (`joints = 6`): the drawings carry the held
+/// orientation (the three-joint arm's at the end), become demonstrations of the pose layout,
+/// and every job reports the final orientation error and the orientation RMSE along the path,
+/// in its file and in the table; a rotation with three joints is refused naming the keys.
+#[test]
+fn shapes_with_the_whole_arm_hold_the_tool_and_measure_its_orientation() {
+    let out = tmp("shapes-six");
+    std::fs::create_dir_all(&out).unwrap();
+    let cfg = out.join("c.toml");
+    std::fs::write(
+        &cfg,
+        "[shapes]\nshapes = [\"Worm\"]\njoints = 6\n\n[lqr_gaifo.sim]\nmodel = \"ur5e\"\n",
+    )
+    .unwrap();
+    let run = out.join("run");
+    let (c, r) = (cfg.to_str().unwrap(), run.to_str().unwrap());
+    let args = [
+        "experiment",
+        "shapes",
+        "--seeds",
+        "1",
+        "--iterations",
+        "2",
+        "--threads",
+        "1",
+        "--json",
+        "--config",
+        c,
+        "--out",
+        r,
+    ];
+    let (ok, stdout, err) = common::learner_output(&args);
+    assert!(ok, "{err}");
+    let csv = std::fs::read_to_string(run.join("demos/Worm.csv")).unwrap();
+    assert!(
+        csv.starts_with("episode,t,x,y,z,rx,ry,rz\n"),
+        "{}",
+        &csv[..60]
+    );
+    let demos = learner::io::demos::load_checked(
+        &run.join("demos/Worm.csv"),
+        &ur5_shared::config::SimConfig::for_model(ur5_shared::UrModel::Ur5e),
+    )
+    .unwrap();
+    assert_eq!(demos.layout(), ur5_shared::layout::StateLayout::POSE6);
+    assert!(demos.goal_pose.is_some());
+    let job: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("runs/Worm_lqr-gaifo_s0.json")).unwrap())
+            .unwrap();
+    let fin = job["final_orientation_error_deg"].as_array().unwrap();
+    assert_eq!(fin.len(), 2, "{job}");
+    assert!(fin.iter().all(|v| v.as_f64().unwrap() >= 0.0));
+    let path_deg = job["orientation_rmse_deg"].as_f64().unwrap();
+    assert!(path_deg.is_finite() && path_deg >= 0.0, "{path_deg}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let row = &v["summary"]["rows"][0];
+    assert_eq!(
+        row["orientation_rmse_mean_deg"].as_f64(),
+        Some(path_deg),
+        "{row}"
+    );
+    let text = std::fs::read_to_string(run.join("shapes.txt")).unwrap();
+    assert!(text.contains("path_deg m/max"), "{text}");
+    std::fs::write(&cfg, "[shapes]\nrotation = [0.0, 3.1, 0.0]\n").unwrap();
+    let (ok, _, err) = common::learner_output(&args);
+    assert!(
+        !ok && err.contains("shapes.rotation") && err.contains("joints"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&out).ok();
+}
