@@ -137,7 +137,9 @@ enum Cmd {
     /// into the goal region (joint goal by IK of the model's kinematics) overshooting it by
     /// 2–6 %, a corrective submovement, a rest of at least 1 s there, a return to (within
     /// 2 mrad of) the start pose; a final rest. Tremor (8–12 Hz, 0.2 mrad) rides on the
-    /// motions. Prints one JSON line: rows, duration, motions.
+    /// motions. With `[task] joints = 6` and `goal_pose` the whole arm reaches to the pose
+    /// (the wrist moving and trembling too; orientation within 3 mrad per axis). Prints one
+    /// JSON line: rows, duration, motions.
     PlaybackGen(PlaybackGenArgs),
 }
 
@@ -276,7 +278,8 @@ struct Ros2SimArgs {
 #[derive(clap::Args)]
 struct PlaybackGenArgs {
     /// TOML file with optional [task] and [sim] tables: the start pose (task.start_q), the
-    /// goal region's centre (task.goal), the wrist lock and end-effector offset of [sim].
+    /// goal region's centre (task.goal), or with joints = 6 a pose goal (task.goal_pose), the
+    /// wrist lock and end-effector offset of [sim].
     #[arg(long)]
     config: Option<PathBuf>,
     /// Reaches.
@@ -410,12 +413,20 @@ fn run() -> Result<()> {
 fn playback_gen(args: PlaybackGenArgs, model: Option<UrModel>) -> Result<()> {
     use hil_sim::ur_sim::playback::{generate, GenConfig};
     let file = load(args.config.clone(), model)?;
+    anyhow::ensure!(
+        file.task.joints == 3 || file.task.goal_pose.is_some(),
+        "[task] joints = 6 without goal_pose: playback-gen's whole-arm reaches go to a pose; \
+         give [task] goal_pose = [x, y, z, rx, ry, rz] (or joints = 3 for reaches to a point)"
+    );
+    let six = file.task.start_six(&file.sim.wrist_q);
     let cfg = GenConfig {
         model: file.sim.model,
         start_q: file.task.start_arm_joints(),
-        wrist_q: file.sim.wrist_q,
+        // A pose goal's start pose has its own wrist angles.
+        wrist_q: [six[3], six[4], six[5]],
         ee_offset: file.sim.ee_offset,
         goal: file.task.goal,
+        goal_pose: file.task.goal_pose,
         goal_half_side: args.goal_half_side,
         motions: args.motions,
         rate_hz: args.rate,

@@ -8,17 +8,22 @@
 //! The paths are solved on the arm as `--demos` solves them (§4.17 steps 2–4, at the file's own
 //! samples instead of the control period): every path's start blended into the paths' mean
 //! start (the offset fading linearly in time to nothing at its end), the mean start solved
-//! nearest the model's default pose, every sample nearest the previous solution, the wrist
-//! locked at `sim.wrist_q` (a point path: a three-joint task's demonstrations). Every motion
-//! thus starts from one pose, the one a recorder takes for the start pose.
+//! nearest the model's default pose, every sample nearest the previous solution. A point path
+//! (`episode,t,x,y,z`) keeps the wrist locked at `sim.wrist_q` (a three-joint task's
+//! demonstrations); a pose path (with the tool's orientation `rx,ry,rz`) moves the whole arm,
+//! the six joints by the pose's inverse kinematics, its start's orientation blended too (the
+//! rotation from the path's first orientation to the starts' mean, [`mean_pose`], scaled by the
+//! same fading weight), for `learner record --pose` with `[task] joints = 6`. Every motion thus
+//! starts from one pose, the one a recorder takes for the start pose.
 
 use std::path::Path;
 
 use hil_sim::ur_sim::playback::{Playback, PlaybackError};
 use hil_sim::ur_sim::playback_motions::{play_motions, Motion, MotionsConfig};
 use ur5_shared::config::SimConfig;
-use ur5_shared::ik::UrIk;
-use ur5_shared::kinematics::UrKinematics;
+use ur5_shared::ik::{pose_from_rotation_vector, UrIk};
+use ur5_shared::kinematics::{Joints6, UrKinematics};
+use ur5_shared::pose::{isometry, mean_pose};
 
 use crate::io::tool_path::{self, ToolPath, ToolPathError};
 use crate::io::IoError;
@@ -42,8 +47,8 @@ pub enum TeachPlaybackError {
     Playback(#[from] PlaybackError),
 }
 
-/// The joint paths of `paths` on the arm of `sim`, the wrist locked (module docs): one motion
-/// a path, its sample times kept.
+/// The joint paths of `paths` on the arm of `sim` (module docs): one motion a path, its sample
+/// times kept; the wrist locked for point paths, the whole arm for pose paths.
 pub fn motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, ToolPathError> {
     if paths.is_empty() {
         return Err(ToolPathError::Empty);
@@ -55,6 +60,9 @@ pub fn motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, To
                 why: format!("{} samples: at least 2", p.t.len()),
             });
         }
+    }
+    if paths.iter().all(|p| p.rotations.is_some()) {
+        return pose_motions_of(paths, sim);
     }
     let n = paths.len() as f64;
     let start: [f64; 3] =
@@ -88,6 +96,66 @@ pub fn motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, To
                     })?;
                 }
                 q.push(UrKinematics::six(&prev, &wrist));
+            }
+            Ok(Motion {
+                t: path.t.clone(),
+                q,
+            })
+        })
+        .collect()
+}
+
+/// Pose paths (every path with its orientations) as whole-arm motions (module docs).
+fn pose_motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, ToolPathError> {
+    let pose_at = |p: &ToolPath, k: usize| {
+        let r = p.rotations.as_ref().expect("pose paths")[k];
+        pose_from_rotation_vector(p.points[k], r)
+    };
+    for p in paths {
+        let r = p.rotations.as_ref().expect("pose paths");
+        if r.len() != p.t.len() {
+            return Err(ToolPathError::Samples {
+                episode: p.episode,
+                why: format!("{} samples but {} orientations", p.t.len(), r.len()),
+            });
+        }
+    }
+    let starts: Vec<_> = paths.iter().map(|p| pose_at(p, 0)).collect();
+    let start = mean_pose(&starts);
+    let point: [f64; 3] = start.translation.vector.into();
+    let ik = UrIk::new(sim.model, sim.ee_offset);
+    let near = UrKinematics::six(&sim.model.default_start_q(), &sim.wrist_q);
+    let start_q = ik
+        .nearest_pose(&start, &near)
+        .map_err(|source| ToolPathError::Start { point, source })?;
+    paths
+        .iter()
+        .zip(&starts)
+        .map(|(path, first)| {
+            let (t0, t1) = (path.t[0], path.t[path.t.len() - 1]);
+            // What moves the path's start onto the mean start: a translation and a rotation
+            // (base frame), each faded out along the path.
+            let shift = start.translation.vector - first.translation.vector;
+            let turn = (start.rotation * first.rotation.inverse()).scaled_axis();
+            let mut prev: Joints6 = start_q;
+            let mut q = Vec::with_capacity(path.t.len());
+            for (k, &t) in path.t.iter().enumerate() {
+                let fade = 1.0 - (t - t0) / (t1 - t0);
+                let mut pose = pose_at(path, k);
+                pose.translation.vector += fade * shift;
+                let v = fade * turn;
+                pose.rotation = isometry(&[0.0, 0.0, 0.0, v.x, v.y, v.z]).rotation * pose.rotation;
+                if k > 0 {
+                    prev = ik.nearest_pose(&pose, &prev).map_err(|source| {
+                        ToolPathError::Unreachable {
+                            episode: path.episode,
+                            t,
+                            point: pose.translation.vector.into(),
+                            source,
+                        }
+                    })?;
+                }
+                q.push(prev);
             }
             Ok(Motion {
                 t: path.t.clone(),
@@ -186,6 +254,85 @@ mod tests {
         })
         .unwrap();
         assert!(pb.duration() > 2.0 * 2.0 + 4.0 * 1.0, "{}", pb.duration());
+    }
+
+    /// Pose paths of two whole-arm motions whose starts differ (wrist 3 by 0.05 rad, fading
+    /// out): both motions start from one pose, the blended mean start; every joint moves; each
+    /// ends at its own path's end pose; a path without its blend follows the motion it was made
+    /// from within 1e-6 rad; and the playback is valid.
+    #[test]
+    fn pose_paths_become_whole_arm_motions_from_one_start_pose() {
+        let sim = SimConfig::for_model(UrModel::Ur5e);
+        let kin = UrKinematics::new(sim.model, sim.ee_offset);
+        let motion = |d: f64| {
+            move |t: f64| -> Joints6 {
+                let s = t / 2.0;
+                [
+                    0.1 + 0.2 * s,
+                    -1.9 + 0.4 * s,
+                    2.2 - 0.3 * s,
+                    -1.5 - 0.3 * s,
+                    1.5 - 0.2 * s,
+                    0.1 + 0.4 * s + d * (1.0 - s),
+                ]
+            }
+        };
+        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.04).collect();
+        let path = |episode: u64, q: &dyn Fn(f64) -> Joints6| {
+            let poses: Vec<_> = t.iter().map(|&t| kin.tool_pose(&q(t))).collect();
+            ToolPath {
+                episode,
+                t: t.clone(),
+                points: poses.iter().map(|p| p.translation.vector.into()).collect(),
+                rotations: Some(
+                    poses
+                        .iter()
+                        .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
+                        .collect(),
+                ),
+            }
+        };
+        let paths = [path(0, &motion(0.0)), path(1, &motion(0.05))];
+        let motions = motions_of(&paths, &sim).unwrap();
+        assert_eq!(motions[0].q[0], motions[1].q[0], "one start pose");
+        let first = motions[0].q[0];
+        let last = motions[0].q.last().unwrap();
+        assert!(
+            (0..6).all(|j| (last[j] - first[j]).abs() > 0.1),
+            "{first:?} {last:?}"
+        );
+        for (m, p) in motions.iter().zip(&paths) {
+            let end = kin.tool_pose(m.q.last().unwrap());
+            let want = pose_from_rotation_vector(
+                *p.points.last().unwrap(),
+                *p.rotations.as_ref().unwrap().last().unwrap(),
+            );
+            assert!((end.translation.vector - want.translation.vector).norm() < 1e-9);
+            assert!(end.rotation.angle_to(&want.rotation) < 1e-9);
+        }
+        // The same path twice: no blend, the motion itself.
+        let same = motions_of(&[paths[0].clone(), paths[0].clone()], &sim).unwrap();
+        let worst = same[0]
+            .q
+            .iter()
+            .zip(&t)
+            .map(|(q, &t)| {
+                let want = motion(0.0)(t);
+                (0..6).map(|j| (q[j] - want[j]).abs()).fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "{worst}");
+        let pb = play_motions(&MotionsConfig {
+            model: sim.model,
+            motions,
+            rate_hz: 100.0,
+            seed: 0,
+        })
+        .unwrap();
+        assert!(
+            pb.q.iter().any(|q| (q[5] - first[5]).abs() > 0.1),
+            "the wrist turns"
+        );
     }
 
     #[test]

@@ -30,8 +30,9 @@
 //! dX = 18, dU = 6).
 //!
 //! **The task.** start_q = the start pose's active joints; goal = the mean end-effector point
-//! at the demonstrations' last step, its spread reported (a point goal: a pose goal is not
-//! derived from a recording). C_expert and C_random are derived as
+//! at the demonstrations' last step, its spread reported; with `pose` (six joints) a pose goal,
+//! the mean of their last tool poses, and the state's three tool points (dX = 30, dU = 6).
+//! C_expert and C_random are derived as
 //! for any imported demonstrations (`io::foreign`): the demonstrations' mean task cost, and the
 //! expert's random initial controller run on the task in the simulator.
 

@@ -369,14 +369,22 @@ impl Player {
 pub struct GenConfig {
     /// The arm model (joint limits, kinematics).
     pub model: UrModel,
-    /// Start pose of the active joints (rad).
+    /// Start pose of the three arm joints (rad).
     pub start_q: [f64; N_JOINTS],
-    /// Wrist angles (rad, wrist 1–3), kept throughout.
+    /// Wrist angles (rad, wrist 1–3): kept throughout for a point goal, the start pose's
+    /// wrist for a pose goal.
     pub wrist_q: [f64; 3],
     /// End-effector offset (m, flange frame).
     pub ee_offset: [f64; 3],
-    /// Centre of the goal region (m, base frame).
+    /// Centre of the goal region (m, base frame); for a pose goal, its position.
     pub goal: [f64; 3],
+    /// A pose goal (UR's p[x, y, z, rx, ry, rz]: m, rotation vector, base frame): the whole
+    /// arm reaches, all six joints moving and trembling, to the pose; each reach's tool point
+    /// aims into the goal region around the pose's position, its orientation the pose's
+    /// tilted by a seeded rotation of up to [`POSE_TILT_RAD`] about each base axis (joint goal
+    /// by the inverse kinematics nearest the start pose). `None`: a point goal, the wrist kept
+    /// at `wrist_q`.
+    pub goal_pose: Option<[f64; 6]>,
     /// Half side of the cubic goal region (m): each reach aims at a point drawn uniformly in it.
     pub goal_half_side: f64,
     /// Number of reaches.
@@ -423,6 +431,10 @@ pub const TREMOR_RAD: f64 = 2e-4;
 pub const TREMOR_HZ: (f64, f64) = (8.0, 12.0);
 /// How far from the start pose a person puts the arm back (rad, each active joint, uniform).
 pub const RETURN_SPREAD_RAD: f64 = 2e-3;
+/// How far a person holding a tool at a pose misses its orientation (rad, the rotation
+/// vector's component about each base axis, uniform): 0.17°, a tenth of a 10 cm tool's
+/// 5 mm goal region.
+pub const POSE_TILT_RAD: f64 = 3e-3;
 
 /// The most rows a generated file may have (about 100 MB of CSV): 120 motions at 1 kHz, 1204
 /// at the default 100 Hz.
@@ -480,9 +492,10 @@ const GOAL_POSTURE: [f64; 3] = [0.293, -1.379, 2.092];
 
 /// Generates `cfg.motions` reaches (module docs of `hil-sim playback-gen`): per motion, a
 /// rest at the start pose, a minimum-jerk reach of seeded duration that overshoots its target
-/// (a point of the goal region, to joint space by IK) by a seeded fraction, a corrective
-/// submovement back, a rest there, and a minimum-jerk return to (near) the start pose; a final
-/// rest at the start. Tremor rides on the motions. The same settings give the same file, bit
+/// (a point of the goal region, or a pose there for [`GenConfig::goal_pose`], to joint space by
+/// IK) by a seeded fraction, a corrective submovement back, a rest there, and a minimum-jerk
+/// return to (near) the start pose; a final rest at the start. Tremor rides on the motions of
+/// the moving joints (three, or six for a pose goal). The same settings give the same file, bit
 /// for bit.
 pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     let bad = |why: String| PlaybackError::Generate(why);
@@ -504,13 +517,15 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
         )));
     }
     let limits = cfg.model.joint_limits();
-    let pose = UrKinematics::six(&cfg.start_q, &cfg.wrist_q);
-    for (j, &q) in pose.iter().enumerate() {
+    let start = UrKinematics::six(&cfg.start_q, &cfg.wrist_q);
+    // The joints the hand moves: the arm's three, or the whole arm for a pose goal.
+    let n = if cfg.goal_pose.is_some() { 6 } else { 3 };
+    for (j, &q) in start.iter().enumerate() {
         if !(q >= limits.lower[j] && q <= limits.upper[j]) {
             return Err(bad(format!(
                 "the start pose's joint {j} ({}) at {q} rad is outside the {}'s limits \
                  [{}, {}] rad",
-                if j < 3 { "task.start_q" } else { "sim.wrist_q" },
+                if j < n { "task.start_q" } else { "sim.wrist_q" },
                 cfg.model,
                 limits.lower[j],
                 limits.upper[j]
@@ -523,39 +538,65 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
             cfg.goal_half_side
         )));
     }
+    let centre = cfg.goal_pose.map_or(cfg.goal, |p| [p[0], p[1], p[2]]);
     let kin = UrKinematics::new(cfg.model, cfg.ee_offset);
+    let ik = ur5_shared::ik::UrIk::new(cfg.model, cfg.ee_offset);
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    // Waypoints: (duration of the move to it, its active joints, whether a hand moves the arm).
-    let start = cfg.start_q;
-    let mut segments: Vec<(f64, [f64; 3], bool)> = Vec::new();
+    // Waypoints: (duration of the move to it, its six joints, whether a hand moves the arm).
+    let mut segments: Vec<(f64, Joints6, bool)> = Vec::new();
     let rest = |rng: &mut ChaCha8Rng| 1.0 + uni(rng, REST_EXTRA_S);
     let mut here = start;
     segments.push((rest(&mut rng), here, false));
     for m in 0..cfg.motions {
         let h = cfg.goal_half_side;
-        let target: [f64; 3] = core::array::from_fn(|k| cfg.goal[k] + uni(&mut rng, (-h, h)));
-        let q_goal =
-            inverse_kinematics(&kin, &cfg.wrist_q, target, GOAL_POSTURE).ok_or_else(|| {
-                bad(format!(
-                "motion {m}: no joint angles put the end effector at {target:?} m (outside the \
-                 {}'s reach?)",
-                cfg.model
-            ))
-            })?;
+        let target: [f64; 3] = core::array::from_fn(|k| centre[k] + uni(&mut rng, (-h, h)));
+        let q_goal = match &cfg.goal_pose {
+            None => inverse_kinematics(&kin, &cfg.wrist_q, target, GOAL_POSTURE)
+                .map(|q| UrKinematics::six(&q, &cfg.wrist_q))
+                .ok_or_else(|| {
+                    bad(format!(
+                        "motion {m}: no joint angles put the end effector at {target:?} m \
+                         (outside the {}'s reach?)",
+                        cfg.model
+                    ))
+                })?,
+            Some(p) => {
+                let tilt: [f64; 3] =
+                    core::array::from_fn(|_| uni(&mut rng, (-POSE_TILT_RAD, POSE_TILT_RAD)));
+                let goal = ur5_shared::pose::isometry(p);
+                let pose = nalgebra::Isometry3::from_parts(
+                    nalgebra::Translation3::from(nalgebra::Vector3::from(target)),
+                    nalgebra::UnitQuaternion::from_scaled_axis(nalgebra::Vector3::from(tilt))
+                        * goal.rotation,
+                );
+                ik.nearest_pose(&pose, &start).map_err(|e| {
+                    bad(format!(
+                        "motion {m}: no joint angles put the tool at p{:?} (m, rotation \
+                         vector): {e}",
+                        ur5_shared::pose::ur_pose(&pose)
+                    ))
+                })?
+            }
+        };
         let over = uni(&mut rng, OVERSHOOT);
-        let past: [f64; 3] = core::array::from_fn(|j| q_goal[j] + over * (q_goal[j] - here[j]));
+        let past: Joints6 = core::array::from_fn(|j| q_goal[j] + over * (q_goal[j] - here[j]));
         segments.push((uni(&mut rng, REACH_S), past, true));
         segments.push((uni(&mut rng, CORRECTION_S), q_goal, true));
         segments.push((rest(&mut rng), q_goal, false));
-        let back: [f64; 3] = core::array::from_fn(|j| {
-            start[j] + uni(&mut rng, (-RETURN_SPREAD_RAD, RETURN_SPREAD_RAD))
-        });
+        let mut back = start;
+        for b in back.iter_mut().take(n) {
+            *b += uni(&mut rng, (-RETURN_SPREAD_RAD, RETURN_SPREAD_RAD));
+        }
         segments.push((uni(&mut rng, REACH_S), back, true));
         segments.push((rest(&mut rng), back, false));
         here = back;
     }
-    // Two tremor sinusoids per active joint.
-    let tremor: [_; 3] = tremor(&mut rng);
+    // Two tremor sinusoids per moving joint.
+    let tremor: Vec<[(f64, f64, f64); 2]> = if n == 6 {
+        tremor::<6>(&mut rng).to_vec()
+    } else {
+        tremor::<3>(&mut rng).to_vec()
+    };
     let dt = 1.0 / cfg.rate_hz;
     let (mut t, mut q) = (Vec::new(), Vec::new());
     let mut from = start;
@@ -575,15 +616,17 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
             } else {
                 0.0
             };
-            let active: [f64; 3] = core::array::from_fn(|j| {
+            t.push(time);
+            q.push(core::array::from_fn(|j| {
+                if j >= n {
+                    return from[j];
+                }
                 let tr: f64 = tremor[j]
                     .iter()
                     .map(|(a, f, p)| a * (std::f64::consts::TAU * f * time + p).sin())
                     .sum();
                 (from[j] + s * (to[j] - from[j]) + env * tr).clamp(limits.lower[j], limits.upper[j])
-            });
-            t.push(time);
-            q.push(UrKinematics::six(&active, &cfg.wrist_q));
+            }));
             row += 1;
         }
         from = to;
@@ -591,7 +634,7 @@ pub fn generate(cfg: &GenConfig) -> Result<Playback, PlaybackError> {
     }
     // The last row at the end of the final rest.
     t.push(row as f64 * dt);
-    q.push(UrKinematics::six(&from, &cfg.wrist_q));
+    q.push(from);
     let p = Playback { t, q };
     // What the generator writes, `--playback` takes.
     Playback::parse(&p.to_csv(), "generated", cfg.model)?;
@@ -610,6 +653,7 @@ mod tests {
             wrist_q: m.default_wrist_q(),
             ee_offset: [0.0; 3],
             goal: m.default_goal(),
+            goal_pose: None,
             goal_half_side: 0.005,
             motions: 3,
             rate_hz: 100.0,
@@ -768,6 +812,64 @@ mod tests {
         assert!(
             near > 3 * 100,
             "about a second at each of 3 goals: {near} rows"
+        );
+    }
+
+    /// A pose goal: the whole arm reaches, the wrist moving and trembling too; every reach
+    /// comes to rest with the tool within the goal region around the pose's position and
+    /// within the tilt of its orientation; the file is seeded and valid; a pose out of reach
+    /// is refused naming the motion.
+    #[test]
+    fn pose_reaches_move_the_whole_arm_to_the_pose() {
+        let m = UrModel::Ur5e;
+        // The flange pose of q = (0.293, −1.379, 2.092, −1.9, 1.3, 0.4) rad.
+        let kin = UrKinematics::new(m, [0.0; 3]);
+        let goal_q = [0.293, -1.379, 2.092, -1.9, 1.3, 0.4];
+        let goal = ur5_shared::pose::ur_pose(&kin.tool_pose(&goal_q));
+        let c = GenConfig {
+            goal_pose: Some(goal),
+            ..gen(2)
+        };
+        let a = generate(&c).unwrap();
+        assert_eq!(a, generate(&c).unwrap(), "same seed, same file");
+        assert_eq!(Playback::parse(&a.to_csv(), "g", m).unwrap(), a);
+        let start = UrKinematics::six(&c.start_q, &c.wrist_q);
+        assert!(a.q[..100].iter().all(|q| *q == start));
+        // The rests away from the start: runs of at least 1 s of one pose.
+        let mut rests = Vec::new();
+        let mut k = 0;
+        while k < a.q.len() {
+            let run = a.q[k..].iter().take_while(|q| **q == a.q[k]).count();
+            if run >= 100 && (0..6).any(|j| (a.q[k][j] - start[j]).abs() > 0.1) {
+                rests.push(a.q[k]);
+            }
+            k += run;
+        }
+        assert_eq!(rests.len(), 3, "one rest at the goal per reach");
+        let target = ur5_shared::pose::isometry(&goal);
+        for q in &rests {
+            // The wrist moved from the start pose to the pose's.
+            assert!((3..6).all(|j| (q[j] - goal_q[j]).abs() < 0.05), "{q:?}");
+            let p = kin.tool_pose(q);
+            let d = p.translation.vector - target.translation.vector;
+            assert!(d.amax() <= c.goal_half_side + 1e-9, "{d}");
+            let tilt = p.rotation.angle_to(&target.rotation);
+            assert!(tilt <= 3f64.sqrt() * POSE_TILT_RAD + 1e-9, "{tilt} rad");
+        }
+        // The wrist trembles while the hand moves it.
+        let wobble = a.q.windows(3).any(|w| {
+            let acc = w[2][5] - 2.0 * w[1][5] + w[0][5];
+            w[0][5] != w[1][5] && acc.abs() > 1e-6
+        });
+        assert!(wobble, "wrist 3 moves and trembles");
+        let far = GenConfig {
+            goal_pose: Some([2.0, 0.0, 0.3, 0.0, 3.1, 0.0]),
+            ..c
+        };
+        let e = generate(&far).unwrap_err().to_string();
+        assert!(
+            e.contains("motion 0: no joint angles put the tool at"),
+            "{e}"
         );
     }
 

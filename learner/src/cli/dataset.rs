@@ -40,15 +40,16 @@ pub enum DatasetCmd {
     Lasa(LasaArgs),
     /// Write a tool-path CSV file (e.g. of `dataset lasa`) as a playback file for `hil-sim
     /// ur-sim --playback`: each path a motion moved by hand between two rests, from one start
-    /// pose, the wrist locked, so that `learner record` can be taught it (docs/ur.md,
-    /// "Teaching a motion by hand").
+    /// pose, the wrist locked (or, for paths with the tool's orientation rx,ry,rz, the whole
+    /// arm following it), so that `learner record` can be taught it (docs/ur.md, "Teaching a
+    /// motion by hand").
     Playback(PlaybackArgs),
 }
 
 /// Arguments of `learner dataset playback`.
 #[derive(Args, Debug)]
 pub struct PlaybackArgs {
-    /// Tool-path CSV file (`episode,t,x,y,z`).
+    /// Tool-path CSV file (`episode,t,x,y,z`, optionally `,rx,ry,rz`).
     pub paths: PathBuf,
     /// Output playback file (new: an existing one is never replaced).
     pub out: PathBuf,

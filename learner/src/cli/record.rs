@@ -102,8 +102,9 @@ fn load_config(args: &RecordArgs) -> anyhow::Result<RecordConfig> {
             let mut c: RecordConfig = ur5_shared::config::from_toml_file(p)?;
             anyhow::ensure!(
                 c.task.goal_pose.is_none(),
-                "{}: [task] goal_pose: a recording's goal is the point its demonstrations end \
-                 at (a pose goal is not derived from a recording); drop goal_pose",
+                "{}: [task] goal_pose: a recording's goal is where its demonstrations end (the \
+                 mean end point, or with --pose and joints = 6 the mean last tool pose); drop \
+                 goal_pose",
                 p.display()
             );
             // The start pose comes from the recording; a whole-arm task without one gets the

@@ -23,4 +23,5 @@ mod serve;
 mod soak;
 mod teach;
 mod teach_motion;
+mod teach_pose;
 mod ur_backend;

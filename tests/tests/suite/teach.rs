@@ -134,9 +134,9 @@ pub(crate) fn train_recorded(dir: &Path, cfg: &str, iterations: usize) -> serde_
 }
 
 /// Runs `table` over RTDE on a ur-sim of model `m` (lockstep) under `rt-controller` on the
-/// task of `demos` (its start pose, goal, horizon and period), a noisy episode and the
-/// noise-free one; checks that the controller ended well and no protective stop happened.
-/// Returns the noise-free episode's samples in time order.
+/// task of `demos` (its active joints, start pose, goal point or pose, horizon and period), a
+/// noisy episode and the noise-free one; checks that the controller ended well and no
+/// protective stop happened. Returns the noise-free episode's samples in time order.
 pub(crate) fn run_over_rtde(
     m: UrModel,
     demos: &imitation::demos::Demos,
@@ -153,25 +153,43 @@ pub(crate) fn run_over_rtde(
             // The controller asks the robot's model there (a UR5e: "UR5" on PolyScope 5).
             dashboard_port: Some(0),
             lockstep: true,
+            // A six-joint task's servoj moves the wrist too.
+            joints: demos.start_q.len(),
             ..UrSimConfig::default()
         },
     )
     .expect("ur-sim");
     let dashboard = run_sim.dashboard_addr.expect("dashboard").port();
-    let f = |v: [f64; 3]| format!("[{}, {}, {}]", v[0], v[1], v[2]);
+    let f = |v: &[f64]| {
+        let v: Vec<String> = v.iter().map(|x| x.to_string()).collect();
+        format!("[{}]", v.join(", "))
+    };
+    // A six-joint task names its joints, a pose goal its pose and tool points.
+    let mut whole_arm = String::new();
+    if demos.start_q.len() == 6 {
+        whole_arm.push_str("joints = 6\n");
+    }
+    if let Some(p) = demos.goal_pose {
+        let points: Vec<String> = demos.tool_points.iter().map(|o| f(o)).collect();
+        whole_arm.push_str(&format!(
+            "goal_pose = {}\ntool_points = [{}]\n",
+            f(&p),
+            points.join(", ")
+        ));
+    }
     let ctl_cfg = write_config(
         dir,
         "ctl.toml",
         &format!(
             "seed = 3\nnoisy_episodes = 1\neval_episodes = 1\nmode = \"lockstep\"\n\
-             [task]\nhorizon = {}\ndt = {}\nstart_q = {}\ngoal = {}\n\
+             [task]\nhorizon = {}\ndt = {}\nstart_q = {}\ngoal = {}\n{whole_arm}\
              [arm]\nbackend = \"ur\"\n[arm.ur]\nmodel = \"{}\"\nhost = \"127.0.0.1\"\n\
              rtde_port = {}\nsecondary_port = {}\ndashboard_port = {dashboard}\nreverse_port = 0\n\
              receive_timeout_ms = 1000\n",
             demos.horizon,
             demos.dt,
-            f(demos.start_q.as_slice().try_into().unwrap()),
-            f(demos.goal),
+            f(demos.start_q.as_slice()),
+            f(&demos.goal),
             m.name(),
             run_sim.rtde_addr.port(),
             run_sim.secondary_addr.port()
@@ -276,6 +294,20 @@ pub(crate) fn record_playback(
     horizon: usize,
     dir: &Path,
 ) -> serde_json::Value {
+    record_playback_with(m, series, playback, episodes, horizon, ("", &[]), dir)
+}
+
+/// [`record_playback`] with `task` more lines of the recorder's `[task]` table (e.g.
+/// `joints = 6`) and `args` more arguments of `learner record` (e.g. `--pose`).
+pub(crate) fn record_playback_with(
+    m: UrModel,
+    series: Series,
+    playback: &Path,
+    episodes: usize,
+    horizon: usize,
+    (task, args): (&str, &[&str]),
+    dir: &Path,
+) -> serde_json::Value {
     let d = |p: &str| dir.join(p).display().to_string();
     let model = m.name();
     // The recorder reads every package it is sent.
@@ -299,31 +331,29 @@ pub(crate) fn record_playback(
     let rec_cfg = write_config(
         dir,
         "record.toml",
-        &format!("[task]\nhorizon = {horizon}\n[sim]\nmodel = \"{model}\"\n"),
+        &format!("[task]\nhorizon = {horizon}\n{task}[sim]\nmodel = \"{model}\"\n"),
     );
-    let rec = run_ok(
-        "learner",
+    let (episodes, out) = (episodes.to_string(), d("rec"));
+    let mut argv = vec![
         "record",
-        &[
-            "record",
-            "--ur",
-            "127.0.0.1",
-            "--rtde-port",
-            &port,
-            "--dashboard-port",
-            &dashboard,
-            "--episodes",
-            &episodes.to_string(),
-            "--config",
-            &rec_cfg,
-            "--out",
-            &d("rec"),
-            "--max-time-s",
-            "100",
-            "--json",
-        ],
-        dir,
-    );
+        "--ur",
+        "127.0.0.1",
+        "--rtde-port",
+        &port,
+        "--dashboard-port",
+        &dashboard,
+        "--episodes",
+        &episodes,
+        "--config",
+        &rec_cfg,
+        "--out",
+        &out,
+        "--max-time-s",
+        "100",
+        "--json",
+    ];
+    argv.extend_from_slice(args);
+    let rec = run_ok("learner", "record", &argv, dir);
     sim.stop();
     rec
 }
