@@ -172,7 +172,7 @@ pub struct ExperimentConfig {
     pub comparison_workspace_goals: bool,
     /// Multi-goal: the global policy and its S-step (MDGPS's per-condition settings are
     /// `lqr_gaifo`'s, so it uses LQR+GAIfO's N episodes per condition).
-    pub mdgps_policy: imitation::mdgps::s_step::PolicyOptConfig,
+    pub mdgps_policy: imitation::mlp_policy::opt::PolicyOptConfig,
     /// Multi-goal: MDGPS's C-step KL bound, nats per time step (`MdgpsConfig::kl_step`; the
     /// centre's LQR+GAIfO keeps `lqr_gaifo.algorithm.kl_step`).
     pub mdgps_kl_step: f64,
