@@ -369,3 +369,55 @@ fn quad(p: &[f64], e: &[f64]) -> f64 {
         .map(|j| e[j] * (0..du).map(|l| p[j * du + l] * e[l]).sum::<f64>())
         .sum()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The minibatch order of a fit as it was written in the S-step and in BCO's inverse model
+    /// before they shared [`Minibatches`]: the reference for the same draws in the same order.
+    fn reference(fits: &[(usize, usize, usize)], rng: &mut ChaCha8Rng) -> Vec<Vec<usize>> {
+        let mut order: Vec<usize> = Vec::new();
+        let mut out = Vec::new();
+        for &(n, b, steps) in fits {
+            let mut cursor = n;
+            for _ in 0..steps {
+                if cursor + b > order.len() || order.len() != n {
+                    order = (0..n).collect();
+                    order.shuffle(rng);
+                    cursor = 0;
+                }
+                out.push(order[cursor..cursor + b].to_vec());
+                cursor += b;
+            }
+        }
+        out
+    }
+
+    /// Every batch as the reference's, over fits of several sizes (a batch of all samples, a
+    /// pass that leaves fewer than b, a fit over the same n as the last); each pass of a fit
+    /// is a permutation.
+    #[test]
+    fn minibatches_draw_as_the_reference() {
+        let fits = [(10, 4, 7), (10, 4, 3), (5, 5, 3), (7, 3, 5), (1, 1, 2)];
+        let want = reference(&fits, &mut ChaCha8Rng::seed_from_u64(4));
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut mb = Minibatches::default();
+        let mut got = Vec::new();
+        for &(n, b, steps) in &fits {
+            mb.start();
+            for _ in 0..steps {
+                got.push(mb.next(n, b, &mut rng).to_vec());
+            }
+        }
+        assert_eq!(got, want);
+        let mut pass: Vec<usize> = got[0].iter().chain(&got[1]).copied().collect();
+        pass.sort_unstable();
+        pass.dedup();
+        assert_eq!(pass.len(), 8, "{got:?}");
+        assert_ne!(
+            got[2], got[0],
+            "a new permutation after the first two batches of 4 of 10"
+        );
+    }
+}
