@@ -24,7 +24,7 @@
 //! in order, each layer `W_l` (row-major, `n_{l+1} × n_l`) then `b_l` (`n_{l+1}`). Its length is
 //! [`flat_len`]`(dx, du, hidden)`: 15,198 values for the reaching task (dX = 12, dU = 3) and the
 //! default `hidden = [64, 64]`. This is exactly
-//! the learner's `imitation::mdgps::policy::GlobalPolicy::flat` and the `params` array of a
+//! the learner's `imitation::mlp_policy::global::GlobalPolicy::flat` and the `params` array of a
 //! policy file (docs/design.md §4.10).
 //!
 //! # Checksum

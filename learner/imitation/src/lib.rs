@@ -16,7 +16,10 @@
 //! - [`expert`]: the LQR loop on the task cost, and its demonstrations ([`demos`]);
 //! - [`gaifo`]: LQR+GAIfO, steps 1–6 in order in [`gaifo::LqrGaifo::learn`]; its log row
 //!   ([`iteration_log::GaifoLog`]) is also the PPO baseline's;
-//! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor and MDGPS's global policy;
+//! - [`mlp_policy`]: the Gaussian MLP policy, GAIfO (PPO)'s actor; on normalised states the
+//!   global policy of MDGPS, BCO and GAIfO (TD3) ([`mlp_policy::global`]) and its supervised
+//!   fit ([`mlp_policy::opt`]: MDGPS's S-step, BCO's cloning), below all learners so that none
+//!   imports another's;
 //! - [`ppo`]: the GAIfO (PPO) baseline;
 //! - [`offpolicy`]: off-policy GAIfO, the critic as the reward of TD3 with a replay buffer;
 //! - [`bco`]: behavioural cloning from observation, BCO(α), a baseline (docs/design.md §7);

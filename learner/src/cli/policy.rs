@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use serde::Serialize;
 
-use imitation::mdgps::policy::GlobalActor;
+use imitation::mlp_policy::global::GlobalActor;
 use imitation::rollout::run_episode;
 use ur5_shared::config::{parse_triple, SimConfig, TaskConfig};
 use ur5_shared::UrModel;

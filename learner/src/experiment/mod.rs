@@ -24,6 +24,9 @@
 //! - `<name>.png`: normalised performance of the noise-free episode per iteration, mean ±
 //!   standard error over seeds, one curve per variant;
 //! - `summary.txt` / `summary.json`: the table printed at the end;
+//! - a pose task (`[expert.task] joints = 6` with a `goal_pose`; the layout is the task's) adds
+//!   its measure of the orientation: the CSV's last column `final_orientation_error_deg`, a
+//!   table of the final orientation error in the summary and a third panel in the figure;
 //! - the demonstrations used (`demos.npz`, or `experts/` for the generalisation experiment).
 
 use std::path::Path;
@@ -172,7 +175,7 @@ pub struct ExperimentConfig {
     pub comparison_workspace_goals: bool,
     /// Multi-goal: the global policy and its S-step (MDGPS's per-condition settings are
     /// `lqr_gaifo`'s, so it uses LQR+GAIfO's N episodes per condition).
-    pub mdgps_policy: imitation::mdgps::s_step::PolicyOptConfig,
+    pub mdgps_policy: imitation::mlp_policy::opt::PolicyOptConfig,
     /// Multi-goal: MDGPS's C-step KL bound, nats per time step (`MdgpsConfig::kl_step`; the
     /// centre's LQR+GAIfO keeps `lqr_gaifo.algorithm.kl_step`).
     pub mdgps_kl_step: f64,
@@ -379,6 +382,16 @@ impl ExperimentConfig {
         if self.algorithms.iter().any(|a| a == "gaifo-td3") {
             self.gaifo_td3.validate()?;
         }
+        ensure!(
+            self.expert.task.goal_pose.is_none()
+                || !(self.comparison_workspace_goals || self.ablation_workspace_goals),
+            ExperimentError::Settings(
+                "comparison_workspace_goals and ablation_workspace_goals move the goal point to \
+                 the five workspace goals; a pose task (expert.task.goal_pose) has a pose of its \
+                 own: leave them off"
+                    .into()
+            )
+        );
         self.expert.task.validate()?;
         self.expert.sim.validate()?;
         Ok(())

@@ -30,8 +30,8 @@ use imitation::demos::Demos;
 use imitation::expert::square_goals;
 use imitation::gaifo::LqrGaifo;
 use imitation::learn::{iterate, LinGaussLearn};
-use imitation::mdgps::policy::GlobalActor;
 use imitation::mdgps::{Mdgps, MdgpsConfig, MdgpsLog};
+use imitation::mlp_policy::global::GlobalActor;
 use imitation::rollout::{run_episode, Arm, Episode, Policy};
 use ur5_shared::config::TaskConfig;
 

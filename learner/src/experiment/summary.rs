@@ -8,7 +8,7 @@ use crate::io::IoError;
 use serde::Serialize;
 
 use super::Run;
-use crate::io::log::CSV_HEADER;
+use crate::io::log::{CSV_HEADER, ORIENTATION_COLUMN};
 use crate::plot::{mean_stderr, plot_panels, Panel, Series};
 use crate::stats::median;
 use imitation::gaifo::GaifoLog;
@@ -33,6 +33,15 @@ pub struct SummaryRow {
     /// Mean (± SE over seeds) final distance (m) over the last 10 iterations.
     pub last10_final_distance_m: f64,
     pub last10_final_distance_se: f64,
+    /// A pose task's (iteration, mean, standard error) of the final orientation error of the
+    /// noise-free episode (degrees) at the report points; `None` (and not in the JSON) for a
+    /// point task.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub final_orientation_error_deg: Option<Vec<(usize, f64, f64)>>,
+    /// A pose task's mean and standard error over seeds of the final orientation error
+    /// (degrees) over the last 10 iterations.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub last10_final_orientation_error_deg: Option<(f64, f64)>,
     /// First iteration at which the mean over seeds reaches 0.8 (None: never).
     pub first_iteration_mean_ge_0_8: Option<usize>,
     /// First iteration at which the mean final distance over seeds is at most 1 cm (None:
@@ -119,6 +128,16 @@ pub(super) fn by_variant(runs: &[Run]) -> Vec<(String, Vec<&Run>)> {
     out
 }
 
+/// Whether `runs` are of a pose task: their logs carry the final orientation error (NaN for a
+/// point task, `GaifoLog::final_orientation_error_deg`).
+pub fn is_pose(runs: &[Run]) -> bool {
+    runs.iter().any(|r| {
+        r.logs
+            .iter()
+            .any(|l| l.final_orientation_error_deg.is_finite())
+    })
+}
+
 /// `f` of every iteration's log, one vector per run (seed) of a variant.
 fn per_seed(rs: &[&Run], f: fn(&GaifoLog) -> f64) -> Vec<Vec<f64>> {
     rs.iter().map(|r| r.logs.iter().map(f).collect()).collect()
@@ -150,6 +169,8 @@ pub fn summarise(runs: &[Run]) -> Vec<SummaryRow> {
             };
             let (l10, l10se) = last10(&perf);
             let (d10, d10se) = last10(&dist);
+            let pose = rs.iter().any(|r| is_pose(std::slice::from_ref(*r)));
+            let orient = pose.then(|| per_seed(&rs, |l| l.final_orientation_error_deg));
             let at_points = |m: &[f64], e: &[f64]| -> Vec<(usize, f64, f64)> {
                 report_points(iterations.max(1))
                     .into_iter()
@@ -166,7 +187,13 @@ pub fn summarise(runs: &[Run]) -> Vec<SummaryRow> {
                 )
             };
             let (n, t) = (rs[0].episodes_per_iteration, rs[0].horizon);
+            let final_orientation_error_deg = orient.as_ref().map(|o| {
+                let (m, e, _) = mean_stderr(o);
+                at_points(&m, &e)
+            });
             SummaryRow {
+                final_orientation_error_deg,
+                last10_final_orientation_error_deg: orient.as_ref().map(|o| last10(o)),
                 episodes_per_iteration: n,
                 horizon: t,
                 to_performance_0_9: Reach::of(&perf, |p| p >= 0.9, n, t),
@@ -260,6 +287,21 @@ pub fn summary_text(rows: &[SummaryRow]) -> String {
         );
     }
     s.push_str("(final distance to the goal of the noise-free episode, cm, mean ± standard error over seeds)\n\n");
+    if rows.iter().any(|r| r.final_orientation_error_deg.is_some()) {
+        header(&mut s, "orientation, deg", &format!(" {:>13}", "last 10"));
+        for r in rows {
+            let _ = write!(s, "{:<20} {:>5}", r.variant, r.seeds);
+            let o = r.final_orientation_error_deg.as_deref().unwrap_or(&[]);
+            for p in &points {
+                let _ = write!(s, " {:>13}", cell(o, *p, 1.0, 2));
+            }
+            let last = r
+                .last10_final_orientation_error_deg
+                .map_or("-".into(), |(m, e)| format!("{m:.2}±{e:.2}"));
+            let _ = writeln!(s, " {last:>13}");
+        }
+        s.push_str("(final orientation error of the tool in the noise-free episode, degrees, mean ± standard error over seeds; pose tasks)\n\n");
+    }
     sample_efficiency_text(&mut s, rows);
     s
 }
@@ -361,11 +403,17 @@ pub fn write_outputs(
     let mut f = std::io::BufWriter::new(
         std::fs::File::create(&csv_path).map_err(IoError::file("creating", &csv_path))?,
     );
-    writeln!(f, "{}", csv_header())?;
+    let pose = is_pose(runs);
+    if pose {
+        writeln!(f, "{},{ORIENTATION_COLUMN}", csv_header())?;
+    } else {
+        writeln!(f, "{}", csv_header())?;
+    }
     for r in runs {
         for l in &r.logs {
             write!(f, "{name},{},", r.variant)?;
-            crate::io::log::write_csv_row(&mut f, l, r.seed, &r.algorithm)?;
+            let row = crate::io::log::GaifoRow::of_task(l, r.seed, &r.algorithm, pose);
+            crate::io::log::write_record(&mut f, &row)?;
         }
     }
     f.flush()?;
@@ -384,23 +432,33 @@ pub fn write_outputs(
             .collect()
     };
     let (perf, dist) = (curves(|l| l.performance), curves(|l| l.final_distance));
+    let orient = curves(|l| l.final_orientation_error_deg);
+    let mut panels = vec![
+        Panel {
+            y_label: "normalised performance (1 = expert, 0 = random)",
+            series: &perf,
+            log_y: false,
+        },
+        Panel {
+            y_label: "final distance to the goal (m, log scale)",
+            series: &dist,
+            log_y: true,
+        },
+    ];
+    if pose {
+        panels.push(Panel {
+            y_label: "final orientation error (degrees, log scale)",
+            series: &orient,
+            log_y: true,
+        });
+    }
+    let height = if pose { 1600 } else { 1100 };
     plot_panels(
         &out.join(format!("{name}.png")),
         title,
         "iteration",
-        &[
-            Panel {
-                y_label: "normalised performance (1 = expert, 0 = random)",
-                series: &perf,
-                log_y: false,
-            },
-            Panel {
-                y_label: "final distance to the goal (m, log scale)",
-                series: &dist,
-                log_y: true,
-            },
-        ],
-        (1000, 1100),
+        &panels,
+        (1000, height),
     )?;
     let rows = summarise(runs);
     std::fs::write(out.join("summary.txt"), summary_text(&rows))?;

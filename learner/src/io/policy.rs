@@ -2,7 +2,7 @@
 //!
 //! | array | shape | meaning |
 //! |---|---|---|
-//! | `params` | (P,) f64 | the flat parameter vector θ (layout in `imitation::mdgps::policy`: input mean and scale, dU mean heads, log σ) |
+//! | `params` | (P,) f64 | the flat parameter vector θ (layout in `imitation::mlp_policy::global`: input mean and scale, dU mean heads, log σ) |
 //! | `hidden` | (H,) i64 | hidden widths of each mean head; P = `flat_len(dX, dU, hidden)` |
 //! | `action_mode` | str | `goal_angles` (a = q + μ + σ ε, rad) or `torque` (a = μ + σ ε, N·m) |
 //! | `start_q` | (dU,) f64 | start pose the policy was trained from (rad), one angle per active joint |
@@ -21,7 +21,7 @@
 
 use std::path::Path;
 
-use imitation::mdgps::policy::{flat_len, GlobalPolicy};
+use imitation::mlp_policy::global::{flat_len, GlobalPolicy};
 use ur5_shared::config::ActionMode;
 use ur5_shared::joints::Joints;
 use ur5_shared::layout::DimensionMismatch;

@@ -13,7 +13,7 @@ use imitation::bco::{Bco, BcoConfig};
 use imitation::demos::Demos;
 use imitation::gaifo::GaifoLog;
 use imitation::learn::{Learn, LinGaussLearn};
-use imitation::mdgps::policy::GlobalPolicy;
+use imitation::mlp_policy::global::GlobalPolicy;
 use imitation::offpolicy::{GaifoTd3, GaifoTd3Config};
 use imitation::replay_mean::{ReplayMean, ReplayMeanConfig};
 use ur5_shared::config::SimConfig;

@@ -46,6 +46,9 @@ fn comparison_outputs_learning_and_thread_independence() {
         text.contains("to threshold") && text.contains("ratio to lqr-gaifo"),
         "{text}"
     );
+    // A point task has no orientation measure (the six-joint test below has).
+    assert!(!text.contains("orientation"), "{text}");
+    assert!(rows.iter().all(|r| r.final_orientation_error_deg.is_none()));
     assert_png(&out2.join("comparison.png"));
     assert!(out2.join("summary.txt").exists() && out2.join("demos.npz").exists());
     let json: serde_json::Value =
@@ -79,6 +82,92 @@ fn comparison_outputs_learning_and_thread_independence() {
     assert_eq!(rows_without_times(&out1.join("comparison.csv")), rows2);
     let _ = std::fs::remove_dir_all(&out1);
     let _ = std::fs::remove_dir_all(&out2);
+}
+
+/// The comparison at six joints and a pose goal from a settings file as one writes it
+/// (`[expert.task] joints = 6` and a `goal_pose` on the UR5e; `learner experiment comparison
+/// --config`): the settings take the model's and the pose task's defaults, every algorithm runs
+/// at the task's layout (dX = 30, dU = 6), and the outputs carry the final orientation error: the
+/// CSV's last column, a table of the summary, the JSON's fields. Seconds: T = 20, 2 iterations.
+#[test]
+fn comparison_at_six_joints_reports_the_orientation_error() {
+    use ur5_shared::config::SimConfig;
+    use ur5_shared::{StateLayout, UrModel};
+    let dir = tmp("cmp6");
+    std::fs::create_dir_all(&dir).unwrap();
+    let settings = dir.join("pose.toml");
+    std::fs::write(
+        &settings,
+        format!(
+            "seeds = 1\niterations = 2\nthreads = 1\n\
+             algorithms = [\"lqr-gaifo\", \"gaifo-ppo\", \"replay-mean\"]\n\
+             [expert]\niterations = 2\nrandom_episodes = 2\ndemos = 2\n\
+             [expert.sim]\nmodel = \"ur5e\"\n\
+             [expert.task]\njoints = 6\nhorizon = 20\ngoal_pose = {:?}\n\
+             [lqr_gaifo.sim]\nmodel = \"ur5e\"\n[gaifo_ppo.sim]\nmodel = \"ur5e\"\n",
+            crate::six_joints::POSE
+        ),
+    )
+    .unwrap();
+    let cfg: ExperimentConfig = ur5_shared::config::from_toml_file_over(
+        &settings,
+        ExperimentConfig::defaults(ExperimentName::Comparison),
+    )
+    .unwrap();
+    assert_eq!(cfg.expert.task.layout(), StateLayout::POSE6);
+    assert_eq!(cfg.expert.task.goal, [-0.4383, -0.2993, 0.3748]);
+    assert_eq!(cfg.expert.sim, SimConfig::for_model(UrModel::Ur5e));
+    assert_eq!(cfg.lqr_gaifo.sim, cfg.expert.sim);
+
+    let out = dir.join("out");
+    let (ok, err) = common::learner(&[
+        "experiment",
+        "comparison",
+        "--config",
+        settings.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let demos = learner::io::demos::load(&out.join("demos.npz")).unwrap();
+    assert_eq!(demos.layout(), StateLayout::POSE6);
+    let csv = std::fs::read_to_string(out.join("comparison.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        format!(
+            "{},{}",
+            learner::experiment::csv_header(),
+            learner::io::log::ORIENTATION_COLUMN
+        )
+    );
+    let degrees: Vec<f64> = lines
+        .map(|l| l.rsplit(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(degrees.len(), 3 * 2, "3 algorithms x 2 iterations");
+    assert!(
+        degrees
+            .iter()
+            .all(|d| d.is_finite() && *d >= 0.0 && *d <= 180.0),
+        "{degrees:?}"
+    );
+    let text = std::fs::read_to_string(out.join("summary.txt")).unwrap();
+    assert!(text.contains("\norientation, deg"), "{text}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    for row in json.as_array().unwrap() {
+        let o = row["final_orientation_error_deg"].as_array().unwrap();
+        assert_eq!(o.len(), 2, "{row}");
+        assert!(
+            o.iter().all(|p| p[1].as_f64().unwrap().is_finite()),
+            "{row}"
+        );
+        assert!(row["last10_final_orientation_error_deg"][0]
+            .as_f64()
+            .is_some());
+    }
+    assert_png(&out.join("comparison.png"));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -117,6 +206,12 @@ fn bad_settings_are_refused_with_a_reason() {
     cfg.algorithms = vec!["dagger".into()];
     let e = run(ExperimentName::Comparison, &cfg, &tmp("bad2"), None).unwrap_err();
     assert!(e.to_string().contains("dagger"), "{e}");
+    // The workspace goals are points: refused for a pose task before anything runs.
+    let mut cfg = ExperimentConfig::defaults(ExperimentName::Comparison);
+    cfg.expert.task = crate::six_joints::pose_task(20);
+    cfg.comparison_workspace_goals = true;
+    let e = run(ExperimentName::Comparison, &cfg, &tmp("bad4"), None).unwrap_err();
+    assert!(e.to_string().contains("comparison_workspace_goals"), "{e}");
     let mut cfg = ExperimentConfig::defaults(ExperimentName::Ablation);
     cfg.ablation_variants = vec!["default".into(), "no-critic".into()];
     let e = run(ExperimentName::Ablation, &cfg, &tmp("bad3"), None).unwrap_err();

@@ -79,7 +79,10 @@ pub fn from_toml_file_over<T: Serialize + DeserializeOwned>(
 /// model = "ur5e"`, or `model = ...` at the top of a bare [`SimConfig`]) gets that model's
 /// defaults for the model-dependent keys it leaves out: [`SimConfig::MODEL_KEYS`] of `[sim]`
 /// from [`SimConfig::for_model`] and [`TaskConfig::MODEL_KEYS`] of `[task]` from
-/// [`TaskConfig::for_model`] (docs/ur.md, "Arm models").
+/// [`TaskConfig::for_model`] (docs/ur.md, "Arm models"). The task's keys that default from
+/// others follow them too (a six-joint `[task]` without `start_q`, a `goal_pose` without `goal`;
+/// docs/design.md §2.5). Both hold at every depth: a table with a `[sim]` or `[task]` of its
+/// own (an experiment's `[expert]` and `[lqr_gaifo]`) is layered as a configuration of its own.
 pub fn from_toml_str<T: Serialize + DeserializeOwned + Default>(
     text: &str,
 ) -> Result<T, ConfigError> {
@@ -101,11 +104,58 @@ fn layered<T: Serialize + DeserializeOwned>(
         // A configuration that does not serialise to a table: the file alone.
         _ => return toml::from_str(text).map_err(parse),
     };
-    model_defaults(&mut merged, &file)?;
-    let task_given = task_keys_given(&merged, &file);
+    // The top level, then every table that holds a `[sim]` or `[task]` of its own (an
+    // experiment's `[expert]`, `[lqr_gaifo]`, MDGPS's `[lqr_gaifo]`): each gets the model's and
+    // the task's defaults from what the file gives in it, as a configuration of its own would.
+    let mut scopes = vec![Vec::new()];
+    nested_scopes(&merged, &mut Vec::new(), &mut scopes);
+    let empty = toml::Table::new();
+    let mut task_given = Vec::with_capacity(scopes.len());
+    for path in &scopes {
+        let f = table_at(&file, path).unwrap_or(&empty);
+        let b = table_at_mut(&mut merged, path).expect("a scope of the base");
+        model_defaults(b, f)?;
+        task_given.push(task_keys_given(b, f));
+    }
     merge_table(&mut merged, file);
-    task_defaults(&mut merged, task_given);
+    for (path, given) in scopes.iter().zip(task_given) {
+        if let Some(t) = table_at_mut(&mut merged, path) {
+            task_defaults(t, given);
+        }
+    }
     T::deserialize(toml::Value::Table(merged)).map_err(parse)
+}
+
+/// The paths (below `t`, which is at `path`) of every table that has a `sim` or `task` table
+/// of its own, parents before children.
+fn nested_scopes(t: &toml::Table, path: &mut Vec<String>, out: &mut Vec<Vec<String>>) {
+    for (k, v) in t {
+        let toml::Value::Table(sub) = v else { continue };
+        if k == "sim" || k == "task" {
+            continue;
+        }
+        path.push(k.clone());
+        if ["sim", "task"]
+            .iter()
+            .any(|s| sub.get(*s).is_some_and(|v| v.is_table()))
+        {
+            out.push(path.clone());
+        }
+        nested_scopes(sub, path, out);
+        path.pop();
+    }
+}
+
+/// The table at `path` below `t` (`t` itself for an empty path).
+fn table_at<'a>(t: &'a toml::Table, path: &[String]) -> Option<&'a toml::Table> {
+    path.iter()
+        .try_fold(t, |t, k| t.get(k).and_then(|v| v.as_table()))
+}
+
+/// [`table_at`], mutable.
+fn table_at_mut<'a>(t: &'a mut toml::Table, path: &[String]) -> Option<&'a mut toml::Table> {
+    path.iter()
+        .try_fold(t, |t, k| t.get_mut(k).and_then(|v| v.as_table_mut()))
 }
 
 /// Lays the model-dependent defaults of the model `file` names over `base` (see
@@ -824,6 +874,62 @@ mod tests {
         assert!(
             e.to_string().contains("ur7") && e.to_string().contains("sim.model"),
             "{e}"
+        );
+    }
+
+    /// A table with a `[sim]` or `[task]` of its own (an experiment's `[expert]`, at any depth)
+    /// is layered as a configuration of its own: the model's defaults and the six-joint pose
+    /// task's; a file that leaves it alone keeps the defaults.
+    #[test]
+    fn nested_configurations_get_the_model_and_task_defaults() {
+        #[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        struct Run {
+            task: TaskConfig,
+            sim: SimConfig,
+        }
+        #[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        struct Learner {
+            sim: SimConfig,
+            n: u32,
+        }
+        #[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        struct Deeper {
+            inner: Run,
+        }
+        #[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+        #[serde(default, deny_unknown_fields)]
+        struct Exp {
+            expert: Run,
+            learner: Learner,
+            deeper: Deeper,
+        }
+        let pose = "goal_pose = [-0.4383, -0.2993, 0.3748, 0.4667, -0.108, -0.8096]\n";
+        let top: Run = from_toml_str(&format!(
+            "[sim]\nmodel = \"ur5e\"\n[task]\njoints = 6\n{pose}"
+        ))
+        .unwrap();
+        assert_eq!(top.task.start_q.len(), 6);
+        assert_eq!(top.task.goal, [-0.4383, -0.2993, 0.3748]);
+        let e: Exp = from_toml_str(&format!(
+            "[expert.sim]\nmodel = \"ur5e\"\n[expert.task]\njoints = 6\n{pose}\
+             [learner]\nn = 2\n[learner.sim]\nmodel = \"ur10e\"\n\
+             [deeper.inner.task]\njoints = 6\n"
+        ))
+        .unwrap();
+        assert_eq!(e.expert, top);
+        assert_eq!(e.learner.sim, SimConfig::for_model(UrModel::Ur10e));
+        assert_eq!(e.learner.n, 2);
+        let mut q = UrModel::Ur5.default_start_q().to_vec();
+        q.extend(UrModel::Ur5.default_wrist_q());
+        assert_eq!(e.deeper.inner.task.start_q.as_slice(), q.as_slice());
+        assert_eq!(from_toml_str::<Exp>("").unwrap(), Exp::default());
+        let e: Exp = from_toml_str("[learner]\nn = 3\n").unwrap();
+        assert_eq!(
+            (e.learner.sim, e.expert),
+            (SimConfig::default(), Run::default())
         );
     }
 

@@ -9,7 +9,7 @@
 
 use std::time::Duration;
 
-use imitation::mdgps::policy::{GlobalActor, GlobalPolicy};
+use imitation::mlp_policy::global::{GlobalActor, GlobalPolicy};
 use imitation::rollout::run_episode;
 use integration_tests::{json_summary, scratch, unique_prefix, write_config, Proc};
 use learner::arm::SimArm;

@@ -22,7 +22,6 @@
 //!
 //! Dimensions (dX, dU) are run-time values given at construction.
 
-use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -32,6 +31,7 @@ use gps::GpsError;
 
 use crate::discriminator::mlp::{Mlp, MlpWorkspace};
 use crate::discriminator::{Adam, AdamConfig, Normalizer};
+use crate::mlp_policy::opt::{check_fit, Minibatches, FIT_ADAM};
 use crate::ImitationError;
 
 /// Settings of the inverse dynamics model (TOML table `[model]` of a BCO run).
@@ -55,12 +55,7 @@ impl Default for InverseModelConfig {
     fn default() -> Self {
         Self {
             hidden: vec![64, 64],
-            adam: AdamConfig {
-                lr: 1e-3,
-                beta1: 0.9,
-                beta2: 0.999,
-                eps: 1e-8,
-            },
+            adam: FIT_ADAM,
             batch_size: 64,
             steps: 500,
             ridge: 1e-8,
@@ -71,19 +66,12 @@ impl Default for InverseModelConfig {
 impl InverseModelConfig {
     /// Checks the ranges, naming the setting (keys under `model.`).
     pub fn validate(&self) -> Result<(), ImitationError> {
-        crate::discriminator::DiscriminatorConfig::check_widths("model.hidden", &self.hidden)
-            .map_err(ImitationError::Config)?;
-        crate::error::check_counts(
-            &[
-                ("model.batch_size", self.batch_size, 1),
-                ("model.steps", self.steps, 0),
-            ],
-            crate::settings::MAX_COUNT,
-        )
-        .map_err(ImitationError::Config)?;
-        self.adam
-            .validate()
-            .map_err(|e| ImitationError::Config(format!("model.adam: {e}")))?;
+        check_fit(
+            "model",
+            &self.hidden,
+            &self.adam,
+            (self.batch_size, self.steps, 0),
+        )?;
         crate::error::check_reals(&[(
             "model.ridge",
             self.ridge,
@@ -126,7 +114,7 @@ pub struct InverseModel {
     ws: Vec<MlpWorkspace>,
     theta: Vec<f64>,
     grad: Vec<f64>,
-    order: Vec<usize>,
+    batches: Minibatches,
 }
 
 /// Snapshot arrays of the model ([`InverseModel::snapshot`]).
@@ -177,7 +165,7 @@ impl InverseModel {
             norm: None,
             features: Vec::new(),
             targets: Vec::new(),
-            order: Vec::new(),
+            batches: Minibatches::default(),
             heads,
             rng,
             cfg,
@@ -297,21 +285,17 @@ impl InverseModel {
         }
         let rmse_linear = (residual.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt();
         let b = self.cfg.batch_size.min(n);
-        let mut cursor = n;
+        // Out of `self` while `loss_gradient` borrows it.
+        let mut batches = std::mem::take(&mut self.batches);
+        batches.start();
         for _ in 0..self.cfg.steps {
-            if cursor + b > n || self.order.len() != n {
-                self.order = (0..n).collect();
-                self.order.shuffle(&mut self.rng);
-                cursor = 0;
-            }
-            let batch = std::mem::take(&mut self.order);
-            self.loss_gradient(&inputs, &residual, &batch[cursor..cursor + b]);
-            self.order = batch;
-            cursor += b;
+            let batch = batches.next(n, b, &mut self.rng);
+            self.loss_gradient(&inputs, &residual, batch);
             self.read_params();
             self.adam.step(&mut self.theta, &self.grad);
             self.write_params();
         }
+        self.batches = batches;
         let all: Vec<usize> = (0..n).collect();
         let rmse = (2.0 * self.loss_gradient(&inputs, &residual, &all)).sqrt();
         if !rmse.is_finite() {
@@ -476,7 +460,7 @@ impl InverseModel {
         self.adam.m = m;
         self.adam.v = v;
         self.rng = rng;
-        self.order.clear();
+        self.batches.start();
         Ok(())
     }
 }

@@ -10,7 +10,7 @@
 //!              model's data and refit it on all of them (module inverse)
 //! 3. label     Δ*_{d,t} = M(s_t, s_{t+1}) for every demonstrated transition
 //! 4. clone     regress the policy's mean offset onto Δ* at the demonstrated states (the
-//!              S-step's regression of MDGPS with unit weights, mdgps::s_step)
+//!              S-step's regression of MDGPS with unit weights, mlp_policy::opt)
 //! ```
 //!
 //! BCO(α): the first `pre_iterations` iterations run the initial policy (it holds the start
@@ -47,9 +47,9 @@ use crate::demos::Demos;
 use crate::discriminator::Normalizer;
 use crate::iteration_log::GaifoLog;
 use crate::learn::Learn;
-use crate::mdgps::policy::GlobalPolicy;
-use crate::mdgps::s_step::{PolicyOpt, PolicyOptConfig, Targets};
 use crate::mlp_policy::action_base;
+use crate::mlp_policy::global::GlobalPolicy;
+use crate::mlp_policy::opt::{PolicyOpt, PolicyOptConfig, Targets};
 use crate::rollout::{execute, Arms, Episode};
 use crate::settings::MAX_COUNT;
 use crate::ImitationError;

@@ -8,7 +8,7 @@ use gps::snapshot::Snapshot;
 
 use super::{Bco, BcoConfig};
 use crate::demos::Demos;
-use crate::mdgps::policy::{flat_len, GlobalPolicy};
+use crate::mlp_policy::global::{flat_len, GlobalPolicy};
 use crate::ImitationError;
 
 /// Iterations done (u64, 1).

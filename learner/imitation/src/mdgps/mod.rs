@@ -18,16 +18,14 @@
 //! 6b.  C-step     each condition's KL-bounded LQR with the bound and KL term towards that
 //!                 linearisation (LqrIteration::improve_towards)
 //! 7.   S-step     regress the policy onto the new controllers' action means at the sampled
-//!                 states, weighted by their precision (module s_step)
+//!                 states, weighted by their precision (mlp_policy::opt)
 //! ```
 //!
 //! Every random draw is seeded from the run seed (noise per condition, GMM per condition,
 //! critic, policy initialisation, minibatch order); nothing runs in parallel inside a run, so a
 //! seed gives the same run bit for bit.
 
-pub mod policy;
 mod resume;
-pub mod s_step;
 
 use std::time::Instant;
 
@@ -46,13 +44,13 @@ use crate::demos::Demos;
 use crate::discriminator::{Normalizer, TrainStats};
 use crate::iteration::LqrIteration;
 use crate::learn::Learn;
+use crate::mlp_policy::global::{GlobalActor, GlobalPolicy};
+use crate::mlp_policy::opt::{PolicyOpt, PolicyOptConfig, SStepReport, Targets};
 use crate::rollout::{run_episode, run_episodes, Arms, Episode, SampleList};
 use crate::settings::GaifoConfig;
 use crate::ImitationError;
 use gps::algorithm::update::Learner;
 use gps::policy::lin_gauss::LinGaussPolicy;
-use policy::{GlobalActor, GlobalPolicy};
-use s_step::{PolicyOpt, PolicyOptConfig, SStepReport, Targets};
 
 /// Run-seed tags of MDGPS's own random streams (ASCII).
 const SEED_GMM: u64 = 0x474d_4d00; // "GMM", as LQR+GAIfO's, mixed with the condition
@@ -128,7 +126,7 @@ pub struct MdgpsLog {
     /// Mean over conditions of the C-step's KL to the policy linearisation (nats) and of η.
     pub kl: f64,
     pub eta: f64,
-    /// S-step loss before and after (module [`s_step`]).
+    /// S-step loss before and after ([`crate::mlp_policy::opt`]).
     pub s_loss_before: f64,
     pub s_loss_after: f64,
     /// Wall seconds per phase: episodes (given by the caller), dynamics, critic, cost
@@ -550,7 +548,7 @@ impl Mdgps {
     }
 
     /// Step 7, the S-step: the policy regressed onto the controllers executed next, at this
-    /// iteration's sample states ([`s_step`]).
+    /// iteration's sample states ([`crate::mlp_policy::opt`]).
     fn s_step(&mut self, samples: &[Vec<Episode>]) -> Result<SStepReport, ImitationError> {
         let targets = self.targets(samples);
         self.opt.update(&mut self.policy, &targets)

@@ -11,11 +11,11 @@
 
 use gps::snapshot::Snapshot;
 
-use super::policy::{flat_len, GlobalPolicy};
 use super::{Mdgps, MdgpsConfig};
 use crate::demos::Demos;
 use crate::discriminator::Discriminator;
 use crate::iteration::LqrIteration;
+use crate::mlp_policy::global::{flat_len, GlobalPolicy};
 use crate::ImitationError;
 
 /// Iterations done (u64, 1).

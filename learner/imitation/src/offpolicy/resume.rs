@@ -11,7 +11,7 @@ use super::td3::q_sizes;
 use super::{GaifoTd3, GaifoTd3Config};
 use crate::demos::Demos;
 use crate::discriminator::{Adam, Discriminator};
-use crate::mdgps::policy::{flat_len, GlobalPolicy};
+use crate::mlp_policy::global::{flat_len, GlobalPolicy};
 use crate::ImitationError;
 
 const ITERATION: &str = "td3.iteration";

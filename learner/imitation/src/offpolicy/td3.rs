@@ -36,7 +36,7 @@ use ur5_shared::StateLayout;
 
 use crate::discriminator::mlp::{Mlp, MlpWorkspace};
 use crate::discriminator::{Adam, AdamConfig, Normalizer};
-use crate::mdgps::policy::{GlobalPolicy, GlobalPolicyWorkspace};
+use crate::mlp_policy::global::{GlobalPolicy, GlobalPolicyWorkspace};
 
 /// TD3's settings; defaults from Fujimoto et al. (2018, Table 3 and §6.1) unless noted.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

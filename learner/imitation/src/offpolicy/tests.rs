@@ -62,7 +62,7 @@ fn one_unit(p: &[f64], x: &[f64]) -> f64 {
 }
 
 /// μ_j(s) of a tiny actor, by hand: u = (s − 0.1)/2, then head j's one unit.
-fn mu_by_hand(pol: &crate::mdgps::policy::GlobalPolicy, s: &[f64; DX], j: usize) -> f64 {
+fn mu_by_hand(pol: &crate::mlp_policy::global::GlobalPolicy, s: &[f64; DX], j: usize) -> f64 {
     let u: Vec<f64> = s.iter().map(|v| (v - 0.1) / 2.0).collect();
     one_unit(pol.net().head(j).params(), &u)
 }

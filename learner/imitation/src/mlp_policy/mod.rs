@@ -1,7 +1,8 @@
 //! The Gaussian MLP policy π(Δ|s) = N(μ(s), diag(σ²)) with a state-independent learned log σ,
 //! and the value function V(s) beside it, all built from the one tanh MLP of
 //! [`crate::discriminator::mlp`]. Below the learners that use it: GAIfO (PPO)'s actor and
-//! value function, and MDGPS's global policy (whose mean is this policy's on normalised states).
+//! value function, and, on normalised states, the [`global`] policy of MDGPS, BCO and GAIfO
+//! (TD3), with its supervised fit ([`opt`]: MDGPS's S-step, BCO's cloning).
 //!
 //! The dimensions are the task's, at run time: the state has dX entries and the action dU
 //! (`ur5_shared::layout::StateLayout`), taken when a policy is built.
@@ -16,6 +17,9 @@
 //! `θ = [θ_μ0 | … | θ_μ(dU−1) | log σ (dU) | θ_V]`, each `θ_…` in the MLP's own layout; the
 //! heads are drawn in that order, so a three-joint policy draws exactly as before the
 //! dimensions were a run-time value.
+
+pub mod global;
+pub mod opt;
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};

@@ -1,6 +1,6 @@
-//! The global policy π_θ(a | s) of MDGPS (docs/design.md §6.1): a Gaussian MLP on the state,
-//! one policy for every goal (the tool points minus their targets are in the state, so the
-//! goal is part of its input). Its dimensions are its task's layout ([`StateLayout`]: dX
+//! The global policy π_θ(a | s) of MDGPS (docs/design.md §6.1), also BCO's cloned policy and
+//! GAIfO (TD3)'s actor: a Gaussian MLP on the normalised state, one policy for every goal (the
+//! tool points minus their targets are in the state, so the goal is part of its input). Its dimensions are its task's layout ([`StateLayout`]: dX
 //! inputs, dU joints), fixed when it is built.
 //!
 //! In goal-angle mode (the paper's set-up, docs/design.md §2.3)
@@ -30,8 +30,8 @@ use ur5_shared::joints::Joints;
 use ur5_shared::policy::{PolicyTable, PolicyTableError};
 use ur5_shared::StateLayout;
 
+use super::{action_base, GaussianMlpPolicy, PolicyWorkspace};
 use crate::discriminator::Normalizer;
-use crate::mlp_policy::{action_base, GaussianMlpPolicy, PolicyWorkspace};
 use crate::rollout::{Actors, Policy};
 
 /// Length of the flat parameter vector for mean heads of hidden widths `hidden` (the policy

@@ -1,6 +1,8 @@
-//! The S-step of MDGPS (docs/design.md §6.4; GPS `PolicyOpt.update(obs, tgt_mu, tgt_prc,
-//! tgt_wt)`): regress the global policy's mean onto the controllers' action means at the
-//! sampled states, each residual weighted by that controller's action precision Σ_t⁻¹:
+//! The supervised fit of a [`GlobalPolicy`]: MDGPS's S-step (docs/design.md §6.4; GPS
+//! `PolicyOpt.update(obs, tgt_mu, tgt_prc, tgt_wt)`) and BCO's cloning (§7, unit precisions),
+//! so below both. It regresses the policy's mean onto target offsets at given states (MDGPS:
+//! the controllers' action means at the sampled states), each residual weighted by a precision
+//! (MDGPS: that controller's action precision Σ_t⁻¹):
 //!
 //! ```text
 //! L(θ) = 1/n Σ_i ½ (μ_θ(u_i) − Δ*_i)ᵀ P_i (μ_θ(u_i) − Δ*_i),   Δ*_i = K_t s_i + k_t − base(s_i),
@@ -21,7 +23,7 @@ use ur5_shared::joints::Joints;
 use gps::snapshot::Snapshot;
 use gps::GpsError;
 
-use super::policy::{GlobalPolicy, GlobalPolicyWorkspace};
+use super::global::{GlobalPolicy, GlobalPolicyWorkspace};
 use crate::discriminator::{Adam, AdamConfig};
 use crate::ImitationError;
 
@@ -47,12 +49,7 @@ impl Default for PolicyOptConfig {
     fn default() -> Self {
         Self {
             hidden: vec![64, 64],
-            adam: AdamConfig {
-                lr: 1e-3,
-                beta1: 0.9,
-                beta2: 0.999,
-                eps: 1e-8,
-            },
+            adam: FIT_ADAM,
             batch_size: 64,
             steps: 1000,
             min_std: 1e-3,
@@ -63,19 +60,12 @@ impl Default for PolicyOptConfig {
 impl PolicyOptConfig {
     /// Checks the ranges (widths and counts as the critic's, Adam's own, σ floor in (0, 1]).
     pub fn validate(&self) -> Result<(), ImitationError> {
-        crate::discriminator::DiscriminatorConfig::check_widths("policy.hidden", &self.hidden)
-            .map_err(ImitationError::Config)?;
-        crate::error::check_counts(
-            &[
-                ("policy.batch_size", self.batch_size, 1),
-                ("policy.steps", self.steps, 1),
-            ],
-            crate::settings::MAX_COUNT,
-        )
-        .map_err(ImitationError::Config)?;
-        self.adam
-            .validate()
-            .map_err(|e| ImitationError::Config(format!("policy.adam: {e}")))?;
+        check_fit(
+            "policy",
+            &self.hidden,
+            &self.adam,
+            (self.batch_size, self.steps, 1),
+        )?;
         crate::error::check_reals(&[(
             "policy.min_std",
             self.min_std,
@@ -83,6 +73,68 @@ impl PolicyOptConfig {
             "in (0, 1] rad",
         )])
         .map_err(ImitationError::Config)
+    }
+}
+
+/// Adam of a supervised fit of MLP heads (the S-step, BCO's cloning and inverse model): GPS
+/// `policy_opt`'s defaults, lr 1e-3, β 0.9 / 0.999, ε 1e-8.
+pub const FIT_ADAM: AdamConfig = AdamConfig {
+    lr: 1e-3,
+    beta1: 0.9,
+    beta2: 0.999,
+    eps: 1e-8,
+};
+
+/// Checks what every minibatch Adam fit of MLP heads is set by, naming each key under `table`
+/// (`policy.hidden`, `model.steps`, …): the hidden widths as the critic's, `batch_size ≥ 1`,
+/// `steps ≥ min_steps` (both at most [`crate::settings::MAX_COUNT`]) and Adam's own ranges.
+pub fn check_fit(
+    table: &str,
+    hidden: &[usize],
+    adam: &AdamConfig,
+    (batch_size, steps, min_steps): (usize, usize, usize),
+) -> Result<(), ImitationError> {
+    crate::discriminator::DiscriminatorConfig::check_widths(&format!("{table}.hidden"), hidden)
+        .map_err(ImitationError::Config)?;
+    let (batch_key, steps_key) = (format!("{table}.batch_size"), format!("{table}.steps"));
+    crate::error::check_counts(
+        &[
+            (batch_key.as_str(), batch_size, 1),
+            (steps_key.as_str(), steps, min_steps),
+        ],
+        crate::settings::MAX_COUNT,
+    )
+    .map_err(ImitationError::Config)?;
+    adam.validate()
+        .map_err(|e| ImitationError::Config(format!("{table}.adam: {e}")))
+}
+
+/// The seeded minibatch order of a fit over n samples: a fresh permutation of 0..n, drawn from
+/// the fit's RNG, at the start of every fit and whenever fewer than b samples of the current
+/// one are left (the S-step's, BCO's cloning and inverse model's). Not state across fits: a
+/// restored fit draws its first order anew.
+#[derive(Clone, Debug, Default)]
+pub struct Minibatches {
+    order: Vec<usize>,
+    cursor: usize,
+}
+
+impl Minibatches {
+    /// Starts a fit: the next [`Minibatches::next`] draws a new permutation.
+    pub fn start(&mut self) {
+        self.order.clear();
+        self.cursor = 0;
+    }
+
+    /// The next b of n sample indices (b ≤ n), after a new permutation from `rng` if needed.
+    pub fn next(&mut self, n: usize, b: usize, rng: &mut ChaCha8Rng) -> &[usize] {
+        if self.cursor + b > self.order.len() || self.order.len() != n {
+            self.order = (0..n).collect();
+            self.order.shuffle(rng);
+            self.cursor = 0;
+        }
+        self.cursor += b;
+        &self.order[self.cursor - b..self.cursor]
     }
 }
 
@@ -170,7 +222,7 @@ pub struct PolicyOpt {
     rng: ChaCha8Rng,
     theta: Vec<f64>,
     grad: Vec<f64>,
-    order: Vec<usize>,
+    batches: Minibatches,
 }
 
 /// Snapshot arrays of the S-step's optimiser.
@@ -188,7 +240,7 @@ impl PolicyOpt {
             rng: ChaCha8Rng::seed_from_u64(seed),
             theta: vec![0.0; n],
             grad: vec![0.0; n],
-            order: Vec::new(),
+            batches: Minibatches::default(),
             cfg,
         }
     }
@@ -248,16 +300,11 @@ impl PolicyOpt {
         let mut ws = pol.workspace();
         let loss_before = Self::loss(pol, data, &mut ws);
         let b = self.cfg.batch_size.min(data.len());
-        let mut cursor = data.len();
+        self.batches.start();
         for _ in 0..self.cfg.steps {
-            if cursor + b > self.order.len() || self.order.len() != data.len() {
-                self.order = (0..data.len()).collect();
-                self.order.shuffle(&mut self.rng);
-                cursor = 0;
-            }
+            let batch = self.batches.next(data.len(), b, &mut self.rng);
             self.grad.fill(0.0);
-            for k in cursor..cursor + b {
-                let i = self.order[k];
+            for &i in batch {
                 let e = residual(pol, data, i, &mut ws);
                 let p = data.precision(i);
                 // ∂L/∂μ = P e / b; the heads' gradients are accumulated per joint.
@@ -268,7 +315,6 @@ impl PolicyOpt {
                 pol.net()
                     .accumulate_mean_grad(&mut ws.net, &c, &mut self.grad);
             }
-            cursor += b;
             pol.net().read_params(&mut self.theta);
             self.adam.step(&mut self.theta, &self.grad);
             pol.net_mut().write_params(&self.theta);
@@ -322,4 +368,56 @@ fn quad(p: &[f64], e: &[f64]) -> f64 {
     (0..du)
         .map(|j| e[j] * (0..du).map(|l| p[j * du + l] * e[l]).sum::<f64>())
         .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The minibatch order of a fit as it was written in the S-step and in BCO's inverse model
+    /// before they shared [`Minibatches`]: the reference for the same draws in the same order.
+    fn reference(fits: &[(usize, usize, usize)], rng: &mut ChaCha8Rng) -> Vec<Vec<usize>> {
+        let mut order: Vec<usize> = Vec::new();
+        let mut out = Vec::new();
+        for &(n, b, steps) in fits {
+            let mut cursor = n;
+            for _ in 0..steps {
+                if cursor + b > order.len() || order.len() != n {
+                    order = (0..n).collect();
+                    order.shuffle(rng);
+                    cursor = 0;
+                }
+                out.push(order[cursor..cursor + b].to_vec());
+                cursor += b;
+            }
+        }
+        out
+    }
+
+    /// Every batch as the reference's, over fits of several sizes (a batch of all samples, a
+    /// pass that leaves fewer than b, a fit over the same n as the last); each pass of a fit
+    /// is a permutation.
+    #[test]
+    fn minibatches_draw_as_the_reference() {
+        let fits = [(10, 4, 7), (10, 4, 3), (5, 5, 3), (7, 3, 5), (1, 1, 2)];
+        let want = reference(&fits, &mut ChaCha8Rng::seed_from_u64(4));
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut mb = Minibatches::default();
+        let mut got = Vec::new();
+        for &(n, b, steps) in &fits {
+            mb.start();
+            for _ in 0..steps {
+                got.push(mb.next(n, b, &mut rng).to_vec());
+            }
+        }
+        assert_eq!(got, want);
+        let mut pass: Vec<usize> = got[0].iter().chain(&got[1]).copied().collect();
+        pass.sort_unstable();
+        pass.dedup();
+        assert_eq!(pass.len(), 8, "{got:?}");
+        assert_ne!(
+            got[2], got[0],
+            "a new permutation after the first two batches of 4 of 10"
+        );
+    }
 }
