@@ -43,7 +43,10 @@ pub struct ExpertConfig {
     pub cost: TaskCostConfig,
     /// Noisy episodes per iteration N. Paper §5: 5.
     pub samples: usize,
-    /// Largest number of iterations. The expert is expected to converge within 15 (75 noisy episodes).
+    /// Largest number of iterations of a three-joint task. The expert is expected to converge
+    /// within 15 (75 noisy episodes); a task of dU joints gets up to iterations × dU / 3
+    /// ([`Self::iterations_for`]; docs/design.md §5 D41), `patience` ending a converged run
+    /// earlier.
     pub iterations: usize,
     /// Stop after this many iterations without a better noise-free episode.
     pub patience: usize,
@@ -73,6 +76,16 @@ pub struct ExpertConfig {
 }
 
 impl ExpertConfig {
+    /// The largest number of iterations of a task of `du` joints: [`Self::iterations`] × dU / 3,
+    /// rounded up (docs/design.md §5 D41). The expert's KL bound per step is the same for six
+    /// joints as for three (GPS's own step adaptation, §5 D40), shared by twice the action
+    /// dimensions, so six joints need more iterations to settle: measured, the five pose
+    /// goals' experts at 15 iterations ended 24 of 25 runs within 1 mm, one 6.5 mm away and
+    /// still converging. Three joints: [`Self::iterations`], the same runs.
+    pub fn iterations_for(&self, du: usize) -> usize {
+        (self.iterations * du).div_ceil(3)
+    }
+
     /// Refuses settings that cannot work, naming the setting and its range
     /// (docs/reliability.md): counts in their ranges up to
     /// [`crate::settings::MAX_COUNT`] (samples ≥ 2 for the dynamics fit), `init_var` in (0, 10] rad², the cost weights finite and ≥ 0 with
@@ -345,10 +358,10 @@ impl ExpertLearner {
         self.cost_random
     }
 
-    /// `cfg.iterations` done, or `cfg.patience` iterations in a row without a better
-    /// noise-free episode.
+    /// [`ExpertConfig::iterations_for`] the task done, or `cfg.patience` iterations in a row
+    /// without a better noise-free episode.
     pub fn done(&self) -> bool {
-        self.iteration() >= self.cfg.iterations
+        self.iteration() >= self.cfg.iterations_for(self.cfg.task.layout().du())
             || (self.best.is_some() && self.since_best >= self.cfg.patience)
     }
 

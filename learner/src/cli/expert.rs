@@ -92,7 +92,8 @@ pub(super) fn pose_text(p: &[f64; 6]) -> String {
 /// per iteration under a header, with a bar and ETA over `c.iterations` on a terminal.
 pub(super) fn train_with_progress(c: &ExpertConfig, out: &Path) -> anyhow::Result<ExpertSummary> {
     eprintln!("{}", IterationLog::PROGRESS_HEADER);
-    let bar = crate::progress::Progress::new(c.iterations as u64, "iterations");
+    let bar =
+        crate::progress::Progress::new(c.iterations_for(c.task.layout().du()) as u64, "iterations");
     Ok(train_and_record(c, out, |l| {
         bar.done_one(&l.progress_line())
     })?)

@@ -656,7 +656,10 @@ mod tests {
         let g = p.goal_pose.unwrap();
         let end = kin.tool_pose(&q(2.0));
         let want = ur5_shared::pose::ur_pose(&end);
-        assert!((0..6).all(|k| (g[k] - want[k]).abs() < 1e-9), "{g:?} against {want:?}");
+        assert!(
+            (0..6).all(|k| (g[k] - want[k]).abs() < 1e-9),
+            "{g:?} against {want:?}"
+        );
         let lp = StateLayout::POSE6;
         let mut targets = [[0.0; 3]; 3];
         ur5_shared::pose::tool_points(&end, &DEFAULT_TOOL_POINTS, &mut targets);
