@@ -45,8 +45,9 @@ use ur5_shared::UrModel;
 
 use imitation::demos::Demos;
 
-use crate::io::foreign::{arm_states, mean_tool_pose, to_demos, DERIVED_SEED};
+use crate::io::foreign::{mean_tool_pose, to_demos, DERIVED_SEED};
 use crate::io::lerobot::{TaskMeta, Trajectories};
+use crate::io::tool_path::arm_states;
 
 /// Why a recording cannot be turned into the learner's demonstrations, or why it stopped.
 #[derive(Debug, thiserror::Error)]

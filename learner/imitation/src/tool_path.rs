@@ -270,6 +270,17 @@ pub fn spread(demos: &[&[Point]]) -> Result<PathMeasures, PathError> {
     })
 }
 
+/// `states` as whole trajectories of `horizon` states of `dx` values each. Panics if `states`
+/// is not a whole number of them.
+fn trajectories(states: &[f64], dx: usize, horizon: usize) -> core::slice::Chunks<'_, f64> {
+    assert!(
+        horizon > 0 && states.len() % (horizon * dx) == 0,
+        "states of {} values are not whole trajectories of {horizon} × {dx}",
+        states.len()
+    );
+    states.chunks(horizon * dx)
+}
+
 /// The tool paths in `states`: `count` trajectories of `horizon` states of `layout`
 /// ((count, horizon, dX) row-major), the path of tool point 0 (its entries minus target, plus
 /// `target`, m). Panics if `states` is not count × horizon × dX long.
@@ -280,14 +291,8 @@ pub fn tool_paths(
     target: &Point,
 ) -> Vec<Vec<Point>> {
     let dx = layout.dx();
-    assert!(
-        horizon > 0 && states.len() % (horizon * dx) == 0,
-        "states of {} values are not whole trajectories of {horizon} × {dx}",
-        states.len()
-    );
     let r = layout.point(0);
-    states
-        .chunks(horizon * dx)
+    trajectories(states, dx, horizon)
         .map(|ep| {
             ep.chunks(dx)
                 .map(|s| core::array::from_fn(|k| s[r.start + k] + target[k]))
@@ -309,28 +314,16 @@ pub fn tool_frames(
     if layout.tool_points() != 3 || targets.len() != 3 {
         return None;
     }
-    let per_point: Vec<Vec<Vec<Point>>> = (0..3)
-        .map(|i| {
+    let dx = layout.dx();
+    let frame = |s: &[f64]| -> Frame {
+        core::array::from_fn(|i| {
             let r = layout.point(i);
-            let dx = layout.dx();
-            assert!(horizon > 0 && states.len() % (horizon * dx) == 0);
-            states
-                .chunks(horizon * dx)
-                .map(|ep| {
-                    ep.chunks(dx)
-                        .map(|s| core::array::from_fn(|k| s[r.start + k] + targets[i][k]))
-                        .collect()
-                })
-                .collect()
+            core::array::from_fn(|k| s[r.start + k] + targets[i][k])
         })
-        .collect();
+    };
     Some(
-        (0..per_point[0].len())
-            .map(|e| {
-                (0..horizon)
-                    .map(|t| [per_point[0][e][t], per_point[1][e][t], per_point[2][e][t]])
-                    .collect()
-            })
+        trajectories(states, dx, horizon)
+            .map(|ep| ep.chunks(dx).map(frame).collect())
             .collect(),
     )
 }

@@ -455,36 +455,6 @@ pub fn mean_tool_pose(
     ur5_shared::pose::ur_pose(&ur5_shared::pose::mean_pose(&ends))
 }
 
-/// The states of an arm's motion in `task`'s layout, one row of `states` (dX each) per step
-/// `(q, qd)` of the six joints (rad, rad/s): the active joints, then the task's tool points
-/// minus their targets and their velocities, by forward kinematics `kin`.
-pub fn arm_states(
-    kin: &ur5_shared::kinematics::UrKinematics,
-    task: &TaskConfig,
-    steps: impl Iterator<
-        Item = (
-            ur5_shared::kinematics::Joints6,
-            ur5_shared::kinematics::Joints6,
-        ),
-    >,
-    states: &mut [f64],
-) {
-    let (layout, offsets, targets) = (task.layout(), task.tool_offsets(), task.targets());
-    let (n, p) = (layout.joints(), offsets.len());
-    let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
-    for (s, (q, qd)) in states.chunks_exact_mut(layout.dx()).zip(steps) {
-        kin.tool_points_velocity(&q, &qd, offsets, &mut points[..p], &mut velocities[..p]);
-        layout.fill_state(
-            &q[..n],
-            &qd[..n],
-            &points[..p],
-            &velocities[..p],
-            &targets,
-            s,
-        );
-    }
-}
-
 /// A UR arm's recorded joint positions as trajectories of the whole arm and a pose
 /// ([`StateLayout::POSE6`], module docs): joint velocities by central differences of the
 /// positions over the frame period (one-sided at an episode's ends), the three default tool
@@ -519,7 +489,7 @@ pub fn from_joint_positions(rec: &super::lerobot::JointRecording, sim: &SimConfi
         let qd: [f64; 6] = core::array::from_fn(|j| (b[j] - a[j]) / ((after - before) as f64 * dt));
         (q(d, t), qd)
     });
-    arm_states(&kin, &task, steps, &mut states);
+    super::tool_path::arm_states(&kin, &task, steps, &mut states);
     Trajectories {
         layout,
         states,

@@ -28,7 +28,7 @@
 use std::path::Path;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use ur5_shared::config::{SimConfig, DEFAULT_TOOL_POINTS};
+use ur5_shared::config::{SimConfig, TaskConfig};
 use ur5_shared::ik::{self, IkError, UrIk};
 use ur5_shared::kinematics::{Joints6, UrKinematics};
 use ur5_shared::layout::{StateLayout, MAX_HORIZON};
@@ -301,6 +301,36 @@ pub struct Solved {
     pub goal_pose: Option<[f64; 6]>,
 }
 
+/// The states of an arm's motion in `task`'s layout, one row of `states` (dX each) per step
+/// `(q, qd)` of the six joints (rad, rad/s): the active joints, then the task's tool points
+/// minus their targets and their velocities, by forward kinematics `kin`.
+pub fn arm_states(
+    kin: &ur5_shared::kinematics::UrKinematics,
+    task: &TaskConfig,
+    steps: impl Iterator<
+        Item = (
+            ur5_shared::kinematics::Joints6,
+            ur5_shared::kinematics::Joints6,
+        ),
+    >,
+    states: &mut [f64],
+) {
+    let (layout, offsets, targets) = (task.layout(), task.tool_offsets(), task.targets());
+    let (n, p) = (layout.joints(), offsets.len());
+    let (mut points, mut velocities) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+    for (s, (q, qd)) in states.chunks_exact_mut(layout.dx()).zip(steps) {
+        kin.tool_points_velocity(&q, &qd, offsets, &mut points[..p], &mut velocities[..p]);
+        layout.fill_state(
+            &q[..n],
+            &qd[..n],
+            &points[..p],
+            &velocities[..p],
+            &targets,
+            s,
+        );
+    }
+}
+
 /// The arm's six joints from the layout's `q` (three: the locked wrist added).
 fn six(q: &[f64], wrist: &[f64; 3]) -> Joints6 {
     match q.len() {
@@ -394,14 +424,8 @@ pub fn solve(
         }),
         _ => None,
     };
-    let (offsets, targets) = match goal_pose {
-        Some(g) => {
-            let mut t = vec![[0.0; 3]; 3];
-            pose::tool_points(&pose::isometry(&g), &DEFAULT_TOOL_POINTS, &mut t);
-            (&DEFAULT_TOOL_POINTS[..], t)
-        }
-        None => (&DEFAULT_TOOL_POINTS[..1], vec![goal]),
-    };
+    // A pose layout's tool points: as a pose task of that goal has them.
+    let pose_task = goal_pose.map(|g| TaskConfig::pose_for_model(sim.model, g));
     let start_q = solve_one(
         start,
         start_rot.map(|r| pose::rotation_vector(&r)),
@@ -414,7 +438,8 @@ pub fn solve(
     let limits = sim.model.joint_limits().velocity;
     let dx = layout.dx();
     let mut states = vec![0.0; paths.len() * horizon * dx];
-    let (mut tool, mut tool_v) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+    // A pose layout's episode, step by step (six joints, rad and rad/s), for [`arm_states`].
+    let mut steps: Vec<(Joints6, Joints6)> = Vec::with_capacity(horizon);
     for (d, (path, (times, points, rots))) in paths.iter().zip(&sampled).enumerate() {
         let offset: [f64; 3] = core::array::from_fn(|r| start[r] - points[0][r]);
         // The rotation taking this episode's start orientation to the mean start's.
@@ -452,17 +477,19 @@ pub fn solve(
                     limit: limits[j],
                 });
             }
-            let at = (d * horizon + k) * dx;
-            if p_count == 1 {
+            if pose_task.is_some() {
+                steps.push((six(&q, &wrist), six(&qd, &[0.0; 3])));
+            } else {
                 // The locked wrist does not move.
                 let (ee, v) = kin.ee_point_velocity(&six(&q, &wrist), &six(&qd, &[0.0; 3]));
+                let at = (d * horizon + k) * dx;
                 layout.fill_state(&q, &qd, &[ee], &[v], &[goal], &mut states[at..at + dx]);
-            } else {
-                let (q6, qd6) = (six(&q, &wrist), six(&qd, &[0.0; 3]));
-                kin.tool_points_velocity(&q6, &qd6, offsets, &mut tool, &mut tool_v);
-                layout.fill_state(&q, &qd, &tool, &tool_v, &targets, &mut states[at..at + dx]);
             }
             prev = q;
+        }
+        if let Some(task) = &pose_task {
+            let episode = &mut states[d * horizon * dx..(d + 1) * horizon * dx];
+            arm_states(&kin, task, steps.drain(..), episode);
         }
     }
     Ok(Solved {
@@ -514,6 +541,7 @@ pub fn load(path: &Path, sim: &SimConfig, dt: f64, seed: u64) -> Result<Trajecto
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::config::DEFAULT_TOOL_POINTS;
     use ur5_shared::UrModel;
 
     const DT: f64 = 0.1;
