@@ -21,7 +21,7 @@ use ur5_shared::kernels::axpy;
 use ur5_shared::layout::{MAX_DU, MAX_DX};
 
 use super::Cost;
-use crate::discriminator::{Discriminator, Workspace};
+use crate::discriminator::{Discriminator, MeanHessian, Workspace};
 use crate::rollout::Episode;
 use gps::algorithm::eval_cost::CostDerivs;
 use gps::dynamics::Dynamics;
@@ -39,8 +39,9 @@ pub struct CompositeWorkspace {
     x: Vec<f64>,
     g: Vec<f64>,
     h: Mat<f64>,
-    /// Mean ∇²D over the samples of one time step (psd mode).
+    /// Mean ∇²D over the samples of one time step (psd mode), and its accumulator.
     h_mean: Mat<f64>,
+    mean: MeanHessian,
 }
 
 impl CompositeWorkspace {
@@ -62,6 +63,7 @@ impl CompositeWorkspace {
             g: vec![0.0; n],
             h: Mat::zeros(n, n),
             h_mean: Mat::zeros(n, n),
+            mean: disc.mean_hessian(),
         }
     }
 }
@@ -318,7 +320,9 @@ impl Cost for CompositeCost<'_> {
 /// samples' ∇²D at step t are averaged first, the average is projected on the PSD cone once
 /// and every sample gets the same `M_tᵀ proj(mean ∇²D) M_t`: the nearest convex curvature
 /// (Frobenius norm) to the averaged expansion that GPS's `eval_cost` forms anyway, at one
-/// eigendecomposition per time step instead of one per sample (docs/design.md §5 D4).
+/// eigendecomposition per time step instead of one per sample (docs/design.md §5 D4). The
+/// mean is formed by [`MeanHessian`]: through the critic's first layer when its input is
+/// wider than that layer (a pose task's), else per sample.
 pub fn composite_cost_derivs(
     disc: &Discriminator,
     dyn_: &Dynamics,
@@ -330,15 +334,19 @@ pub fn composite_cost_derivs(
     let t_len = episodes[0].horizon();
     let (dx, du) = (dyn_.dx, dyn_.du);
     out.resize(n, t_len, dx, du);
+    if ws.psd {
+        ws.mean.prepare(disc);
+    }
     for t in 0..t_len {
-        if ws.psd {
-            ws.h_mean.fill(0.0);
-        }
         for (i, ep) in episodes.iter().enumerate() {
             let nt = i * t_len + t;
             let (s, a) = (ep.state(t), ep.action(t));
             predicted_transition(dyn_, t, t_len, s, a, &mut ws.x);
-            out.l[nt] = disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut());
+            out.l[nt] = if ws.psd {
+                disc.value_gradient_add_hessian(&ws.x, &mut ws.disc, &mut ws.g, &mut ws.mean)
+            } else {
+                disc.value_gradient_hessian(&ws.x, &mut ws.disc, &mut ws.g, ws.h.as_mut())
+            };
             compose_gradient(
                 dyn_,
                 t,
@@ -347,9 +355,7 @@ pub fn composite_cost_derivs(
                 &mut out.lx[nt * dx..(nt + 1) * dx],
                 &mut out.lu[nt * du..(nt + 1) * du],
             );
-            if ws.psd {
-                ws.h_mean += &ws.h;
-            } else {
+            if !ws.psd {
                 compose_hessian(
                     dyn_,
                     t,
@@ -362,7 +368,7 @@ pub fn composite_cost_derivs(
             }
         }
         if ws.psd {
-            ws.h_mean *= faer::Scale(1.0 / n as f64);
+            ws.mean.mean_into(ws.h_mean.as_mut());
             drop_phase(ws.phase, &mut ws.h_mean);
             project_psd(&mut ws.h_mean);
             compose_hessian(

@@ -258,6 +258,70 @@ impl Mlp {
         }
     }
 
+    /// `∇²_{a_0} y` into `b` (row-major `h_1 × h_1`, fully written, symmetric) after
+    /// [`Self::forward`] and [`Self::backward`]: the Hessian in the first layer's
+    /// pre-activations, so that `∇²_u y = W_0ᵀ (∇²_{a_0} y) W_0` (`a_0 = W_0 u + b_0` is affine
+    /// in u). The same sum as [`Self::input_hessian`] with `J_0 = I` in place of `W_0`:
+    /// `Σ_k G_kᵀ diag(g_k ⊙ s''_k) G_k`, `G_0 = I`, `G_k = W_k diag(s'_{k−1}) G_{k−1}`; the
+    /// first term is diagonal and `G_1` is `W_1` with its columns scaled, so neither takes a
+    /// product. Per point `O(h² h_1)` against the input Hessian's `O(h² n_0 + h n_0²)`: cheaper
+    /// when the net's input is wider than its first layer, where the mean of many points'
+    /// input Hessians is `W_0ᵀ (mean ∇²_{a_0} y) W_0` ([`super::MeanHessian`]).
+    pub(crate) fn first_layer_hessian(&self, ws: &mut MlpWorkspace, b: &mut [f64]) {
+        let h1 = self.sizes[1];
+        let b = &mut b[..h1 * h1];
+        b.fill(0.0);
+        let l = self.layers();
+        let r0 = self.hidden(0);
+        for (i, (&g, &z)) in ws.g[r0.clone()].iter().zip(&ws.z[r0.clone()]).enumerate() {
+            b[i * h1 + i] = g * (-2.0 * z * (1.0 - z * z));
+        }
+        for k in 1..l - 1 {
+            let n = self.sizes[k + 1];
+            let n_in = self.sizes[k];
+            let w = self.w(k);
+            if k == 1 {
+                // G_1 = W_1 diag(s'_0).
+                let z0 = &ws.z[r0.clone()];
+                for i in 0..n {
+                    let row = &mut ws.jac_a[i * h1..(i + 1) * h1];
+                    for ((v, &wij), &z) in row.iter_mut().zip(&w[i * n_in..(i + 1) * n_in]).zip(z0)
+                    {
+                        *v = wij * (1.0 - z * z);
+                    }
+                }
+            } else {
+                // G_k = W_k diag(s'_{k−1}) G_{k−1}; G_{k−1} (in jac_a) has had its rows scaled.
+                let (prev, cur) = (&ws.jac_a[..n_in * h1], &mut ws.jac_b[..n * h1]);
+                for i in 0..n {
+                    let row = &mut cur[i * h1..(i + 1) * h1];
+                    mat_t_vec(prev, n_in, h1, &w[i * n_in..(i + 1) * n_in], row);
+                }
+                std::mem::swap(&mut ws.jac_a, &mut ws.jac_b);
+            }
+            let r = self.hidden(k);
+            let jac = &mut ws.jac_a[..n * h1];
+            for (i, (&g, &z)) in ws.g[r.clone()].iter().zip(&ws.z[r]).enumerate() {
+                let sp = 1.0 - z * z;
+                let row = &mut jac[i * h1..(i + 1) * h1];
+                sym_outer_acc_upper(g * (-2.0 * z * sp), row, b);
+                for v in row.iter_mut() {
+                    *v *= sp;
+                }
+            }
+        }
+        for p in 0..h1 {
+            for q in 0..p {
+                b[p * h1 + q] = b[q * h1 + p];
+            }
+        }
+    }
+
+    /// The first layer's weights `W_0` (row-major `h_1 × n_0`).
+    pub(crate) fn first_weights(&self) -> &[f64] {
+        self.w(0)
+    }
+
     /// `grad += ∂/∂θ (ρᵀ ∇_u y(u; θ))` for the direction `ρ = ws.rho`, after
     /// [`Self::forward`] and [`Self::backward`] (the tangent/adjoint recursion in the module
     /// docs). Returns `ρᵀ ∇_u y` (the tangent output `ẏ`).
@@ -384,8 +448,9 @@ impl MlpWorkspace {
             bar_z: vec![0.0; max_h],
             bar_ta: vec![0.0; max_h],
             bar_a: vec![0.0; max_h],
-            jac_a: vec![0.0; max_h * n0],
-            jac_b: vec![0.0; max_h * n0],
+            // J_k of the input Hessian (n_0 columns) or of the first layer's (h_1 columns).
+            jac_a: vec![0.0; max_h * n0.max(max_h)],
+            jac_b: vec![0.0; max_h * n0.max(max_h)],
         }
     }
 

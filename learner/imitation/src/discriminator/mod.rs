@@ -22,6 +22,7 @@
 //! [`Discriminator::workspace`] and passed to every call.
 
 pub mod adam;
+mod mean_hessian;
 pub mod mlp;
 mod persist;
 #[cfg(test)]
@@ -59,7 +60,16 @@ fn raw_copy(k: usize, d: usize) -> usize {
     (k / p.len()) * dx + p.start + k % p.len()
 }
 
+/// Whether input `i` is among `points` ([`DiscriminatorConfig::warped_inputs`]): a tool
+/// point's position minus its target, in s or s'.
+fn warped(points: &Option<(Range<usize>, usize)>, i: usize) -> bool {
+    points
+        .as_ref()
+        .is_some_and(|(p, dx)| i < 2 * dx && p.contains(&(i % dx)))
+}
+
 pub use adam::{Adam, AdamConfig};
+pub use mean_hessian::MeanHessian;
 pub use mlp::{Mlp, MlpWorkspace};
 
 /// What went wrong in the discriminator, and what to do about it.
@@ -268,15 +278,28 @@ impl DiscriminatorConfig {
     /// Whether input `i` of a transition of `d` = 2 dX inputs is one that
     /// [`Self::near_goal_scale`] warps: a tool point's position minus its target, in s or s'.
     fn warps(&self, i: usize, d: usize) -> bool {
-        self.near_goal_scale > 0.0
-            && point_inputs(d).is_some_and(|(p, dx)| i < 2 * dx && p.contains(&(i % dx)))
+        warped(&self.warped_inputs(d), i)
+    }
+
+    /// The tool-point inputs and dX of a transition of `d` inputs when
+    /// [`Self::near_goal_scale`] warps them ([`warped`] tells input by input); `None` when
+    /// nothing is warped.
+    fn warped_inputs(&self, d: usize) -> Option<(Range<usize>, usize)> {
+        (self.near_goal_scale > 0.0)
+            .then(|| point_inputs(d))
+            .flatten()
     }
 
     /// Input `i` of a transition of `d` inputs as the critic sees it before the normalisation:
     /// `x`, or `g(x) = a·x + (1 − a)·c·asinh(x/c)` (c = [`Self::near_goal_scale`],
     /// a = [`Self::near_goal_far_slope`]) for the inputs it warps.
     pub fn warp(&self, i: usize, d: usize, x: f64) -> f64 {
-        if self.warps(i, d) {
+        self.warp_in(&self.warped_inputs(d), i, x)
+    }
+
+    /// [`Self::warp`] with the warped inputs found once ([`Self::warped_inputs`]).
+    fn warp_in(&self, points: &Option<(Range<usize>, usize)>, i: usize, x: f64) -> f64 {
+        if warped(points, i) {
             let (c, a) = (self.near_goal_scale, self.near_goal_far_slope);
             a * x + (1.0 - a) * c * (x / c).asinh()
         } else {
@@ -605,6 +628,7 @@ impl Discriminator {
     fn forward_raw(&self, x: &[f64], mlp_ws: &mut MlpWorkspace) -> f64 {
         assert_eq!(x.len(), self.input_dim(), "input length");
         let d = x.len();
+        let points = self.config.warped_inputs(d);
         for (i, (((u, &xi), &m), &s)) in mlp_ws
             .u
             .iter_mut()
@@ -613,7 +637,7 @@ impl Discriminator {
             .zip(&self.norm.std)
             .enumerate()
         {
-            *u = (self.config.warp(i, d, xi) - m) / s;
+            *u = (self.config.warp_in(&points, i, xi) - m) / s;
         }
         for k in 0..self.extra_inputs() {
             mlp_ws.u[d + k] = (x[raw_copy(k, d)] - self.norm.mean[d + k]) / self.norm.std[d + k];

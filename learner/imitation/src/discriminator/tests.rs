@@ -471,3 +471,161 @@ fn discriminator_adam_matches_kingma_ba_by_hand() {
     assert!((theta[0] - after_first).abs() < 1e-15);
     assert_eq!(adam.steps(), 2);
 }
+
+/// `max |a − b| / max |b|` over two equally long slices.
+fn scaled_diff(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let diff = a
+        .iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    diff / scale
+}
+
+#[test]
+fn first_layer_hessian_through_the_first_weights_is_the_input_hessian() {
+    let mut worst: f64 = 0.0;
+    for c in cases_with_warp() {
+        let (disc, xs) = random_critic(&c);
+        let net = disc.net();
+        let (n0, h1) = (net.input_dim(), net.sizes()[1]);
+        let w0 = net.first_weights();
+        let mut ws = net_workspace(&disc);
+        for x in &xs {
+            // The net's own input u: any point will do, these are the critic's raw inputs
+            // padded with the raw copies' columns.
+            ws.u.copy_from_slice(&pad(x, n0));
+            net.forward(&mut ws);
+            net.backward(&mut ws, true);
+            let mut hess_u = vec![0.0; n0 * n0];
+            net.input_hessian(&mut ws, &mut hess_u);
+            let mut b = vec![0.0; h1 * h1];
+            net.first_layer_hessian(&mut ws, &mut b);
+            // W_0ᵀ B W_0 by the definition, entry by entry.
+            let mut through = vec![0.0; n0 * n0];
+            for p in 0..n0 {
+                for q in 0..n0 {
+                    let mut v = 0.0;
+                    for i in 0..h1 {
+                        for j in 0..h1 {
+                            v += w0[i * n0 + p] * b[i * h1 + j] * w0[j * n0 + q];
+                        }
+                    }
+                    through[p * n0 + q] = v;
+                }
+            }
+            for p in 0..h1 {
+                for q in 0..h1 {
+                    assert_eq!(b[p * h1 + q], b[q * h1 + p], "B symmetric bit for bit");
+                }
+            }
+            worst = worst.max(scaled_diff(&through, &hess_u));
+        }
+    }
+    assert!(worst <= 1e-12, "W0ᵀ B W0 against ∇²_u: {worst:.2e}");
+}
+
+fn net_workspace(disc: &Discriminator) -> MlpWorkspace {
+    MlpWorkspace::new(disc.net().sizes())
+}
+
+fn pad(x: &[f64], n: usize) -> Vec<f64> {
+    (0..n).map(|i| x[i % x.len()]).collect()
+}
+
+/// Adds more points around the case's own, so that a mean is over several.
+fn points(disc: &Discriminator, xs: &[Vec<f64>], seed: u64) -> Vec<Vec<f64>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let s = &disc.normalizer().std;
+    let mut v = xs.to_vec();
+    for x in xs {
+        v.push(
+            x.iter()
+                .zip(s)
+                .map(|(xi, si)| xi + 0.5 * si * rng.random_range(-1.0..1.0))
+                .collect(),
+        );
+    }
+    v
+}
+
+#[test]
+fn the_mean_hessian_through_the_first_layer_equals_the_mean_per_point() {
+    let mut worst: f64 = 0.0;
+    let mut wide = cases_with_warp();
+    // Wider inputs than the first layer without the warp too (every column fixed).
+    wide.push(Case {
+        d: 60,
+        hidden: vec![16, 8],
+        normalise: true,
+        seed: 7,
+        space: PenaltySpace::Raw,
+        warp: 0.0,
+        far_slope: 0.0,
+        keep_raw: false,
+    });
+    for c in wide {
+        let (disc, xs) = random_critic(&c);
+        let d = disc.input_dim();
+        let xs = points(&disc, &xs, c.seed + 1);
+        let mut ws = disc.workspace();
+        let (mut g, mut g2) = (vec![0.0; d], vec![0.0; d]);
+        // The per-point mean as the composite cost formed it before: sum, then × 1/N.
+        let mut by_hand = Mat::<f64>::zeros(d, d);
+        let mut one = Mat::<f64>::zeros(d, d);
+        for x in &xs {
+            disc.value_gradient_hessian(x, &mut ws, &mut g, one.as_mut());
+            by_hand += &one;
+        }
+        by_hand *= faer::Scale(1.0 / xs.len() as f64);
+        for factored in [false, true] {
+            let mut acc = disc.mean_hessian_on(factored);
+            let mut mean = Mat::<f64>::zeros(d, d);
+            // Twice: the accumulator empties itself after each mean.
+            for _ in 0..2 {
+                acc.prepare(&disc);
+                for x in &xs {
+                    let y = disc.value_gradient_add_hessian(x, &mut ws, &mut g2, &mut acc);
+                    let y_ref = disc.value_gradient(x, &mut ws, &mut g);
+                    assert_eq!(y.to_bits(), y_ref.to_bits());
+                    assert_eq!(g2, g, "same gradient");
+                }
+                acc.mean_into(mean.as_mut());
+            }
+            let a: Vec<f64> = (0..d * d).map(|k| mean[(k / d, k % d)]).collect();
+            let b: Vec<f64> = (0..d * d).map(|k| by_hand[(k / d, k % d)]).collect();
+            if factored {
+                worst = worst.max(scaled_diff(&a, &b));
+            } else {
+                assert_eq!(a, b, "the per-point route keeps the bits ({} inputs)", d);
+            }
+        }
+    }
+    assert!(
+        worst <= 1e-12,
+        "through the first layer against per point: {worst:.2e}"
+    );
+}
+
+#[test]
+fn the_mean_hessian_goes_through_the_first_layer_only_where_that_is_cheaper() {
+    let pose_d = 2 * ur5_shared::StateLayout::POSE6.dx();
+    let route = |d: usize, keep_raw: bool| {
+        let c = Case {
+            d,
+            hidden: vec![64, 64],
+            normalise: false,
+            seed: 1,
+            space: PenaltySpace::Normalised,
+            warp: 0.3,
+            far_slope: 0.0,
+            keep_raw,
+        };
+        random_critic(&c).0.mean_hessian().factored()
+    };
+    // Three joints and a point: 24 (+ 6 raw copies) inputs into 64 units: per point.
+    assert!(!route(2 * DX, true));
+    // Six joints and a pose: 60 + 18 inputs into 64 units: through the first layer.
+    assert!(route(pose_d, true));
+    assert!(!route(pose_d, false));
+}
