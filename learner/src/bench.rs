@@ -403,11 +403,18 @@ pub struct GaifoBenchResult {
 }
 
 /// Runs `cfg.iterations` LQR+GAIfO iterations on `demos` and summarises their timings.
+/// faer's own parallelism is off for the run (restored after), so that every matrix routine of
+/// the learner runs on the thread whose CPU time is measured: with it on, faer hands parts of
+/// its larger products to the episode threads' pool, which that clock does not see.
 pub fn gaifo(
     cfg: &imitation::gaifo::GaifoConfig,
     demos: imitation::demos::Demos,
 ) -> Result<GaifoBenchResult, BenchError> {
-    let logs = crate::run::train(cfg, demos, None, |_| {})?;
+    let par = faer::get_global_parallelism();
+    faer::set_global_parallelism(faer::Par::Seq);
+    let logs = crate::run::train(cfg, demos, None, |_| {});
+    faer::set_global_parallelism(par);
+    let logs = logs?;
     if logs.is_empty() {
         return Err(BenchError::NoIterations);
     }

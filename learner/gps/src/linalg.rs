@@ -263,8 +263,9 @@ impl LuSolver {
 /// `a = 0.5 (a + aᵀ)` for a square matrix.
 pub fn symmetrize(mut a: MatMut<'_, f64>) {
     let n = a.nrows();
-    for i in 0..n {
-        for j in 0..i {
+    // Column by column (faer's storage order); each pair once, from its own two entries.
+    for j in 0..n {
+        for i in j + 1..n {
             let v = 0.5 * (a[(i, j)] + a[(j, i)]);
             a[(i, j)] = v;
             a[(j, i)] = v;

@@ -165,10 +165,11 @@ pub fn gauss_fit_joint_prior(
     let nf = n as f64;
     let (m, n0) = (prior.m, prior.n0);
     let c = (nf * m) / (nf + m);
-    for a in 0..d {
-        let da = ws.mun[a] - prior.mu0[a];
-        for b in 0..d {
-            let db = ws.mun[b] - prior.mu0[b];
+    // Column by column (faer's storage order); every entry its own expression.
+    for b in 0..d {
+        let db = ws.mun[b] - prior.mu0[b];
+        for a in 0..d {
+            let da = ws.mun[a] - prior.mu0[a];
             ws.sigma[(a, b)] =
                 (nf * ws.empsig[(a, b)] + prior.phi[(a, b)] + c * (da * db)) / (nf + n0);
         }
