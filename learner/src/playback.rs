@@ -5,27 +5,25 @@
 //! ([`hil_sim::ur_sim::playback_motions`]), so that `learner record` can be tried on any motion,
 //! not only reaches.
 //!
-//! The paths are solved on the arm as `--demos` solves them (§4.17 steps 2–4, at the file's own
-//! samples instead of the control period): every path's start blended into the paths' mean
-//! start (the offset fading linearly in time to nothing at its end), the mean start solved
-//! nearest the model's default pose, every sample nearest the previous solution. A point path
-//! (`episode,t,x,y,z`) keeps the wrist locked at `sim.wrist_q` (a three-joint task's
-//! demonstrations); a pose path (with the tool's orientation `rx,ry,rz`) moves the whole arm,
-//! the six joints by the pose's inverse kinematics, its start's orientation blended too (the
-//! rotation from the path's first orientation to the starts' mean, [`mean_pose`], scaled by the
-//! same fading weight), for `learner record --pose` with `[task] joints = 6`. Every motion thus
-//! starts from one pose, the one a recorder takes for the start pose.
+//! The paths are solved on the arm by the routine that solves `--demos` ([`Blend`], §4.17
+//! steps 2–3), at the file's own samples instead of the control period: every path's start
+//! blended into the paths' mean start (the offset fading linearly in time to nothing at its
+//! end), the mean start solved nearest the model's default start (the wrist at
+//! `sim.wrist_q`), every sample nearest the previous solution. A point path (`episode,t,x,y,z`) keeps the wrist locked at
+//! `sim.wrist_q` (a three-joint task's demonstrations); a pose path (with the tool's
+//! orientation `rx,ry,rz`) moves the whole arm, the six joints by the pose's inverse
+//! kinematics, its start's orientation blended too (the rotation from the path's first
+//! orientation to the starts' mean, [`mean_rotation`], by the same fading weight), for
+//! `learner record --pose` with `[task] joints = 6`. Every motion thus starts from one pose,
+//! the one a recorder takes for the start pose.
 
 use std::path::Path;
 
 use hil_sim::ur_sim::playback::{Playback, PlaybackError};
 use hil_sim::ur_sim::playback_motions::{play_motions, Motion, MotionsConfig};
 use ur5_shared::config::SimConfig;
-use ur5_shared::ik::{pose_from_rotation_vector, UrIk};
-use ur5_shared::kinematics::{Joints6, UrKinematics};
-use ur5_shared::pose::{isometry, mean_pose};
 
-use crate::io::tool_path::{self, ToolPath, ToolPathError};
+use crate::io::tool_path::{self, mean_point, mean_rotation, Blend, ToolPath, ToolPathError};
 use crate::io::IoError;
 
 /// Why tool paths cannot be played as motions taught by hand.
@@ -53,110 +51,44 @@ pub fn motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, To
     if paths.is_empty() {
         return Err(ToolPathError::Empty);
     }
+    let pose = paths.iter().all(|p| p.rotations.is_some());
     for p in paths {
-        if p.t.len() < 2 || p.points.len() != p.t.len() {
-            return Err(ToolPathError::Samples {
-                episode: p.episode,
-                why: format!("{} samples: at least 2", p.t.len()),
-            });
-        }
+        let rotations = p.rotations.as_ref().filter(|_| pose).map(Vec::len);
+        let why = if p.t.len() < 2 || p.points.len() != p.t.len() {
+            format!("{} samples: at least 2", p.t.len())
+        } else if let Some(r) = rotations.filter(|&r| r != p.t.len()) {
+            format!("{} samples but {r} orientations", p.t.len())
+        } else {
+            continue;
+        };
+        return Err(ToolPathError::Samples {
+            episode: p.episode,
+            why,
+        });
     }
-    if paths.iter().all(|p| p.rotations.is_some()) {
-        return pose_motions_of(paths, sim);
-    }
-    let n = paths.len() as f64;
-    let start: [f64; 3] =
-        core::array::from_fn(|r| paths.iter().map(|p| p.points[0][r]).sum::<f64>() / n);
-    let ik = UrIk::new(sim.model, sim.ee_offset);
-    let wrist = sim.wrist_q;
-    let start_q = ik
-        .nearest_point(start, wrist, &sim.model.default_start_q())
-        .map_err(|source| ToolPathError::Start {
-            point: start,
-            source,
-        })?;
+    let firsts: Vec<[f64; 3]> = paths.iter().map(|p| p.points[0]).collect();
+    let rotation = pose
+        .then(|| mean_rotation(paths.iter().filter_map(|p| Some(p.rotations.as_ref()?[0]))))
+        .flatten();
+    let blend = Blend::new(sim, if pose { 6 } else { 3 }, mean_point(&firsts), rotation)?;
     paths
         .iter()
         .map(|path| {
             let (t0, t1) = (path.t[0], path.t[path.t.len() - 1]);
-            let offset: [f64; 3] = core::array::from_fn(|r| start[r] - path.points[0][r]);
-            let mut prev = start_q;
+            let fade = |k: usize| 1.0 - (path.t[k] - t0) / (t1 - t0);
             let mut q = Vec::with_capacity(path.t.len());
-            for (k, (&t, x)) in path.t.iter().zip(&path.points).enumerate() {
-                let fade = 1.0 - (t - t0) / (t1 - t0);
-                let p: [f64; 3] = core::array::from_fn(|r| x[r] + fade * offset[r]);
-                if k > 0 {
-                    prev = ik.nearest_point(p, wrist, &prev).map_err(|source| {
-                        ToolPathError::Unreachable {
-                            episode: path.episode,
-                            t,
-                            point: p,
-                            source,
-                        }
-                    })?;
-                }
-                q.push(UrKinematics::six(&prev, &wrist));
-            }
-            Ok(Motion {
-                t: path.t.clone(),
-                q,
-            })
-        })
-        .collect()
-}
-
-/// Pose paths (every path with its orientations) as whole-arm motions (module docs).
-fn pose_motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, ToolPathError> {
-    let pose_at = |p: &ToolPath, k: usize| {
-        let r = p.rotations.as_ref().expect("pose paths")[k];
-        pose_from_rotation_vector(p.points[k], r)
-    };
-    for p in paths {
-        let r = p.rotations.as_ref().expect("pose paths");
-        if r.len() != p.t.len() {
-            return Err(ToolPathError::Samples {
-                episode: p.episode,
-                why: format!("{} samples but {} orientations", p.t.len(), r.len()),
-            });
-        }
-    }
-    let starts: Vec<_> = paths.iter().map(|p| pose_at(p, 0)).collect();
-    let start = mean_pose(&starts);
-    let point: [f64; 3] = start.translation.vector.into();
-    let ik = UrIk::new(sim.model, sim.ee_offset);
-    let near = UrKinematics::six(&sim.model.default_start_q(), &sim.wrist_q);
-    let start_q = ik
-        .nearest_pose(&start, &near)
-        .map_err(|source| ToolPathError::Start { point, source })?;
-    paths
-        .iter()
-        .zip(&starts)
-        .map(|(path, first)| {
-            let (t0, t1) = (path.t[0], path.t[path.t.len() - 1]);
-            // What moves the path's start onto the mean start: a translation and a rotation
-            // (base frame), each faded out along the path.
-            let shift = start.translation.vector - first.translation.vector;
-            let turn = (start.rotation * first.rotation.inverse()).scaled_axis();
-            let mut prev: Joints6 = start_q;
-            let mut q = Vec::with_capacity(path.t.len());
-            for (k, &t) in path.t.iter().enumerate() {
-                let fade = 1.0 - (t - t0) / (t1 - t0);
-                let mut pose = pose_at(path, k);
-                pose.translation.vector += fade * shift;
-                let v = fade * turn;
-                pose.rotation = isometry(&[0.0, 0.0, 0.0, v.x, v.y, v.z]).rotation * pose.rotation;
-                if k > 0 {
-                    prev = ik.nearest_pose(&pose, &prev).map_err(|source| {
-                        ToolPathError::Unreachable {
-                            episode: path.episode,
-                            t,
-                            point: pose.translation.vector.into(),
-                            source,
-                        }
-                    })?;
-                }
-                q.push(prev);
-            }
+            let rotations = path.rotations.as_deref().filter(|_| pose);
+            blend.follow(
+                path.episode,
+                &path.t,
+                &path.points,
+                rotations,
+                fade,
+                |_, qk| {
+                    q.push(blend.six(qk));
+                    Ok(())
+                },
+            )?;
             Ok(Motion {
                 t: path.t.clone(),
                 q,
@@ -189,6 +121,8 @@ pub fn playback_of_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::ik::pose_from_rotation_vector;
+    use ur5_shared::kinematics::{Joints6, UrKinematics};
     use ur5_shared::UrModel;
 
     /// Two short strokes in a vertical plane before the default goal, starting 1 cm apart.
