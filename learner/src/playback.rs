@@ -269,6 +269,69 @@ mod tests {
         );
     }
 
+    /// The one blend-and-solve routine: paths sampled every 0.04 s become the same joint
+    /// paths (within 1e-12 rad) as motions (the fade by time) and as demonstrations at a
+    /// control period of 0.04 s (the fade by step), at three joints with a wrist locked away
+    /// from home and at six for pose paths whose start orientations differ.
+    #[test]
+    fn motions_and_demonstrations_of_the_same_samples_are_the_same_joint_paths() {
+        use crate::io::tool_path::solve;
+        use ur5_shared::layout::StateLayout;
+        let mut sim = SimConfig::for_model(UrModel::Ur5e);
+        sim.wrist_q = [-1.4, 1.7, 0.3];
+        let kin = UrKinematics::new(sim.model, sim.ee_offset);
+        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.04).collect();
+        let pose_path = |episode: u64, d: f64| {
+            let poses: Vec<_> = t
+                .iter()
+                .map(|&t| {
+                    let s = t / 2.0;
+                    kin.tool_pose(&[
+                        0.1 + 0.2 * s,
+                        -1.9 + 0.4 * s,
+                        2.2 - 0.3 * s,
+                        -1.5 - 0.3 * s + 0.5 * d * (1.0 - s),
+                        1.5 - 0.2 * s,
+                        0.1 + 0.4 * s + d * (1.0 - s),
+                    ])
+                })
+                .collect();
+            ToolPath {
+                episode,
+                t: t.clone(),
+                points: poses.iter().map(|p| p.translation.vector.into()).collect(),
+                rotations: Some(
+                    poses
+                        .iter()
+                        .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
+                        .collect(),
+                ),
+            }
+        };
+        let poses = vec![pose_path(0, 0.0), pose_path(1, 0.05), pose_path(2, -0.08)];
+        for (paths, layout) in [
+            (strokes(sim.model.default_goal()), StateLayout::REACH3),
+            (poses, StateLayout::POSE6),
+        ] {
+            let motions = motions_of(&paths, &sim).unwrap();
+            let s = solve(&paths, &sim, layout, 0.04).unwrap();
+            assert_eq!(s.horizon, t.len());
+            let n = layout.joints();
+            let mut worst = 0.0f64;
+            for (d, m) in motions.iter().enumerate() {
+                for (k, q) in m.q.iter().enumerate() {
+                    let x = &s.states[(d * s.horizon + k) * layout.dx()..][..n];
+                    worst = (0..n).fold(worst, |w, j| w.max((x[j] - q[j]).abs()));
+                }
+            }
+            assert!(worst < 1e-12, "{n} joints: {worst} rad");
+            assert!(
+                motions.iter().all(|m| m.q[0][..n] == s.start_q[..]),
+                "{n} joints: one start pose"
+            );
+        }
+    }
+
     #[test]
     fn a_point_out_of_reach_is_refused_naming_episode_and_time() {
         let sim = SimConfig::for_model(UrModel::Ur5);
