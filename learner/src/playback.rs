@@ -152,6 +152,44 @@ mod tests {
             .collect()
     }
 
+    /// The sample times of the test paths: 2 s every 0.04 s.
+    fn times() -> Vec<f64> {
+        (0..=50).map(|k| k as f64 * 0.04).collect()
+    }
+
+    /// A whole-arm motion of 2 s, its start moved by `d3` on wrist 3 and `d1` on wrist 1
+    /// (rad), fading out by its end.
+    fn whole_arm(d3: f64, d1: f64) -> impl Fn(f64) -> Joints6 {
+        move |t: f64| {
+            let s = t / 2.0;
+            [
+                0.1 + 0.2 * s,
+                -1.9 + 0.4 * s,
+                2.2 - 0.3 * s,
+                -1.5 - 0.3 * s + d1 * (1.0 - s),
+                1.5 - 0.2 * s,
+                0.1 + 0.4 * s + d3 * (1.0 - s),
+            ]
+        }
+    }
+
+    /// The pose path of the motion `q` through the forward kinematics `kin`, at [`times`].
+    fn pose_path(kin: &UrKinematics, episode: u64, q: &dyn Fn(f64) -> Joints6) -> ToolPath {
+        let t = times();
+        let poses: Vec<_> = t.iter().map(|&t| kin.tool_pose(&q(t))).collect();
+        ToolPath {
+            episode,
+            t,
+            points: poses.iter().map(|p| p.translation.vector.into()).collect(),
+            rotations: Some(
+                poses
+                    .iter()
+                    .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
+                    .collect(),
+            ),
+        }
+    }
+
     /// The motions start from one pose (the blended start), follow the paths through the
     /// forward kinematics (exactly at the end, within the blend elsewhere), keep the wrist
     /// locked and play as a valid file.
@@ -198,35 +236,12 @@ mod tests {
     fn pose_paths_become_whole_arm_motions_from_one_start_pose() {
         let sim = SimConfig::for_model(UrModel::Ur5e);
         let kin = UrKinematics::new(sim.model, sim.ee_offset);
-        let motion = |d: f64| {
-            move |t: f64| -> Joints6 {
-                let s = t / 2.0;
-                [
-                    0.1 + 0.2 * s,
-                    -1.9 + 0.4 * s,
-                    2.2 - 0.3 * s,
-                    -1.5 - 0.3 * s,
-                    1.5 - 0.2 * s,
-                    0.1 + 0.4 * s + d * (1.0 - s),
-                ]
-            }
-        };
-        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.04).collect();
-        let path = |episode: u64, q: &dyn Fn(f64) -> Joints6| {
-            let poses: Vec<_> = t.iter().map(|&t| kin.tool_pose(&q(t))).collect();
-            ToolPath {
-                episode,
-                t: t.clone(),
-                points: poses.iter().map(|p| p.translation.vector.into()).collect(),
-                rotations: Some(
-                    poses
-                        .iter()
-                        .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
-                        .collect(),
-                ),
-            }
-        };
-        let paths = [path(0, &motion(0.0)), path(1, &motion(0.05))];
+        let motion = |d: f64| whole_arm(d, 0.0);
+        let t = times();
+        let paths = [
+            pose_path(&kin, 0, &motion(0.0)),
+            pose_path(&kin, 1, &motion(0.05)),
+        ];
         let motions = motions_of(&paths, &sim).unwrap();
         assert_eq!(motions[0].q[0], motions[1].q[0], "one start pose");
         let first = motions[0].q[0];
@@ -280,35 +295,12 @@ mod tests {
         let mut sim = SimConfig::for_model(UrModel::Ur5e);
         sim.wrist_q = [-1.4, 1.7, 0.3];
         let kin = UrKinematics::new(sim.model, sim.ee_offset);
-        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.04).collect();
-        let pose_path = |episode: u64, d: f64| {
-            let poses: Vec<_> = t
-                .iter()
-                .map(|&t| {
-                    let s = t / 2.0;
-                    kin.tool_pose(&[
-                        0.1 + 0.2 * s,
-                        -1.9 + 0.4 * s,
-                        2.2 - 0.3 * s,
-                        -1.5 - 0.3 * s + 0.5 * d * (1.0 - s),
-                        1.5 - 0.2 * s,
-                        0.1 + 0.4 * s + d * (1.0 - s),
-                    ])
-                })
-                .collect();
-            ToolPath {
-                episode,
-                t: t.clone(),
-                points: poses.iter().map(|p| p.translation.vector.into()).collect(),
-                rotations: Some(
-                    poses
-                        .iter()
-                        .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
-                        .collect(),
-                ),
-            }
-        };
-        let poses = vec![pose_path(0, 0.0), pose_path(1, 0.05), pose_path(2, -0.08)];
+        let t = times();
+        let poses = vec![
+            pose_path(&kin, 0, &whole_arm(0.0, 0.0)),
+            pose_path(&kin, 1, &whole_arm(0.05, 0.025)),
+            pose_path(&kin, 2, &whole_arm(-0.08, -0.04)),
+        ];
         for (paths, layout) in [
             (strokes(sim.model.default_goal()), StateLayout::REACH3),
             (poses, StateLayout::POSE6),
