@@ -5,27 +5,25 @@
 //! ([`hil_sim::ur_sim::playback_motions`]), so that `learner record` can be tried on any motion,
 //! not only reaches.
 //!
-//! The paths are solved on the arm as `--demos` solves them (§4.17 steps 2–4, at the file's own
-//! samples instead of the control period): every path's start blended into the paths' mean
-//! start (the offset fading linearly in time to nothing at its end), the mean start solved
-//! nearest the model's default pose, every sample nearest the previous solution. A point path
-//! (`episode,t,x,y,z`) keeps the wrist locked at `sim.wrist_q` (a three-joint task's
-//! demonstrations); a pose path (with the tool's orientation `rx,ry,rz`) moves the whole arm,
-//! the six joints by the pose's inverse kinematics, its start's orientation blended too (the
-//! rotation from the path's first orientation to the starts' mean, [`mean_pose`], scaled by the
-//! same fading weight), for `learner record --pose` with `[task] joints = 6`. Every motion thus
-//! starts from one pose, the one a recorder takes for the start pose.
+//! The paths are solved on the arm by the routine that solves `--demos` ([`Blend`], §4.17
+//! steps 2–3), at the file's own samples instead of the control period: every path's start
+//! blended into the paths' mean start (the offset fading linearly in time to nothing at its
+//! end), the mean start solved nearest the model's default start (the wrist at
+//! `sim.wrist_q`), every sample nearest the previous solution. A point path (`episode,t,x,y,z`) keeps the wrist locked at
+//! `sim.wrist_q` (a three-joint task's demonstrations); a pose path (with the tool's
+//! orientation `rx,ry,rz`) moves the whole arm, the six joints by the pose's inverse
+//! kinematics, its start's orientation blended too (the rotation from the path's first
+//! orientation to the starts' mean, [`mean_rotation`], by the same fading weight), for
+//! `learner record --pose` with `[task] joints = 6`. Every motion thus starts from one pose,
+//! the one a recorder takes for the start pose.
 
 use std::path::Path;
 
 use hil_sim::ur_sim::playback::{Playback, PlaybackError};
 use hil_sim::ur_sim::playback_motions::{play_motions, Motion, MotionsConfig};
 use ur5_shared::config::SimConfig;
-use ur5_shared::ik::{pose_from_rotation_vector, UrIk};
-use ur5_shared::kinematics::{Joints6, UrKinematics};
-use ur5_shared::pose::{isometry, mean_pose};
 
-use crate::io::tool_path::{self, ToolPath, ToolPathError};
+use crate::io::tool_path::{self, mean_point, mean_rotation, Blend, ToolPath, ToolPathError};
 use crate::io::IoError;
 
 /// Why tool paths cannot be played as motions taught by hand.
@@ -53,110 +51,44 @@ pub fn motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, To
     if paths.is_empty() {
         return Err(ToolPathError::Empty);
     }
+    let pose = paths.iter().all(|p| p.rotations.is_some());
     for p in paths {
-        if p.t.len() < 2 || p.points.len() != p.t.len() {
-            return Err(ToolPathError::Samples {
-                episode: p.episode,
-                why: format!("{} samples: at least 2", p.t.len()),
-            });
-        }
+        let rotations = p.rotations.as_ref().filter(|_| pose).map(Vec::len);
+        let why = if p.t.len() < 2 || p.points.len() != p.t.len() {
+            format!("{} samples: at least 2", p.t.len())
+        } else if let Some(r) = rotations.filter(|&r| r != p.t.len()) {
+            format!("{} samples but {r} orientations", p.t.len())
+        } else {
+            continue;
+        };
+        return Err(ToolPathError::Samples {
+            episode: p.episode,
+            why,
+        });
     }
-    if paths.iter().all(|p| p.rotations.is_some()) {
-        return pose_motions_of(paths, sim);
-    }
-    let n = paths.len() as f64;
-    let start: [f64; 3] =
-        core::array::from_fn(|r| paths.iter().map(|p| p.points[0][r]).sum::<f64>() / n);
-    let ik = UrIk::new(sim.model, sim.ee_offset);
-    let wrist = sim.wrist_q;
-    let start_q = ik
-        .nearest_point(start, wrist, &sim.model.default_start_q())
-        .map_err(|source| ToolPathError::Start {
-            point: start,
-            source,
-        })?;
+    let firsts: Vec<[f64; 3]> = paths.iter().map(|p| p.points[0]).collect();
+    let rotation = pose
+        .then(|| mean_rotation(paths.iter().filter_map(|p| Some(p.rotations.as_ref()?[0]))))
+        .flatten();
+    let blend = Blend::new(sim, if pose { 6 } else { 3 }, mean_point(&firsts), rotation)?;
     paths
         .iter()
         .map(|path| {
             let (t0, t1) = (path.t[0], path.t[path.t.len() - 1]);
-            let offset: [f64; 3] = core::array::from_fn(|r| start[r] - path.points[0][r]);
-            let mut prev = start_q;
+            let fade = |k: usize| 1.0 - (path.t[k] - t0) / (t1 - t0);
             let mut q = Vec::with_capacity(path.t.len());
-            for (k, (&t, x)) in path.t.iter().zip(&path.points).enumerate() {
-                let fade = 1.0 - (t - t0) / (t1 - t0);
-                let p: [f64; 3] = core::array::from_fn(|r| x[r] + fade * offset[r]);
-                if k > 0 {
-                    prev = ik.nearest_point(p, wrist, &prev).map_err(|source| {
-                        ToolPathError::Unreachable {
-                            episode: path.episode,
-                            t,
-                            point: p,
-                            source,
-                        }
-                    })?;
-                }
-                q.push(UrKinematics::six(&prev, &wrist));
-            }
-            Ok(Motion {
-                t: path.t.clone(),
-                q,
-            })
-        })
-        .collect()
-}
-
-/// Pose paths (every path with its orientations) as whole-arm motions (module docs).
-fn pose_motions_of(paths: &[ToolPath], sim: &SimConfig) -> Result<Vec<Motion>, ToolPathError> {
-    let pose_at = |p: &ToolPath, k: usize| {
-        let r = p.rotations.as_ref().expect("pose paths")[k];
-        pose_from_rotation_vector(p.points[k], r)
-    };
-    for p in paths {
-        let r = p.rotations.as_ref().expect("pose paths");
-        if r.len() != p.t.len() {
-            return Err(ToolPathError::Samples {
-                episode: p.episode,
-                why: format!("{} samples but {} orientations", p.t.len(), r.len()),
-            });
-        }
-    }
-    let starts: Vec<_> = paths.iter().map(|p| pose_at(p, 0)).collect();
-    let start = mean_pose(&starts);
-    let point: [f64; 3] = start.translation.vector.into();
-    let ik = UrIk::new(sim.model, sim.ee_offset);
-    let near = UrKinematics::six(&sim.model.default_start_q(), &sim.wrist_q);
-    let start_q = ik
-        .nearest_pose(&start, &near)
-        .map_err(|source| ToolPathError::Start { point, source })?;
-    paths
-        .iter()
-        .zip(&starts)
-        .map(|(path, first)| {
-            let (t0, t1) = (path.t[0], path.t[path.t.len() - 1]);
-            // What moves the path's start onto the mean start: a translation and a rotation
-            // (base frame), each faded out along the path.
-            let shift = start.translation.vector - first.translation.vector;
-            let turn = (start.rotation * first.rotation.inverse()).scaled_axis();
-            let mut prev: Joints6 = start_q;
-            let mut q = Vec::with_capacity(path.t.len());
-            for (k, &t) in path.t.iter().enumerate() {
-                let fade = 1.0 - (t - t0) / (t1 - t0);
-                let mut pose = pose_at(path, k);
-                pose.translation.vector += fade * shift;
-                let v = fade * turn;
-                pose.rotation = isometry(&[0.0, 0.0, 0.0, v.x, v.y, v.z]).rotation * pose.rotation;
-                if k > 0 {
-                    prev = ik.nearest_pose(&pose, &prev).map_err(|source| {
-                        ToolPathError::Unreachable {
-                            episode: path.episode,
-                            t,
-                            point: pose.translation.vector.into(),
-                            source,
-                        }
-                    })?;
-                }
-                q.push(prev);
-            }
+            let rotations = path.rotations.as_deref().filter(|_| pose);
+            blend.follow(
+                path.episode,
+                &path.t,
+                &path.points,
+                rotations,
+                fade,
+                |_, qk| {
+                    q.push(blend.six(qk));
+                    Ok(())
+                },
+            )?;
             Ok(Motion {
                 t: path.t.clone(),
                 q,
@@ -189,6 +121,8 @@ pub fn playback_of_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ur5_shared::ik::pose_from_rotation_vector;
+    use ur5_shared::kinematics::{Joints6, UrKinematics};
     use ur5_shared::UrModel;
 
     /// Two short strokes in a vertical plane before the default goal, starting 1 cm apart.
@@ -216,6 +150,44 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// The sample times of the test paths: 2 s every 0.04 s.
+    fn times() -> Vec<f64> {
+        (0..=50).map(|k| k as f64 * 0.04).collect()
+    }
+
+    /// A whole-arm motion of 2 s, its start moved by `d3` on wrist 3 and `d1` on wrist 1
+    /// (rad), fading out by its end.
+    fn whole_arm(d3: f64, d1: f64) -> impl Fn(f64) -> Joints6 {
+        move |t: f64| {
+            let s = t / 2.0;
+            [
+                0.1 + 0.2 * s,
+                -1.9 + 0.4 * s,
+                2.2 - 0.3 * s,
+                -1.5 - 0.3 * s + d1 * (1.0 - s),
+                1.5 - 0.2 * s,
+                0.1 + 0.4 * s + d3 * (1.0 - s),
+            ]
+        }
+    }
+
+    /// The pose path of the motion `q` through the forward kinematics `kin`, at [`times`].
+    fn pose_path(kin: &UrKinematics, episode: u64, q: &dyn Fn(f64) -> Joints6) -> ToolPath {
+        let t = times();
+        let poses: Vec<_> = t.iter().map(|&t| kin.tool_pose(&q(t))).collect();
+        ToolPath {
+            episode,
+            t,
+            points: poses.iter().map(|p| p.translation.vector.into()).collect(),
+            rotations: Some(
+                poses
+                    .iter()
+                    .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
+                    .collect(),
+            ),
+        }
     }
 
     /// The motions start from one pose (the blended start), follow the paths through the
@@ -264,35 +236,12 @@ mod tests {
     fn pose_paths_become_whole_arm_motions_from_one_start_pose() {
         let sim = SimConfig::for_model(UrModel::Ur5e);
         let kin = UrKinematics::new(sim.model, sim.ee_offset);
-        let motion = |d: f64| {
-            move |t: f64| -> Joints6 {
-                let s = t / 2.0;
-                [
-                    0.1 + 0.2 * s,
-                    -1.9 + 0.4 * s,
-                    2.2 - 0.3 * s,
-                    -1.5 - 0.3 * s,
-                    1.5 - 0.2 * s,
-                    0.1 + 0.4 * s + d * (1.0 - s),
-                ]
-            }
-        };
-        let t: Vec<f64> = (0..=50).map(|k| k as f64 * 0.04).collect();
-        let path = |episode: u64, q: &dyn Fn(f64) -> Joints6| {
-            let poses: Vec<_> = t.iter().map(|&t| kin.tool_pose(&q(t))).collect();
-            ToolPath {
-                episode,
-                t: t.clone(),
-                points: poses.iter().map(|p| p.translation.vector.into()).collect(),
-                rotations: Some(
-                    poses
-                        .iter()
-                        .map(|p| ur5_shared::pose::rotation_vector(&p.rotation))
-                        .collect(),
-                ),
-            }
-        };
-        let paths = [path(0, &motion(0.0)), path(1, &motion(0.05))];
+        let motion = |d: f64| whole_arm(d, 0.0);
+        let t = times();
+        let paths = [
+            pose_path(&kin, 0, &motion(0.0)),
+            pose_path(&kin, 1, &motion(0.05)),
+        ];
         let motions = motions_of(&paths, &sim).unwrap();
         assert_eq!(motions[0].q[0], motions[1].q[0], "one start pose");
         let first = motions[0].q[0];
@@ -333,6 +282,46 @@ mod tests {
             pb.q.iter().any(|q| (q[5] - first[5]).abs() > 0.1),
             "the wrist turns"
         );
+    }
+
+    /// The one blend-and-solve routine: paths sampled every 0.04 s become the same joint
+    /// paths (within 1e-12 rad) as motions (the fade by time) and as demonstrations at a
+    /// control period of 0.04 s (the fade by step), at three joints with a wrist locked away
+    /// from home and at six for pose paths whose start orientations differ.
+    #[test]
+    fn motions_and_demonstrations_of_the_same_samples_are_the_same_joint_paths() {
+        use crate::io::tool_path::solve;
+        use ur5_shared::layout::StateLayout;
+        let mut sim = SimConfig::for_model(UrModel::Ur5e);
+        sim.wrist_q = [-1.4, 1.7, 0.3];
+        let kin = UrKinematics::new(sim.model, sim.ee_offset);
+        let t = times();
+        let poses = vec![
+            pose_path(&kin, 0, &whole_arm(0.0, 0.0)),
+            pose_path(&kin, 1, &whole_arm(0.05, 0.025)),
+            pose_path(&kin, 2, &whole_arm(-0.08, -0.04)),
+        ];
+        for (paths, layout) in [
+            (strokes(sim.model.default_goal()), StateLayout::REACH3),
+            (poses, StateLayout::POSE6),
+        ] {
+            let motions = motions_of(&paths, &sim).unwrap();
+            let s = solve(&paths, &sim, layout, 0.04).unwrap();
+            assert_eq!(s.horizon, t.len());
+            let n = layout.joints();
+            let mut worst = 0.0f64;
+            for (d, m) in motions.iter().enumerate() {
+                for (k, q) in m.q.iter().enumerate() {
+                    let x = &s.states[(d * s.horizon + k) * layout.dx()..][..n];
+                    worst = (0..n).fold(worst, |w, j| w.max((x[j] - q[j]).abs()));
+                }
+            }
+            assert!(worst < 1e-12, "{n} joints: {worst} rad");
+            assert!(
+                motions.iter().all(|m| m.q[0][..n] == s.start_q[..]),
+                "{n} joints: one start pose"
+            );
+        }
     }
 
     #[test]

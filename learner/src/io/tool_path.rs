@@ -7,11 +7,13 @@
 //! 1. each episode is resampled (linear in time; orientations along the shortest arc) to T
 //!    samples over its own duration, T − 1 = its mean duration over the control period, rounded;
 //! 2. every episode's start is blended into the episodes' mean start, the offset fading
-//!    linearly to nothing at its end (the arm starts every episode from one pose; the ends are
-//!    kept as recorded);
+//!    linearly by step to nothing at its end (the arm starts every episode from one pose; the
+//!    ends are kept as recorded);
 //! 3. the start pose is the mean start through the inverse kinematics ([`ur5_shared::ik`]),
-//!    the branch nearest the model's default pose; each sample is then solved nearest the
-//!    previous one, so an episode stays on one branch; the goal is the episodes' mean end;
+//!    the branch nearest the model's default start (the wrist at `sim.wrist_q`); each sample
+//!    is then solved nearest the previous one, so an episode stays on one branch; the goal is
+//!    the episodes' mean end. Steps 2 and 3 are [`Blend`], which the freedrive playbacks of
+//!    [`crate::playback`] share, fading by time;
 //! 4. a sample out of reach, or a step that needs a joint faster than its limit (a jump
 //!    between branches near a singularity, or a path too fast for the arm), is refused naming
 //!    the episode, the time in the file and the reason;
@@ -339,6 +341,142 @@ fn six(q: &[f64], wrist: &[f64; 3]) -> Joints6 {
     }
 }
 
+/// The unit quaternion of the rotation vector `r` (rad, axis × angle).
+fn quat(r: [f64; 3]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_scaled_axis(Vector3::from(r))
+}
+
+/// The mean of `points` (m), coordinate by coordinate. Panics on none.
+pub fn mean_point(points: &[[f64; 3]]) -> [f64; 3] {
+    assert!(!points.is_empty(), "the mean of no point");
+    core::array::from_fn(|r| points.iter().map(|p| p[r]).sum::<f64>() / points.len() as f64)
+}
+
+/// The mean of the orientations `rotations` (rotation vectors, rad; [`pose::mean_pose`]'s
+/// rotation), none without any.
+pub fn mean_rotation(rotations: impl Iterator<Item = [f64; 3]>) -> Option<UnitQuaternion<f64>> {
+    let poses: Vec<_> = rotations
+        .map(|r| Isometry3::from_parts(Default::default(), quat(r)))
+        .collect();
+    (!poses.is_empty()).then(|| pose::mean_pose(&poses).rotation)
+}
+
+/// Tool paths blended into their mean start and solved on the arm (module docs, steps 2–4
+/// but the speed check): the one routine by which demonstrations ([`solve`], samples at the
+/// control period) and motions taught by hand ([`crate::playback::motions_of`], the file's
+/// own samples) become joint paths.
+///
+/// Three joints (the wrist locked at `sim.wrist_q`) follow the tool point; six follow its
+/// pose. The mean start is solved nearest the model's default start with the wrist at
+/// `sim.wrist_q` (a six-joint task's default start pose, docs/design.md §2.5); every sample
+/// of a path is then moved by the path's offset to the mean start, scaled by the sample's
+/// fade (1 at the start, 0 at the end, the caller's choice in between): the tool point by
+/// fade × the translation, the orientation by the rotation taking the path's first
+/// orientation to the mean start's raised to the power fade (the same axis, fade × the
+/// angle), before it; and solved nearest the previous sample's joints.
+#[derive(Clone, Debug)]
+pub struct Blend {
+    ik: UrIk,
+    wrist: [f64; 3],
+    point: [f64; 3],
+    rotation: UnitQuaternion<f64>,
+    start_q: Vec<f64>,
+}
+
+impl Blend {
+    /// The mean start at tool point `point` (m, base frame) and, for six joints, orientation
+    /// `rotation` (base frame), solved for `joints` of the arm of `sim`. Panics unless
+    /// `joints` is 3 or 6.
+    pub fn new(
+        sim: &SimConfig,
+        joints: usize,
+        point: [f64; 3],
+        rotation: Option<UnitQuaternion<f64>>,
+    ) -> Result<Self, ToolPathError> {
+        assert!(matches!(joints, 3 | 6), "3 or 6 joints, not {joints}");
+        if sim.ee_link != "wrist_3_link" {
+            return Err(ToolPathError::EeLink(sim.ee_link.clone()));
+        }
+        let ik = UrIk::new(sim.model, sim.ee_offset);
+        let (wrist, near) = (sim.wrist_q, sim.model.default_start_q());
+        let start_q = match (joints, rotation) {
+            (3, _) => ik.nearest_point(point, wrist, &near).map(|q| q.to_vec()),
+            (_, Some(r)) => ik
+                .nearest_pose(
+                    &Isometry3::from_parts(Vector3::from(point).into(), r),
+                    &six(&near, &wrist),
+                )
+                .map(|q| q.to_vec()),
+            (_, None) => return Err(ToolPathError::NeedsOrientation),
+        }
+        .map_err(|source| ToolPathError::Start { point, source })?;
+        Ok(Self {
+            ik,
+            wrist,
+            point,
+            rotation: rotation.unwrap_or_else(UnitQuaternion::identity),
+            start_q,
+        })
+    }
+
+    /// The joints at the mean start (rad; three or six).
+    pub fn start_q(&self) -> &[f64] {
+        &self.start_q
+    }
+
+    /// The arm's six joints from the blend's `q` (three: the locked wrist added).
+    pub fn six(&self, q: &[f64]) -> Joints6 {
+        six(q, &self.wrist)
+    }
+
+    /// Blends and solves one path (type docs): episode `episode`'s samples at times `t` (s,
+    /// the file's, for errors), tool points `points` (m) and, for six joints, orientations
+    /// `rotations` (rotation vectors, rad), sample k faded by `fade(k)`. Calls `each(k, q)`
+    /// with each sample's joints (rad) in order, the first the mean start's; stops at the
+    /// first error, a sample out of reach or one `each` returns.
+    pub fn follow(
+        &self,
+        episode: u64,
+        t: &[f64],
+        points: &[[f64; 3]],
+        rotations: Option<&[[f64; 3]]>,
+        fade: impl Fn(usize) -> f64,
+        mut each: impl FnMut(usize, &[f64]) -> Result<(), ToolPathError>,
+    ) -> Result<(), ToolPathError> {
+        let offset: [f64; 3] = core::array::from_fn(|r| self.point[r] - points[0][r]);
+        let rotations = (self.start_q.len() == 6).then(|| rotations.expect("six joints"));
+        // The rotation taking this path's first orientation to the mean start's.
+        let turn = rotations.map(|r| self.rotation * quat(r[0]).inverse());
+        let mut q = self.start_q.clone();
+        each(0, &q)?;
+        for k in 1..points.len() {
+            let f = fade(k);
+            let p: [f64; 3] = core::array::from_fn(|r| points[k][r] + f * offset[r]);
+            let solved = match (turn, rotations) {
+                (Some(turn), Some(r)) => {
+                    let pose =
+                        Isometry3::from_parts(Vector3::from(p).into(), turn.powf(f) * quat(r[k]));
+                    self.ik
+                        .nearest_pose(&pose, &six(&q, &self.wrist))
+                        .map(|q| q.to_vec())
+                }
+                _ => self
+                    .ik
+                    .nearest_point(p, self.wrist, &[q[0], q[1], q[2]])
+                    .map(|q| q.to_vec()),
+            };
+            q = solved.map_err(|source| ToolPathError::Unreachable {
+                episode,
+                t: t[k],
+                point: p,
+                source,
+            })?;
+            each(k, &q)?;
+        }
+        Ok(())
+    }
+}
+
 /// Solves `paths` into demonstrations of `layout` on the arm of `sim` at the control period
 /// `dt` (s) (module docs, steps 1–5).
 pub fn solve(
@@ -377,45 +515,15 @@ pub fn solve(
         });
     }
     let sampled: Vec<Resampled> = paths.iter().map(|p| resample(p, horizon)).collect();
-    let mean = |k: usize| -> [f64; 3] {
-        core::array::from_fn(|r| {
-            sampled.iter().map(|s| s.1[k][r]).sum::<f64>() / sampled.len() as f64
-        })
-    };
+    let mean =
+        |k: usize| -> [f64; 3] { mean_point(&sampled.iter().map(|s| s.1[k]).collect::<Vec<_>>()) };
     let (start, goal) = (mean(0), mean(horizon - 1));
-    let (ik, kin) = (
-        UrIk::new(sim.model, sim.ee_offset),
-        UrKinematics::new(sim.model, sim.ee_offset),
-    );
+    let kin = UrKinematics::new(sim.model, sim.ee_offset);
     let wrist = sim.wrist_q;
-    let default6 = six(&sim.model.default_start_q(), &sim.model.default_wrist_q());
-    // One solve: the layout's joints nearest `near` for the tool at `p` (and rotation `r`).
-    let solve_one = |p: [f64; 3], r: Option<[f64; 3]>, near: &[f64]| -> Result<Vec<f64>, IkError> {
-        match n {
-            3 => ik
-                .nearest_point(p, wrist, &[near[0], near[1], near[2]])
-                .map(|q| q.to_vec()),
-            _ => ik
-                .nearest_pose(
-                    &ik::pose_from_rotation_vector(p, r.expect("checked")),
-                    &near.try_into().expect("6"),
-                )
-                .map(|q| q.to_vec()),
-        }
-    };
     // Six joints: the mean start and end orientations (each episode's start rotation is
     // blended into the mean start's as its point is), the goal pose the mean end pose.
-    let quat = |r: [f64; 3]| UnitQuaternion::from_scaled_axis(Vector3::from(r));
-    let mean_rot = |k: usize| {
-        let poses: Vec<_> = sampled
-            .iter()
-            .filter_map(|s| {
-                s.2.as_ref()
-                    .map(|r| Isometry3::from_parts(Default::default(), quat(r[k])))
-            })
-            .collect();
-        (!poses.is_empty()).then(|| pose::mean_pose(&poses).rotation)
-    };
+    let mean_rot =
+        |k: usize| mean_rotation(sampled.iter().filter_map(|s| s.2.as_ref().map(|r| r[k])));
     let (start_rot, end_rot) = (mean_rot(0), mean_rot(horizon - 1));
     let goal_pose = match (p_count, end_rot) {
         (3, Some(r)) => Some({
@@ -426,67 +534,47 @@ pub fn solve(
     };
     // A pose layout's tool points: as a pose task of that goal has them.
     let pose_task = goal_pose.map(|g| TaskConfig::pose_for_model(sim.model, g));
-    let start_q = solve_one(
-        start,
-        start_rot.map(|r| pose::rotation_vector(&r)),
-        &default6[..n],
-    )
-    .map_err(|source| ToolPathError::Start {
-        point: start,
-        source,
-    })?;
+    let blend = Blend::new(sim, n, start, start_rot)?;
+    let start_q = blend.start_q().to_vec();
     let limits = sim.model.joint_limits().velocity;
     let dx = layout.dx();
     let mut states = vec![0.0; paths.len() * horizon * dx];
     // A pose layout's episode, step by step (six joints, rad and rad/s), for [`arm_states`].
     let mut steps: Vec<(Joints6, Joints6)> = Vec::with_capacity(horizon);
     for (d, (path, (times, points, rots))) in paths.iter().zip(&sampled).enumerate() {
-        let offset: [f64; 3] = core::array::from_fn(|r| start[r] - points[0][r]);
-        // The rotation taking this episode's start orientation to the mean start's.
-        let turn = match (start_rot, rots) {
-            (Some(s), Some(r)) => s * quat(r[0]).inverse(),
-            _ => UnitQuaternion::identity(),
-        };
         let mut prev = start_q.clone();
-        for k in 0..horizon {
-            let fade = 1.0 - k as f64 / (horizon - 1) as f64;
-            let p: [f64; 3] = core::array::from_fn(|r| points[k][r] + fade * offset[r]);
-            let rot = rots.as_ref().map(|r| {
-                let blended = turn.powf(fade) * quat(r[k]);
-                pose::rotation_vector(&blended)
-            });
-            let q = if k == 0 {
-                start_q.clone()
-            } else {
-                solve_one(p, rot, &prev).map_err(|source| ToolPathError::Unreachable {
-                    episode: path.episode,
-                    t: times[k],
-                    point: p,
-                    source,
-                })?
-            };
-            let qd: Vec<f64> = (0..n)
-                .map(|j| if k == 0 { 0.0 } else { (q[j] - prev[j]) / dt })
-                .collect();
-            if let Some(j) = (0..n).find(|&j| qd[j].abs() > limits[j]) {
-                return Err(ToolPathError::Jump {
-                    episode: path.episode,
-                    t: times[k],
-                    joint: j,
-                    speed: qd[j].abs(),
-                    limit: limits[j],
-                });
-            }
-            if pose_task.is_some() {
-                steps.push((six(&q, &wrist), six(&qd, &[0.0; 3])));
-            } else {
-                // The locked wrist does not move.
-                let (ee, v) = kin.ee_point_velocity(&six(&q, &wrist), &six(&qd, &[0.0; 3]));
-                let at = (d * horizon + k) * dx;
-                layout.fill_state(&q, &qd, &[ee], &[v], &[goal], &mut states[at..at + dx]);
-            }
-            prev = q;
-        }
+        let fade = |k: usize| 1.0 - k as f64 / (horizon - 1) as f64;
+        blend.follow(
+            path.episode,
+            times,
+            points,
+            rots.as_deref(),
+            fade,
+            |k, q| {
+                let qd: Vec<f64> = (0..n)
+                    .map(|j| if k == 0 { 0.0 } else { (q[j] - prev[j]) / dt })
+                    .collect();
+                if let Some(j) = (0..n).find(|&j| qd[j].abs() > limits[j]) {
+                    return Err(ToolPathError::Jump {
+                        episode: path.episode,
+                        t: times[k],
+                        joint: j,
+                        speed: qd[j].abs(),
+                        limit: limits[j],
+                    });
+                }
+                if pose_task.is_some() {
+                    steps.push((six(q, &wrist), six(&qd, &[0.0; 3])));
+                } else {
+                    // The locked wrist does not move.
+                    let (ee, v) = kin.ee_point_velocity(&six(q, &wrist), &six(&qd, &[0.0; 3]));
+                    let at = (d * horizon + k) * dx;
+                    layout.fill_state(q, &qd, &[ee], &[v], &[goal], &mut states[at..at + dx]);
+                }
+                prev = q.to_vec();
+                Ok(())
+            },
+        )?;
         if let Some(task) = &pose_task {
             let episode = &mut states[d * horizon * dx..(d + 1) * horizon * dx];
             arm_states(&kin, task, steps.drain(..), episode);

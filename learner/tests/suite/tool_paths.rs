@@ -215,3 +215,63 @@ fn the_baselines_report_a_motions_path_and_mdgps_refuses_its_terms() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// FNV-1a (64 bits) of the bits of `values`: a digest that changes with any bit of any value.
+fn digest<'a>(values: impl IntoIterator<Item = &'a f64>) -> u64 {
+    values.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, v| {
+        v.to_bits()
+            .to_le_bytes()
+            .iter()
+            .fold(h, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+    })
+}
+
+/// The LASA shape `name` placed as `learner dataset lasa` places it by default on `model`
+/// (facing the arm, ending at the default goal, 0.2 m, 10 s), tool points alone.
+fn lasa_points(name: &str, model: ur5_shared::UrModel) -> Vec<learner::io::tool_path::ToolPath> {
+    use learner::io::lasa;
+    let placement = lasa::Placement {
+        plane: lasa::Plane::Facing,
+        end: model.default_goal(),
+        size: 0.2,
+        duration: 10.0,
+        rotation: None,
+    };
+    lasa::place(&lasa::shape(name).unwrap(), &placement).unwrap()
+}
+
+/// Three-joint demonstrations (`--demos`, the control period) and freedrive motions
+/// (`dataset playback`, the file's own times) of LASA shapes are bit for bit those of the
+/// code before both were solved by one blend-and-solve routine: the digests below were
+/// recorded from that code (two solvers, one a caller), and any bit of any joint angle,
+/// velocity, tool point, start or goal changes them.
+#[test]
+fn three_joint_paths_solve_bit_for_bit_as_recorded() {
+    use learner::io::tool_path::solve;
+    use ur5_shared::layout::StateLayout;
+    use ur5_shared::UrModel;
+    let mut got = Vec::new();
+    for (name, model, dt) in [
+        ("Worm", UrModel::Ur5, 0.1),
+        ("Sshape", UrModel::Ur10e, 0.05),
+    ] {
+        let mut sim = SimConfig::for_model(model);
+        sim.wrist_q = [-1.4, 1.7, 0.3];
+        let paths = lasa_points(name, model);
+        let s = solve(&paths, &sim, StateLayout::REACH3, dt).unwrap();
+        got.push(digest(s.states.iter().chain(&s.start_q).chain(&s.goal)));
+        let motions = learner::playback::motions_of(&paths, &sim).unwrap();
+        got.push(digest(
+            motions
+                .iter()
+                .flat_map(|m| m.t.iter().chain(m.q.iter().flatten())),
+        ));
+    }
+    let want: [u64; 4] = [
+        0xcd1b3d5b2bb54a4f,
+        0xdff3314819394556,
+        0xfd75fce2eda0362c,
+        0xc88bbfccba3c153f,
+    ];
+    assert_eq!(got, want, "{got:#x?}");
+}
