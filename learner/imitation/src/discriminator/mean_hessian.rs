@@ -20,10 +20,11 @@
 //!   the per-point route is kept where it is the cheaper one (n_0 ≤ h_1, e.g. every
 //!   three-joint critic), so its results keep their bits.
 
-use faer::{Mat, MatMut};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 use super::{raw_copy, Discriminator, Mlp, Workspace};
-use ur5_shared::kernels::{axpy, dot};
+use ur5_shared::kernels::axpy;
 
 /// Accumulates `∇²ₓD` over points, [`MeanHessian::add`], and gives their mean,
 /// [`MeanHessian::mean_into`]. Build once per critic shape ([`Discriminator::mean_hessian`]);
@@ -46,17 +47,30 @@ pub struct MeanHessian {
     /// Wᵀ_0 (n_0 × h_1, a column of W_0 a row), V_C (|C| × h_1, a column a row).
     w0t: Vec<f64>,
     v_fixed: Vec<f64>,
-    /// Σ B_n (h_1 × h_1), Σ B_n V_{P,n} (|P| × h_1), Σ V_{P,n}ᵀ B_n V_{P,n} (|P| × |P|, upper),
-    /// Σ of the diagonal warp term (d).
+    /// Σ B_n (h_1 × h_1), Σ B_n V_{P,n} (h_1 × |P|), Σ V_{P,n}ᵀ B_n V_{P,n} (|P| × |P|),
+    /// Σ of the diagonal warp term (d). The matrices here are column-major (B is symmetric).
     b_sum: Vec<f64>,
     bv_sum: Vec<f64>,
     pp_sum: Vec<f64>,
     diag_sum: Vec<f64>,
-    /// One point's B, V_P and B V_P; one column of (Σ B) V_C.
+    /// One point's B, V_P (h_1 × |P|) and B V_P; at the mean, (Σ B) V_C (h_1 × |C|), its
+    /// product with V_Cᵀ (|C| × |C|) and (Σ B V_P)ᵀ V_C (|P| × |C|).
     b: Vec<f64>,
     v: Vec<f64>,
     bv: Vec<f64>,
     t: Vec<f64>,
+    cc: Vec<f64>,
+    pc: Vec<f64>,
+}
+
+/// The column-major `rows × cols` matrix in `v`.
+fn mat(v: &[f64], rows: usize, cols: usize) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(&v[..rows * cols], rows, cols)
+}
+
+/// [`mat`], writable.
+fn mat_mut(v: &mut [f64], rows: usize, cols: usize) -> MatMut<'_, f64> {
+    MatMut::from_column_major_slice_mut(&mut v[..rows * cols], rows, cols)
 }
 
 impl Discriminator {
@@ -103,7 +117,9 @@ impl Discriminator {
             b: vec![0.0; big(h1 * h1)],
             v: vec![0.0; big(np * h1)],
             bv: vec![0.0; big(np * h1)],
-            t: vec![0.0; big(h1)],
+            t: vec![0.0; big(h1 * nc)],
+            cc: vec![0.0; big(nc * nc)],
+            pc: vec![0.0; big(np * nc)],
         }
     }
 
@@ -140,18 +156,23 @@ impl Discriminator {
                 axpy(1.0 / s[c], &acc.w0t[c * h1..(c + 1) * h1], col);
             }
             acc.diag_sum[p] += ws.mlp.grad_u[p] / s[p] * g2;
-            let bv = &mut acc.bv[i * h1..(i + 1) * h1];
-            for (r, out) in bv.iter_mut().enumerate() {
-                *out = dot(&acc.b[r * h1..(r + 1) * h1], col);
-            }
         }
         let np = acc.varying.len();
-        axpy(1.0, &acc.bv[..np * h1], &mut acc.bv_sum);
-        for i in 0..np {
-            for j in i..np {
-                acc.pp_sum[i * np + j] +=
-                    dot(&acc.v[i * h1..(i + 1) * h1], &acc.bv[j * h1..(j + 1) * h1]);
-            }
+        if np > 0 {
+            // B V_P, then Σ B V_P and Σ V_Pᵀ (B V_P).
+            let (b, v) = (mat(&acc.b, h1, h1), mat(&acc.v, h1, np));
+            matmul(
+                mat_mut(&mut acc.bv, h1, np),
+                Accum::Replace,
+                b,
+                v,
+                1.0,
+                Par::Seq,
+            );
+            axpy(1.0, &acc.bv[..np * h1], &mut acc.bv_sum);
+            let bv = mat(&acc.bv, h1, np);
+            let pp = mat_mut(&mut acc.pp_sum, np, np);
+            matmul(pp, Accum::Add, v.transpose(), bv, 1.0, Par::Seq);
         }
         y
     }
@@ -221,28 +242,56 @@ impl MeanHessian {
             self.clear();
             return;
         }
-        let (h1, np) = (self.h1, self.varying.len());
-        // mean[C, C]: (Σ B) times a column of V_C at a time, then its dot products.
+        let (h1, nc, np) = (self.h1, self.fixed.len(), self.varying.len());
+        let vc = mat(&self.v_fixed, h1, nc);
+        // mean[C, C] = V_Cᵀ (Σ B) V_C / N.
+        let b_sum = mat(&self.b_sum, h1, h1);
+        matmul(
+            mat_mut(&mut self.t, h1, nc),
+            Accum::Replace,
+            b_sum,
+            vc,
+            1.0,
+            Par::Seq,
+        );
+        let t = mat(&self.t, h1, nc);
+        matmul(
+            mat_mut(&mut self.cc, nc, nc),
+            Accum::Replace,
+            vc.transpose(),
+            t,
+            inv_n,
+            Par::Seq,
+        );
+        // mean[P, C] = (Σ B V_P)ᵀ V_C / N.
+        let bv_sum = mat(&self.bv_sum, h1, np);
+        matmul(
+            mat_mut(&mut self.pc, np, nc),
+            Accum::Replace,
+            bv_sum.transpose(),
+            vc,
+            inv_n,
+            Par::Seq,
+        );
+        let (cc, pc, pp) = (
+            mat(&self.cc, nc, nc),
+            mat(&self.pc, np, nc),
+            mat(&self.pp_sum, np, np),
+        );
+        // Each symmetric block from its upper triangle, so that the mean is symmetric bit for bit.
         for (a, &p) in self.fixed.iter().enumerate() {
-            let va = &self.v_fixed[a * h1..(a + 1) * h1];
-            for (r, t) in self.t.iter_mut().enumerate() {
-                *t = dot(&self.b_sum[r * h1..(r + 1) * h1], va);
-            }
             for (c, &q) in self.fixed.iter().enumerate().skip(a) {
-                let h = dot(&self.v_fixed[c * h1..(c + 1) * h1], &self.t) * inv_n;
-                out[(p, q)] = h;
-                out[(q, p)] = h;
+                out[(p, q)] = cc[(a, c)];
+                out[(q, p)] = cc[(a, c)];
             }
         }
         for (i, &(p, _)) in self.varying.iter().enumerate() {
-            let bv = &self.bv_sum[i * h1..(i + 1) * h1];
             for (c, &q) in self.fixed.iter().enumerate() {
-                let h = dot(bv, &self.v_fixed[c * h1..(c + 1) * h1]) * inv_n;
-                out[(p, q)] = h;
-                out[(q, p)] = h;
+                out[(p, q)] = pc[(i, c)];
+                out[(q, p)] = pc[(i, c)];
             }
             for (j, &(q, _)) in self.varying.iter().enumerate().skip(i) {
-                let h = self.pp_sum[i * np + j] * inv_n;
+                let h = pp[(i, j)] * inv_n;
                 out[(p, q)] = h;
                 out[(q, p)] = h;
             }
