@@ -11,6 +11,11 @@ use crate::math::{
     SimdAngVector, Vector,
 };
 use crate::prelude::MultibodyJoint;
+
+// hil-sim patch (vendor/rapier3d/PATCHED.md): the mass matrices without heap work.
+#[cfg(feature = "dim3")]
+#[path = "multibody_mass_exact.rs"]
+mod mass_exact;
 #[cfg(feature = "dim3")]
 use crate::utils::mat_to_na;
 use crate::utils::{AngularInertiaOps, CrossProduct, CrossProductMatrix, IndexMut2, vect_to_na};
@@ -821,6 +826,21 @@ impl Multibody {
             return; // Nothing to do.
         }
 
+        // hil-sim patch (vendor/rapier3d/PATCHED.md): the same matrices, bit for bit, without
+        // the heap work and the products with structural zeros; the code below otherwise.
+        #[cfg(feature = "dim3")]
+        if self.update_mass_matrix_exact(dt, bodies) {
+            self.finish_mass_matrices(dt);
+            return;
+        }
+        self.update_mass_matrix_reference(dt, bodies);
+        self.finish_mass_matrices(dt);
+    }
+
+    /// The body of upstream's `update_mass_matrix` up to the damping and armature terms
+    /// (hil-sim patch: split so that [`Self::update_mass_matrix_exact`] can fall back to it).
+    fn update_mass_matrix_reference(&mut self, dt: Real, bodies: &RigidBodySet) {
+
         if self.augmented_mass.ncols() != self.ndofs {
             // TODO: do a resize instead of a full reallocation.
             self.augmented_mass = DMatrix::zeros(self.ndofs, self.ndofs);
@@ -1020,7 +1040,11 @@ impl Multibody {
             self.acc_augmented_mass
                 .gemm_tr(1.0, rb_j, &self.i_coriolis_dt, 1.0);
         }
+    }
 
+    /// The tail of upstream's `update_mass_matrix`: damping, armature and spring terms, the
+    /// kinematic-dof rearrangement and the LU factorisations (hil-sim patch: split out).
+    fn finish_mass_matrices(&mut self, dt: Real) {
         /*
          * Damping and armature.
          *
