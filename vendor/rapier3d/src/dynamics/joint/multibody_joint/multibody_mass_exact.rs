@@ -54,14 +54,24 @@ fn gemm3(y: &mut [Real], ys: usize, alpha: Real, a: &Mat3, x: &[Real], xs: usize
     }
 }
 
+/// Bit 31 set when a value of `s` is not finite (exponent all ones): OR-reduced over the
+/// slice with integer operations only, so that the check vectorises.
 #[inline(always)]
-fn finite_mat3(m: &Mat3) -> bool {
-    m.iter().all(|v| v.is_finite())
+fn nonfinite(s: &[Real]) -> u32 {
+    s.iter().fold(0, |acc, v| {
+        acc | (v.to_bits() & 0x7f80_0000).wrapping_add(0x0080_0000)
+    })
+}
+
+/// The columns of a column-major matrix with six rows.
+#[inline(always)]
+fn cols6(m: &[Real]) -> &[[Real; 6]] {
+    m.as_chunks::<6>().0
 }
 
 #[inline(always)]
-fn finite_slice(s: &[Real]) -> bool {
-    s.iter().fold(true, |ok, v| ok & v.is_finite())
+fn nonfinite3(v: crate::math::Vector) -> u32 {
+    nonfinite(&[v.x, v.y, v.z])
 }
 
 impl Multibody {
@@ -85,7 +95,8 @@ impl Multibody {
             self.i_coriolis_dt = crate::math::Jacobian::zeros(n);
         }
 
-        let mut ok = dt.is_finite();
+        // Bit 31: a value the skipped products rely on is not finite.
+        let mut bad = nonfinite(&[dt]);
         let mut curr_assembly_id = 0;
         // M·J columns of the current link: without and with the gyroscopic term.
         let mut w0 = [0.0 as Real; SPATIAL_DIM];
@@ -120,7 +131,7 @@ impl Multibody {
             augmented_inertia += gyroscopic_matrix * dt;
             let m0 = super::concat_rb_mass_matrix(rb_mass, rb_inertia.into());
             let m1 = super::concat_rb_mass_matrix(rb_mass, augmented_inertia.into());
-            ok &= m0.iter().chain(m1.iter()).all(|v| v.is_finite());
+            bad |= nonfinite(m0.as_slice()) | nonfinite(m1.as_slice());
 
             // Columns beyond the last ancestor dof are +0 in every matrix of this link.
             let active = link.assembly_id + link_ndofs;
@@ -129,13 +140,13 @@ impl Multibody {
              * Coriolis matrices (upstream's order of operations, active columns only).
              */
             let rb_j = self.body_jacobians[i].as_slice();
-            ok &= finite_slice(&rb_j[..SPATIAL_DIM * active]);
+            bad |= nonfinite(&rb_j[..SPATIAL_DIM * active]);
             let angvel_cross = SimdAngVector::<Real>::from(rb.vels.angvel).gcross_matrix();
-            ok &= rb.vels.angvel.is_finite()
-                && link.shift02.is_finite()
-                && link.shift23.is_finite()
-                && link.joint_velocity.linvel.is_finite()
-                && link.joint_velocity.angvel.is_finite();
+            bad |= nonfinite3(rb.vels.angvel)
+                | nonfinite3(link.shift02)
+                | nonfinite3(link.shift23)
+                | nonfinite3(link.joint_velocity.linvel)
+                | nonfinite3(link.joint_velocity.angvel);
 
             if i != 0 {
                 let parent_id = link.parent_internal_id;
@@ -154,12 +165,12 @@ impl Multibody {
                 let linvel_cross = vect_to_na(link.joint_velocity.linvel).gcross_matrix_tr();
                 let parent_w_shift = parent_w * shift_cross_tr;
                 let vel_wrt_joint_w = vect_to_na(link.joint_velocity.angvel).gcross_matrix();
-                ok &= finite_mat3(&parent_w)
-                    && finite_mat3(&shift_cross_tr)
-                    && finite_mat3(&dvel_cross)
-                    && finite_mat3(&linvel_cross)
-                    && finite_mat3(&parent_w_shift)
-                    && finite_mat3(&vel_wrt_joint_w);
+                bad |= nonfinite(parent_w.as_slice())
+                    | nonfinite(shift_cross_tr.as_slice())
+                    | nonfinite(dvel_cross.as_slice())
+                    | nonfinite(linvel_cross.as_slice())
+                    | nonfinite(parent_w_shift.as_slice())
+                    | nonfinite(vel_wrt_joint_w.as_slice());
 
                 let (coriolis_v, parent_coriolis_v) = self.coriolis_v.index_mut2(i, parent_id);
                 let (coriolis_w, parent_coriolis_w) = self.coriolis_w.index_mut2(i, parent_id);
@@ -184,7 +195,7 @@ impl Multibody {
                         &mut rb_joint_j,
                     );
                     let jj = tmp1.as_slice();
-                    ok &= finite_slice(&jj[..SPATIAL_DIM * link_ndofs]);
+                    bad |= nonfinite(&jj[..SPATIAL_DIM * link_ndofs]);
                     let own = 3 * link.assembly_id;
                     gemm3(&mut cv[own..], 3, 2.0, &parent_w, jj, 6, link_ndofs);
                     gemm3(&mut cw[own..], 3, 1.0, &parent_w, &jj[DIM..], 6, link_ndofs);
@@ -197,9 +208,9 @@ impl Multibody {
             let shift_cross_tr = vect_to_na(link.shift23).gcross_matrix_tr();
             let dvel_cross = vect_to_na(rb.vels.angvel.gcross(link.shift23)).gcross_matrix_tr();
             let angvel_shift = angvel_cross * shift_cross_tr;
-            ok &= finite_mat3(&shift_cross_tr)
-                && finite_mat3(&dvel_cross)
-                && finite_mat3(&angvel_shift);
+            bad |= nonfinite(shift_cross_tr.as_slice())
+                | nonfinite(dvel_cross.as_slice())
+                | nonfinite(angvel_shift.as_slice());
             {
                 let cv = self.coriolis_v[i].as_mut_slice();
                 let cw = self.coriolis_w[i].as_slice();
@@ -215,7 +226,7 @@ impl Multibody {
             let rb_mass_dt = vect_to_na(rb_mass * dt);
             let inertia = crate::utils::mat_to_na(rb_inertia);
             let dt_inertia = inertia * dt; // only checked: the products below form dt·I_rj
-            ok &= rb_mass_dt.iter().all(|v| v.is_finite()) && finite_mat3(&dt_inertia);
+            bad |= nonfinite(rb_mass_dt.as_slice()) | nonfinite(dt_inertia.as_slice());
             {
                 let cv = self.coriolis_v[i].as_slice();
                 let cw = self.coriolis_w[i].as_slice();
@@ -243,24 +254,25 @@ impl Multibody {
             let icd = self.i_coriolis_dt.as_slice();
             let am = self.augmented_mass.as_mut_slice();
             let acc = self.acc_augmented_mass.as_mut_slice();
+            let (rb_j6, icd6) = (cols6(rb_j), cols6(icd));
             for j in 0..active {
-                let jj = &rb_j[6 * j..6 * j + 6];
+                let jj = &rb_j6[j];
                 // `gemv` of the block-diagonal mass: the zero blocks' products dropped (2.).
                 for r in 0..3 {
                     w0[r] = m0[(r, r)] * jj[r];
-                    w1[r] = w0[r];
                 }
                 for r in 3..6 {
                     w0[r] = (m0[(r, 3)] * jj[3] + m0[(r, 4)] * jj[4]) + m0[(r, 5)] * jj[5];
                     w1[r] = (m1[(r, 3)] * jj[3] + m1[(r, 4)] * jj[4]) + m1[(r, 5)] * jj[5];
                 }
-                let icd_j = &icd[6 * j..6 * j + 6];
-                for k in 0..active {
-                    let jk = &rb_j[6 * k..6 * k + 6];
+                let icd_j = &icd6[j];
+                let am_j = &mut am[j * n..j * n + active];
+                let acc_j = &mut acc[j * n..j * n + active];
+                for ((jk, am_e), acc_e) in rb_j6[..active].iter().zip(am_j).zip(acc_j) {
                     let mut lin: Real = 0.0;
-                    for r in 0..3 {
-                        lin += jk[r] * w0[r];
-                    }
+                    lin += jk[0] * w0[0];
+                    lin += jk[1] * w0[1];
+                    lin += jk[2] * w0[2];
                     let (mut d0, mut d1) = (lin, lin);
                     for r in 3..6 {
                         d0 += jk[r] * w0[r];
@@ -270,15 +282,15 @@ impl Multibody {
                     for r in 0..6 {
                         d2 += jk[r] * icd_j[r];
                     }
-                    let e = k + j * n;
-                    am[e] = d0 + am[e];
-                    acc[e] = d1 + acc[e];
-                    acc[e] = d2 + acc[e];
+                    *am_e = d0 + *am_e;
+                    *acc_e = d1 + *acc_e;
+                    *acc_e = d2 + *acc_e;
                 }
             }
         }
 
-        ok && finite_slice(self.augmented_mass.as_slice())
-            && finite_slice(self.acc_augmented_mass.as_slice())
+        bad |= nonfinite(self.augmented_mass.as_slice())
+            | nonfinite(self.acc_augmented_mass.as_slice());
+        bad & 0x8000_0000 == 0
     }
 }
