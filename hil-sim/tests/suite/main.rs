@@ -8,4 +8,5 @@ mod models;
 mod servoj;
 mod sim;
 mod six;
+mod step_bits;
 mod ur_sim;

@@ -11,6 +11,11 @@ use crate::math::{
     SimdAngVector, Vector,
 };
 use crate::prelude::MultibodyJoint;
+
+// hil-sim patch (vendor/rapier3d/PATCHED.md): the mass matrices without heap work.
+#[cfg(feature = "dim3")]
+#[path = "multibody_mass_exact.rs"]
+mod mass_exact;
 #[cfg(feature = "dim3")]
 use crate::utils::mat_to_na;
 use crate::utils::{AngularInertiaOps, CrossProduct, CrossProductMatrix, IndexMut2, vect_to_na};
@@ -134,6 +139,9 @@ pub struct Multibody {
     coriolis_v: Vec<OMatrix<Real, Dim, Dyn>>,
     coriolis_w: Vec<OMatrix<Real, AngDim, Dyn>>,
     i_coriolis_dt: Jacobian<Real>,
+    /// hil-sim patch: every body Jacobian column beyond its link's last ancestor dof is `+0`
+    /// (true when the last `update_body_jacobians` saw only finite shifts).
+    jacobian_tails_zero: bool,
 }
 impl Default for Multibody {
     fn default() -> Self {
@@ -167,6 +175,7 @@ impl Multibody {
             coriolis_v: Vec::new(),
             coriolis_w: Vec::new(),
             i_coriolis_dt: Jacobian::zeros(0),
+            jacobian_tails_zero: false,
             root_is_dynamic: false,
             self_contacts_enabled,
             couplings: Vec::new(),
@@ -599,18 +608,31 @@ impl Multibody {
                 rb.forces.force - rb_mass * acc.linvel,
                 rb.forces.torque - gyroscopic - rb_inertia * acc.angvel,
             );
-            self.accelerations.gemv_tr(
+            // hil-sim patch: `Jᵀ·f` over the columns that can be nonzero. Beyond them the
+            // column is +0, its dot with a finite `f` is +0, and adding +0 to an entry that
+            // started at +0 and was only ever added to changes no bit.
+            let cols = |f: &Force| {
+                let finite = f.as_vector().iter().all(|v| v.is_finite());
+                if self.jacobian_tails_zero && finite {
+                    link.assembly_id + link.joint.ndofs()
+                } else {
+                    self.ndofs
+                }
+            };
+            let active = cols(&external_forces);
+            self.accelerations.rows_mut(0, active).gemv_tr(
                 1.0,
-                &self.body_jacobians[i],
+                &self.body_jacobians[i].columns(0, active),
                 external_forces.as_vector(),
                 1.0,
             );
 
             if check_implicit_coriolis_divergence {
                 let applied_forces = Force::new(rb.forces.force, rb.forces.torque);
-                pos_forces.gemv_tr(
+                let active = cols(&applied_forces);
+                pos_forces.rows_mut(0, active).gemv_tr(
                     1.0,
-                    &self.body_jacobians[i],
+                    &self.body_jacobians[i].columns(0, active),
                     applied_forces.as_vector(),
                     1.0,
                 );
@@ -766,8 +788,14 @@ impl Multibody {
     }
 
     fn update_body_jacobians(&mut self) {
+        // hil-sim patch: the shift products over the columns that can be nonzero while every
+        // shift so far is finite (beyond them every column is +0 and `+0 + s·(+0)` is +0);
+        // over all columns, as upstream, once one is not.
+        self.jacobian_tails_zero = true;
         for i in 0..self.links.len() {
             let link = &self.links[i];
+            self.jacobian_tails_zero &= link.shift02.is_finite() && link.shift23.is_finite();
+            let tails_zero = self.jacobian_tails_zero;
 
             if self.body_jacobians[i].ncols() != self.ndofs {
                 // TODO: use a resize instead.
@@ -785,8 +813,15 @@ impl Multibody {
                 link_j.copy_from(parent_j);
 
                 {
-                    let mut link_j_v = link_j.fixed_rows_mut::<DIM>(0);
-                    let parent_j_w = parent_j.fixed_rows::<ANG_DIM>(DIM);
+                    let cols = if tails_zero {
+                        parent_link.assembly_id + parent_link.joint.ndofs()
+                    } else {
+                        self.ndofs
+                    };
+                    let mut link_j_v = link_j.columns_mut(0, cols);
+                    let mut link_j_v = link_j_v.fixed_rows_mut::<DIM>(0);
+                    let parent_j_w = parent_j.columns(0, cols);
+                    let parent_j_w = parent_j_w.fixed_rows::<ANG_DIM>(DIM);
 
                     let shift_tr = vect_to_na(link.shift02).gcross_matrix_tr();
                     link_j_v.gemm(1.0, &shift_tr, &parent_j_w, 1.0);
@@ -807,7 +842,12 @@ impl Multibody {
             link_j_part += link_joint_j;
 
             {
-                let link_j = &mut self.body_jacobians[i];
+                let cols = if tails_zero {
+                    link.assembly_id + ndofs
+                } else {
+                    self.ndofs
+                };
+                let mut link_j = self.body_jacobians[i].columns_mut(0, cols);
                 let (mut link_j_v, link_j_w) =
                     link_j.rows_range_pair_mut(0..DIM, DIM..DIM + ANG_DIM);
                 let shift_tr = vect_to_na(link.shift23).gcross_matrix_tr();
@@ -820,6 +860,21 @@ impl Multibody {
         if self.ndofs == 0 {
             return; // Nothing to do.
         }
+
+        // hil-sim patch (vendor/rapier3d/PATCHED.md): the same matrices, bit for bit, without
+        // the heap work and the products with structural zeros; the code below otherwise.
+        #[cfg(feature = "dim3")]
+        if self.update_mass_matrix_exact(dt, bodies) {
+            self.finish_mass_matrices(dt);
+            return;
+        }
+        self.update_mass_matrix_reference(dt, bodies);
+        self.finish_mass_matrices(dt);
+    }
+
+    /// The body of upstream's `update_mass_matrix` up to the damping and armature terms
+    /// (hil-sim patch: split so that [`Self::update_mass_matrix_exact`] can fall back to it).
+    fn update_mass_matrix_reference(&mut self, dt: Real, bodies: &RigidBodySet) {
 
         if self.augmented_mass.ncols() != self.ndofs {
             // TODO: do a resize instead of a full reallocation.
@@ -1020,7 +1075,11 @@ impl Multibody {
             self.acc_augmented_mass
                 .gemm_tr(1.0, rb_j, &self.i_coriolis_dt, 1.0);
         }
+    }
 
+    /// The tail of upstream's `update_mass_matrix`: damping, armature and spring terms, the
+    /// kinematic-dof rearrangement and the LU factorisations (hil-sim patch: split out).
+    fn finish_mass_matrices(&mut self, dt: Real) {
         /*
          * Damping and armature.
          *
@@ -1072,16 +1131,17 @@ impl Multibody {
             .rearrange_rows(&mut self.augmented_mass, true);
 
         // TODO: avoid allocation inside LU at each timestep.
-        self.acc_inv_augmented_mass = LU::new(
-            self.acc_augmented_mass
-                .view((0, 0), (effective_dim, effective_dim))
-                .into_owned(),
-        );
-        self.inv_augmented_mass = LU::new(
-            self.augmented_mass
-                .view((0, 0), (effective_dim, effective_dim))
-                .into_owned(),
-        );
+        // hil-sim patch: a plain copy when no dof is removed (the same matrix, without
+        // `into_owned`'s element-wise iteration).
+        let leading = |m: &DMatrix<Real>| {
+            if effective_dim == m.nrows() {
+                m.clone()
+            } else {
+                m.view((0, 0), (effective_dim, effective_dim)).into_owned()
+            }
+        };
+        self.acc_inv_augmented_mass = LU::new(leading(&self.acc_augmented_mass));
+        self.inv_augmented_mass = LU::new(leading(&self.augmented_mass));
     }
 
     /// Per-DoF inverse joint-space inertia `diag(M⁻¹)` at the current configuration, where `M`
