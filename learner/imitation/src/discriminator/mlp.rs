@@ -221,41 +221,9 @@ impl Mlp {
     pub(crate) fn input_hessian(&self, ws: &mut MlpWorkspace, hess: &mut [f64]) {
         let n0 = self.sizes[0];
         hess.fill(0.0);
-        let l = self.layers();
         // J_0 = W_0.
         ws.jac_a[..self.sizes[1] * n0].copy_from_slice(self.w(0));
-        for k in 0..l - 1 {
-            let n = self.sizes[k + 1];
-            let r = self.hidden(k);
-            if k > 0 {
-                // J_k = W_k diag(s'_{k−1}) J_{k−1}; J_{k−1} (in jac_a) has had its rows scaled.
-                let n_in = self.sizes[k];
-                let w = self.w(k);
-                let (prev, cur) = (&ws.jac_a[..n_in * n0], &mut ws.jac_b[..n * n0]);
-                for i in 0..n {
-                    let row = &mut cur[i * n0..(i + 1) * n0];
-                    mat_t_vec(prev, n_in, n0, &w[i * n_in..(i + 1) * n_in], row);
-                }
-                std::mem::swap(&mut ws.jac_a, &mut ws.jac_b);
-            }
-            let jac = &mut ws.jac_a[..n * n0];
-            for (i, (&g, &z)) in ws.g[r.clone()].iter().zip(&ws.z[r]).enumerate() {
-                let sp = 1.0 - z * z;
-                let c = g * (-2.0 * z * sp);
-                let row = &mut jac[i * n0..(i + 1) * n0];
-                // Upper triangle of c · row rowᵀ.
-                sym_outer_acc_upper(c, row, &mut hess[..n0 * n0]);
-                // Scale the row by s'_k for the next layer's Jacobian.
-                for v in row.iter_mut() {
-                    *v *= sp;
-                }
-            }
-        }
-        for p in 0..n0 {
-            for q in 0..p {
-                hess[p * n0 + q] = hess[q * n0 + p];
-            }
-        }
+        self.add_curvature_from(0, n0, ws, &mut hess[..n0 * n0]);
     }
 
     /// `∇²_{a_0} y` into `b` (row-major `h_1 × h_1`, fully written, symmetric) after
@@ -271,48 +239,65 @@ impl Mlp {
         let h1 = self.sizes[1];
         let b = &mut b[..h1 * h1];
         b.fill(0.0);
-        let l = self.layers();
         let r0 = self.hidden(0);
         for (i, (&g, &z)) in ws.g[r0.clone()].iter().zip(&ws.z[r0.clone()]).enumerate() {
             b[i * h1 + i] = g * (-2.0 * z * (1.0 - z * z));
         }
-        for k in 1..l - 1 {
-            let n = self.sizes[k + 1];
-            let n_in = self.sizes[k];
-            let w = self.w(k);
-            if k == 1 {
-                // G_1 = W_1 diag(s'_0).
-                let z0 = &ws.z[r0.clone()];
-                for i in 0..n {
-                    let row = &mut ws.jac_a[i * h1..(i + 1) * h1];
-                    for ((v, &wij), &z) in row.iter_mut().zip(&w[i * n_in..(i + 1) * n_in]).zip(z0)
-                    {
-                        *v = wij * (1.0 - z * z);
-                    }
+        if self.layers() > 2 {
+            // G_1 = W_1 diag(s'_0).
+            let (n, w, z0) = (self.sizes[2], self.w(1), &ws.z[r0]);
+            for i in 0..n {
+                let row = &mut ws.jac_a[i * h1..(i + 1) * h1];
+                for ((v, &wij), &z) in row.iter_mut().zip(&w[i * h1..(i + 1) * h1]).zip(z0) {
+                    *v = wij * (1.0 - z * z);
                 }
-            } else {
-                // G_k = W_k diag(s'_{k−1}) G_{k−1}; G_{k−1} (in jac_a) has had its rows scaled.
-                let (prev, cur) = (&ws.jac_a[..n_in * h1], &mut ws.jac_b[..n * h1]);
+            }
+            self.add_curvature_from(1, h1, ws, b);
+        }
+    }
+
+    /// The curvature of hidden layers `start..`, `Σ_k J_kᵀ diag(g_k ⊙ s''_k) J_k`, added into
+    /// `hess` (row-major `cols × cols`, then mirrored from its upper triangle), with
+    /// `J_start` (`n_{start+1} × cols`, row-major) in `ws.jac_a` and
+    /// `J_k = W_k diag(s'_{k−1}) J_{k−1}` after it: the recursion of [`Self::input_hessian`]
+    /// (from `J_0 = W_0`) and of [`Self::first_layer_hessian`] (from `G_1`).
+    fn add_curvature_from(
+        &self,
+        start: usize,
+        cols: usize,
+        ws: &mut MlpWorkspace,
+        hess: &mut [f64],
+    ) {
+        for k in start..self.layers() - 1 {
+            let n = self.sizes[k + 1];
+            if k > start {
+                // J_k = W_k diag(s'_{k−1}) J_{k−1}; J_{k−1} (in jac_a) has had its rows scaled.
+                let n_in = self.sizes[k];
+                let w = self.w(k);
+                let (prev, cur) = (&ws.jac_a[..n_in * cols], &mut ws.jac_b[..n * cols]);
                 for i in 0..n {
-                    let row = &mut cur[i * h1..(i + 1) * h1];
-                    mat_t_vec(prev, n_in, h1, &w[i * n_in..(i + 1) * n_in], row);
+                    let row = &mut cur[i * cols..(i + 1) * cols];
+                    mat_t_vec(prev, n_in, cols, &w[i * n_in..(i + 1) * n_in], row);
                 }
                 std::mem::swap(&mut ws.jac_a, &mut ws.jac_b);
             }
             let r = self.hidden(k);
-            let jac = &mut ws.jac_a[..n * h1];
+            let jac = &mut ws.jac_a[..n * cols];
             for (i, (&g, &z)) in ws.g[r.clone()].iter().zip(&ws.z[r]).enumerate() {
                 let sp = 1.0 - z * z;
-                let row = &mut jac[i * h1..(i + 1) * h1];
-                sym_outer_acc_upper(g * (-2.0 * z * sp), row, b);
+                let c = g * (-2.0 * z * sp);
+                let row = &mut jac[i * cols..(i + 1) * cols];
+                // Upper triangle of c · row rowᵀ.
+                sym_outer_acc_upper(c, row, &mut hess[..cols * cols]);
+                // Scale the row by s'_k for the next layer's Jacobian.
                 for v in row.iter_mut() {
                     *v *= sp;
                 }
             }
         }
-        for p in 0..h1 {
+        for p in 0..cols {
             for q in 0..p {
-                b[p * h1 + q] = b[q * h1 + p];
+                hess[p * cols + q] = hess[q * cols + p];
             }
         }
     }
