@@ -23,6 +23,8 @@ use crate::model::ArmModel;
 use crate::servo::{joint_servo_torque, wrist_velocity_gain};
 use crate::SimError;
 
+#[cfg(test)]
+mod aba_check;
 mod state;
 
 /// Standard gravity (m/s²), along −z of the base frame.
@@ -342,6 +344,10 @@ impl Ur5Sim {
                 multibody.damping_mut()[d.dof] = cfg.perturbation.joint_damping[j] as f32;
                 multibody.frictions_mut()[d.dof] = cfg.perturbation.joint_friction[j] as f32;
             }
+            // Six joints: the free accelerations by the articulated-body algorithm (vendored
+            // rapier3d, docs/design.md §5 D46); three joints keep the mass-matrix route, bit
+            // for bit.
+            multibody.set_articulated_body_dynamics(n == MAX_JOINTS);
         }
 
         let rng = ChaCha8Rng::seed_from_u64(cfg.perturbation.seed);
@@ -677,21 +683,29 @@ impl Ur5Sim {
     /// Applies raw joint torques (N·m, not clamped; first [`Ur5Sim::joints`] entries) for one
     /// physics step.
     fn apply_torque_and_step(&mut self, tau: [f64; MAX_JOINTS]) {
-        for rb in self.world.bodies.iter_mut() {
-            rb.1.reset_torques(false);
-        }
-        for (j, d) in self.dofs.iter().enumerate().take(self.n) {
-            // A joint torque is an equal and opposite couple on child and parent (UR5.md).
-            let child = &self.world.bodies[d.child_body];
-            let axis = self.axis_world(j, child);
-            let couple = axis * tau[j] as f32;
-            self.world.bodies[d.child_body].add_torque(couple, false);
-            self.world.bodies[d.parent_body].add_torque(-couple, false);
+        self.apply_joint_torques(&tau);
+        for j in 0..self.n {
             self.last_tau[j] = tau[j];
             self.max_abs_tau[j] = self.max_abs_tau[j].max(tau[j].abs());
         }
         self.step_world();
         self.time += self.cfg.physics_dt;
+    }
+
+    /// Replaces the links' user torques by the joint torques `tau` (N·m, first
+    /// [`Ur5Sim::joints`] entries): each an equal and opposite couple about the joint's axis
+    /// on child and parent (UR5.md).
+    fn apply_joint_torques(&mut self, tau: &[f64; MAX_JOINTS]) {
+        for rb in self.world.bodies.iter_mut() {
+            rb.1.reset_torques(false);
+        }
+        for (j, d) in self.dofs.iter().enumerate().take(self.n) {
+            let child = &self.world.bodies[d.child_body];
+            let axis = self.axis_world(j, child);
+            let couple = axis * tau[j] as f32;
+            self.world.bodies[d.child_body].add_torque(couple, false);
+            self.world.bodies[d.parent_body].add_torque(-couple, false);
+        }
     }
 
     /// One physics step of the world: the multibody stepped alone by rapier's own routines

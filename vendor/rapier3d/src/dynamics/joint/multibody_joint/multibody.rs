@@ -16,6 +16,10 @@ use crate::prelude::MultibodyJoint;
 #[cfg(feature = "dim3")]
 #[path = "multibody_mass_exact.rs"]
 mod mass_exact;
+// hil-sim patch (vendor/rapier3d/PATCHED.md): the articulated-body algorithm, when selected.
+#[cfg(feature = "dim3")]
+#[path = "multibody_aba.rs"]
+mod aba;
 #[cfg(feature = "dim3")]
 use crate::utils::mat_to_na;
 use crate::utils::{AngularInertiaOps, CrossProduct, CrossProductMatrix, IndexMut2, vect_to_na};
@@ -142,6 +146,12 @@ pub struct Multibody {
     /// hil-sim patch: every body Jacobian column beyond its link's last ancestor dof is `+0`
     /// (true when the last `update_body_jacobians` saw only finite shifts).
     jacobian_tails_zero: bool,
+    /// hil-sim patch: the free accelerations by the articulated-body algorithm when it
+    /// applies (`set_articulated_body_dynamics`), and its per-link buffer.
+    articulated_body: bool,
+    #[cfg(feature = "dim3")]
+    #[cfg_attr(feature = "serde-serialize", serde(skip))]
+    aba: Vec<aba::AbaLink>,
 }
 impl Default for Multibody {
     fn default() -> Self {
@@ -176,6 +186,9 @@ impl Multibody {
             coriolis_w: Vec::new(),
             i_coriolis_dt: Jacobian::zeros(0),
             jacobian_tails_zero: false,
+            articulated_body: false,
+            #[cfg(feature = "dim3")]
+            aba: Vec::new(),
             root_is_dynamic: false,
             self_contacts_enabled,
             couplings: Vec::new(),
@@ -537,6 +550,13 @@ impl Multibody {
     pub(crate) fn update_acceleration(&mut self, dt: Real, bodies: &RigidBodySet) {
         if self.ndofs == 0 {
             return; // Nothing to do.
+        }
+
+        // hil-sim patch (vendor/rapier3d/PATCHED.md): the articulated-body algorithm.
+        #[cfg(feature = "dim3")]
+        if self.articulated_body_applies(bodies) {
+            self.update_acceleration_aba(dt, bodies);
+            return;
         }
 
         self.accelerations.fill(0.0);
@@ -1406,8 +1426,16 @@ impl Multibody {
         // The staged solver's multibody init and substeps (`init_solver_buffers_and_multibodies`,
         // the generic velocity increment, `integrate_multibody_positions`).
         let dt = params.dt / num_substeps as Real;
+        // With the articulated-body algorithm the mass matrices are not needed here (only the
+        // pipeline's constraint solver uses them); its inputs do not change within the step.
+        #[cfg(feature = "dim3")]
+        let mass_matrix = !self.articulated_body_applies(bodies);
+        #[cfg(not(feature = "dim3"))]
+        let mass_matrix = true;
         self.update_velocities(bodies);
-        self.update_mass_matrix(dt, bodies);
+        if mass_matrix {
+            self.update_mass_matrix(dt, bodies);
+        }
         self.update_acceleration(dt, bodies);
         for substep in 0..num_substeps {
             let is_last_substep = substep + 1 == num_substeps;
@@ -1419,7 +1447,9 @@ impl Multibody {
             self.update_rigid_bodies_internal(bodies, !is_last_substep, true, false);
             if !is_last_substep {
                 self.update_velocities(bodies);
-                self.update_mass_matrix(dt, bodies);
+                if mass_matrix {
+                    self.update_mass_matrix(dt, bodies);
+                }
                 self.update_acceleration(dt, bodies);
             }
         }
@@ -1434,6 +1464,32 @@ impl Multibody {
             }
         }
         true
+    }
+
+    /// **Added for hil-sim (see `vendor/rapier3d/PATCHED.md`).** The free accelerations
+    /// (generalized, rad/s² for a revolute dof) the next step of `dt` would start from, with the
+    /// current coordinates, velocities and user forces and `gravity`, by the route the
+    /// multibody is set to (`set_articulated_body_dynamics`): for checking one route against
+    /// the other. Leaves the bodies' effective forces and velocities as a step would set them;
+    /// changes no coordinate or velocity. Call `forward_kinematics` first if the coordinates
+    /// changed since the last step.
+    pub fn compute_free_accelerations(
+        &mut self,
+        bodies: &mut RigidBodySet,
+        gravity: Vector,
+        dt: Real,
+    ) -> DVectorView<'_, Real> {
+        for link in self.links.iter() {
+            let rb = bodies.index_mut_internal(link.rigid_body);
+            if rb.is_dynamic() {
+                let mass = rb.mprops.effective_mass();
+                rb.forces.compute_effective_force_and_torque(gravity, mass);
+            }
+        }
+        self.update_velocities(bodies);
+        self.update_mass_matrix(dt, bodies);
+        self.update_acceleration(dt, bodies);
+        self.accelerations.rows(0, self.ndofs)
     }
 
     /// Apply displacements, in generalized coordinates, to this multibody.
