@@ -547,7 +547,7 @@ impl Multibody {
             .extend((0..num_jacobians).map(|_| Jacobian::zeros(0)));
     }
 
-    pub(crate) fn update_acceleration(&mut self, dt: Real, bodies: &RigidBodySet) {
+    pub(crate) fn update_acceleration(&mut self, dt: Real, bodies: &mut RigidBodySet) {
         if self.ndofs == 0 {
             return; // Nothing to do.
         }
@@ -1385,7 +1385,12 @@ impl Multibody {
         if !self.velocities.iter().all(|v| v.is_finite()) {
             return false;
         }
-        for link in self.links.iter() {
+        // Whether the articulated-body algorithm applies (its checks folded into this loop).
+        #[cfg(feature = "dim3")]
+        let mut aba = self.articulated_body_root_applies(bodies);
+        #[cfg(not(feature = "dim3"))]
+        let aba = false;
+        for (i, link) in self.links.iter().enumerate() {
             let data = &link.joint.data;
             let free = !data.locked_axes.bits();
             if data.motor_axes.bits() & free != 0 {
@@ -1409,7 +1414,12 @@ impl Multibody {
                 dof += 1;
             }
             match bodies.get(link.rigid_body) {
-                Some(rb) if rb.colliders().is_empty() && rb.additional_solver_iterations() == 0 => {}
+                Some(rb) if rb.colliders().is_empty() && rb.additional_solver_iterations() == 0 => {
+                    #[cfg(feature = "dim3")]
+                    if i > 0 {
+                        aba = aba && Self::articulated_body_link_applies(i, link, rb);
+                    }
+                }
                 _ => return false,
             }
         }
@@ -1428,15 +1438,8 @@ impl Multibody {
         let dt = params.dt / num_substeps as Real;
         // With the articulated-body algorithm the mass matrices are not needed here (only the
         // pipeline's constraint solver uses them); its inputs do not change within the step.
-        #[cfg(feature = "dim3")]
-        let mass_matrix = !self.articulated_body_applies(bodies);
-        #[cfg(not(feature = "dim3"))]
-        let mass_matrix = true;
-        self.update_velocities(bodies);
-        if mass_matrix {
-            self.update_mass_matrix(dt, bodies);
-        }
-        self.update_acceleration(dt, bodies);
+        let mass_matrix = !aba;
+        self.update_velocities_mass_matrix_and_acceleration(dt, bodies, mass_matrix);
         for substep in 0..num_substeps {
             let is_last_substep = substep + 1 == num_substeps;
             for (v, a) in self.velocities.iter_mut().zip(self.accelerations.iter()) {
@@ -1446,11 +1449,7 @@ impl Multibody {
             self.forward_kinematics(bodies, false);
             self.update_rigid_bodies_internal(bodies, !is_last_substep, true, false);
             if !is_last_substep {
-                self.update_velocities(bodies);
-                if mass_matrix {
-                    self.update_mass_matrix(dt, bodies);
-                }
-                self.update_acceleration(dt, bodies);
+                self.update_velocities_mass_matrix_and_acceleration(dt, bodies, mass_matrix);
             }
         }
 
@@ -1490,6 +1489,27 @@ impl Multibody {
         self.update_mass_matrix(dt, bodies);
         self.update_acceleration(dt, bodies);
         self.accelerations.rows(0, self.ndofs)
+    }
+
+    /// `step_alone`'s link velocities, mass matrix and free accelerations: rapier's routines
+    /// when `mass_matrix`, else the articulated-body algorithm, which `update_acceleration`
+    /// would choose (`step_alone` has checked that it applies) and which sets the links'
+    /// velocities itself.
+    #[inline]
+    fn update_velocities_mass_matrix_and_acceleration(
+        &mut self,
+        dt: Real,
+        bodies: &mut RigidBodySet,
+        mass_matrix: bool,
+    ) {
+        if mass_matrix {
+            self.update_velocities(bodies);
+            self.update_mass_matrix(dt, bodies);
+            self.update_acceleration(dt, bodies);
+        } else {
+            #[cfg(feature = "dim3")]
+            self.update_acceleration_aba(dt, bodies);
+        }
     }
 
     /// Apply displacements, in generalized coordinates, to this multibody.

@@ -36,11 +36,117 @@
 //! kinematic dof, no dof coupling, isotropic link masses, links in topological order.
 //! Anything else keeps the mass-matrix route ([`Multibody::articulated_body_applies`]).
 
-use super::Multibody;
-use crate::dynamics::RigidBodySet;
+use super::{Multibody, MultibodyLink};
+use crate::dynamics::{
+    LockedAxes, RigidBody, RigidBodyMassProps, RigidBodySet, RigidBodyVelocity,
+};
 use crate::math::{Matrix, Real, SPATIAL_DIM, Vector};
 use crate::utils::AngularInertiaOps;
-use na::SMatrix;
+
+/// A symmetric 3×3 matrix: diagonal `(xx, yy, zz)` and off-diagonal `(yz, xz, xy)`.
+#[derive(Copy, Clone, Debug, Default)]
+pub(super) struct Sym3 {
+    d: Vector,
+    o: Vector,
+}
+
+impl Sym3 {
+    #[inline(always)]
+    fn mul(&self, v: Vector) -> Vector {
+        let (d, o) = (self.d, self.o);
+        Vector::new(
+            d.x * v.x + o.z * v.y + o.y * v.z,
+            o.z * v.x + d.y * v.y + o.x * v.z,
+            o.y * v.x + o.x * v.y + d.z * v.z,
+        )
+    }
+
+    /// `self − u wᵀ` for `u wᵀ` symmetric (w a multiple of u): its upper triangle.
+    #[inline(always)]
+    fn sub_outer(&self, u: Vector, w: Vector) -> Sym3 {
+        Sym3 {
+            d: self.d - u * w,
+            o: self.o - Vector::new(u.y * w.z, u.x * w.z, u.x * w.y),
+        }
+    }
+
+    #[inline(always)]
+    fn add(&self, other: &Sym3) -> Sym3 {
+        Sym3 {
+            d: self.d + other.d,
+            o: self.o + other.o,
+        }
+    }
+
+    /// The symmetric part's upper triangle of a general matrix known to be symmetric.
+    #[inline(always)]
+    fn from_matrix(m: &Matrix) -> Sym3 {
+        Sym3 {
+            d: Vector::new(m.x_axis.x, m.y_axis.y, m.z_axis.z),
+            o: Vector::new(m.z_axis.y, m.z_axis.x, m.y_axis.x),
+        }
+    }
+
+    /// `Y + Yᵀ` of a general matrix Y.
+    #[inline(always)]
+    fn twice_sym(y: &Matrix) -> Sym3 {
+        Sym3 {
+            d: 2.0 * Vector::new(y.x_axis.x, y.y_axis.y, y.z_axis.z),
+            o: Vector::new(
+                y.z_axis.y + y.y_axis.z,
+                y.z_axis.x + y.x_axis.z,
+                y.y_axis.x + y.x_axis.y,
+            ),
+        }
+    }
+
+    #[inline(always)]
+    fn col(&self, j: usize) -> Vector {
+        let (d, o) = (self.d, self.o);
+        match j {
+            0 => Vector::new(d.x, o.z, o.y),
+            1 => Vector::new(o.z, d.y, o.x),
+            _ => Vector::new(o.y, o.x, d.z),
+        }
+    }
+}
+
+/// The body's world inertia about its centre of mass (kg·m²): the inverse of its effective
+/// world inverse inertia, as `effective_angular_inertia` computes it (cofactors over the
+/// determinant), with one division; `effective_angular_inertia` itself when a rotation is
+/// locked or the matrix is singular.
+#[inline(always)]
+fn world_inertia(mprops: &RigidBodyMassProps) -> Sym3 {
+    let m = &mprops.effective_world_inv_inertia;
+    let c11 = m.m22 * m.m33 - m.m23 * m.m23;
+    let c12 = m.m12 * m.m33 - m.m13 * m.m23;
+    let c13 = m.m12 * m.m23 - m.m13 * m.m22;
+    let det = m.m11 * c11 - m.m12 * c12 + m.m13 * c13;
+    if det == 0.0 || mprops.flags.intersects(LockedAxes::ROTATION_LOCKED) {
+        return Sym3::from_matrix(&mprops.effective_angular_inertia().into_matrix());
+    }
+    let inv = 1.0 / det;
+    Sym3 {
+        d: Vector::new(
+            c11,
+            m.m11 * m.m33 - m.m13 * m.m13,
+            m.m11 * m.m22 - m.m12 * m.m12,
+        ) * inv,
+        o: Vector::new(m.m13 * m.m12 - m.m23 * m.m11, c13, -c12) * inv,
+    }
+}
+
+/// r̂ M (r̂ x = r × x): the cross product with each column of M.
+#[inline(always)]
+fn cross_cols(r: Vector, m: &Matrix) -> Matrix {
+    Matrix::from_cols(r.cross(m.x_axis), r.cross(m.y_axis), r.cross(m.z_axis))
+}
+
+/// r̂ S for a symmetric S.
+#[inline(always)]
+fn cross_cols_sym(r: Vector, s: &Sym3) -> Matrix {
+    Matrix::from_cols(r.cross(s.col(0)), r.cross(s.col(1)), r.cross(s.col(2)))
+}
 
 /// One link's spatial quantities in the three passes, about its joint anchor, world axes.
 #[derive(Copy, Clone, Debug, Default)]
@@ -56,10 +162,10 @@ pub(super) struct AbaLink {
     /// The velocity-product acceleration `v × S q̇` (rad/s², m/s²).
     c_w: Vector,
     c_v: Vector,
-    /// The articulated inertia `[[A, B], [Bᵀ, C]]` (kg·m², kg·m, kg).
-    ia: Matrix,
+    /// The articulated inertia `[[A, B], [Bᵀ, C]]` (kg·m², kg·m, kg), A and C symmetric.
+    ia: Sym3,
     ib: Matrix,
-    ic: Matrix,
+    ic: Sym3,
     /// The articulated bias force (N·m about the anchor; N).
     p_n: Vector,
     p_f: Vector,
@@ -71,22 +177,6 @@ pub(super) struct AbaLink {
     /// The link's spatial acceleration (rad/s²; m/s² of the anchor, spatial).
     a_w: Vector,
     a_v: Vector,
-}
-
-/// The cross-product matrix r̂ (r̂ x = r × x), column-major.
-#[inline(always)]
-fn skew(r: Vector) -> Matrix {
-    Matrix::from_cols(
-        Vector::new(0.0, r.z, -r.y),
-        Vector::new(-r.z, 0.0, r.x),
-        Vector::new(r.y, -r.x, 0.0),
-    )
-}
-
-/// The outer product u vᵀ.
-#[inline(always)]
-fn outer(u: Vector, v: Vector) -> Matrix {
-    Matrix::from_cols(u * v.x, u * v.y, u * v.z)
 }
 
 impl Multibody {
@@ -110,36 +200,50 @@ impl Multibody {
     /// most one free (non-kinematic) dof, there is no dof coupling, every link mass is isotropic
     /// and every parent comes before its children.
     pub fn articulated_body_applies(&self, bodies: &RigidBodySet) -> bool {
-        if !self.articulated_body || !self.couplings.is_empty() || self.root_is_dynamic {
-            return false;
-        }
-        let root = &self.links[0];
-        if root.joint.ndofs() != 0 || !bodies.get(root.rigid_body).is_some_and(|rb| rb.is_fixed())
-        {
+        if !self.articulated_body_root_applies(bodies) {
             return false;
         }
         for (i, link) in self.links.iter().enumerate().skip(1) {
-            if link.joint.ndofs() > 1 || link.joint.kinematic || link.parent_internal_id >= i {
-                return false;
-            }
             match bodies.get(link.rigid_body) {
-                Some(rb) => {
-                    let m = rb.mprops.effective_mass();
-                    if !(m.x == m.y && m.y == m.z) {
-                        return false;
-                    }
-                }
-                None => return false,
+                Some(rb) if Self::articulated_body_link_applies(i, link, rb) => {}
+                _ => return false,
             }
         }
         true
     }
 
+    /// The conditions of [`Multibody::articulated_body_applies`] on the multibody and its root.
+    #[inline]
+    pub(super) fn articulated_body_root_applies(&self, bodies: &RigidBodySet) -> bool {
+        if !self.articulated_body || !self.couplings.is_empty() || self.root_is_dynamic {
+            return false;
+        }
+        let root = &self.links[0];
+        root.joint.ndofs() == 0 && bodies.get(root.rigid_body).is_some_and(|rb| rb.is_fixed())
+    }
+
+    /// The conditions of [`Multibody::articulated_body_applies`] on link `i > 0` and its body.
+    #[inline]
+    pub(super) fn articulated_body_link_applies(
+        i: usize,
+        link: &MultibodyLink,
+        rb: &RigidBody,
+    ) -> bool {
+        let m = rb.mprops.effective_mass();
+        link.joint.ndofs() <= 1
+            && !link.joint.kinematic
+            && link.parent_internal_id < i
+            && m.x == m.y
+            && m.y == m.z
+    }
+
     /// The free accelerations into `self.accelerations` by the articulated-body algorithm
     /// (module doc); the caller has checked [`Multibody::articulated_body_applies`] and run
-    /// `update_velocities` and `forward_kinematics` for the current state. No allocation once
+    /// `forward_kinematics` for the current state. Sets every moving link's body velocity
+    /// (centre of mass, world) from the generalized velocities on the way, as
+    /// `update_velocities` does, so that `step_alone` need not run that. No allocation once
     /// the per-link buffer has the multibody's length.
-    pub(super) fn update_acceleration_aba(&mut self, dt: Real, bodies: &RigidBodySet) {
+    pub(super) fn update_acceleration_aba(&mut self, dt: Real, bodies: &mut RigidBodySet) {
         let n = self.links.len();
         if self.aba.len() != n {
             self.aba.resize(n, AbaLink::default());
@@ -160,7 +264,7 @@ impl Multibody {
         for i in 1..n {
             let link = &self.links[i];
             let parent = &self.links[link.parent_internal_id];
-            let rb = &bodies[link.rigid_body];
+            let rb = bodies.index_mut_internal(link.rigid_body);
             let (done, rest) = self.aba.split_at_mut(i);
             let lp = &done[link.parent_internal_id];
             let l = &mut rest[0];
@@ -170,16 +274,18 @@ impl Multibody {
             let v_w = lp.v_w;
             let v_v = lp.v_v + lp.v_w.cross(r);
 
+            // S as `MultibodyJoint::jacobian` gives it for one free axis: a translation along,
+            // or a rotation about, an axis of the joint frame (local_frame1 in the parent).
             let (mut s_w, mut s_v, mut qd) = (Vector::ZERO, Vector::ZERO, 0.0);
-            if link.joint.ndofs() == 1 {
-                let mut tmp = SMatrix::<Real, SPATIAL_DIM, 1>::zeros();
-                let mut j = tmp.columns_mut(0, 1);
-                link.joint.jacobian(
-                    &(parent.local_to_world.rotation * link.joint.data.local_frame1.rotation),
-                    &mut j,
-                );
-                s_v = Vector::new(tmp[0], tmp[1], tmp[2]);
-                s_w = Vector::new(tmp[3], tmp[4], tmp[5]);
+            let free = !link.joint.data.locked_axes.bits() & ((1 << SPATIAL_DIM) - 1);
+            if free != 0 {
+                let axis = free.trailing_zeros() as usize;
+                let rot = parent.local_to_world.rotation * link.joint.data.local_frame1.rotation;
+                if axis < 3 {
+                    s_v = rot * Vector::AXES[axis];
+                } else {
+                    s_w = rot * Vector::AXES[axis - 3];
+                }
                 qd = self.velocities[link.assembly_id];
             }
             let (m_w, m_v) = (s_w * qd, s_v * qd);
@@ -189,23 +295,43 @@ impl Multibody {
             l.c_v = v_w.cross(m_v) + v_v.cross(m_w);
             l.v_w = v_w + m_w;
             l.v_v = v_v + m_v;
-
-            // The rigid-body inertia about the anchor: the centre of mass is at `shift23`.
-            let mass = rb.mprops.effective_mass().x;
             let rc = link.shift23;
-            let rx = skew(rc);
-            let b = rx * mass;
-            l.ia = rb.mprops.effective_angular_inertia().into_matrix() - b * rx;
-            l.ib = b;
-            l.ic = Matrix::from_diagonal(Vector::splat(mass));
 
-            // Bias force v ×* (I v) minus the applied force (at the centre of mass) and torque.
-            let h_n = l.ia * l.v_w + l.ib * l.v_v;
-            let h_f = l.ib.transpose() * l.v_w + l.v_v * mass;
+            // The rigid-body inertia about the anchor, the centre of mass at `shift23 = rc`:
+            // A = I_c + m (|rc|² 1 − rc rcᵀ), B = m r̂c, C = m 1.
+            let mass = rb.mprops.effective_mass().x;
+            let ic = world_inertia(&rb.mprops);
+            let mrc = rc * mass;
+            let rr = rc.dot(mrc);
+            l.ia = Sym3 {
+                d: ic.d + Vector::splat(rr) - rc * mrc,
+                o: ic.o - Vector::new(rc.y * mrc.z, rc.x * mrc.z, rc.x * mrc.y),
+            };
+            l.ib = Matrix::from_cols(
+                Vector::new(0.0, mrc.z, -mrc.y),
+                Vector::new(-mrc.z, 0.0, mrc.x),
+                Vector::new(mrc.y, -mrc.x, 0.0),
+            );
+            l.ic = Sym3 {
+                d: Vector::splat(mass),
+                o: Vector::ZERO,
+            };
+
+            // Bias force v ×* (I v) minus the applied force (at the centre of mass) and torque:
+            // I v = (A ω + m rc × v, m (v − rc × ω)).
+            let h_n = l.ia.mul(l.v_w) + mrc.cross(l.v_v);
+            let h_f = l.v_v * mass - mrc.cross(l.v_w);
             let f = rb.forces.force;
             let moment = rb.forces.torque + rc.cross(f);
             l.p_n = l.v_w.cross(h_n) + l.v_v.cross(h_f) - moment;
             l.p_f = l.v_w.cross(h_f) - f;
+
+            // The body's velocity, as `update_velocities` would set it (the centre of mass's).
+            let vels = RigidBodyVelocity {
+                linvel: l.v_v + l.v_w.cross(rc),
+                angvel: l.v_w,
+            };
+            rb.vels = vels;
         }
 
         // Pass 2, tips to root: articulated inertias and bias forces.
@@ -218,26 +344,35 @@ impl Multibody {
 
             if link.joint.ndofs() == 1 {
                 let dof = link.assembly_id;
-                l.u_n = l.ia * l.s_w + l.ib * l.s_v;
-                l.u_f = l.ib.transpose() * l.s_w + l.ic * l.s_v;
-                l.d = l.s_w.dot(l.u_n) + l.s_v.dot(l.u_f) + diag;
-                l.u = tau
-                    - self.damping[dof] * self.velocities[dof]
-                    - (l.s_w.dot(l.p_n) + l.s_v.dot(l.p_f));
+                let ibt = l.ib.transpose();
+                let tau = tau - self.damping[dof] * self.velocities[dof];
+                if l.s_v == Vector::ZERO {
+                    // A revolute joint: S = (s_w, 0).
+                    l.u_n = l.ia.mul(l.s_w);
+                    l.u_f = ibt * l.s_w;
+                    l.d = l.s_w.dot(l.u_n) + diag;
+                    l.u = tau - l.s_w.dot(l.p_n);
+                } else {
+                    l.u_n = l.ia.mul(l.s_w) + l.ib * l.s_v;
+                    l.u_f = ibt * l.s_w + l.ic.mul(l.s_v);
+                    l.d = l.s_w.dot(l.u_n) + l.s_v.dot(l.u_f) + diag;
+                    l.u = tau - (l.s_w.dot(l.p_n) + l.s_v.dot(l.p_f));
+                }
                 if pid != 0 {
                     // I^a = I^A − U Uᵀ / D; p^a = p^A + I^a c + U u / D.
                     let inv_d = 1.0 / l.d;
                     let (un_d, uf_d) = (l.u_n * inv_d, l.u_f * inv_d);
-                    let ia = l.ia - outer(un_d, l.u_n);
-                    let ib = l.ib - outer(un_d, l.u_f);
-                    let ic = l.ic - outer(uf_d, l.u_f);
-                    let p_n = l.p_n + ia * l.c_w + ib * l.c_v + un_d * l.u;
-                    let p_f = l.p_f + ib.transpose() * l.c_w + ic * l.c_v + uf_d * l.u;
-                    Self::aba_add_to_parent(&mut done[pid], l.anchor, ia, ib, ic, p_n, p_f);
+                    let ia = l.ia.sub_outer(l.u_n, un_d);
+                    let ib = l.ib - Matrix::from_cols(un_d * l.u_f.x, un_d * l.u_f.y, un_d * l.u_f.z);
+                    let ic = l.ic.sub_outer(l.u_f, uf_d);
+                    let p_n = l.p_n + ia.mul(l.c_w) + ib * l.c_v + un_d * l.u;
+                    let p_f = l.p_f + ib.transpose() * l.c_w + ic.mul(l.c_v) + uf_d * l.u;
+                    Self::aba_add_to_parent(&mut done[pid], l.anchor, &ia, &ib, &ic, p_n, p_f);
                 }
             } else if pid != 0 {
                 // A fixed joint: no dof, no velocity product (c = 0): I^a = I^A, p^a = p^A.
-                Self::aba_add_to_parent(&mut done[pid], l.anchor, l.ia, l.ib, l.ic, l.p_n, l.p_f);
+                let (ia, ib, ic) = (l.ia, l.ib, l.ic);
+                Self::aba_add_to_parent(&mut done[pid], l.anchor, &ia, &ib, &ic, l.p_n, l.p_f);
             }
         }
 
@@ -273,37 +408,41 @@ impl Multibody {
         let mut diag = self.damping[dof] * dt + self.armature[dof];
         let mut force = 0.0;
         let free = !link.joint.data.locked_axes.bits() & ((1 << SPATIAL_DIM) - 1);
-        if free != 0 {
-            let axis = free.trailing_zeros() as usize;
-            let k = link.joint.spring_stiffness[axis];
-            if k != 0.0 {
-                let q = link.joint.coords[axis];
-                let rest = link.joint.spring_ref[axis];
-                force = -k * (q - rest) - k * dt * self.velocities[dof];
-                diag += k * (dt * dt);
-            }
+        let axis = free.trailing_zeros() as usize;
+        let k = link.joint.spring_stiffness[axis];
+        if k != 0.0 {
+            let q = link.joint.coords[axis];
+            let rest = link.joint.spring_ref[axis];
+            force = -k * (q - rest) - k * dt * self.velocities[dof];
+            diag += k * (dt * dt);
         }
         (diag, force)
     }
 
     /// Adds a child's articulated inertia and bias force, about the child's anchor `b`, to its
-    /// parent's, about the parent's anchor (module doc: the shift by `r = b − a`).
+    /// parent's, about the parent's anchor (module doc: the shift by `r = b − a`):
+    /// B' = B + r̂ C, A' = A + Y + Yᵀ + r̂ (r̂ C)ᵀ with Y = r̂ Bᵀ, n' = n + r × f.
     #[inline(always)]
     fn aba_add_to_parent(
         parent: &mut AbaLink,
         b: Vector,
-        ia: Matrix,
-        ib: Matrix,
-        ic: Matrix,
+        ia: &Sym3,
+        ib: &Matrix,
+        ic: &Sym3,
         p_n: Vector,
         p_f: Vector,
     ) {
         let r = b - parent.anchor;
-        let rx = skew(r);
-        let ib2 = ib + rx * ic;
-        parent.ia += ia + rx * ib2.transpose() - ib * rx;
-        parent.ib += ib2;
-        parent.ic += ic;
+        let w = cross_cols_sym(r, ic);
+        let y = cross_cols(r, &ib.transpose());
+        let rcr = cross_cols(r, &w.transpose());
+        parent.ia = parent
+            .ia
+            .add(ia)
+            .add(&Sym3::twice_sym(&y))
+            .add(&Sym3::from_matrix(&rcr));
+        parent.ib += *ib + w;
+        parent.ic = parent.ic.add(ic);
         parent.p_n += p_n + r.cross(p_f);
         parent.p_f += p_f;
     }
