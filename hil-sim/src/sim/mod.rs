@@ -60,6 +60,8 @@ struct ActiveDof {
     dof: usize,
     parent_body: RigidBodyHandle,
     child_body: RigidBodyHandle,
+    /// The joint's axis in the child body's frame (`local_axis2` of its joint, fixed).
+    axis_in_child: Vec3,
 }
 
 /// The state of a rapier world without its pipelines (which hold only scratch memory):
@@ -270,15 +272,13 @@ impl Ur5Sim {
                 .expect("active joint was checked");
             let jh = &handles.joints[ji];
             let link = link_of(jh.link2, &world).id;
-            let dof = world.multibody_joints[mb]
-                .link(link)
-                .expect("link")
-                .assembly_id();
+            let mb_link = world.multibody_joints[mb].link(link).expect("link");
             dofs.push(ActiveDof {
                 link,
-                dof,
+                dof: mb_link.assembly_id(),
                 parent_body: jh.link1,
                 child_body: jh.link2,
+                axis_in_child: mb_link.joint().data.local_axis2(),
             });
         }
         let unused = dofs[0];

@@ -7,10 +7,7 @@ use super::*;
 impl Ur5Sim {
     /// World direction of active joint `j`'s axis.
     pub(super) fn axis_world(&self, j: usize, child: &RigidBody) -> Vec3 {
-        let link = self.world.multibody_joints[self.mb]
-            .link(self.dofs[j].link)
-            .expect("link");
-        child.position().rotation * link.joint().data.local_axis2()
+        child.position().rotation * self.dofs[j].axis_in_child
     }
 
     /// The rapier multibody. Invariant: its link poses and body Jacobians are always those of

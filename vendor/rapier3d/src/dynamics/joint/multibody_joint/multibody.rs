@@ -1447,21 +1447,30 @@ impl Multibody {
             }
             self.integrate(dt);
             self.forward_kinematics(bodies, false);
-            self.update_rigid_bodies_internal(bodies, !is_last_substep, true, false);
+            if is_last_substep {
+                // `update_rigid_bodies_internal(bodies, false, true, false)` fused with the
+                // pipeline's `advance_to_final_positions` below: the same assignments and
+                // calls per body, in one pass over the links.
+                for link in self.links.iter() {
+                    if let Some(rb) = bodies.get_mut_internal(link.rigid_body) {
+                        rb.pos.next_position = link.local_to_world;
+                        if rb.is_dynamic() {
+                            rb.pos.position = rb.pos.next_position;
+                            rb.mprops
+                                .update_world_mass_properties(rb.body_type, &rb.pos.position);
+                        }
+                    }
+                }
+            } else {
+                self.update_rigid_bodies_internal(bodies, true, true, false);
+            }
             if !is_last_substep {
                 self.update_velocities_mass_matrix_and_acceleration(dt, bodies, mass_matrix);
             }
         }
 
-        // The pipeline's `advance_to_final_positions` for the moving links.
-        for link in self.links.iter() {
-            let rb = bodies.index_mut_internal(link.rigid_body);
-            if rb.is_dynamic() {
-                rb.pos.position = rb.pos.next_position;
-                rb.mprops
-                    .update_world_mass_properties(rb.body_type, &rb.pos.position);
-            }
-        }
+        // The pipeline's `advance_to_final_positions` for the moving links: done in the last
+        // substep's pass above.
         true
     }
 
