@@ -116,6 +116,13 @@ pub struct GaifoConfig {
     pub fit: LrPriorConfig,
     /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
     pub traj_opt: TrajOptConfig,
+    /// Copies of each final state's resting pair [s_{T−1}; s_{T−1}] among the critic's rows,
+    /// for the demonstrations and the controller alike: the pair the last step's cost D(s, s)
+    /// evaluates (docs/design.md §5 D10, D44). Unset: the task's default,
+    /// [`Self::terminal_pairs_for`] (0 at three joints, the paper's critic; 10 at six). Left
+    /// out when unset, so that settings without it print and hash as before.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub critic_terminal_pairs: Option<usize>,
     /// How the cost sees the time along the motion (docs/design.md §5 D39); off by default.
     /// Left out when serialised off, so that settings without it print and hash as before
     /// (a run of an earlier build resumes).
@@ -237,12 +244,25 @@ impl Default for GaifoConfig {
             },
             fit: LrPriorConfig::default(),
             traj_opt: TrajOptConfig::default(),
+            critic_terminal_pairs: None,
             path: PathSettings::default(),
         }
     }
 }
 
 impl GaifoConfig {
+    /// Largest accepted [`Self::critic_terminal_pairs`].
+    pub const MAX_TERMINAL_PAIRS: usize = 1000;
+
+    /// The critic's copies of each final state's resting pair for a task with `du` action
+    /// dimensions (docs/design.md §5 D44): [`Self::critic_terminal_pairs`] when set, else 0
+    /// at three joints (the paper's critic, the same bits) and 10 for more: the whole arm
+    /// otherwise learns to move in its last transition, where no later cost sees it.
+    pub fn terminal_pairs_for(&self, du: usize) -> usize {
+        self.critic_terminal_pairs
+            .unwrap_or(if du > 3 { 10 } else { 0 })
+    }
+
     /// The GPS algorithm settings of a task with `du` action dimensions: [`Self::algorithm`]
     /// with `kl_step` × dU / 3 (docs/design.md §5 D40). `kl_step` is the paper's bound per time
     /// step for its three joints; the KL between two trajectory distributions of one dynamics
@@ -292,6 +312,15 @@ impl GaifoConfig {
         if !(self.init_var.is_finite() && self.init_var > 0.0 && self.init_var <= 10.0) {
             return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
         }
+        if let Some(k) = self.critic_terminal_pairs {
+            if k > Self::MAX_TERMINAL_PAIRS {
+                return bad(
+                    "critic_terminal_pairs",
+                    &k,
+                    &format!("in 0..={}", Self::MAX_TERMINAL_PAIRS),
+                );
+            }
+        }
         self.critic().validate()?;
         self.path.validate()?;
         crate::error::check_arm_and_gps(
@@ -324,6 +353,26 @@ mod tests {
         );
     }
 
+    /// The critic's terminal pairs: none at three joints (the paper's critic), 10 at six, the
+    /// setting when given; unset, the settings serialise as before (docs/design.md §5 D44).
+    #[test]
+    fn terminal_pairs_follow_the_task_unless_set() {
+        let cfg = GaifoConfig::default();
+        assert_eq!(cfg.terminal_pairs_for(3), 0);
+        assert_eq!(cfg.terminal_pairs_for(6), 10);
+        let set = GaifoConfig {
+            critic_terminal_pairs: Some(3),
+            ..GaifoConfig::default()
+        };
+        assert_eq!(set.terminal_pairs_for(3), 3);
+        assert_eq!(set.terminal_pairs_for(6), 3);
+        let text = serde_json::to_string(&cfg).unwrap();
+        assert!(!text.contains("critic_terminal_pairs"), "{text}");
+        let back: GaifoConfig =
+            serde_json::from_str(&serde_json::to_string(&set).unwrap()).unwrap();
+        assert_eq!(back, set);
+    }
+
     #[test]
     fn settings_that_cannot_work_are_refused_naming_the_setting() {
         assert!(GaifoConfig::default().validate().is_ok());
@@ -347,6 +396,10 @@ mod tests {
                 Box::new(|c| c.discriminator.hidden = vec![1_000_000_000]),
             ),
             ("samples", Box::new(|c| c.samples = 1_000_000_000)),
+            (
+                "critic_terminal_pairs",
+                Box::new(|c| c.critic_terminal_pairs = Some(1_000_000)),
+            ),
             ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
             (
                 "critic_lr_half_life",
