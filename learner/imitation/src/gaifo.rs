@@ -78,8 +78,7 @@ impl LqrGaifo {
         let finals: Vec<&[f64]> = (0..demos.count)
             .map(|d| demos.state(d, demos.horizon - 1))
             .collect();
-        let copies = cfg.terminal_pairs_for(demos.layout().du());
-        let expert = with_terminal_pairs(expert, &finals, copies);
+        let expert = with_terminal_pairs(expert, &finals, cfg.critic_terminal_pairs);
         let critic = Critic::from_settings(expert, cfg.critic(), cfg.seed)?;
         let tracking = if cfg.path.tracking_weight > 0.0 {
             Some(Tracking::from_demos(
@@ -204,8 +203,7 @@ impl LqrGaifo {
             controller = with_phase(&controller, t_len);
         }
         let finals: Vec<&[f64]> = episodes.iter().map(|e| e.state(t_len - 1)).collect();
-        let copies = self.cfg.terminal_pairs_for(self.task.layout().du());
-        let controller = with_terminal_pairs(controller, &finals, copies);
+        let controller = with_terminal_pairs(controller, &finals, self.cfg.critic_terminal_pairs);
         let critic = self.update_discriminator(&controller)?;
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) (plus the tracking term, when on) and its
         // second-order expansion.

@@ -118,11 +118,10 @@ pub struct GaifoConfig {
     pub traj_opt: TrajOptConfig,
     /// Copies of each final state's resting pair [s_{T−1}; s_{T−1}] among the critic's rows,
     /// for the demonstrations and the controller alike: the pair the last step's cost D(s, s)
-    /// evaluates (docs/design.md §5 D10, D44). Unset: the task's default,
-    /// [`Self::terminal_pairs_for`] (0 at three joints, the paper's critic; 10 at six). Left
-    /// out when unset, so that settings without it print and hash as before.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub critic_terminal_pairs: Option<usize>,
+    /// evaluates (docs/design.md §5 D10, D44); 0 (the default, the paper's critic) = none.
+    /// Left out when 0, so that settings without it print and hash as before.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub critic_terminal_pairs: usize,
     /// How the cost sees the time along the motion (docs/design.md §5 D39); off by default.
     /// Left out when serialised off, so that settings without it print and hash as before
     /// (a run of an earlier build resumes).
@@ -244,24 +243,20 @@ impl Default for GaifoConfig {
             },
             fit: LrPriorConfig::default(),
             traj_opt: TrajOptConfig::default(),
-            critic_terminal_pairs: None,
+            critic_terminal_pairs: 0,
             path: PathSettings::default(),
         }
     }
 }
 
+/// Whether a count is 0 (serde's `skip_serializing_if`).
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 impl GaifoConfig {
     /// Largest accepted [`Self::critic_terminal_pairs`].
     pub const MAX_TERMINAL_PAIRS: usize = 1000;
-
-    /// The critic's copies of each final state's resting pair for a task with `du` action
-    /// dimensions (docs/design.md §5 D44): [`Self::critic_terminal_pairs`] when set, else 0
-    /// at three joints (the paper's critic, the same bits) and 10 for more: the whole arm
-    /// otherwise learns to move in its last transition, where no later cost sees it.
-    pub fn terminal_pairs_for(&self, du: usize) -> usize {
-        self.critic_terminal_pairs
-            .unwrap_or(if du > 3 { 10 } else { 0 })
-    }
 
     /// The GPS algorithm settings of a task with `du` action dimensions: [`Self::algorithm`]
     /// with `kl_step` × dU / 3 (docs/design.md §5 D40). `kl_step` is the paper's bound per time
@@ -312,14 +307,12 @@ impl GaifoConfig {
         if !(self.init_var.is_finite() && self.init_var > 0.0 && self.init_var <= 10.0) {
             return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
         }
-        if let Some(k) = self.critic_terminal_pairs {
-            if k > Self::MAX_TERMINAL_PAIRS {
-                return bad(
-                    "critic_terminal_pairs",
-                    &k,
-                    &format!("in 0..={}", Self::MAX_TERMINAL_PAIRS),
-                );
-            }
+        if self.critic_terminal_pairs > Self::MAX_TERMINAL_PAIRS {
+            return bad(
+                "critic_terminal_pairs",
+                &self.critic_terminal_pairs,
+                &format!("in 0..={}", Self::MAX_TERMINAL_PAIRS),
+            );
         }
         self.critic().validate()?;
         self.path.validate()?;
@@ -353,23 +346,21 @@ mod tests {
         );
     }
 
-    /// The critic's terminal pairs: none at three joints (the paper's critic), 10 at six, the
-    /// setting when given; unset, the settings serialise as before (docs/design.md §5 D44).
+    /// The critic's terminal pairs are off unless set; off, the settings serialise as before
+    /// (docs/design.md §5 D44).
     #[test]
-    fn terminal_pairs_follow_the_task_unless_set() {
+    fn terminal_pairs_are_off_unless_set_and_then_serialised() {
         let cfg = GaifoConfig::default();
-        assert_eq!(cfg.terminal_pairs_for(3), 0);
-        assert_eq!(cfg.terminal_pairs_for(6), 10);
-        let set = GaifoConfig {
-            critic_terminal_pairs: Some(3),
-            ..GaifoConfig::default()
-        };
-        assert_eq!(set.terminal_pairs_for(3), 3);
-        assert_eq!(set.terminal_pairs_for(6), 3);
+        assert_eq!(cfg.critic_terminal_pairs, 0);
         let text = serde_json::to_string(&cfg).unwrap();
         assert!(!text.contains("critic_terminal_pairs"), "{text}");
-        let back: GaifoConfig =
-            serde_json::from_str(&serde_json::to_string(&set).unwrap()).unwrap();
+        let set = GaifoConfig {
+            critic_terminal_pairs: 10,
+            ..GaifoConfig::default()
+        };
+        let text = serde_json::to_string(&set).unwrap();
+        assert!(text.contains("\"critic_terminal_pairs\":10"), "{text}");
+        let back: GaifoConfig = serde_json::from_str(&text).unwrap();
         assert_eq!(back, set);
     }
 
@@ -398,7 +389,7 @@ mod tests {
             ("samples", Box::new(|c| c.samples = 1_000_000_000)),
             (
                 "critic_terminal_pairs",
-                Box::new(|c| c.critic_terminal_pairs = Some(1_000_000)),
+                Box::new(|c| c.critic_terminal_pairs = 1_000_000),
             ),
             ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
             (
