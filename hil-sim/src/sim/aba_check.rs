@@ -1,5 +1,5 @@
 //! The six-joint arm's free accelerations by the articulated-body algorithm (vendored rapier3d,
-//! docs/design.md §5 D46) against rapier's mass-matrix route, (M + diag)⁻¹ (τ − b) from
+//! docs/design.md §5 D43) against rapier's mass-matrix route, (M + diag)⁻¹ (τ − b) from
 //! rapier's own mass matrix and LU, on random states with nonzero velocities (Coriolis,
 //! centripetal and gyroscopic terms), joint torques, damping and armature.
 //!

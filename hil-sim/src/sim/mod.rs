@@ -345,7 +345,7 @@ impl Ur5Sim {
                 multibody.frictions_mut()[d.dof] = cfg.perturbation.joint_friction[j] as f32;
             }
             // Six joints: the free accelerations by the articulated-body algorithm (vendored
-            // rapier3d, docs/design.md §5 D46); three joints keep the mass-matrix route, bit
+            // rapier3d, docs/design.md §5 D43); three joints keep the mass-matrix route, bit
             // for bit.
             multibody.set_articulated_body_dynamics(n == MAX_JOINTS);
         }

@@ -6,7 +6,7 @@
 //!
 //! The three-joint digests below were recorded from the code before the speed-up of the
 //! multibody's mass matrix and step (docs/design.md §5 D38), the six-joint ones when six
-//! joints moved to the articulated-body algorithm (D46): work on the step may make it faster,
+//! joints moved to the articulated-body algorithm (D43): work on the step may make it faster,
 //! but the test fails if any bit of any trajectory moves. A change meant to alter the physics
 //! must say so and record new digests.
 

@@ -70,6 +70,29 @@ pub fn with_phase(transitions: &Mat<f64>, horizon: usize) -> Mat<f64> {
     })
 }
 
+/// `transitions` (rows of `2 dX` or, with the phase, `2 dX + 1` inputs) with `copies` rows of
+/// the resting pair [s; s] appended for each final state `s` of `finals` (each dX long), final
+/// after final: the pair the last step's cost D(s, s) evaluates (docs/design.md §5 D10), so
+/// that the critic is trained on it for the demonstrations' and the controller's final states
+/// alike instead of extrapolating to it (§5 D44). With the phase, these rows take the last
+/// step's, 1. `copies` = 0 returns `transitions` unchanged.
+pub fn with_terminal_pairs(transitions: Mat<f64>, finals: &[&[f64]], copies: usize) -> Mat<f64> {
+    if copies == 0 || finals.is_empty() {
+        return transitions;
+    }
+    let (rows, d) = (transitions.nrows(), transitions.ncols());
+    let dx = finals[0].len();
+    Mat::from_fn(rows + copies * finals.len(), d, |r, c| {
+        if r < rows {
+            transitions[(r, c)]
+        } else if c < 2 * dx {
+            finals[(r - rows) / copies][c % dx]
+        } else {
+            1.0
+        }
+    })
+}
+
 /// The critic's config for run seed `seed`: `dcfg` with its seed mixed with the run's, so
 /// that runs with different seeds get different critics.
 pub fn critic_config(dcfg: &DiscriminatorConfig, seed: u64) -> DiscriminatorConfig {
@@ -266,6 +289,36 @@ mod tests {
             for c in 0..D_IN {
                 assert_eq!(p[(r, c)], x[(r, c)]);
             }
+        }
+    }
+
+    /// Each final state's resting pair is appended `copies` times, final after final, after the
+    /// transitions, which are kept; with the phase, those rows take phase 1; no copies, no rows.
+    #[test]
+    fn terminal_pairs_are_appended_as_resting_pairs() {
+        let x = transitions(6, 0.0);
+        let a: Vec<f64> = (0..DX).map(|i| i as f64 + 0.5).collect();
+        let b: Vec<f64> = (0..DX).map(|i| -(i as f64) - 0.25).collect();
+        let finals = [a.as_slice(), b.as_slice()];
+        for phase in [false, true] {
+            let x = if phase { with_phase(&x, 4) } else { x.clone() };
+            let p = with_terminal_pairs(x.clone(), &finals, 3);
+            assert_eq!((p.nrows(), p.ncols()), (12, x.ncols()));
+            for r in 0..6 {
+                for c in 0..x.ncols() {
+                    assert_eq!(p[(r, c)], x[(r, c)]);
+                }
+            }
+            for r in 6..12 {
+                let s = finals[(r - 6) / 3];
+                for c in 0..DX {
+                    assert_eq!((p[(r, c)], p[(r, DX + c)]), (s[c], s[c]));
+                }
+                if phase {
+                    assert_eq!(p[(r, D_IN)], 1.0);
+                }
+            }
+            assert_eq!(with_terminal_pairs(x.clone(), &finals, 0), x);
         }
     }
 

@@ -37,7 +37,9 @@ use crate::controller::init_hold;
 use crate::cost::composite::{CompositeCost, CompositeWorkspace};
 use crate::cost::tracking::{Tracking, WithTracking};
 use crate::cpu::thread_cpu_s;
-use crate::critic::{episode_transitions, expert_transitions, with_phase, Critic};
+use crate::critic::{
+    episode_transitions, expert_transitions, with_phase, with_terminal_pairs, Critic,
+};
 use crate::demos::Demos;
 use crate::discriminator::{Discriminator, TrainStats};
 use crate::iteration::LqrIteration;
@@ -73,6 +75,10 @@ impl LqrGaifo {
         if cfg.path.critic_phase {
             expert = with_phase(&expert, demos.horizon);
         }
+        let finals: Vec<&[f64]> = (0..demos.count)
+            .map(|d| demos.state(d, demos.horizon - 1))
+            .collect();
+        let expert = with_terminal_pairs(expert, &finals, cfg.critic_terminal_pairs);
         let critic = Critic::from_settings(expert, cfg.critic(), cfg.seed)?;
         let tracking = if cfg.path.tracking_weight > 0.0 {
             Some(Tracking::from_demos(
@@ -196,6 +202,8 @@ impl LqrGaifo {
         if self.cfg.path.critic_phase {
             controller = with_phase(&controller, t_len);
         }
+        let finals: Vec<&[f64]> = episodes.iter().map(|e| e.state(t_len - 1)).collect();
+        let controller = with_terminal_pairs(controller, &finals, self.cfg.critic_terminal_pairs);
         let critic = self.update_discriminator(&controller)?;
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) (plus the tracking term, when on) and its
         // second-order expansion.

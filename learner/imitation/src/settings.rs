@@ -116,6 +116,12 @@ pub struct GaifoConfig {
     pub fit: LrPriorConfig,
     /// GPS KL-bounded LQR settings (docs/design.md §1.3 step 6).
     pub traj_opt: TrajOptConfig,
+    /// Copies of each final state's resting pair [s_{T−1}; s_{T−1}] among the critic's rows,
+    /// for the demonstrations and the controller alike: the pair the last step's cost D(s, s)
+    /// evaluates (docs/design.md §5 D10, D44); 0 (the default, the paper's critic) = none.
+    /// Left out when 0, so that settings without it print and hash as before.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub critic_terminal_pairs: usize,
     /// How the cost sees the time along the motion (docs/design.md §5 D39); off by default.
     /// Left out when serialised off, so that settings without it print and hash as before
     /// (a run of an earlier build resumes).
@@ -237,12 +243,21 @@ impl Default for GaifoConfig {
             },
             fit: LrPriorConfig::default(),
             traj_opt: TrajOptConfig::default(),
+            critic_terminal_pairs: 0,
             path: PathSettings::default(),
         }
     }
 }
 
+/// Whether a count is 0 (serde's `skip_serializing_if`).
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 impl GaifoConfig {
+    /// Largest accepted [`Self::critic_terminal_pairs`].
+    pub const MAX_TERMINAL_PAIRS: usize = 1000;
+
     /// The GPS algorithm settings of a task with `du` action dimensions: [`Self::algorithm`]
     /// with `kl_step` × dU / 3 (docs/design.md §5 D40). `kl_step` is the paper's bound per time
     /// step for its three joints; the KL between two trajectory distributions of one dynamics
@@ -292,6 +307,13 @@ impl GaifoConfig {
         if !(self.init_var.is_finite() && self.init_var > 0.0 && self.init_var <= 10.0) {
             return bad("init_var", &self.init_var, "finite, > 0 and <= 10 rad²");
         }
+        if self.critic_terminal_pairs > Self::MAX_TERMINAL_PAIRS {
+            return bad(
+                "critic_terminal_pairs",
+                &self.critic_terminal_pairs,
+                &format!("in 0..={}", Self::MAX_TERMINAL_PAIRS),
+            );
+        }
         self.critic().validate()?;
         self.path.validate()?;
         crate::error::check_arm_and_gps(
@@ -324,6 +346,24 @@ mod tests {
         );
     }
 
+    /// The critic's terminal pairs are off unless set; off, the settings serialise as before
+    /// (docs/design.md §5 D44).
+    #[test]
+    fn terminal_pairs_are_off_unless_set_and_then_serialised() {
+        let cfg = GaifoConfig::default();
+        assert_eq!(cfg.critic_terminal_pairs, 0);
+        let text = serde_json::to_string(&cfg).unwrap();
+        assert!(!text.contains("critic_terminal_pairs"), "{text}");
+        let set = GaifoConfig {
+            critic_terminal_pairs: 10,
+            ..GaifoConfig::default()
+        };
+        let text = serde_json::to_string(&set).unwrap();
+        assert!(text.contains("\"critic_terminal_pairs\":10"), "{text}");
+        let back: GaifoConfig = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, set);
+    }
+
     #[test]
     fn settings_that_cannot_work_are_refused_naming_the_setting() {
         assert!(GaifoConfig::default().validate().is_ok());
@@ -347,6 +387,10 @@ mod tests {
                 Box::new(|c| c.discriminator.hidden = vec![1_000_000_000]),
             ),
             ("samples", Box::new(|c| c.samples = 1_000_000_000)),
+            (
+                "critic_terminal_pairs",
+                Box::new(|c| c.critic_terminal_pairs = 1_000_000),
+            ),
             ("iterations", Box::new(|c| c.iterations = 1_000_000_000_000)),
             (
                 "critic_lr_half_life",

@@ -85,7 +85,8 @@ impl Default for MdgpsConfig {
 impl MdgpsConfig {
     /// Checks every setting (LQR+GAIfO's, the KL step and the policy's). The path's terms
     /// (`[lqr_gaifo.path]`, docs/design.md §5 D39) are refused: MDGPS's conditions are reaches
-    /// to several goals, and its composite cost has no per-step tracking term or phase input.
+    /// to several goals, and its composite cost has no per-step tracking term or phase input;
+    /// so is `lqr_gaifo.critic_terminal_pairs` (§5 D44), which its critic does not take.
     pub fn validate(&self) -> Result<(), ImitationError> {
         self.lqr_gaifo.validate()?;
         if !self.lqr_gaifo.path.is_off() {
@@ -94,6 +95,14 @@ impl MdgpsConfig {
                  take the path's tracking term or phase input; remove [lqr_gaifo.path], or \
                  imitate the motion with --algo lqr-gaifo (docs/design.md §5 D39)",
                 self.lqr_gaifo.path
+            )));
+        }
+        if self.lqr_gaifo.critic_terminal_pairs != 0 {
+            return Err(ImitationError::Config(format!(
+                "lqr_gaifo.critic_terminal_pairs = {}: MDGPS's critic is not trained on the \
+                 final states' resting pairs; remove it, or use --algo lqr-gaifo \
+                 (docs/design.md §5 D44)",
+                self.lqr_gaifo.critic_terminal_pairs
             )));
         }
         crate::error::check_reals(&[(
@@ -750,6 +759,13 @@ mod tests {
         let e = c.validate().unwrap_err().to_string();
         assert!(
             e.contains("lqr_gaifo.path") && e.contains("--algo lqr-gaifo"),
+            "{e}"
+        );
+        let mut c = MdgpsConfig::default();
+        c.lqr_gaifo.critic_terminal_pairs = 10;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("lqr_gaifo.critic_terminal_pairs = 10") && e.contains("--algo lqr-gaifo"),
             "{e}"
         );
     }
