@@ -66,19 +66,33 @@ pub struct LqrGaifo {
     tracking: Option<Tracking>,
 }
 
+/// The critic's rows for trajectories of horizon `horizon` (the demonstrations' or the noisy
+/// episodes'): their `transitions`, with the phase when the critic takes it (docs/design.md §5
+/// D39), then the resting pairs of their `finals` (§5 D44). Expert and controller rows are built
+/// alike here, so the critic sees both sides in one layout.
+fn critic_rows(
+    cfg: &GaifoConfig,
+    transitions: Mat<f64>,
+    horizon: usize,
+    finals: &[&[f64]],
+) -> Mat<f64> {
+    let rows = if cfg.path.critic_phase {
+        with_phase(&transitions, horizon)
+    } else {
+        transitions
+    };
+    with_terminal_pairs(rows, finals, cfg.critic_terminal_pairs)
+}
+
 impl LqrGaifo {
     /// Sets up a run imitating `demos` (the task — goal, start pose, T, dt — is theirs).
     pub fn new(cfg: GaifoConfig, demos: Demos) -> Result<Self, ImitationError> {
         cfg.validate()?;
         let task = demos.task()?;
-        let mut expert = expert_transitions(&demos);
-        if cfg.path.critic_phase {
-            expert = with_phase(&expert, demos.horizon);
-        }
         let finals: Vec<&[f64]> = (0..demos.count)
             .map(|d| demos.state(d, demos.horizon - 1))
             .collect();
-        let expert = with_terminal_pairs(expert, &finals, cfg.critic_terminal_pairs);
+        let expert = critic_rows(&cfg, expert_transitions(&demos), demos.horizon, &finals);
         let critic = Critic::from_settings(expert, cfg.critic(), cfg.seed)?;
         let tracking = if cfg.path.tracking_weight > 0.0 {
             Some(Tracking::from_demos(
@@ -198,12 +212,8 @@ impl LqrGaifo {
         self.lqr.fit_dynamics(&samples)?;
         // 3. Update the discriminator on (s, s') of the controller vs the expert.
         let t2 = Instant::now();
-        let mut controller = episode_transitions(episodes);
-        if self.cfg.path.critic_phase {
-            controller = with_phase(&controller, t_len);
-        }
         let finals: Vec<&[f64]> = episodes.iter().map(|e| e.state(t_len - 1)).collect();
-        let controller = with_terminal_pairs(controller, &finals, self.cfg.critic_terminal_pairs);
+        let controller = critic_rows(&self.cfg, episode_transitions(episodes), t_len, &finals);
         let critic = self.update_discriminator(&controller)?;
         // 4–5. Composite cost D(s, F_t[s;a] + f_t) (plus the tracking term, when on) and its
         // second-order expansion.
