@@ -1424,14 +1424,7 @@ impl Multibody {
             }
         }
 
-        // The pipeline's fused body traversal: gravity and user forces.
-        for link in self.links.iter() {
-            let rb = bodies.index_mut_internal(link.rigid_body);
-            if rb.is_dynamic() {
-                let mass = rb.mprops.effective_mass();
-                rb.forces.compute_effective_force_and_torque(gravity, mass);
-            }
-        }
+        self.compute_effective_forces(bodies, gravity);
 
         // The staged solver's multibody init and substeps (`init_solver_buffers_and_multibodies`,
         // the generic velocity increment, `integrate_multibody_positions`).
@@ -1487,6 +1480,14 @@ impl Multibody {
         gravity: Vector,
         dt: Real,
     ) -> DVectorView<'_, Real> {
+        self.compute_effective_forces(bodies, gravity);
+        self.update_velocities_mass_matrix_and_acceleration(dt, bodies, true);
+        self.accelerations.rows(0, self.ndofs)
+    }
+
+    /// The pipeline's fused body traversal for this multibody's moving links: each one's
+    /// effective force and torque from `gravity` and its user forces.
+    fn compute_effective_forces(&self, bodies: &mut RigidBodySet, gravity: Vector) {
         for link in self.links.iter() {
             let rb = bodies.index_mut_internal(link.rigid_body);
             if rb.is_dynamic() {
@@ -1494,16 +1495,12 @@ impl Multibody {
                 rb.forces.compute_effective_force_and_torque(gravity, mass);
             }
         }
-        self.update_velocities(bodies);
-        self.update_mass_matrix(dt, bodies);
-        self.update_acceleration(dt, bodies);
-        self.accelerations.rows(0, self.ndofs)
     }
 
-    /// `step_alone`'s link velocities, mass matrix and free accelerations: rapier's routines
-    /// when `mass_matrix`, else the articulated-body algorithm, which `update_acceleration`
-    /// would choose (`step_alone` has checked that it applies) and which sets the links'
-    /// velocities itself.
+    /// The link velocities, mass matrix and free accelerations of a step: rapier's routines
+    /// when `mass_matrix` (`update_acceleration` then takes the articulated-body algorithm where
+    /// it applies), else the articulated-body algorithm alone, which sets the links' velocities
+    /// itself (`step_alone`, having checked that it applies).
     #[inline]
     fn update_velocities_mass_matrix_and_acceleration(
         &mut self,
